@@ -1,0 +1,27 @@
+"""observer: impact-time state observers for linear multibody systems with unilateral contacts.
+
+Public API (a contract relied on by the benchmarks, reports and users):
+
+* :func:`load_scenario` — a built-in scenario by name or a TOML file, with overrides;
+* :func:`simulate` — Moreau–Jean simulation of the master and its observers;
+* :data:`SCENARIOS`, :data:`CONTACT_SOLVERS`, :data:`OBSERVERS` — registries;
+* :class:`LinearSystem`, :class:`ImpactLaw`, :class:`Scenario`, :class:`MoreauJean`,
+  :class:`SimulationResult`, :class:`Slave`.
+"""
+
+from observer.contact import CONTACT_SOLVERS
+from observer.errors import ContactSolverError, InputError
+from observer.impact import ImpactLaw
+from observer.model import Harmonic, LinearSystem
+from observer.observers import OBSERVERS, Slave, lyapunov
+from observer.result import SimulationResult, read_frame
+from observer.scenario import Scenario
+from observer.scenarios import SCENARIOS
+from observer.simulate import load_scenario, simulate
+from observer.stepping import MoreauJean
+
+__version__ = "0.1.0"
+
+__all__ = ["CONTACT_SOLVERS", "ContactSolverError", "Harmonic", "ImpactLaw", "InputError",
+           "LinearSystem", "MoreauJean", "OBSERVERS", "SCENARIOS", "Scenario", "SimulationResult",
+           "Slave", "load_scenario", "lyapunov", "read_frame", "simulate", "__version__"]

@@ -1,0 +1,115 @@
+"""Command line: ``python -m observer {scenarios, show, run, plot}``.
+
+Errors in input exit with status 2 and one line on stderr (``error: FIELD: PROBLEM``),
+never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from observer.errors import ContactSolverError, InputError
+
+
+def _parse_sets(items: list[str]) -> dict[str, str]:
+    out = {}
+    for item in items or []:
+        if "=" not in item:
+            raise InputError("--set", f"expected KEY=VALUE, got {item!r}")
+        key, value = item.split("=", 1)
+        out[key.strip()] = value.strip()
+    return out
+
+
+def cmd_scenarios(args) -> int:
+    from observer.scenarios import SCENARIOS
+    width = max(len(k) for k in SCENARIOS)
+    for name, module in SCENARIOS.items():
+        print(f"{name:<{width}}  {module.DESCRIPTION}")
+    return 0
+
+
+def cmd_show(args) -> int:
+    from observer.simulate import load_scenario
+    from observer.tomlio import dumps
+    sc = load_scenario(args.scenario, _parse_sets(args.set))
+    header = f"{sc.name}: {sc.description}\n"
+    module_doc = ""
+    from observer.scenarios import SCENARIOS
+    if args.scenario in SCENARIOS:
+        module_doc = (SCENARIOS[args.scenario].__doc__ or "").strip()
+    text = dumps(sc.to_dict(), comments={"scenario": header + module_doc})
+    sys.stdout.write(text)
+    return 0
+
+
+def cmd_run(args) -> int:
+    from observer.simulate import simulate, load_scenario
+    sc = load_scenario(args.scenario, _parse_sets(args.set))
+    observers = [o for o in (args.observers or "").split(",") if o]
+    res = simulate(sc, h=args.h, t_end=args.t_end, solver=args.solver, observers=observers,
+                   source=args.source, log=args.log)
+    path = res.write(args.out)
+    meta = res.metadata
+    msg = (f"{sc.name}: {meta['steps']} steps of h = {meta['h']:g} in {meta['wall_time_s']:.2f} s "
+           f"({meta['steps_per_second']:.0f} steps/s), {int(res.active[1:].any(axis=1).sum())} "
+           f"steps with closed contacts, max contact residual {meta['max_contact_residual']:.1e}")
+    print(msg)
+    for name, s in res.slaves.items():
+        print(f"  {name}: V(0) = {s.V[0]:.3e}, V(end) = {s.V[-1]:.3e}")
+    print(f"wrote {path}")
+    return 0
+
+
+def cmd_plot(args) -> int:
+    from observer.plotting import plot_run
+    from observer.result import read_frame
+    df = read_frame(args.result)
+    path = plot_run(df, args.out, dof=args.dof)
+    print(f"wrote {path}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m observer",
+                                description="Impact-time state observers for nonsmooth mechanical systems.")
+    sub = p.add_subparsers(dest="command", required=True)
+    s = sub.add_parser("scenarios", help="list the built-in scenarios")
+    s.set_defaults(func=cmd_scenarios)
+    s = sub.add_parser("show", help="print a scenario as an editable TOML file")
+    s.add_argument("scenario", help="built-in name or .toml path")
+    s.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override (param.NAME for builder parameters, else dotted TOML key)")
+    s.set_defaults(func=cmd_show)
+    s = sub.add_parser("run", help="simulate a scenario and write the result (CSV or Parquet)")
+    s.add_argument("scenario", help="built-in name or .toml path")
+    s.add_argument("--h", type=float, help="step size")
+    s.add_argument("--t-end", type=float, help="final time")
+    s.add_argument("--solver", help="contact solver (pivoting, lemke, nnls, reference)")
+    s.add_argument("--observers", help="comma-separated observers, e.g. jump,nojump")
+    s.add_argument("--source", choices=["master", "log", "self"], help="switching signal source")
+    s.add_argument("--log", help="closing log CSV (contact,t_close,t_open) for --source log")
+    s.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override (param.NAME for builder parameters, else dotted TOML key)")
+    s.add_argument("--out", required=True, help="output file (.csv or .parquet)")
+    s.set_defaults(func=cmd_run)
+    s = sub.add_parser("plot", help="draw the paper-style figures of a run")
+    s.add_argument("result", help="result file written by run")
+    s.add_argument("--out", required=True, help="image file (.png, .svg, .pdf)")
+    s.add_argument("--dof", type=int, default=0, help="coordinate to plot (default 0)")
+    s.set_defaults(func=cmd_plot)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (InputError, ContactSolverError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130

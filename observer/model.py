@@ -1,0 +1,195 @@
+"""Linear time-invariant multibody model with unilateral constraints.
+
+The model is the paper's system (1)-(3)::
+
+    M du = (-C u - K q + f(t)) dt + W dΛ,      g = Wᵀ q + ν(t) ≥ 0,      γ = Wᵀ u + ν̇(t)
+
+A :class:`LinearSystem` holds data only (no state); it validates everything on
+construction and raises :class:`~observer.errors.InputError` naming the field.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from observer.errors import InputError
+from observer.validation import (as_array, as_scalar, broadcast_vector, check_psd,
+                                 check_spd, check_symmetric)
+
+
+@dataclass(frozen=True)
+class Harmonic:
+    """A vector signal ``x(t) = constant + Σ_j amplitude_j ∘ trig(omega_j t + phase_j)``.
+
+    ``trig`` is ``cos`` for forcing and ``sin`` for the gap offset ν(t) (the TOML
+    convention of the scenario format). Arrays: ``constant`` shape (d,),
+    ``amplitude`` and ``phase`` shape (T, d), ``omega`` shape (T,), for T terms.
+    """
+
+    constant: np.ndarray
+    amplitude: np.ndarray
+    omega: np.ndarray
+    phase: np.ndarray
+    kind: str = "cos"
+
+    @staticmethod
+    def build(field_name: str, dim: int, *, constant: Any = 0.0, terms: list[dict] | None = None,
+              kind: str = "cos") -> "Harmonic":
+        """Validate and build from a constant and a list of ``{amplitude, omega, phase}`` terms.
+
+        ``amplitude`` and ``phase`` may be scalars (broadcast) or ``dim``-vectors.
+        """
+        c = broadcast_vector(f"{field_name}.constant", constant, dim)
+        amps, omegas, phases = [], [], []
+        for j, term in enumerate(terms or []):
+            where = field_name if j == 0 else f"{field_name}.harmonics[{j - 1}]"
+            amps.append(broadcast_vector(f"{where}.amplitude", term.get("amplitude", 0.0), dim))
+            omegas.append(as_scalar(f"{where}.omega", term.get("omega", 0.0), low=0.0))
+            phases.append(broadcast_vector(f"{where}.phase", term.get("phase", 0.0), dim))
+        return Harmonic(c, np.array(amps, dtype=float).reshape(-1, dim), np.array(omegas, dtype=float),
+                        np.array(phases, dtype=float).reshape(-1, dim), kind)
+
+    @property
+    def dim(self) -> int:
+        return self.constant.shape[0]
+
+    def __call__(self, t: Any) -> np.ndarray:
+        """Evaluate at scalar ``t`` (shape (d,)) or a time array (shape (len(t), d))."""
+        t_arr = np.asarray(t, dtype=float)
+        out = np.broadcast_to(self.constant, t_arr.shape + (self.dim,)).copy()
+        trig = np.cos if self.kind == "cos" else np.sin
+        for a, w, p in zip(self.amplitude, self.omega, self.phase):
+            out += a * trig(w * t_arr[..., None] + p)
+        return out
+
+    def derivative(self, t: Any) -> np.ndarray:
+        """Exact time derivative, same shapes as :meth:`__call__`."""
+        t_arr = np.asarray(t, dtype=float)
+        out = np.zeros(t_arr.shape + (self.dim,))
+        for a, w, p in zip(self.amplitude, self.omega, self.phase):
+            arg = w * t_arr[..., None] + p
+            out += a * w * (-np.sin(arg) if self.kind == "cos" else np.cos(arg))
+        return out
+
+    def bound(self) -> np.ndarray:
+        """Componentwise sup |x(t)| over all t (exact upper bound: |c| + Σ|a|)."""
+        return np.abs(self.constant) + np.abs(self.amplitude).sum(axis=0)
+
+    def terms(self) -> list[dict]:
+        """The harmonic terms as plain dicts (for TOML output)."""
+        return [{"amplitude": a.tolist(), "omega": float(w), "phase": p.tolist()}
+                for a, w, p in zip(self.amplitude, self.omega, self.phase)]
+
+
+@dataclass(frozen=True)
+class LinearSystem:
+    """An n-DOF LTI mechanical system with m unilateral contacts (paper eqs. (1)-(3)).
+
+    Parameters
+    ----------
+    M, C, K : ndarray, shape (n, n)
+        Mass (SPD), damping and stiffness (symmetric PSD) matrices.
+    W : ndarray, shape (n, m)
+        Generalized force directions w_j as columns, linearly independent.
+    forcing : Harmonic
+        f(t) = constant + Σ amplitude·cos(omega t + phase), dimension n.
+    gap : Harmonic
+        ν(t) = offset + Σ amplitude·sin(omega t + phase), dimension m.
+    check : bool
+        Validate the matrices (default). ``False`` is meant only for deliberately
+        invalid systems built by the proof checks' known-bad cases.
+    """
+
+    M: np.ndarray
+    C: np.ndarray
+    K: np.ndarray
+    W: np.ndarray
+    forcing: Harmonic
+    gap: Harmonic
+    check: bool = field(default=True, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        M = as_array("system.M", self.M, (None, None))
+        n = M.shape[0]
+        if M.shape != (n, n):
+            raise InputError("system.M", f"must be square, got shape {M.shape[0]}x{M.shape[1]}")
+        if n == 0:
+            raise InputError("system.M", "must have at least one degree of freedom")
+        C = as_array("system.C", self.C, (n, n))
+        K = as_array("system.K", self.K, (n, n))
+        W = as_array("system.W", self.W, (n, None))
+        m = W.shape[1]
+        if m == 0:
+            raise InputError("system.W", "needs at least one contact column")
+        if self.forcing.dim != n:
+            raise InputError("system.forcing", f"has dimension {self.forcing.dim}, expected n = {n}")
+        if self.gap.dim != m:
+            raise InputError("system.gap", f"has dimension {self.gap.dim}, expected m = {m}")
+        if self.check:
+            check_spd("system.M", M)
+            check_symmetric("system.C", C)
+            check_psd("system.C", C)
+            check_psd("system.K", K)
+            sv = np.linalg.svd(W, compute_uv=False)
+            if m > n or sv[-1] <= 1e-12 * sv[0]:
+                raise InputError("system.W", "columns are not linearly independent "
+                                 f"(smallest singular value {sv[-1] if m <= n else 0.0:.3g})")
+        for name, arr in (("M", M), ("C", C), ("K", K), ("W", W)):
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+
+    # -- sizes -----------------------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        """Number of degrees of freedom."""
+        return self.M.shape[0]
+
+    @property
+    def m(self) -> int:
+        """Number of unilateral contacts."""
+        return self.W.shape[1]
+
+    # -- signals ---------------------------------------------------------------------------
+    def f(self, t: Any) -> np.ndarray:
+        """External force f(t), shape (n,) or (len(t), n)."""
+        return self.forcing(t)
+
+    def nu(self, t: Any) -> np.ndarray:
+        """Gap offset ν(t), shape (m,) or (len(t), m)."""
+        return self.gap(t)
+
+    def nu_dot(self, t: Any) -> np.ndarray:
+        """Exact derivative ν̇(t)."""
+        return self.gap.derivative(t)
+
+    def gaps(self, q: np.ndarray, t: Any) -> np.ndarray:
+        """Gaps g = Wᵀq + ν(t) (paper eq. (2)); ``q`` shape (n,) or time-major (N, n)."""
+        return q @ self.W + self.nu(t)
+
+    def contact_velocities(self, u: np.ndarray, t: Any) -> np.ndarray:
+        """Contact velocities γ = Wᵀu + ν̇(t) (paper eq. (3))."""
+        return u @ self.W + self.nu_dot(t)
+
+    # -- derived matrices ------------------------------------------------------------------
+    def is_stiffness_definite(self) -> bool:
+        """True if K is positive definite (needed for K-metric projections)."""
+        try:
+            np.linalg.cholesky(self.K)
+        except np.linalg.LinAlgError:
+            return False
+        eig = np.linalg.eigvalsh(self.K)
+        return bool(eig[0] > 1e-12 * eig[-1])
+
+    def require_definite_stiffness(self, why: str) -> None:
+        """Raise :class:`InputError` on ``system.K`` unless K ≻ 0."""
+        if not self.is_stiffness_definite():
+            raise InputError("system.K", f"must be positive definite for {why} "
+                             f"(smallest eigenvalue {np.linalg.eigvalsh(self.K)[0]:.3g})")
+
+    def energy(self, q: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Mechanical energy ½uᵀMu + ½qᵀKq (kinetic plus elastic), time-major input allowed."""
+        return 0.5 * np.einsum("...i,ij,...j->...", u, self.M, u) + 0.5 * np.einsum(
+            "...i,ij,...j->...", q, self.K, q)

@@ -1,0 +1,133 @@
+"""Impact-time state observers: slaves with switched kinematic or geometric unilateral constraints.
+
+An observer is a replica of the master model whose constraints are switched on by the
+Boolean signal χ (paper eqs. (7)-(11)). Both designs share the master's step
+(:class:`observer.stepping.MoreauJean`), one source of truth for the impact laws:
+
+* ``nojump`` — switched *kinematic* constraints (the earlier observer, paper ref. [4]):
+  while χ_i = 1, γ_i ≥ 0 with the master's impact law; positions are never corrected.
+* ``jump`` — switched *geometric* constraints (the paper's new observer): additionally,
+  while χ_i = 1 the gap is held at zero by the K-metric projection
+  ``q ← q − K⁻¹W_I L_I⁻¹ g_I`` (eqs. (13)-(14)); needs K ≻ 0.
+
+The error Lyapunov function is ``V = ½vᵀMv + ½eᵀKe`` (paper (16) with the ½ on both
+terms; THEORY §2 erratum 2), e = q_s − q_m, v = u_s − u_m.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from observer.errors import InputError
+from observer.model import LinearSystem
+from observer.switching import SOURCES
+from observer.validation import as_array, as_scalar
+
+OBSERVERS = {"jump": True, "nojump": False}
+"""Registry: observer name -> whether it has position jumps."""
+
+
+@dataclass(frozen=True)
+class Slave:
+    """One observer: a name, its design and its initial state (any state, also one with g < 0)."""
+
+    name: str
+    position_jumps: bool
+    q0: np.ndarray
+    u0: np.ndarray
+
+
+@dataclass(frozen=True)
+class ObserverConfig:
+    """The ``[observer]`` table: initial state, coupling window, χ source, log file."""
+
+    q0: np.ndarray
+    u0: np.ndarray
+    coupling: tuple[float, float] | None
+    source: str
+    log: str | None
+    observers: tuple[str, ...]
+
+    @staticmethod
+    def from_table(table: dict, n: int, q_master: np.ndarray, u_master: np.ndarray,
+                   base_dir: str | None = None) -> "ObserverConfig":
+        q0 = as_array("observer.q", table["q"], (n,)) if "q" in table else q_master.copy()
+        u0 = as_array("observer.u", table["u"], (n,)) if "u" in table else u_master.copy()
+        coupling = None
+        if "coupling" in table:
+            c = as_array("observer.coupling", table["coupling"], (2,))
+            if c[1] < c[0]:
+                raise InputError("observer.coupling", f"t_off = {c[1]} < t_on = {c[0]}")
+            coupling = (float(c[0]), float(c[1]))
+        source = table.get("source", "master")
+        if source not in SOURCES:
+            raise InputError("observer.source", f"must be one of {list(SOURCES)}, got {source!r}")
+        log = table.get("log")
+        if source == "log" and not log:
+            raise InputError("observer.log", "source = \"log\" needs a log file path")
+        if log is not None and base_dir is not None:
+            from pathlib import Path
+            p = Path(log)
+            if not p.is_absolute() and not p.exists() and (Path(base_dir) / p).exists():
+                log = str(Path(base_dir) / p)
+        names = tuple(table.get("observers", ("jump", "nojump")))
+        for name in names:
+            check_observer_name(name)
+        if "log_tolerance" in table:
+            as_scalar("observer.log_tolerance", table["log_tolerance"], low=0.0)
+        return ObserverConfig(q0, u0, coupling, source, log, names)
+
+
+def check_observer_name(name: Any) -> None:
+    """Raise unless ``name`` is a registered observer."""
+    if name not in OBSERVERS:
+        raise InputError("observers", f"unknown observer {name!r}; choose from {sorted(OBSERVERS)}")
+
+
+def lyapunov(system: LinearSystem, q_s: np.ndarray, u_s: np.ndarray, q_m: np.ndarray,
+             u_m: np.ndarray) -> np.ndarray:
+    """V = ½(u_s−u_m)ᵀM(u_s−u_m) + ½(q_s−q_m)ᵀK(q_s−q_m), time-major (N+1,) output."""
+    v = u_s - u_m
+    e = q_s - q_m
+    return 0.5 * np.einsum("ki,ij,kj->k", v, system.M, v) + 0.5 * np.einsum(
+        "ki,ij,kj->k", e, system.K, e)
+
+
+def lyapunov_decrements(system: LinearSystem, h: float, a: dict, b: dict) -> dict[str, np.ndarray]:
+    """Per-step parts of ΔV between trajectories ``a`` and ``b`` (dicts with q, u, P, sigma).
+
+    For θ = ½ the scheme gives exactly (discrete twin of eq. (17))::
+
+        V_{k+1} − V_k = −h v̄ᵀCv̄  +  (Wᵀv̄)ᵀ(P_a − P_b)  +  [½‖e⁺‖²_K − ½‖e⁻‖²_K]
+
+    with v̄ = (v_k + v_{k+1})/2 and e⁻ the error before the step's position projections
+    (e⁻ = e⁺ − K⁻¹W(Σ_a − Σ_b)). Returns arrays of shape (N+1,) (row k+1 = step k) named
+    ``damping``, ``impulse``, ``projection``, ``total`` (= ΔV) and ``residual``
+    (ΔV minus the three parts: round-off for θ = ½).
+    """
+    v = a["u"] - b["u"]
+    e = a["q"] - b["q"]
+    vbar = 0.5 * (v[1:] + v[:-1])
+    out = {k: np.zeros(v.shape[0]) for k in ("damping", "impulse", "projection", "total", "residual")}
+    out["damping"][1:] = -h * np.einsum("ki,ij,kj->k", vbar, system.C, vbar)
+    out["impulse"][1:] = np.einsum("ki,ki->k", vbar @ system.W, a["P"][1:] - b["P"][1:])
+    dsig = _sigma(a, v.shape) - _sigma(b, v.shape)
+    if np.any(dsig):
+        de = np.linalg.solve(system.K, system.W @ dsig[1:].T).T
+        e_pre = e[1:] - de
+        out["projection"][1:] = 0.5 * (np.einsum("ki,ij,kj->k", e[1:], system.K, e[1:])
+                                       - np.einsum("ki,ij,kj->k", e_pre, system.K, e_pre))
+    V = lyapunov(system, a["q"], a["u"], b["q"], b["u"])
+    out["total"][1:] = np.diff(V)
+    out["residual"] = out["total"] - out["damping"] - out["impulse"] - out["projection"]
+    return out
+
+
+def _sigma(traj: dict, shape: tuple[int, int]) -> np.ndarray:
+    s = traj.get("sigma")
+    if s is None:
+        return np.zeros((shape[0], traj["P"].shape[1]))
+    return s

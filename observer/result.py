@@ -1,0 +1,176 @@
+"""Simulation results: time-major arrays, a tidy DataFrame view, CSV/Parquet output.
+
+Array layout (everywhere in the toolkit): time-major, ``shape (N+1, n)`` for N steps.
+Row 0 is the initial state; row k+1 of ``P`` and ``active`` belongs to the step
+t_k → t_{k+1} (the impulse of that step and the closed set it used).
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from observer.errors import InputError
+from observer.model import LinearSystem
+
+
+def package_versions() -> dict[str, str]:
+    """Versions of Python and the numerical stack, for result metadata."""
+    from importlib import metadata
+
+    out = {"python": platform.python_version()}
+    for pkg in ("observer-toolkit", "numpy", "scipy", "pandas", "cvxpy", "osqp"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = "not installed"
+    return out
+
+
+@dataclass
+class SlaveTrajectory:
+    """One observer's trajectory and its error Lyapunov function.
+
+    ``V[k] = ½(u_s−u_m)ᵀM(u_s−u_m) + ½(q_s−q_m)ᵀK(q_s−q_m)`` (paper (16) with the ½ on
+    both terms); ``dV_smooth``/``dV_impulse`` are the per-step decrements of the exact
+    discrete identity ``V_{k+1}−V_k = −h v̄ᵀCv̄ + (Wᵀv̄)ᵀΔP − ½ ΔgᵀL⁻¹Δg`` split into the
+    damping part, the impulse part and the projection part (row k+1 = step k).
+    """
+
+    name: str
+    q: np.ndarray
+    u: np.ndarray
+    P: np.ndarray
+    V: np.ndarray
+    dV_damping: np.ndarray
+    dV_impulse: np.ndarray
+    dV_projection: np.ndarray
+    sigma: np.ndarray
+
+
+@dataclass
+class SimulationResult:
+    """A master run (and optionally observer runs) on the grid ``t``.
+
+    Attributes
+    ----------
+    t : ndarray, shape (N+1,)
+    q, u : ndarray, shape (N+1, n)
+    P : ndarray, shape (N+1, m)
+        Impulse per step (row k+1 = step k).
+    active : ndarray of bool, shape (N+1, m)
+        Closed set of the master in step k (row k+1).
+    system : LinearSystem
+    metadata : dict
+        Scenario parameters, h, θ, solver, package versions, work counters.
+    chi : ndarray of bool, shape (N+1, m) or None
+        Switching signal fed to the observers (row k+1 = step k).
+    slaves : dict[str, SlaveTrajectory]
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    u: np.ndarray
+    P: np.ndarray
+    active: np.ndarray
+    system: LinearSystem
+    metadata: dict = field(default_factory=dict)
+    chi: np.ndarray | None = None
+    slaves: dict = field(default_factory=dict)
+    sigma: np.ndarray | None = None
+
+    @property
+    def g(self) -> np.ndarray:
+        """Gaps g = Wᵀq + ν(t), shape (N+1, m)."""
+        return self.system.gaps(self.q, self.t)
+
+    @property
+    def gamma(self) -> np.ndarray:
+        """Contact velocities γ = Wᵀu + ν̇(t), shape (N+1, m)."""
+        return self.system.contact_velocities(self.u, self.t)
+
+    def to_frame(self) -> pd.DataFrame:
+        """Tidy DataFrame: ``t, q0.., u0.., g0.., P0.., active0..`` plus, with observers,
+        ``chi0..`` and per observer NAME ``NAME_q0.., NAME_u0.., V_NAME``. The metadata is in
+        ``DataFrame.attrs``."""
+        n, m = self.system.n, self.system.m
+        cols: dict[str, np.ndarray] = {"t": self.t}
+        for name, arr, width in (("q", self.q, n), ("u", self.u, n), ("g", self.g, m), ("P", self.P, m)):
+            for j in range(width):
+                cols[f"{name}{j}"] = arr[:, j]
+        for j in range(m):
+            cols[f"active{j}"] = self.active[:, j].astype(np.int8)
+        if self.chi is not None:
+            for j in range(m):
+                cols[f"chi{j}"] = self.chi[:, j].astype(np.int8)
+        for name, s in self.slaves.items():
+            for j in range(n):
+                cols[f"{name}_q{j}"] = s.q[:, j]
+            for j in range(n):
+                cols[f"{name}_u{j}"] = s.u[:, j]
+            cols[f"V_{name}"] = s.V
+        df = pd.DataFrame(cols)
+        df.attrs.update(json.loads(json.dumps(self.metadata, default=_jsonable)))
+        return df
+
+    def write(self, path: str | Path) -> Path:
+        """Write :meth:`to_frame` as CSV (metadata in a leading ``# metadata:`` line) or Parquet."""
+        return write_frame(self.to_frame(), path)
+
+
+def _jsonable(x):
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, (np.floating, np.integer, np.bool_)):
+        return x.item()
+    return str(x)
+
+
+def write_frame(df: pd.DataFrame, path: str | Path) -> Path:
+    """Write a DataFrame by extension: ``.csv`` (metadata as a JSON comment line) or ``.parquet``."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".parquet"):
+        raise InputError("--out", f"unsupported extension {path.suffix!r}; use .csv or .parquet")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if suffix == ".csv":
+        with path.open("w", newline="") as fh:
+            fh.write("# metadata: " + json.dumps(df.attrs, default=_jsonable) + "\n")
+            df.to_csv(fh, index=False, float_format="%.17g")
+    else:
+        df.to_parquet(path, index=False)
+    return path
+
+
+def read_frame(path: str | Path) -> pd.DataFrame:
+    """Read a result written by :func:`write_frame`, restoring ``attrs`` (the metadata)."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(str(path), "file not found")
+    if path.suffix.lower() == ".parquet":
+        return pd.read_parquet(path)
+    with path.open() as fh:
+        first = fh.readline()
+    df = pd.read_csv(path, comment=None, skiprows=1 if first.startswith("# metadata:") else 0)
+    if first.startswith("# metadata:"):
+        df.attrs.update(json.loads(first[len("# metadata:"):]))
+    return df
+
+
+def run_metadata(scenario, stepper, wall_time: float) -> dict:
+    """Metadata of a run: scenario parameters, scheme, solver work, versions, timing."""
+    meta = dict(scenario.parameters())
+    meta.update(h=stepper.h, theta=stepper.theta, steps=stepper.grid.steps,
+                solver=stepper.solver.name, contact_solves=stepper.stats.contact_solves,
+                solver_iterations=stepper.stats.iterations, solver_fallbacks=stepper.stats.fallbacks,
+                max_contact_residual=stepper.stats.max_residual, wall_time_s=wall_time,
+                steps_per_second=stepper.grid.steps / wall_time if wall_time > 0 else float("nan"),
+                versions=package_versions(), platform=platform.platform(),
+                argv=" ".join(sys.argv))
+    return meta

@@ -1,0 +1,237 @@
+"""Scenarios: a system, its impact law, initial state and simulation settings, as one document.
+
+A scenario is read from a TOML file (or built by a module in :mod:`observer.scenarios`)
+into a nested dict, validated against :data:`SCHEMA` (unknown keys are errors) and
+turned into a frozen :class:`Scenario`. :meth:`Scenario.to_dict` gives the document back,
+so that ``python -m observer show NAME`` prints a file that ``run`` accepts unchanged.
+
+TOML format (the contract; ``[observer]`` is used by the observers)::
+
+    [scenario]          name, description
+    [system]            M, C, K (n×n), W (n×m, column j is w_j)
+    [system.forcing]    constant (n), amplitude (n), omega, phase  : f = c + a∘cos(ωt + φ)
+    [[system.forcing.harmonics]]  amplitude, omega, phase          : more cos terms
+    [system.gap]        offset (m), amplitude (m), omega, phase    : ν = o + a∘sin(ωt + φ)
+    [[system.gap.harmonics]]      amplitude, omega, phase          : more sin terms
+    [impact]            law = "newton" | "poisson", restitution (scalar or m-vector)
+    [initial]           q, u
+    [simulation]        t_end, h, theta, solver, master_projection
+    [observer]          q, u, coupling = [t_on, t_off], source = "master" | "log", log,
+                        observers = ["jump", "nojump"]
+
+``phase`` may be a scalar or a vector.
+"""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from observer.errors import InputError
+from observer.impact import ImpactLaw
+from observer.model import Harmonic, LinearSystem
+from observer.stepping import check_step_parameters
+from observer.validation import as_array, as_scalar
+
+_HARMONIC = {"amplitude": None, "omega": None, "phase": None}
+SCHEMA: dict = {
+    "scenario": {"name": None, "description": None},
+    "system": {
+        "M": None, "C": None, "K": None, "W": None,
+        "forcing": {"constant": None, **_HARMONIC, "harmonics": [_HARMONIC]},
+        "gap": {"offset": None, **_HARMONIC, "harmonics": [_HARMONIC]},
+    },
+    "impact": {"law": None, "restitution": None},
+    "initial": {"q": None, "u": None},
+    "simulation": {"t_end": None, "h": None, "theta": None, "solver": None, "master_projection": None},
+    "observer": {"q": None, "u": None, "coupling": None, "source": None, "log": None,
+                 "observers": None, "log_tolerance": None},
+}
+REQUIRED = ("system.M", "system.C", "system.K", "system.W", "impact.law", "impact.restitution",
+            "initial.q", "initial.u", "simulation.t_end", "simulation.h")
+
+INITIAL_GAP_TOL = 1e-9
+"""Largest accepted initial penetration, relative to max(1, max|ν(0)|, max|Wᵀq0|)."""
+
+
+def check_keys(doc: Any, schema: Any, prefix: str = "") -> None:
+    """Raise :class:`InputError` on any key of ``doc`` that ``schema`` does not know."""
+    if isinstance(schema, list):
+        if not isinstance(doc, list):
+            raise InputError(prefix, "must be an array of tables")
+        for i, item in enumerate(doc):
+            check_keys(item, schema[0], f"{prefix}[{i}]")
+        return
+    if schema is None:
+        return
+    if not isinstance(doc, dict):
+        raise InputError(prefix, "must be a table")
+    for key, value in doc.items():
+        name = f"{prefix}.{key}" if prefix else key
+        if key not in schema:
+            known = ", ".join(sorted(schema))
+            raise InputError(name, f"unknown key (known keys here: {known})")
+        check_keys(value, schema[key], name)
+
+
+def _get(doc: dict, dotted: str, default: Any = KeyError) -> Any:
+    node: Any = doc
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            if default is KeyError:
+                raise InputError(dotted, "required key is missing")
+            return default
+        node = node[part]
+    return node
+
+
+def parse_value(text: str) -> Any:
+    """Parse a ``--set`` value as a TOML value (number, array, bool, quoted string) or a bare string."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def apply_overrides(doc: dict, overrides: dict[str, Any]) -> dict:
+    """Return a copy of ``doc`` with dotted keys set (``{"simulation.h": 1e-3}``); keys are checked later."""
+    doc = copy.deepcopy(doc)
+    for key, value in overrides.items():
+        parts = key.split(".")
+        node = doc
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+            if not isinstance(node, dict):
+                raise InputError(key, "cannot set a key inside a non-table value")
+        node[parts[-1]] = parse_value(value) if isinstance(value, str) else value
+    return doc
+
+
+def _harmonic_doc(field_name: str, d: dict, n: int, kind: str, const_key: str) -> Harmonic:
+    terms = []
+    if any(k in d for k in ("amplitude", "omega", "phase")):
+        terms.append({k: d[k] for k in ("amplitude", "omega", "phase") if k in d})
+    terms += d.get("harmonics", [])
+    return Harmonic.build(field_name, n, constant=d.get(const_key, 0.0), terms=terms, kind=kind)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A complete, validated simulation case.
+
+    Attributes
+    ----------
+    name, description : str
+    system : LinearSystem
+    law : ImpactLaw
+    q0, u0 : ndarray, shape (n,)
+        Initial state of the master (g(q0, 0) ≥ 0 up to :data:`INITIAL_GAP_TOL`).
+    t_end, h, theta : float
+    solver : str
+        Contact solver name.
+    master_projection : bool
+        Use the position-projected master (K-metric projection on its own closed set).
+    observer : dict
+        The raw ``[observer]`` table (validated by :mod:`observer.observers`).
+    """
+
+    name: str
+    description: str
+    system: LinearSystem
+    law: ImpactLaw
+    q0: np.ndarray
+    u0: np.ndarray
+    t_end: float
+    h: float
+    theta: float = 0.5
+    solver: str = "pivoting"
+    master_projection: bool = False
+    observer: dict = field(default_factory=dict)
+    source: str = ""
+
+    # -- construction ----------------------------------------------------------------------
+    @staticmethod
+    def from_dict(doc: dict, source: str = "") -> "Scenario":
+        """Validate a scenario document (see module docstring) and build the scenario."""
+        check_keys(doc, SCHEMA)
+        for key in REQUIRED:
+            _get(doc, key)
+        sysd = doc["system"]
+        M = as_array("system.M", sysd["M"], (None, None))
+        n = M.shape[0]
+        W = as_array("system.W", sysd["W"], (n, None))
+        m = W.shape[1]
+        forcing = _harmonic_doc("system.forcing", sysd.get("forcing", {}), n, "cos", "constant")
+        gap = _harmonic_doc("system.gap", sysd.get("gap", {}), m, "sin", "offset")
+        system = LinearSystem(M, sysd["C"], sysd["K"], W, forcing, gap)
+        law = ImpactLaw.build(doc["impact"]["law"], doc["impact"]["restitution"], m)
+        q0 = as_array("initial.q", doc["initial"]["q"], (n,))
+        u0 = as_array("initial.u", doc["initial"]["u"], (n,))
+        simd = doc["simulation"]
+        h, theta = check_step_parameters(simd["h"], simd.get("theta", 0.5))
+        t_end = as_scalar("simulation.t_end", simd["t_end"], positive=True)
+        solver = simd.get("solver", "pivoting")
+        from observer.contact import get_solver
+        get_solver(solver)
+        projection = simd.get("master_projection", False)
+        if not isinstance(projection, bool):
+            raise InputError("simulation.master_projection", f"must be true or false, got {projection!r}")
+        if projection:
+            system.require_definite_stiffness("simulation.master_projection")
+        check_initial_gap("initial.q", system, q0)
+        meta = doc.get("scenario", {})
+        return Scenario(str(meta.get("name", Path(source).stem if source else "custom")),
+                        str(meta.get("description", "")), system, law, q0, u0, t_end, h, theta,
+                        solver, projection, dict(doc.get("observer", {})), source)
+
+    def to_dict(self) -> dict:
+        """The scenario as a TOML-ready document (inverse of :meth:`from_dict`)."""
+        s = self.system
+
+        def harmonic(hm: Harmonic, const_key: str) -> dict:
+            d: dict = {const_key: hm.constant.tolist()}
+            terms = hm.terms()
+            if terms:
+                d.update(terms[0])
+                if len(terms) > 1:
+                    d["harmonics"] = terms[1:]
+            return d
+
+        doc = {
+            "scenario": {"name": self.name, "description": self.description},
+            "system": {"M": s.M.tolist(), "C": s.C.tolist(), "K": s.K.tolist(), "W": s.W.tolist(),
+                       "forcing": harmonic(s.forcing, "constant"), "gap": harmonic(s.gap, "offset")},
+            "impact": {"law": self.law.law, "restitution": self.law.restitution.tolist()
+                       if not self.law.is_global else float(self.law.restitution[0])},
+            "initial": {"q": self.q0.tolist(), "u": self.u0.tolist()},
+            "simulation": {"t_end": self.t_end, "h": self.h, "theta": self.theta,
+                           "solver": self.solver, "master_projection": self.master_projection},
+        }
+        if self.observer:
+            doc["observer"] = copy.deepcopy(self.observer)
+        return doc
+
+    def with_overrides(self, overrides: dict[str, Any]) -> "Scenario":
+        """A new scenario with dotted-key overrides applied to its document."""
+        return Scenario.from_dict(apply_overrides(self.to_dict(), overrides), self.source)
+
+    def parameters(self) -> dict:
+        """Flat metadata describing the run settings (for results and reports)."""
+        return {"scenario": self.name, "n": self.system.n, "m": self.system.m, "h": self.h,
+                "theta": self.theta, "t_end": self.t_end, "law": self.law.law,
+                "restitution": self.law.restitution.tolist(), "solver": self.solver,
+                "master_projection": self.master_projection}
+
+
+def check_initial_gap(field_name: str, system: LinearSystem, q0: np.ndarray, t0: float = 0.0) -> None:
+    """Raise if the initial state penetrates a contact by more than :data:`INITIAL_GAP_TOL`."""
+    g = system.gaps(q0, t0)
+    scale = max(1.0, float(np.max(np.abs(system.nu(t0)))), float(np.max(np.abs(q0 @ system.W))))
+    if np.min(g) < -INITIAL_GAP_TOL * scale:
+        j = int(np.argmin(g))
+        raise InputError(field_name, f"initial state penetrates contact {j}: g = {g[j]:.6g} < 0")

@@ -1,0 +1,42 @@
+"""Bouncing ball (Zeno): a point mass dropped from rest at height h0 onto the ground.
+
+1 DOF, q = height, M = m, C = K = 0 (a free rigid mode: simulation only; the observer
+with position jumps needs K ≻ 0), f = −m g0, g = q ≥ 0, Newton restitution e.
+Closed form (THEORY §7.1): first impact t1 = sqrt(2h0/g0), impact times
+t_k = t1 + (2v1/g0) e(1 − e^{k−1})/(1 − e), accumulation time
+t_∞ = sqrt(2h0/g0)(1 + e)/(1 − e) = 4.0637 s for h0 = 1 m, e = 0.8; then persistent
+contact with λ = m g0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+DESCRIPTION = "ball dropped on the ground: Zeno accumulation at t_inf = 4.06 s, then rest"
+
+PARAMETERS = dict(m=1.0, g0=9.81, h0=1.0, restitution=0.8, law="newton", h=1e-3, t_end=6.0)
+
+
+def accumulation_time(h0: float, g0: float, e: float) -> float:
+    """Zeno time t_∞ = sqrt(2h0/g0)(1 + e)/(1 − e)."""
+    return float(np.sqrt(2 * h0 / g0) * (1 + e) / (1 - e))
+
+
+def impact_times(h0: float, g0: float, e: float, count: int) -> np.ndarray:
+    """The first ``count`` impact times t_k = t1 + (2v1/g0) e(1 − e^{k−1})/(1 − e)."""
+    t1 = np.sqrt(2 * h0 / g0)
+    v1 = np.sqrt(2 * g0 * h0)
+    k = np.arange(1, count + 1)
+    return t1 + (2 * v1 / g0) * e * (1 - e ** (k - 1)) / (1 - e)
+
+
+def document(**overrides) -> dict:
+    p = {**PARAMETERS, **overrides}
+    return {
+        "scenario": {"name": "bouncing_ball", "description": DESCRIPTION},
+        "system": {"M": [[p["m"]]], "C": [[0.0]], "K": [[0.0]], "W": [[1.0]],
+                   "forcing": {"constant": [-p["m"] * p["g0"]]}, "gap": {"offset": [0.0]}},
+        "impact": {"law": p["law"], "restitution": p["restitution"]},
+        "initial": {"q": [p["h0"]], "u": [0.0]},
+        "simulation": {"t_end": p["t_end"], "h": p["h"], "theta": 0.5},
+    }

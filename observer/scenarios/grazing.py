@@ -1,0 +1,41 @@
+"""Grazing: a damped forced 1-DOF oscillator whose steady-state amplitude just touches a wall.
+
+``ẍ + 2ζẋ + x = F cos(ωt)`` has the steady state x(t) = X cos(ωt − δ) with
+X = F / sqrt((1 − ω²)² + (2ζω)²) and δ = atan2(2ζω, 1 − ω²). The wall sits at
+σ = X(1 + clearance); with clearance 0 the orbit touches it with zero velocity once per
+period (a grazing contact). The run starts on the steady-state orbit. Convention as in
+``impact_oscillator``: q = x, g = σ − q ≥ 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+DESCRIPTION = "damped forced oscillator whose amplitude just touches the wall (grazing)"
+
+PARAMETERS = dict(zeta=0.05, F=1.0, omega=0.8, clearance=0.0, restitution=0.8, law="newton",
+                  h=1e-3, t_end=40.0)
+
+
+def steady_state(zeta: float, F: float, omega: float) -> tuple[float, float]:
+    """Amplitude X and phase lag δ of the linear steady state."""
+    X = F / np.hypot(1 - omega ** 2, 2 * zeta * omega)
+    return float(X), float(np.arctan2(2 * zeta * omega, 1 - omega ** 2))
+
+
+def document(**overrides) -> dict:
+    p = {**PARAMETERS, **overrides}
+    X, delta = steady_state(p["zeta"], p["F"], p["omega"])
+    sigma = X * (1.0 + p["clearance"])
+    q0 = X * np.cos(-delta)
+    u0 = -X * p["omega"] * np.sin(-delta)
+    return {
+        "scenario": {"name": "grazing", "description": DESCRIPTION},
+        "system": {"M": [[1.0]], "C": [[2.0 * p["zeta"]]], "K": [[1.0]], "W": [[-1.0]],
+                   "forcing": {"constant": [0.0], "amplitude": [p["F"]], "omega": p["omega"],
+                               "phase": 0.0},
+                   "gap": {"offset": [sigma]}},
+        "impact": {"law": p["law"], "restitution": p["restitution"]},
+        "initial": {"q": [float(q0)], "u": [float(u0)]},
+        "simulation": {"t_end": p["t_end"], "h": p["h"], "theta": 0.5},
+    }

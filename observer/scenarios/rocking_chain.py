@@ -1,0 +1,97 @@
+"""Chain of N rocking blocks on a harmonically moving ground (paper, Example 2; THEORY §4).
+
+Block i = 1..N (1 = lowest) is a rectangle of width 2b, height H, mass m_i and centroidal
+inertia J = m(4b² + H²)/12; it translates vertically (y_i) and rotates (φ_i):
+q = (y1, φ1, …, yN, φN), n = 2N. Interface j joins block j−1 (the ground if j = 1) to
+block j with two vertical spring–dampers (k, c) at x = ±a, so
+``K_j = Σ_r k [1, x_r]ᵀ[1, x_r] = diag(2k, 2ka²)`` and the chain stiffness is
+``K = Σ_j (E_j − E_{j−1})ᵀ K_j (E_j − E_{j−1})`` (E_0 := 0), C likewise.
+
+Contacts are the corners x = −b (L) and x = +b (R) of every interface, m = 2N:
+``g_{j,s} = g⁰_{j,s} + [1, x_s]·(p_j − p_{j−1})``, so W is square, block lower-bidiagonal
+with det W = (2b)^N. The ground moves as y_g = Y sin Ωt (φ_g ≡ 0); it enters the force
+through interface 1, ``f = f_grav + E_1ᵀ(K_1 p0 + C_1 ṗ0)``, and the gaps of interface 1,
+``ν_{1,s} = g⁰_{1,s} − Y sin Ωt``. The unloaded clearances g⁰ = s − Wᵀq_s are set from the
+desired static gaps s (s_L at left corners, s_R at right corners) at the static
+configuration q_s = K⁻¹f_grav. Unequal s_L ≠ s_R break the left/right symmetry, which
+would otherwise keep every rotation at zero.
+
+Neglected (this is what keeps the model LTI): P-Δ terms, horizontal corner motion,
+friction, finite rotation of the contact normals. Poisson law in Glocker's inequality
+form (the Delassus matrix has negative off-diagonals for flat blocks, H < 2√2 b).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+DESCRIPTION = "N rocking blocks (y, phi), two corner contacts per interface, moving ground"
+
+PARAMETERS = dict(N=10, m=1.0, b=0.1, H=0.1, a=0.08, k=1000.0, c=5.0, g0=9.81, s_L=0.002,
+                  s_R=0.003, Y=0.02, Omega=6.0, restitution=0.9, law="poisson", h=1e-4,
+                  t_end=8.0, t_on=4.0, t_off=8.0, slave_offset=1e-6)
+"""Defaults (SI units). ``slave_offset`` perturbs φ1 and y_N of the observers' initial state."""
+
+
+def matrices(N: int, m: float, b: float, H: float, a: float, k: float, c: float):
+    """Return M, C, K, W of the chain (n = m = 2N) and the interface matrices K_j, C_j."""
+    n = 2 * N
+    J = m * (4 * b * b + H * H) / 12.0
+    M = np.diag(np.tile([m, J], N))
+    offsets = (-a, a)
+    K_int = sum(k * np.outer([1.0, x], [1.0, x]) for x in offsets)
+    C_int = sum(c * np.outer([1.0, x], [1.0, x]) for x in offsets)
+    K = np.zeros((n, n))
+    C = np.zeros((n, n))
+    W = np.zeros((n, n))
+    for j in range(N):                       # interface j+1 joins block j (ground if j = 0) to j+1
+        D = np.zeros((2, n))                 # D = E_{j+1} − E_j
+        D[:, 2 * j:2 * j + 2] = np.eye(2)
+        if j > 0:
+            D[:, 2 * j - 2:2 * j] = -np.eye(2)
+        K += D.T @ K_int @ D
+        C += D.T @ C_int @ D
+        for side, x in enumerate((-b, b)):
+            W[:, 2 * j + side] = D.T @ np.array([1.0, x])
+    return M, C, K, W, K_int, C_int
+
+
+def document(**overrides) -> dict:
+    p = {**PARAMETERS, **overrides}
+    N = int(p["N"])
+    if N < 1 or N != p["N"]:
+        from observer.errors import InputError
+        raise InputError("param.N", f"must be a positive integer, got {p['N']!r}")
+    M, C, K, W, K_int, C_int = matrices(N, p["m"], p["b"], p["H"], p["a"], p["k"], p["c"])
+    n = 2 * N
+    f_grav = np.zeros(n)
+    f_grav[0::2] = -p["g0"] * p["m"]
+    q_s = np.linalg.solve(K, f_grav)
+    s = np.tile([p["s_L"], p["s_R"]], N)
+    g0 = s - W.T @ q_s
+    Y, Om = p["Y"], p["Omega"]
+    # f = f_grav + E_1ᵀ(K_1 [Y sin Ωt, 0] + C_1 [YΩ cos Ωt, 0]); sin Ωt = cos(Ωt − π/2)
+    amp_k = np.zeros(n)
+    amp_k[:2] = Y * K_int[:, 0]
+    amp_c = np.zeros(n)
+    amp_c[:2] = Y * Om * C_int[:, 0]
+    gap_amp = np.zeros(n)
+    gap_amp[:2] = -Y                          # ν_{1,s} = g⁰ − [1, x_s]·p0 = g⁰ − Y sin Ωt
+    slave_q = q_s.copy()
+    slave_q[1] += p["slave_offset"]
+    slave_q[n - 2] += p["slave_offset"]
+    return {
+        "scenario": {"name": "rocking_chain", "description": DESCRIPTION},
+        "system": {"M": M.tolist(), "C": C.tolist(), "K": K.tolist(), "W": W.tolist(),
+                   "forcing": {"constant": f_grav.tolist(), "amplitude": amp_c.tolist(),
+                               "omega": Om, "phase": 0.0,
+                               "harmonics": [{"amplitude": amp_k.tolist(), "omega": Om,
+                                              "phase": -np.pi / 2}]},
+                   "gap": {"offset": g0.tolist(), "amplitude": gap_amp.tolist(), "omega": Om,
+                           "phase": 0.0}},
+        "impact": {"law": p["law"], "restitution": p["restitution"]},
+        "initial": {"q": q_s.tolist(), "u": [0.0] * n},
+        "simulation": {"t_end": p["t_end"], "h": p["h"], "theta": 0.5},
+        "observer": {"q": slave_q.tolist(), "u": [0.0] * n, "coupling": [p["t_on"], p["t_off"]],
+                     "source": "master", "observers": ["jump", "nojump"]},
+    }

@@ -1,0 +1,197 @@
+"""The façade: load a scenario, simulate the master and its observers, return a result."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+
+from observer.errors import InputError
+from observer.observers import OBSERVERS, ObserverConfig, Slave, check_observer_name, lyapunov, \
+    lyapunov_decrements
+from observer.result import SimulationResult, SlaveTrajectory, run_metadata
+from observer.scenario import Scenario, apply_overrides, parse_value
+from observer.scenarios import SCENARIOS, builtin_document
+from observer.stepping import MoreauJean
+from observer.switching import coupling_mask, read_log, sample_log
+from observer.tomlio import read_toml
+
+
+def load_scenario(name_or_path: str | Path | Scenario, overrides: dict[str, Any] | None = None) -> Scenario:
+    """Load a built-in scenario by name or a TOML file by path, with dotted-key overrides.
+
+    Keys ``param.NAME`` set a built-in's builder parameter (e.g. ``{"param.N": 5}`` for
+    ``rocking_chain``); every other key addresses the TOML document
+    (``{"simulation.h": 1e-3, "impact.law": "newton"}``). String values are parsed as
+    TOML values, so CLI ``--set`` strings work unchanged.
+    """
+    overrides = dict(overrides or {})
+    if isinstance(name_or_path, Scenario):
+        return name_or_path.with_overrides(overrides) if overrides else name_or_path
+    params = {k[len("param."):]: (parse_value(v) if isinstance(v, str) else v)
+              for k, v in overrides.items() if k.startswith("param.")}
+    rest = {k: v for k, v in overrides.items() if not k.startswith("param.")}
+    name = str(name_or_path)
+    if name in SCENARIOS:
+        doc, source = builtin_document(name, params), name
+    elif name.endswith(".toml") or Path(name).exists():
+        if params:
+            raise InputError(next(iter(params)) and "param." + next(iter(params)),
+                             "builder parameters apply only to built-in scenarios")
+        doc, source = read_toml(name), name
+    else:
+        raise InputError("scenario", f"{name!r} is neither a built-in scenario "
+                         f"({', '.join(SCENARIOS)}) nor an existing .toml file")
+    return Scenario.from_dict(apply_overrides(doc, rest), source)
+
+
+def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: float | None = None, *,
+             solver: str | None = None, theta: float | None = None,
+             master_projection: bool | None = None,
+             observers: Iterable[str | Slave] = (), source: str | None = None,
+             coupling: tuple[float, float] | None | str = "scenario",
+             log: str | Path | None = None, residual_tol: float = 1e-9) -> SimulationResult:
+    """Simulate the master (and the observers) of ``scenario`` with the Moreau–Jean scheme.
+
+    Parameters
+    ----------
+    scenario : str, Path or Scenario
+        Built-in name, TOML path or a loaded :class:`Scenario`.
+    h, t_end, solver, theta, master_projection
+        Override the scenario's settings.
+    observers : iterable of str or Slave
+        ``"jump"``/``"nojump"`` start from the scenario's ``[observer]`` state; a
+        :class:`~observer.observers.Slave` gives its own name, design and state.
+    source : {"master", "log", "self"}, optional
+        Switching signal (default: the scenario's ``observer.source``, else "master").
+    coupling : (t_on, t_off) or None
+        Coupling window (default: the scenario's; None couples over the whole run).
+    log : path, optional
+        Closing log for ``source="log"`` (default: the scenario's ``observer.log``).
+
+    Returns
+    -------
+    SimulationResult
+        With one :class:`~observer.result.SlaveTrajectory` per observer (V relative to the
+        master) and the switching signal ``chi``.
+    """
+    sc = load_scenario(scenario)
+    overrides = {k: v for k, v in (("simulation.h", h), ("simulation.t_end", t_end),
+                                   ("simulation.solver", solver), ("simulation.theta", theta),
+                                   ("simulation.master_projection", master_projection))
+                 if v is not None}
+    if overrides:
+        sc = sc.with_overrides(overrides)
+    system = sc.system
+    stepper = MoreauJean(system, sc.law, sc.h, sc.t_end, sc.theta, solver=sc.solver,
+                         residual_tol=residual_tol)
+    grid = stepper.grid
+    slaves = _slaves(sc, observers)
+    cfg = None
+    if slaves:
+        base_dir = str(Path(sc.source).parent) if sc.source.endswith(".toml") else None
+        cfg = ObserverConfig.from_table(sc.observer, system.n, sc.q0, sc.u0, base_dir)
+        source = source or cfg.source
+        if coupling == "scenario":
+            coupling = cfg.coupling
+        log = log or cfg.log
+        if any(s.position_jumps for s in slaves):
+            system.require_definite_stiffness("the observer with position jumps")
+    chi_log = None
+    if slaves and source == "log":
+        if log is None:
+            raise InputError("observer.log", "source = \"log\" needs a log file")
+        chi_log = sample_log(read_log(log, system.m), grid.t, system.m)
+    coupled = coupling_mask(grid.t, None if coupling == "scenario" else coupling)
+
+    t_start = time.perf_counter()
+    out = _run(stepper, sc.q0, sc.u0, sc.master_projection, slaves, source, coupled, chi_log)
+    wall = time.perf_counter() - t_start
+
+    meta = run_metadata(sc, stepper, wall)
+    res = SimulationResult(grid.t, out["q"], out["u"], out["P"], out["active"], system, meta,
+                           sigma=out["sigma"])
+    if slaves:
+        res.chi = out["chi"]
+        master = {"q": out["q"], "u": out["u"], "P": out["P"], "sigma": out["sigma"]}
+        for s, traj in zip(slaves, out["slaves"]):
+            V = lyapunov(system, traj["q"], traj["u"], out["q"], out["u"])
+            parts = lyapunov_decrements(system, sc.h, traj, master)
+            res.slaves[s.name] = SlaveTrajectory(s.name, traj["q"], traj["u"], traj["P"], V,
+                                                 parts["damping"], parts["impulse"],
+                                                 parts["projection"], traj["sigma"])
+        meta.update(observers=[s.name for s in slaves], source=source,
+                    coupling=None if coupling in ("scenario", None) else list(coupling),
+                    log=str(log) if log else None)
+    return res
+
+
+def _slaves(sc: Scenario, observers: Iterable[str | Slave]) -> list[Slave]:
+    out: list[Slave] = []
+    cfg = None
+    for ob in observers:
+        if isinstance(ob, Slave):
+            out.append(ob)
+            continue
+        check_observer_name(ob)
+        if cfg is None:
+            cfg = ObserverConfig.from_table(sc.observer, sc.system.n, sc.q0, sc.u0)
+        out.append(Slave(ob, OBSERVERS[ob], cfg.q0, cfg.u0))
+    names = [s.name for s in out]
+    if len(set(names)) != len(names):
+        raise InputError("observers", f"observer names must be unique, got {names}")
+    return out
+
+
+def _run(stepper: MoreauJean, q0: np.ndarray, u0: np.ndarray, master_projection: bool,
+         slaves: list[Slave], source: str | None, coupled: np.ndarray,
+         chi_log: np.ndarray | None) -> dict:
+    """The time loop: master step, then every slave with χ (or its own closed set)."""
+    steps = stepper.grid.steps
+    n, m = stepper.system.n, stepper.system.m
+
+    def arrays(q_init, u_init):
+        d = {"q": np.empty((steps + 1, n)), "u": np.empty((steps + 1, n)),
+             "P": np.zeros((steps + 1, m)), "sigma": np.zeros((steps + 1, m)),
+             "active": np.zeros((steps + 1, m), dtype=bool)}
+        d["q"][0], d["u"][0] = q_init, u_init
+        return d
+
+    master = arrays(q0, u0)
+    chi_rec = np.zeros((steps + 1, m), dtype=bool)
+    subs = [arrays(s.q0, s.u0) for s in slaves]
+    jumps = [s.position_jumps for s in slaves]
+    states = [(s.q0.copy(), s.u0.copy()) for s in slaves]
+    q, u = q0.copy(), u0.copy()
+    mq, mu, mP, msig, mact = master["q"], master["u"], master["P"], master["sigma"], master["active"]
+    for k in range(steps):
+        idx = np.flatnonzero(stepper.predicted_active(k, q, u))
+        q, u, P, sig = stepper.step(k, q, u, idx, master_projection)
+        mq[k + 1], mu[k + 1] = q, u
+        if idx.size:
+            mP[k + 1, idx] = P
+            mact[k + 1, idx] = True
+            if sig is not None:
+                msig[k + 1, idx] = sig
+        if not subs:
+            continue
+        chi = idx if chi_log is None else np.flatnonzero(chi_log[k])
+        chi_rec[k + 1, chi] = True
+        for j, rec in enumerate(subs):
+            qs, us = states[j]
+            if coupled[k]:
+                act, proj = chi, jumps[j]
+            else:
+                act, proj = np.flatnonzero(stepper.predicted_active(k, qs, us)), master_projection
+            qs, us, Ps, sgs = stepper.step(k, qs, us, act, proj)
+            states[j] = (qs, us)
+            rec["q"][k + 1], rec["u"][k + 1] = qs, us
+            if act.size:
+                rec["P"][k + 1, act] = Ps
+                if sgs is not None:
+                    rec["sigma"][k + 1, act] = sgs
+    master["chi"] = chi_rec
+    master["slaves"] = subs
+    return master

@@ -1,0 +1,86 @@
+"""Reading and writing scenario documents as TOML.
+
+Reading uses the standard library's ``tomllib``. Writing is a small emitter for the
+scenario schema (tables of scalars, strings, vectors and matrices) that prints one
+matrix row per line and every float with ``repr`` (shortest round-trip form), so that
+``show`` output is editable by hand and reads back to bit-identical arrays.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from observer.errors import InputError
+
+
+def read_toml(path: str | Path) -> dict:
+    """Parse a TOML file; a syntax error becomes an :class:`InputError` naming the file."""
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise InputError(str(path), "file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(str(path), f"invalid TOML ({exc})") from None
+
+
+def _scalar(x: Any) -> str:
+    if isinstance(x, bool):
+        return "true" if x else "false"
+    if isinstance(x, int):
+        return str(x)
+    if isinstance(x, float):
+        if not math.isfinite(x):
+            raise ValueError(f"cannot write non-finite float {x!r} to TOML")
+        return repr(x)
+    if isinstance(x, str):
+        return '"' + x.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+    raise TypeError(f"cannot write {type(x).__name__} to TOML")
+
+
+def _value(x: Any, indent: str = "") -> str:
+    if isinstance(x, (list, tuple)):
+        if x and isinstance(x[0], (list, tuple)):
+            rows = ",\n".join(indent + "  " + _value(r) for r in x)
+            return "[\n" + rows + ",\n" + indent + "]"
+        return "[" + ", ".join(_scalar(v) for v in x) + "]"
+    return _scalar(x)
+
+
+def dumps(doc: dict, comments: dict[str, str] | None = None) -> str:
+    """Serialise a nested dict (tables, arrays of tables under key ``harmonics``) to TOML.
+
+    ``comments`` maps a dotted table name to a comment printed above the table.
+    """
+    comments = comments or {}
+    out: list[str] = []
+
+    def table(prefix: str, d: dict, array_item: bool = False) -> None:
+        scalars = {k: v for k, v in d.items() if not isinstance(v, dict) and not _is_table_array(v)}
+        if prefix:
+            if prefix in comments:
+                out.append("")
+                out.extend("# " + line for line in comments[prefix].splitlines())
+            elif out:
+                out.append("")
+            out.append(f"[[{prefix}]]" if array_item else f"[{prefix}]")
+        for k, v in scalars.items():
+            out.append(f"{k} = {_value(v)}")
+        for k, v in d.items():
+            name = f"{prefix}.{k}" if prefix else k
+            if isinstance(v, dict):
+                table(name, v)
+            elif _is_table_array(v):
+                for item in v:
+                    table(name, item, array_item=True)
+
+    table("", doc)
+    return "\n".join(out).lstrip("\n") + "\n"
+
+
+def _is_table_array(v: Any) -> bool:
+    return isinstance(v, list) and bool(v) and all(isinstance(i, dict) for i in v)
