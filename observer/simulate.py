@@ -105,6 +105,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
             raise InputError("observer.log", "source = \"log\" needs a log file")
         chi_log = sample_log(read_log(log, system.m), grid.t, system.m)
     coupled = coupling_mask(grid.t, None if coupling == "scenario" else coupling)
+    if source == "self":
+        coupled[:] = False
 
     t_start = time.perf_counter()
     out = _run(stepper, sc.q0, sc.u0, sc.master_projection, slaves, source, coupled, chi_log)

@@ -169,6 +169,29 @@ class MoreauJean:
         self._e = np.asarray(law.restitution)
         self._fallback = None
         self._k = 0
+        self._slices: dict[bytes, tuple] = {}
+
+    MAX_CACHED_SETS = 4096
+    """Active sets whose matrix slices are kept (cleared when full)."""
+
+    def _active_slices(self, active: np.ndarray) -> tuple:
+        """Slices of the precomputed matrices for one active set (cached by the set).
+
+        Returns ``(W_A, Â⁻¹W_A, Ĝ_AA, G₀_AA, K⁻¹W_A, L_AA, e_A)``.
+        """
+        key = active.tobytes()
+        hit = self._slices.get(key)
+        if hit is None:
+            S = self.S
+            ix = np.ix_(active, active)
+            hit = (np.ascontiguousarray(S.W[:, active]), np.ascontiguousarray(S.AinvW[:, active]),
+                   S.Ghat[ix], S.G0[ix],
+                   None if S.KinvW is None else np.ascontiguousarray(S.KinvW[:, active]),
+                   None if S.L is None else S.L[ix], self._e[active])
+            if len(self._slices) >= self.MAX_CACHED_SETS:
+                self._slices.clear()
+            self._slices[key] = hit
+        return hit
 
     @property
     def h(self) -> float:
@@ -229,16 +252,13 @@ class MoreauJean:
             u1 = u_free
             P = np.zeros(0)
         else:
-            W_A = S.W[:, active]
-            AinvW_A = S.AinvW[:, active]
-            Ghat = S.Ghat[np.ix_(active, active)]
+            W_A, AinvW_A, Ghat, G0, _, _, e_A = self._active_slices(active)
             gamma_k = u @ W_A + grid.nu_dot[k, active]
             gamma_free = u_free @ W_A + grid.nu_dot[k + 1, active]
             if self._law_code == NEWTON:
-                P = self._solve(Ghat, gamma_free + self._e[active] * gamma_k).x
+                P = self._solve(Ghat, gamma_free + e_A * gamma_k).x
             else:
-                G0 = S.G0[np.ix_(active, active)]
-                P_imp = poisson_impact(G0, gamma_k, self._e[active], self._solve)
+                P_imp = poisson_impact(G0, gamma_k, e_A, self._solve)
                 P = P_imp + self._solve(Ghat, gamma_free + Ghat @ P_imp).x
             u1 = u_free + AinvW_A @ P
         q1 = q + h * ((1.0 - theta) * u + theta * u1)
@@ -257,10 +277,10 @@ class MoreauJean:
             return q, np.zeros(0)
         if S.L is None:
             self.system.require_definite_stiffness("the position projection (position jumps)")
-        g = q @ S.W[:, active] + self.grid.nu[k, active]
-        L_I = S.L[np.ix_(active, active)]
+        W_I, _, _, _, KinvW_I, L_I, _ = self._active_slices(active)
+        g = q @ W_I + self.grid.nu[k, active]
         if active.size == 1:
             sigma = -g / L_I[0, 0]
         else:
             sigma = -np.linalg.solve(L_I, g)
-        return q + S.KinvW[:, active] @ sigma, sigma
+        return q + KinvW_I @ sigma, sigma
