@@ -57,8 +57,10 @@ def cmd_run(args) -> int:
            f"({meta['steps_per_second']:.0f} steps/s), {int(res.active[1:].any(axis=1).sum())} "
            f"steps with closed contacts, max contact residual {meta['max_contact_residual']:.1e}")
     print(msg)
-    for name, s in res.slaves.items():
-        print(f"  {name}: V(0) = {s.V[0]:.3e}, V(end) = {s.V[-1]:.3e}")
+    if res.slaves:
+        summary = res.synchronization()
+        print("synchronization (times from t_on to V <= rho V(t_on); inf = not reached):")
+        print(summary.drop(columns=["master_closings"]).to_string(index=False, float_format=lambda x: f"{x:.3g}"))
     print(f"wrote {path}")
     return 0
 
@@ -72,10 +74,17 @@ def cmd_plot(args) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (``error: ...``, exit status 2), like every other input error."""
+
+    def error(self, message: str):
+        self.exit(2, f"error: {message} (see --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m observer",
+    p = _Parser(prog="python -m observer",
                                 description="Impact-time state observers for nonsmooth mechanical systems.")
-    sub = p.add_subparsers(dest="command", required=True)
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     s = sub.add_parser("scenarios", help="list the built-in scenarios")
     s.set_defaults(func=cmd_scenarios)
     s = sub.add_parser("show", help="print a scenario as an editable TOML file")
@@ -109,6 +118,9 @@ def main(argv: list[str] | None = None) -> int:
         return args.func(args)
     except (InputError, ContactSolverError) as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)

@@ -37,15 +37,18 @@ class Harmonic:
 
     @staticmethod
     def build(field_name: str, dim: int, *, constant: Any = 0.0, terms: list[dict] | None = None,
-              kind: str = "cos") -> "Harmonic":
+              kind: str = "cos", constant_name: str = "constant",
+              term_names: list[str] | None = None) -> "Harmonic":
         """Validate and build from a constant and a list of ``{amplitude, omega, phase}`` terms.
 
-        ``amplitude`` and ``phase`` may be scalars (broadcast) or ``dim``-vectors.
+        ``amplitude`` and ``phase`` may be scalars (broadcast) or ``dim``-vectors. Error
+        messages name ``field_name.constant_name`` and ``term_names[j]`` (default
+        ``field_name.harmonics[j]``).
         """
-        c = broadcast_vector(f"{field_name}.constant", constant, dim)
+        c = broadcast_vector(f"{field_name}.{constant_name}", constant, dim)
         amps, omegas, phases = [], [], []
         for j, term in enumerate(terms or []):
-            where = field_name if j == 0 else f"{field_name}.harmonics[{j - 1}]"
+            where = term_names[j] if term_names else f"{field_name}.harmonics[{j}]"
             amps.append(broadcast_vector(f"{where}.amplitude", term.get("amplitude", 0.0), dim))
             omegas.append(as_scalar(f"{where}.omega", term.get("omega", 0.0), low=0.0))
             phases.append(broadcast_vector(f"{where}.phase", term.get("phase", 0.0), dim))

@@ -84,7 +84,7 @@ class ObserverConfig:
 def check_observer_name(name: Any) -> None:
     """Raise unless ``name`` is a registered observer."""
     if name not in OBSERVERS:
-        raise InputError("observers", f"unknown observer {name!r}; choose from {sorted(OBSERVERS)}")
+        raise InputError("observer.observers", f"unknown observer {name!r}; choose from {sorted(OBSERVERS)}")
 
 
 def lyapunov(system: LinearSystem, q_s: np.ndarray, u_s: np.ndarray, q_m: np.ndarray,

@@ -23,6 +23,12 @@ def plot_run(df: pd.DataFrame, out: str | Path, dof: int = 0) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    out = Path(out)
+    formats = plt.figure().canvas.get_supported_filetypes()
+    plt.close("all")
+    if out.suffix.lstrip(".").lower() not in formats:
+        raise InputError("--out", f"unsupported image format {out.suffix!r}; use one of "
+                         f"{', '.join('.' + f for f in ('png', 'svg', 'pdf'))}")
     if f"q{dof}" not in df.columns:
         raise InputError("--dof", f"no coordinate q{dof} in the result")
     names = observer_names(df)
@@ -51,7 +57,6 @@ def plot_run(df: pd.DataFrame, out: str | Path, dof: int = 0) -> Path:
     if title:
         fig.suptitle(f"{title} (h = {df.attrs.get('h', '?')})", fontsize=10)
     fig.tight_layout()
-    out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=120)
     plt.close(fig)

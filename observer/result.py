@@ -119,6 +119,27 @@ class SimulationResult:
         df.attrs.update(json.loads(json.dumps(self.metadata, default=_jsonable)))
         return df
 
+    def synchronization(self, rhos: tuple[float, ...] = (1e-3, 1e-6, 1e-9)) -> pd.DataFrame:
+        """One row per observer: times (from t_on) to V ≤ ρ·V(t_on), the fitted exponential
+        rate of V over the coupling window, V(t_on), the final V and the floor (median of V
+        over the last 10 % of the window). ``inf`` marks a threshold never reached."""
+        from observer.metrics import decay_rate, floor, switchings, sync_time
+
+        coupling = self.metadata.get("coupling") or [float(self.t[0]), float(self.t[-1])]
+        t_on, t_off = float(coupling[0]), min(float(coupling[1]), float(self.t[-1]))
+        rows = []
+        for name, s in self.slaves.items():
+            k_on = int(np.searchsorted(self.t, t_on))
+            row = {"observer": name, "t_on": t_on, "t_off": t_off, "V_on": float(s.V[k_on])}
+            for rho in rhos:
+                row[f"t_sync_{rho:g}"] = sync_time(self.t, s.V, rho, t_on, t_off)
+            row["rate"] = decay_rate(self.t, s.V, t_on, t_off)
+            row["V_end"] = float(s.V[-1])
+            row["floor"] = floor(self.t, s.V, t_off - 0.1 * (t_off - t_on), t_off)
+            row["master_closings"] = switchings(self.active)
+            rows.append(row)
+        return pd.DataFrame(rows)
+
     def write(self, path: str | Path) -> Path:
         """Write :meth:`to_frame` as CSV (metadata in a leading ``# metadata:`` line) or Parquet."""
         return write_frame(self.to_frame(), path)
@@ -153,14 +174,21 @@ def read_frame(path: str | Path) -> pd.DataFrame:
     path = Path(path)
     if not path.exists():
         raise InputError(str(path), "file not found")
-    if path.suffix.lower() == ".parquet":
-        return pd.read_parquet(path)
-    with path.open() as fh:
-        first = fh.readline()
-    df = pd.read_csv(path, comment=None, skiprows=1 if first.startswith("# metadata:") else 0)
-    if first.startswith("# metadata:"):
-        df.attrs.update(json.loads(first[len("# metadata:"):]))
-    return df
+    try:
+        if path.suffix.lower() == ".parquet":
+            return pd.read_parquet(path)
+        with path.open() as fh:
+            first = fh.readline()
+        has_meta = first.startswith("# metadata:")
+        df = pd.read_csv(path, skiprows=1 if has_meta else 0)
+        if has_meta:
+            df.attrs.update(json.loads(first[len("# metadata:"):]))
+    except (UnicodeDecodeError, ValueError, OSError) as exc:
+        raise InputError(str(path), f"not a result file written by this toolkit ({exc})") from None
+    if "t" not in df.columns:
+        raise InputError(str(path), "not a result file (no column 't')")
+    flags = [c for c in df.columns if c.startswith(("active", "chi"))]
+    return df.astype({c: float for c in df.columns if c not in flags})
 
 
 def run_metadata(scenario, stepper, wall_time: float) -> dict:

@@ -113,11 +113,15 @@ def apply_overrides(doc: dict, overrides: dict[str, Any]) -> dict:
 
 
 def _harmonic_doc(field_name: str, d: dict, n: int, kind: str, const_key: str) -> Harmonic:
-    terms = []
+    terms, names = [], []
     if any(k in d for k in ("amplitude", "omega", "phase")):
         terms.append({k: d[k] for k in ("amplitude", "omega", "phase") if k in d})
-    terms += d.get("harmonics", [])
-    return Harmonic.build(field_name, n, constant=d.get(const_key, 0.0), terms=terms, kind=kind)
+        names.append(field_name)
+    for j, term in enumerate(d.get("harmonics", [])):
+        terms.append(term)
+        names.append(f"{field_name}.harmonics[{j}]")
+    return Harmonic.build(field_name, n, constant=d.get(const_key, 0.0), terms=terms, kind=kind,
+                          constant_name=const_key, term_names=names)
 
 
 @dataclass(frozen=True)
@@ -164,8 +168,13 @@ class Scenario:
         sysd = doc["system"]
         M = as_array("system.M", sysd["M"], (None, None))
         n = M.shape[0]
+        if M.shape != (n, n) or n == 0:
+            raise InputError("system.M", f"must be a non-empty square matrix, got shape "
+                             f"{M.shape[0]}x{M.shape[1]}")
         W = as_array("system.W", sysd["W"], (n, None))
         m = W.shape[1]
+        if m == 0:
+            raise InputError("system.W", "needs at least one contact column")
         forcing = _harmonic_doc("system.forcing", sysd.get("forcing", {}), n, "cos", "constant")
         gap = _harmonic_doc("system.gap", sysd.get("gap", {}), m, "sin", "offset")
         system = LinearSystem(M, sysd["C"], sysd["K"], W, forcing, gap)
@@ -177,7 +186,7 @@ class Scenario:
         t_end = as_scalar("simulation.t_end", simd["t_end"], positive=True)
         solver = simd.get("solver", "pivoting")
         from observer.contact import get_solver
-        get_solver(solver)
+        get_solver(solver, field="simulation.solver")
         projection = simd.get("master_projection", False)
         if not isinstance(projection, bool):
             raise InputError("simulation.master_projection", f"must be true or false, got {projection!r}")

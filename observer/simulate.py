@@ -15,7 +15,7 @@ from observer.result import SimulationResult, SlaveTrajectory, run_metadata
 from observer.scenario import Scenario, apply_overrides, parse_value
 from observer.scenarios import SCENARIOS, builtin_document
 from observer.stepping import MoreauJean
-from observer.switching import coupling_mask, read_log, sample_log
+from observer.switching import SOURCES, coupling_mask, read_log, sample_log
 from observer.tomlio import read_toml
 
 
@@ -99,6 +99,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         log = log or cfg.log
         if any(s.position_jumps for s in slaves):
             system.require_definite_stiffness("the observer with position jumps")
+    if source is not None and source not in SOURCES:
+        raise InputError("observer.source", f"must be one of {list(SOURCES)}, got {source!r}")
     chi_log = None
     if slaves and source == "log":
         if log is None:
@@ -143,7 +145,7 @@ def _slaves(sc: Scenario, observers: Iterable[str | Slave]) -> list[Slave]:
         out.append(Slave(ob, OBSERVERS[ob], cfg.q0, cfg.u0))
     names = [s.name for s in out]
     if len(set(names)) != len(names):
-        raise InputError("observers", f"observer names must be unique, got {names}")
+        raise InputError("observer.observers", f"observer names must be unique, got {names}")
     return out
 
 

@@ -48,10 +48,8 @@ def as_scalar(field: str, value: Any, *, positive: bool = False, low: float | No
 
 def broadcast_vector(field: str, value: Any, length: int) -> np.ndarray:
     """Accept a scalar or a vector of ``length`` entries; return a vector."""
-    arr = np.array(value, dtype=float) if np.ndim(value) == 0 else None
-    if arr is not None:
-        as_array(field, value, ())
-        return np.full(length, float(value))
+    if np.ndim(value) == 0:
+        return np.full(length, as_scalar(field, value))
     return as_array(field, value, (length,))
 
 

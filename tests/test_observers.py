@@ -272,3 +272,17 @@ def test_slave_may_start_penetrating_and_self_source_is_uncoupled():
     assert res.slaves["jump"].V[-1] < res.slaves["jump"].V[0]
     res = observer.simulate(sc, observers=[Slave("twin", False, sc.q0, sc.u0)], source="self")
     assert np.array_equal(res.slaves["twin"].q, res.q)
+
+
+def test_synchronization_summary_matches_metrics(double_mass_run):
+    """The per-observer summary reports the same times as the metric functions, inf where a
+    threshold is not reached in the window, and a positive rate."""
+    res = double_mass_run
+    summary = res.synchronization().set_index("observer")
+    for name in ("jump", "nojump"):
+        V = res.slaves[name].V
+        assert summary.loc[name, "t_sync_1e-06"] == sync_time(res.t, V, 1e-6)
+        assert summary.loc[name, "rate"] > 0.5
+    assert summary.loc["nojump", "t_sync_1e-09"] == np.inf    # needs 13.7 s; the run is 10 s
+    assert summary.loc["jump", "t_sync_1e-09"] < 10.0
+    assert summary.loc["jump", "V_on"] == res.slaves["jump"].V[0]

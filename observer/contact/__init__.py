@@ -75,12 +75,12 @@ CONTACT_SOLVERS = {cls.name: cls for cls in (PivotingSolver, LemkeSolver, NNLSSo
 """Registry: stable name -> solver class."""
 
 
-def get_solver(name: str):
-    """Instantiate a registered contact solver by name."""
+def get_solver(name: str, field: str = "solver"):
+    """Instantiate a registered contact solver by name (``field`` names the input in errors)."""
     try:
         return CONTACT_SOLVERS[name]()
-    except KeyError:
-        raise InputError("solver", f"unknown contact solver {name!r}; "
+    except (KeyError, TypeError):
+        raise InputError(field, f"unknown contact solver {name!r}; "
                          f"choose from {sorted(CONTACT_SOLVERS)}") from None
 
 

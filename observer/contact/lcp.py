@@ -118,7 +118,20 @@ def lemke(G: np.ndarray, b: np.ndarray, max_iter: int | None = None) -> LCPSolut
     m = b.shape[0]
     if np.all(b >= 0.0):
         return LCPSolution(np.zeros(m), 0.0, 0, "lemke")
-    max_iter = max_iter or 50 * (m + 1)
+    # LCP(G, b) is homogeneous in b: solve the problem scaled to max|b| = 1 so that the
+    # pivoting tolerances are relative, then scale back.
+    b_scale = float(np.max(np.abs(b)))
+    G_scale = max(float(np.max(np.abs(G))), TINY)
+    sol = _lemke_unit(G / G_scale, b / b_scale, max_iter or 50 * (m + 1))
+    if sol is None:
+        return None
+    x = _polish(G, b, sol[0] * (b_scale / G_scale))
+    return LCPSolution(x, lcp_residual(G, b, x), sol[1], "lemke")
+
+
+def _lemke_unit(G: np.ndarray, b: np.ndarray, max_iter: int) -> tuple[np.ndarray, int] | None:
+    """Lemke's pivots on a problem scaled to max|G| = max|b| = 1; returns (x, pivots) or None."""
+    m = b.shape[0]
     # Tableau columns: w (0..m-1), z (m..2m-1), z0 (2m), rhs (2m+1).
     T = np.zeros((m, 2 * m + 2))
     T[:, :m] = np.eye(m)
@@ -149,7 +162,7 @@ def lemke(G: np.ndarray, b: np.ndarray, max_iter: int | None = None) -> LCPSolut
         ratios = np.full(m, np.inf)
         ratios[pos] = T[pos, -1] / col[pos]
         rmin = np.min(ratios)
-        ties = np.flatnonzero(ratios <= rmin + 1e-12 * max(1.0, abs(rmin)))
+        ties = np.flatnonzero(ratios <= rmin + 1e-12 * abs(rmin))
         z0_rows = ties[basis[ties] == z0]
         r = int(z0_rows[0]) if z0_rows.size else int(ties[np.argmax(col[ties])])
         pivot(r, entering)
@@ -164,8 +177,7 @@ def lemke(G: np.ndarray, b: np.ndarray, max_iter: int | None = None) -> LCPSolut
     for i in range(m):
         if m <= basis[i] < 2 * m:
             x[basis[i] - m] = max(T[i, -1], 0.0)
-    x = _polish(G, b, x)
-    return LCPSolution(x, lcp_residual(G, b, x), it, "lemke")
+    return x, it
 
 
 def _polish(G: np.ndarray, b: np.ndarray, x: np.ndarray) -> np.ndarray:

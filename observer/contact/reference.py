@@ -43,7 +43,7 @@ class ReferenceProblemCache:
 
 _CACHE = ReferenceProblemCache()
 
-OSQP_SETTINGS = dict(eps_abs=1e-12, eps_rel=1e-12, max_iter=200_000, polish=True,
+OSQP_SETTINGS = dict(eps_abs=1e-12, eps_rel=1e-12, max_iter=200_000, polishing=True,
                      polish_refine_iter=10, verbose=False)
 """OSQP settings of the reference solver (tight tolerances, solution polishing on)."""
 
@@ -53,10 +53,15 @@ def solve_reference(G: np.ndarray, b: np.ndarray) -> LCPSolution:
     import cvxpy as cp
 
     m = b.shape[0]
+    if np.all(b >= 0.0):
+        return LCPSolution(np.zeros(m), 0.0, 0, "cvxpy-osqp")
     problem, x, R, bp = _CACHE.get(m)
     R.value = psd_factor(G)
     bp.value = np.asarray(b, dtype=float)
-    problem.solve(solver=cp.OSQP, warm_start=True, **OSQP_SETTINGS)
+    try:
+        problem.solve(solver=cp.OSQP, warm_start=True, **OSQP_SETTINGS)
+    except cp.error.SolverError:
+        return LCPSolution(np.full(m, np.nan), np.inf, 0, "cvxpy-osqp")
     if x.value is None:
         return LCPSolution(np.full(m, np.nan), np.inf, 0, "cvxpy-osqp")
     sol = np.clip(np.asarray(x.value, dtype=float), 0.0, None)

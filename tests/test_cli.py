@@ -1,0 +1,271 @@
+"""The command line ``python -m observer {scenarios, show, run, plot}`` in subprocesses.
+
+Every command is independent, so a module fixture runs them all concurrently (a few at a
+time) in one temporary directory; the tests then inspect exit status, stdout, stderr and
+the files written. Interpreter start-up (about 1 s, mostly imports) dominates the cost.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from observer import SCENARIOS, simulate
+from observer.result import read_frame
+
+REPO = Path(__file__).resolve().parents[1]
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def _env():
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    env.pop("PYTHONIOENCODING", None)
+    return env
+
+
+def run_cli(args, cwd):
+    return subprocess.run([sys.executable, "-m", "observer", *map(str, args)], cwd=cwd, env=_env(),
+                          capture_output=True, text=True, timeout=300)
+
+
+def run_all(commands: dict, cwd, workers=4) -> dict:
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        futures = {key: pool.submit(run_cli, args, cwd) for key, args in commands.items()}
+        return {key: f.result() for key, f in futures.items()}
+
+
+# Errors run as real subprocesses: name -> (arguments, text that the error line must contain)
+ERROR_CASES = {
+    "unknown-scenario": (["run", "no_such_scenario", "--out", "e1.csv"], "no_such_scenario"),
+    "unknown-set-key": (["run", "rocking_chain", "--set", "param.foo=1", "--out", "e2.csv"],
+                        "param.foo"),
+    "negative-h": (["run", "bouncing_ball", "--h", "-1", "--out", "e3.csv"], "simulation.h"),
+    "missing-toml": (["run", "missing.toml", "--out", "e4.csv"], "missing.toml"),
+    "invalid-toml": (["run", "invalid.toml", "--out", "e5.csv"], "invalid TOML"),
+    "xlsx": (["run", "bouncing_ball", "--t-end", "0.01", "--out", "e6.xlsx"], ".xlsx"),
+}
+
+# More errors, run in-process through observer.cli.main (same code, no interpreter start-up)
+INPROCESS_ERROR_CASES = {
+    "show-unknown-scenario": (["show", "no_such_scenario"], "no_such_scenario"),
+    "unknown-toml-key": (["run", "bouncing_ball", "--set", "simulation.hh=1", "--out", "i1.csv"],
+                         "simulation.hh"),
+    "set-without-value": (["run", "bouncing_ball", "--set", "param.h0", "--out", "i2.csv"], "--set"),
+    "zero-h": (["run", "bouncing_ball", "--h", "0", "--out", "i3.csv"], "simulation.h"),
+    "negative-t-end": (["run", "bouncing_ball", "--t-end", "-2", "--out", "i4.csv"],
+                       "simulation.t_end"),
+    "penetration": (["run", "bouncing_ball", "--set", "initial.q=[-0.5]", "--out", "i5.csv"],
+                    "initial.q"),
+    "unknown-observer": (["run", "double_mass", "--t-end", "0.01", "--observers", "kalman",
+                          "--out", "i6.csv"], "kalman"),
+    "unknown-solver": (["run", "bouncing_ball", "--solver", "gauss", "--out", "i7.csv"], "gauss"),
+    "param-on-toml": (["run", "bb.toml", "--set", "param.h0=2", "--out", "i8.csv"], "param.h0"),
+    "bad-param-N": (["run", "rocking_chain", "--set", "param.N=0", "--out", "i9.csv"], "param.N"),
+    "plot-missing-result": (["plot", "missing.csv", "--out", "i10.png"], "missing.csv"),
+    "plot-bad-dof": (["plot", "bb.csv", "--dof", "3", "--out", "i11.png"], "--dof"),
+}
+
+# Known CLI contract violations (an uncaught exception / several lines instead of one
+# "error:" line), run in-process
+MORE_ERROR_CASES = {
+    "plot-bad-image-extension": (["plot", "bb.csv", "--out", "x1.xyz"], "xyz"),
+    "plot-result-not-csv": (["plot", "figs/obs.png", "--out", "x2.png"], "obs.png"),
+    "run-out-under-a-file": (["run", "bouncing_ball", "--t-end", "0.01", "--out",
+                              "afile.txt/x3.csv"], "afile.txt"),
+    "set-non-numeric-restitution": (["run", "bouncing_ball", "--t-end", "0.01", "--set",
+                                     "impact.restitution=high", "--out", "x4.csv"],
+                                    "impact.restitution"),
+    "argparse-bad-float": (["run", "bouncing_ball", "--h", "abc", "--out", "x5.csv"], "--h"),
+}
+
+
+@pytest.fixture(scope="module")
+def cli(tmp_path_factory):
+    """Run every subprocess command once; returns (working directory, {key: CompletedProcess})."""
+    d = tmp_path_factory.mktemp("cli")
+    (d / "invalid.toml").write_text("[simulation]\nh = [1e-3,\n")
+    (d / "afile.txt").write_text("not a directory\n")
+    wave1 = {
+        "scenarios": ["scenarios"],
+        "run-csv": ["run", "bouncing_ball", "--h", "1e-3", "--t-end", "0.05", "--out", "bb.csv"],
+        "run-parquet": ["run", "bouncing_ball", "--h", "1e-3", "--t-end", "0.05",
+                        "--out", "out/bb.parquet"],
+        "run-set-N": ["run", "rocking_chain", "--set", "param.N=2", "--set", "simulation.h=1e-3",
+                      "--t-end", "0.5", "--out", "chain2.csv"],
+        "run-observers": ["run", "double_mass", "--h", "1e-3", "--t-end", "1.0",
+                          "--observers", "jump,nojump", "--out", "obs.csv"],
+    }
+    wave1.update({k: v[0] for k, v in ERROR_CASES.items()})
+    results = run_all(wave1, d)
+    results.update(run_all({"plot": ["plot", "obs.csv", "--out", "figs/obs.png"]}, d))
+    return d, results
+
+
+def run_main(args, cwd, capsys, monkeypatch):
+    """observer.cli.main in-process: (status, stdout, stderr); SystemExit gives its code."""
+    from observer.cli import main
+    monkeypatch.chdir(cwd)
+    capsys.readouterr()
+    try:
+        rc = main([str(a) for a in args])
+    except SystemExit as exc:
+        rc = exc.code
+    out, err = capsys.readouterr()
+    return subprocess.CompletedProcess(args, rc, out, err)
+
+
+def assert_ok(proc):
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def assert_one_error_line(proc, hint):
+    assert proc.returncode != 0
+    assert "Traceback" not in proc.stderr, proc.stderr
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith("error: "), lines[0]
+    assert hint in lines[0], lines[0]
+
+
+# ---------------------------------------------------------------------------------------
+def test_scenarios_lists_builtins_with_descriptions(cli):
+    _, res = cli
+    proc = res["scenarios"]
+    assert_ok(proc)
+    lines = proc.stdout.splitlines()
+    assert len(lines) == len(SCENARIOS) == 5
+    for line, (name, module) in zip(lines, SCENARIOS.items()):
+        got_name, desc = line.split(None, 1)
+        assert got_name == name
+        assert desc.strip() == module.DESCRIPTION
+
+
+def test_run_writes_csv_with_one_row_per_grid_point(cli):
+    d, res = cli
+    proc = res["run-csv"]
+    assert_ok(proc)
+    assert proc.stdout.rstrip().endswith("wrote bb.csv")
+    path = d / "bb.csv"
+    assert path.read_text().startswith("# metadata: {")
+    df = read_frame(path)
+    assert len(df) == 50 + 1
+    assert list(df.columns) == ["t", "q0", "u0", "g0", "P0", "active0"]
+    np.testing.assert_allclose(df["t"].to_numpy(), np.arange(51) * 1e-3, rtol=0, atol=1e-15)
+    assert df["t"].iloc[-1] == pytest.approx(0.05, abs=1e-15)
+    # free fall from 1 m, exact for the θ = ½ scheme: q(0.05) = 1 - 9.81·0.05²/2 = 0.98773750
+    assert df["q0"].iloc[-1] == pytest.approx(0.9877375, abs=1e-14)
+    assert df["u0"].iloc[-1] == pytest.approx(-0.4905, abs=1e-14)
+    ref = simulate("bouncing_ball", h=1e-3, t_end=0.05)
+    assert np.array_equal(df["q0"].to_numpy(), ref.q[:, 0])
+    assert np.array_equal(df["u0"].to_numpy(), ref.u[:, 0])
+    a = df.attrs
+    assert a["scenario"] == "bouncing_ball" and a["h"] == 1e-3 and a["steps"] == 50
+    assert a["t_end"] == 0.05 and a["theta"] == 0.5 and a["solver"] == "pivoting"
+    assert a["versions"]["numpy"] == np.__version__
+    assert "run bouncing_ball" in a["argv"] or "observer" in a["argv"]
+
+
+def test_run_writes_parquet(cli):
+    d, res = cli
+    assert_ok(res["run-parquet"])
+    path = d / "out" / "bb.parquet"
+    assert path.read_bytes()[:4] == b"PAR1"
+    df = pd.read_parquet(path)
+    assert len(df) == 51
+    csv = read_frame(d / "bb.csv")
+    assert list(df.columns) == list(csv.columns)
+    for col in ("t", "q0", "u0", "g0", "P0"):
+        assert np.array_equal(df[col].to_numpy(), csv[col].to_numpy()), col
+    back = read_frame(path)
+    assert back.attrs["h"] == 1e-3 and back.attrs["scenario"] == "bouncing_ball"
+
+
+def test_run_set_param_N_on_rocking_chain(cli):
+    d, res = cli
+    assert_ok(res["run-set-N"])
+    df = read_frame(d / "chain2.csv")
+    assert df.attrs["n"] == 4 and df.attrs["m"] == 4 and df.attrs["h"] == 1e-3
+    assert len(df) == 501
+    for prefix in ("q", "u", "g", "P", "active"):
+        assert [c for c in df.columns if c.rstrip("0123456789") == prefix] == \
+               [f"{prefix}{j}" for j in range(4)]
+    # static start: gaps s_L = 2 mm, s_R = 3 mm; the moving ground then closes contacts
+    np.testing.assert_allclose(df.loc[0, ["g0", "g1", "g2", "g3"]].to_numpy(dtype=float),
+                               [0.002, 0.003, 0.002, 0.003], rtol=0, atol=1e-12)
+    assert df[[f"active{j}" for j in range(4)]].to_numpy().any()
+    assert np.all(np.isfinite(df.to_numpy(dtype=float)))
+
+
+@pytest.mark.parametrize("case", list(ERROR_CASES))
+def test_errors_give_one_line_and_nonzero_status(cli, case):
+    d, res = cli
+    args, hint = ERROR_CASES[case]
+    proc = res[case]
+    assert_one_error_line(proc, hint)
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    out = args[args.index("--out") + 1]
+    assert not (d / out).exists()                 # nothing half-written
+
+
+@pytest.mark.parametrize("case", list(INPROCESS_ERROR_CASES))
+def test_more_errors_in_process(cli, case, capsys, monkeypatch):
+    d, res = cli
+    assert_ok(res["run-csv"])                     # bb.csv is an input of some cases
+    (d / "bb.toml").write_text("[scenario]\n")      # only its name matters for param-on-toml
+    args, hint = INPROCESS_ERROR_CASES[case]
+    proc = run_main(args, d, capsys, monkeypatch)
+    assert_one_error_line(proc, hint)
+    assert proc.returncode == 2
+    if "--out" in args:
+        assert not (d / args[args.index("--out") + 1]).exists()
+
+
+@pytest.mark.parametrize("case", list(MORE_ERROR_CASES))
+def test_errors_without_traceback_more_cases(cli, case, capsys, monkeypatch):
+    d, res = cli
+    assert_ok(res["plot"])                        # inputs: bb.csv and figs/obs.png
+    args, hint = MORE_ERROR_CASES[case]
+    proc = run_main(args, d, capsys, monkeypatch)
+    assert_one_error_line(proc, hint)
+
+
+def test_run_with_observers_and_plot(cli):
+    d, res = cli
+    proc = res["run-observers"]
+    assert_ok(proc)
+    assert proc.stdout.rstrip().endswith("wrote obs.csv")
+    df = read_frame(d / "obs.csv")
+    for col in ("chi0", "jump_q0", "jump_u1", "V_jump", "nojump_q1", "V_nojump"):
+        assert col in df.columns
+    assert df["V_jump"].iloc[0] == pytest.approx(0.06, rel=1e-12)
+    assert df["V_nojump"].iloc[0] == pytest.approx(0.06, rel=1e-12)
+    assert df["V_jump"].iloc[-1] < 0.06                  # the observer converges
+    assert len(df) == 1001
+    assert df.attrs["observers"] == ["jump", "nojump"]
+    plot = res["plot"]
+    assert_ok(plot)
+    assert "wrote" in plot.stdout
+    png = d / "figs" / "obs.png"
+    data = png.read_bytes()
+    assert data[:8] == PNG_MAGIC
+    assert len(data) > 10_000
+    assert data[12:16] == b"IHDR"
+    width, height = int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+    assert width >= 500 and height >= 500                # three stacked panels
+
+
+def test_help_lists_commands(capsys, monkeypatch, tmp_path):
+    proc = run_main(["--help"], tmp_path, capsys, monkeypatch)
+    assert proc.returncode == 0
+    for cmd in ("scenarios", "show", "run", "plot"):
+        assert cmd in proc.stdout
