@@ -38,7 +38,7 @@ def load_scenario(name_or_path: str | Path | Scenario, overrides: dict[str, Any]
         doc, source = builtin_document(name, params), name
     elif name.endswith(".toml") or Path(name).exists():
         if params:
-            raise InputError(next(iter(params)) and "param." + next(iter(params)),
+            raise InputError("param." + next(iter(params)),
                              "builder parameters apply only to built-in scenarios")
         doc, source = read_toml(name), name
     else:
@@ -88,11 +88,12 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     stepper = MoreauJean(system, sc.law, sc.h, sc.t_end, sc.theta, solver=sc.solver,
                          residual_tol=residual_tol)
     grid = stepper.grid
-    slaves = _slaves(sc, observers)
-    cfg = None
-    if slaves:
+    observers = list(observers)
+    slaves: list[Slave] = []
+    if observers:
         base_dir = str(Path(sc.source).parent) if sc.source.endswith(".toml") else None
         cfg = ObserverConfig.from_table(sc.observer, system.n, sc.q0, sc.u0, base_dir)
+        slaves = _slaves(cfg, observers)
         source = source or cfg.source
         if coupling == "scenario":
             coupling = cfg.coupling
@@ -111,7 +112,7 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         coupled[:] = False
 
     t_start = time.perf_counter()
-    out = _run(stepper, sc.q0, sc.u0, sc.master_projection, slaves, source, coupled, chi_log)
+    out = _run(stepper, sc.q0, sc.u0, sc.master_projection, slaves, coupled, chi_log)
     wall = time.perf_counter() - t_start
 
     meta = run_metadata(sc, stepper, wall)
@@ -132,16 +133,14 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     return res
 
 
-def _slaves(sc: Scenario, observers: Iterable[str | Slave]) -> list[Slave]:
+def _slaves(cfg: ObserverConfig, observers: list[str | Slave]) -> list[Slave]:
+    """Observer names become slaves started from the ``[observer]`` state; Slave objects pass."""
     out: list[Slave] = []
-    cfg = None
     for ob in observers:
         if isinstance(ob, Slave):
             out.append(ob)
             continue
         check_observer_name(ob)
-        if cfg is None:
-            cfg = ObserverConfig.from_table(sc.observer, sc.system.n, sc.q0, sc.u0)
         out.append(Slave(ob, OBSERVERS[ob], cfg.q0, cfg.u0))
     names = [s.name for s in out]
     if len(set(names)) != len(names):
@@ -150,8 +149,7 @@ def _slaves(sc: Scenario, observers: Iterable[str | Slave]) -> list[Slave]:
 
 
 def _run(stepper: MoreauJean, q0: np.ndarray, u0: np.ndarray, master_projection: bool,
-         slaves: list[Slave], source: str | None, coupled: np.ndarray,
-         chi_log: np.ndarray | None) -> dict:
+         slaves: list[Slave], coupled: np.ndarray, chi_log: np.ndarray | None) -> dict:
     """The time loop: master step, then every slave with χ (or its own closed set)."""
     steps = stepper.grid.steps
     n, m = stepper.system.n, stepper.system.m
