@@ -18,6 +18,15 @@ def tests(session: nox.Session) -> None:
 
 
 @nox.session
+def checks(session: nox.Session) -> None:
+    """Run the proof checks on every built-in scenario (``nox -s checks -- NAME ...`` for one);
+    fails when a check fails. Results with full witnesses go to ``out/checks.json``."""
+    session.install("-e", ".")
+    session.run("python", "-m", "proofs_checks", *(session.posargs or ["all"]),
+                "--json", "out/checks.json")
+
+
+@nox.session
 def run(session: nox.Session) -> None:
     """Simulate a built-in scenario with both observers and plot it.
 

@@ -72,8 +72,10 @@ class SchemeMatrices:
         M, C, K, W = system.M, system.C, system.K, system.W
         n = system.n
         A_hat = M + h * theta * C + (h * theta) ** 2 * K
-        A_cho = sla.cho_factor(A_hat)
-        Ainv = sla.cho_solve(A_cho, np.eye(n))
+        if np.array_equal(A_hat, A_hat.T):
+            Ainv = sla.cho_solve(sla.cho_factor(A_hat), np.eye(n))
+        else:                        # a non-symmetric C (allowed by the paper, check=False only)
+            Ainv = sla.lu_solve(sla.lu_factor(A_hat), np.eye(n))
         Bu = np.eye(n) - Ainv @ (h * C + h * h * theta * K)
         Bq = -h * (Ainv @ K)
         Bf = h * Ainv

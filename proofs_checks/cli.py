@@ -1,0 +1,152 @@
+"""Command line: ``python -m proofs_checks SCENARIO [SCENARIO ...] [options]``.
+
+Runs the proof checks on built-in or TOML scenarios (``all`` = every built-in), prints one
+table per scenario (check, status, margin, tolerance, time, witness summary) and exits
+with status 0 when no check failed (not-applicable checks do not fail), 1 when a check
+failed, and 2 with one line ``error: ...`` on stderr for bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+from observer.errors import ContactSolverError, InputError
+
+STATUS_WIDTH = 6
+
+
+def _pairs(items: list[str] | None, flag: str) -> dict[str, str]:
+    out = {}
+    for item in items or []:
+        if "=" not in item:
+            raise InputError(flag, f"expected KEY=VALUE, got {item!r}")
+        key, value = item.split("=", 1)
+        out[key.strip()] = value.strip()
+    return out
+
+
+def _options(items: list[str] | None) -> dict:
+    from observer.scenario import parse_value
+    from proofs_checks import CHECKS
+    out: dict = {}
+    for key, value in _pairs(items, "--option").items():
+        check, _, kw = key.partition(".")
+        if check not in CHECKS or not kw:
+            raise InputError("--option", f"expected CHECK.KEYWORD=VALUE with CHECK one of "
+                             f"{', '.join(CHECKS)}, got {key!r}")
+        out.setdefault(check, {})[kw] = parse_value(value)
+    return out
+
+
+def _fmt(x: float) -> str:
+    if x != x:                                                  # NaN
+        return "-"
+    return f"{x:.3g}"
+
+
+def format_table(results) -> str:
+    """The per-scenario table printed by the CLI."""
+    w = max(len(r.name) for r in results)
+    lines = [f"  {'check':<{w}}  {'status':<{STATUS_WIDTH}}  {'margin':>10}  {'tol':>8}  {'time':>6}  witness"]
+    for r in results:
+        lines.append(f"  {r.name:<{w}}  {r.status:<{STATUS_WIDTH}}  {_fmt(r.margin):>10}  {_fmt(r.tolerance):>8}  "
+                     f"{r.elapsed:5.1f}s  {r.summary(140)}")
+    return "\n".join(lines)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from proofs_checks import CHECKS
+    p = argparse.ArgumentParser(
+        prog="python -m proofs_checks",
+        description="Numerically verify the steps of Proposition 1 and Theorem 1 on a scenario. "
+                    f"Checks: {', '.join(CHECKS)}.")
+    p.add_argument("scenarios", nargs="*", metavar="SCENARIO",
+                   help="built-in name, .toml path, or 'all' (every built-in scenario)")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="scenario override (param.NAME for builder parameters, else dotted TOML key)")
+    p.add_argument("--only", action="append", metavar="NAME",
+                   help="run only these checks (repeat or comma-separate)")
+    p.add_argument("--option", action="append", metavar="CHECK.KEY=VALUE",
+                   help="keyword option of one check, e.g. impact_monotone.samples=200")
+    p.add_argument("--seed", type=int, default=0, help="seed of all random sampling (default 0)")
+    p.add_argument("--h", type=float, help="step of the run-based checks (default: the scenario's)")
+    p.add_argument("--t-end", type=float, help="horizon of the run-based checks (default: min(t_end, 40000 h))")
+    p.add_argument("--json", metavar="FILE", help="write all results (with full witnesses) as JSON")
+    p.add_argument("--list", action="store_true", help="list the checks and exit")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return _main(args)
+    except (InputError, ContactSolverError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(args) -> int:
+    import proofs_checks
+    from observer.scenarios import SCENARIOS
+    from proofs_checks import CHECKS, CheckSettings, run_checks, select
+
+    if args.list:
+        for name, fn in CHECKS.items():
+            print(name)
+        return 0
+    if not args.scenarios:
+        raise InputError("SCENARIO", "give at least one scenario (a built-in name, a .toml file, or 'all')")
+    names = [s for item in args.scenarios for s in (SCENARIOS if item == "all" else [item])]
+    only = select(args.only) if args.only else None
+    overrides = _pairs(args.set, "--set")
+    settings = CheckSettings(seed=args.seed, h=args.h, t_end=args.t_end, options=_options(args.option))
+    if settings.h is not None and not settings.h > 0:
+        raise InputError("--h", f"must be > 0, got {settings.h!r}")
+    if settings.t_end is not None and not settings.t_end > 0:
+        raise InputError("--t-end", f"must be > 0, got {settings.t_end!r}")
+    scenarios = [proofs_checks.load(n, overrides) for n in names]   # validate all inputs first
+    all_results = []
+    failed = 0
+    t_start = time.perf_counter()
+    for name, sc in zip(names, scenarios):
+        t0 = time.perf_counter()
+        results = run_checks(sc, only, settings=settings)
+        ctx_h = settings.h or sc.h
+        print(f"{sc.name} ({name}): n = {sc.system.n}, m = {sc.system.m}, {sc.law.law} law, "
+              f"restitution {_restitution(sc)}; seed {settings.seed}, run h = {ctx_h:g}")
+        print(format_table(results))
+        nfail = sum(r.passed is False for r in results)
+        nna = sum(r.passed is None for r in results)
+        print(f"  -> {len(results) - nfail - nna} passed, {nfail} failed, {nna} not applicable "
+              f"in {time.perf_counter() - t0:.1f} s\n")
+        failed += nfail
+        all_results += results
+    if args.json:
+        path = Path(args.json)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        doc = {"settings": {"seed": settings.seed, "h": settings.h, "t_end": settings.t_end,
+                            "options": settings.options, "overrides": overrides, "scenarios": names},
+               "platform": platform.platform(), "python": platform.python_version(),
+               "wall_time_s": time.perf_counter() - t_start,
+               "results": [r.to_dict() for r in all_results]}
+        path.write_text(json.dumps(doc, indent=1))
+        print(f"wrote {path}")
+    if failed:
+        print(f"{failed} check(s) FAILED", file=sys.stderr)
+    return 1 if failed else 0
+
+
+def _restitution(sc) -> str:
+    e = sc.law.restitution
+    return f"{e[0]:g} (global)" if sc.law.is_global else "[" + ", ".join(f"{x:g}" for x in e) + "]"

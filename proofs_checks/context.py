@@ -1,0 +1,119 @@
+"""What the registered checks share for one scenario: settings, seeded generators, cached runs.
+
+The run-based checks (A1, eqs. (13)-(14), eq. (17), Theorem 1) use one replayed run
+(:func:`proofs_checks.runs.replay`): the plain master and two observers, coupled to the
+master's χ over the whole run, started from different states. The observers have position
+jumps when K ≻ 0, otherwise not (bouncing ball). The run is computed once, on first use.
+
+Horizons (defaults chosen to keep ``python -m proofs_checks SCENARIO`` under a minute):
+the run uses the scenario's h and ``t_end = min(scenario t_end, max_steps·h)``; the
+Proposition 1 runs use ``min(scenario t_end, short_steps·h)`` (the h-scaling with the
+steps h·(16, 4, 1)).
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg as sla
+
+from observer.scenario import Scenario
+from proofs_checks.runs import Run, SlaveSpec, replay
+
+
+@dataclass(frozen=True)
+class CheckSettings:
+    """Settings of a :func:`proofs_checks.run_checks` call.
+
+    Attributes
+    ----------
+    seed : int
+        Seed of every random generator (each check gets its own stream, so results do
+        not depend on which other checks run).
+    h, t_end : float, optional
+        Step and horizon of the run-based checks (defaults: see module docstring).
+    max_steps, short_steps : int
+        Step budgets of the shared run and of the runs of Proposition 1 (the exact pairs,
+        and the finest step of the h-scaling).
+    options : dict
+        Per-check keyword arguments, ``{check_name: {keyword: value}}``, passed to the
+        check functions (tolerances, sample counts, ...).
+    """
+
+    seed: int = 0
+    h: float | None = None
+    t_end: float | None = None
+    max_steps: int = 40_000
+    short_steps: int = 20_000
+    options: dict = field(default_factory=dict)
+
+
+class CheckContext:
+    """A scenario with its check settings, seeded generators and lazily computed runs."""
+
+    def __init__(self, scenario: Scenario, settings: CheckSettings | None = None):
+        self.scenario = scenario
+        self.settings = settings or CheckSettings()
+        s = self.settings
+        self.h = float(s.h or scenario.h)
+        self.t_end = float(s.t_end or min(scenario.t_end, s.max_steps * self.h))
+        self._run: Run | None = None
+
+    @property
+    def system(self):
+        return self.scenario.system
+
+    @property
+    def law(self):
+        return self.scenario.law
+
+    def rng(self, name: str) -> np.random.Generator:
+        """An independent generator for ``name``, seeded by (seed, crc32(name))."""
+        return np.random.default_rng([self.settings.seed, zlib.crc32(name.encode())])
+
+    def options(self, name: str) -> dict:
+        return dict(self.settings.options.get(name, {}))
+
+    # -- the shared run --------------------------------------------------------------------
+    def slave_specs(self) -> list[SlaveSpec]:
+        """Two observers: the scenario's ``[observer]`` state (if it differs from the master's)
+        or a random one, and a second random state; perturbations of 2 % of the position
+        scale, velocities scaled by the slowest natural frequency."""
+        sc, sys_ = self.scenario, self.system
+        rng = self.rng("slaves")
+        n = sys_.n
+        jumps = sys_.is_stiffness_definite()
+        q_scale = max(float(np.max(np.abs(sc.q0))), float(np.max(np.abs(sys_.nu(0.0)))), 1e-3)
+        dq = 0.02 * q_scale
+        omega = 1.0
+        if jumps:
+            omega = float(np.sqrt(max(sla.eigh(sys_.K, sys_.M, eigvals_only=True)[0], 0.0)))
+        du = dq * max(omega, 1.0)
+        obs = sc.observer or {}
+        qa = np.asarray(obs.get("q", sc.q0), dtype=float)
+        ua = np.asarray(obs.get("u", sc.u0), dtype=float)
+        za, zb = rng.standard_normal((2, 2 * n))
+        if np.array_equal(qa, sc.q0) and np.array_equal(ua, sc.u0):
+            qa, ua = sc.q0 + dq * za[:n], sc.u0 + du * za[n:]
+        qb, ub = sc.q0 + dq * zb[:n], sc.u0 + du * zb[n:]
+        return [SlaveSpec("a", jumps, qa, ua), SlaveSpec("b", jumps, qb, ub)]
+
+    @property
+    def run(self) -> Run:
+        """The shared run (computed on first use)."""
+        if self._run is None:
+            self._run = replay(self.scenario, h=self.h, t_end=self.t_end, slaves=self.slave_specs())
+        return self._run
+
+    def visited_sets(self) -> list[np.ndarray]:
+        """Distinct nonempty closed sets of the master in the shared run."""
+        act = self.run.master.active[1:]
+        rows = np.unique(act[act.any(axis=1)], axis=0)
+        return [np.flatnonzero(r) for r in rows]
+
+    @property
+    def short_t_end(self) -> float:
+        """Horizon of the Proposition 1 runs: ``min(t_end, short_steps·h)``."""
+        return float(self.settings.t_end or min(self.scenario.t_end, self.settings.short_steps * self.h))

@@ -1,0 +1,257 @@
+"""Eqs. (13)-(14): the constraint forces of the switched geometric constraints in closed form,
+and the positive semi-definiteness of ``P_I L_I⁻¹ P_Iᵀ`` for every active set.
+
+From the proof of Proposition 1 (with the erratum I(t) = {i | χ_i = 1}, THEORY §2)::
+
+    σ = −P_I L_I⁻¹ P_Iᵀ γ_s     (13)        Σ = −P_I L_I⁻¹ P_Iᵀ g_s⁻     (14)
+    L_I = W_Iᵀ K⁻¹ W_I,  and the position jump is q⁺ − q⁻ = K⁻¹ W Σ.
+
+Discrete form (THEORY §6.3): the time-stepper realizes both by one K-metric projection per
+step onto ``{g_I(q, t_{k+1}) = 0}``: ``q_{k+1} = q⁻_{k+1} + K⁻¹WΣ_k`` with
+``Σ_k = −P_I L_I⁻¹ P_Iᵀ g⁻_{k+1}`` (eq. (14) exactly). When every contact of I was already
+projected in the previous step (g⁺_{k,I} = 0), ``g⁻_{k+1,I} = h γ̄_I + O(h³)`` and the
+step multiplier is the integral of the force of eq. (13): ``Σ_k/h = −P_I L_I⁻¹ P_Iᵀ γ̄`` with
+γ̄ = Wᵀ[(1−θ)u_k + θu_{k+1}] + ν̇(t_k + h/2).
+
+:func:`check_projection_closed_form` compares, at every step of a run, the projection the
+integrator applied (q⁺ − q⁻ from the run) with these closed forms, always computed in the
+K metric (independently of the stepper's cached matrices). A run made with a wrong
+projection metric (``replay(..., metric=np.eye(n))``) fails.
+
+:func:`check_projection_psd` checks ``P_I L_I⁻¹ P_Iᵀ ⪰ 0`` (built with linear solves, never
+an explicit inverse) exhaustively over all nonempty I for m ≤ 16, and for larger m over
+all singletons and pairs, random subsets, the full set and a greedy chain of
+worst-conditioned subsets. By Cauchy interlacing, for symmetric L the full set has the
+largest condition number and the extreme eigenvalues, so for SPD L the sampled search
+cannot miss the worst case.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import scipy.linalg as sla
+
+from proofs_checks.result import CheckResult
+from proofs_checks.runs import Run, Trajectory
+
+EPS = float(np.finfo(float).eps)
+
+
+def _stiffness_reason(K: np.ndarray) -> str | None:
+    """None if K ≻ 0, else why the K-metric checks are not applicable."""
+    eig = np.linalg.eigvalsh(0.5 * (K + K.T))
+    if eig[-1] <= 0 or eig[0] <= 1e-12 * abs(eig[-1]):
+        return (f"K is not positive definite (λ_min = {eig[0]:.3g}): the K-metric projection, "
+                "eqs. (13)-(14) and L_I = W_IᵀK⁻¹W_I need K ≻ 0")
+    return None
+
+
+def check_projection_closed_form(run: Run, *, slaves: tuple[str, ...] | None = None,
+                                 tolerance: float = 1e-8, force_tolerance: float = 1e-6) -> CheckResult:
+    """Eqs. (13)-(14): the applied position jumps equal ``K⁻¹W Σ`` with ``Σ = −P_I L_I⁻¹ P_Iᵀ g⁻``.
+
+    Parameters
+    ----------
+    run : Run
+        A replay with observers that have position jumps.
+    slaves : tuple of str, optional
+        Observers to examine (default: all with position jumps).
+    tolerance : float
+        Accepted relative error of the jump, ``‖Δq − Δq_cf‖_K / (‖Δq_cf‖_K + r)`` with the
+        round-off scale r = 1e-7·max‖q‖_K (eq. (14)).
+    force_tolerance : float
+        Accepted error of the continuous part, ``|Σ_k/h − σ_cf| / max|σ_cf|`` on steps whose
+        whole set was closed before (eq. (13)); the O(h²) difference between
+        (ν_{k+1} − ν_k)/h and ν̇(t_k + h/2) is far below it.
+
+    Returns
+    -------
+    CheckResult
+        ``margin = −(worst relative error of (14))`` (or of (13) when only (13) fails); the
+        witness has the worst step (``time`` = t_{k+1}, when the projection acts), its set,
+        the applied multiplier (least squares of KΔq = W_IΣ), the closed form, and the
+        part of KΔq outside range W_I (nonzero for a projection in another metric).
+    """
+    system = run.system
+    name, eq = "projection_closed_form", "eqs. (13)-(14), proof of Proposition 1"
+    reason = _stiffness_reason(system.K)
+    if reason:
+        return CheckResult.not_applicable(name, reason, eq)
+    names = slaves or tuple(n for n, tr in run.slaves.items() if tr.projected)
+    if not names:
+        return CheckResult.not_applicable(name, "the run has no observer with position jumps", eq)
+    K, W = system.K, system.W
+    Kc = sla.cho_factor(K)
+    KinvW = sla.cho_solve(Kc, W)
+    L = W.T @ KinvW
+    L = 0.5 * (L + L.T)
+    t, h, th = run.t, run.h, run.theta
+    nu, nud_mid = system.nu(t), system.nu_dot(0.5 * (t[:-1] + t[1:]))
+    worst14 = {"value": -np.inf}
+    worst13 = {"value": -np.inf}
+    steps_checked = cont_steps = 0
+    sig_scale = 0.0
+    records13 = []
+    for sname in names:
+        tr: Trajectory = run.slaves[sname]
+        qK = np.sqrt(np.einsum("ki,ij,kj->k", tr.q, K, tr.q))
+        r_scale = 1e-7 * float(np.max(qK)) + 1e-300
+        prev = np.zeros(system.m, dtype=bool)
+        for k in range(t.size - 1):
+            act = tr.active[k + 1] if tr.projected else np.zeros(system.m, bool)
+            I = np.flatnonzero(act)
+            if I.size == 0:
+                prev = act
+                continue
+            steps_checked += 1
+            g_pre = tr.q_pre[k + 1] @ W[:, I] + nu[k + 1, I]
+            L_I = L[np.ix_(I, I)]
+            cI = sla.cho_factor(L_I)
+            Sigma_cf = -sla.cho_solve(cI, g_pre)
+            dq_cf = KinvW[:, I] @ Sigma_cf
+            dq = tr.q[k + 1] - tr.q_pre[k + 1]
+            diff = dq - dq_cf
+            err = float(np.sqrt(diff @ K @ diff)) / (float(np.sqrt(dq_cf @ K @ dq_cf)) + r_scale)
+            Sigma_ls = np.linalg.lstsq(W[:, I], K @ dq, rcond=None)[0]     # applied multiplier
+            if err > worst14["value"]:
+                resid = K @ dq - W[:, I] @ Sigma_ls
+                worst14 = {"value": err, "slave": sname, "step": k, "time": float(t[k + 1]), "active_set": I.tolist(),
+                           "g_minus": g_pre, "Sigma_applied": Sigma_ls, "Sigma_closed_form": Sigma_cf,
+                           "jump_applied": dq, "jump_closed_form": dq_cf,
+                           "jump_not_in_range_KinvW": float(np.linalg.norm(resid)
+                                                            / max(np.linalg.norm(K @ dq), 1e-300)),
+                           "g_plus_after": tr.q[k + 1] @ W[:, I] + nu[k + 1, I]}
+            if np.all(prev[I]):
+                cont_steps += 1
+                u_th = (1 - th) * tr.u[k] + th * tr.u[k + 1]
+                gbar = u_th @ W[:, I] + nud_mid[k, I]
+                sigma_cf = -sla.cho_solve(cI, gbar)
+                records13.append((np.max(np.abs(Sigma_ls / h - sigma_cf)), sname, k, I, Sigma_ls / h, sigma_cf))
+                sig_scale = max(sig_scale, float(np.max(np.abs(sigma_cf))))
+            prev = act
+    if steps_checked == 0:
+        return CheckResult.not_applicable(name, "no step with a closed contact in the run", eq)
+    for dev, sname, k, I, s_app, s_cf in records13:
+        rel = dev / max(sig_scale, 1e-300)
+        if rel > worst13["value"]:
+            worst13 = {"value": rel, "slave": sname, "step": k, "time": float(t[k + 1]), "active_set": I.tolist(),
+                       "sigma_applied": s_app, "sigma_closed_form": s_cf}
+    witness = {"max_jump_error_eq14": worst14["value"], "max_force_error_eq13": worst13["value"]
+               if records13 else float("nan"), "projected_steps": steps_checked,
+               "persistent_steps": cont_steps, "metric": run.metric}
+    witness.update({f"eq14_{k}": v for k, v in worst14.items() if k != "value"})
+    witness.update({f"eq13_{k}": v for k, v in worst13.items() if k != "value"})
+    keys = ("max_jump_error_eq14", "max_force_error_eq13", "eq14_time", "eq14_active_set",
+            "eq14_Sigma_applied", "eq14_Sigma_closed_form", "metric")
+    fail14 = worst14["value"] > tolerance
+    fail13 = bool(records13) and worst13["value"] > force_tolerance
+    reasons = []
+    if fail14:
+        reasons.append("the applied position jump is not K⁻¹WΣ with Σ = −P_I L_I⁻¹ P_Iᵀ g⁻ (eq. (14))")
+    if fail13:
+        reasons.append("the continuous constraint force differs from σ = −P_I L_I⁻¹ P_Iᵀ γ (eq. (13))")
+    if fail13 and not fail14:
+        return CheckResult.from_margin(name, -worst13["value"], force_tolerance, witness, eq, keys,
+                                       "; ".join(reasons))
+    return CheckResult.from_margin(name, -worst14["value"], tolerance, witness, eq, keys, "; ".join(reasons))
+
+
+def _subsets(m: int, rng: np.random.Generator, exhaustive_up_to: int, samples: int,
+             L: np.ndarray) -> tuple[list[np.ndarray], bool]:
+    if m <= exhaustive_up_to:
+        return [np.array(c) for k in range(1, m + 1) for c in itertools.combinations(range(m), k)], True
+    sets = {}
+
+    def add(ix):
+        a = np.unique(np.asarray(ix, dtype=np.int64))
+        sets.setdefault(a.tobytes(), a)
+
+    for i in range(m):
+        add([i])
+    for c in itertools.combinations(range(m), 2):
+        add(c)
+    add(range(m))
+    for _ in range(samples):
+        add(rng.choice(m, size=int(rng.integers(1, m + 1)), replace=False))
+    # greedy chain of worst-conditioned subsets: grow from the worst pair
+    def cond(ix):
+        w = np.linalg.eigvalsh(L[np.ix_(ix, ix)])
+        return abs(w[-1]) / abs(w[0]) if w[0] != 0 else np.inf
+
+    pair = max(itertools.combinations(range(m), 2), key=lambda c: cond(list(c)))
+    cur = list(pair)
+    while len(cur) < m:
+        rest = [j for j in range(m) if j not in cur]
+        j = max(rest, key=lambda j: cond(cur + [j]))
+        cur = cur + [j]
+        add(cur)
+    return list(sets.values()), False
+
+
+def check_projection_psd(K: np.ndarray, W: np.ndarray, *, rng: np.random.Generator,
+                         exhaustive_up_to: int = 16, samples: int = 2000,
+                         tolerance: float = 1e-12) -> CheckResult:
+    """``P_I L_I⁻¹ P_Iᵀ ⪰ 0`` for every active set I (proof of Proposition 1, after eq. (14); eq. (17)).
+
+    ``L = WᵀK⁻¹W`` is formed with a solve of K; for every examined I the m×m matrix
+    ``P_I L_I⁻¹ P_Iᵀ`` is formed as ``P_I X`` with ``X = solve(L_I, P_Iᵀ)`` and symmetrized.
+    Its eigenvalues are those of the I block plus exact zeros for the rows not in I, so
+    the margin is taken on the block.
+
+    Returns
+    -------
+    CheckResult
+        ``margin = min_I λ_min(L_I⁻¹)/λ_max(L_I⁻¹)`` (relative smallest eigenvalue, ≥ 0 for
+        PSD); the witness has the worst set, its eigenvalues, the largest condition
+        number of L_I and its set, and how many sets were examined (exhaustively or not).
+        Not applicable when K is singular.
+    """
+    name, eq = "projection_psd", "P_I L_I⁻¹ P_Iᵀ ⪰ 0, after eq. (14); eq. (17)"
+    K = np.asarray(K, dtype=float)
+    W = np.asarray(W, dtype=float)
+    eigK = np.linalg.eigvalsh(0.5 * (K + K.T))
+    if abs(eigK[0]) <= 1e-12 * max(abs(eigK[-1]), 1e-300) or not np.any(K):
+        return CheckResult.not_applicable(name, f"K is singular (λ_min = {eigK[0]:.3g}): L_I = W_IᵀK⁻¹W_I "
+                                          "does not exist (needs K ≻ 0)", eq)
+    L = W.T @ np.linalg.solve(K, W)
+    L = 0.5 * (L + L.T)
+    m = W.shape[1]
+    sets, exhaustive = _subsets(m, rng, exhaustive_up_to, samples, L)
+    worst = (np.inf, None, None)
+    worst_cond = (0.0, None)
+    by_size: dict[int, list[np.ndarray]] = {}
+    for s in sets:
+        by_size.setdefault(s.size, []).append(s)
+    for k, group in by_size.items():
+        idx = np.array(group)                                         # (B, k)
+        LI = L[idx[:, :, None], idx[:, None, :]]                      # (B, k, k)
+        eyeB = np.broadcast_to(np.eye(k), LI.shape)
+        try:
+            X = np.linalg.solve(LI, eyeB)                             # L_I⁻¹ P_Iᵀ P_I block, by solves
+        except np.linalg.LinAlgError:
+            X = np.stack([np.linalg.lstsq(a, np.eye(k), rcond=None)[0] for a in LI])
+        X = 0.5 * (X + np.swapaxes(X, 1, 2))
+        wX = np.linalg.eigvalsh(X)                                    # (B, k)
+        wL = np.linalg.eigvalsh(LI)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel = wX[:, 0] / np.max(np.abs(wX), axis=1)
+            cond = np.abs(wL[:, -1]) / np.abs(wL[:, 0])
+        j = int(np.argmin(rel))
+        if rel[j] < worst[0]:
+            worst = (float(rel[j]), idx[j], wX[j])
+        jc = int(np.argmax(cond))
+        if cond[jc] > worst_cond[0]:
+            worst_cond = (float(cond[jc]), idx[jc])
+    I = worst[1]
+    S = np.zeros((m, m))
+    S[np.ix_(I, I)] = np.linalg.solve(L[np.ix_(I, I)], np.eye(I.size))
+    witness = {"min_relative_eigenvalue": worst[0], "worst_set": I.tolist(), "eigenvalues_L_I_inv": worst[2],
+               "min_eigenvalue_P_Linv_PT": float(np.linalg.eigvalsh(0.5 * (S + S.T))[0]),
+               "max_condition_L_I": worst_cond[0], "max_condition_set": worst_cond[1].tolist(),
+               "sets_examined": len(sets), "exhaustive": exhaustive, "m": m,
+               "K_lambda_min": float(eigK[0])}
+    keys = ("min_relative_eigenvalue", "worst_set", "max_condition_L_I", "sets_examined", "exhaustive")
+    reason = "" if worst[0] >= -tolerance else "L_I is indefinite: P_I L_I⁻¹ P_Iᵀ has a negative eigenvalue"
+    return CheckResult.from_margin(name, worst[0], tolerance, witness, eq, keys, reason)

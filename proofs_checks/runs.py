@@ -1,0 +1,223 @@
+"""Simulated runs for the run-based checks: a replay of the library's time loop that keeps
+what the checks need (pre-projection states, predicted gaps) and lets tests swap the
+projection metric.
+
+The replay calls the library's own stepper (:class:`observer.stepping.MoreauJean`):
+``predicted_active`` for the master's closed set, ``step(..., project=False)`` for the
+smooth and impulsive part of every step and, with the default ``metric=None``,
+``MoreauJean.project`` for the position jumps; it is therefore bitwise identical to
+:func:`observer.simulate` with the same settings (a test asserts it). With ``metric`` set,
+the position jumps use the given metric N instead of K::
+
+    q⁺ = q⁻ − N⁻¹W_I (W_Iᵀ N⁻¹ W_I)⁻¹ g_I(q⁻, t_{k+1})
+
+which is how the tests build the known-bad "wrong projection metric" integrator
+(N = identity: the Euclidean projection, paper section 1: "non-energy consistent").
+
+Arrays are time-major, row 0 the initial state and row k+1 the step t_k → t_{k+1}.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from observer.model import LinearSystem
+from observer.observers import lyapunov
+from observer.scenario import Scenario
+from observer.stepping import MoreauJean
+
+Projector = Callable[[int, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+@dataclass(frozen=True)
+class SlaveSpec:
+    """An observer of the replay: name, design (position jumps or not) and initial state."""
+
+    name: str
+    position_jumps: bool
+    q0: np.ndarray
+    u0: np.ndarray
+
+
+@dataclass
+class Trajectory:
+    """One system of a replay.
+
+    Attributes
+    ----------
+    q : ndarray, shape (N+1, n)
+        Positions after the step's projection (the state).
+    q_pre : ndarray, shape (N+1, n)
+        Positions before the projection (``q_pre[k+1] = q_k + h[(1−θ)u_k + θu_{k+1}]``);
+        equal to ``q`` for steps without projection.
+    u : ndarray, shape (N+1, n)
+    P : ndarray, shape (N+1, m)
+        Impulse of step k in row k+1 (zero on open contacts).
+    sigma : ndarray, shape (N+1, m)
+        Multiplier Σ returned by the projector (zero where nothing was projected).
+    active : ndarray of bool, shape (N+1, m)
+        Closed set used by the step (row k+1).
+    projected : bool
+        Whether position projections were applied.
+    """
+
+    name: str
+    q: np.ndarray
+    q_pre: np.ndarray
+    u: np.ndarray
+    P: np.ndarray
+    sigma: np.ndarray
+    active: np.ndarray
+    projected: bool
+
+    def as_dict(self) -> dict:
+        """The dict expected by :func:`observer.observers.lyapunov_decrements`."""
+        return {"q": self.q, "u": self.u, "P": self.P, "sigma": self.sigma}
+
+
+@dataclass
+class Run:
+    """A replayed master run with observers driven by the master's closed set χ.
+
+    ``g_pred[k+1]`` is the master's predicted gap ``g_k + (h/2)γ_k`` that decided its
+    closed set of step k (Siconos rule, ``χ = g_pred ≤ 0``); ``chi[k+1]`` is the closed
+    set fed to the observers in step k (the master's, unless overridden).
+    """
+
+    system: LinearSystem
+    stepper: MoreauJean
+    t: np.ndarray
+    master: Trajectory
+    slaves: dict[str, Trajectory]
+    chi: np.ndarray
+    g_pred: np.ndarray
+    metric: str = "K (library projection)"
+    settings: dict = field(default_factory=dict)
+
+    @property
+    def h(self) -> float:
+        return self.stepper.h
+
+    @property
+    def theta(self) -> float:
+        return self.stepper.theta
+
+
+def make_projector(stepper: MoreauJean, metric: np.ndarray | Projector | None) -> tuple[Projector, str]:
+    """Projector ``(k, q, active) -> (q⁺, Σ)`` onto ``{g_I(q, t_k) = 0}`` and its description.
+
+    ``None`` is the library's K-metric projection (eqs. (13)-(14)); an (n, n) matrix N is
+    the N-metric projection (``N = K`` reproduces the library up to round-off; ``N = I`` is
+    the known-bad Euclidean projection); a callable is used as is.
+    """
+    if metric is None:
+        return stepper.project, "K (library projection)"
+    if callable(metric):
+        return metric, getattr(metric, "__name__", "custom projector")
+    N = np.asarray(metric, dtype=float)
+    W, nu = stepper.system.W, stepper.grid.nu
+
+    def project(k: int, q: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if active.size == 0:
+            return q, np.zeros(0)
+        W_I = W[:, active]
+        NinvW = np.linalg.solve(N, W_I)
+        L_N = W_I.T @ NinvW
+        g = q @ W_I + nu[k, active]
+        sigma = -np.linalg.solve(L_N, g)
+        return q + NinvW @ sigma, sigma
+
+    if np.array_equal(N, stepper.system.K):
+        desc = "K (explicit matrix)"
+    elif np.array_equal(N, np.eye(N.shape[0])):
+        desc = "identity (Euclidean)"
+    else:
+        desc = "custom matrix"
+    return project, desc
+
+
+def replay(scenario: Scenario, *, h: float | None = None, t_end: float | None = None,
+           slaves: tuple[SlaveSpec, ...] | list[SlaveSpec] = (), master_projection: bool = False,
+           metric: np.ndarray | Projector | None = None, system: LinearSystem | None = None,
+           chi: np.ndarray | None = None) -> Run:
+    """Simulate the master and observers coupled over the whole run, recording everything.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Supplies the system, impact law, master initial state, h, θ and solver.
+    h, t_end : float, optional
+        Override the scenario's step and horizon.
+    slaves : sequence of SlaveSpec
+        Observers; all are driven by the same χ (the master's closed set, or ``chi``).
+    master_projection : bool
+        Project the master on its own closed set (the "projected master").
+    metric : ndarray, callable or None
+        Projection metric of the position jumps (see :func:`make_projector`).
+    system : LinearSystem, optional
+        Replace the scenario's system (e.g. a known-bad one built with ``check=False``).
+    chi : ndarray of bool, shape (N+1, m), optional
+        Switching signal for the observers (row k+1 = step k) instead of the master's.
+
+    Returns
+    -------
+    Run
+    """
+    system = system or scenario.system
+    stepper = MoreauJean(system, scenario.law, h or scenario.h, t_end or scenario.t_end,
+                         scenario.theta, solver=scenario.solver)
+    project, desc = make_projector(stepper, metric)
+    grid, S = stepper.grid, stepper.S
+    steps, n, m = grid.steps, system.n, system.m
+
+    def record(name: str, q0: np.ndarray, u0: np.ndarray, projected: bool) -> Trajectory:
+        tr = Trajectory(name, np.empty((steps + 1, n)), np.empty((steps + 1, n)),
+                        np.empty((steps + 1, n)), np.zeros((steps + 1, m)), np.zeros((steps + 1, m)),
+                        np.zeros((steps + 1, m), dtype=bool), projected)
+        tr.q[0] = tr.q_pre[0] = q0
+        tr.u[0] = u0
+        return tr
+
+    master = record("master", scenario.q0, scenario.u0, master_projection)
+    subs = [record(s.name, np.asarray(s.q0, float), np.asarray(s.u0, float), s.position_jumps)
+            for s in slaves]
+    g_pred = np.zeros((steps + 1, m))
+    chi_rec = np.zeros((steps + 1, m), dtype=bool)
+    if chi is not None:
+        chi = np.asarray(chi, dtype=bool)
+        if chi.shape != (steps + 1, m):
+            raise ValueError(f"chi has shape {chi.shape}, expected {(steps + 1, m)}")
+    h_, nu, nud = S.h, grid.nu, grid.nu_dot
+    for k in range(steps):
+        idx = np.flatnonzero(stepper.predicted_active(k, master.q[k], master.u[k]))
+        _advance(stepper, project, master, k, idx)
+        act = idx if chi is None else np.flatnonzero(chi[k + 1])
+        chi_rec[k + 1, act] = True
+        for tr in subs:
+            _advance(stepper, project, tr, k, act)
+    g_pred[1:] = (master.q[:-1] + 0.5 * h_ * master.u[:-1]) @ S.W + nu[:-1] + 0.5 * h_ * nud[:-1]
+    return Run(system, stepper, grid.t, master, {tr.name: tr for tr in subs}, chi_rec, g_pred, desc,
+               {"h": stepper.h, "t_end": float(grid.t[-1]), "theta": stepper.theta,
+                "master_projection": master_projection})
+
+
+def _advance(stepper: MoreauJean, project: Projector, tr: Trajectory, k: int, idx: np.ndarray) -> None:
+    q1, u1, P, _ = stepper.step(k, tr.q[k], tr.u[k], idx, False)
+    tr.q_pre[k + 1] = q1
+    if tr.projected and idx.size:
+        q1, sig = project(k + 1, q1, idx)
+        tr.sigma[k + 1, idx] = sig
+    tr.q[k + 1], tr.u[k + 1] = q1, u1
+    if idx.size:
+        tr.P[k + 1, idx] = P
+        tr.active[k + 1, idx] = True
+
+
+def lyapunov_pair(system: LinearSystem, a: Trajectory, b: Trajectory, pre: bool = False) -> np.ndarray:
+    """V = ½vᵀMv + ½eᵀKe between two trajectories (paper (16) with the ½ on both terms;
+    THEORY §2 erratum 2); with ``pre`` the position error uses the pre-projection states."""
+    qa, qb = (a.q_pre, b.q_pre) if pre else (a.q, b.q)
+    return lyapunov(system, qa, a.u, qb, b.u)
