@@ -13,11 +13,12 @@ from pathlib import Path
 from observer.errors import ContactSolverError, InputError
 
 
-def _parse_sets(items: list[str]) -> dict[str, str]:
+def parse_pairs(items: list[str] | None, flag: str = "--set") -> dict[str, str]:
+    """``["a.b=1", "c=x"]`` → ``{"a.b": "1", "c": "x"}``; a malformed item is an error on ``flag``."""
     out = {}
     for item in items or []:
         if "=" not in item:
-            raise InputError("--set", f"expected KEY=VALUE, got {item!r}")
+            raise InputError(flag, f"expected KEY=VALUE, got {item!r}")
         key, value = item.split("=", 1)
         out[key.strip()] = value.strip()
     return out
@@ -34,7 +35,7 @@ def cmd_scenarios(args) -> int:
 def cmd_show(args) -> int:
     from observer.simulate import load_scenario
     from observer.tomlio import dumps
-    sc = load_scenario(args.scenario, _parse_sets(args.set))
+    sc = load_scenario(args.scenario, parse_pairs(args.set))
     header = f"{sc.name}: {sc.description}\n"
     module_doc = ""
     from observer.scenarios import SCENARIOS
@@ -47,7 +48,7 @@ def cmd_show(args) -> int:
 
 def cmd_run(args) -> int:
     from observer.simulate import simulate, load_scenario
-    sc = load_scenario(args.scenario, _parse_sets(args.set))
+    sc = load_scenario(args.scenario, parse_pairs(args.set))
     observers = [o for o in (args.observers or "").split(",") if o]
     res = simulate(sc, h=args.h, t_end=args.t_end, solver=args.solver, observers=observers,
                    source=args.source, log=args.log)
@@ -114,8 +115,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    return guarded(args.func, args)
+
+
+def guarded(func, *args) -> int:
+    """Call ``func(*args)``; turn input, solver and file errors into one ``error:`` line on
+    stderr and exit status 2 (130 on Ctrl-C). Shared by every command line of the toolkit."""
     try:
-        return args.func(args)
+        return func(*args)
     except (InputError, ContactSolverError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -15,26 +15,17 @@ import sys
 import time
 from pathlib import Path
 
-from observer.errors import ContactSolverError, InputError
+from observer.cli import guarded, parse_pairs
+from observer.errors import InputError
 
 STATUS_WIDTH = 6
-
-
-def _pairs(items: list[str] | None, flag: str) -> dict[str, str]:
-    out = {}
-    for item in items or []:
-        if "=" not in item:
-            raise InputError(flag, f"expected KEY=VALUE, got {item!r}")
-        key, value = item.split("=", 1)
-        out[key.strip()] = value.strip()
-    return out
 
 
 def _options(items: list[str] | None) -> dict:
     from observer.scenario import parse_value
     from proofs_checks import CHECKS
     out: dict = {}
-    for key, value in _pairs(items, "--option").items():
+    for key, value in parse_pairs(items, "--option").items():
         check, _, kw = key.partition(".")
         if check not in CHECKS or not kw:
             raise InputError("--option", f"expected CHECK.KEYWORD=VALUE with CHECK one of "
@@ -83,17 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    try:
-        return _main(args)
-    except (InputError, ContactSolverError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return 130
+    return guarded(_main, args)
 
 
 def _main(args) -> int:
@@ -109,7 +90,7 @@ def _main(args) -> int:
         raise InputError("SCENARIO", "give at least one scenario (a built-in name, a .toml file, or 'all')")
     names = [s for item in args.scenarios for s in (SCENARIOS if item == "all" else [item])]
     only = select(args.only) if args.only else None
-    overrides = _pairs(args.set, "--set")
+    overrides = parse_pairs(args.set, "--set")
     settings = CheckSettings(seed=args.seed, h=args.h, t_end=args.t_end, options=_options(args.option))
     if settings.h is not None and not settings.h > 0:
         raise InputError("--h", f"must be > 0, got {settings.h!r}")
