@@ -1,4 +1,12 @@
-"""nox sessions: ``tests`` (default), ``run`` (the main job on a built-in scenario)."""
+"""nox sessions.
+
+* ``tests`` (default): the pytest suite.
+* ``report``: the main job — run the ``quick`` benchmark suite (resumable) and build the
+  self-contained HTML report ``reports/out/quick/index.html``; ``-- SUITE`` for another.
+* ``bench -- SUITE``: run a benchmark suite only (rows appended to ``bench/results/SUITE.jsonl``).
+* ``checks``: the proof checks on every built-in scenario.
+* ``run -- SCENARIO``: simulate one scenario with both observers and plot it.
+"""
 
 from __future__ import annotations
 
@@ -39,6 +47,32 @@ def run(session: nox.Session) -> None:
     session.run("python", "-m", "observer", "run", name, "--observers", "jump,nojump",
                 "--out", f"out/{name}.csv", *extra)
     session.run("python", "-m", "observer", "plot", f"out/{name}.csv", "--out", f"out/{name}.png")
+
+
+@nox.session
+def bench(session: nox.Session) -> None:
+    """Run a benchmark suite: ``nox -s bench -- SUITE [--limit K]`` (default ``quick``).
+
+    Suites: quick, full, observers, work_precision, robustness, scaling, micro, smoke
+    (``python -m bench list``). Rows are appended to ``bench/results/SUITE.jsonl`` as runs
+    finish; rerunning resumes an interrupted suite without recomputing finished rows.
+    """
+    session.install("-e", ".[bench]")
+    suite = session.posargs[0] if session.posargs else "quick"
+    session.run("python", "-m", "bench", "run", suite, *session.posargs[1:])
+
+
+@nox.session
+def report(session: nox.Session) -> None:
+    """Build the HTML report of a suite: ``nox -s report -- SUITE`` (default ``quick``).
+
+    Runs the suite first if its results are missing or incomplete (finished rows are
+    kept), then writes ``reports/out/SUITE/index.html`` (self-contained; open it in a browser).
+    """
+    session.install("-e", ".[bench]")
+    suite = session.posargs[0] if session.posargs else "quick"
+    session.run("python", "-m", "bench", "run", suite, success_codes=[0, 1])
+    session.run("python", "-m", "reports", suite, "--out", f"reports/out/{suite}", *session.posargs[1:])
 
 
 if __name__ == "__main__":

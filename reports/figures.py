@@ -1,0 +1,257 @@
+"""Figures of the report: matplotlib (Agg) → PNG → ``data:`` URI, so the page is self-contained.
+
+Colours follow the paper: master black, observer with position jumps blue, observer
+without red. Every function returns a :class:`Figure` (data URI + alt text) or None when
+there is nothing to draw (the report then says so instead of showing an empty plot).
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+from dataclasses import dataclass
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.ticker import NullFormatter  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+COLORS = {"master": "black", "jump": "tab:blue", "nojump": "tab:red"}
+STYLES = {"master": "-", "jump": "--", "nojump": ":"}
+LABELS = {"master": "master", "jump": "observer with jumps", "nojump": "observer without jumps"}
+DPI = 96
+
+
+@dataclass(frozen=True)
+class Figure:
+    """An inline image: ``src`` is a ``data:image/png;base64,...`` URI."""
+
+    src: str
+    alt: str
+    caption: str = ""
+
+
+def to_data_uri(fig) -> str:
+    """Render a matplotlib figure as a base64 PNG data URI and close it."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight")
+    plt.close(fig)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _tidy_log_axes(axes) -> None:
+    """No labels on minor ticks of log axes (they overlap on narrow panels)."""
+    for ax in np.ravel(axes):
+        if ax.get_xscale() == "log":
+            ax.xaxis.set_minor_formatter(NullFormatter())
+        if ax.get_yscale() == "log":
+            ax.yaxis.set_minor_formatter(NullFormatter())
+
+
+def _positive(x: np.ndarray) -> np.ndarray:
+    x = np.asarray(x, dtype=float)
+    return np.where(x > 0, x, np.nan)
+
+
+def scenario_figure(traj: pd.DataFrame, title: str, observers: list[str], window: tuple[float, float],
+                    coord_label: str, contact_label: str) -> Figure | None:
+    """The paper's figure of one scenario: a gap, a coordinate, and log V of each observer.
+
+    Parameters
+    ----------
+    traj : DataFrame
+        Columns ``t, master_q, master_g, <obs>_q, <obs>_g, V_<obs>`` (downsampled run).
+    observers : list of str
+        Observers present in ``traj``.
+    window : (t_on, t_off)
+        Coupling window, shaded.
+    """
+    if traj is None or traj.empty:
+        return None
+    t = traj["t"].to_numpy()
+    fig, axes = plt.subplots(3, 1, figsize=(8.6, 6.6), sharex=True)
+    for ax, var, label in ((axes[0], "g", contact_label), (axes[1], "q", coord_label)):
+        ax.plot(t, traj[f"master_{var}"], color=COLORS["master"], lw=1.3, ls="-", label=LABELS["master"])
+        for name in observers:
+            col = f"{name}_{var}"
+            if col in traj:
+                ax.plot(t, traj[col], color=COLORS.get(name), lw=1.0, ls=STYLES.get(name, "--"),
+                        label=LABELS.get(name, name))
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].axhline(0.0, color="0.5", lw=0.6)
+    axes[0].legend(loc="upper right", fontsize=8, ncol=3)
+    ax = axes[2]
+    drawn = False
+    for name in observers:
+        col = f"V_{name}"
+        if col in traj:
+            ax.semilogy(t, _positive(traj[col]), color=COLORS.get(name), lw=1.0,
+                        label=f"V, {LABELS.get(name, name)}")
+            drawn = True
+    if not drawn:
+        plt.close(fig)
+        return None
+    ax.set_ylabel("V (J)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(loc="upper right", fontsize=8)
+    t_on, t_off = window
+    for a in axes:
+        a.axvspan(t_on, t_off, color="0.92", zorder=0)
+    axes[-1].set_xlabel("t (s)   (shaded: coupling window, χ from the master)")
+    fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    return Figure(to_data_uri(fig), f"{title}: gap, coordinate and log V of the observers",
+                  f"Top: {contact_label}; middle: {coord_label}; bottom: V of each observer "
+                  "(log scale).")
+
+
+def work_precision_figure(wp: pd.DataFrame, orders: dict[str, float]) -> Figure | None:
+    """One row per (scenario, quantity): log error against log CPU time (left) and against
+    log h (right), one line per (impact law, contact solver)."""
+    if wp.empty:
+        return None
+    groups = list(dict.fromkeys(zip(wp["scenario"], wp["target"])))
+    fig, axes = plt.subplots(len(groups), 2, figsize=(10.5, 3.1 * len(groups)), squeeze=False)
+    for i, (scen, target) in enumerate(groups):
+        sub = wp[(wp["scenario"] == scen) & (wp["target"] == target)]
+        color = COLORS.get(target, "black")
+        for method, g in sub.groupby("method", sort=False):
+            g = g.sort_values("h")
+            law, solver = g["law"].iloc[0], g["solver"].iloc[0]
+            ls = "-" if law == "newton" else "--"
+            marker = "o" if solver == "pivoting" else "s"
+            mfc = color if solver == "pivoting" else "none"
+            ms = 5 if solver == "pivoting" else 8
+            label = f"{law} · {solver} (p = {orders.get(method, float('nan')):.2f})"
+            axes[i, 0].loglog(g["cpu_time_s"], g["err_mean"], ls=ls, marker=marker, color=color,
+                              mfc=mfc, ms=ms, lw=1.1, label=label)
+            axes[i, 1].loglog(g["h"], g["err_mean"], ls=ls, marker=marker, color=color, mfc=mfc,
+                              ms=ms, lw=1.1, label=label)
+        hs = np.sort(sub["h"].unique())
+        ref = sub["err_mean"].median() * hs / np.median(hs)
+        axes[i, 1].loglog(hs, ref, color="0.6", lw=0.8, ls="-.", label="slope 1")
+        what = LABELS.get(target, target)
+        refname = sub["reference"].iloc[0].split(" (")[0]
+        axes[i, 0].set_title(f"{scen}: {what} (reference: {refname})", fontsize=9, loc="left")
+        axes[i, 0].set_xlabel("CPU time (s)")
+        axes[i, 1].set_xlabel("h (s)")
+        for a in axes[i]:
+            a.grid(alpha=0.3, which="both")
+            a.set_ylabel("error", fontsize=9)
+        axes[i, 1].legend(fontsize=7, loc="lower right")
+    _tidy_log_axes(axes)
+    fig.tight_layout()
+    return Figure(to_data_uri(fig), "work-precision diagrams: error against CPU time and against h",
+                  "Left: error (time average of max_i |q_i − q_ref,i|) against CPU time "
+                  "(work-precision). Right: the same error against h, with a slope-1 guide. Solid: "
+                  "Newton law; dashed: Poisson law; filled circles: pivoting solver; open squares: "
+                  "cvxpy/OSQP reference solver (same errors, more CPU time). Colours: master black, "
+                  "observer with jumps blue, observer without jumps red.")
+
+
+def robustness_figure(rob: pd.DataFrame, kinds: list[str], labels: dict[str, str],
+                      units: dict[str, str]) -> Figure | None:
+    """Floor (median of V/V(t_on) at the end of the window) and decay rate against the size of
+    each perturbation, per observer; the unperturbed value as a horizontal line."""
+    rob = rob[rob["status"] == "ok"]
+    if rob.empty:
+        return None
+    base = rob[rob["perturbation"] == "none"]
+    kinds = [k for k in kinds if k != "none" and (rob["perturbation"] == k).any()]
+    if not kinds:
+        return None
+    fig, axes = plt.subplots(2, len(kinds), figsize=(3.6 * len(kinds), 6.0), squeeze=False)
+    for j, kind in enumerate(kinds):
+        sub = rob[rob["perturbation"] == kind]
+        for name, g in sub.groupby("observer", sort=False):
+            agg = g.groupby("size").agg(floor=("floor_rel", "median"), rate=("rate", "median"),
+                                        fmin=("floor_rel", "min"), fmax=("floor_rel", "max"))
+            x = agg.index.to_numpy(dtype=float)
+            c = COLORS.get(name)
+            axes[0, j].loglog(x, _positive(agg["floor"]), "o-", color=c, ms=4, label=LABELS.get(name, name))
+            if g["seed"].nunique() > 1:
+                axes[0, j].fill_between(x, _positive(agg["fmin"]), _positive(agg["fmax"]), color=c, alpha=0.15)
+            axes[1, j].semilogx(x, agg["rate"], "o-", color=c, ms=4, label=LABELS.get(name, name))
+            b = base[base["observer"] == name]
+            if not b.empty:
+                axes[0, j].axhline(float(b["floor_rel"].iloc[0]), color=c, lw=0.8, ls=":")
+                axes[1, j].axhline(float(b["rate"].iloc[0]), color=c, lw=0.8, ls=":")
+        sizes = np.sort(sub["size"].unique().astype(float))
+        for a in axes[:, j]:
+            a.set_xticks(sizes, [f"{x:g}" for x in sizes], fontsize=7)
+            a.xaxis.set_minor_formatter(NullFormatter())
+        unit = units.get(kind, "")
+        axes[1, j].set_xlabel(f"{labels.get(kind, kind)}" + (f" ({unit})" if unit else ""), fontsize=8)
+        axes[0, j].set_title(kind, fontsize=10)
+        axes[0, j].set_ylabel("floor / V(t_on)")
+        axes[1, j].set_ylabel("decay rate of V (1/s)")
+        for a in axes[:, j]:
+            a.grid(alpha=0.3, which="both")
+    axes[0, 0].legend(fontsize=7)
+    for a in np.ravel(axes):
+        if a.get_yscale() == "log":
+            a.yaxis.set_minor_formatter(NullFormatter())
+    fig.tight_layout()
+    return Figure(to_data_uri(fig), "robustness: floor and rate against the perturbation size",
+                  "Dotted horizontal lines: the same observer with the exact switching signal. "
+                  "Shaded band (when several seeds): min–max over seeds; markers: median.")
+
+
+def scaling_figure(sc: pd.DataFrame, fit_time: tuple[float, float], fit_mem: tuple[float, float] | None
+                   ) -> Figure | None:
+    """CPU time per step and peak memory against N (log-log) with the fitted power laws."""
+    sc = sc[sc["status"] == "ok"].sort_values("N")
+    if sc.empty:
+        return None
+    N = sc["N"].to_numpy(dtype=float)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    ax = axes[0]
+    ax.loglog(N, sc["cpu_per_step_s"] * 1e6, "o-", color="black", label="measured")
+    p, c = fit_time
+    ax.loglog(N, np.exp(c) * N ** p * 1e6, "--", color="tab:blue", label=f"fit ∝ N^{p:.2f}")
+    ax.set_xlabel("N (blocks; n = m = 2N)")
+    ax.set_ylabel("CPU time per step (µs)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    ax = axes[1]
+    if "peak_mem_mb" in sc and sc["peak_mem_mb"].notna().any():
+        ax.loglog(N, sc["peak_mem_mb"], "o-", color="black", label="peak traced memory")
+        if fit_mem is not None:
+            p, c = fit_mem
+            ax.loglog(N, np.exp(c) * N ** p, "--", color="tab:blue", label=f"fit ∝ N^{p:.2f}")
+        ax.set_ylabel("peak memory (MB)")
+    ax.set_xlabel("N")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    for a in axes:
+        a.set_xticks([int(n) for n in N], [str(int(n)) for n in N])
+    _tidy_log_axes(axes)
+    fig.tight_layout()
+    return Figure(to_data_uri(fig), "scaling of the rocking chain with N")
+
+
+def micro_figure(micro: pd.DataFrame) -> Figure | None:
+    """Mean time of one contact solve per solver and size (log scale bars)."""
+    cs = micro[micro["kind"] == "contact_solve"]
+    if cs.empty:
+        return None
+    sizes = sorted(cs["m"].unique())
+    solvers = list(dict.fromkeys(cs["solver"]))
+    fig, ax = plt.subplots(figsize=(7.5, 3.4))
+    width = 0.8 / len(solvers)
+    colors = {"reference": "0.35", "pivoting": "tab:blue", "lemke": "tab:orange", "nnls": "tab:green"}
+    for i, s in enumerate(solvers):
+        vals = [float(cs[(cs["m"] == m) & (cs["solver"] == s)]["mean_s"].mean()) * 1e6 for m in sizes]
+        ax.bar(np.arange(len(sizes)) + (i - (len(solvers) - 1) / 2) * width, vals, width,
+               label=s, color=colors.get(s))
+    ax.set_yscale("log")
+    ax.set_xticks(np.arange(len(sizes)), [f"m = {int(m)}" for m in sizes])
+    ax.set_ylabel("mean time per solve (µs)")
+    ax.grid(alpha=0.3, axis="y", which="both")
+    ax.legend(fontsize=8, ncol=len(solvers))
+    fig.tight_layout()
+    return Figure(to_data_uri(fig), "micro-benchmark: time of one contact solve per solver")

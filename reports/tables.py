@@ -1,0 +1,113 @@
+"""Tables of the report: every cell is a formatted string, never NaN.
+
+Rules (the report promises "no NaN cells"):
+
+* a finite number gets 3 significant digits (scientific notation outside [1e-3, 1e4));
+* ``inf`` in a time-to-threshold column reads "not reached" (:func:`fmt_time`), elsewhere "∞";
+* a missing or not-applicable value reads "n/a" or "n/a (reason)" — the caller gives the
+  reason when there is one.
+
+Every table has a one-line title (rendered before it, so two reports diff cleanly).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Iterable
+
+
+@dataclass
+class Table:
+    """A titled table of preformatted cells."""
+
+    title: str
+    columns: list[str]
+    rows: list[list[str]] = field(default_factory=list)
+    note: str = ""
+    numeric: list[bool] | None = None
+
+    def add(self, cells: Iterable[Any]) -> None:
+        cells = [c if isinstance(c, str) else fmt(c) for c in cells]
+        if len(cells) != len(self.columns):
+            raise ValueError(f"table {self.title!r}: {len(cells)} cells for {len(self.columns)} columns")
+        self.rows.append(cells)
+
+    def __post_init__(self):
+        if self.numeric is None:
+            self.numeric = [False] * len(self.columns)
+
+
+def _isnan(x: Any) -> bool:
+    try:
+        return x is None or (isinstance(x, float) and math.isnan(x)) or (
+            hasattr(x, "dtype") and math.isnan(float(x)))
+    except (TypeError, ValueError):
+        return False
+
+
+def fmt(x: Any, digits: int = 3, na: str = "n/a", unit: str = "") -> str:
+    """A number for reading: 3 significant digits, ``∞``, or ``na`` for missing values."""
+    if x is None or isinstance(x, str):
+        return na if x is None or x == "" else x
+    if isinstance(x, bool):
+        return "yes" if x else "no"
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return str(x)
+    if math.isnan(v):
+        return na
+    if math.isinf(v):
+        return "∞" if v > 0 else "−∞"
+    if v == 0:
+        s = "0"
+    elif isinstance(x, int) or (float(v).is_integer() and abs(v) < 1e6 and digits >= 3
+                                and not isinstance(x, float)):
+        s = f"{int(v):d}"
+    elif 10 ** (digits - 1) <= abs(v) < 1e4:
+        s = f"{v:.0f}"
+    elif 1e-3 <= abs(v) < 1e4:
+        s = f"{v:.{digits}g}"
+    else:
+        mant, exp = f"{v:.{digits - 1}e}".split("e")
+        s = f"{mant}e{int(exp)}"
+    s = s.replace("-", "−")
+    return f"{s} {unit}".rstrip() if unit else s
+
+
+def fmt_int(x: Any, na: str = "n/a") -> str:
+    if _isnan(x):
+        return na
+    return f"{int(round(float(x))):d}"
+
+
+def fmt_time(x: Any, na: str = "n/a") -> str:
+    """A time to reach a threshold: "not reached" for ``inf``."""
+    if _isnan(x):
+        return na
+    v = float(x)
+    return "not reached" if math.isinf(v) else fmt(v, unit="s")
+
+
+def fmt_ratio(x: Any, na: str = "n/a") -> str:
+    if _isnan(x):
+        return na
+    v = float(x)
+    if math.isinf(v):
+        return "∞"
+    return f"{v:.0f}" if abs(v) >= 100 else f"{v:.1f}" if abs(v) >= 10 else f"{v:.2f}"
+
+
+def fmt_pct(x: Any) -> str:
+    return "n/a" if _isnan(x) else f"{100 * float(x):.0f} %"
+
+
+def fmt_rho(x: Any) -> str:
+    """A threshold such as 1e-6 as "1e−6" (plain when it is not a power of ten)."""
+    v = float(x)
+    if v > 0:
+        e = math.log10(v)
+        if abs(e - round(e)) < 1e-9:
+            return f"1e{int(round(e))}".replace("-", "−")
+    return fmt(v)

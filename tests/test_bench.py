@@ -1,0 +1,338 @@
+"""Benchmark suites (bench/): declared grids, resumable results, perturbed logs, references.
+
+No timing assertions: speed is measured by the suites, not tested here.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bench.perturb import KINDS, perturb_log
+from bench.reference import ExactImpactOscillator, ball_position, closed_form_position
+from bench.results import ResultsFile, load_results
+from bench.run import results_path, run_suite
+from bench.suites import SUITES, Case, Suite, get_suite
+from observer.scenarios import bouncing_ball as bb
+from observer.switching import read_log, validate_log
+
+REPO = Path(__file__).resolve().parent.parent
+SMOKE = get_suite("smoke")
+
+
+def smoke_rows_expected() -> int:
+    """Rows of the smoke suite: observers 2 per case, robustness 2 per case, else 1 (the
+    checks case writes one row per registered check, counted separately)."""
+    n = 0
+    for c in SMOKE.cases:
+        n += {"observers": len(c.observers), "robustness": len(c.observers)}.get(c.kind, 1) \
+            if c.kind != "checks" else 0
+    return n
+
+
+# ----------------------------------------------------------------------------- declarations
+def test_case_ids_are_stable_and_unique():
+    a = Case("work_precision", "double_mass", law="newton", h=1e-3, t_end=1.0, target="jump",
+             observers=("jump",), reference="h/16 run", h_ref=1.5625e-5)
+    b = Case("work_precision", "double_mass", law="newton", h=1e-3, t_end=1.0, target="jump",
+             observers=("jump",), reference="h/16 run", h_ref=1.5625e-5)
+    assert a.case_id == b.case_id
+    assert "h=0.001" in a.case_id and "law=newton" in a.case_id
+    assert Case("observers", "double_mass").case_id == "observers:double_mass"
+    for suite in SUITES.values():
+        ids = [c.case_id for c in suite.cases]
+        assert len(ids) == len(set(ids)), suite.name
+    with pytest.raises(ValueError, match="duplicate"):
+        Suite("dup", "", (a, b))
+    with pytest.raises(KeyError, match="unknown suite"):
+        get_suite("nope")
+
+
+@pytest.mark.parametrize("name", ["quick", "full"])
+def test_quick_and_full_cover_every_kind_and_the_issue_grid(name):
+    suite = SUITES[name]
+    kinds = Counter(c.kind for c in suite.cases)
+    assert set(kinds) == {"observers", "work_precision", "robustness", "scaling", "checks"}
+    assert suite.micro is not None
+    obs = {c.name for c in suite.of_kind("observers")}
+    assert {"double_mass", "rocking_chain", "grazing", "bouncing_ball (Zeno)"} <= obs
+    assert any("persistent" in n for n in obs)
+    chain = [c for c in suite.of_kind("observers") if c.scenario == "rocking_chain"][0]
+    assert dict(chain.params)["param.N"] == 10
+    # work-precision: ≥ 5 step sizes per method, both laws and both contact solvers
+    wp = suite.of_kind("work_precision")
+    methods = Counter((c.scenario, c.target, c.law, c.solver) for c in wp)
+    assert min(methods.values()) >= 5
+    assert {c.law for c in wp} == {"newton", "poisson"}
+    assert {c.solver for c in wp} == {"pivoting", "reference"}
+    assert {c.target for c in wp} == {"master", "jump", "nojump"}
+    for c in wp:
+        assert c.reference in ("closed form", "h/16 run")
+        if c.reference == "h/16 run":
+            assert c.h / c.h_ref >= 16 - 1e-9
+    # robustness: every perturbation kind; scaling: the issue's N values
+    assert {c.perturbation for c in suite.of_kind("robustness")} == set(KINDS)
+    assert [dict(c.params)["param.N"] for c in suite.of_kind("scaling")] == [5, 10, 20, 50, 100, 200]
+
+
+# ----------------------------------------------------------------------------- results file
+def test_results_file_append_resume_and_repair(tmp_path):
+    rf = ResultsFile(tmp_path / "s.jsonl")
+    assert rf.rows() == [] and rf.done_ids() == set()
+    rf.append_case("s", "a", [{"x": 1.0, "t": float("inf")}, {"x": 2.0, "t": float("nan")}])
+    rf.append_case("s", "b", [{"x": 3.0}])
+    assert rf.done_ids() == {"a", "b"}
+    rows = rf.rows()
+    assert rows[0]["t"] == float("inf") and np.isnan(rows[1]["t"])
+    assert [r["row"] for r in rows] == [0, 1, 0] and rows[0]["case_rows"] == 2
+    # an interrupted write: first row of case c complete, its second row torn
+    with rf.path.open("a") as fh:
+        fh.write(json.dumps({"suite": "s", "case_id": "c", "case_rows": 2, "row": 0, "x": 4}) + "\n")
+        fh.write('{"suite": "s", "case_id": "c", "case_ro')
+    assert rf.done_ids() == {"a", "b"}
+    assert rf.repair() == 2
+    assert rf.repair() == 0
+    assert len(rf.path.read_text().splitlines()) == 3
+    rf.append_case("s", "c", [{"x": 4}, {"x": 5}])
+    assert rf.done_ids() == {"a", "b", "c"}
+    assert rf.prune({"a", "c"}) == 1
+    assert rf.done_ids() == {"a", "c"}
+    assert (tmp_path / "s.stale.jsonl").read_text().count('"case_id":"b"') == 1
+    with pytest.raises(ValueError, match="reserved"):
+        rf.append_case("s", "d", [{"case_id": "x"}])
+    df = load_results([rf.path])
+    assert len(df) == 4 and set(df["case_id"]) == {"a", "c"}
+
+
+# ----------------------------------------------------------------------------- running
+@pytest.fixture(scope="module")
+def smoke_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("smoke")
+    summary = run_suite("smoke", out, progress=False)
+    return out, summary
+
+
+def test_smoke_suite_rows_are_tidy_and_complete(smoke_run):
+    out, summary = smoke_run
+    assert summary.failed == [], summary.failed
+    df = load_results([results_path("smoke", out)])
+    assert len(df[df["kind"] != "checks"]) == smoke_rows_expected()
+    assert (out / "smoke.csv").exists()
+    for col in ("suite", "case_id", "kind", "scenario", "solver", "law", "h", "seed", "date",
+                "git_commit", "cpu", "v_numpy", "v_observer", "v_python", "status", "cpu_time_s"):
+        assert col in df.columns, col
+        assert df[col].notna().all() or col == "cpu_time_s", col
+    ok = df[df["status"] == "ok"]
+    assert (ok["cpu_time_s"] > 0).all()
+    obs = df[df["kind"] == "observers"].set_index(["name", "observer"])
+    na = obs.loc[("bouncing_ball (Zeno)", "jump")]
+    assert na["status"] == "n/a" and "K" in na["note"]
+    dm = obs.loc[("double_mass", "jump")]
+    assert dm["V_on"] > 0 and np.isfinite(dm["rate"])
+    assert (out / dm["trajectory"]).exists()
+    traj = pd.read_parquet(out / dm["trajectory"])
+    assert {"t", "master_q", "jump_q", "nojump_q", "V_jump", "V_nojump"} <= set(traj.columns)
+    wp = df[df["kind"] == "work_precision"]
+    assert (wp["err_mean"] > 0).all() and wp["reference"].str.startswith("closed form").all()
+    rob = df[df["kind"] == "robustness"]
+    assert set(rob["perturbation"]) == {"none", "delay"}
+    for f in rob["log_file"]:
+        read_log(out / f, 1)
+    sc = df[df["kind"] == "scaling"]
+    assert (sc["peak_mem_mb"] > 0).all() and (sc["cpu_per_step_s"] > 0).all()
+
+
+def test_rerun_of_a_finished_suite_computes_nothing(smoke_run):
+    out, _ = smoke_run
+    before = results_path("smoke", out).read_text()
+    summary = run_suite("smoke", out, progress=False, micro=False)
+    assert summary.ran == 0 and summary.skipped == summary.total - len(summary.unavailable)
+    assert results_path("smoke", out).read_text() == before
+
+
+def test_interrupted_suite_resumes_without_recomputing(tmp_path):
+    """Kill `python -m bench run smoke` after its first finished case, then rerun: the rows
+    written before the kill are kept byte for byte, the rest is added, no duplicates."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    cmd = [sys.executable, "-m", "bench", "run", "smoke", "--out", str(tmp_path), "--no-progress"]
+    path = results_path("smoke", tmp_path)
+    proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if path.exists() and len(ResultsFile(path).done_ids()) >= 1:
+                break
+            time.sleep(0.01)
+        os.killpg(proc.pid, signal.SIGKILL)
+    finally:
+        proc.wait(timeout=30)
+    done_before = ResultsFile(path).done_ids()
+    total = len(SMOKE.cases)
+    if len(done_before) >= total - 1:
+        pytest.skip("the suite finished before it could be killed")
+    assert len(done_before) >= 1
+    kept = []
+    for line in path.read_text().splitlines(keepends=True):
+        try:
+            if line.endswith("\n") and json.loads(line)["case_id"] in done_before:
+                kept.append(line)
+        except json.JSONDecodeError:
+            pass
+    rows_before = {(r["case_id"], r["row"]): r for r in ResultsFile(path).rows()}
+    res = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stdout + res.stderr
+    rows_after = ResultsFile(path).rows()
+    keys = [(r["case_id"], r["row"]) for r in rows_after]
+    assert len(keys) == len(set(keys))                                    # no duplicates
+    assert {r["case_id"] for r in rows_after} >= {c.case_id for c in SMOKE.cases if c.kind != "checks"}
+    for key, r in rows_before.items():                                    # not recomputed
+        after = next(x for x in rows_after if (x["case_id"], x["row"]) == key)
+        assert after["date"] == r["date"] and after["cpu_time_s"] == r["cpu_time_s"]
+    assert path.read_text().startswith("".join(kept))
+    assert f"{len(done_before)} already done" in res.stdout
+
+
+def test_limit_runs_only_the_first_cases_then_resume(tmp_path):
+    suite = Suite("mini", "two tiny cases", (
+        Case("work_precision", "bouncing_ball", law="newton", h=2e-3, t_end=0.5, observers=(),
+             reference="closed form"),
+        Case("scaling", "rocking_chain", params=(("param.N", 2),), observers=(), h=1e-3,
+             t_end=0.05, memory=False)))
+    s1 = run_suite(suite, tmp_path, progress=False, limit=1)
+    assert (s1.ran, s1.skipped) == (1, 0)
+    first = ResultsFile(results_path("mini", tmp_path)).rows()
+    s2 = run_suite(suite, tmp_path, progress=False)
+    assert (s2.ran, s2.skipped) == (1, 1)
+    rows = ResultsFile(results_path("mini", tmp_path)).rows()
+    assert rows[0] == first[0] and len(rows) == 2
+
+
+def test_failed_case_is_reported_and_retried(tmp_path):
+    bad = Case("work_precision", "double_mass", law="newton", h=1e-3, t_end=0.1, observers=(),
+               reference="closed form")                                   # no closed form exists
+    summary = run_suite(Suite("bad", "", (bad,)), tmp_path, progress=False)
+    assert summary.ran == 0 and len(summary.failed) == 1
+    assert "closed form" in summary.failed[0][1]
+    assert ResultsFile(results_path("bad", tmp_path)).done_ids() == set()
+
+
+def test_cli_list_show_status(tmp_path):
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    out = subprocess.run([sys.executable, "-m", "bench", "list"], cwd=REPO, env=env,
+                         capture_output=True, text=True, check=True).stdout
+    assert "quick" in out and "full" in out and "smoke" in out
+    out = subprocess.run([sys.executable, "-m", "bench", "status", "smoke", "--out", str(tmp_path)],
+                         cwd=REPO, env=env, capture_output=True, text=True, check=True).stdout
+    assert f"0/{len(SMOKE.cases)}" in out
+    bad = subprocess.run([sys.executable, "-m", "bench", "run", "nope"], cwd=REPO, env=env,
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "unknown suite" in bad.stderr
+
+
+# ----------------------------------------------------------------------------- perturbations
+@pytest.fixture
+def log():
+    rows = [(0, 0.10, 0.10), (0, 0.50, 0.50), (0, 1.00, 1.60), (0, 2.00, 2.00), (0, 2.40, 2.40),
+            (0, 3.00, 3.00), (1, 0.70, 0.70), (1, 1.20, 1.90), (1, 2.50, 2.50), (1, 3.30, 3.30)]
+    return pd.DataFrame(rows, columns=["contact", "t_close", "t_open"])
+
+
+def test_delay_shifts_every_interval(log):
+    out = perturb_log(log, "delay", 0.05, rng=np.random.default_rng(0), m=2, t_min=0, t_max=4, h=1e-3)
+    assert np.allclose(out["t_close"] - log["t_close"], 0.05)
+    assert np.allclose(out["t_open"] - log["t_open"], 0.05)
+
+
+def test_jitter_is_seeded_and_valid(log):
+    a = perturb_log(log, "jitter", 0.2, rng=np.random.default_rng(3), m=2, t_min=0, t_max=4, h=1e-3)
+    b = perturb_log(log, "jitter", 0.2, rng=np.random.default_rng(3), m=2, t_min=0, t_max=4, h=1e-3)
+    c = perturb_log(log, "jitter", 0.2, rng=np.random.default_rng(4), m=2, t_min=0, t_max=4, h=1e-3)
+    pd.testing.assert_frame_equal(a, b)
+    assert not a.equals(c)
+    validate_log(a, 2)                                  # sorted, no overlaps, t_open ≥ t_close
+    assert a["t_close"].min() >= 0 and a["t_open"].max() <= 4
+    assert not np.allclose(a["t_close"].to_numpy()[:3], log["t_close"].to_numpy()[:3])
+
+
+def test_missed_deletes_a_fraction_of_the_impacts_only(log):
+    out = perturb_log(log, "missed", 0.5, rng=np.random.default_rng(1), m=2, t_min=0, t_max=4, h=1e-3)
+    impacts = (log["t_open"] - log["t_close"]) <= 1e-3
+    assert len(out) == len(log) - round(0.5 * impacts.sum())
+    long_in = set(map(tuple, log[~impacts].to_numpy()))
+    assert long_in <= set(map(tuple, out.to_numpy()))  # persistent intervals untouched
+
+
+def test_false_closings_only_where_the_contact_is_open(log):
+    out = perturb_log(log, "false", 20.0, rng=np.random.default_rng(2), m=2, t_min=0, t_max=4, h=1e-3)
+    assert len(out) > len(log)
+    validate_log(out, 2)
+    extra = out.merge(log, how="left", indicator=True)
+    extra = extra[extra["_merge"] == "left_only"]
+    assert (extra["t_open"] == extra["t_close"]).all()
+    for _, r in extra.iterrows():
+        mine = log[log["contact"] == r["contact"]]
+        assert not ((mine["t_close"] <= r["t_close"]) & (r["t_close"] <= mine["t_open"])).any()
+
+
+def test_unknown_perturbation_is_an_error(log):
+    with pytest.raises(ValueError, match="unknown perturbation"):
+        perturb_log(log, "noise", 1.0, rng=np.random.default_rng(0), m=2, t_min=0, t_max=4, h=1e-3)
+
+
+# ----------------------------------------------------------------------------- references
+def test_ball_closed_form():
+    h0, g, e = 1.0, 9.81, 0.8
+    tk = bb.impact_times(h0, g, e, 8)
+    assert np.allclose(ball_position(tk, h0, g, e), 0.0, atol=1e-12)
+    t = np.array([0.0, 0.2])
+    assert np.allclose(ball_position(t, h0, g, e), h0 - 0.5 * g * t ** 2)
+    apex = tk[0] + e * np.sqrt(2 * g * h0) / g                 # apex after the first rebound
+    assert ball_position(np.array([apex]), h0, g, e)[0] == pytest.approx(e ** 2 * h0, rel=1e-12)
+    assert ball_position(np.array([bb.accumulation_time(h0, g, e) + 0.1]), h0, g, e)[0] == 0.0
+
+
+def test_exact_impact_oscillator_reproduces_the_periodic_orbit():
+    """THEORY §7.2: ω = 2.8, r = 0.8, σ = 0 has the (1,1) orbit V = 0.336177, t0 = 1.092635,
+    T = 2π/ω. Started just after an impact on it, the exact solution hits again after T
+    with the same velocity."""
+    om, r, V, t0 = 2.8, 0.8, 0.336177, 1.092635
+    T = 2 * np.pi / om
+    ex = ExactImpactOscillator(1.0, om, 0.0, 0.0, r, 0.0, -r * V, t0, t0 + 3.5 * T)
+    assert ex.impacts.shape[0] == 3
+    # the orbit data have 6 digits, and the orbit amplifies that error a little per period
+    assert abs(ex.impacts[0, 0] - (t0 + T)) <= 2e-6 and abs(ex.impacts[0, 1] - V) <= 2e-6
+    assert np.allclose(np.diff(np.r_[t0, ex.impacts[:, 0]]), T, atol=2e-5)
+    assert np.allclose(ex.impacts[:, 1], V, atol=2e-5)
+    x, v = ex(np.array([t0 + 0.5 * T]))
+    assert x[0] < 0.0                                            # inside the admissible set
+
+
+def test_closed_form_position_dispatch():
+    import observer
+    assert closed_form_position(observer.load_scenario("double_mass"), np.linspace(0, 1, 3)) is None
+    sc = observer.load_scenario("impact_oscillator", {"simulation.t_end": 2.0})
+    q = closed_form_position(sc, np.linspace(0, 2, 5))
+    assert q.shape == (5, 1) and q[0, 0] == pytest.approx(sc.q0[0])
+
+
+# ----------------------------------------------------------------------------- micro
+def test_micro_benchmarks_run_as_tests():
+    """The micro-benchmarks are also correctness tests (each asserts its residual); run them
+    once each with timing disabled."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    res = subprocess.run([sys.executable, "-m", "pytest", "bench/micro", "-q", "-p", "no:cacheprovider",
+                          "--benchmark-disable"], cwd=REPO, env=env, capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    assert " passed" in res.stdout
