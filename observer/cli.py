@@ -82,6 +82,25 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"error: {message} (see --help)\n")
 
 
+def cmd_log(args) -> int:
+    import numpy as np
+
+    from observer.result import read_frame
+    from observer.switching import log_from_active
+    df = read_frame(args.result)
+    cols = sorted((c for c in df.columns if c.startswith("active")), key=lambda c: int(c[6:]))
+    if not cols:
+        raise InputError(args.result, "no active0.. columns: not a result written by 'run'")
+    log = log_from_active(df["t"].to_numpy(), df[cols].to_numpy().astype(bool))
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    log.to_csv(out, index=False, float_format="%.17g")
+    impacts = int(np.sum(log["t_open"] == log["t_close"]))
+    print(f"wrote {out}: {len(log)} closed intervals ({impacts} impacts of zero length) "
+          f"over {len(cols)} contacts")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="python -m observer",
                                 description="Impact-time state observers for nonsmooth mechanical systems.")
@@ -105,6 +124,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override (param.NAME for builder parameters, else dotted TOML key)")
     s.add_argument("--out", required=True, help="output file (.csv or .parquet)")
     s.set_defaults(func=cmd_run)
+    s = sub.add_parser("log", help="write the closing log (contact,t_close,t_open) of a run, "
+                                   "the input of --source log")
+    s.add_argument("result", help="result file written by run")
+    s.add_argument("--out", required=True, help="closing log CSV")
+    s.set_defaults(func=cmd_log)
     s = sub.add_parser("plot", help="draw the paper-style figures of a run")
     s.add_argument("result", help="result file written by run")
     s.add_argument("--out", required=True, help="image file (.png, .svg, .pdf)")

@@ -269,3 +269,22 @@ def test_help_lists_commands(capsys, monkeypatch, tmp_path):
     assert proc.returncode == 0
     for cmd in ("scenarios", "show", "run", "plot"):
         assert cmd in proc.stdout
+
+
+def test_log_command_feeds_source_log(tmp_path, capsys):
+    """`log` writes a run's closings; an observer driven by that log on the same grid sees
+    exactly the master's closed sets (χ from the log equals the master's active set)."""
+    from observer.cli import main
+    run_csv, log_csv, obs_csv = tmp_path / "run.csv", tmp_path / "log.csv", tmp_path / "obs.csv"
+    assert main(["run", "double_mass", "--t-end", "1.5", "--h", "1e-3", "--out", str(run_csv)]) == 0
+    assert main(["log", str(run_csv), "--out", str(log_csv)]) == 0
+    log = pd.read_csv(log_csv)
+    assert list(log.columns) == ["contact", "t_close", "t_open"] and (log.t_open == log.t_close).sum() > 5
+    assert main(["run", "double_mass", "--t-end", "1.5", "--h", "1e-3", "--observers", "jump,nojump",
+                 "--source", "log", "--log", str(log_csv), "--out", str(obs_csv)]) == 0
+    df = pd.read_csv(obs_csv, comment="#")
+    chi = df[[c for c in df.columns if c.startswith("chi")]].to_numpy()[1:]
+    active = df[[c for c in df.columns if c.startswith("active")]].to_numpy()[1:]
+    assert np.array_equal(chi, active)
+    assert main(["log", str(log_csv), "--out", str(tmp_path / "x.csv")]) == 2
+    assert "error:" in capsys.readouterr().err
