@@ -31,6 +31,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Iterable
 
+from observer.result import package_versions
+
 RESERVED = ("suite", "case_id", "case_rows", "row")
 
 
@@ -227,24 +229,6 @@ def git_commit(root: str | Path | None = None) -> str:
         return sha + ("+dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
         return "unknown"
-
-
-def package_versions() -> dict[str, str]:
-    """Versions of the toolkit and of its numerical stack."""
-    from importlib import metadata
-
-    out = {"python": platform.python_version()}
-    try:
-        import observer
-        out["observer"] = observer.__version__
-    except ImportError:  # pragma: no cover
-        out["observer"] = "not importable"
-    for pkg in ("numpy", "scipy", "pandas", "cvxpy", "osqp", "matplotlib"):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            out[pkg] = "not installed"
-    return out
 
 
 def _command() -> str:

@@ -21,11 +21,13 @@ from observer.model import LinearSystem
 
 
 def package_versions() -> dict[str, str]:
-    """Versions of Python and the numerical stack, for result metadata."""
+    """Versions of Python, the toolkit and its numerical stack, for result metadata."""
     from importlib import metadata
 
-    out = {"python": platform.python_version()}
-    for pkg in ("observer-toolkit", "numpy", "scipy", "pandas", "cvxpy", "osqp"):
+    import observer
+
+    out = {"python": platform.python_version(), "observer": observer.__version__}
+    for pkg in ("numpy", "scipy", "pandas", "cvxpy", "osqp", "matplotlib"):
         try:
             out[pkg] = metadata.version(pkg)
         except metadata.PackageNotFoundError:
