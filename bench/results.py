@@ -121,13 +121,7 @@ class ResultsFile:
             return 0
         with self.path.open("r", encoding="utf-8") as fh:
             before = sum(1 for _ in fh)
-        tmp = self.path.with_suffix(self.path.suffix + ".tmp")
-        with tmp.open("w", encoding="utf-8") as fh:
-            for r in keep:
-                fh.write(dumps_row(r) + "\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, self.path)
+        self._rewrite(keep)
         return before - len(keep)
 
     def prune(self, keep_ids: set[str]) -> int:
@@ -143,15 +137,18 @@ class ResultsFile:
                 fh.write(dumps_row(r) + "\n")
             fh.flush()
             os.fsync(fh.fileno())
+        self._rewrite([r for r in rows if r.get("case_id") in keep_ids])
+        return len(stale)
+
+    def _rewrite(self, rows: list[dict]) -> None:
+        """Replace the file by ``rows`` atomically (write a temporary file, fsync, rename)."""
         tmp = self.path.with_suffix(self.path.suffix + ".tmp")
         with tmp.open("w", encoding="utf-8") as fh:
             for r in rows:
-                if r.get("case_id") in keep_ids:
-                    fh.write(dumps_row(r) + "\n")
+                fh.write(dumps_row(r) + "\n")
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, self.path)
-        return len(stale)
 
     # -- writing ---------------------------------------------------------------------------
     def append_case(self, suite: str, case_id: str, rows: list[dict]) -> None:
