@@ -67,8 +67,14 @@ def test_input_error_is_a_value_error_with_field():
 
 
 def test_builtin_documents_are_valid():
+    """Every built-in document validates, keeps its matrices and starts without penetration."""
     for name in ("double_mass", "rocking_chain", "bouncing_ball", "impact_oscillator", "grazing"):
-        Scenario.from_dict(doc_of(name))
+        doc = doc_of(name)
+        sc = Scenario.from_dict(doc)
+        assert sc.name == name
+        assert np.array_equal(sc.system.M, np.array(doc["system"]["M"]))
+        assert np.array_equal(sc.system.W, np.array(doc["system"]["W"]))
+        assert np.min(sc.system.gaps(sc.q0, 0.0)) >= -1e-12
 
 
 # ---------------------------------------------------------------------------------------
