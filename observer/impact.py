@@ -9,6 +9,10 @@ velocity γ⁻ and impulse Λ ≥ 0, the post-impact velocity is γ⁺ = γ⁻ +
   solved as LCP(G, γ_C + G(ε∘Λ_C)) in μ = Λ_E − ε∘Λ_C; Λ = (1+ε)∘Λ_C + μ, γ⁺ = γ_E ≥ 0.
 
 For one contact the two coincide exactly.
+
+:func:`poisson_target` turns the Poisson map into the target velocity of the discrete step
+(:mod:`observer.stepping`), which makes the discrete Poisson step equal to the discrete
+Newton step for one contact.
 """
 
 from __future__ import annotations
@@ -65,16 +69,61 @@ class ImpactLaw:
 
 
 def newton_impact(G: np.ndarray, gamma_minus: np.ndarray, e: np.ndarray, solve: Solve) -> np.ndarray:
-    """Generalized Newton impulse: solve ``0 ≤ γ⁻ + GΛ + e∘γ⁻ ⊥ Λ ≥ 0`` for Λ."""
+    """Generalized Newton impulse (paper eq. (5)): solve ``0 ≤ γ⁻ + GΛ + e∘γ⁻ ⊥ Λ ≥ 0`` for Λ."""
     return solve(G, (1.0 + e) * gamma_minus).x
 
 
-def poisson_impact(G: np.ndarray, gamma_minus: np.ndarray, eps: np.ndarray, solve: Solve) -> np.ndarray:
-    """Generalized Poisson impulse in Glocker's inequality form (compression, then expansion)."""
+def poisson_phases(G: np.ndarray, gamma_minus: np.ndarray, eps: np.ndarray,
+                   solve: Solve) -> tuple[np.ndarray, np.ndarray]:
+    """Compression and expansion impulses (Λ_C, Λ_E) of Poisson's law (paper eq. (6), Glocker's form).
+
+    Compression ``0 ≤ γ_C ⊥ Λ_C ≥ 0`` with ``γ_C = γ⁻ + GΛ_C``; expansion
+    ``0 ≤ γ_E ⊥ Λ_E − ε∘Λ_C ≥ 0`` with ``γ_E = γ_C + GΛ_E``, solved as the LCP in
+    ``μ = Λ_E − ε∘Λ_C``: ``0 ≤ Gμ + (γ_C + G(ε∘Λ_C)) ⊥ μ ≥ 0``.
+
+    For one contact the closed form is used: ``Λ_C = max(0, −γ⁻/G)``, ``Λ_E = εΛ_C``
+    (so that ``γ_E = −εγ⁻`` for γ⁻ < 0, Newton's value).
+    """
+    if gamma_minus.shape[0] == 1:
+        lam_c = np.maximum(-gamma_minus / G[0, 0], 0.0)
+        return lam_c, eps * lam_c
     lam_c = solve(G, gamma_minus).x
     gamma_c = gamma_minus + G @ lam_c
     mu = solve(G, gamma_c + G @ (eps * lam_c)).x
-    return (1.0 + eps) * lam_c + mu
+    return lam_c, eps * lam_c + mu
+
+
+def poisson_impact(G: np.ndarray, gamma_minus: np.ndarray, eps: np.ndarray, solve: Solve) -> np.ndarray:
+    """Generalized Poisson impulse Λ = Λ_C + Λ_E in Glocker's inequality form (:func:`poisson_phases`)."""
+    lam_c, lam_e = poisson_phases(G, gamma_minus, eps, solve)
+    return lam_c + lam_e
+
+
+def poisson_target(G: np.ndarray, gamma_k: np.ndarray, eps: np.ndarray,
+                   solve: Solve) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Target contact velocity τ of the discrete Poisson step, and its impulsive part.
+
+    ``τ = γ_E − (1+ε)∘γ_C``, where ``γ_C = γ_k + GΛ_C ≥ 0`` and ``γ_E = γ_C + GΛ_E ≥ 0`` are
+    the velocities after Glocker's compression and expansion phases (:func:`poisson_phases`)
+    for the pre-impact velocity γ_k of the step. On a contact that the compression closes
+    (γ_C,i = 0) the target is Glocker's post-impact velocity γ_E,i; on a contact still
+    separating after compression (γ_C,i > 0, Λ_C,i = 0), one that the step's predictor closed
+    although it leaves, the target is lowered by (1+ε_i)γ_C,i, which is Newton's discrete
+    target −ε_iγ_k,i when the contact is not coupled to an impacting one. Hence for one
+    contact ``τ = −εγ_k`` exactly, for either sign of γ_k (returned in that form, so that the
+    Poisson and Newton steps see bitwise the same LCP). τ is a continuous function of γ_k.
+
+    Returns
+    -------
+    tau, lam_c, lam_e : ndarray
+        The target and the compression and expansion impulses of the impulsive part.
+    """
+    lam_c, lam_e = poisson_phases(G, gamma_k, eps, solve)
+    if gamma_k.shape[0] == 1:
+        return -eps * gamma_k, lam_c, lam_e
+    gamma_c = gamma_k + G @ lam_c
+    gamma_e = gamma_c + G @ lam_e
+    return gamma_e - (1.0 + eps) * gamma_c, lam_c, lam_e
 
 
 def impact(law: ImpactLaw, G: np.ndarray, gamma_minus: np.ndarray, active: np.ndarray,
