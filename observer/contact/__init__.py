@@ -2,9 +2,13 @@
 
 A contact solver is any object with a ``name`` and a method
 ``solve(G, b) -> LCPSolution`` for the LCP ``0 ≤ Gx + b ⊥ x ≥ 0`` with symmetric PSD G.
+Every answer carries its residual recomputed from the returned x (``w = Gx + b``,
+:func:`lcp_residual`) and, in ``method``, the algorithm that actually produced x.
 
 - ``"pivoting"`` (default, fast and exact): closed form for one contact, block principal
-  pivoting for SPD G, Lemke for PSD G.
+  pivoting for SPD G, Lemke as fallback for PSD G. ``PivotingSolver(fallback=False)``
+  (or ``get_solver("pivoting", fallback=False)``) runs the fast path alone; the
+  instance counts the fallbacks it took in ``fallbacks``.
 - ``"lemke"``: Lemke's algorithm only (exact, any PSD G).
 - ``"nnls"``: NNLS on the Cholesky factor (exact, SPD G only).
 - ``"reference"``: the QP written in cvxpy and solved by OSQP (transparent, slow).
@@ -19,22 +23,49 @@ from observer.contact.lcp import (LCPSolution, block_principal_pivoting, lcp_res
 from observer.contact.reference import solve_reference
 from observer.errors import ContactSolverError, InputError
 
+ACCEPT_RESIDUAL = 1e-10
+"""Largest residual of block pivoting that the pivoting solver accepts without trying Lemke."""
+
 
 class PivotingSolver:
-    """Fast exact solver: closed form (m = 1), block principal pivoting, Lemke as fallback."""
+    """Fast exact solver: closed form (m = 1, G > 0), block principal pivoting, Lemke as fallback.
+
+    Parameters
+    ----------
+    fallback : bool
+        Try Lemke when block pivoting fails (singular principal block: G only PSD) or
+        leaves a residual above :data:`ACCEPT_RESIDUAL`; the better answer is returned
+        with ``fallbacks = 1``. With ``fallback=False`` block pivoting's own answer is
+        returned whatever its residual (the caller judges it), and a failure raises
+        ``ContactSolverError``.
+
+    Attributes
+    ----------
+    fallbacks : int
+        Number of solves of this instance that fell back to Lemke.
+    """
 
     name = "pivoting"
+
+    def __init__(self, fallback: bool = True) -> None:
+        self.fallback = bool(fallback)
+        self.fallbacks = 0
 
     def solve(self, G: np.ndarray, b: np.ndarray) -> LCPSolution:
         if b.shape[0] == 1 and G[0, 0] > 0.0:
             return solve_single(G, b)
         sol = block_principal_pivoting(G, b)
-        if sol is None or sol.residual > 1e-10:
+        if self.fallback and (sol is None or sol.residual > ACCEPT_RESIDUAL):
+            self.fallbacks += 1
             alt = lemke(G, b)
             if alt is not None and (sol is None or alt.residual < sol.residual):
                 sol = alt
+            if sol is not None:
+                sol = sol._replace(fallbacks=1)
         if sol is None:
-            raise ContactSolverError("pivoting: no solution found (infeasible LCP or G not PSD)")
+            tried = "block pivoting and lemke" if self.fallback else "block pivoting (fallback disabled)"
+            raise ContactSolverError(f"pivoting: no solution found by {tried} "
+                                     "(infeasible LCP or G not PSD)")
         return sol
 
 
@@ -75,14 +106,23 @@ CONTACT_SOLVERS = {cls.name: cls for cls in (PivotingSolver, LemkeSolver, NNLSSo
 """Registry: stable name -> solver class."""
 
 
-def get_solver(name: str, field: str = "solver"):
-    """Instantiate a registered contact solver by name (``field`` names the input in errors)."""
+def get_solver(name: str, field: str = "solver", **options):
+    """Instantiate a registered contact solver by name (``field`` names the input in errors).
+
+    ``options`` go to the solver's constructor (e.g. ``fallback=False`` for ``"pivoting"``);
+    an option the solver does not have raises ``InputError`` naming ``field``.
+    """
     try:
-        return CONTACT_SOLVERS[name]()
+        cls = CONTACT_SOLVERS[name]
     except (KeyError, TypeError):
         raise InputError(field, f"unknown contact solver {name!r}; "
                          f"choose from {sorted(CONTACT_SOLVERS)}") from None
+    try:
+        return cls(**options)
+    except TypeError:
+        raise InputError(field, f"contact solver {name!r} takes no options "
+                         f"{sorted(options)}") from None
 
 
-__all__ = ["CONTACT_SOLVERS", "LCPSolution", "get_solver", "lcp_residual", "PivotingSolver",
+__all__ = ["ACCEPT_RESIDUAL", "CONTACT_SOLVERS", "LCPSolution", "get_solver", "lcp_residual", "PivotingSolver",
            "LemkeSolver", "NNLSSolver", "ReferenceSolver"]
