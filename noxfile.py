@@ -1,6 +1,9 @@
 """nox sessions.
 
-* ``tests`` (default): the pytest suite.
+* ``tests`` (default): the pytest suite, dependencies pinned by ``constraints.txt``.
+* ``tests_latest``: the same suite against the latest releases of every dependency.
+* ``mutants -- [MODULE ...]``: mutation testing (mutmut) of the core modules, each against
+  its own tests (:data:`MUTATION_TARGETS`); see ``tests/mutants/README.md``.
 * ``report``: the main job — run the ``quick`` benchmark suite (resumable) and build the
   self-contained HTML report ``reports/out/quick/index.html``; ``-- SUITE`` for another.
 * ``bench -- SUITE``: run a benchmark suite only (rows appended to ``bench/results/SUITE.jsonl``).
@@ -10,6 +13,13 @@
 
 from __future__ import annotations
 
+import json
+import os
+import re
+import shutil
+import tomllib
+from pathlib import Path
+
 import nox
 
 nox.needs_version = ">=2024.3.2"
@@ -18,11 +28,154 @@ nox.options.reuse_existing_virtualenvs = True
 nox.options.sessions = ["tests"]
 
 
+ROOT = Path(__file__).resolve().parent
+CONSTRAINTS = "constraints.txt"
+
+
 @nox.session
 def tests(session: nox.Session) -> None:
-    """Install the package with its test extras and run pytest (pass pytest args after --)."""
-    session.install("-e", ".[test]")
+    """Install the package with its test extras, every version pinned by ``constraints.txt``,
+    and run pytest (pass pytest args after --)."""
+    session.install("-c", CONSTRAINTS, "-e", ".[test]")
     session.run("python", "-m", "pytest", *session.posargs)
+
+
+@nox.session
+def tests_latest(session: nox.Session) -> None:
+    """The test suite against the latest release of every dependency (no constraints file):
+    the early warning that an upstream release breaks something ``tests`` would not see."""
+    session.install("--upgrade", "--upgrade-strategy", "eager", "-e", ".[test]")
+    session.run("python", "-m", "pytest", *session.posargs)
+
+
+# Mutation testing: module -> (files mutated, tests run against them). Each module is run
+# in its own work directory mutants/MODULE/ (mutmut copies the tree into
+# mutants/MODULE/mutants/ and runs pytest there, so the tests import the mutated copy).
+MUTATION_TARGETS: dict[str, tuple[list[str], list[str]]] = {
+    "stepping": (["observer/stepping.py"],
+                 ["tests/test_step_physics.py", "tests/test_timestepping.py"]),
+    "impact": (["observer/impact.py"],
+               ["tests/test_step_physics.py", "tests/test_contact.py", "tests/test_timestepping.py"]),
+    "contact": (["observer/contact/*"], ["tests/test_contact.py"]),
+    "observers": (["observer/observers.py"], ["tests/test_observers.py"]),
+    "proofs_checks": (["proofs_checks/*"], ["tests/test_proofs_checks.py"]),
+}
+MUTANTS_DIR = ROOT / "mutants"
+EQUIVALENT_DIR = ROOT / "tests" / "mutants"
+_COPIED = ("observer", "proofs_checks", "tests")
+_EQUIVALENT_NAME = re.compile(r"`([\w.]+__mutmut_\d+)`")
+
+
+def _toml_list(items: list[str]) -> str:
+    return "[" + ", ".join(json.dumps(i) for i in items) + "]"
+
+
+def _mutmut_pyproject(module: str, tests: list[str]) -> str:
+    """pyproject.toml of a module's work directory: the project's, with its ``[tool.mutmut]``
+    table narrowed to the module's files and tests."""
+    text = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
+    base = tomllib.loads(text)["tool"]["mutmut"]
+    # drop the project's [tool.mutmut] table (up to the next table header)
+    text = re.sub(r"(?ms)^\[tool\.mutmut\]\n.*?(?=^\[|\Z)", "", text)
+    settings = dict(base, only_mutate=MUTATION_TARGETS[module][0],
+                    pytest_add_cli_args_test_selection=tests)
+    lines = ["", "[tool.mutmut]"]
+    for key, value in settings.items():
+        if isinstance(value, list):
+            lines.append(f"{key} = {_toml_list([str(v) for v in value])}")
+        else:
+            lines.append(f"{key} = {json.dumps(value)}")
+    return text.rstrip() + "\n" + "\n".join(lines) + "\n"
+
+
+def _equivalent_mutants(module: str) -> set[str]:
+    """Mutant names listed (in backticks) in tests/mutants/MODULE.md as equivalent."""
+    path = EQUIVALENT_DIR / f"{module}.md"
+    if not path.exists():
+        return set()
+    return set(_EQUIVALENT_NAME.findall(path.read_text(encoding="utf-8")))
+
+
+def _mutation_summary(session: nox.Session, module: str, work: Path) -> dict:
+    """Read mutmut's per-file verdicts; print the score and the survivors not listed as
+    equivalent; return the counts."""
+    verdicts: dict[str, int | None] = {}
+    for meta in (work / "mutants").rglob("*.py.meta"):
+        verdicts.update(json.loads(meta.read_text())["exit_code_by_key"])
+    killed = sum(code in (1, 3) for code in verdicts.values())
+    timeout = sum(code in (36, 24, -24, 152, 255) for code in verdicts.values())
+    survived = sorted(k for k, code in verdicts.items() if code == 0)
+    other = sorted(k for k, code in verdicts.items()
+                   if code not in (0, 1, 3, 36, 24, -24, 152, 255))
+    equivalent = _equivalent_mutants(module)
+    stale = sorted(equivalent - set(verdicts))
+    unexplained = [k for k in survived if k not in equivalent]
+    caught = killed + timeout
+    total = len(verdicts)
+    considered = total - len(equivalent & set(survived))
+    score = 100.0 * caught / total if total else float("nan")
+    adjusted = 100.0 * caught / considered if considered else float("nan")
+    session.log(f"[{module}] {total} mutants: {killed} killed, {timeout} timeout, "
+                f"{len(survived)} survived ({len(survived) - len(unexplained)} listed as "
+                f"equivalent), {len(other)} other (no tests / suspicious / not checked)")
+    session.log(f"[{module}] mutation score {score:.1f} % (caught/total); "
+                f"{adjusted:.1f} % excluding listed equivalents")
+    for name in unexplained:
+        session.log(f"[{module}]   survived: {name}")
+    for name in other:
+        session.log(f"[{module}]   {verdicts[name]}: {name}")
+    if stale:
+        session.warn(f"[{module}] tests/mutants/{module}.md lists mutants that no longer "
+                     f"exist (renumbered after a source change?): {', '.join(stale)}")
+    return dict(module=module, total=total, killed=killed, timeout=timeout,
+                survived=survived, unexplained=unexplained, other=other,
+                score=score, score_excluding_equivalents=adjusted)
+
+
+@nox.session
+def mutants(session: nox.Session) -> None:
+    """Mutation testing with mutmut: ``nox -s mutants -- [MODULE ...] [--tests T,...]
+    [--max-children N]``.
+
+    MODULE is one of :data:`MUTATION_TARGETS` (default: all, one after the other); each is
+    mutated and tested against its own test files only (``--tests`` replaces them), in a
+    fresh work directory ``mutants/MODULE/``. Afterwards ``cd mutants/MODULE`` and
+    ``mutmut results`` / ``mutmut show NAME`` inspect the survivors. A summary of every
+    module goes to ``mutants/summary.json``. See ``tests/mutants/README.md``.
+    """
+    session.install("-c", CONSTRAINTS, "-e", ".[test]", "mutmut")
+    args = list(session.posargs)
+    tests_override: list[str] | None = None
+    max_children: list[str] = []
+    if "--tests" in args:
+        i = args.index("--tests")
+        tests_override = [t for t in args[i + 1].split(",") if t]
+        del args[i:i + 2]
+    if "--max-children" in args:
+        i = args.index("--max-children")
+        max_children = ["--max-children", args[i + 1]]
+        del args[i:i + 2]
+    modules = args or list(MUTATION_TARGETS)
+    unknown = [m for m in modules if m not in MUTATION_TARGETS]
+    if unknown:
+        session.error(f"unknown module(s) {unknown}; choose from {sorted(MUTATION_TARGETS)}")
+    # tests resolve the oracle data from the project root; the work copy is elsewhere
+    env = {"OBSERVER_ORACLES": os.environ.get("OBSERVER_ORACLES",
+                                              str(ROOT.parent / "shared" / "oracles"))}
+    summaries = []
+    for module in modules:
+        tests = tests_override or MUTATION_TARGETS[module][1]
+        work = MUTANTS_DIR / module
+        shutil.rmtree(work, ignore_errors=True)
+        work.mkdir(parents=True)
+        ignore = shutil.ignore_patterns("__pycache__", "*.pyc", ".hypothesis", ".benchmarks")
+        for name in _COPIED:
+            shutil.copytree(ROOT / name, work / name, ignore=ignore)
+        (work / "pyproject.toml").write_text(_mutmut_pyproject(module, tests), encoding="utf-8")
+        with session.chdir(work):
+            session.run("mutmut", "run", *max_children, env=env)
+            summaries.append(_mutation_summary(session, module, work))
+    (MUTANTS_DIR / "summary.json").write_text(json.dumps(summaries, indent=2))
 
 
 @nox.session
