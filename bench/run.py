@@ -49,7 +49,8 @@ class RunSummary:
         if self.repaired_lines:
             lines.append(f"dropped {self.repaired_lines} line(s) of an interrupted case")
         if self.stale_rows:
-            lines.append(f"moved {self.stale_rows} row(s) of cases no longer in the suite to "
+            lines.append(f"moved {self.stale_rows} row(s) of cases no longer in the suite (or "
+                         f"written without a column the report now needs) to "
                          f"{self.results.stem}.stale.jsonl")
         for cid, msg in self.failed:
             lines.append(f"FAILED {cid}: {msg}")
@@ -73,6 +74,17 @@ def unavailable_path(suite: str, out_dir: str | Path = RESULTS_DIR) -> Path:
 def micro_path(suite: str, out_dir: str | Path = RESULTS_DIR) -> Path:
     """``OUT/<suite>-micro.json``."""
     return Path(out_dir) / f"{suite}-micro.json"
+
+
+def outdated_ids(rows: list[dict]) -> set[str]:
+    """Cases with a row that lacks a column its kind requires now
+    (:data:`bench.runners.REQUIRED_COLUMNS`, e.g. settling times added after the row was
+    written): they are moved to the stale file and run again."""
+    from bench.runners import REQUIRED_COLUMNS
+
+    return {r.get("case_id", "") for r in rows
+            if r.get("status", "ok") == "ok"
+            and any(c not in r for c in REQUIRED_COLUMNS.get(r.get("kind", ""), ()))}
 
 
 def run_suite(suite: str | Suite, out_dir: str | Path = RESULTS_DIR, *, progress: bool = True,
@@ -104,7 +116,7 @@ def run_suite(suite: str | Suite, out_dir: str | Path = RESULTS_DIR, *, progress
     rf = ResultsFile(results_path(suite.name, out_dir))
     summary = RunSummary(suite.name, rf.path, len(suite.cases))
     summary.repaired_lines = rf.repair()
-    summary.stale_rows = rf.prune({c.case_id for c in suite.cases})
+    summary.stale_rows = rf.prune({c.case_id for c in suite.cases} - outdated_ids(rf.rows()))
     done = rf.done_ids()
     todo = [c for c in suite.cases if c.case_id not in done]
     summary.skipped = len(suite.cases) - len(todo)

@@ -30,7 +30,7 @@ import observer
 from observer import OBSERVERS, Slave
 from observer.contact import get_solver
 from observer.errors import InputError
-from observer.metrics import switchings
+from observer.metrics import excursions_after_passage, settling_time, switchings
 from observer.switching import log_from_active
 
 from bench.perturb import perturb_log
@@ -116,10 +116,31 @@ def _slaves(case: Case, sc, names) -> list[Slave]:
     return [Slave(name, OBSERVERS[name], sc.q0 + dq, sc.u0 + du) for name in names]
 
 
+def settle_column(rho: float) -> str:
+    """Row column of the settling time at ρ (:func:`observer.metrics.settling_time`)."""
+    return f"t_settle_{rho:g}"
+
+
+REQUIRED_COLUMNS = {"observers": tuple(settle_column(r) for r in RHOS),
+                    "robustness": tuple(settle_column(r) for r in RHOS)}
+"""Columns every row of a kind must have; rows written before a column existed are moved
+to the stale file and their cases rerun (:func:`bench.run.run_suite`)."""
+
+
 def sync_metrics(res, name: str) -> dict[str, Any]:
-    """Synchronization metrics of observer ``name`` in a result (window = coupling window)."""
+    """Synchronization metrics of observer ``name`` in a result (window = coupling window).
+
+    Per threshold ρ in :data:`bench.suites.RHOS`: ``t_sync_ρ`` the first passage of
+    V ≤ ρ·V(t_on), ``t_settle_ρ`` the settling time (V stays below until t_off) and
+    ``above_after_ρ`` the fraction of window samples after the first passage with V back
+    above the threshold.
+    """
     row = res.synchronization(RHOS).set_index("observer").loc[name].to_dict()
     s = res.slaves[name]
+    t_on, t_off = float(row["t_on"]), float(row["t_off"])
+    for rho in RHOS:
+        row[settle_column(rho)] = settling_time(res.t, s.V, rho, t_on, t_off)
+        row[f"above_after_{rho:g}"] = excursions_after_passage(res.t, s.V, rho, t_on, t_off)
     V_on = row["V_on"]
     row.update(
         floor_rel=row["floor"] / V_on if V_on > 0 else float("nan"),

@@ -24,7 +24,8 @@ from typing import Any
 KINDS = ("observers", "work_precision", "robustness", "scaling", "checks")
 
 RHOS = (1e-3, 1e-5, 1e-6, 1e-9)
-"""Synchronization thresholds: time until V ≤ ρ·V(t_on) is reported for each ρ."""
+"""Synchronization thresholds: for each ρ the rows hold the settling time (V stays ≤ ρ·V(t_on)
+until the end of the coupling window) and the first-passage time (first V ≤ ρ·V(t_on))."""
 
 
 @dataclass(frozen=True)

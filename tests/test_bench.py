@@ -336,3 +336,94 @@ def test_micro_benchmarks_run_as_tests():
                          timeout=300)
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
     assert " passed" in res.stdout
+
+
+# ----------------------------------------------------------------------------- settling times
+def _settling_by_loop(t, V, rho, t_on, t_off):
+    """Settling time by its definition, sample by sample: the earliest window sample from which
+    every later window sample has V ≤ ρ·V(t_on)."""
+    window = [k for k in range(len(t)) if t_on <= t[k] <= t_off]
+    level = rho * V[window[0]]
+    for pos, k in enumerate(window):
+        if all(V[j] <= level for j in window[pos:]):
+            return t[k] - t[window[0]]
+    return float("inf")
+
+
+def test_settling_time_waits_for_the_last_excursion():
+    """V = e^{−t} with a bump back above 1e-3 on [9, 9.5): the first passage of 1e-3 is at
+    ln(1000) ≈ 6.91 s, the settling time at 9.5 s; below 1e-5 V never gets before the bump
+    and settles after it; ρ above V's end value but below its bump → the bump's end."""
+    from observer.metrics import excursions_after_passage, settling_time, sync_time
+
+    t = np.round(np.arange(0.0, 20.0 + 1e-9, 0.01), 10)
+    V = np.exp(-t)
+    bump = (t >= 9.0) & (t < 9.5)
+    V[bump] = 2e-3
+    assert sync_time(t, V, 1e-3) == pytest.approx(np.ceil(np.log(1e3) * 100) / 100)
+    assert settling_time(t, V, 1e-3) == pytest.approx(9.5)
+    assert settling_time(t, V, 1e-5) == pytest.approx(np.ceil(np.log(1e5) * 100) / 100)
+    # the fraction of samples after the first passage that are above: the 50 bump samples
+    after = t[t > sync_time(t, V, 1e-3)].size
+    assert excursions_after_passage(t, V, 1e-3) == pytest.approx(50 / after)
+    assert excursions_after_passage(t, V, 1e-5) == 0.0
+    assert np.isnan(excursions_after_passage(t, V, 1e-12))
+    # ends above the threshold: never; never above (ρ ≥ 1): 0
+    assert settling_time(t, V, 1e-12) == np.inf
+    assert settling_time(t, V, 1.0) == 0.0
+    # window: from t_on = 2 (V0 = e^{-2}) to t_off = 9.2 (inside the bump): never settles
+    assert settling_time(t, V, 1e-3, 2.0, 9.2) == np.inf
+    # window [2, 12]: V0 = e^{-2}, first passage at 2 + ln(1000), settled after the bump
+    assert sync_time(t, V, 1e-3, 2.0, 12.0) == pytest.approx(np.ceil(np.log(1e3) * 100) / 100)
+    assert settling_time(t, V, 1e-3, 2.0, 12.0) == pytest.approx(9.5 - 2.0)
+    assert settling_time(t, V, 1e-3, 2.0, 8.0) == np.inf      # not even reached by t_off
+    for rho in (1e-2, 1e-3, 1e-5, 1e-9):
+        for t_on, t_off in ((0.0, 20.0), (2.0, 9.2), (1.0, 15.0)):
+            assert settling_time(t, V, rho, t_on, t_off) == pytest.approx(
+                _settling_by_loop(t, V, rho, t_on, t_off), abs=1e-9)
+
+
+def test_observer_rows_carry_settling_times_recomputed_from_V(tmp_path):
+    """On a real run (double_mass, jump observer, coupled from t_on = 0.1 s), every t_settle
+    and t_sync column of the row equals the definition applied sample by sample to V."""
+    import observer
+    from bench.runners import sync_metrics
+
+    sc = observer.load_scenario("double_mass", {"simulation.h": 2e-3, "simulation.t_end": 2.0,
+                                                "observer.coupling": [0.1, 1.8]})
+    res = observer.simulate(sc, observers=["jump"])
+    row = sync_metrics(res, "jump")
+    assert (row["t_on"], row["t_off"]) == (0.1, 1.8)
+    V = res.slaves["jump"].V
+    win = [k for k in range(res.t.size) if 0.1 <= res.t[k] <= 1.8]
+    reached = 0
+    for rho in (1e-3, 1e-5, 1e-6, 1e-9):
+        first = next((res.t[k] - res.t[win[0]] for k in win if V[k] <= rho * V[win[0]]), np.inf)
+        assert row[f"t_sync_{rho:g}"] == pytest.approx(first, abs=1e-12)
+        assert row[f"t_settle_{rho:g}"] == pytest.approx(
+            _settling_by_loop(res.t, V, rho, 0.1, 1.8), abs=1e-12)
+        assert row[f"t_settle_{rho:g}"] >= row[f"t_sync_{rho:g}"]
+        reached += np.isfinite(row[f"t_settle_{rho:g}"])
+    assert reached >= 1                        # not a comparison of two infinities only
+
+
+def test_rows_without_settling_times_are_rerun(tmp_path):
+    """An observers case written before the settling columns existed is moved to the stale
+    file and run again; other cases are kept."""
+    obs = Case("observers", "double_mass", h=2e-3, t_end=0.2)
+    wp = Case("work_precision", "bouncing_ball", law="newton", h=2e-3, t_end=0.2, observers=(),
+              reference="closed form")
+    suite = Suite("old", "", (obs, wp))
+    run_suite(suite, tmp_path, progress=False, micro=False)
+    path = results_path("old", tmp_path)
+    rows = ResultsFile(path).rows()
+    old = [{k: v for k, v in r.items() if not k.startswith(("t_settle_", "above_after_"))}
+           for r in rows]
+    path.write_text("".join(json.dumps(r) + "\n" for r in old))
+    summary = run_suite(suite, tmp_path, progress=False, micro=False)
+    assert summary.ran == 1 and summary.skipped == 1 and summary.stale_rows == 2
+    new = ResultsFile(path).rows()
+    assert all("t_settle_1e-09" in r for r in new if r["kind"] == "observers")
+    assert [r for r in new if r["kind"] == "work_precision"] == [old[2]]
+    stale = path.with_name("old.stale.jsonl").read_text().splitlines()
+    assert len(stale) == 2 and all('"t_settle_' not in line for line in stale)

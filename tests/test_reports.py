@@ -7,10 +7,12 @@ it is skipped only when no Chromium is installed (``.ci/run`` installs it).
 from __future__ import annotations
 
 import base64
+import json
 import os
 import re
 import subprocess
 import sys
+from dataclasses import dataclass, field
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -18,9 +20,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from bench.results import ResultsFile
 from bench.run import micro_path, results_path, run_suite
+from reports.analysis import fit_power
 from reports.browser import check_page, find_chromium
-from reports.build import build_report, fit_power, ratio_rows
+from reports.build import build_report
 from reports.tables import fmt, fmt_rho, fmt_time
 
 REPO = Path(__file__).resolve().parent.parent
@@ -70,6 +74,120 @@ class _Cells(HTMLParser):
     def handle_data(self, data):
         if self._in_cell:
             self._buf += data
+
+
+NUMBER = re.compile(r"[−-]?\d+(?:\.\d+)?(?:e[−-]?\d+)?")
+
+
+def _num(text: str) -> float:
+    """The first number in a cell ("1.23e−7 s" → 1.23e-7; the report writes − for minus)."""
+    m = NUMBER.search(text)
+    assert m is not None, f"no number in {text!r}"
+    return float(m.group(0).replace("−", "-"))
+
+
+def _nums(text: str) -> list[float]:
+    return [float(x.replace("−", "-")) for x in NUMBER.findall(text)]
+
+
+@dataclass
+class _Table:
+    title: str
+    columns: list = field(default_factory=list)
+    rows: list = field(default_factory=list)
+
+    def dicts(self) -> list[dict]:
+        return [dict(zip(self.columns, r)) for r in self.rows]
+
+    def column(self, name: str) -> list[str]:
+        i = self.columns.index(name)
+        return [r[i] for r in self.rows]
+
+
+@dataclass
+class _Body:
+    """What one ``<section id=...>`` shows directly: paragraphs, list items, tables."""
+
+    paragraphs: list = field(default_factory=list)
+    items: list = field(default_factory=list)
+    tables: list = field(default_factory=list)
+
+    def text(self) -> str:
+        return "\n".join(self.paragraphs + self.items)
+
+
+class _Page(HTMLParser):
+    """Sections of the report by id, with their paragraphs, list items and titled tables."""
+
+    def __init__(self):
+        super().__init__(convert_charrefs=True)
+        self.sections: dict[str, _Body] = {}
+        self._stack: list[str] = []
+        self._buf: str | None = None
+        self._p_class = None
+        self._title = None
+        self._table: _Table | None = None
+        self._row: list | None = None
+        self._header = False
+
+    def _body(self) -> _Body:
+        return self.sections.setdefault(self._stack[-1] if self._stack else "", _Body())
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if tag == "section":
+            self._stack.append(a.get("id", ""))
+            self._body()
+        elif tag in ("p", "li", "td", "th"):
+            self._buf = ""
+            if tag == "p":
+                self._p_class = a.get("class")
+            if tag == "th":
+                self._header = True
+        elif tag == "table":
+            self._table = _Table(self._title or "")
+            self._body().tables.append(self._table)
+            self._title = None
+        elif tag == "tr":
+            self._row, self._header = [], False
+
+    def handle_endtag(self, tag):
+        if tag == "section":
+            self._stack.pop()
+        elif tag == "p" and self._buf is not None:
+            text = " ".join(self._buf.split())
+            if self._p_class == "table-title":
+                self._title = text
+            else:
+                self._body().paragraphs.append(text)
+            self._buf = None
+        elif tag == "li" and self._buf is not None:
+            self._body().items.append(" ".join(self._buf.split()))
+            self._buf = None
+        elif tag in ("td", "th") and self._row is not None:
+            self._row.append(" ".join((self._buf or "").split()))
+            self._buf = None
+        elif tag == "tr" and self._table is not None and self._row is not None:
+            if self._header:
+                self._table.columns = self._row
+            else:
+                self._table.rows.append(self._row)
+            self._row = None
+
+    def handle_data(self, data):
+        if self._buf is not None:
+            self._buf += data
+
+    def table(self, section: str, title_start: str) -> _Table:
+        found = [t for t in self.sections[section].tables if t.title.startswith(title_start)]
+        assert len(found) == 1, (title_start, [t.title for t in self.sections[section].tables])
+        return found[0]
+
+
+def _parse(index: Path) -> _Page:
+    page = _Page()
+    page.feed(index.read_text(encoding="utf-8"))
+    return page
 
 
 @pytest.fixture(scope="module")
@@ -132,22 +250,27 @@ def test_not_applicable_and_not_reached_are_spelled_out(smoke_report):
     assert "not reached" in html                         # 1 s runs do not reach 1e-9
 
 
-def test_proof_check_section_is_defensive(smoke_report, tmp_path):
-    """With check rows the table is shown; without, the section says why (no crash)."""
+def test_proof_check_section_shows_the_check_rows(smoke_report, tmp_path):
+    """With check rows the proof-check table lists every one of them (scenario, check, status,
+    margin); without, the section says why (no crash)."""
     index, out = smoke_report
-    html = index.read_text(encoding="utf-8")
-    try:
-        import proofs_checks  # noqa: F401
-        assert "Proof-check table" in html
-        assert "PASS" in html
-    except Exception:
-        assert "No proof-check results" in html
-    rows = [line for line in results_path("smoke", out).read_text().splitlines()
-            if '"kind":"checks"' not in line]
+    page = _parse(index)
+    rows = pd.DataFrame(ResultsFile(results_path("smoke", out)).rows())
+    checks = rows[rows["kind"] == "checks"]
+    assert len(checks) > 0                      # proofs_checks is part of this repository
+    table = page.table("proof-checks", "Proof-check table")
+    assert len(table.rows) == len(checks)
+    for cells, (_, r) in zip(table.dicts(), checks.iterrows()):
+        assert (cells["scenario"], cells["check"], cells["status"]) == \
+            (r["scenario"], r["check"], r["check_status"])
+        if r["check_status"] != "n/a":
+            assert _num(cells["margin"]) == pytest.approx(r["margin"], rel=5e-3, abs=1e-300)
+    lines = [line for line in results_path("smoke", out).read_text().splitlines()
+             if '"kind":"checks"' not in line]
     path = tmp_path / "nochecks.jsonl"
-    path.write_text("\n".join(rows) + "\n")
+    path.write_text("\n".join(lines) + "\n")
     page = build_report([path], tmp_path / "r").read_text(encoding="utf-8")
-    assert "No proof-check results" in page
+    assert "No proof-check results" in page and "Proof-check table" not in page
 
 
 def test_cli_builds_report_and_rejects_missing_results(smoke_report, tmp_path):
@@ -164,28 +287,6 @@ def test_cli_builds_report_and_rejects_missing_results(smoke_report, tmp_path):
 
 
 # ----------------------------------------------------------------------------- pieces
-def _obs_row(name, observer, t3, t6, floor_rel, closed, status="ok", note=""):
-    inf = float("inf")
-    return {"name": name, "observer": observer, "status": status, "note": note, "t_on": 0.0,
-            "t_off": 10.0, "t_sync_0.001": t3, "t_sync_1e-05": t6, "t_sync_1e-06": t6,
-            "t_sync_1e-09": inf, "floor_rel": floor_rel, "master_closed_fraction": closed}
-
-
-def test_ratio_rows_and_verdicts():
-    inf = float("inf")
-    obs = pd.DataFrame([
-        _obs_row("dm", "jump", 2.0, 4.0, 1e-10, 0.2), _obs_row("dm", "nojump", 3.0, 8.0, 1e-7, 0.2),
-        _obs_row("rest", "jump", 3.0, 6.0, 1e-9, 1.0), _obs_row("rest", "nojump", inf, inf, 0.5, 1.0),
-        _obs_row("ball", "jump", np.nan, np.nan, np.nan, 0.1, "n/a", "K is not positive definite"),
-        _obs_row("ball", "nojump", 3.9, 4.0, 0.0, 0.1)])
-    recs = {r["name"]: r for r in ratio_rows(obs)}
-    assert "2.00 at ρ = 1e−6" in recs["dm"]["headline"]
-    assert recs["dm"]["verdict"].startswith("converges")
-    assert "does NOT converge at all: persistent contact" in recs["rest"]["verdict"]
-    assert recs["rest"]["headline"].startswith("∞")
-    assert recs["ball"]["headline"].startswith("n/a") and "K = 0" in recs["ball"]["headline"]
-
-
 def test_formatting_never_prints_nan():
     assert fmt(float("nan")) == "n/a" and fmt(None) == "n/a"
     assert fmt(float("inf")) == "∞" and fmt_time(float("inf")) == "not reached"
@@ -255,3 +356,324 @@ def test_broken_proofs_checks_is_reported_not_fatal(tmp_path, monkeypatch):
     assert unavailable_path("pc", tmp_path).exists()
     page = build_report([results_path("pc", tmp_path)], tmp_path / "r").read_text(encoding="utf-8")
     assert "No proof-check results" in page and "checks under construction" in page
+
+
+# ----------------------------------------------------------------------------- synthetic rows
+# A report built from hand-made rows whose numbers are known: every test below recomputes the
+# reported numbers from these rows (independently of reports.analysis) and compares them with
+# the cells and sentences of the section that shows them.
+INF = float("inf")
+RHO_KEYS = {1e-3: "0.001", 1e-5: "1e-05", 1e-6: "1e-06", 1e-9: "1e-09"}
+OBSERVERS = {
+    # name: {observer: (first passage per ρ, settling per ρ, fraction above after first passage)}
+    "dm": {"jump": ((0.5, 1.5, 2.0, 2.5), (0.5, 1.5, 3.0, 8.0), (0.0, 0.0, 0.1, 0.34)),
+           "nojump": ((1.0, 3.6, 4.5, 12.0), (1.0, 3.6, 4.5, 12.0), (0.0,) * 4)},
+    "stuck": {"jump": ((2.0, 4.0, 5.0, 9.0), (2.0, 4.0, 5.0, INF), (0.0, 0.0, 0.0, 0.5)),
+              "nojump": ((INF,) * 4, (INF,) * 4, (float("nan"),) * 4)},
+}
+WP_METHODS = {
+    # (scenario, target, law, solver, reference): (constant, order)
+    ("impact_oscillator", "master", "newton", "pivoting", "closed form (event-driven)"): (2.0, 1.0),
+    ("double_mass", "master", "poisson", "pivoting", "h/16 run"): (0.5, 0.8),
+    ("double_mass", "master", "poisson", "reference", "h/16 run"): (0.5, 0.8),
+    ("double_mass", "jump", "poisson", "pivoting", "h/16 run"): (3.0, 1.3),
+}
+WP_H = (4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4)
+WP_NOISE = (1.0, 1.04, 0.97, 1.02, 0.99)
+SCALING_N = (5, 10, 20, 50, 100, 200)
+SCALING_NOISE = (1.0, 0.95, 1.05, 1.0, 0.98, 1.03)
+CHECKS = [("double_mass", "mass_spd", "section 2: M ≻ 0", "PASS", 0.999, 0.0, "lambda_min=1", ""),
+          ("double_mass", "lyapunov_decrease", "(16)", "FAIL", -4.1e-4, 1e-9, "step 12: dV > 0", ""),
+          ("ball", "projection_defined", "(10)", "n/a", float("nan"), float("nan"), "",
+           "K = 0: the projection is undefined")]
+MICRO_MEANS = {(1, "reference"): 2.0e-3, (1, "pivoting"): 4.0e-6, (1, "lemke"): 1.6e-5,
+               (1, "nnls"): 5.0e-5, (8, "reference"): 3.0e-3, (8, "pivoting"): 6.0e-5,
+               (8, "lemke"): 2.5e-4, (8, "nnls"): 3.0e-4}
+
+
+def _observer_rows() -> list[tuple[str, list[dict]]]:
+    cases = []
+    for name, runs in OBSERVERS.items():
+        rows = []
+        for observer, (first, settle, above) in runs.items():
+            row = {"kind": "observers", "scenario": "double_mass", "name": name, "observer": observer,
+                   "status": "ok", "note": "", "h": 1e-3, "t_end": 21.0, "t_on": 1.0, "t_off": 21.0,
+                   "law": "newton", "solver": "pivoting", "params": "", "V_on": 0.5, "rate": 1.2,
+                   "floor_rel": 1e-11 if name == "dm" else 0.4, "V_end_rel": 1e-11, "e_q_end": 1e-6,
+                   "master_closings": 40, "cpu_time_s": 0.5, "steps_per_s": 4e4,
+                   "master_closed_fraction": 0.3 if name == "dm" else 1.0}
+            for i, key in enumerate(RHO_KEYS.values()):
+                row.update({f"t_sync_{key}": first[i], f"t_settle_{key}": settle[i],
+                            f"above_after_{key}": above[i]})
+            rows.append(row)
+        cases.append((f"observers:{name}", rows))
+    ball = [{"kind": "observers", "scenario": "bouncing_ball", "name": "ball", "observer": "jump",
+             "status": "n/a", "note": "K is not positive definite (K = 0 here)", "h": 1e-3,
+             "t_end": 2.0, "law": "newton", "solver": "pivoting", "params": ""},
+            {**cases[0][1][1], "scenario": "bouncing_ball", "name": "ball", "e_q_end": 0.2}]
+    cases.append(("observers:ball", ball))
+    return cases
+
+
+def _synthetic_rows() -> list[tuple[str, list[dict]]]:
+    cases = _observer_rows()
+    for (scen, target, law, solver, ref), (c, p) in WP_METHODS.items():
+        for h, noise in zip(WP_H, WP_NOISE):
+            cases.append((f"wp:{scen}:{target}:{law}:{solver}:{h}", [{
+                "kind": "work_precision", "scenario": scen, "name": scen, "target": target,
+                "law": law, "solver": solver, "reference": ref, "status": "ok", "h": h,
+                "method": f"{scen} · {target} · {law} · {solver}", "err_mean": c * h ** p * noise,
+                "err_max": 3 * c * h ** (p / 2) / noise, "cpu_time_s": 2e-4 / h * noise ** 2
+                * (50 if solver == "reference" else 1), "cpu_scope": "master",
+                "contact_solves": int(1 / h)}]))
+    for N, noise in zip(SCALING_N, SCALING_NOISE):
+        cases.append((f"scaling:{N}", [{
+            "kind": "scaling", "scenario": "rocking_chain", "name": "rocking_chain", "status": "ok",
+            "N": N, "n": 2 * N, "h": 1e-3, "t_end": 2.0, "steps": 2000,
+            "cpu_per_step_s": 3e-6 * N ** 1.3 * noise, "steps_per_s": 1 / (3e-6 * N ** 1.3 * noise),
+            "mean_active": 0.5, "max_active": 3, "peak_mem_mb": 0.2 * N ** 2 / noise,
+            "trajectory_mb": 0.01 * N}]))
+    cases.append(("checks", [{"kind": "checks", "scenario": s, "name": s, "check": c, "equation": e,
+                              "check_status": st, "margin": mg, "tolerance": tol, "witness": w,
+                              "reason": why, "status": "ok"}
+                             for s, c, e, st, mg, tol, w, why in CHECKS]))
+    return cases
+
+
+def _micro_json() -> dict:
+    return {"datetime": "2024-01-01T00:00:00", "version": "4.0.0", "machine_info": {"cpu": {}},
+            "benchmarks": [{"group": f"contact solve m={m}", "name": f"test_solve[{solver}-{m}]",
+                            "stats": {"mean": mean, "median": mean, "stddev": mean / 10,
+                                      "min": mean, "rounds": 5},
+                            "extra_info": {"kind": "contact_solve", "solver": solver, "m": m,
+                                           "residual": 0.0}}
+                           for (m, solver), mean in MICRO_MEANS.items()]}
+
+
+@pytest.fixture(scope="module")
+def synthetic_report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("synthetic")
+    rf = ResultsFile(out / "synthetic.jsonl")
+    for case_id, rows in _synthetic_rows():
+        rf.append_case("synthetic", case_id, rows)
+    (out / "synthetic-micro.json").write_text(json.dumps(_micro_json()))
+    index = build_report([rf.path], out / "report")
+    return _parse(index), pd.DataFrame(rf.rows())
+
+
+def _settle(name: str, observer: str, rho: float) -> float:
+    return OBSERVERS[name][observer][1][list(RHO_KEYS).index(rho)]
+
+
+def _first(name: str, observer: str, rho: float) -> float:
+    return OBSERVERS[name][observer][0][list(RHO_KEYS).index(rho)]
+
+
+def test_observer_ratios_are_settling_time_ratios(synthetic_report):
+    """Every finite cell of the ratio table is t_settle(no-jump) / t_settle(jump) recomputed
+    from the rows; on 'dm' at ρ = 1e-6 and 1e-9 the first-passage ratio differs (2.25, 4.80)
+    from the settling ratio (1.50, 1.50), so a ratio of first passages is caught."""
+    page, _ = synthetic_report
+    table = page.table("observers", "Settling-time ratio")
+    cells = {r["scenario"]: r for r in table.dicts()}
+    for rho in RHO_KEYS:
+        col = f"ratio at ρ = {fmt_rho(rho)}"
+        tj, tn = _settle("dm", "jump", rho), _settle("dm", "nojump", rho)
+        assert _nums(cells["dm"][col])[:3] == pytest.approx([tn / tj, tn, tj], rel=5e-3)
+    first = _nums(cells["dm"][next(c for c in table.columns if c.startswith("first-passage ratio"))])
+    assert first == pytest.approx([_first("dm", "nojump", r) / _first("dm", "jump", r)
+                                   for r in RHO_KEYS], rel=5e-3)
+    # stuck: only the jump observer settles (ρ ≤ 1e-6); at 1e-9 it only passes, never settles
+    stuck = cells["stuck"]
+    for rho in (1e-3, 1e-5, 1e-6):
+        cell = stuck[f"ratio at ρ = {fmt_rho(rho)}"]
+        assert cell.startswith("∞") and _num(cell) == pytest.approx(_settle("stuck", "jump", rho))
+        assert _nums(cell.split("ratio >")[1])[0] == pytest.approx(20.0 / _settle("stuck", "jump", rho),
+                                                                   rel=5e-3)
+    assert stuck["ratio at ρ = 1e−9"] == "neither settles"
+    assert cells["ball"]["ratio at ρ = 1e−3"].startswith("n/a")
+
+
+def test_observer_headline_uses_settling_times_at_the_deepest_common_rho(synthetic_report):
+    """The headline (ratio table, observer-section list, key numbers, scenario paragraph) is
+    the settling ratio at the deepest ρ both observers settle below: 'dm' 12.0/8.0 = 1.50 at
+    1e−9, not the first-passage 4.80."""
+    page, _ = synthetic_report
+    tn, tj = _settle("dm", "nojump", 1e-9), _settle("dm", "jump", 1e-9)
+    expected = f"settling-time ratio no-jump/jump = {tn / tj:.2f} at ρ = 1e−9"
+    first = _first("dm", "nojump", 1e-9) / _first("dm", "jump", 1e-9)
+    head = page.table("observers", "Settling-time ratio").dicts()[0]["headline"]
+    assert head.startswith(expected) and f"first-passage ratio {first:.2f}" in head
+    assert _nums(head.split("(")[1])[:2] == pytest.approx([tn, tj], rel=5e-3)
+    obs_items = page.sections["observers"].items
+    assert any(i.startswith(f"dm: {expected}") for i in obs_items), obs_items
+    assert any(i.startswith(f"dm: {expected}") for i in page.sections["key-numbers"].items)
+    assert any(f"Headline (settling times): {expected}" in p
+               for p in page.sections["scn-dm"].paragraphs)
+    stuck = next(i for i in obs_items if i.startswith("stuck:"))
+    assert "never settles below ρ = 1e−3" in stuck
+    assert f"settles below ρ = 1e−6 after {fmt(_settle('stuck', 'jump', 1e-6))} s" in stuck
+    assert "settling times" in page.sections["observers"].paragraphs[0]
+
+
+def test_observer_prose_lists_every_return_above_a_threshold(synthetic_report):
+    """Exactly the (scenario, observer, ρ) with settle > first passage are listed, with both
+    times and the fraction above, taken from the rows."""
+    page, _ = synthetic_report
+    expected = [(name, obs, rho) for name, runs in OBSERVERS.items() for obs in runs
+                for rho in RHO_KEYS if np.isfinite(_first(name, obs, rho))
+                and _settle(name, obs, rho) > _first(name, obs, rho)]
+    assert len(expected) == 3
+    items = [i for i in page.sections["observers"].items if "first passage at" in i]
+    assert len(items) == len(expected)
+    assert any(f"in {len(expected)} case(s)" in p for p in page.sections["observers"].paragraphs)
+    for item, (name, obs, rho) in zip(items, expected):
+        assert item.startswith(f"{name}, observer ") and f"ρ = {fmt_rho(rho)}:" in item
+        numbers = _nums(item.split(":", 1)[1])
+        assert numbers[0] == pytest.approx(_first(name, obs, rho))
+        above = OBSERVERS[name][obs][2][list(RHO_KEYS).index(rho)]
+        assert f"{100 * above:.0f} %" in item
+        if np.isinf(_settle(name, obs, rho)):
+            assert "never settles" in item
+        else:
+            assert numbers[1] == pytest.approx(_settle(name, obs, rho))
+
+
+def test_observer_table_shows_settling_and_first_passage_columns(synthetic_report):
+    page, _ = synthetic_report
+    table = page.table("observers", "Observer table")
+    first_col = next(c for c in table.columns if c.startswith("first passage"))
+    rows = [r for r in table.dicts() if r["scenario"] == "dm"]
+    assert [r["observer"] for r in rows] == ["with jumps (new)", "without jumps ([4])"]
+    for r, obs in zip(rows, ("jump", "nojump")):
+        for rho in RHO_KEYS:
+            assert _num(r[f"settles below {fmt_rho(rho)}"]) == pytest.approx(_settle("dm", obs, rho))
+        assert _nums(r[first_col]) == pytest.approx([_first("dm", obs, rho) for rho in RHO_KEYS])
+    stuck_jump = next(r for r in table.dicts() if r["scenario"] == "stuck")
+    assert stuck_jump["settles below 1e−9"] == "not reached"
+    assert _nums(stuck_jump[first_col])[-1] == pytest.approx(_first("stuck", "jump", 1e-9))
+
+
+def _fitted(x, y) -> float:
+    return float(np.polyfit(np.log(np.asarray(x, float)), np.log(np.asarray(y, float)), 1)[0])
+
+
+def test_work_precision_orders_are_recomputed_from_the_points(synthetic_report):
+    """Order p (mean and max norm) and work slope of every method, fitted here by least squares
+    on the rows, match the table to its 2 decimals (a flipped sign or swapped axes fail)."""
+    page, rows = synthetic_report
+    table = page.table("work-precision", "Fitted orders of convergence")
+    cells = {(r["scenario"], r["quantity"], r["law"], r["solver"]): r for r in table.dicts()}
+    assert len(cells) == len(WP_METHODS)
+    wp = rows[rows["kind"] == "work_precision"]
+    for (scen, target, law, solver, _), (_, order) in WP_METHODS.items():
+        g = wp[(wp["scenario"] == scen) & (wp["target"] == target) & (wp["law"] == law)
+               & (wp["solver"] == solver)]
+        p = _fitted(g["h"], g["err_mean"])
+        assert p == pytest.approx(order, abs=0.05)             # the data are ∝ h^order
+        r = cells[(scen, target, law, solver)]
+        assert _num(r["order p (mean norm)"]) == pytest.approx(p, abs=0.006)
+        assert _num(r["order (max norm)"]) == pytest.approx(_fitted(g["h"], g["err_max"]), abs=0.006)
+        assert _num(r["work slope s"]) == pytest.approx(-_fitted(g["cpu_time_s"], g["err_mean"]),
+                                                        abs=0.006)
+        assert _num(r["smallest error"]) == pytest.approx(g["err_mean"].min(), rel=5e-3)
+        assert r["points"] == str(len(WP_H))
+    # the sentence under the table and the key numbers quote the same fitted orders
+    osc = wp[wp["scenario"] == "impact_oscillator"]
+    p_osc = _fitted(osc["h"], osc["err_mean"])
+    dm = wp[(wp["scenario"] == "double_mass") & (wp["target"] == "master") & (wp["solver"] == "pivoting")]
+    p_dm = _fitted(dm["h"], dm["err_mean"])
+    text = page.sections["work-precision"].text()
+    assert f"p = {p_osc:.2f} … {p_osc:.2f} (impact_oscillator)" in text
+    assert f"double_mass poisson (h/16 reference) p = {p_dm:.2f}" in text
+    jump = wp[(wp["target"] == "jump")]
+    assert any(f"poisson {_fitted(jump['h'], jump['err_mean']):.2f}" in i
+               for i in page.sections["key-numbers"].items)
+
+
+def test_solver_comparison_totals_are_recomputed(synthetic_report):
+    page, rows = synthetic_report
+    wp = rows[(rows["kind"] == "work_precision") & (rows["target"] == "master")
+              & (rows["scenario"] == "double_mass")]
+    piv = wp[wp["solver"] == "pivoting"]["cpu_time_s"].sum()
+    ref = wp[wp["solver"] == "reference"]["cpu_time_s"].sum()
+    r = page.table("work-precision", "Contact solvers on the same method").dicts()[0]
+    assert _num(r["CPU pivoting (s)"]) == pytest.approx(piv, rel=5e-3)
+    assert _num(r["CPU reference (s)"]) == pytest.approx(ref, rel=5e-3)
+    assert _num(r["ratio"]) == pytest.approx(ref / piv, rel=5e-3)
+
+
+def test_scaling_exponents_are_recomputed(synthetic_report):
+    page, rows = synthetic_report
+    sc = rows[rows["kind"] == "scaling"].sort_values("N")
+    big = sc[sc["N"] >= 50]
+    expected = {"CPU time per step": _fitted(sc["N"], sc["cpu_per_step_s"]),
+                "CPU time per step (N ≥ 50)": _fitted(big["N"], big["cpu_per_step_s"]),
+                "peak memory": _fitted(sc["N"], sc["peak_mem_mb"])}
+    assert expected["CPU time per step"] == pytest.approx(1.3, abs=0.05)
+    table = {r["quantity"]: r for r in page.table("scaling", "Fitted exponents").dicts()}
+    assert set(table) == set(expected)
+    for q, p in expected.items():
+        assert _num(table[q]["exponent p"]) == pytest.approx(p, abs=0.006)
+    assert table["CPU time per step (N ≥ 50)"]["N range"] == "50 … 200"
+    msg = (f"CPU time per step ∝ N^{expected['CPU time per step']:.2f} over N = 5 … 200 "
+           f"(N^{expected['CPU time per step (N ≥ 50)']:.2f} for N ≥ 50)")
+    assert any(msg in i for i in page.sections["key-numbers"].items)
+    per_step = page.table("scaling", "Scaling of the chain").column("CPU per step (µs)")
+    assert [_num(c) for c in per_step] == pytest.approx(list(sc["cpu_per_step_s"] * 1e6), rel=5e-3)
+
+
+def test_micro_speedups_are_recomputed(synthetic_report):
+    page, _ = synthetic_report
+    table = page.table("micro", "Speed-up of the fast contact solvers").dicts()
+    assert [r["m"] for r in table] == ["1", "8"]
+    for r in table:
+        m = int(r["m"])
+        for solver in ("pivoting", "lemke", "nnls"):
+            speedup = MICRO_MEANS[(m, "reference")] / MICRO_MEANS[(m, solver)]
+            assert r[f"speed-up {solver}"].endswith("×")
+            assert _num(r[f"speed-up {solver}"]) == pytest.approx(speedup, rel=5e-3)
+            assert _num(r[f"{solver} (µs)"]) == pytest.approx(MICRO_MEANS[(m, solver)] * 1e6, rel=5e-3)
+    key = next(i for i in page.sections["key-numbers"].items if i.startswith("Fast contact solver"))
+    assert _nums(key)[:2] == pytest.approx([MICRO_MEANS[(1, "reference")] / MICRO_MEANS[(1, "pivoting")], 1])
+
+
+def test_proof_check_table_lists_every_check_row(synthetic_report):
+    """Status, margin, tolerance and witness (or reason for n/a) of each check row, and the
+    counts in the sentence above the table and in the key numbers."""
+    page, _ = synthetic_report
+    table = page.table("proof-checks", "Proof-check table").dicts()
+    assert len(table) == len(CHECKS)
+    for r, (scen, check, eq, status, margin, tol, witness, reason) in zip(table, CHECKS):
+        assert (r["scenario"], r["check"], r["equation"], r["status"]) == (scen, check, eq, status)
+        if status == "n/a":
+            assert r["margin"] == "n/a" and r["witness / reason"] == reason
+        else:
+            assert _num(r["margin"]) == pytest.approx(margin, rel=5e-3)
+            assert _num(r["tolerance"]) == pytest.approx(tol, rel=5e-3)
+            assert r["witness / reason"] == witness
+    counts = {s: sum(c[3] == s for c in CHECKS) for s in ("PASS", "FAIL", "n/a")}
+    text = page.sections["proof-checks"].paragraphs[0]
+    assert text.startswith(f"{len(CHECKS)} checks on 2 scenarios: {counts['PASS']} PASS, "
+                           f"{counts['FAIL']} FAIL, {counts['n/a']} n/a.")
+    assert f"Proof-step checks: {counts['PASS']} PASS, {counts['FAIL']} FAIL" in \
+        "\n".join(page.sections["key-numbers"].items)
+
+
+# ----------------------------------------------------------------------------- analysis frames
+def test_analysis_observer_ratios_frame():
+    """reports.analysis.observer_ratios against the ratios recomputed from the rows."""
+    from reports.analysis import headline, observer_ratios
+
+    obs = pd.DataFrame([r for _, rows in _observer_rows() for r in rows])
+    frame = observer_ratios(obs)
+    assert len(frame) == 3 * len(RHO_KEYS)
+    dm = frame[frame["name"] == "dm"].set_index("rho")
+    for rho in RHO_KEYS:
+        assert dm.loc[rho, "ratio"] == pytest.approx(_settle("dm", "nojump", rho) / _settle("dm", "jump", rho))
+        assert dm.loc[rho, "first_ratio"] == pytest.approx(_first("dm", "nojump", rho) / _first("dm", "jump", rho))
+    stuck = frame[frame["name"] == "stuck"].set_index("rho")
+    assert list(stuck["ratio"].iloc[:3]) == [INF] * 3 and np.isnan(stuck.loc[1e-9, "ratio"])
+    assert headline(frame[frame["name"] == "dm"])["rho"] == 1e-9
+    assert headline(frame[frame["name"] == "stuck"])["kind"] == "jump only"
+    assert headline(frame[frame["name"] == "ball"])["kind"] == "no jump observer"
