@@ -34,14 +34,18 @@ row k+1 = the impulse of step k, the Interaction's ``lambda(1)``) and
 ``record_loop_s`` (the recording loop's wall time); with ``repeats`` > 0: ``loop_s`` (one
 wall time per timing run: :func:`time.perf_counter` around the stepping loop only —
 model construction and initialisation excluded, nothing recorded) and
-``loop_ns_per_step`` (their median / steps · 1e9). With ``repeats`` > 0 and a forced
-problem, ``fixed_force_loop_s`` and ``fixed_force_ns_per_step`` time the same loop with
-``fExt`` held at ``constant`` (no per-step Python force update): the cost of the Siconos
-step itself, a different trajectory, timing only.
+``loop_ns_per_step`` (their median / steps · 1e9). With ``repeats`` > 0 also
+``run_s``/``run_ns_per_step``/``run_steps``: the same problem with ``fExt`` held at
+``constant``, stepped by ``TimeStepping.run()`` — Siconos' own C++ loop, no Python per step
+— the cost of the Siconos step itself (for a forced problem a different trajectory:
+timing only; ``run_steps`` is the number of steps run() made, from its final time).
+
+The JSON is printed as the last line of stdout (Siconos' C++ messages are sent to stderr).
 """
 
 import json
 import math
+import os
 import sys
 import time
 
@@ -179,6 +183,26 @@ def timed_run(p, fbar):
     return time.perf_counter() - t0
 
 
+def cpp_run(p):
+    """Wall time of ``TimeStepping.run()`` with fExt = ``constant``, and its step count.
+
+    run() prints progress lines on the C++ stdout; file descriptor 1 is pointed at stderr
+    meanwhile, so that stdout carries only the JSON.
+    """
+    sim, _, _ = build(p)
+    sys.stdout.flush()
+    saved = os.dup(1)
+    os.dup2(2, 1)
+    try:
+        t0 = time.perf_counter()
+        sim.run()
+        wall = time.perf_counter() - t0
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+    return wall, int(round(sim.startingTime() / p["h"]))
+
+
 def run(problem):
     """Run a problem (see the module docstring) and return the output dict."""
     p = parse(problem)
@@ -196,10 +220,10 @@ def run(problem):
     if repeats > 0:
         loops = [timed_run(p, fbar) for _ in range(repeats)]
         out.update(loop_s=loops, loop_ns_per_step=float(np.median(loops)) / steps * 1e9)
-        if forced:
-            fixed = [timed_run(p, None) for _ in range(repeats)]
-            out.update(fixed_force_loop_s=fixed,
-                       fixed_force_ns_per_step=float(np.median(fixed)) / steps * 1e9)
+        runs = [cpp_run(p) for _ in range(repeats)]
+        walls = [w for w, _ in runs]
+        out.update(run_s=walls, run_steps=runs[0][1],
+                   run_ns_per_step=float(np.median(walls)) / runs[0][1] * 1e9)
     return out
 
 
@@ -210,14 +234,14 @@ def main(argv):
     of the JSON output, which then holds ``npz`` = that path.
     """
     if "--version" in argv:
-        json.dump({"siconos_version": siconos_version()}, sys.stdout)
+        sys.stdout.write("\n" + json.dumps({"siconos_version": siconos_version()}) + "\n")
         return 0
     npz = next((a for a in argv if a.endswith(".npz")), None)
     out = run(json.load(sys.stdin))
     if npz is not None and "q" in out:
         np.savez(npz, **{k: np.asarray(out.pop(k)) for k in ("t", "q", "u", "P")})
         out["npz"] = npz
-    json.dump(out, sys.stdout)
+    sys.stdout.write("\n" + json.dumps(out) + "\n")
     return 0
 
 
