@@ -27,7 +27,7 @@ def package_versions() -> dict[str, str]:
     import observer
 
     out = {"python": platform.python_version(), "observer": observer.__version__}
-    for pkg in ("numpy", "scipy", "pandas", "cvxpy", "osqp", "matplotlib"):
+    for pkg in ("numpy", "scipy", "pandas", "cvxpy", "osqp", "matplotlib", "numba"):
         try:
             out[pkg] = metadata.version(pkg)
         except metadata.PackageNotFoundError:
@@ -40,9 +40,9 @@ class SlaveTrajectory:
     """One observer's trajectory and its error Lyapunov function.
 
     ``V[k] = ½(u_s−u_m)ᵀM(u_s−u_m) + ½(q_s−q_m)ᵀK(q_s−q_m)`` (paper (16) with the ½ on
-    both terms); ``dV_smooth``/``dV_impulse`` are the per-step decrements of the exact
-    discrete identity ``V_{k+1}−V_k = −h v̄ᵀCv̄ + (Wᵀv̄)ᵀΔP − ½ ΔgᵀL⁻¹Δg`` split into the
-    damping part, the impulse part and the projection part (row k+1 = step k).
+    both terms); ``dV_damping``/``dV_impulse``/``dV_projection`` are the per-step parts of
+    the discrete identity ``V_{k+1}−V_k = −h v̄ᵀCv̄ + (Wᵀv̄)ᵀΔP − ½ ΔgᵀL⁻¹Δg`` (row k+1 =
+    step k); None when the run kept only every k-th step (``record_every > 1``).
     """
 
     name: str
@@ -50,9 +50,9 @@ class SlaveTrajectory:
     u: np.ndarray
     P: np.ndarray
     V: np.ndarray
-    dV_damping: np.ndarray
-    dV_impulse: np.ndarray
-    dV_projection: np.ndarray
+    dV_damping: np.ndarray | None
+    dV_impulse: np.ndarray | None
+    dV_projection: np.ndarray | None
     sigma: np.ndarray
 
 
@@ -122,10 +122,12 @@ class SimulationResult:
         return df
 
     def synchronization(self, rhos: tuple[float, ...] = (1e-3, 1e-6, 1e-9)) -> pd.DataFrame:
-        """One row per observer: times (from t_on) to V ≤ ρ·V(t_on), the fitted exponential
-        rate of V over the coupling window, V(t_on), the final V and the floor (median of V
-        over the last 10 % of the window). ``inf`` marks a threshold never reached."""
-        from observer.metrics import decay_rate, floor, switchings, sync_time
+        """One row per observer: first-passage times ``t_sync_ρ`` (from t_on, to V ≤ ρ·V(t_on))
+        and settling times ``t_settle_ρ`` (after which V stays below ρ·V(t_on) for the rest of
+        the window, :func:`observer.metrics.settling_time`), the fitted exponential rate of V
+        over the coupling window, V(t_on), the final V and the floor (median of V over the
+        last 10 % of the window). ``inf`` marks a threshold never reached."""
+        from observer.metrics import decay_rate, floor, settling_time, switchings, sync_time
 
         coupling = self.metadata.get("coupling") or [float(self.t[0]), float(self.t[-1])]
         t_on, t_off = float(coupling[0]), min(float(coupling[1]), float(self.t[-1]))
@@ -135,6 +137,7 @@ class SimulationResult:
             row = {"observer": name, "t_on": t_on, "t_off": t_off, "V_on": float(s.V[k_on])}
             for rho in rhos:
                 row[f"t_sync_{rho:g}"] = sync_time(self.t, s.V, rho, t_on, t_off)
+                row[f"t_settle_{rho:g}"] = settling_time(self.t, s.V, rho, t_on, t_off)
             row["rate"] = decay_rate(self.t, s.V, t_on, t_off)
             row["V_end"] = float(s.V[-1])
             row["floor"] = floor(self.t, s.V, t_off - 0.1 * (t_off - t_on), t_off)
@@ -193,14 +196,20 @@ def read_frame(path: str | Path) -> pd.DataFrame:
     return df.astype({c: float for c in df.columns if c not in flags})
 
 
-def run_metadata(scenario, stepper, wall_time: float) -> dict:
-    """Metadata of a run: scenario parameters, scheme, solver work, versions, timing."""
+def run_metadata(scenario, stepper, out) -> dict:
+    """Metadata of a run: scenario parameters, scheme, engine, solver work (with every
+    fallback to the reference solver), versions, timing (compile time apart)."""
     meta = dict(scenario.parameters())
+    st = out.stats
     meta.update(h=stepper.h, theta=stepper.theta, steps=stepper.grid.steps,
-                solver=stepper.solver.name, contact_solves=stepper.stats.contact_solves,
-                solver_iterations=stepper.stats.iterations, solver_fallbacks=stepper.stats.fallbacks,
-                max_contact_residual=stepper.stats.max_residual, wall_time_s=wall_time,
-                steps_per_second=stepper.grid.steps / wall_time if wall_time > 0 else float("nan"),
+                engine=out.engine, structure="dense" if stepper.S.band is None else "banded",
+                record_every=int(out.rows[1] - out.rows[0]) if out.rows.size > 1 else 1,
+                solver=stepper.solver.name, contact_solves=st["contact_solves"],
+                solver_iterations=st["iterations"], solver_fallbacks=st["fallbacks"],
+                fallback_steps=list(out.fallbacks),
+                max_contact_residual=st["max_residual"], wall_time_s=out.run_time_s,
+                compile_time_s=out.compile_time_s,
+                steps_per_second=stepper.grid.steps / out.run_time_s if out.run_time_s > 0 else float("nan"),
                 versions=package_versions(), platform=platform.platform(),
                 argv=" ".join(sys.argv))
     return meta

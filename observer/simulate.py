@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any, Iterable
 
 import numpy as np
 
 from observer.errors import InputError
+from observer.loop import LoopInput, check_engine, check_record_every
+from observer.loop import run as run_loop
 from observer.observers import OBSERVERS, ObserverConfig, Slave, check_observer_name, lyapunov, \
     lyapunov_decrements
 from observer.result import SimulationResult, SlaveTrajectory, run_metadata
@@ -52,7 +53,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
              master_projection: bool | None = None,
              observers: Iterable[str | Slave] = (), source: str | None = None,
              coupling: tuple[float, float] | None | str = "scenario",
-             log: str | Path | None = None, residual_tol: float = 1e-9) -> SimulationResult:
+             log: str | Path | None = None, residual_tol: float = 1e-9,
+             engine: str = "compiled", record_every: int = 1) -> SimulationResult:
     """Simulate the master (and the observers) of ``scenario`` with the Moreau–Jean scheme.
 
     Parameters
@@ -70,6 +72,12 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         Coupling window (default: the scenario's; None couples over the whole run).
     log : path, optional
         Closing log for ``source="log"`` (default: the scenario's ``observer.log``).
+    engine : {"compiled", "python"}
+        The time loop (:mod:`observer.loop`): the numba kernel (default) or the readable
+        numpy reference; both give the same trajectories to round-off.
+    record_every : int
+        Keep every k-th step (row r = step r·k). The per-step decrements of V need every
+        step and are left out (None) otherwise.
 
     Returns
     -------
@@ -84,9 +92,12 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
                  if v is not None}
     if overrides:
         sc = sc.with_overrides(overrides)
+    check_engine(engine)
+    record_every = check_record_every(record_every)
     system = sc.system
     stepper = MoreauJean(system, sc.law, sc.h, sc.t_end, sc.theta, solver=sc.solver,
-                         residual_tol=residual_tol)
+                         residual_tol=residual_tol,
+                         structure="auto" if engine == "compiled" else "dense")
     grid = stepper.grid
     observers = list(observers)
     slaves: list[Slave] = []
@@ -111,19 +122,23 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     if source == "self":
         coupled[:] = False
 
-    t_start = time.perf_counter()
-    out = _run(stepper, sc.q0, sc.u0, sc.master_projection, slaves, coupled, chi_log)
-    wall = time.perf_counter() - t_start
+    inp = LoopInput(stepper, np.stack([sc.q0] + [s.q0 for s in slaves]),
+                    np.stack([sc.u0] + [s.u0 for s in slaves]),
+                    np.array([False] + [s.position_jumps for s in slaves]),
+                    bool(sc.master_projection), coupled, chi_log)
+    out = run_loop(inp, engine=engine, record_every=record_every)
 
-    meta = run_metadata(sc, stepper, wall)
-    res = SimulationResult(grid.t, out["q"], out["u"], out["P"], out["active"], system, meta,
-                           sigma=out["sigma"])
+    meta = run_metadata(sc, stepper, out)
+    t = grid.t[out.rows]
+    res = SimulationResult(t, out.q[0], out.u[0], out.P[0], out.active, system, meta, sigma=out.sigma[0])
     if slaves:
-        res.chi = out["chi"]
-        master = {"q": out["q"], "u": out["u"], "P": out["P"], "sigma": out["sigma"]}
-        for s, traj in zip(slaves, out["slaves"]):
-            V = lyapunov(system, traj["q"], traj["u"], out["q"], out["u"])
-            parts = lyapunov_decrements(system, sc.h, traj, master)
+        res.chi = out.chi
+        master = {"q": out.q[0], "u": out.u[0], "P": out.P[0], "sigma": out.sigma[0]}
+        for i, s in enumerate(slaves, start=1):
+            traj = {"q": out.q[i], "u": out.u[i], "P": out.P[i], "sigma": out.sigma[i]}
+            V = lyapunov(system, traj["q"], traj["u"], master["q"], master["u"])
+            parts = (lyapunov_decrements(system, sc.h, traj, master) if record_every == 1
+                     else {"damping": None, "impulse": None, "projection": None})
             res.slaves[s.name] = SlaveTrajectory(s.name, traj["q"], traj["u"], traj["P"], V,
                                                  parts["damping"], parts["impulse"],
                                                  parts["projection"], traj["sigma"])
@@ -146,54 +161,3 @@ def _slaves(cfg: ObserverConfig, observers: list[str | Slave]) -> list[Slave]:
     if len(set(names)) != len(names):
         raise InputError("observer.observers", f"observer names must be unique, got {names}")
     return out
-
-
-def _run(stepper: MoreauJean, q0: np.ndarray, u0: np.ndarray, master_projection: bool,
-         slaves: list[Slave], coupled: np.ndarray, chi_log: np.ndarray | None) -> dict:
-    """The time loop: master step, then every slave with χ (or its own closed set)."""
-    steps = stepper.grid.steps
-    n, m = stepper.system.n, stepper.system.m
-
-    def arrays(q_init, u_init):
-        d = {"q": np.empty((steps + 1, n)), "u": np.empty((steps + 1, n)),
-             "P": np.zeros((steps + 1, m)), "sigma": np.zeros((steps + 1, m)),
-             "active": np.zeros((steps + 1, m), dtype=bool)}
-        d["q"][0], d["u"][0] = q_init, u_init
-        return d
-
-    master = arrays(q0, u0)
-    chi_rec = np.zeros((steps + 1, m), dtype=bool)
-    subs = [arrays(s.q0, s.u0) for s in slaves]
-    jumps = [s.position_jumps for s in slaves]
-    states = [(s.q0.copy(), s.u0.copy()) for s in slaves]
-    q, u = q0.copy(), u0.copy()
-    mq, mu, mP, msig, mact = master["q"], master["u"], master["P"], master["sigma"], master["active"]
-    for k in range(steps):
-        idx = np.flatnonzero(stepper.predicted_active(k, q, u))
-        q, u, P, sig = stepper.step(k, q, u, idx, master_projection)
-        mq[k + 1], mu[k + 1] = q, u
-        if idx.size:
-            mP[k + 1, idx] = P
-            mact[k + 1, idx] = True
-            if sig is not None:
-                msig[k + 1, idx] = sig
-        if not subs:
-            continue
-        chi = idx if chi_log is None else np.flatnonzero(chi_log[k])
-        chi_rec[k + 1, chi] = True
-        for j, rec in enumerate(subs):
-            qs, us = states[j]
-            if coupled[k]:
-                act, proj = chi, jumps[j]
-            else:
-                act, proj = np.flatnonzero(stepper.predicted_active(k, qs, us)), master_projection
-            qs, us, Ps, sgs = stepper.step(k, qs, us, act, proj)
-            states[j] = (qs, us)
-            rec["q"][k + 1], rec["u"][k + 1] = qs, us
-            if act.size:
-                rec["P"][k + 1, act] = Ps
-                if sgs is not None:
-                    rec["sigma"][k + 1, act] = sgs
-    master["chi"] = chi_rec
-    master["slaves"] = subs
-    return master

@@ -65,6 +65,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg as sla
+import scipy.sparse as sp
 
 from observer.contact import get_solver
 from observer.contact.lcp import LCPSolution
@@ -74,19 +75,64 @@ from observer.model import LinearSystem
 from observer.validation import as_scalar
 
 
+BANDED_MIN_N = 64
+"""Smallest n for which a banded structure is used (smaller systems stay dense)."""
+
+
+def bandwidth(*mats: np.ndarray) -> int:
+    """Largest |i − j| over the nonzero entries of the given n×n matrices."""
+    pattern = np.zeros_like(mats[0], dtype=bool)
+    for A in mats:
+        pattern |= A != 0.0
+    i, j = np.nonzero(pattern)
+    return int(np.max(np.abs(i - j))) if i.size else 0
+
+
+def to_band(A: np.ndarray, bw: int) -> np.ndarray:
+    """Lower band storage of symmetric A: ``ab[d, j] = A[j + d, j]`` (LAPACK/scipy layout)."""
+    n = A.shape[0]
+    ab = np.zeros((bw + 1, n))
+    for d in range(bw + 1):
+        ab[d, :n - d] = np.diagonal(A, -d)
+    return ab
+
+
+@dataclass(frozen=True)
+class BandedScheme:
+    """Banded form of the free-velocity update: ``Â u_free = R_u u + R_q q + h f̄``.
+
+    ``Achol`` is the lower banded Cholesky factor of ``Â = M + hθC + h²θ²K``;
+    ``Ru = M − h(1−θ)C − h²θ(1−θ)K`` and ``Rq = −hK`` are in lower band storage (``Ru_s``,
+    ``Rq_s`` the same as sparse matrices, for the numpy engine).
+    """
+
+    bw: int
+    Achol: np.ndarray
+    Ru: np.ndarray
+    Rq: np.ndarray
+    Ru_s: sp.csr_matrix
+    Rq_s: sp.csr_matrix
+
+    def free_velocity(self, h: float, q: np.ndarray, u: np.ndarray, fbar: np.ndarray) -> np.ndarray:
+        return sla.cho_solve_banded((self.Achol, True), self.Ru_s @ u + self.Rq_s @ q + h * fbar)
+
+
 @dataclass(frozen=True)
 class SchemeMatrices:
     """h-dependent matrices of the θ-scheme, computed once per run.
 
-    ``u_free = Bu u + Bq q + Bf f̄``; ``AinvW = Â⁻¹W``; ``Ghat = WᵀÂ⁻¹W``;
-    ``G0 = WᵀM⁻¹W``; ``KinvW = K⁻¹W`` and ``L = WᵀK⁻¹W`` (None unless K ≻ 0).
+    Dense structure: ``u_free = Bu u + Bq q + Bf f̄`` (``band`` is None). Banded structure
+    (n ≥ :data:`BANDED_MIN_N`, symmetric M, C, K of bandwidth ≤ n/8, chosen automatically):
+    ``Bu = Bq = Bf = None`` and :class:`BandedScheme` gives u_free in O(n·bw²). Always:
+    ``AinvW = Â⁻¹W``; ``Ghat = WᵀÂ⁻¹W``; ``G0 = WᵀM⁻¹W``; ``KinvW = K⁻¹W`` and
+    ``L = WᵀK⁻¹W`` (None unless K ≻ 0).
     """
 
     h: float
     theta: float
-    Bu: np.ndarray
-    Bq: np.ndarray
-    Bf: np.ndarray
+    Bu: np.ndarray | None
+    Bq: np.ndarray | None
+    Bf: np.ndarray | None
     W: np.ndarray
     WT: np.ndarray
     AinvW: np.ndarray
@@ -94,9 +140,24 @@ class SchemeMatrices:
     G0: np.ndarray
     KinvW: np.ndarray | None
     L: np.ndarray | None
+    band: BandedScheme | None = None
 
     @staticmethod
-    def build(system: LinearSystem, h: float, theta: float) -> "SchemeMatrices":
+    def choose_structure(system: LinearSystem) -> str:
+        """"banded" for large systems with symmetric, narrowly banded M, C, K; else "dense"."""
+        M, C, K = system.M, system.C, system.K
+        if system.n < BANDED_MIN_N or not (np.array_equal(C, C.T) and np.array_equal(M, M.T)
+                                           and np.array_equal(K, K.T)):
+            return "dense"
+        return "banded" if bandwidth(M, C, K) <= system.n // 8 else "dense"
+
+    @staticmethod
+    def build(system: LinearSystem, h: float, theta: float, structure: str = "dense") -> "SchemeMatrices":
+        """Precompute the scheme; ``structure`` is "dense", "banded" or "auto"."""
+        if structure == "auto":
+            structure = SchemeMatrices.choose_structure(system)
+        if structure == "banded":
+            return SchemeMatrices._build_banded(system, h, theta)
         M, C, K, W = system.M, system.C, system.K, system.W
         n = system.n
         A_hat = M + h * theta * C + (h * theta) ** 2 * K
@@ -117,6 +178,32 @@ class SchemeMatrices:
             L = 0.5 * (L + L.T)
         return SchemeMatrices(h, theta, Bu, Bq, Bf, W, np.ascontiguousarray(W.T), AinvW,
                               0.5 * (Ghat + Ghat.T), 0.5 * (G0 + G0.T), KinvW, L)
+
+    @staticmethod
+    def _build_banded(system: LinearSystem, h: float, theta: float) -> "SchemeMatrices":
+        """The banded structure: no dense n×n matrix is formed or multiplied."""
+        M, C, K, W = system.M, system.C, system.K, system.W
+        bw = max(bandwidth(M, C, K), 1)
+        A_hat = M + h * theta * C + (h * theta) ** 2 * K
+        Achol = sla.cholesky_banded(to_band(A_hat, bw), lower=True)
+        Ru = M - h * (1.0 - theta) * C - h * h * theta * (1.0 - theta) * K
+        Rq = -h * K
+        band = BandedScheme(bw, Achol, to_band(Ru, bw), to_band(Rq, bw), sp.csr_matrix(Ru), sp.csr_matrix(Rq))
+        Ws = sp.csc_matrix(W)
+        AinvW = sla.cho_solve_banded((Achol, True), W)
+        Ghat = np.asarray(Ws.T @ AinvW)
+        G0 = np.asarray(Ws.T @ sla.cho_solve_banded((sla.cholesky_banded(to_band(M, bw), lower=True), True), W))
+        KinvW = L = None
+        try:
+            Kchol = sla.cholesky_banded(to_band(K, bw), lower=True)
+        except np.linalg.LinAlgError:
+            Kchol = None
+        if Kchol is not None and system.is_stiffness_definite():
+            KinvW = sla.cho_solve_banded((Kchol, True), W)
+            L = np.asarray(Ws.T @ KinvW)
+            L = 0.5 * (L + L.T)
+        return SchemeMatrices(h, theta, None, None, None, W, np.ascontiguousarray(W.T), AinvW,
+                              0.5 * (Ghat + Ghat.T), 0.5 * (G0 + G0.T), KinvW, L, band)
 
 
 @dataclass(frozen=True)
@@ -181,18 +268,20 @@ class MoreauJean:
         Largest accepted relative complementarity residual of a contact solve; a worse
         solution is re-solved by the reference solver (a ``RuntimeWarning`` says so)
         and, if still worse, raises :class:`ContactSolverError`.
+    structure : {"dense", "banded", "auto"}
+        Matrix structure of the free-velocity update (:meth:`SchemeMatrices.build`).
     """
 
     def __init__(self, system: LinearSystem, law: ImpactLaw, h: float, t_end: float,
                  theta: float = 0.5, t0: float = 0.0, solver: str = "pivoting",
-                 residual_tol: float = 1e-9):
+                 residual_tol: float = 1e-9, structure: str = "dense"):
         h, theta = check_step_parameters(h, theta)
         t_end = as_scalar("simulation.t_end", t_end)
         self.system = system
         self.law = law
         self.solver = get_solver(solver)
         self.residual_tol = residual_tol
-        self.S = SchemeMatrices.build(system, h, theta)
+        self.S = SchemeMatrices.build(system, h, theta, structure)
         self.grid = Grid.build(system, h, t_end, theta, t0)
         self.stats = StepStats()
         self._law_code = law.code
@@ -301,7 +390,10 @@ class MoreauJean:
         self._k = k
         S, grid = self.S, self.grid
         h, theta = S.h, S.theta
-        u_free = S.Bu @ u + S.Bq @ q + S.Bf @ grid.fbar[k]
+        if S.band is None:
+            u_free = S.Bu @ u + S.Bq @ q + S.Bf @ grid.fbar[k]
+        else:
+            u_free = S.band.free_velocity(h, q, u, grid.fbar[k])
         if active.size == 0:
             u1 = u_free
             P = np.zeros(0)

@@ -1,0 +1,489 @@
+"""The compiled time loop (``engine="compiled"``): master and observers in one numba call.
+
+This is the same scheme as :class:`observer.stepping.MoreauJean` and the loop of
+:mod:`observer.loop` (the readable reference, ``engine="python"``), written on plain arrays
+for numba: no allocation and no Python-level dispatch per step, the impact law and the
+matrix structure selected by integer codes, the small LCPs solved by compiled exact
+solvers that return ``(iterations, status, residual)``.
+
+* **Free velocity.** Dense systems use the precomputed ``u_free = Bu u + Bq q + Bf f̄``
+  (:class:`~observer.stepping.SchemeMatrices`). Banded systems (``STRUCTURE_BANDED``) solve
+  ``Â u_free = R_u u + R_q q + h f̄`` with the banded Cholesky factor of
+  ``Â = M + hθC + h²θ²K`` computed once per h, ``R_u = M − h(1−θ)C − h²θ(1−θ)K`` and
+  ``R_q = −hK`` (the same algebra as ``Bu = Â⁻¹R_u``, ``Bq = Â⁻¹R_q``, ``Bf = hÂ⁻¹``):
+  O(n·bandwidth²) per step instead of O(n²).
+* **Contacts.** W is stored by columns (CSC), so gaps and contact velocities cost
+  O(nnz(W)); the closed set's Delassus matrices are gathered from the precomputed dense
+  ``Ĝ = WᵀÂ⁻¹W`` and ``G₀ = WᵀM⁻¹W`` and the impulse is applied through the columns of
+  ``Â⁻¹W``: O(n|A| + |A|³) per step with |A| closed contacts.
+* **LCPs.** One contact: the closed form ``x = max(0, −b/G)``. Several: block principal
+  pivoting (Júdice & Pires with Murty's single-flip backup, finite for P-matrices) on a
+  Cholesky-solved basis, the round-off tests of :mod:`observer.contact.lcp`. A solve whose
+  relative natural residual ``‖min(x, Gx + b)‖_∞ / max(‖b‖_∞, ‖Gx‖_∞)`` exceeds the
+  tolerance, or whose basis is not positive definite, stops the kernel with a nonzero
+  status at that step: the caller re-solves that step with the reference solver, records
+  it, and resumes (:func:`observer.loop.run`).
+
+Statuses: :data:`OK`, :data:`LCP_FAILED` (the step's contact problem was not solved to
+tolerance), :data:`PROJECTION_FAILED` (L_I not positive definite).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+OK, LCP_FAILED, PROJECTION_FAILED = 0, 1, 2
+STRUCTURE_DENSE, STRUCTURE_BANDED = 0, 1
+EPS = float(np.finfo(np.float64).eps)
+ROUNDOFF = 16.0
+TINY = 1e-300
+
+
+# ---------------------------------------------------------------------------------------
+# small dense linear algebra on work buffers
+# ---------------------------------------------------------------------------------------
+@njit(cache=True)
+def _cholesky(G, a, Lf):
+    """Lower Cholesky factor of G[:a, :a] into Lf[:a, :a]; False if not positive definite."""
+    for j in range(a):
+        s = G[j, j]
+        for p in range(j):
+            s -= Lf[j, p] * Lf[j, p]
+        if not s > 0.0:
+            return False
+        d = np.sqrt(s)
+        Lf[j, j] = d
+        for i in range(j + 1, a):
+            s = G[i, j]
+            for p in range(j):
+                s -= Lf[i, p] * Lf[j, p]
+            Lf[i, j] = s / d
+    return True
+
+
+@njit(cache=True)
+def _cho_solve(Lf, a, rhs, out):
+    """Solve (Lf Lfᵀ) out = rhs on the first a entries."""
+    for i in range(a):
+        s = rhs[i]
+        for p in range(i):
+            s -= Lf[i, p] * out[p]
+        out[i] = s / Lf[i, i]
+    for i in range(a - 1, -1, -1):
+        s = out[i]
+        for p in range(i + 1, a):
+            s -= Lf[p, i] * out[p]
+        out[i] = s / Lf[i, i]
+
+
+# ---------------------------------------------------------------------------------------
+# LCP 0 ≤ Gx + b ⊥ x ≥ 0 with SPD G (the first a rows/columns of the buffers)
+# ---------------------------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def lcp_residual(G, b, x, a):
+    """Relative natural residual ‖min(x, Gx + b)‖_∞ / max(‖b‖_∞, ‖Gx‖_∞)."""
+    r = 0.0
+    sb = 0.0
+    sg = 0.0
+    for i in range(a):
+        gx = 0.0
+        for j in range(a):
+            gx += G[i, j] * x[j]
+        w = gx + b[i]
+        v = abs(min(x[i], w))
+        if v > r:
+            r = v
+        if abs(b[i]) > sb:
+            sb = abs(b[i])
+        if abs(gx) > sg:
+            sg = abs(gx)
+    return r / max(sb, sg, TINY)
+
+
+@njit(cache=True)
+def solve_lcp(G, b, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter):
+    """Exact LCP solve; returns ``(iterations, status, residual)`` and x in ``x[:a]``.
+
+    One contact: closed form. Several: block principal pivoting started from
+    ``{i : b_i < 0}``; every infeasible index (basic with ``G_ii x_i < −tol``, non-basic with
+    ``w_i < −tol``, tol = 16·a·eps·(|b_i| + (|G||x|)_i)) is flipped while their number
+    decreases, then three more full flips, then Murty's single flip of the largest index.
+    """
+    if a == 1:
+        g = G[0, 0]
+        x[0] = -b[0] / g if b[0] < 0.0 else 0.0
+        return 0, OK, lcp_residual(G, b, x, 1)
+    for i in range(a):
+        basic[i] = b[i] < 0.0
+    best = a + 1
+    backups = 3
+    for it in range(1, max_iter + 1):
+        nb = 0
+        for i in range(a):
+            if basic[i]:
+                rhs[nb] = -b[i]
+                c = 0
+                for j in range(a):
+                    if basic[j]:
+                        Gs[nb, c] = G[i, j]
+                        c += 1
+                nb += 1
+        if nb > 0 and not _cholesky(Gs, nb, Lf):
+            return it, LCP_FAILED, np.inf
+        _cho_solve(Lf, nb, rhs, sol)
+        c = 0
+        for i in range(a):
+            if basic[i]:
+                x[i] = sol[c]
+                c += 1
+            else:
+                x[i] = 0.0
+        count = 0
+        for i in range(a):
+            gx = 0.0
+            ag = 0.0
+            for j in range(a):
+                gx += G[i, j] * x[j]
+                ag += abs(G[i, j]) * abs(x[j])
+            tol = ROUNDOFF * a * EPS * (abs(b[i]) + ag)
+            if basic[i]:
+                bad = G[i, i] * x[i] < -tol
+            else:
+                bad = gx + b[i] < -tol
+            infeas[i] = bad
+            if bad:
+                count += 1
+            if not np.isfinite(x[i]):
+                return it, LCP_FAILED, np.inf
+        if count == 0:
+            for i in range(a):
+                if x[i] < 0.0:
+                    x[i] = 0.0
+            return it, OK, lcp_residual(G, b, x, a)
+        if count < best:
+            best = count
+            backups = 3
+            for i in range(a):
+                if infeas[i]:
+                    basic[i] = not basic[i]
+        elif backups > 0:
+            backups -= 1
+            for i in range(a):
+                if infeas[i]:
+                    basic[i] = not basic[i]
+        else:
+            for i in range(a - 1, -1, -1):
+                if infeas[i]:
+                    basic[i] = not basic[i]
+                    break
+    return max_iter, LCP_FAILED, np.inf
+
+
+# ---------------------------------------------------------------------------------------
+# banded symmetric matrices (lower band storage: ab[d, j] = A[j + d, j])
+# ---------------------------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def _band_matvec_add(ab, bw, x, out):
+    """out += A x for symmetric A in lower band storage."""
+    n = x.shape[0]
+    for j in range(n):
+        out[j] += ab[0, j] * x[j]
+        for d in range(1, bw + 1):
+            i = j + d
+            if i >= n:
+                break
+            a = ab[d, j]
+            out[i] += a * x[j]
+            out[j] += a * x[i]
+
+
+@njit(cache=True, inline="always")
+def _band_cho_solve(cb, bw, x):
+    """Solve (L Lᵀ) y = x in place, L lower Cholesky factor in band storage."""
+    n = x.shape[0]
+    for j in range(n):
+        x[j] /= cb[0, j]
+        for d in range(1, bw + 1):
+            i = j + d
+            if i >= n:
+                break
+            x[i] -= cb[d, j] * x[j]
+    for j in range(n - 1, -1, -1):
+        s = x[j]
+        for d in range(1, bw + 1):
+            i = j + d
+            if i >= n:
+                break
+            s -= cb[d, j] * x[i]
+        x[j] = s / cb[0, j]
+
+
+# ---------------------------------------------------------------------------------------
+# one step of one system
+# ---------------------------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def _contact_rows(Wp, Wi, Wv, x, j):
+    """(Wᵀx)_j from the CSC storage of W."""
+    s = 0.0
+    for p in range(Wp[j], Wp[j + 1]):
+        s += Wv[p] * x[Wi[p]]
+    return s
+
+
+@njit(cache=True, inline="always")
+def predicted_active(k, q, u, h, Wp, Wi, Wv, nu, nu_dot, act):
+    """Siconos' predictor ``g_k + (h/2)γ_k ≤ 0`` into the index buffer; returns |A|."""
+    m = Wp.shape[0] - 1
+    a = 0
+    for j in range(m):
+        s = 0.0
+        for p in range(Wp[j], Wp[j + 1]):
+            s += Wv[p] * (q[Wi[p]] + 0.5 * h * u[Wi[p]])
+        if s + nu[k, j] + 0.5 * h * nu_dot[k, j] <= 0.0:
+            act[a] = j
+            a += 1
+    return a
+
+
+@njit(cache=True, inline="always")
+def _free_velocity(k, q, u, h, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, uf):
+    n = q.shape[0]
+    if structure == STRUCTURE_DENSE:
+        for i in range(n):
+            s1 = 0.0
+            s2 = 0.0
+            s3 = 0.0
+            for j in range(n):
+                s1 += Bu[i, j] * u[j]
+            for j in range(n):
+                s2 += Bq[i, j] * q[j]
+            for j in range(n):
+                s3 += Bf[i, j] * fbar[k, j]
+            uf[i] = s1 + s2 + s3
+    else:
+        for i in range(n):
+            uf[i] = h * fbar[k, i]
+        _band_matvec_add(Ru_b, bw, u, uf)
+        _band_matvec_add(Rq_b, bw, q, uf)
+        _band_cho_solve(Ach_b, bw, uf)
+
+
+@njit(cache=True, inline="always")
+def step_system(k, q, u, act, a, project, law, sch, wk, out):
+    """One Moreau–Jean step on the closed set ``act[:a]``.
+
+    ``sch`` = (h, θ, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, f̄, ν, ν̇, W (CSC: Wp, Wi,
+    Wv), Â⁻¹W, Ĝ, G₀, N⁻¹W, WᵀN⁻¹W, e, tol); ``wk`` = work buffers ((n,), (10, m),
+    (4, m, m), (2, m) bool); ``out`` = (q1, u1, P, Σ, q_pre, stats) with stats = [solves,
+    iterations, max residual]. Writes q_{k+1}, u_{k+1}, P[:a], Σ[:a] and the position before
+    the projection; returns the status. (Tuples keep the call inlinable: numba inlines
+    functions of at most 32 arguments, and an inlined call costs no reference counting.)
+    """
+    (h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, nu, nu_dot, Wp, Wi, Wv,
+     AinvW, Ghat, G0, KinvW, L, e, tol) = sch
+    wk_f, wk_m, wk_mm, wk_b = wk
+    q1, u1, P, sig, qpre, stats = out
+    n = q.shape[0]
+    uf = wk_f
+    _free_velocity(k, q, u, h, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, uf)
+    for i in range(n):
+        u1[i] = uf[i]
+    if a > 0:
+        gk = wk_m[0]
+        bvec = wk_m[1]
+        x = wk_m[2]
+        lc = wk_m[3]
+        le = wk_m[4]
+        gc = wk_m[5]
+        rhs = wk_m[6]
+        sol = wk_m[7]
+        G = wk_mm[0]
+        Gs = wk_mm[1]
+        Lf = wk_mm[2]
+        basic = wk_b[0]
+        infeas = wk_b[1]
+        max_iter = max(200, 20 * a)
+        for r in range(a):
+            j = act[r]
+            gk[r] = _contact_rows(Wp, Wi, Wv, u, j) + nu_dot[k, j]
+        # target velocity τ (kept in bvec), then b = γ_free − τ
+        if law == 0:
+            for r in range(a):
+                bvec[r] = -e[act[r]] * gk[r]
+        else:
+            for r in range(a):
+                for c in range(a):
+                    G[r, c] = G0[act[r], act[c]]
+            if a == 1:
+                bvec[0] = -e[act[0]] * gk[0]
+            else:
+                it, st, res = solve_lcp(G, gk, a, lc, basic, infeas, Gs, rhs, sol, Lf, max_iter)
+                stats[0] += 1
+                stats[1] += it
+                if st != OK or not res <= tol:
+                    return LCP_FAILED
+                if res > stats[2]:
+                    stats[2] = res
+                for r in range(a):
+                    s = 0.0
+                    for c in range(a):
+                        s += G[r, c] * lc[c]
+                    gc[r] = gk[r] + s
+                for r in range(a):
+                    s = 0.0
+                    for c in range(a):
+                        s += G[r, c] * (e[act[c]] * lc[c])
+                    x[r] = gc[r] + s
+                for r in range(a):
+                    rhs[r] = x[r]
+                it, st, res = solve_lcp(G, rhs, a, le, basic, infeas, Gs, x, sol, Lf, max_iter)
+                stats[0] += 1
+                stats[1] += it
+                if st != OK or not res <= tol:
+                    return LCP_FAILED
+                if res > stats[2]:
+                    stats[2] = res
+                for r in range(a):
+                    le[r] = e[act[r]] * lc[r] + le[r]          # Λ_E = ε∘Λ_C + μ
+                for r in range(a):
+                    s = 0.0
+                    for c in range(a):
+                        s += G[r, c] * le[c]
+                    bvec[r] = (gc[r] + s) - (1.0 + e[act[r]]) * gc[r]
+        for r in range(a):
+            j = act[r]
+            gfree = _contact_rows(Wp, Wi, Wv, uf, j) + nu_dot[k + 1, j]
+            bvec[r] = gfree - bvec[r]
+        for r in range(a):
+            for c in range(a):
+                G[r, c] = Ghat[act[r], act[c]]
+        it, st, res = solve_lcp(G, bvec, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter)
+        stats[0] += 1
+        stats[1] += it
+        if st != OK or not res <= tol:
+            return LCP_FAILED
+        if res > stats[2]:
+            stats[2] = res
+        for r in range(a):
+            P[r] = x[r]
+            j = act[r]
+            for i in range(n):
+                u1[i] += AinvW[i, j] * x[r]
+    for i in range(n):
+        q1[i] = q[i] + h * ((1.0 - theta) * u[i] + theta * u1[i])
+        qpre[i] = q1[i]
+    if project and a > 0:
+        g = wk_m[8]
+        s_ = wk_m[9]
+        Gp = wk_mm[3]
+        Lf = wk_mm[2]
+        for r in range(a):
+            j = act[r]
+            g[r] = _contact_rows(Wp, Wi, Wv, q1, j) + nu[k + 1, j]
+        if a == 1:
+            s_[0] = -g[0] / L[act[0], act[0]]
+        else:
+            for r in range(a):
+                for c in range(a):
+                    Gp[r, c] = L[act[r], act[c]]
+            if not _cholesky(Gp, a, Lf):
+                return PROJECTION_FAILED
+            _cho_solve(Lf, a, g, s_)
+            for r in range(a):
+                s_[r] = -s_[r]
+        for r in range(a):
+            sig[r] = s_[r]
+            j = act[r]
+            for i in range(n):
+                q1[i] += KinvW[i, j] * s_[r]
+    return OK
+
+
+# ---------------------------------------------------------------------------------------
+# the loop: master (system 0) and observers (1..S-1)
+# ---------------------------------------------------------------------------------------
+@njit(cache=True)
+def advance(k0, k1, s0, qs, us, jumps, master_projection, coupled, chi_log, use_log, chi_now,
+            record_every, rec_q, rec_u, rec_P, rec_sig, rec_act, rec_chi, rec_qpre, record_pre,
+            law, h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, nu, nu_dot,
+            Wp, Wi, Wv, AinvW, Ghat, G0, KinvW, L, e, tol, stats):
+    """Advance every system from step k0 (starting with system s0) up to step k1.
+
+    ``qs``, ``us`` (S, n) hold the current states and are updated in place; ``chi_now`` (m,)
+    the closed set fed to the observers at the current step (the master's, or the log's).
+    Row r of the records holds step ``r·record_every`` (row 0: the initial state, written
+    by the caller); impulses and multipliers are those of the step ending at the row.
+
+    Returns ``(k, s, status)``: ``status == OK`` and k = k1 when done; otherwise the step and
+    system that failed (their state untouched).
+    """
+    S, n = qs.shape
+    m = Wp.shape[0] - 1
+    act = np.empty(m, np.int64)
+    q1 = np.empty(n)
+    qpre = np.empty(n)
+    u1 = np.empty(n)
+    P = np.zeros(m)
+    sig = np.zeros(m)
+    sch = (h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, nu, nu_dot, Wp, Wi, Wv,
+           AinvW, Ghat, G0, KinvW, L, e, tol)
+    wk = (np.empty(n), np.empty((10, m)), np.empty((4, m, m)), np.zeros((2, m), np.bool_))
+    out = (q1, u1, P, sig, qpre, stats)
+    for k in range(k0, k1):
+        rec = (k + 1) % record_every == 0
+        r = (k + 1) // record_every
+        first = s0 if k == k0 else 0
+        for s in range(first, S):
+            q = qs[s]
+            u = us[s]
+            if s == 0:
+                a = predicted_active(k, q, u, h, Wp, Wi, Wv, nu, nu_dot, act)
+                project = master_projection
+                if use_log:
+                    for j in range(m):
+                        chi_now[j] = chi_log[k, j]
+                else:
+                    for j in range(m):
+                        chi_now[j] = False
+                    for i in range(a):
+                        chi_now[act[i]] = True
+            elif coupled[k]:
+                a = 0
+                for j in range(m):
+                    if chi_now[j]:
+                        act[a] = j
+                        a += 1
+                project = jumps[s]
+            else:
+                a = predicted_active(k, q, u, h, Wp, Wi, Wv, nu, nu_dot, act)
+                project = master_projection
+            status = step_system(k, q, u, act, a, project, law, sch, wk, out)
+            if status != OK:
+                return k, s, status
+            for i in range(n):
+                q[i] = q1[i]
+                u[i] = u1[i]
+            if rec:
+                for i in range(n):
+                    rec_q[s, r, i] = q1[i]
+                    rec_u[s, r, i] = u1[i]
+                if record_pre:
+                    for i in range(n):
+                        rec_qpre[s, r, i] = qpre[i]
+                for j in range(m):
+                    rec_P[s, r, j] = 0.0
+                    rec_sig[s, r, j] = 0.0
+                for i in range(a):
+                    rec_P[s, r, act[i]] = P[i]
+                    if project:
+                        rec_sig[s, r, act[i]] = sig[i]
+                if s == 0:
+                    for j in range(m):
+                        rec_act[r, j] = False
+                    for i in range(a):
+                        rec_act[r, act[i]] = True
+                    if S > 1:
+                        for j in range(m):
+                            rec_chi[r, j] = chi_now[j]
+    return k1, 0, OK
