@@ -32,21 +32,21 @@ Problems (:func:`peer_problems`), built from the built-in scenarios through the 
     discretisation error, which is why the toolkit side runs the ground-frame scenario too
     (built with overrides of the built-in, ``param.Y = 0`` plus the force above).
 
-Both sides time the stepping only: Siconos the Python loop of ``computeOneStep``/``nextStep``
-(:func:`time.perf_counter` around it; model construction excluded), the toolkit the
-:func:`observer.simulate` call (:func:`time.perf_counter` around the call, after one short
-warm-up call that triggers any compilation; ``toolkit_loop_ns_per_step`` is the loop alone,
-from the result's metadata). A forced problem makes the Siconos loop write ``fExt`` from
-Python every step (``siconos_forcing`` says so). The driver also times Siconos' own C++ loop,
-``TimeStepping.run()``, on the same system with ``fExt`` held at its constant part
-(``siconos_run_ns_per_step``; no Python per step at all, a different trajectory when the
-problem is forced, timing only): ``ratio_run`` compares the toolkit with that lower bound
-of Siconos' per-step cost. ``ratio`` = Siconos ÷ toolkit per-step time (> 1: the toolkit is
-faster).
+Timing. Siconos: the Python loop of ``computeOneStep``/``nextStep`` alone
+(:func:`time.perf_counter` around it; model construction excluded); a forced problem makes
+it write ``fExt`` from Python every step (``siconos_forcing`` says so). Toolkit: the whole
+:func:`observer.simulate` call (:func:`time.perf_counter` around it, after one short warm-up
+call that triggers any compilation); ``toolkit_loop_ns_per_step`` is its loop alone, from
+the result's metadata. The driver also times Siconos' own C++ loop, ``TimeStepping.run()``,
+on the same system with ``fExt`` held at its constant part (``siconos_run_ns_per_step``):
+no Python per step at all, but for a forced problem a different trajectory (timing only;
+it can cost more per step when the unforced system rests on a closed contact, as
+double_mass does). ``ratio`` = Siconos ÷ toolkit time per step (> 1: the toolkit is
+faster), ``ratio_run`` the same with the run() time.
 
 >>> from bench.peers import peer_problems, run_peer, siconos_available
 >>> siconos_available()                                            # doctest: +SKIP
-(True, '4.4.0')
+(True, '4.5.0 (Debian python3-siconos 4.4.0+dfsg-2)')
 >>> run_peer(peer_problems()["impact_oscillator"], steps=10_000)   # doctest: +SKIP
 """
 
