@@ -1,8 +1,20 @@
 """Moreau–Jean time stepping against exact oracles (THEORY.md §6, §7, §10).
 
+External oracle data is resolved by ``tests/oracles.py`` (``../shared/oracles`` from the
+project root; a missing oracle fails under ``CI`` and skips otherwise).
+
+Floating-point results are compared with a stated round-off tolerance (they depend on the
+BLAS and library versions); bitwise equality is asserted only where it is the property
+(structural zeros of an inactive contact, one code path driven two ways). The external
+oracles are run with both engines of :func:`observer.simulate` (the numba kernel and the
+numpy reference stepper of ``observer/stepping.py``), each checked on its own.
+
 Oracles used here:
 
 * Siconos' ``BouncingBallTS.ref`` (same scheme, so agreement to round-off);
+* Siconos runs generated for this project (``siconos/generated/``: the forced impact
+  oscillator at θ = 1, and a 3-DOF system with two coupled contacts at θ = ½, ¾, 1),
+  reproduced step by step from their JSON input through the public API;
 * the closed-form Zeno bouncing ball (THEORY §7.1, ``observer.scenarios.bouncing_ball``);
 * an event-driven closed-form solution of the undamped forced impact oscillator
   ``ẍ + x = A cos ωt``, ``x ≤ σ``, ``ẋ⁺ = −r ẋ⁻`` written in this file (THEORY §7.2);
@@ -14,6 +26,7 @@ Oracles used here:
 from __future__ import annotations
 
 import functools
+import json
 from pathlib import Path
 
 import numpy as np
@@ -23,12 +36,15 @@ from scipy.optimize import brentq
 
 import observer
 from observer.scenario import Scenario
+from observer.loop import ENGINES
 from observer.scenarios import bouncing_ball as bb
 from observer.stepping import MoreauJean
+from oracles import oracle
 
 DATA = Path(__file__).parent / "data"
 SICONOS_TOML = DATA / "siconos_bouncing_ball.toml"
-SICONOS_REF = Path("/work/shared/oracles/siconos/BouncingBallTS.ref")
+
+EPS = np.finfo(float).eps
 
 LAWS = ("newton", "poisson")
 
@@ -160,18 +176,18 @@ def custom_scenario(M, C, K, W, *, q0, u0, h, t_end, theta=0.5, law="newton", e=
 # ---------------------------------------------------------------------------------------
 # 1. Siconos BouncingBallTS
 # ---------------------------------------------------------------------------------------
-def test_siconos_bouncing_ball_reference():
+@pytest.mark.parametrize("engine", ENGINES)
+def test_siconos_bouncing_ball_reference(engine):
     """The 3-DOF Siconos ball (tests/data/siconos_bouncing_ball.toml) reproduces
-    BouncingBallTS.ref: t, q[0], v[0], impulse p(1)[0] and λ(1)[0] agree to ≤ 1e-10 at
-    every one of the 2001 rows (same scheme, so only round-off may differ)."""
-    if not SICONOS_REF.exists():
-        pytest.skip(f"Siconos oracle {SICONOS_REF} not available")
-    with SICONOS_REF.open() as fh:
+    BouncingBallTS.ref with either engine: t, q[0], v[0], impulse p(1)[0] and λ(1)[0] agree
+    to ≤ 1e-10 at every one of the 2001 rows (same scheme, so only round-off may differ)."""
+    path = oracle("siconos", "BouncingBallTS.ref")
+    with path.open() as fh:
         rows, cols = map(int, fh.readline().split())
-    ref = np.loadtxt(SICONOS_REF, skiprows=1)
+    ref = np.loadtxt(path, skiprows=1)
     assert ref.shape == (rows, cols) == (2001, 5)
 
-    res = observer.simulate(str(SICONOS_TOML))
+    res = observer.simulate(str(SICONOS_TOML), engine=engine)
     assert res.t.shape == (rows,)
     assert res.q.shape == (rows, 3) and res.P.shape == (rows, 1)
     tol = 1e-10
@@ -181,11 +197,129 @@ def test_siconos_bouncing_ball_reference():
     assert np.max(np.abs(res.P[:, 0] - ref[:, 3])) <= tol
     # for one contact with H = [1, 0, 0], Siconos' λ(1) is the same impulse
     assert np.max(np.abs(res.P[:, 0] - ref[:, 4])) <= tol
-    # the unconstrained coordinates never move
-    assert np.all(res.q[:, 1:] == 0.0) and np.all(res.u[:, 1:] == 0.0)
+    # the unconstrained coordinates never move (round-off of the O(1) motion of q[0])
+    assert np.max(np.abs(res.q[:, 1:])) <= 1e-14 and np.max(np.abs(res.u[:, 1:])) <= 1e-14
     # the comparison is not vacuous: many impacts, then persistent contact
     assert impact_rows(res.P[:, 0]).size >= 20
     assert res.active[-100:, 0].all()
+
+
+# ---------------------------------------------------------------------------------------
+# 1b. Siconos runs made for this project: θ ≠ ½ and two coupled contacts
+# ---------------------------------------------------------------------------------------
+GENERATED_TOL = 1e-10
+"""Absolute tolerance on t, q, u and P at every step against a generated Siconos run (same
+scheme, active-set rule and Newton law, so only round-off may differ: measured ≤ 5.6e-14 on
+values of order 1; the tolerance leaves room for other BLAS/LAPACK builds on both sides)."""
+
+SHARED_GENERATED = ("impact_oscillator_theta1", "two_contact_theta0.5", "two_contact_theta0.75",
+                    "two_contact_theta1.0")
+CLOSED_GENERATED = ("two_contact_closed_theta0.5", "two_contact_closed_theta0.75",
+                    "two_contact_closed_theta1.0")
+"""Shipped in tests/data/siconos/ (made by its ``make_two_contact_closed.py`` with Siconos):
+the two-contact system preloaded so that both contacts stay closed together."""
+
+
+def siconos_scenario(spec: dict) -> Scenario:
+    """The scenario of a generated Siconos input (``siconos/generated/*.json``), through the
+    public document format: f(t) = constant + amplitude·cos(omega t + phase),
+    g = Wᵀq + gap_offset, Newton's law with the given restitution on every contact."""
+    forcing = spec["forcing"]
+    doc = {
+        "system": {"M": spec["M"], "C": spec["C"], "K": spec["K"], "W": spec["W"],
+                   "forcing": {"constant": forcing["constant"], "amplitude": forcing["amplitude"],
+                               "omega": forcing["omega"], "phase": forcing["phase"]},
+                   "gap": {"offset": spec["gap_offset"]}},
+        "impact": {"law": "newton", "restitution": spec["restitution"]},
+        "initial": {"q": spec["q0"], "u": spec["u0"]},
+        "simulation": {"t_end": spec["T"], "h": spec["h"], "theta": spec["theta"]},
+    }
+    return Scenario.from_dict(doc)
+
+
+@functools.lru_cache(maxsize=None)
+def generated_run(name: str, engine: str = ENGINES[0]):
+    """(input, Siconos columns by header name, our run with ``engine``) of a generated
+    Siconos oracle."""
+    if name in CLOSED_GENERATED:
+        spec_path, csv_path = DATA / "siconos" / f"{name}.json", DATA / "siconos" / f"{name}.csv.gz"
+    else:
+        folder = oracle("siconos", "generated")
+        spec_path, csv_path = folder / f"{name}.json", folder / f"{name}.csv"
+    spec = json.loads(spec_path.read_text())
+    table = np.genfromtxt(csv_path, delimiter=",", names=True)
+    return spec, table, observer.simulate(siconos_scenario(spec), engine=engine)
+
+
+def siconos_columns(table, prefix: str, count: int) -> np.ndarray:
+    """Columns ``prefix0 … prefix{count-1}`` of a generated oracle, as an array (rows, count)."""
+    return np.column_stack([table[f"{prefix}{i}"] for i in range(count)])
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("name", SHARED_GENERATED + CLOSED_GENERATED)
+def test_siconos_generated_runs(name, engine):
+    """Each generated Siconos run (one Interaction per contact, MoreauJeanOSI(θ), Lemke) is
+    reproduced from its JSON input through the public API, with either engine: t, q, u and
+    the impulse P of every step agree to :data:`GENERATED_TOL` (1e-10; measured ≤ 5.6e-14),
+    on every one of the T/h + 1 rows. (θ = 1 catches θ and 1 − θ swapped in the position
+    update, which θ = ½ cannot see.)"""
+    spec, ref, res = generated_run(name, engine)
+    n, m = np.shape(spec["W"])
+    steps = int(round(spec["T"] / spec["h"]))
+    assert ref.shape == (steps + 1,) and res.t.shape == (steps + 1,)
+    assert res.metadata["theta"] == spec["theta"]
+    assert np.max(np.abs(res.t - ref["t"])) <= GENERATED_TOL
+    for ours, prefix, count in ((res.q, "q", n), (res.u, "u", n), (res.P, "P", m)):
+        err = np.max(np.abs(ours - siconos_columns(ref, prefix, count)))
+        assert err <= GENERATED_TOL, (prefix, err)
+
+
+def impact_count(P: np.ndarray) -> int:
+    """Number of impacts in an impulse column: groups of consecutive steps with P > 0."""
+    return int(np.count_nonzero(np.diff(np.r_[0, (P > 0.0).astype(int)]) == 1))
+
+
+def test_siconos_generated_oscillator_has_impacts():
+    """The θ = 1 oscillator oracle is not vacuous: θ = 1 really (not ½), Siconos' run has
+    impacts (measured: 12, one step each), and ours has them on the same steps."""
+    spec, ref, res = generated_run("impact_oscillator_theta1")
+    assert spec["theta"] == 1.0
+    assert impact_count(ref["P0"]) >= 5
+    assert np.array_equal(ref["P0"] > 0, res.P[:, 0] > 0)
+    # a real impact (velocity reversal) at each first impulse step, not grazing contact
+    first = np.flatnonzero(np.diff(np.r_[0, (ref["P0"] > 0).astype(int)]) == 1)
+    assert np.all(ref["P0"][first] >= 1e-3 * np.max(ref["P0"]))
+
+
+@pytest.mark.parametrize("name", CLOSED_GENERATED)
+def test_siconos_two_contacts_closed_together(name):
+    """The preloaded two-contact oracle exercises what it is for: impacts on each contact
+    (measured 10-12 and 23-28), then both contacts closed together — coupled Delassus
+    matrix, off-diagonal w₀ᵀM⁻¹w₁ ≠ 0 — on ≥ 900 steps (measured 1021-1033), with both
+    impulses positive there in Siconos' run and in ours."""
+    spec, ref, res = generated_run(name)
+    W = np.array(spec["W"])
+    assert abs(W[:, 0] @ np.linalg.solve(np.array(spec["M"]), W[:, 1])) > 0.1
+    ref_P = siconos_columns(ref, "P", 2)
+    both = res.active.all(axis=1)
+    assert np.count_nonzero(both) >= 900
+    assert np.count_nonzero((ref_P > 0).all(axis=1)) >= 900
+    assert np.count_nonzero((res.P > 0).all(axis=1)) >= 900
+    assert all(impact_count(ref_P[:, j]) >= 5 for j in range(2))
+
+
+@pytest.mark.parametrize("name", SHARED_GENERATED[1:])
+def test_siconos_shared_two_contact_runs_exercise_both_contacts(name):
+    """The shared two-contact runs (T = 10 s) have impacts on both contacts (measured 14-15
+    and 30-33) and long phases with contact 1 closed (≥ 400 steps with P₁ > 0; measured
+    450-468), and a step with both contacts closed (measured 2 only: the long both-closed
+    phases are in :data:`CLOSED_GENERATED`)."""
+    spec, ref, res = generated_run(name)
+    ref_P = siconos_columns(ref, "P", 2)
+    assert all(impact_count(ref_P[:, j]) >= 3 for j in range(2))
+    assert np.count_nonzero(ref_P[:, 1] > 0) >= 400
+    assert np.count_nonzero(res.active.all(axis=1)) >= 1
 
 
 # ---------------------------------------------------------------------------------------
@@ -208,24 +342,29 @@ def test_ball_first_impact_step(law):
     assert abs(t_grid[0] - t1) <= 0.5 * h + g * h * h / (8 * v1) + 1e-12
     # free flight before the first impact is exact, so the extrapolated impact is too
     assert abs(t_sub[0] - t1) <= 1e-9
-    # ... and the first rebound obeys the law: u_{k+1} = −e·u_k (Newton) exactly,
-    # −e·u_k − g h (Poisson split: impulsive part first, then the smooth step)
+    # ... and the first rebound obeys the law u_{k+1} = −e·u_k (for one contact the
+    # discrete Poisson step is the Newton step: no smooth sub-step after the reversal)
     k = impact_rows(res.P[:, 0])[0] - 1
-    expected = -BALL["e"] * res.u[k, 0] - (g * h if law == "poisson" else 0.0)
-    assert res.u[k + 1, 0] == pytest.approx(expected, rel=1e-12)
+    assert res.u[k + 1, 0] == pytest.approx(-BALL["e"] * res.u[k, 0], rel=1e-12)
+
+
+def test_ball_poisson_is_newton():
+    """For one contact Poisson's law is Newton's law, and the discrete Poisson step is the
+    discrete Newton step: the two ball runs (θ = ½ and θ = 1, 5 s, several hundred impact
+    and contact steps) agree to round-off, 1e-12 relative to the largest |q|, |u|, |P|."""
+    for theta in (0.5, 1.0):
+        newton, poisson = (ball_run(law, H_BALL, 5.0, theta) for law in LAWS)
+        assert impact_rows(newton.P[:, 0]).size >= 20
+        for a, b in ((newton.q, poisson.q), (newton.u, poisson.u), (newton.P, poisson.P)):
+            assert np.max(np.abs(a - b)) <= 1e-12 * np.max(np.abs(a))
 
 
 @pytest.mark.parametrize("law", LAWS)
 def test_ball_impact_times(law):
     """The first 10 impact times (start of each new group of P > 0 steps) follow the
-    closed form t_k = t1 + (2v1/g) e(1 − e^{k−1})/(1 − e).
-
-    Newton: within 5h for all ten (grid quantisation h/2 plus an O(h) per-bounce error
-    that stays small, measured ≤ 3h). Poisson split: the smooth sub-step after the velocity
-    reversal removes about g h(1+e)/(2e) of rebound speed per impact, which accumulates
-    geometrically to a flight-time drift of at most (1+e)/(e(1−e))·h per bounce; we assert
-    |Δt_k| ≤ (1/2 + (k−1)(1+e)/(e(1−e)))·h and, for both laws, the first two within 2h.
-    """
+    closed form t_k = t1 + (2v1/g) e(1 − e^{k−1})/(1 − e): the first two within 2h, all ten
+    within 5h (grid quantisation h/2 plus an O(h) per-bounce error that stays small,
+    measured ≤ 3h). Both laws: for one contact the discrete Poisson step is Newton's."""
     h, g, h0, e = H_BALL, BALL["g0"], BALL["h0"], BALL["e"]
     res = ball_run(law, h, 5.0)
     t_grid, _ = ball_impact_times(res, g)
@@ -234,11 +373,7 @@ def test_ball_impact_times(law):
     exact = bb.impact_times(h0, g, e, n)
     err = t_grid[:n] - exact
     assert np.all(np.abs(err[:2]) <= 2 * h), err / h
-    if law == "newton":
-        assert np.all(np.abs(err) <= 5 * h), err / h
-    else:
-        drift = (1 + e) / (e * (1 - e))
-        assert np.all(np.abs(err) <= (0.5 + drift * np.arange(n)) * h), err / h
+    assert np.all(np.abs(err) <= 5 * h), err / h
 
 
 @pytest.mark.parametrize("law", LAWS)
@@ -275,27 +410,17 @@ def exact_last_time_above(h0, g, e, level):
 
 @pytest.mark.parametrize("law", LAWS)
 def test_ball_last_time_above_1mm(law):
-    """The last time q > 1e-3 m matches the closed form 3.9277 s (THEORY §7.1) at h = 1e-4.
-
-    Tolerances: Newton 10h (impact-time error ≤ 5h, plus the sensitivity 0.34 s/(m/s) of
-    the crossing of the low 15th apex (1.24 mm) to an O(g h) rebound-speed error);
-    Poisson split: its per-bounce drift (1+e)/(e(1−e))·h over the 15 bounces plus the same
-    sensitivity to its accumulated speed deficit (1+e)/(2e(1−e))·g h, i.e. ≈ 190h.
-    """
+    """The last time q > 1e-3 m matches the closed form 3.9277 s (THEORY §7.1) at h = 1e-4
+    to 10h (impact-time error ≤ 5h, plus the sensitivity 0.34 s/(m/s) of the crossing of
+    the low 15th apex (1.24 mm) to an O(g h) rebound-speed error); both laws, since for
+    one contact the discrete Poisson step is Newton's."""
     h, g, h0, e = 1e-4, BALL["g0"], BALL["h0"], BALL["e"]
     k, t_exact = exact_last_time_above(h0, g, e, 1e-3)
     # THEORY §7.1 quotes 3.9278 s; the series gives 3.92770 s (t_15 = 3.90485 s + 22.85 ms)
     assert k == 15 and t_exact == pytest.approx(3.9277, abs=5e-5)
     res = ball_run(law, h, 4.0)
     t_last = res.t[np.flatnonzero(res.q[:, 0] > 1e-3)[-1]]
-    if law == "newton":
-        tol = 10 * h
-    else:
-        vk = e ** k * np.sqrt(2 * g * h0)
-        dv = (1 + e) / (2 * e * (1 - e)) * g * h
-        sens = (1 + vk / np.sqrt(vk ** 2 - 2 * g * 1e-3)) / g
-        tol = k * (1 + e) / (e * (1 - e)) * h + sens * dv
-    assert abs(t_last - t_exact) <= tol, (t_last, t_exact, tol)
+    assert abs(t_last - t_exact) <= 10 * h, (t_last, t_exact)
 
 
 # ---------------------------------------------------------------------------------------
@@ -359,7 +484,7 @@ def test_impact_oscillator_first_order(law):
     assert n_impacts == [4] * len(Ns)
     order = fit_order(hs, errs)
     assert abs(order - 1.0) <= 0.2, (order, errs / hs)
-    assert errs[-1] <= 30 * hs[-1]          # measured 5.4h (Newton), 16.5h (Poisson)
+    assert errs[-1] <= 10 * hs[-1]          # measured 5.4h (both laws: one contact)
 
 
 # ---------------------------------------------------------------------------------------
@@ -445,7 +570,12 @@ def test_single_impact(law, e, kind):
     """K = C = 0, f = 0, one contact approached with γ⁻ < 0 so that exactly one step
     carries an impulse: γ⁺ = −eγ⁻ to round-off, the kinetic energy changes by exactly
     −(1−e²)(γ⁻)²/(2G) with G = wᵀM⁻¹w (relative 1e-12 of the kinetic energy), the impulse
-    is (1+e)|γ⁻|/G, and the velocity only changes along M⁻¹w."""
+    is (1+e)|γ⁻|/G, and the velocity only changes along M⁻¹w.
+
+    "Exactly one step" allows round-off elsewhere: after a plastic impact (e = 0) the
+    contact stays closed with γ = O(ε|γ⁻|) of either sign (measured −3.8e-17), so the
+    following steps may carry an impulse of that order (measured 2.5e-17); every other
+    step's |P| must stay below 100ε times the impact's impulse (|γ⁻|/G)."""
     h = 1e-3
     M, w, u0 = single_impact_system(kind)
     n = M.shape[0]
@@ -456,7 +586,9 @@ def test_single_impact(law, e, kind):
     sc = custom_scenario(M, np.zeros((n, n)), np.zeros((n, n)), w[:, None], q0=np.zeros(n),
                          u0=u0, h=h, t_end=30 * h, law=law, e=e, offset=[gap0])
     res = observer.simulate(sc)
-    rows = np.flatnonzero(res.P[:, 0] != 0.0)
+    G = float(w @ np.linalg.solve(M, w))
+    roundoff = 100 * EPS * abs(gamma_minus) / G
+    rows = np.flatnonzero(np.abs(res.P[:, 0]) > roundoff)
     assert rows.tolist() == [N + 1]
     if e > 0:
         assert np.flatnonzero(res.active[:, 0]).tolist() == [N + 1]
@@ -466,7 +598,6 @@ def test_single_impact(law, e, kind):
     gm, gp = res.gamma[k, 0], res.gamma[k + 1, 0]
     assert gm == pytest.approx(gamma_minus, rel=1e-14)
     assert abs(gp + e * gm) <= 1e-12 * abs(gm)
-    G = float(w @ np.linalg.solve(M, w))
     T0 = 0.5 * u0 @ M @ u0
     T = 0.5 * np.einsum("ki,ij,kj->k", res.u, M, res.u)
     dT = T[k + 1] - T[k]
@@ -524,7 +655,7 @@ def test_double_mass_static_preload(law):
 def test_ball_impact_times_first_order(law):
     """Both laws converge to the same closed-form impact times with order 1 ± 0.2: RMS
     error of the first 8 impact times (sub-step estimate from the last pre-impact state)
-    over h = 2e-3 … 6.25e-5. (The Poisson split's constant is ~10× Newton's.)"""
+    over h = 2e-3 … 6.25e-5, with the same constant (≤ 5h at the finest h)."""
     g, h0, e = BALL["g0"], BALL["h0"], BALL["e"]
     n = 8
     exact = bb.impact_times(h0, g, e, n)
@@ -538,7 +669,7 @@ def test_ball_impact_times_first_order(law):
     errs = np.array(errs)
     order = fit_order(hs, errs)
     assert abs(order - 1.0) <= 0.2, (order, errs / hs)
-    assert errs[-1] <= (5 if law == "newton" else 40) * hs[-1]
+    assert errs[-1] <= 5 * hs[-1]
 
 
 # ---------------------------------------------------------------------------------------
@@ -588,12 +719,13 @@ def test_theta_half_exact_energy_balance(forced):
 
 def test_moreau_jean_step_matches_simulate():
     """Driving :class:`MoreauJean` by hand (``predicted_active`` then ``step``) reproduces
-    ``simulate`` bit for bit on the bouncing ball (Newton, θ = ½)."""
+    ``simulate(engine="python")`` — the same stepper driven by the loop — bit for bit on
+    the bouncing ball (Newton, θ = ½): one code path, so bitwise equality is the property."""
     h = 1e-3
-    res = ball_run("newton", h, 5.0)
     sc = observer.load_scenario("bouncing_ball", {
         "param.m": BALL["m"], "param.g0": BALL["g0"], "param.h0": BALL["h0"],
         "param.restitution": BALL["e"], "param.law": "newton"})
+    res = observer.simulate(sc, h=h, t_end=5.0, theta=0.5, engine="python")
     stepper = MoreauJean(sc.system, sc.law, h, 5.0, theta=0.5)
     q, u = sc.q0.copy(), sc.u0.copy()
     for k in range(stepper.grid.steps):
