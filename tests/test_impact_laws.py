@@ -1,0 +1,257 @@
+"""The impact laws of :mod:`observer.impact` on their own (paper eqs. (5)-(6), (9)).
+
+Each law is checked against properties recomputed here from its returned impulses and
+against LCPs solved here by enumerating active sets (:func:`lcp_enum`), never against the
+module's own numbers:
+
+* Newton: ``0 ≤ γ⁺ + e∘γ⁻ ⊥ Λ ≥ 0`` with ``γ⁺ = γ⁻ + GΛ``;
+* Poisson (Glocker's inequality form): compression ``0 ≤ γ_C ⊥ Λ_C ≥ 0``, expansion
+  ``0 ≤ γ_E ⊥ Λ_E − ε∘Λ_C ≥ 0``; the one-contact closed form agrees with the LCP path;
+* the discrete Poisson target ``τ = γ_E − (1+ε)∘γ_C`` (``−εγ_k`` for one contact, bitwise);
+* :meth:`ImpactLaw.build` rejects bad input with an error naming the field.
+
+Tolerance: 1e-12 relative to the size of the velocities and impulses (2×2 and 3×3
+well-conditioned problems).
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from observer.contact.lcp import LCPSolution
+from observer.errors import InputError
+from observer.impact import (LAWS, NEWTON, POISSON, ImpactLaw, impact, newton_impact,
+                             poisson_impact, poisson_phases, poisson_target)
+
+TOL = 1e-12
+
+
+def lcp_enum(G: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The solution of ``0 ≤ Gx + b ⊥ x ≥ 0`` (G ≻ 0) by trying every active set."""
+    m = b.size
+    tol = 1e-13 * (1.0 + np.abs(b).max())
+    for r in range(m + 1):
+        for J in itertools.combinations(range(m), r):
+            J = list(J)
+            x = np.zeros(m)
+            if J:
+                x[J] = np.linalg.solve(G[np.ix_(J, J)], -b[J])
+            if np.all(x >= -tol) and np.all(G @ x + b >= -tol):
+                return np.maximum(x, 0.0)
+    raise AssertionError("no active set solves the LCP")
+
+
+class Recorder:
+    """A ``solve`` callable built on :func:`lcp_enum` that records its problems."""
+
+    def __init__(self):
+        self.problems = []
+
+    def __call__(self, G, b):
+        self.problems.append((G.copy(), b.copy()))
+        return LCPSolution(lcp_enum(G, b), 0.0, 1, "enum")
+
+
+def no_solve(G, b):
+    raise AssertionError("the one-contact closed form must not call the LCP solver")
+
+
+def assert_complementary(x, y, scale, what):
+    tol = TOL * max(scale, 1.0)
+    assert np.all(x >= -tol), f"{what}: {x}"
+    assert np.all(y >= -tol), f"{what}: {y}"
+    assert np.all(np.abs(x * y) <= tol * max(scale, 1.0)), f"{what}: {x} ⊥ {y}"
+
+
+# Two and three coupled contacts (G = WᵀM⁻¹W of small systems) with approach velocities
+# chosen so that the impacts interact (some contacts separate after compression).
+G2 = np.array([[2.0, 1.2], [1.2, 1.0]])
+G3 = np.array([[2.0, 0.9, 0.3], [0.9, 1.5, -0.6], [0.3, -0.6, 1.2]])
+CASES = [
+    (G2, np.array([-1.0, 0.3]), np.array([0.5, 0.9])),
+    (G2, np.array([-1.0, -2.0]), np.array([0.2, 0.7])),
+    (G3, np.array([-1.0, -0.2, 0.5]), np.array([0.8, 0.3, 0.6])),
+    (G3, np.array([-2.0, -1.0, -0.5]), np.array([0.0, 1.0, 0.4])),
+    (G3, np.array([0.5, 0.2, 0.0]), np.array([0.5, 0.5, 0.5])),       # nothing approaches
+    (G2, np.array([-1.0, -0.5]), np.array([0.2, 0.9])),               # Poisson ≠ Newton
+    # contact 0 approaches but separates after compression (γ_C,0 > 0); expansion μ_1 > 0
+    (G3, np.array([-1.5, -0.6, -1.8]), np.array([0.2, 0.1, 0.5])),
+]
+IDS = ["2-one-approaches", "2-both-approach", "3-mixed", "3-all-approach", "3-separating",
+       "2-poisson-not-newton", "3-expansion-lcp"]
+
+
+# ---------------------------------------------------------------------------------------
+# ImpactLaw
+# ---------------------------------------------------------------------------------------
+def test_build_broadcasts_and_freezes_the_restitution():
+    law = ImpactLaw.build("newton", 0.4, 3)
+    assert law.law == "newton" and law.restitution.tolist() == [0.4, 0.4, 0.4]
+    assert not law.restitution.flags.writeable
+    with pytest.raises(ValueError):
+        law.restitution[0] = 1.0
+    law = ImpactLaw.build("poisson", [0.0, 1.0], 2)           # both ends of [0, 1] accepted
+    assert law.restitution.tolist() == [0.0, 1.0]
+    assert not law.restitution.flags.writeable
+
+
+@pytest.mark.parametrize("law,e,m,field,match", [
+    ("newtonian", 0.5, 1, "impact.law", r"must be one of \['newton', 'poisson'\], got 'newtonian'"),
+    (None, 0.5, 1, "impact.law", "got None"),
+    ("newton", -0.01, 2, "impact.restitution", r"must lie in \[0, 1\], got \[-0.01, -0.01\]"),
+    ("poisson", [0.5, 1.01], 2, "impact.restitution", r"must lie in \[0, 1\], got \[0.5, 1.01\]"),
+    ("newton", [0.5, -1e-12], 2, "impact.restitution", "must lie in"),
+    ("newton", [0.5, 0.5, 0.5], 2, "impact.restitution", "shape"),
+    ("newton", "much", 2, "impact.restitution", None),
+])
+def test_build_rejects_bad_input_naming_the_field(law, e, m, field, match):
+    with pytest.raises(InputError, match=match) as info:
+        ImpactLaw.build(law, e, m)
+    assert info.value.field == field
+
+
+def test_law_codes_and_global_restitution():
+    assert LAWS == ("newton", "poisson") and (NEWTON, POISSON) == (0, 1)
+    assert ImpactLaw.build("newton", 0.5, 2).code == NEWTON
+    assert ImpactLaw.build("poisson", 0.5, 2).code == POISSON
+    assert ImpactLaw.build("newton", [0.3, 0.3, 0.3], 3).is_global is True
+    assert ImpactLaw.build("newton", [0.3, 0.3, 0.4], 3).is_global is False
+    assert ImpactLaw.build("newton", [0.4, 0.3, 0.3], 3).is_global is False
+    assert ImpactLaw.build("poisson", [0.7], 1).is_global is True
+
+
+# ---------------------------------------------------------------------------------------
+# Newton
+# ---------------------------------------------------------------------------------------
+@pytest.mark.parametrize("G,gm,e", CASES, ids=IDS)
+def test_newton_impulse_satisfies_the_law(G, gm, e):
+    lam = newton_impact(G, gm, e, Recorder())
+    gp = gm + G @ lam
+    scale = np.abs(gm).max() + np.abs(G @ lam).max()
+    assert_complementary(gp + e * gm, lam, scale, "Newton")
+    np.testing.assert_allclose(lam, lcp_enum(G, (1 + e) * gm), rtol=0, atol=TOL * scale)
+
+
+def test_newton_one_contact_closed_form():
+    for gm, e in ((-2.0, 0.5), (-1.0, 0.0), (-0.5, 1.0), (0.7, 0.5)):
+        lam = newton_impact(np.array([[4.0]]), np.array([gm]), np.array([e]), Recorder())
+        assert lam[0] == pytest.approx(max(0.0, -(1 + e) * gm / 4.0), abs=1e-15)
+
+
+# ---------------------------------------------------------------------------------------
+# Poisson
+# ---------------------------------------------------------------------------------------
+@pytest.mark.parametrize("G,gm,eps", CASES, ids=IDS)
+def test_poisson_phases_satisfy_glockers_conditions(G, gm, eps):
+    rec = Recorder()
+    lam_c, lam_e = poisson_phases(G, gm, eps, rec)
+    assert lam_c.shape == lam_e.shape == gm.shape
+    gc = gm + G @ lam_c
+    ge = gc + G @ lam_e
+    scale = np.abs(gm).max() + np.abs(G).max() * (np.abs(lam_c).max() + np.abs(lam_e).max())
+    assert_complementary(gc, lam_c, scale, "compression")
+    assert_complementary(ge, lam_e - eps * lam_c, scale, "expansion")
+    # the same impulses from the two LCPs solved here
+    lc = lcp_enum(G, gm)
+    mu = lcp_enum(G, gm + G @ lc + G @ (eps * lc))
+    np.testing.assert_allclose(lam_c, lc, rtol=0, atol=TOL * scale)
+    np.testing.assert_allclose(lam_e, eps * lc + mu, rtol=0, atol=TOL * scale)
+    lam = poisson_impact(G, gm, eps, Recorder())
+    np.testing.assert_allclose(lam, (1 + eps) * lc + mu, rtol=0, atol=TOL * scale)
+    # the two problems handed to the solver: (G, γ⁻), then (G, γ_C + G(ε∘Λ_C))
+    assert len(rec.problems) == 2
+    np.testing.assert_array_equal(rec.problems[0][1], gm)
+    np.testing.assert_allclose(rec.problems[1][1], gc + G @ (eps * lam_c), rtol=0, atol=TOL * scale)
+
+
+def test_the_cases_exercise_every_branch():
+    """The CASES above contain a separating-after-compression contact and an active
+    expansion LCP (μ > 0), so the target's −(1+ε)γ_C term and μ are both tested."""
+    G, gm, eps = CASES[6]
+    lc = lcp_enum(G, gm)
+    gc = gm + G @ lc
+    mu = lcp_enum(G, gc + G @ (eps * lc))
+    assert gm[0] < 0 and gc[0] > 0.1 and mu[1] > 0.1
+
+
+def test_poisson_differs_from_newton_on_coupled_contacts():
+    """A case where Glocker's Poisson law is not Newton's (so the dispatch is observable)."""
+    G, gm, e = CASES[5]
+    newton = newton_impact(G, gm, e, Recorder())
+    poisson = poisson_impact(G, gm, e, Recorder())
+    assert np.max(np.abs(newton - poisson)) > 1e-3
+
+
+@pytest.mark.parametrize("gm", [-2.0, -1e-3, 0.0, 0.5])
+@pytest.mark.parametrize("eps", [0.0, 0.35, 1.0])
+def test_poisson_one_contact_closed_form_equals_the_lcp_path(gm, eps):
+    """One contact: Λ_C = max(0, −γ⁻/G), Λ_E = εΛ_C, without a solver call; the same
+    contact embedded in a decoupled 2-contact problem (LCP path) gives the same impulses."""
+    G1 = np.array([[2.5]])
+    lam_c, lam_e = poisson_phases(G1, np.array([gm]), np.array([eps]), no_solve)
+    assert lam_c[0] == pytest.approx(max(0.0, -gm / 2.5), abs=1e-15)
+    assert lam_e[0] == pytest.approx(eps * max(0.0, -gm / 2.5), abs=1e-15)
+    assert lam_c.shape == lam_e.shape == (1,)
+    G2d = np.array([[2.5, 0.0], [0.0, 1.0]])
+    lc2, le2 = poisson_phases(G2d, np.array([gm, 1.0]), np.array([eps, 0.5]), Recorder())
+    assert lc2[0] == pytest.approx(lam_c[0], abs=1e-15) and lc2[1] == 0.0
+    assert le2[0] == pytest.approx(lam_e[0], abs=1e-15) and le2[1] == 0.0
+    # the post-impact velocity is Newton's: −εγ⁻ when approaching, γ⁻ otherwise
+    ge = gm + 2.5 * (lam_c[0] + lam_e[0])
+    assert ge == pytest.approx(-eps * gm if gm < 0 else gm, abs=1e-15)
+    lam = poisson_impact(G1, np.array([gm]), np.array([eps]), no_solve)
+    assert lam[0] == pytest.approx((1 + eps) * max(0.0, -gm / 2.5), abs=1e-15)
+
+
+@pytest.mark.parametrize("G,gk,eps", CASES, ids=IDS)
+def test_poisson_target_from_the_phases(G, gk, eps):
+    tau, lam_c, lam_e = poisson_target(G, gk, eps, Recorder())
+    lc = lcp_enum(G, gk)
+    mu = lcp_enum(G, gk + G @ lc + G @ (eps * lc))
+    gc = gk + G @ lc
+    ge = gc + G @ (eps * lc + mu)
+    scale = np.abs(gk).max() + np.abs(G).max() * np.abs(lc).max() * 3
+    np.testing.assert_allclose(lam_c, lc, rtol=0, atol=TOL * scale)
+    np.testing.assert_allclose(lam_e, eps * lc + mu, rtol=0, atol=TOL * scale)
+    np.testing.assert_allclose(tau, ge - (1 + eps) * gc, rtol=0, atol=TOL * scale)
+
+
+def test_poisson_target_on_an_uncoupled_separating_contact_is_newtons():
+    """G diagonal: each contact on its own, so τ_i = −ε_iγ_k,i for either sign of γ_k,i."""
+    G = np.diag([2.0, 0.5, 1.0])
+    gk = np.array([-1.0, 0.4, 0.0])
+    eps = np.array([0.3, 0.6, 0.9])
+    tau, lam_c, lam_e = poisson_target(G, gk, eps, Recorder())
+    np.testing.assert_allclose(tau, -eps * gk, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(lam_c, [0.5, 0.0, 0.0], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(lam_e, [0.15, 0.0, 0.0], rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("gk", [-1.3, 0.0, 0.8])
+def test_poisson_target_one_contact_is_bitwise_newtons(gk):
+    eps = np.array([0.45])
+    g = np.array([gk])
+    tau, lam_c, lam_e = poisson_target(np.array([[3.0]]), g, eps, no_solve)
+    assert np.array_equal(tau, -eps * g)
+    assert lam_c[0] == pytest.approx(max(0.0, -gk / 3.0), abs=1e-15)
+    assert lam_e[0] == pytest.approx(0.45 * max(0.0, -gk / 3.0), abs=1e-15)
+
+
+# ---------------------------------------------------------------------------------------
+# dispatch
+# ---------------------------------------------------------------------------------------
+def test_impact_dispatches_on_the_law_and_slices_the_restitution():
+    e = [0.2, 0.5, 0.9]
+    G, gm = CASES[5][0], CASES[5][1]
+    active = np.array([0, 2])
+    e_A = np.array([0.2, 0.9])
+    lam_n = impact(ImpactLaw.build("newton", e, 3), G, gm, active, Recorder())
+    np.testing.assert_allclose(lam_n, lcp_enum(G, (1 + e_A) * gm), rtol=0, atol=1e-13)
+    lam_p = impact(ImpactLaw.build("poisson", e, 3), G, gm, active, Recorder())
+    lc = lcp_enum(G, gm)
+    mu = lcp_enum(G, gm + G @ lc + G @ (e_A * lc))
+    np.testing.assert_allclose(lam_p, (1 + e_A) * lc + mu, rtol=0, atol=1e-13)
+    assert np.max(np.abs(lam_n - lam_p)) > 1e-3
