@@ -53,11 +53,12 @@ def tests_latest(session: nox.Session) -> None:
 # mutants/MODULE/mutants/ and runs pytest there, so the tests import the mutated copy).
 MUTATION_TARGETS: dict[str, tuple[list[str], list[str]]] = {
     "stepping": (["observer/stepping.py"],
-                 ["tests/test_step_physics.py", "tests/test_timestepping.py"]),
+                 ["tests/test_step_physics.py", "tests/test_timestepping.py", "tests/test_stepping_units.py"]),
     "impact": (["observer/impact.py"],
-               ["tests/test_step_physics.py", "tests/test_contact.py", "tests/test_timestepping.py"]),
+               ["tests/test_step_physics.py", "tests/test_contact.py", "tests/test_timestepping.py",
+                "tests/test_impact_laws.py"]),
     "contact": (["observer/contact/*"], ["tests/test_contact.py"]),
-    "observers": (["observer/observers.py"], ["tests/test_observers.py"]),
+    "observers": (["observer/observers.py"], ["tests/test_observers.py", "tests/test_stepping_units.py"]),
     "proofs_checks": (["proofs_checks/*"], ["tests/test_proofs_checks.py"]),
 }
 MUTANTS_DIR = ROOT / "mutants"
