@@ -1,9 +1,12 @@
 """What the registered checks share for one scenario: settings, seeded generators, cached runs.
 
 The run-based checks (A1, eqs. (13)-(14), eq. (17), Theorem 1) use one replayed run
-(:func:`proofs_checks.runs.replay`): the plain master and two observers, coupled to the
-master's χ over the whole run, started from different states. The observers have position
-jumps when K ≻ 0, otherwise not (bouncing ball). The run is computed once, on first use.
+(:func:`proofs_checks.runs.replay`): the scenario's master (plain unless
+``simulation.master_projection``) and the observers the toolkit runs, coupled to the
+master's χ over the whole run: two with position jumps (``jump_a``, ``jump_b``; only when
+K ≻ 0) and two without (``nojump_a``, ``nojump_b``), ``*_a`` started from the scenario's
+``[observer]`` state (the report's observers), ``*_b`` from another state. The run is
+computed once, on first use.
 
 Horizons (defaults chosen to keep ``python -m proofs_checks SCENARIO`` under a minute):
 the run uses the scenario's h and ``t_end = min(scenario t_end, max_steps·h)``; the
@@ -78,9 +81,11 @@ class CheckContext:
 
     # -- the shared run --------------------------------------------------------------------
     def slave_specs(self) -> list[SlaveSpec]:
-        """Two observers: the scenario's ``[observer]`` state (if it differs from the master's)
-        or a random one, and a second random state; perturbations of 2 % of the position
-        scale, velocities scaled by the slowest natural frequency."""
+        """The observers of the shared run: state a is the scenario's ``[observer]`` state (if
+        it differs from the master's) or a random one, state b a second random state
+        (perturbations of 2 % of the position scale, velocities scaled by the slowest natural
+        frequency); each state for the design with position jumps (when K ≻ 0: ``jump_a``,
+        ``jump_b``, listed first) and without (``nojump_a``, ``nojump_b``)."""
         sc, sys_ = self.scenario, self.system
         rng = self.rng("slaves")
         n = sys_.n
@@ -98,13 +103,15 @@ class CheckContext:
         if np.array_equal(qa, sc.q0) and np.array_equal(ua, sc.u0):
             qa, ua = sc.q0 + dq * za[:n], sc.u0 + du * za[n:]
         qb, ub = sc.q0 + dq * zb[:n], sc.u0 + du * zb[n:]
-        return [SlaveSpec("a", jumps, qa, ua), SlaveSpec("b", jumps, qb, ub)]
+        designs = (("jump", True), ("nojump", False)) if jumps else (("nojump", False),)
+        return [SlaveSpec(f"{d}_{x}", pj, q, u) for d, pj in designs for x, q, u in (("a", qa, ua), ("b", qb, ub))]
 
     @property
     def run(self) -> Run:
         """The shared run (computed on first use)."""
         if self._run is None:
-            self._run = replay(self.scenario, h=self.h, t_end=self.t_end, slaves=self.slave_specs())
+            self._run = replay(self.scenario, h=self.h, t_end=self.t_end, slaves=self.slave_specs(),
+                               master_projection=self.scenario.master_projection)
         return self._run
 
     def visited_sets(self) -> list[np.ndarray]:

@@ -46,7 +46,7 @@ import scipy.linalg as sla
 from scipy.optimize import minimize
 
 from observer.contact import get_solver
-from observer.impact import ImpactLaw, newton_impact, poisson_impact
+from observer.impact import ImpactLaw, impact
 from observer.model import LinearSystem
 from proofs_checks.result import CheckResult
 
@@ -68,9 +68,9 @@ class _SetProblem:
     evals: int = 0
 
     def impact(self, gamma: np.ndarray) -> np.ndarray:
-        fn = newton_impact if self.law == "newton" else poisson_impact
+        """Λ(γ⁻) of the library's impact map (:func:`observer.impact.impact`, no copy of it)."""
         self.evals += 1
-        return fn(self.G, gamma, self.e, self.solve)
+        return impact(self.law_obj, self.G, gamma, self.local, self.solve)
 
     def rho(self, g1: np.ndarray, g2: np.ndarray) -> tuple[float, dict]:
         """Normalized monotonicity ratio ρ and the quantities of eq. (6).
@@ -99,6 +99,8 @@ class _SetProblem:
             "roundoff_allowance": allowance, "impulses_differ": bool(np.any(dL != 0.0))}
 
     def __post_init__(self) -> None:
+        self.law_obj = ImpactLaw.build(self.law, self.e, self.G.shape[0])   # restitution of this set
+        self.local = np.arange(self.G.shape[0])
         w = np.linalg.eigvalsh(self.G)
         self.cond, self.norm = float(w[-1] / w[0]), float(w[-1])
         # the normalization metric G⁻¹ (SPD, small): from the Cholesky factor

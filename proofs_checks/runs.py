@@ -96,6 +96,9 @@ class Run:
     g_pred: np.ndarray
     metric: str = "K (library projection)"
     settings: dict = field(default_factory=dict)
+    scenario: Scenario | None = None
+    """The scenario of the replay (with ``settings["metric"]`` and ``settings["system"]``
+    it lets a check re-run the same case at other step sizes, :func:`rerun`)."""
 
     @property
     def h(self) -> float:
@@ -201,7 +204,25 @@ def replay(scenario: Scenario, *, h: float | None = None, t_end: float | None = 
     g_pred[1:] = (master.q[:-1] + 0.5 * h_ * master.u[:-1]) @ S.W + nu[:-1] + 0.5 * h_ * nud[:-1]
     return Run(system, stepper, grid.t, master, {tr.name: tr for tr in subs}, chi_rec, g_pred, desc,
                {"h": stepper.h, "t_end": float(grid.t[-1]), "theta": stepper.theta,
-                "master_projection": master_projection})
+                "master_projection": master_projection, "metric": metric, "system": system,
+                "chi_override": chi is not None}, scenario)
+
+
+def slave_specs_of(run: Run) -> list[SlaveSpec]:
+    """The observers of a run as :class:`SlaveSpec` (initial states and designs)."""
+    return [SlaveSpec(name, tr.projected, tr.q[0].copy(), tr.u[0].copy()) for name, tr in run.slaves.items()]
+
+
+def rerun(run: Run, h: float) -> Run:
+    """The same case as ``run`` (scenario, system, metric, observers, horizon) at step ``h``.
+
+    Raises ValueError when the run used an explicit χ (it lives on the run's own grid).
+    """
+    st = run.settings
+    if run.scenario is None or st.get("chi_override"):
+        raise ValueError("the run cannot be repeated at another step (no scenario, or an explicit χ)")
+    return replay(run.scenario, h=h, t_end=st["t_end"], slaves=slave_specs_of(run),
+                  master_projection=st["master_projection"], metric=st["metric"], system=st["system"])
 
 
 def _advance(stepper: MoreauJean, project: Projector, tr: Trajectory, k: int, idx: np.ndarray) -> None:
