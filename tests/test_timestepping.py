@@ -286,9 +286,12 @@ def test_siconos_generated_oscillator_has_impacts():
     spec, ref, res = generated_run("impact_oscillator_theta1")
     assert spec["theta"] == 1.0
     assert impact_count(ref["P0"]) >= 5
-    assert np.array_equal(ref["P0"] > 0, res.P[:, 0] > 0)
-    # a real impact (velocity reversal) at each first impulse step, not grazing contact
-    first = np.flatnonzero(np.diff(np.r_[0, (ref["P0"] > 0).astype(int)]) == 1)
+    # the same impulse steps (above round-off: 1e-12 of the largest impulse)
+    roundoff = 1e-12 * np.max(ref["P0"])
+    assert np.array_equal(ref["P0"] > roundoff, res.P[:, 0] > roundoff)
+    # each impact is a real one (an impulse of at least 1e-3 of the largest), not grazing
+    first = np.flatnonzero(np.diff(np.r_[0, (ref["P0"] > roundoff).astype(int)]) == 1)
+    assert first.size == impact_count(ref["P0"])
     assert np.all(ref["P0"][first] >= 1e-3 * np.max(ref["P0"]))
 
 
