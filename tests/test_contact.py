@@ -367,8 +367,10 @@ def test_pivoting_fallback_is_taken_and_reported():
     sol = solver.solve(G, b)
     assert (sol.method, sol.fallbacks, solver.fallbacks) == ("lemke", 1, 1)
     check_complementarity(G, b, sol.x)
-    with pytest.raises(ContactSolverError, match="fallback disabled"):
+    with pytest.raises(ContactSolverError) as info:
         PivotingSolver(fallback=False).solve(G, b)
+    assert str(info.value) == ("pivoting: no solution found by block pivoting (fallback disabled) "
+                               "(infeasible LCP or G not PSD)")
     with pytest.raises(ContactSolverError, match="block pivoting and lemke"):
         PivotingSolver().solve(np.zeros((2, 2)), b)
 
@@ -388,10 +390,14 @@ def test_pivoting_without_fallback_returns_its_own_answer(monkeypatch):
     sol = PivotingSolver().solve(G, b)
     assert sol.method == "lemke" and sol.fallbacks == 1
     np.testing.assert_allclose(sol.x, [4.0 / 3.0, 7.0 / 3.0], rtol=1e-14)
-    # a fallback that does worse is not taken, but the attempt is reported
-    monkeypatch.setattr(contact, "lemke", lambda G, b: poor._replace(residual=1.0, method="lemke"))
-    sol = PivotingSolver().solve(G, b)
-    assert sol.method == "block-pivoting" and sol.fallbacks == 1 and sol.x is poor.x
+    # a fallback that does worse, or only as well, is not taken, but the attempt is reported
+    for residual in (1.0, poor.residual):
+        monkeypatch.setattr(contact, "lemke", lambda G, b: poor._replace(residual=residual, method="lemke"))
+        solver = PivotingSolver()
+        sol = solver.solve(G, b)
+        assert sol.method == "block-pivoting" and sol.fallbacks == 1 and sol.x is poor.x
+        solver.solve(G, b)
+        assert solver.fallbacks == 2
     # a good block-pivoting answer (residual exactly at the acceptance limit) is kept
     edge = poor._replace(residual=ACCEPT_RESIDUAL)
     monkeypatch.setattr(contact, "block_principal_pivoting", lambda G, b: edge)
@@ -407,6 +413,82 @@ def test_get_solver_options():
     with pytest.raises(InputError) as info:
         get_solver("lemke", "contact.solver", fallback=False)
     assert info.value.field == "contact.solver" and "fallback" in str(info.value)
+
+
+def test_block_pivoting_starting_basis_and_count():
+    """Block pivoting starts from the basis {i : b_i < 0} and counts its rounds from 1: on
+    G = [[2, 1], [1, 2]] with b = (0, -1) or (0.5, -1) that basis ({2}: x = (0, 1/2),
+    w = (1/2 + b_1, 0) >= 0) is already the solution, found in exactly one round (the
+    basis {1, 2} would give x_1 < 0 and a second round)."""
+    G = np.array([[2.0, 1.0], [1.0, 2.0]])
+    for b in ([0.0, -1.0], [0.5, -1.0]):
+        sol = block_principal_pivoting(G, np.array(b))
+        np.testing.assert_array_equal(sol.x, [0.0, 0.5])
+        assert sol.iterations == 1 and sol.method == "block-pivoting"
+    # Murty's example needs the basis {1, 2}: one round as well; x = 0 for b >= 0: one round
+    assert block_principal_pivoting(G, np.array([-5.0, -6.0])).iterations == 1
+    assert block_principal_pivoting(G, np.array([1.0, 0.0])).iterations == 1
+    # a wrong starting guess costs a round: G = [[2, -1], [-1, 2]], b = (-4, 1) starts with {1},
+    # x = (2, 0), w_2 = -1 < 0, then {1, 2}: x = (7/3, 2/3), w = 0
+    G = np.array([[2.0, -1.0], [-1.0, 2.0]])
+    b = np.array([-4.0, 1.0])
+    sol = block_principal_pivoting(G, b)
+    assert sol.iterations == 2
+    np.testing.assert_allclose(sol.x, [7.0 / 3.0, 2.0 / 3.0], rtol=1e-15)
+    # the iteration cap: one round is not enough for that problem, two are
+    assert block_principal_pivoting(G, b, max_iter=1) is None
+    assert block_principal_pivoting(G, b, max_iter=2).iterations == 2
+
+
+def test_block_pivoting_infeasibility_tolerance():
+    """The pivoting test (lcp._infeasible): a basic x_i is infeasible iff x_i < 0 (exact sign
+    test, x_i = 0 is feasible); a non-basic w_i iff w_i < -16·m·eps·(|b_i| + (|G||x|)_i).
+    Near misses on both sides of that bound, built exactly in floating point: G = [[1, 1],
+    [1, 1]], x = (1, 0), b = (-1, -(1 + k·eps)), so w_2 = -k·eps and the bound is
+    32·eps·(2 + k·eps) ≈ 64·eps."""
+    from observer.contact.lcp import _infeasible
+
+    G = np.array([[1.0, 1.0], [1.0, 1.0]])
+    x = np.array([1.0, 0.0])
+    basic = np.array([True, False])
+    for k, flagged in ((60, False), (63, False), (66, True), (80, True)):
+        b = np.array([-1.0, -(1.0 + k * EPS)])
+        assert (G @ x + b)[1] == -k * EPS
+        np.testing.assert_array_equal(_infeasible(G, b, x, basic), [False, flagged], err_msg=str(k))
+    # a basic index exactly at 0 is feasible, one just below is not
+    np.testing.assert_array_equal(_infeasible(G, np.array([0.0, 1.0]), np.array([0.0, 0.0]), basic),
+                                  [False, False])
+    np.testing.assert_array_equal(_infeasible(G, np.array([0.0, 1.0]), np.array([-1e-300, 0.0]), basic),
+                                  [True, False])
+    # a non-basic w_i = 0 with a zero round-off bound (b_i = 0, no basic coupling) is feasible
+    np.testing.assert_array_equal(_infeasible(np.eye(2), np.zeros(2), np.zeros(2), basic),
+                                  [False, False])
+
+
+def test_lemke_pivot_count_and_cap():
+    """Lemke on G = diag(1..m), b = -1.5·(1..m) (all contacts close): the artificial variable
+    enters, each z_i enters once, the last pivot drives z0 out: exactly m + 1 pivots; a cap
+    of m + 1 suffices and a cap of m returns None. b >= 0 costs no pivot (x = 0)."""
+    for m in (1, 2, 3, 5):
+        G = np.diag(np.arange(1.0, m + 1.0))
+        b = -1.5 * np.arange(1.0, m + 1.0)
+        sol = lemke(G, b)
+        assert sol.iterations == m + 1
+        np.testing.assert_allclose(sol.x, 1.5, rtol=1e-15)
+        assert lemke(G, b, max_iter=m + 1).iterations == m + 1
+        assert lemke(G, b, max_iter=m) is None
+        sol = lemke(G, -b)
+        assert sol.iterations == 0 and sol.method == "lemke" and np.all(sol.x == 0.0)
+
+
+def test_reference_scaling_rule():
+    """The reference QP is Jacobi-scaled only when diag(G) spans more than SCALE_SPREAD = 1e4."""
+    assert reference_mod.SCALE_SPREAD == 1e4
+    np.testing.assert_array_equal(reference_mod.reference_scaling(np.diag([1.0, 9.0e3])), [1.0, 1.0])
+    np.testing.assert_array_equal(reference_mod.reference_scaling(np.diag([1.0, 1.0e4])), [1.0, 1.0])
+    np.testing.assert_allclose(reference_mod.reference_scaling(np.diag([1.0, 4.0e4])), [1.0, 0.005])
+    np.testing.assert_allclose(reference_mod.reference_scaling(np.diag([4.0e-6, 1.0])), [500.0, 1.0])
+    assert reference_mod.reference_scaling(np.zeros((0, 0))).shape == (0,)
 
 
 # --------------------------------------------------------------------------------------
@@ -426,6 +508,12 @@ def test_registry_names_and_interface():
         assert isinstance(sol, LCPSolution)
         assert isinstance(sol.residual, float) and isinstance(sol.iterations, int)
         assert isinstance(sol.method, str) and sol.method and sol.fallbacks == 0
+        assert sol.method in SOLO_METHODS[name]
+    # iterations: pivots of the pivoting methods, none reported by scipy's nnls
+    assert get_solver("nnls").solve(G, b).iterations == 0
+    assert get_solver("pivoting").solve(G, b).iterations == 1
+    assert get_solver("lemke").solve(G, b).iterations == 3
+    assert get_solver("reference").solve(G, -b).iterations == 0
 
 
 @pytest.mark.parametrize("name", ["", "Pivoting", "pgs", "osqp", ["pivoting"]])
@@ -889,6 +977,8 @@ def test_reference_problem_is_dpp_cached_and_silent():
         warnings.simplefilter("error")
         sol = solver.solve(G2, b2)
     assert _reference_problem(m) is problem
+    fresh = reference_mod.ReferenceProblemCache()
+    assert fresh.get(m)[0] is fresh.get(m)[0] and fresh.get(m)[0] is not problem
     assert natural_residual(G2, b2, sol.x) <= RES_TOL
     np.testing.assert_allclose(sol.x, get_solver("nnls").solve(G2, b2).x,
                                rtol=0, atol=1e-10 * np.max(np.abs(np.linalg.solve(G2, b2))))
@@ -934,11 +1024,20 @@ def test_infeasible_lcp_is_reported(case):
             get_solver(name).solve(G, b)
         with pytest.raises(ContactSolverError, match=name):
             solo(name).solve(G, b)
+    messages = {"lemke": "lemke: ended on a secondary ray (infeasible LCP)",
+                "nnls": "nnls: Delassus matrix is not positive definite",
+                "pivoting": "pivoting: no solution found by block pivoting and lemke "
+                            "(infeasible LCP or G not PSD)"}
+    for name, message in messages.items():
+        with pytest.raises(ContactSolverError) as info:
+            get_solver(name).solve(G, b)
+        assert str(info.value) == message
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sol = get_solver("reference").solve(G, b)
     assert sol.residual == np.inf
-    assert not np.all(np.isfinite(sol.x))
+    assert np.all(np.isnan(sol.x)) and sol.x.shape == b.shape
+    assert (sol.iterations, sol.method, sol.fallbacks) == (0, "cvxpy-osqp", 0)
 
 
 def test_nnls_rejects_singular_psd():

@@ -84,8 +84,8 @@ def jacobi_scaling(G: np.ndarray) -> np.ndarray:
     For PSD G a zero diagonal entry means a zero row and column; that contact is left
     unscaled.
     """
-    g = np.diag(G).astype(float)
-    d = np.ones_like(g)
+    g = np.diag(G)
+    d = np.ones(g.shape)
     pos = g > 0.0
     d[pos] = 1.0 / np.sqrt(g[pos])
     return d
@@ -113,7 +113,7 @@ def _infeasible(G: np.ndarray, b: np.ndarray, x: np.ndarray, basic: np.ndarray) 
     without coming back.
     """
     w = G @ x + b
-    tol = ROUNDOFF * max(b.shape[0], 1) * EPS * _roundoff_scale(G, b, x)
+    tol = ROUNDOFF * b.shape[0] * EPS * _roundoff_scale(G, b, x)
     return (basic & (x < 0.0)) | (~basic & (w < -tol))
 
 
@@ -147,7 +147,6 @@ def block_principal_pivoting(G: np.ndarray, b: np.ndarray, max_iter: int | None 
         infeasible = _infeasible(G, b, x, basic)
         count = int(infeasible.sum())
         if count == 0:
-            np.maximum(x, 0.0, out=x)
             return solution(G, b, x, it, "block-pivoting")
         if count < best:
             best, backups = count, 3
@@ -170,8 +169,8 @@ def lemke(G: np.ndarray, b: np.ndarray, max_iter: int | None = None) -> LCPSolut
 
     Processes every LCP with a PSD (more generally copositive-plus) matrix: it ends
     with a solution, or on a secondary ray (returns ``None``) when the LCP is
-    infeasible. The pivots run on the Jacobi-scaled problem ``LCP(DGD, Db)/‖Db‖_∞``
-    (:func:`jacobi_scaling`), so that the relative pivot tolerances do not mistake a
+    infeasible. The pivots run on the Jacobi-scaled problem ``LCP(DGD, Db/‖Db‖_∞)``
+    (:func:`jacobi_scaling`; for PSD G, ``|(DGD)_ij| <= 1``), so that the relative pivot tolerances do not mistake a
     stiff or a soft contact for a zero column; the final support is polished by a
     least-squares solve on the original data and the residual recomputed from x.
     """
@@ -179,19 +178,17 @@ def lemke(G: np.ndarray, b: np.ndarray, max_iter: int | None = None) -> LCPSolut
     if np.all(b >= 0.0):
         return solution(G, b, np.zeros(m), 0, "lemke")
     d = jacobi_scaling(G)
-    Gs = G * np.outer(d, d)
     bs = d * b
     b_scale = float(np.max(np.abs(bs)))
-    G_scale = max(float(np.max(np.abs(Gs))), TINY)
-    sol = _lemke_unit(Gs / G_scale, bs / b_scale, max_iter or 50 * (m + 1))
+    sol = _lemke_unit(G * np.outer(d, d), bs / b_scale, max_iter or 50 * (m + 1))
     if sol is None:
         return None
-    x = _polish(G, b, d * sol[0] * (b_scale / G_scale), d)
+    x = _polish(G, b, d * sol[0] * b_scale)
     return solution(G, b, x, sol[1], "lemke")
 
 
 def _lemke_unit(G: np.ndarray, b: np.ndarray, max_iter: int) -> tuple[np.ndarray, int] | None:
-    """Lemke's pivots on a problem scaled to max|G| = max|b| = 1; returns (x, pivots) or None."""
+    """Lemke's pivots on a problem scaled to unit diagonal and max|b| = 1; returns (x, pivots) or None."""
     m = b.shape[0]
     # Tableau columns: w (0..m-1), z (m..2m-1), z0 (2m), rhs (2m+1).
     T = np.zeros((m, 2 * m + 2))
@@ -241,7 +238,7 @@ def _lemke_unit(G: np.ndarray, b: np.ndarray, max_iter: int) -> tuple[np.ndarray
     return x, it
 
 
-def _polish(G: np.ndarray, b: np.ndarray, x: np.ndarray, d: np.ndarray | None = None) -> np.ndarray:
+def _polish(G: np.ndarray, b: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Re-solve the equations of a guessed support; return the best of ``x`` and the re-solves.
 
     Two supports are tried: ``{x_i > 0}`` and ``{x_i/d_i > d_i w_i}`` (whichever of x_i and
@@ -250,10 +247,10 @@ def _polish(G: np.ndarray, b: np.ndarray, x: np.ndarray, d: np.ndarray | None = 
     ``(DGD)_SS y_S = -(Db)_S``, ``x = D y`` (least squares, so that a singular PSD block
     gives its minimum-norm solution), which keeps every contact's relative accuracy
     when the diagonal of G spans many decades. A re-solve is kept only if it is
-    non-negative and its residual (:func:`lcp_residual`) is not worse. ``d`` defaults to
+    non-negative and its residual (:func:`lcp_residual`) is not worse. D is
     :func:`jacobi_scaling`.
     """
-    d = jacobi_scaling(G) if d is None else d
+    d = jacobi_scaling(G)
     w = G @ x + b
     best, best_res = x, lcp_residual(G, b, x)
     for support in (x > 0.0, x / d > d * w):
@@ -287,4 +284,4 @@ def nnls_cholesky(G: np.ndarray, b: np.ndarray) -> LCPSolution:
     L = np.linalg.cholesky(G * np.outer(d, d))
     c = solve_triangular(L, d * b, lower=True)
     y, _ = nnls(L.T, -c)
-    return solution(G, b, _polish(G, b, d * y, d), 0, "nnls")
+    return solution(G, b, _polish(G, b, d * y), 0, "nnls")

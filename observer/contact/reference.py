@@ -92,6 +92,6 @@ def solve_reference(G: np.ndarray, b: np.ndarray) -> LCPSolution:
     if x.value is None:
         return _failure(m)
     y = np.clip(np.asarray(x.value, dtype=float), 0.0, None)
-    sol = _polish(G, b, d * y, d)
+    sol = _polish(G, b, d * y)
     iters = int(problem.solver_stats.num_iters or 0) if problem.solver_stats else 0
     return solution(G, b, sol, iters, METHOD)
