@@ -51,12 +51,17 @@ def cmd_run(args) -> int:
     sc = load_scenario(args.scenario, parse_pairs(args.set))
     observers = [o for o in (args.observers or "").split(",") if o]
     res = simulate(sc, h=args.h, t_end=args.t_end, solver=args.solver, observers=observers,
-                   source=args.source, log=args.log)
+                   source=args.source, log=args.log, engine=args.engine,
+                   record_every=args.record_every)
     path = res.write(args.out)
     meta = res.metadata
     msg = (f"{sc.name}: {meta['steps']} steps of h = {meta['h']:g} in {meta['wall_time_s']:.2f} s "
-           f"({meta['steps_per_second']:.0f} steps/s), {int(res.active[1:].any(axis=1).sum())} "
-           f"steps with closed contacts, max contact residual {meta['max_contact_residual']:.1e}")
+           f"({meta['steps_per_second']:.0f} steps/s, {meta['engine']} engine"
+           + (f", compiled in {meta['compile_time_s']:.1f} s" if meta['compile_time_s'] > 0.05 else "")
+           + f"), {int(res.active[1:].any(axis=1).sum())} "
+           f"steps with closed contacts, max contact residual {meta['max_contact_residual']:.1e}"
+           + (f", {meta['solver_fallbacks']} steps re-solved by the reference solver"
+              if meta['solver_fallbacks'] else ""))
     print(msg)
     if res.slaves:
         summary = res.synchronization()
@@ -120,6 +125,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--observers", help="comma-separated observers, e.g. jump,nojump")
     s.add_argument("--source", choices=["master", "log", "self"], help="switching signal source")
     s.add_argument("--log", help="closing log CSV (contact,t_close,t_open) for --source log")
+    s.add_argument("--engine", choices=["compiled", "python"], default="compiled",
+                   help="time loop: the numba kernel (default) or the numpy reference")
+    s.add_argument("--record-every", type=int, default=1, metavar="K",
+                   help="keep every K-th step (default 1)")
     s.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override (param.NAME for builder parameters, else dotted TOML key)")
     s.add_argument("--out", required=True, help="output file (.csv or .parquet)")

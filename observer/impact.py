@@ -10,8 +10,8 @@ velocity γ⁻ and impulse Λ ≥ 0, the post-impact velocity is γ⁺ = γ⁻ +
 
 For one contact the two coincide exactly.
 
-:func:`poisson_target` turns the Poisson map into the target velocity of the discrete step
-(:mod:`observer.stepping`), which makes the discrete Poisson step equal to the discrete
+:func:`poisson_step` is the discrete Poisson step of :mod:`observer.stepping`: Glocker's law
+with the step's Delassus matrix on the step's pre-impact velocity, equal to the discrete
 Newton step for one contact.
 """
 
@@ -99,31 +99,29 @@ def poisson_impact(G: np.ndarray, gamma_minus: np.ndarray, eps: np.ndarray, solv
     return lam_c + lam_e
 
 
-def poisson_target(G: np.ndarray, gamma_k: np.ndarray, eps: np.ndarray,
-                   solve: Solve) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Target contact velocity τ of the discrete Poisson step, and its impulsive part.
+def poisson_step(G: np.ndarray, gamma_free: np.ndarray, gamma_k: np.ndarray, eps: np.ndarray,
+                 solve: Solve) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Impulse of the discrete Poisson step: Glocker's law with the step's Delassus matrix.
 
-    ``τ = γ_E − (1+ε)∘γ_C``, where ``γ_C = γ_k + GΛ_C ≥ 0`` and ``γ_E = γ_C + GΛ_E ≥ 0`` are
-    the velocities after Glocker's compression and expansion phases (:func:`poisson_phases`)
-    for the pre-impact velocity γ_k of the step. On a contact that the compression closes
-    (γ_C,i = 0) the target is Glocker's post-impact velocity γ_E,i; on a contact still
-    separating after compression (γ_C,i > 0, Λ_C,i = 0), one that the step's predictor closed
-    although it leaves, the target is lowered by (1+ε_i)γ_C,i, which is Newton's discrete
-    target −ε_iγ_k,i when the contact is not coupled to an impacting one. Hence for one
-    contact ``τ = −εγ_k`` exactly, for either sign of γ_k (returned in that form, so that the
-    Poisson and Newton steps see bitwise the same LCP). τ is a continuous function of γ_k.
+    The step's pre-impact velocity is ``γ̃ = (γ_free + ε∘γ_k)/(1+ε)``; the impulse is
+    ``P = Λ_C + Λ_E`` with (Λ_C, Λ_E) = :func:`poisson_phases` (G, γ̃, ε), so that
+    ``0 ≤ γ̃ + GΛ_C ⊥ Λ_C ≥ 0`` and ``0 ≤ γ̃ + GP ⊥ Λ_E − ε∘Λ_C ≥ 0`` hold exactly. Newton's
+    discrete law is ``P = LCP(G, γ_free + e∘γ_k) = LCP(G, (1+e)∘γ̃)``, the Newton map on the same
+    γ̃; for one contact the two maps coincide, and the one-contact impulse is returned in
+    Newton's closed form ``max(0, −(γ_free + εγ_k)/G)`` (bitwise the Newton step).
 
     Returns
     -------
-    tau, lam_c, lam_e : ndarray
-        The target and the compression and expansion impulses of the impulsive part.
+    P, lam_c, lam_e : ndarray
     """
-    lam_c, lam_e = poisson_phases(G, gamma_k, eps, solve)
     if gamma_k.shape[0] == 1:
-        return -eps * gamma_k, lam_c, lam_e
-    gamma_c = gamma_k + G @ lam_c
-    gamma_e = gamma_c + G @ lam_e
-    return gamma_e - (1.0 + eps) * gamma_c, lam_c, lam_e
+        b = gamma_free + eps * gamma_k
+        P = np.array([-b[0] / G[0, 0]]) if b[0] < 0.0 else np.zeros(1)
+        lam_c = P / (1.0 + eps)
+        return P, lam_c, P - lam_c
+    gamma_t = (gamma_free + eps * gamma_k) / (1.0 + eps)
+    lam_c, lam_e = poisson_phases(G, gamma_t, eps, solve)
+    return lam_c + lam_e, lam_c, lam_e
 
 
 def impact(law: ImpactLaw, G: np.ndarray, gamma_minus: np.ndarray, active: np.ndarray,

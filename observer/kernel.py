@@ -274,14 +274,15 @@ def step_system(k, q, u, act, a, project, law, sch, wk, out):
     """One Moreau–Jean step on the closed set ``act[:a]``.
 
     ``sch`` = (h, θ, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, f̄, ν, ν̇, W (CSC: Wp, Wi,
-    Wv), Â⁻¹W, Ĝ, G₀, N⁻¹W, WᵀN⁻¹W, e, tol); ``wk`` = work buffers ((n,), (10, m),
+    Wv), (Â⁻¹W)ᵀ, Ĝ, G₀, (N⁻¹W)ᵀ, WᵀN⁻¹W, e, tol) — the n×m matrices transposed, so that
+    a contact's column is contiguous; ``wk`` = work buffers ((n,), (10, m),
     (4, m, m), (2, m) bool); ``out`` = (q1, u1, P, Σ, q_pre, stats) with stats = [solves,
     iterations, max residual]. Writes q_{k+1}, u_{k+1}, P[:a], Σ[:a] and the position before
     the projection; returns the status. (Tuples keep the call inlinable: numba inlines
     functions of at most 32 arguments, and an inlined call costs no reference counting.)
     """
     (h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, nu, nu_dot, Wp, Wi, Wv,
-     AinvW, Ghat, G0, KinvW, L, e, tol) = sch
+     AinvWT, Ghat, G0, KinvWT, L, e, tol) = sch
     wk_f, wk_m, wk_mm, wk_b = wk
     q1, u1, P, sig, qpre, stats = out
     n = q.shape[0]
@@ -307,69 +308,57 @@ def step_system(k, q, u, act, a, project, law, sch, wk, out):
         for r in range(a):
             j = act[r]
             gk[r] = _contact_rows(Wp, Wi, Wv, u, j) + nu_dot[k, j]
-        # target velocity τ (kept in bvec), then b = γ_free − τ
-        if law == 0:
-            for r in range(a):
-                bvec[r] = -e[act[r]] * gk[r]
-        else:
-            for r in range(a):
-                for c in range(a):
-                    G[r, c] = G0[act[r], act[c]]
-            if a == 1:
-                bvec[0] = -e[act[0]] * gk[0]
-            else:
-                it, st, res = solve_lcp(G, gk, a, lc, basic, infeas, Gs, rhs, sol, Lf, max_iter)
-                stats[0] += 1
-                stats[1] += it
-                if st != OK or not res <= tol:
-                    return LCP_FAILED
-                if res > stats[2]:
-                    stats[2] = res
-                for r in range(a):
-                    s = 0.0
-                    for c in range(a):
-                        s += G[r, c] * lc[c]
-                    gc[r] = gk[r] + s
-                for r in range(a):
-                    s = 0.0
-                    for c in range(a):
-                        s += G[r, c] * (e[act[c]] * lc[c])
-                    x[r] = gc[r] + s
-                for r in range(a):
-                    rhs[r] = x[r]
-                it, st, res = solve_lcp(G, rhs, a, le, basic, infeas, Gs, x, sol, Lf, max_iter)
-                stats[0] += 1
-                stats[1] += it
-                if st != OK or not res <= tol:
-                    return LCP_FAILED
-                if res > stats[2]:
-                    stats[2] = res
-                for r in range(a):
-                    le[r] = e[act[r]] * lc[r] + le[r]          # Λ_E = ε∘Λ_C + μ
-                for r in range(a):
-                    s = 0.0
-                    for c in range(a):
-                        s += G[r, c] * le[c]
-                    bvec[r] = (gc[r] + s) - (1.0 + e[act[r]]) * gc[r]
-        for r in range(a):
-            j = act[r]
-            gfree = _contact_rows(Wp, Wi, Wv, uf, j) + nu_dot[k + 1, j]
-            bvec[r] = gfree - bvec[r]
+            gc[r] = _contact_rows(Wp, Wi, Wv, uf, j) + nu_dot[k + 1, j]          # γ_free
         for r in range(a):
             for c in range(a):
                 G[r, c] = Ghat[act[r], act[c]]
-        it, st, res = solve_lcp(G, bvec, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter)
-        stats[0] += 1
-        stats[1] += it
-        if st != OK or not res <= tol:
-            return LCP_FAILED
-        if res > stats[2]:
-            stats[2] = res
+        if law == 0 or a == 1:
+            # Newton, and Poisson on one contact (the same map): LCP(Ĝ, γ_free + e∘γ_k)
+            for r in range(a):
+                bvec[r] = gc[r] + e[act[r]] * gk[r]
+            it, st, res = solve_lcp(G, bvec, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter)
+            stats[0] += 1
+            stats[1] += it
+            if st != OK or not res <= tol:
+                return LCP_FAILED
+            if res > stats[2]:
+                stats[2] = res
+        else:
+            # Poisson: Glocker's phases with Ĝ on γ̃ = (γ_free + ε∘γ_k)/(1+ε)
+            for r in range(a):
+                er = e[act[r]]
+                bvec[r] = (gc[r] + er * gk[r]) / (1.0 + er)
+            it, st, res = solve_lcp(G, bvec, a, lc, basic, infeas, Gs, rhs, sol, Lf, max_iter)
+            stats[0] += 1
+            stats[1] += it
+            if st != OK or not res <= tol:
+                return LCP_FAILED
+            if res > stats[2]:
+                stats[2] = res
+            for r in range(a):                                   # γ_C = γ̃ + ĜΛ_C
+                acc = 0.0
+                for c in range(a):
+                    acc += G[r, c] * lc[c]
+                gc[r] = bvec[r] + acc
+            for r in range(a):                                   # γ_C + Ĝ(ε∘Λ_C)
+                acc = 0.0
+                for c in range(a):
+                    acc += G[r, c] * (e[act[c]] * lc[c])
+                le[r] = gc[r] + acc
+            it, st, res = solve_lcp(G, le, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter)
+            stats[0] += 1
+            stats[1] += it
+            if st != OK or not res <= tol:
+                return LCP_FAILED
+            if res > stats[2]:
+                stats[2] = res
+            for r in range(a):                                   # P = Λ_C + (ε∘Λ_C + μ)
+                x[r] = lc[r] + (e[act[r]] * lc[r] + x[r])
         for r in range(a):
             P[r] = x[r]
             j = act[r]
             for i in range(n):
-                u1[i] += AinvW[i, j] * x[r]
+                u1[i] += AinvWT[j, i] * x[r]
     for i in range(n):
         q1[i] = q[i] + h * ((1.0 - theta) * u[i] + theta * u1[i])
         qpre[i] = q1[i]
@@ -396,24 +385,150 @@ def step_system(k, q, u, act, a, project, law, sch, wk, out):
             sig[r] = s_[r]
             j = act[r]
             for i in range(n):
-                q1[i] += KinvW[i, j] * s_[r]
+                q1[i] += KinvWT[j, i] * s_[r]
     return OK
+
+
+# ---------------------------------------------------------------------------------------
+# streaming summary (store="summary"): V of every observer and its parts, without trajectories
+# ---------------------------------------------------------------------------------------
+F_VON, F_VMAX, F_VEND, F_NINC, F_MAXINC, F_DAMP, F_IMP, F_PROJ, F_MAXIMP, F_KON = range(10)
+SUMMARY_FIELDS = 10
+"""Per observer: V(t_on), max V in the window, V at the end, steps with V_{k+1} > V_k, the
+largest relative rise, the sums of the damping, impulse and remaining (projection and, for
+θ ≠ ½, numerical) parts of ΔV, the largest impulse part relative to V_k, the first window
+sample; then, per threshold ρ, the first window sample with V ≤ ρV(t_on) and the last one
+with V > ρV(t_on) (−1: none)."""
+
+
+@njit(cache=True, inline="always")
+def _quad(structure, A, x, bw):
+    """xᵀAx for dense A or symmetric A in lower band storage."""
+    n = x.shape[0]
+    acc = 0.0
+    if structure == STRUCTURE_DENSE:
+        for i in range(n):
+            r = 0.0
+            for j in range(n):
+                r += A[i, j] * x[j]
+            acc += x[i] * r
+    else:
+        for j in range(n):
+            acc += A[0, j] * x[j] * x[j]
+            for d in range(1, bw + 1):
+                i = j + d
+                if i >= n:
+                    break
+                acc += 2.0 * A[d, j] * x[i] * x[j]
+    return acc
+
+
+@njit(cache=True)
+def _summary_sample(kg, V, s, summ, k_on, k_off, rhos):
+    """Fold the sample V(t_kg) of observer s into its summary row."""
+    nr = rhos.shape[0]
+    summ[s, F_VEND] = V
+    if kg < k_on or kg > k_off:
+        return
+    if kg == k_on:
+        summ[s, F_VON] = V
+        summ[s, F_KON] = kg
+        summ[s, F_VMAX] = V
+    if V > summ[s, F_VMAX]:
+        summ[s, F_VMAX] = V
+    V0 = summ[s, F_VON]
+    for i in range(nr):
+        below = V <= rhos[i] * V0
+        if below and summ[s, SUMMARY_FIELDS + i] < 0:
+            summ[s, SUMMARY_FIELDS + i] = kg
+        if not below:
+            summ[s, SUMMARY_FIELDS + nr + i] = kg
+
+
+@njit(cache=True)
+def _summary_step(kg, s, qs, us, qprev_m, uprev_m, vprev, Vprev, Pfull_m, P, act, a,
+                  structure, Mq, Kq, Cq, bw, h, Wp, Wi, Wv, summ, k_on, k_off, rhos, wv):
+    """After observer s made step kg−1 → kg: V, its damping and impulse parts, the rest."""
+    n = qs.shape[1]
+    m = Wp.shape[0] - 1
+    for i in range(n):
+        wv[i] = us[s, i] - us[0, i]
+    V = 0.5 * _quad(structure, Mq, wv[:n], bw)
+    for i in range(n):
+        wv[n + i] = 0.5 * (wv[i] + vprev[s, i])            # v̄
+        vprev[s, i] = wv[i]
+    damping = -h * _quad(structure, Cq, wv[n:2 * n], bw)
+    for i in range(n):
+        wv[i] = qs[s, i] - qs[0, i]
+    V += 0.5 * _quad(structure, Kq, wv[:n], bw)
+    impulse = 0.0                                         # (Wᵀv̄)ᵀ(P_s − P_m)
+    for j in range(m):
+        wv[2 * n + j] = -Pfull_m[j]
+    for r in range(a):
+        wv[2 * n + act[r]] += P[r]
+    for j in range(m):
+        dP = wv[2 * n + j]
+        if dP != 0.0:
+            g = 0.0
+            for p in range(Wp[j], Wp[j + 1]):
+                g += Wv[p] * wv[n + Wi[p]]
+            impulse += g * dP
+    dV = V - Vprev[s]
+    if kg - 1 >= k_on and kg <= k_off:
+        if dV > 0.0:
+            summ[s, F_NINC] += 1
+            if Vprev[s] > 0.0 and dV / Vprev[s] > summ[s, F_MAXINC]:
+                summ[s, F_MAXINC] = dV / Vprev[s]
+        summ[s, F_DAMP] += damping
+        summ[s, F_IMP] += impulse
+        summ[s, F_PROJ] += dV - damping - impulse
+        if Vprev[s] > 0.0 and impulse / Vprev[s] > summ[s, F_MAXIMP]:
+            summ[s, F_MAXIMP] = impulse / Vprev[s]
+    Vprev[s] = V
+    _summary_sample(kg, V, s, summ, k_on, k_off, rhos)
+    return V
+
+
+@njit(cache=True)
+def summary_start(qs, us, structure, Mq, Kq, bw, vprev, Vprev, summ, k_on, k_off, rhos, rec_V):
+    """The summary's first sample: V(t_0) of every observer, and v_0 for the damping part."""
+    S, n = qs.shape
+    wv = np.empty(n)
+    for s in range(1, S):
+        for i in range(n):
+            wv[i] = us[s, i] - us[0, i]
+            vprev[s, i] = wv[i]
+        V = 0.5 * _quad(structure, Mq, wv, bw)
+        for i in range(n):
+            wv[i] = qs[s, i] - qs[0, i]
+        V += 0.5 * _quad(structure, Kq, wv, bw)
+        Vprev[s] = V
+        rec_V[s, 0] = V
+        _summary_sample(0, V, s, summ, k_on, k_off, rhos)
 
 
 # ---------------------------------------------------------------------------------------
 # the loop: master (system 0) and observers (1..S-1)
 # ---------------------------------------------------------------------------------------
 @njit(cache=True)
-def advance(k0, k1, s0, qs, us, jumps, master_projection, coupled, chi_log, use_log, chi_now,
+def advance(k0, k1, s0, kb, qs, us, jumps, master_projection, coupled, chi_log, use_log, chi_now,
             record_every, rec_q, rec_u, rec_P, rec_sig, rec_act, rec_chi, rec_qpre, record_pre,
+            summary, k_on, k_off, rhos, summ, vprev, Vprev, rec_V, closings, prev_act, Mq, Kq, Cq,
             law, h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, nu, nu_dot,
-            Wp, Wi, Wv, AinvW, Ghat, G0, KinvW, L, e, tol, stats):
+            Wp, Wi, Wv, AinvWT, Ghat, G0, KinvWT, L, e, tol, stats):
     """Advance every system from step k0 (starting with system s0) up to step k1.
 
-    ``qs``, ``us`` (S, n) hold the current states and are updated in place; ``chi_now`` (m,)
-    the closed set fed to the observers at the current step (the master's, or the log's).
-    Row r of the records holds step ``r·record_every`` (row 0: the initial state, written
-    by the caller); impulses and multipliers are those of the step ending at the row.
+    The signals (``fbar``, ``nu``, ``nu_dot``, ``coupled``, ``chi_log``) are a window of the
+    grid starting at step ``kb`` (row k − kb holds step k). ``qs``, ``us`` (S, n) hold the
+    current states and are updated in place; ``chi_now`` (m,) the closed set fed to the
+    observers at the current step (the master's, or the log's). Row r of the records holds
+    step ``r·record_every`` (row 0: the initial state, written by the caller); impulses and
+    multipliers are those of the step ending at the row.
+
+    With ``summary``, every step also updates the streaming summary of each observer
+    (:data:`SUMMARY_FIELDS`, coupling window = grid samples k_on..k_off, thresholds ``rhos``),
+    records V at the recorded rows (``rec_V``), and counts the master's closings per contact.
+    ``stats`` = [solves, iterations, max residual, min gap after a step, its step].
 
     Returns ``(k, s, status)``: ``status == OK`` and k = k1 when done; otherwise the step and
     system that failed (their state untouched).
@@ -426,11 +541,14 @@ def advance(k0, k1, s0, qs, us, jumps, master_projection, coupled, chi_log, use_
     u1 = np.empty(n)
     P = np.zeros(m)
     sig = np.zeros(m)
+    Pfull_m = np.zeros(m)
+    wv = np.empty(2 * n + m)
     sch = (h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, nu, nu_dot, Wp, Wi, Wv,
-           AinvW, Ghat, G0, KinvW, L, e, tol)
+           AinvWT, Ghat, G0, KinvWT, L, e, tol)
     wk = (np.empty(n), np.empty((10, m)), np.empty((4, m, m)), np.zeros((2, m), np.bool_))
     out = (q1, u1, P, sig, qpre, stats)
     for k in range(k0, k1):
+        kl = k - kb
         rec = (k + 1) % record_every == 0
         r = (k + 1) // record_every
         first = s0 if k == k0 else 0
@@ -438,17 +556,17 @@ def advance(k0, k1, s0, qs, us, jumps, master_projection, coupled, chi_log, use_
             q = qs[s]
             u = us[s]
             if s == 0:
-                a = predicted_active(k, q, u, h, Wp, Wi, Wv, nu, nu_dot, act)
+                a = predicted_active(kl, q, u, h, Wp, Wi, Wv, nu, nu_dot, act)
                 project = master_projection
                 if use_log:
                     for j in range(m):
-                        chi_now[j] = chi_log[k, j]
+                        chi_now[j] = chi_log[kl, j]
                 else:
                     for j in range(m):
                         chi_now[j] = False
                     for i in range(a):
                         chi_now[act[i]] = True
-            elif coupled[k]:
+            elif coupled[kl]:
                 a = 0
                 for j in range(m):
                     if chi_now[j]:
@@ -456,14 +574,36 @@ def advance(k0, k1, s0, qs, us, jumps, master_projection, coupled, chi_log, use_
                         a += 1
                 project = jumps[s]
             else:
-                a = predicted_active(k, q, u, h, Wp, Wi, Wv, nu, nu_dot, act)
+                a = predicted_active(kl, q, u, h, Wp, Wi, Wv, nu, nu_dot, act)
                 project = master_projection
-            status = step_system(k, q, u, act, a, project, law, sch, wk, out)
+            status = step_system(kl, q, u, act, a, project, law, sch, wk, out)
             if status != OK:
                 return k, s, status
             for i in range(n):
                 q[i] = q1[i]
                 u[i] = u1[i]
+            if s == 0:
+                for j in range(m):                                  # closings and penetration
+                    Pfull_m[j] = 0.0
+                for i in range(a):
+                    Pfull_m[act[i]] = P[i]
+                for i in range(a):
+                    if not prev_act[act[i]]:
+                        closings[act[i]] += 1
+                for j in range(m):
+                    prev_act[j] = False
+                for i in range(a):
+                    prev_act[act[i]] = True
+                for j in range(m):
+                    g = _contact_rows(Wp, Wi, Wv, q1, j) + nu[kl + 1, j]
+                    if g < stats[3]:
+                        stats[3] = g
+                        stats[4] = k + 1
+            elif summary:
+                V = _summary_step(k + 1, s, qs, us, qs[0], us[0], vprev, Vprev, Pfull_m, P, act, a,
+                                  structure, Mq, Kq, Cq, bw, h, Wp, Wi, Wv, summ, k_on, k_off, rhos, wv)
+                if rec:
+                    rec_V[s, r] = V
             if rec:
                 for i in range(n):
                     rec_q[s, r, i] = q1[i]

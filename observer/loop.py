@@ -31,7 +31,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from observer.errors import InputError
-from observer.stepping import MoreauJean
+from observer.stepping import Grid, MoreauJean
 
 ENGINES = ("compiled", "python")
 """Registered engines; the first is the default."""
@@ -49,10 +49,14 @@ class LoopInput:
     jumps : ndarray of bool, shape (S,)
         Position jumps while coupled (row 0 ignored).
     master_projection : bool
-    coupled : ndarray of bool, shape (N,)
-        Step k couples the observers to χ_k.
-    chi_log : ndarray of bool, shape (N, m) or None
-        χ_k from a log instead of the master's closed set.
+    coupling : (t_on, t_off) or None
+        Steps with t_on ≤ t_k ≤ t_off couple the observers to χ_k (None: every step).
+    self_driven : bool
+        No step is coupled (``source="self"``): each observer uses its own predicted set.
+    log : DataFrame or None
+        Closing log (contact, t_close, t_open): χ_k from it instead of the master's set.
+    chi : ndarray of bool, shape (N, m), optional
+        χ_k given explicitly (row k = step k), overriding the master's set and the log.
     metric : ndarray (n, n) or None
         Projection metric (None: K).
     """
@@ -62,9 +66,28 @@ class LoopInput:
     u0: np.ndarray
     jumps: np.ndarray
     master_projection: bool
-    coupled: np.ndarray
-    chi_log: np.ndarray | None = None
+    coupling: tuple[float, float] | None = None
+    self_driven: bool = False
+    log: object = None
+    chi: np.ndarray | None = None
     metric: np.ndarray | None = None
+
+    def coupled(self, t: np.ndarray) -> np.ndarray:
+        """Coupling of the steps of the window with grid points ``t`` (bool, len(t) − 1)."""
+        from observer.switching import coupling_mask
+        mask = coupling_mask(t, self.coupling)
+        if self.self_driven:
+            mask[:] = False
+        return mask
+
+    def chi_window(self, t: np.ndarray, k0: int) -> np.ndarray | None:
+        """χ of the steps of the window starting at step k0 (None: the master's closed set)."""
+        if self.chi is not None:
+            return np.asarray(self.chi[k0:k0 + t.size - 1], dtype=bool)
+        if self.log is not None:
+            from observer.switching import sample_log
+            return sample_log(self.log, t, self.stepper.system.m)
+        return None
 
 
 @dataclass(frozen=True)
@@ -90,6 +113,8 @@ class LoopOutput:
     fallbacks: list = field(default_factory=list)
     compile_time_s: float = 0.0
     run_time_s: float = 0.0
+    V: np.ndarray | None = None
+    summary: dict | None = None
 
 
 def check_engine(engine: str) -> str:
@@ -118,19 +143,33 @@ def projection_matrices(stepper: MoreauJean, metric: np.ndarray | None) -> tuple
     return NinvW, 0.5 * (L + L.T)
 
 
+STORES = ("full", "summary")
+WINDOW = 1 << 16
+"""Steps per window of the compiled engine (the signals of one window are built at a time)."""
+
+
 def run(inp: LoopInput, engine: str = "compiled", record_every: int = 1,
-        record_pre: bool = False) -> LoopOutput:
-    """Advance the master and the observers of ``inp`` over the stepper's grid."""
+        record_pre: bool = False, store: str = "full", rhos: tuple = (1e-3, 1e-6, 1e-9)) -> LoopOutput:
+    """Advance the master and the observers of ``inp`` over the stepper's grid.
+
+    ``store="summary"`` (compiled engine) also computes, streaming over every step, what the
+    synchronization metrics need (:func:`summary_frame`); with it the trajectories are kept
+    only every ``record_every`` steps, so memory does not grow with the horizon beyond that.
+    """
     check_engine(engine)
     record_every = check_record_every(record_every)
+    if store not in STORES:
+        raise InputError("store", f"must be one of {list(STORES)}, got {store!r}")
     if engine == "python":
+        if store == "summary":
+            raise InputError("store", 'store="summary" needs engine="compiled"')
         return _run_python(inp, record_every, record_pre)
-    return _run_compiled(inp, record_every, record_pre)
+    return _run_compiled(inp, record_every, record_pre, store == "summary", tuple(rhos))
 
 
 def _allocate(inp: LoopInput, record_every: int, record_pre: bool):
     stepper = inp.stepper
-    steps, n, m = stepper.grid.steps, stepper.system.n, stepper.system.m
+    steps, n, m = stepper.steps, stepper.system.n, stepper.system.m
     S = inp.q0.shape[0]
     R = steps // record_every + 1
     rec = {"q": np.empty((S, R, n)), "u": np.empty((S, R, n)), "P": np.zeros((S, R, m)),
@@ -152,6 +191,8 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool) -> LoopOutp
     NinvW, L = projection_matrices(stepper, inp.metric)
     S = inp.q0.shape[0]
     states = [(inp.q0[s].copy(), inp.u0[s].copy()) for s in range(S)]
+    coupled = inp.coupled(stepper.grid.t)
+    chi_log = inp.chi_window(stepper.grid.t, 0)
     t0 = time.perf_counter()
     for k in range(stepper.grid.steps):
         r = (k + 1) // record_every if (k + 1) % record_every == 0 else -1
@@ -161,8 +202,8 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool) -> LoopOutp
             if s == 0:
                 act = np.flatnonzero(stepper.predicted_active(k, q, u))
                 proj = inp.master_projection
-                chi = act if inp.chi_log is None else np.flatnonzero(inp.chi_log[k])
-            elif inp.coupled[k]:
+                chi = act if chi_log is None else np.flatnonzero(chi_log[k])
+            elif coupled[k]:
                 act, proj = chi, bool(inp.jumps[s])
             else:
                 act, proj = np.flatnonzero(stepper.predicted_active(k, q, u)), inp.master_projection
@@ -223,105 +264,193 @@ def compile_time() -> float:
             "simulation": {"t_end": 0.02, "h": 0.01}}, "warm-up")
         st = MoreauJean(sc.system, sc.law, sc.h, sc.t_end, sc.theta)
         inp = LoopInput(st, np.stack([sc.q0, sc.q0]), np.stack([sc.u0, sc.u0]), np.array([False, True]),
-                        False, np.ones(st.grid.steps, bool))
-        _run_compiled(inp, 1, True, warm=True)
+                        False)
+        _run_compiled(inp, 1, True, True, (1e-3,), warm=True)
         _COMPILED = True
     return time.perf_counter() - t0
 
 
 def kernel_data(stepper: MoreauJean, metric: np.ndarray | None) -> tuple:
-    """The scheme's arrays in the kernel's argument order (after ``h, theta``)."""
+    """The scheme's constant arrays: ``(structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw)`` and
+    ``(Wp, Wi, Wv, (Â⁻¹W)ᵀ, Ĝ, G₀, (N⁻¹W)ᵀ, WᵀN⁻¹W, e, tol)`` in the kernel's order."""
     from observer.kernel import STRUCTURE_BANDED, STRUCTURE_DENSE
 
-    S, grid = stepper.S, stepper.grid
+    S = stepper.S
     Wc = sp.csc_matrix(S.W)
     Wc.sort_indices()
     NinvW, L = projection_matrices(stepper, metric)
-    band = S.band
-    if band is None:
-        structure, bw = STRUCTURE_DENSE, 0
-        dummy = np.zeros((1, 1))
-        Bu, Bq, Bf, Ru_b, Rq_b, Ach_b = S.Bu, S.Bq, S.Bf, dummy, dummy, dummy
-    else:
-        structure, bw = STRUCTURE_BANDED, band.bw
-        dummy = np.zeros((1, 1))
-        Bu = Bq = Bf = dummy
-        Ru_b, Rq_b, Ach_b = band.Ru, band.Rq, band.Achol
     c = lambda a, dtype=np.float64: np.ascontiguousarray(a, dtype=dtype)  # noqa: E731
-    return (structure, c(Bu), c(Bq), c(Bf), c(Ru_b), c(Rq_b), c(Ach_b), int(bw), c(grid.fbar),
-            c(grid.nu), c(grid.nu_dot), c(Wc.indptr, np.int64), c(Wc.indices, np.int64), c(Wc.data),
-            c(S.AinvW), c(S.Ghat), c(S.G0), c(NinvW), c(L), c(stepper.law.restitution),
-            float(stepper.residual_tol))
+    dummy = np.zeros((1, 1))
+    if S.band is None:
+        head = (STRUCTURE_DENSE, c(S.Bu), c(S.Bq), c(S.Bf), dummy, dummy, dummy, 0)
+    else:
+        b = S.band
+        head = (STRUCTURE_BANDED, dummy, dummy, dummy, c(b.Ru), c(b.Rq), c(b.Achol), int(b.bw))
+    tail = (c(Wc.indptr, np.int64), c(Wc.indices, np.int64), c(Wc.data), c(S.AinvW.T), c(S.Ghat),
+            c(S.G0), c(NinvW.T), c(L), c(stepper.law.restitution), float(stepper.residual_tol))
+    return head, tail
 
 
-def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, warm: bool = False) -> LoopOutput:
-    from observer.kernel import OK, PROJECTION_FAILED, advance
+def quadratic_forms(stepper: MoreauJean) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """M, K and the symmetric part of C in the kernel's structure (dense or lower band)."""
+    from observer.stepping import to_band
+
+    sys_ = stepper.system
+    C = 0.5 * (sys_.C + sys_.C.T)
+    if stepper.S.band is None:
+        return tuple(np.ascontiguousarray(A) for A in (sys_.M, sys_.K, C))
+    bw = stepper.S.band.bw
+    return tuple(np.ascontiguousarray(to_band(A, bw)) for A in (sys_.M, sys_.K, C))
+
+
+def coupling_samples(inp: LoopInput) -> tuple[int, int]:
+    """Grid samples k_on..k_off of the coupling window (t_on ≤ t_k ≤ t_off), as in
+    :func:`observer.metrics.sync_time`; the whole run when not coupled to a window."""
+    st = inp.stepper
+    if inp.coupling is None or inp.self_driven:
+        return 0, st.steps
+    t_on, t_off = inp.coupling
+    k_on = max(0, int(np.ceil((t_on - st.t0) / st.h - 1e-9)))
+    while k_on > 0 and st.time(k_on - 1) >= t_on:
+        k_on -= 1
+    while k_on <= st.steps and st.time(k_on) < t_on:
+        k_on += 1
+    k_off = min(st.steps, int(np.floor((t_off - st.t0) / st.h + 1e-9)))
+    while k_off < st.steps and st.time(k_off + 1) <= t_off:
+        k_off += 1
+    while k_off >= 0 and st.time(k_off) > t_off:
+        k_off -= 1
+    return k_on, k_off
+
+
+def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: bool = False,
+                  rhos: tuple = (1e-3,), warm: bool = False) -> LoopOutput:
+    from observer.kernel import OK, PROJECTION_FAILED, SUMMARY_FIELDS, advance, summary_start
 
     stepper = inp.stepper
-    steps, m = stepper.grid.steps, stepper.system.m
+    steps, n, m = stepper.steps, stepper.system.n, stepper.system.m
     S = inp.q0.shape[0]
     ct = 0.0 if (warm or _COMPILED) else compile_time()
     rec, rows = _allocate(inp, record_every, record_pre)
-    data = kernel_data(stepper, inp.metric)
+    head, tail = kernel_data(stepper, inp.metric)
     qs, us = inp.q0.astype(float).copy(), inp.u0.astype(float).copy()
     jumps = np.asarray(inp.jumps, dtype=np.bool_)
-    coupled = np.asarray(inp.coupled, dtype=np.bool_)
-    use_log = inp.chi_log is not None
-    chi_log = np.asarray(inp.chi_log, dtype=np.bool_) if use_log else np.zeros((1, 1), np.bool_)
     chi_now = np.zeros(m, dtype=np.bool_)
-    stats = np.zeros(3)
+    stats = np.array([0.0, 0.0, 0.0, np.inf, -1.0])
     law = int(stepper.law.code)
+    Mq, Kq, Cq = quadratic_forms(stepper) if summary else (np.zeros((1, 1)),) * 3
+    rho_arr = np.asarray(rhos, dtype=np.float64)
+    k_on, k_off = coupling_samples(inp)
+    summ = np.zeros((S, SUMMARY_FIELDS + 2 * rho_arr.size))
+    summ[:, SUMMARY_FIELDS:] = -1.0
+    vprev, Vprev = np.zeros((S, n)), np.zeros(S)
+    rec_V = np.zeros((S, rows.size if summary else 0))
+    closings, prev_act = np.zeros(m, np.int64), np.zeros(m, np.bool_)
+    if summary:
+        summary_start(qs, us, head[0], Mq, Kq, head[7], vprev, Vprev, summ, k_on, k_off, rho_arr, rec_V)
     fallbacks: list[dict] = []
-    k, s = 0, 0
     t0 = time.perf_counter()
+    k, s = 0, 0
     while k < steps:
-        k, s, status = advance(k, steps, s, qs, us, jumps, bool(inp.master_projection), coupled,
-                               chi_log, use_log, chi_now, record_every, rec["q"], rec["u"], rec["P"],
-                               rec["sigma"], rec["active"], rec["chi"], rec["q_pre"], record_pre,
-                               law, stepper.h, stepper.theta, *data, stats)
-        if status == OK:
-            break
-        if status == PROJECTION_FAILED:
-            stepper.system.require_definite_stiffness("the position projection (position jumps)")
-            raise InputError("system.W", f"W_IᵀK⁻¹W_I is not positive definite at step {k} "
-                             f"(t = {stepper.grid.t[k]:.6g}): the closed contacts' columns of W "
-                             "are dependent in the K metric")
-        _fallback_step(inp, stepper, k, s, qs, us, chi_now, record_every, record_pre, rec)
-        fallbacks.append({"step": int(k), "t": float(stepper.grid.t[k]), "system": int(s)})
-        s += 1
-        if s == S:
-            k, s = k + 1, 0
+        kb = k
+        k1 = min(steps, kb + WINDOW)
+        grid = Grid.window(stepper.system, stepper.h, stepper.theta, stepper.t0, kb, k1)
+        coupled = np.ascontiguousarray(inp.coupled(grid.t), dtype=np.bool_)
+        chi_w = inp.chi_window(grid.t, kb)
+        use_log = chi_w is not None
+        chi_log = np.ascontiguousarray(chi_w, dtype=np.bool_) if use_log else np.zeros((1, 1), np.bool_)
+        signals = (np.ascontiguousarray(grid.fbar), np.ascontiguousarray(grid.nu),
+                   np.ascontiguousarray(grid.nu_dot))
+        while k < k1:
+            k, s, status = advance(k, k1, s, kb, qs, us, jumps, bool(inp.master_projection), coupled,
+                                   chi_log, use_log, chi_now, record_every, rec["q"], rec["u"], rec["P"],
+                                   rec["sigma"], rec["active"], rec["chi"], rec["q_pre"], record_pre,
+                                   summary, k_on, k_off, rho_arr, summ, vprev, Vprev, rec_V, closings,
+                                   prev_act, Mq, Kq, Cq, law, stepper.h, stepper.theta, *head, *signals,
+                                   *tail, stats)
+            if status == OK:
+                break
+            if status == PROJECTION_FAILED:
+                stepper.system.require_definite_stiffness("the position projection (position jumps)")
+                raise InputError("system.W", f"W_IᵀK⁻¹W_I is not positive definite at step {k} "
+                                 f"(t = {float(stepper.time(k)):.6g}): the closed contacts' columns "
+                                 "of W are dependent in the K metric")
+            if summary:
+                raise InputError("store", f'store="summary": the kernel could not solve the contact '
+                                 f"problem of step {k} (t = {float(stepper.time(k)):.6g}); run with "
+                                 'store="full", which re-solves such steps with the reference solver')
+            _fallback_step(inp, stepper, k, s, qs, us, chi_now, record_every, record_pre, rec,
+                           coupled[k - kb], None if chi_w is None else chi_w[k - kb])
+            fallbacks.append({"step": int(k), "t": float(stepper.time(k)), "system": int(s)})
+            s += 1
+            if s == S:
+                k, s = k + 1, 0
     run_time = time.perf_counter() - t0
     ref = getattr(stepper, "_reference_twin", None)
     ref_stats = ref.stats if (ref is not None and fallbacks) else None
+    out_summary = None
+    if summary:
+        out_summary = {"fields": summ, "closings": closings, "k_on": k_on, "k_off": k_off,
+                       "rhos": tuple(rhos)}
     return LoopOutput(rows, rec["q"], rec["u"], rec["P"], rec["sigma"], rec["active"], rec["chi"],
                       rec["q_pre"] if record_pre else None, "compiled",
                       {"contact_solves": int(stats[0]) + (ref_stats.contact_solves if ref_stats else 0),
                        "iterations": int(stats[1]) + (ref_stats.iterations if ref_stats else 0),
                        "max_residual": max(float(stats[2]), ref_stats.max_residual if ref_stats else 0.0),
-                       "fallbacks": len(fallbacks)},
-                      fallbacks, ct, run_time)
+                       "fallbacks": len(fallbacks), "min_gap": float(stats[3]),
+                       "min_gap_step": int(stats[4])},
+                      fallbacks, ct, run_time, rec_V if summary else None, out_summary)
 
 
-def _fallback_step(inp, stepper, k, s, qs, us, chi_now, record_every, record_pre, rec) -> None:
+def summary_frame(out: LoopOutput, names: list[str], t0: float, h: float) -> "pd.DataFrame":
+    """One row per observer from the kernel's streaming summary: V(t_on), max V, V(end), the
+    count and largest relative size of the rises of V, the sums of the damping, impulse and
+    remaining parts of ΔV, the largest impulse part relative to V, and per threshold ρ the
+    first-passage time ``t_sync_ρ`` and the settling time ``t_settle_ρ`` (definitions of
+    :mod:`observer.metrics`, evaluated at every step, not only at the recorded rows)."""
+    import pandas as pd
+
+    from observer.kernel import (F_DAMP, F_IMP, F_MAXIMP, F_MAXINC, F_NINC, F_PROJ, F_VEND, F_VMAX,
+                                 F_VON, SUMMARY_FIELDS)
+
+    sm = out.summary
+    f, rhos, k_on, k_off = sm["fields"], sm["rhos"], sm["k_on"], sm["k_off"]
+    rows = []
+    for s, name in enumerate(names, start=1):
+        row = {"observer": name, "t_on": t0 + k_on * h, "t_off": t0 + k_off * h, "V_on": f[s, F_VON],
+               "V_max": f[s, F_VMAX], "V_end": f[s, F_VEND], "rises": int(f[s, F_NINC]),
+               "max_rise_rel": f[s, F_MAXINC], "sum_damping": f[s, F_DAMP],
+               "sum_impulse": f[s, F_IMP], "sum_projection": f[s, F_PROJ],
+               "max_impulse_rel": f[s, F_MAXIMP]}
+        for i, rho in enumerate(rhos):
+            first, last = f[s, SUMMARY_FIELDS + i], f[s, SUMMARY_FIELDS + len(rhos) + i]
+            row[f"t_sync_{rho:g}"] = (first - k_on) * h if first >= 0 else float("inf")
+            row[f"t_settle_{rho:g}"] = (0.0 if last < 0 else float("inf") if last >= k_off
+                                        else (last + 1 - k_on) * h)
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _fallback_step(inp, stepper, k, s, qs, us, chi_now, record_every, record_pre, rec,
+                   coupled_k, chi_row) -> None:
     """Step k of system s, which the kernel could not solve, with the reference solver."""
     ref = _reference_stepper(stepper)
     q, u = qs[s], us[s]
     if s == 0:
-        act = np.flatnonzero(stepper.predicted_active(k, q, u))
+        act = np.flatnonzero(ref.predicted_active(k, q, u))
         proj = inp.master_projection
         chi_now[:] = False
-        chi_now[act if inp.chi_log is None else np.flatnonzero(inp.chi_log[k])] = True
-    elif inp.coupled[k]:
+        chi_now[act if chi_row is None else np.flatnonzero(chi_row)] = True
+    elif coupled_k:
         act, proj = np.flatnonzero(chi_now), bool(inp.jumps[s])
     else:
-        act, proj = np.flatnonzero(stepper.predicted_active(k, q, u)), inp.master_projection
+        act, proj = np.flatnonzero(ref.predicted_active(k, q, u)), inp.master_projection
     q1, u1, P, _ = ref.step(k, q, u, act, False)
     q_pre = q1
     sig = None
     if proj and act.size:
-        NinvW, L = projection_matrices(stepper, inp.metric)
-        q1, sig = _project(stepper, inp.metric, NinvW, L, k + 1, q1, act)
+        NinvW, L = projection_matrices(ref, inp.metric)
+        q1, sig = _project(ref, inp.metric, NinvW, L, k + 1, q1, act)
     qs[s], us[s] = q1, u1
     if (k + 1) % record_every == 0:
         r = (k + 1) // record_every
@@ -341,10 +470,11 @@ def _fallback_step(inp, stepper, k, s, qs, us, chi_now, record_every, record_pre
 
 
 def _reference_stepper(stepper: MoreauJean) -> MoreauJean:
+    """The stepper's twin with the reference solver (same grid), built once."""
     ref = getattr(stepper, "_reference_twin", None)
     if ref is None:
-        ref = MoreauJean(stepper.system, stepper.law, stepper.h, float(stepper.grid.t[-1]),
-                         stepper.theta, t0=float(stepper.grid.t[0]), solver="reference",
+        ref = MoreauJean(stepper.system, stepper.law, stepper.h, float(stepper.time(stepper.steps)),
+                         stepper.theta, t0=stepper.t0, solver="reference",
                          residual_tol=stepper.residual_tol)
         stepper._reference_twin = ref
     return ref

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from observer.errors import InputError
-from observer.validation import (as_array, as_scalar, broadcast_vector, check_psd,
+from observer.validation import (as_array, as_scalar, broadcast_vector, check_psd, extreme_eigenvalues,
                                  check_spd, check_symmetric)
 
 
@@ -136,10 +136,17 @@ class LinearSystem:
             check_symmetric("system.C", C)
             check_psd("system.C", C)
             check_psd("system.K", K)
-            sv = np.linalg.svd(W, compute_uv=False)
-            if m > n or sv[-1] <= 1e-12 * sv[0]:
+            if m > n:
+                sv_min, sv_max = 0.0, 1.0
+            elif m <= 512:
+                sv = np.linalg.svd(W, compute_uv=False)
+                sv_min, sv_max = float(sv[-1]), float(sv[0])
+            else:       # large (banded) W: from the extreme eigenvalues of WᵀW, O(m·bw²)
+                lo, hi = extreme_eigenvalues(W.T @ W)
+                sv_min, sv_max = np.sqrt(max(lo, 0.0)), np.sqrt(max(hi, 0.0))
+            if m > n or sv_min <= 1e-12 * sv_max:
                 raise InputError("system.W", "columns are not linearly independent "
-                                 f"(smallest singular value {sv[-1] if m <= n else 0.0:.3g})")
+                                 f"(smallest singular value {sv_min:.3g})")
         for name, arr in (("M", M), ("C", C), ("K", K), ("W", W)):
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
@@ -177,20 +184,25 @@ class LinearSystem:
         return u @ self.W + self.nu_dot(t)
 
     # -- derived matrices ------------------------------------------------------------------
+    def stiffness_eigenvalue_range(self) -> tuple[float, float]:
+        """Smallest and largest eigenvalue of K (computed once)."""
+        cached = self.__dict__.get("_K_eig")
+        if cached is None:
+            cached = extreme_eigenvalues(self.K)
+            object.__setattr__(self, "_K_eig", cached)
+        return cached
+
     def is_stiffness_definite(self) -> bool:
-        """True if K is positive definite (needed for K-metric projections)."""
-        try:
-            np.linalg.cholesky(self.K)
-        except np.linalg.LinAlgError:
-            return False
-        eig = np.linalg.eigvalsh(self.K)
-        return bool(eig[0] > 1e-12 * eig[-1])
+        """True if K is positive definite (needed for K-metric projections): its smallest
+        eigenvalue exceeds 1e-12 of its largest."""
+        lo, hi = self.stiffness_eigenvalue_range()
+        return bool(lo > 0.0 and lo > 1e-12 * hi)
 
     def require_definite_stiffness(self, why: str) -> None:
         """Raise :class:`InputError` on ``system.K`` unless K ≻ 0."""
         if not self.is_stiffness_definite():
             raise InputError("system.K", f"must be positive definite for {why} "
-                             f"(smallest eigenvalue {np.linalg.eigvalsh(self.K)[0]:.3g})")
+                             f"(smallest eigenvalue {self.stiffness_eigenvalue_range()[0]:.3g})")
 
     def energy(self, q: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Mechanical energy ½uᵀMu + ½qᵀKq (kinetic plus elastic), time-major input allowed."""

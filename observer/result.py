@@ -74,6 +74,9 @@ class SimulationResult:
     chi : ndarray of bool, shape (N+1, m) or None
         Switching signal fed to the observers (row k+1 = step k).
     slaves : dict[str, SlaveTrajectory]
+    summary : DataFrame or None
+        ``store="summary"`` runs: the kernel's per-observer metrics over every step
+        (:func:`observer.loop.summary_frame`).
     """
 
     t: np.ndarray
@@ -86,6 +89,7 @@ class SimulationResult:
     chi: np.ndarray | None = None
     slaves: dict = field(default_factory=dict)
     sigma: np.ndarray | None = None
+    summary: pd.DataFrame | None = None
 
     @property
     def g(self) -> np.ndarray:
@@ -208,6 +212,8 @@ def run_metadata(scenario, stepper, out) -> dict:
                 solver_iterations=st["iterations"], solver_fallbacks=st["fallbacks"],
                 fallback_steps=list(out.fallbacks),
                 max_contact_residual=st["max_residual"], wall_time_s=out.run_time_s,
+                min_gap=st.get("min_gap"), min_gap_t=(float(stepper.time(st["min_gap_step"]))
+                                                      if st.get("min_gap_step", -1) >= 0 else None),
                 compile_time_s=out.compile_time_s,
                 steps_per_second=stepper.grid.steps / out.run_time_s if out.run_time_s > 0 else float("nan"),
                 versions=package_versions(), platform=platform.platform(),

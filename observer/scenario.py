@@ -99,15 +99,21 @@ def parse_value(text: str) -> Any:
 
 
 def apply_overrides(doc: dict, overrides: dict[str, Any]) -> dict:
-    """Return a copy of ``doc`` with dotted keys set (``{"simulation.h": 1e-3}``); keys are checked later."""
-    doc = copy.deepcopy(doc)
+    """Return a copy of ``doc`` with dotted keys set (``{"simulation.h": 1e-3}``); keys are checked later.
+
+    Only the tables on the path of an override are copied (the input is never modified);
+    the values, matrices included, are shared, so the cost does not grow with their size.
+    """
+    doc = dict(doc)
     for key, value in overrides.items():
         parts = key.split(".")
         node = doc
         for part in parts[:-1]:
-            node = node.setdefault(part, {})
-            if not isinstance(node, dict):
+            child = node.get(part, {})
+            if not isinstance(child, dict):
                 raise InputError(key, "cannot set a key inside a non-table value")
+            node[part] = child = dict(child)
+            node = child
         node[parts[-1]] = parse_value(value) if isinstance(value, str) else value
     return doc
 

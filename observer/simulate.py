@@ -8,7 +8,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from observer.errors import InputError
-from observer.loop import LoopInput, check_engine, check_record_every
+from observer.loop import LoopInput, check_engine, check_record_every, summary_frame
 from observer.loop import run as run_loop
 from observer.observers import OBSERVERS, ObserverConfig, Slave, check_observer_name, lyapunov, \
     lyapunov_decrements
@@ -16,7 +16,7 @@ from observer.result import SimulationResult, SlaveTrajectory, run_metadata
 from observer.scenario import Scenario, apply_overrides, parse_value
 from observer.scenarios import SCENARIOS, builtin_document
 from observer.stepping import MoreauJean
-from observer.switching import SOURCES, coupling_mask, read_log, sample_log
+from observer.switching import SOURCES, read_log
 from observer.tomlio import read_toml
 
 
@@ -54,7 +54,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
              observers: Iterable[str | Slave] = (), source: str | None = None,
              coupling: tuple[float, float] | None | str = "scenario",
              log: str | Path | None = None, residual_tol: float = 1e-9,
-             engine: str = "compiled", record_every: int = 1) -> SimulationResult:
+             engine: str = "compiled", record_every: int | None = None,
+             store: str = "full") -> SimulationResult:
     """Simulate the master (and the observers) of ``scenario`` with the Moreau–Jean scheme.
 
     Parameters
@@ -75,9 +76,16 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     engine : {"compiled", "python"}
         The time loop (:mod:`observer.loop`): the numba kernel (default) or the readable
         numpy reference; both give the same trajectories to round-off.
-    record_every : int
-        Keep every k-th step (row r = step r·k). The per-step decrements of V need every
-        step and are left out (None) otherwise.
+    record_every : int, optional
+        Keep every k-th step (row r = step r·k); default 1, or about 10 000 rows with
+        ``store="summary"``. The per-step decrements of V need every step and are left out
+        (None) otherwise.
+    store : {"full", "summary"}
+        ``"summary"`` (compiled engine) computes in the kernel, streaming over every step,
+        V of each observer, its damping/impulse/remaining parts, first-passage and settling
+        times, the master's closings per contact and its deepest penetration, and keeps the
+        trajectories only at the recorded rows: memory independent of the horizon beyond
+        that (``result.summary``).
 
     Returns
     -------
@@ -93,12 +101,13 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     if overrides:
         sc = sc.with_overrides(overrides)
     check_engine(engine)
-    record_every = check_record_every(record_every)
     system = sc.system
     stepper = MoreauJean(system, sc.law, sc.h, sc.t_end, sc.theta, solver=sc.solver,
                          residual_tol=residual_tol,
                          structure="auto" if engine == "compiled" else "dense")
-    grid = stepper.grid
+    if record_every is None:
+        record_every = max(1, stepper.steps // 10_000) if store == "summary" else 1
+    record_every = check_record_every(record_every)
     observers = list(observers)
     slaves: list[Slave] = []
     if observers:
@@ -113,30 +122,29 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
             system.require_definite_stiffness("the observer with position jumps")
     if source is not None and source not in SOURCES:
         raise InputError("observer.source", f"must be one of {list(SOURCES)}, got {source!r}")
-    chi_log = None
+    log_frame = None
     if slaves and source == "log":
         if log is None:
             raise InputError("observer.log", "source = \"log\" needs a log file")
-        chi_log = sample_log(read_log(log, system.m), grid.t, system.m)
-    coupled = coupling_mask(grid.t, None if coupling == "scenario" else coupling)
-    if source == "self":
-        coupled[:] = False
+        log_frame = read_log(log, system.m)
 
     inp = LoopInput(stepper, np.stack([sc.q0] + [s.q0 for s in slaves]),
                     np.stack([sc.u0] + [s.u0 for s in slaves]),
                     np.array([False] + [s.position_jumps for s in slaves]),
-                    bool(sc.master_projection), coupled, chi_log)
-    out = run_loop(inp, engine=engine, record_every=record_every)
+                    bool(sc.master_projection), None if coupling == "scenario" else coupling,
+                    source == "self", log_frame)
+    out = run_loop(inp, engine=engine, record_every=record_every, store=store)
 
     meta = run_metadata(sc, stepper, out)
-    t = grid.t[out.rows]
+    t = stepper.time(out.rows)
     res = SimulationResult(t, out.q[0], out.u[0], out.P[0], out.active, system, meta, sigma=out.sigma[0])
     if slaves:
         res.chi = out.chi
         master = {"q": out.q[0], "u": out.u[0], "P": out.P[0], "sigma": out.sigma[0]}
         for i, s in enumerate(slaves, start=1):
             traj = {"q": out.q[i], "u": out.u[i], "P": out.P[i], "sigma": out.sigma[i]}
-            V = lyapunov(system, traj["q"], traj["u"], master["q"], master["u"])
+            V = (out.V[i] if out.V is not None
+                 else lyapunov(system, traj["q"], traj["u"], master["q"], master["u"]))
             parts = (lyapunov_decrements(system, sc.h, traj, master) if record_every == 1
                      else {"damping": None, "impulse": None, "projection": None})
             res.slaves[s.name] = SlaveTrajectory(s.name, traj["q"], traj["u"], traj["P"], V,
@@ -145,6 +153,9 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         meta.update(observers=[s.name for s in slaves], source=source,
                     coupling=None if coupling in ("scenario", None) else list(coupling),
                     log=str(log) if log else None)
+    if out.summary is not None:
+        res.summary = summary_frame(out, [s.name for s in slaves], stepper.t0, stepper.h)
+        res.summary.attrs["master_closings"] = out.summary["closings"].tolist()
     return res
 
 

@@ -9,38 +9,34 @@ discretised; Siconos' ``MoreauJeanOSI``)::
 
 so that ``u_{k+1} = u_free + Â⁻¹W_A P`` with the iteration matrix
 ``Â = M + hθC + h²θ²K`` and ``γ_{k+1} = γ_free + ĜP`` with ``Ĝ = W_AᵀÂ⁻¹W_A``
-(γ = Wᵀu + ν̇). Both impact laws are one LCP of the same form,
+(γ = Wᵀu + ν̇). The impulse P comes from the impact law applied, with the step's Delassus
+matrix Ĝ, to the step's pre-impact velocity ``γ̃ = (γ_free + e∘γ_k)/(1+e)``:
 
-    0 ≤ γ_{k+1} − τ ⊥ P ≥ 0,   i.e.  P = LCP(Ĝ, γ_free − τ),
+* Newton (paper eq. (5)): ``0 ≤ ĜP + (1+e)∘γ̃ ⊥ P ≥ 0``, i.e. Siconos' law
+  ``0 ≤ γ_{k+1} + e∘γ_k ⊥ P ≥ 0``;
+* Poisson (paper eq. (6)), :func:`observer.impact.poisson_step`: Glocker's inequality law on
+  γ̃, ``P = Λ_C + Λ_E`` with ``0 ≤ γ̃ + ĜΛ_C ⊥ Λ_C ≥ 0`` (compression) and
+  ``0 ≤ γ_E ⊥ Λ_E − ε∘Λ_C ≥ 0``, ``γ_E = γ̃ + ĜP`` (expansion).
 
-with a *target velocity* τ computed from the pre-impact contact velocity γ_k:
+Derivation of the Poisson step. Over a step with an impact, P carries the impulsive part and
+the smooth contact force of the step together; γ_free = γ_k + δ, with δ = O(h) the step's
+smooth velocity change. Newton's discrete law restitutes ``−eγ_k`` and lets δ decide only
+whether that target is reached; written as an impact map it is Newton's map on γ̃ with the
+Delassus matrix Ĝ. The Poisson step is Glocker's map on the *same* γ̃ and Ĝ. Hence:
 
-* Newton (paper eq. (5)): ``τ = −e∘γ_k`` — Siconos' law on ``γ_{k+1} + eγ_k``.
-* Poisson (paper eq. (6)), :func:`observer.impact.poisson_target`: Glocker's inequality
-  law on γ_k with the impact Delassus matrix ``G₀ = W_AᵀM⁻¹W_A`` gives the compression and
-  expansion impulses (Λ_C, Λ_E), the velocities ``γ_C = γ_k + G₀Λ_C`` after compression
-  and ``γ_E = γ_C + G₀Λ_E`` after expansion; then ``τ = γ_E − (1+ε)∘γ_C``.
-
-Derivation of the Poisson step. Over a step with an impact the step impulse P carries the
-impulsive part and the smooth contact force of the step together. Restituting a fraction ε
-of the *whole* compression impulse (the smooth force included) makes resting contacts hop;
-applying the impulsive part first and the smooth force after it (the earlier split) lets
-the step's smooth velocity change δ = γ_free − γ_k act *after* the rebound, so the rebound
-velocity becomes ``ε|γ_k| + δ`` instead of Newton's ``ε|γ_k|``: an O(h) energy loss per
-impact whose constant grows like (1+ε)/(1−ε) (bouncing ball, ε = 0.99, h = 1e-3: rest at
-55.7 s instead of 87.03 s). Newton's discrete law avoids this because its complementarity
-is on ``γ_{k+1} − τ``: the smooth change δ only decides *whether* the target is reached. The
-Poisson step therefore keeps Newton's form and only replaces its target by the outcome of
-Glocker's impact map on γ_k. For one contact Glocker's map gives γ_C = 0, ``γ_E = −εγ_k``
-(γ_k < 0) and γ_C = γ_E = γ_k (γ_k ≥ 0), so ``τ = −εγ_k`` in both cases: **the Poisson step
-is the Newton step** (bitwise: the one-contact target is formed as ``−ε∘γ_k``). The term
-−(1+ε)γ_C acts only on contacts that are still separating after compression (γ_C > 0):
-there the step applies Newton's discrete rule, as the predictor closed them. With several
-contacts the impulsive part (Λ_C, Λ_E) satisfies Glocker's conditions
-``0 ≤ γ_C ⊥ Λ_C ≥ 0`` and ``0 ≤ γ_E ⊥ Λ_E − ε∘Λ_C ≥ 0`` exactly (up to the LCP solver's
-residual); resting contacts (γ_k = 0) have Λ_C = Λ_E = 0 and τ = 0, the e = 0 law, so they
-do not hop; and as h → 0, Ĝ → G₀ and δ → 0, so the step's velocity jump tends to
-Glocker's ``γ_E − γ_k``.
+* for one contact Glocker's map is Newton's map, so **the Poisson step is the Newton step**
+  (returned in Newton's closed form, bitwise); the earlier split (impulse on γ_k first, then
+  the smooth force with e = 0) restituted ``ε|γ_k| + δ`` instead, an O(h) energy loss per
+  impact whose constant grows like (1+ε)/(1−ε) (bouncing ball, ε = 0.99, h = 1e-3: rest at
+  55.7 s instead of 87.0 s);
+* with several contacts Glocker's conditions hold exactly on the step's impulse, in γ̃;
+* resting contacts (γ_k = 0) have γ̃ = γ_free/(1+ε): with one ε for the touching contacts,
+  P = LCP(Ĝ, γ_free), the e = 0 law, so they do not hop;
+* monotonicity (the impulse term of eq. (17)): with γ̄ = (γ_k + γ_{k+1})/2 and
+  γ̄_G = γ̃ + ĜP/2 (Glocker's mean velocity), ``γ̄ − γ̄_G = −(1−ε)/(2(1+ε))∘δ``, exactly as for
+  Newton; so ``ΔPᵀΔγ̄ ≤ ΔPᵀΔγ̄_G + O(h)`` and the discrete impulse term inherits the sign of
+  the impact map's (A3) up to an O(h) slack that vanishes as h → 0;
+* as h → 0, Ĝ → G₀ = W_AᵀM⁻¹W_A and γ̃ → γ_k: the step's velocity jump tends to Glocker's.
 
 With θ = ½ the difference of two solutions driven by the same A satisfies the identity
 ``V_{k+1} − V_k = −h v̄ᵀCv̄ + (Wᵀv̄)ᵀΔP`` to round-off, with v̄ = (v_k + v_{k+1})/2 and
@@ -70,7 +66,7 @@ import scipy.sparse as sp
 from observer.contact import get_solver
 from observer.contact.lcp import LCPSolution
 from observer.errors import ContactSolverError, InputError
-from observer.impact import NEWTON, ImpactLaw, poisson_target
+from observer.impact import NEWTON, ImpactLaw, poisson_step
 from observer.model import LinearSystem
 from observer.validation import as_scalar
 
@@ -206,27 +202,41 @@ class SchemeMatrices:
                               0.5 * (Ghat + Ghat.T), 0.5 * (G0 + G0.T), KinvW, L, band)
 
 
+def grid_steps(h: float, t_end: float, t0: float = 0.0) -> int:
+    """Number of steps N of the grid t_k = t0 + k h reaching t_end (at least one)."""
+    steps = int(np.ceil((t_end - t0) / h - 1e-9))
+    if steps < 1:
+        raise InputError("simulation.t_end", f"must exceed t0 = {t0} by at least one step h = {h}")
+    return steps
+
+
 @dataclass(frozen=True)
 class Grid:
-    """The time grid t_k = t0 + k h (k = 0..N) and the signals sampled on it.
+    """The time grid t_k = t0 + k h (k = k0..k1) and the signals sampled on it.
 
-    ``fbar[k] = (1−θ)f(t_k) + θf(t_{k+1})`` (shape (N, n)); ``nu``, ``nu_dot`` shape (N+1, m).
+    ``fbar[i] = (1−θ)f(t_{k0+i}) + θf(t_{k0+i+1})`` (shape (k1−k0, n)); ``nu``, ``nu_dot``
+    shape (k1−k0+1, m). :meth:`build` makes the whole grid (k0 = 0); :meth:`window` a part of
+    it with bitwise the same values (every entry is computed from its own t_k = t0 + k h), so
+    that a long run can be advanced window by window in bounded memory.
     """
 
     t: np.ndarray
     fbar: np.ndarray
     nu: np.ndarray
     nu_dot: np.ndarray
+    k0: int = 0
 
     @staticmethod
     def build(system: LinearSystem, h: float, t_end: float, theta: float, t0: float = 0.0) -> "Grid":
-        steps = int(np.ceil((t_end - t0) / h - 1e-9))
-        if steps < 1:
-            raise InputError("simulation.t_end", f"must exceed t0 = {t0} by at least one step h = {h}")
-        t = t0 + np.arange(steps + 1) * h
+        return Grid.window(system, h, theta, t0, 0, grid_steps(h, t_end, t0))
+
+    @staticmethod
+    def window(system: LinearSystem, h: float, theta: float, t0: float, k0: int, k1: int) -> "Grid":
+        """Steps k0..k1−1 (grid points k0..k1)."""
+        t = t0 + np.arange(k0, k1 + 1) * h
         f = system.f(t)
         fbar = (1.0 - theta) * f[:-1] + theta * f[1:]
-        return Grid(t, fbar, system.nu(t), system.nu_dot(t))
+        return Grid(t, fbar, system.nu(t), system.nu_dot(t), k0)
 
     @property
     def steps(self) -> int:
@@ -282,7 +292,10 @@ class MoreauJean:
         self.solver = get_solver(solver)
         self.residual_tol = residual_tol
         self.S = SchemeMatrices.build(system, h, theta, structure)
-        self.grid = Grid.build(system, h, t_end, theta, t0)
+        self.t0 = float(t0)
+        self.steps = grid_steps(h, t_end, self.t0)
+        self._t_end = t_end
+        self._grid: Grid | None = None
         self.stats = StepStats()
         self._law_code = law.code
         self._e = np.asarray(law.restitution)
@@ -313,6 +326,18 @@ class MoreauJean:
         return hit
 
     @property
+    def grid(self) -> Grid:
+        """The whole grid with its signals (built on first use: a compiled run advances
+        window by window and never needs it)."""
+        if self._grid is None:
+            self._grid = Grid.build(self.system, self.S.h, self._t_end, self.S.theta, self.t0)
+        return self._grid
+
+    def time(self, k) -> np.ndarray | float:
+        """t_k = t0 + k h (the grid's value, without building the grid)."""
+        return self.t0 + np.asarray(k) * self.S.h
+
+    @property
     def h(self) -> float:
         return self.S.h
 
@@ -340,7 +365,7 @@ class MoreauJean:
 
     def _fall_back(self, G: np.ndarray, b: np.ndarray, why: str) -> LCPSolution:
         """Re-solve with the reference solver; warn (and count) or raise :class:`ContactSolverError`."""
-        t = self.grid.t[self._k]
+        t = float(self.time(self._k))
         if self._fallback is None:
             self._fallback = get_solver("reference")
         self.stats.fallbacks += 1
@@ -366,18 +391,28 @@ class MoreauJean:
         g_pred = S.WT @ (q + 0.5 * S.h * u) + grid.nu[k] + 0.5 * S.h * grid.nu_dot[k]
         return g_pred <= 0.0
 
-    def target(self, k: int, u: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Target velocity τ of the step's LCP ``0 ≤ γ_{k+1} − τ ⊥ P ≥ 0`` on ``active``.
+    def impulse(self, k: int, u: np.ndarray, u_free: np.ndarray,
+                active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Impulse P of the step on ``active`` from u_k and the free velocity.
 
-        Returns ``(τ, Λ_C, Λ_E)``: Newton ``τ = −e∘γ_k`` (Λ_C, Λ_E empty); Poisson
-        :func:`observer.impact.poisson_target` with ``G₀ = W_AᵀM⁻¹W_A`` (Λ_C, Λ_E its
-        compression and expansion impulses). γ_k = W_Aᵀu_k + ν̇_A(t_k).
+        Returns ``(P, Λ_C, Λ_E)``: Newton ``P = LCP(Ĝ, γ_free + e∘γ_k)`` (Λ_C, Λ_E empty);
+        Poisson :func:`observer.impact.poisson_step` (Glocker's law with Ĝ on
+        ``γ̃ = (γ_free + ε∘γ_k)/(1+ε)``; Λ_C, Λ_E its compression and expansion impulses).
+        γ_k = W_Aᵀu_k + ν̇_A(t_k), γ_free = W_Aᵀu_free + ν̇_A(t_{k+1}).
         """
-        W_A, _, _, G0, _, _, e_A = self._active_slices(active)
+        W_A, _, Ghat, _, _, _, e_A = self._active_slices(active)
         gamma_k = u @ W_A + self.grid.nu_dot[k, active]
+        gamma_free = u_free @ W_A + self.grid.nu_dot[k + 1, active]
         if self._law_code == NEWTON:
-            return -e_A * gamma_k, np.zeros(0), np.zeros(0)
-        return poisson_target(G0, gamma_k, e_A, self._solve)
+            return self._solve(Ghat, gamma_free + e_A * gamma_k).x, np.zeros(0), np.zeros(0)
+        return poisson_step(Ghat, gamma_free, gamma_k, e_A, self._solve)
+
+    def free_velocity(self, k: int, q: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """u_free of step k (no contact impulse)."""
+        S = self.S
+        if S.band is None:
+            return S.Bu @ u + S.Bq @ q + S.Bf @ self.grid.fbar[k]
+        return S.band.free_velocity(S.h, q, u, self.grid.fbar[k])
 
     def step(self, k: int, q: np.ndarray, u: np.ndarray, active: np.ndarray,
              project: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
@@ -388,21 +423,14 @@ class MoreauJean:
         K-metric projection (eq. (14)); otherwise ``None``.
         """
         self._k = k
-        S, grid = self.S, self.grid
-        h, theta = S.h, S.theta
-        if S.band is None:
-            u_free = S.Bu @ u + S.Bq @ q + S.Bf @ grid.fbar[k]
-        else:
-            u_free = S.band.free_velocity(h, q, u, grid.fbar[k])
+        h, theta = self.S.h, self.S.theta
+        u_free = self.free_velocity(k, q, u)
         if active.size == 0:
             u1 = u_free
             P = np.zeros(0)
         else:
-            W_A, AinvW_A, Ghat, G0, _, _, e_A = self._active_slices(active)
-            gamma_free = u_free @ W_A + grid.nu_dot[k + 1, active]
-            tau = self.target(k, u, active)[0]
-            P = self._solve(Ghat, gamma_free - tau).x
-            u1 = u_free + AinvW_A @ P
+            P = self.impulse(k, u, u_free, active)[0]
+            u1 = u_free + self._active_slices(active)[1] @ P
         q1 = q + h * ((1.0 - theta) * u + theta * u1)
         sigma = None
         if project:

@@ -32,17 +32,20 @@ projected (the plain master; 0 for a projected one)::
 the second term is nonzero only for the master–jump pair: the plain master penetrates
 (Proposition 1's mismatched pair), a discretisation effect that vanishes as h → 0.
 
-Impulse part. On the closed set A both members solve ``0 ≤ y = γ_{k+1} − τ ⊥ P ≥ 0`` with
-γ_{k+1} = γ_free + ĜP, Ĝ = W_AᵀÂ⁻¹W_A, Â = M + hθC + h²θ²K (:mod:`observer.stepping`),
-and Newton's target ``τ = −E γ_k`` (E = diag e_A); for Poisson τ is Glocker's target,
-``r = τ + Eγ_k`` its deviation from Newton's (0 for one contact). With
-δ = Δγ_free − Δγ_k = W_Aᵀ(Δu_free − v_k) = −W_AᵀÂ⁻¹(hCv_k + hK(e_k + hθv_k)) = O(h) and
-D = (I − E)(I + E)⁻¹, exactly::
+Impulse part. On the closed set A, with γ_{k+1} = γ_free + ĜP, Ĝ = W_AᵀÂ⁻¹W_A,
+Â = M + hθC + h²θ²K (:mod:`observer.stepping`), E = diag e_A, D = (I − E)(I + E)⁻¹ and
+δ = Δγ_free − Δγ_k = W_Aᵀ(Δu_free − v_k) = −W_AᵀÂ⁻¹(hCv_k + hK(e_k + hθv_k)) = O(h).
+Newton: both members solve ``0 ≤ y = γ_{k+1} + Eγ_k ⊥ P ≥ 0``, and exactly::
 
     (Wᵀv̄)ᵀΔP = ½ΔPᵀ(I + D)Δy        complementarity  ≤ 0  (ΔP_iΔy_i = −(y₁P₂ + y₂P₁)_i)
               − ½ΔPᵀDĜΔP            Delassus         ≤ 0 when e is global (sym(DĜ) ⪰ 0)
               − ½ΔPᵀDδ              slack            no sign, O(h); 0 for e = 1
-              + ΔPᵀ(I + E)⁻¹Δr      Poisson target   0 for Newton and for one contact
+
+Poisson on several contacts: P is Glocker's map with Ĝ on γ̃ = (γ_free + Eγ_k)/(1+E)
+(:func:`observer.impact.poisson_step`); with Glocker's mean velocity γ̄_G = γ̃ + ĜP/2,
+exactly ``(Wᵀv̄)ᵀΔP = ΔPᵀΔγ̄_G − ½ΔPᵀDδ``: the first term is the impact map's monotonicity
+term (A3; reported as ``impulse_complementarity``, Delassus part 0), the second the same
+slack as Newton's. (``impulse_target`` is kept, identically 0, for the columns' stability.)
 
 so in discrete time the impulse term has **no sign**: the slack −(1−e)/(2(1+e))ΔPᵀδ of the
 impact law on ``γ_{k+1} + eγ_k`` vanishes only as h → 0 (δ = O(h)) or for e = 1.
@@ -221,9 +224,9 @@ def _projection_parts(run: Run, A: Trajectory, B: Trajectory, out: dict) -> None
 def _impulse_parts(run: Run, A: Trajectory, B: Trajectory, out: dict, examine: np.ndarray | None) -> None:
     """The exact split of the impulse part (module docstring), per closed set.
 
-    Newton, and every one-contact step, in closed form (τ = −Eγ_k). Poisson steps on several
-    contacts need Glocker's target of each member (:meth:`observer.stepping.MoreauJean.target`);
-    they are split only at the steps in ``examine`` (elsewhere NaN) to bound the cost.
+    Every part in closed form from the run's states and impulses (Newton, and Poisson on
+    one contact, which is Newton's step; Poisson on several contacts through Glocker's mean
+    velocity). ``examine`` is accepted for compatibility and no longer needed.
     """
     s, h, th = run.system, run.h, run.theta
     C, K, W = s.C, s.K, s.W
@@ -239,7 +242,6 @@ def _impulse_parts(run: Run, A: Trajectory, B: Trajectory, out: dict, examine: n
     groups: dict[bytes, list[int]] = {}
     for k in closed:
         groups.setdefault(A.active[k + 1].tobytes(), []).append(int(k))
-    wanted = set() if examine is None else set(int(k) for k in examine)
     for ks in groups.values():
         ks = np.asarray(ks)
         act = np.flatnonzero(A.active[ks[0] + 1])
@@ -252,18 +254,17 @@ def _impulse_parts(run: Run, A: Trajectory, B: Trajectory, out: dict, examine: n
         delta = -(sla.lu_solve(lu, (h * v[ks] @ C.T + h * (e[ks] + h * th * v[ks]) @ K.T).T).T) @ WA
         out["impulse_delassus"][ks] = -0.5 * np.einsum("ki,ki->k", dP * D, dP @ G.T)
         out["impulse_slack"][ks] = -0.5 * np.einsum("ki,ki->k", dP * D, delta)
-        dr = np.zeros_like(dP)
         if not newton and act.size > 1:
-            for j, k in enumerate(ks):
-                if k in wanted:
-                    tA = run.stepper.target(int(k), A.u[k], act)[0]
-                    tB = run.stepper.target(int(k), B.u[k], act)[0]
-                    dr[j] = tA - tB + E * dg0[j]
-                else:
-                    dr[j] = np.nan
-        dy = dg1 + E * dg0 - dr
+            # Glocker's map on γ̃ = (γ_free + Eγ_k)/(1+E) with Ĝ (observer.impact.poisson_step):
+            # ΔPᵀΔγ̄ = ΔPᵀΔγ̄_G − ½ΔPᵀDδ with γ̄_G = γ̃ + ĜP/2, Δγ̃ = Δγ_k + δ/(1+E)
+            dgbar_G = dg0 + delta / (1.0 + E) + 0.5 * dP @ G.T
+            out["impulse_complementarity"][ks] = np.einsum("ki,ki->k", dP, dgbar_G)
+            out["impulse_delassus"][ks] = 0.0
+            out["impulse_target"][ks] = 0.0
+            continue
+        dy = dg1 + E * dg0
         out["impulse_complementarity"][ks] = 0.5 * np.einsum("ki,ki->k", dP * (1.0 + D), dy)
-        out["impulse_target"][ks] = np.einsum("ki,ki->k", dP / (1.0 + E), dr)
+        out["impulse_target"][ks] = 0.0
 
 
 def decrement_parts(run: Run, a: str, b: str, examine: np.ndarray | None = None) -> dict[str, np.ndarray]:

@@ -7,10 +7,14 @@ matrices alone (nothing precomputed by the stepper):
   ``M(u_{k+1} − u_k) = −hC u_θ − hK q_θ + h f̄_k + W P`` and ``q_{k+1} = q_k + h u_θ``;
 * the contact velocities ``γ = Wᵀu + ν̇`` at both ends of the step;
 * Newton (paper eq. (5), discrete): ``0 ≤ γ_{k+1} + e∘γ_k ⊥ P ≥ 0`` on the closed set;
-* Poisson (paper eq. (6), Glocker's inequality form) on the step's impulsive part
-  (Λ_C, Λ_E) with ``G₀ = W_AᵀM⁻¹W_A``: compression ``0 ≤ γ_C ⊥ Λ_C ≥ 0``, expansion
-  ``0 ≤ γ_E ⊥ Λ_E − ε∘Λ_C ≥ 0``; and the step's smooth part
-  ``0 ≤ γ_{k+1} − τ ⊥ P ≥ 0`` with τ = γ_E − (1+ε)∘γ_C recomputed here.
+* Poisson (paper eq. (6), Glocker's inequality form) on the step's impulse P = Λ_C + Λ_E,
+  with the step's Delassus matrix ``Ĝ = W_AᵀÂ⁻¹W_A`` (Â = M + hθC + h²θ²K, built here) and
+  the step's pre-impact velocity ``γ̃ = (γ_free + ε∘γ_k)/(1+ε)``, where
+  ``γ_free = γ_{k+1} − ĜP`` is recomputed here: compression ``0 ≤ γ̃ + ĜΛ_C ⊥ Λ_C ≥ 0``,
+  expansion ``0 ≤ γ̃ + ĜP ⊥ Λ_E − ε∘Λ_C ≥ 0``.
+
+The stepper tests run on ``engine="python"`` (the reference implementation of
+:mod:`observer.stepping`); the compiled engine is held to it in ``test_engines.py``.
 
 Tolerances: complementarity is checked to 1e-9 relative to the size of the velocities and
 impulses involved (the LCP solvers are exact up to round-off of order 1e-15 of the
@@ -92,25 +96,32 @@ def check_newton_steps(sc: Scenario, res) -> int:
     return count
 
 
+def iteration_matrix(sc: Scenario) -> np.ndarray:
+    s, h, th = sc.system, sc.h, sc.theta
+    return s.M + h * th * s.C + (h * th) ** 2 * s.K
+
+
 def check_poisson_steps(sc: Scenario, res) -> dict[str, int]:
-    """Glocker's conditions on the impulsive part and the smooth part's LCP on every step."""
+    """Glocker's conditions on the step's impulse, in γ̃ and Ĝ, on every step."""
     st = stepper_of(sc)
     s = sc.system
     eps = sc.law.restitution
+    A_hat = iteration_matrix(sc)
     counts = {"steps": 0, "impacts": 0, "multi_impacts": 0, "expansion_lcp_active": 0}
     for k in np.flatnonzero(res.active[1:].any(axis=1)):
         A = np.flatnonzero(res.active[k + 1])
         g0, g1 = gammas(sc, res, k, A)
-        _, lam_c, lam_e = st.target(k, res.u[k], A)
-        G0 = s.W[:, A].T @ np.linalg.solve(s.M, s.W[:, A])
-        gamma_c = g0 + G0 @ lam_c
-        gamma_e = gamma_c + G0 @ lam_e
-        scale = velocity_scale(sc, res, k, A) + np.abs(G0).max() * (np.abs(lam_c).max() + np.abs(lam_e).max())
-        assert_complementary(gamma_c, lam_c, scale, f"Poisson compression, step {k}")
-        assert_complementary(gamma_e, lam_e - eps[A] * lam_c, scale, f"Poisson expansion, step {k}")
-        tau = gamma_e - (1.0 + eps[A]) * gamma_c
         P = res.P[k + 1, A]
-        assert_complementary(g1 - tau, P, scale, f"Poisson smooth part, step {k}")
+        AinvW = np.linalg.solve(A_hat, s.W[:, A])
+        G = s.W[:, A].T @ AinvW
+        u_free = res.u[k + 1] - AinvW @ P
+        g_free = g1 - G @ P
+        g_t = (g_free + eps[A] * g0) / (1.0 + eps[A])
+        P_step, lam_c, lam_e = st.impulse(k, res.u[k], u_free, A)
+        scale = velocity_scale(sc, res, k, A) + np.abs(G).max() * np.abs(P).max()
+        np.testing.assert_allclose(lam_c + lam_e, P, rtol=0, atol=RTOL * max(np.abs(P).max(), 1e-300))
+        assert_complementary(g_t + G @ lam_c, lam_c, scale, f"Poisson compression, step {k}")
+        assert_complementary(g_t + G @ P, lam_e - eps[A] * lam_c, scale, f"Poisson expansion, step {k}")
         counts["steps"] += 1
         counts["impacts"] += bool(np.any(lam_c > 0))
         counts["multi_impacts"] += int(np.sum(lam_c > 0) >= 2)
@@ -130,7 +141,7 @@ SINGLE = [("bouncing_ball", {}), ("impact_oscillator", {}), ("grazing", {}),
 @pytest.mark.parametrize("name,over", SINGLE, ids=[s[0] for s in SINGLE])
 def test_newton_step_laws_single_contact(name, over, theta):
     sc = observer.load_scenario(name, {**over, "impact.law": "newton", "simulation.theta": theta})
-    res = observer.simulate(sc)
+    res = observer.simulate(sc, engine="python")
     assert_momentum_balance(sc, res)
     assert check_newton_steps(sc, res) > 0
 
@@ -139,7 +150,7 @@ def test_newton_step_laws_single_contact(name, over, theta):
 @pytest.mark.parametrize("name,over", SINGLE, ids=[s[0] for s in SINGLE])
 def test_poisson_step_laws_single_contact(name, over, theta):
     sc = observer.load_scenario(name, {**over, "impact.law": "poisson", "simulation.theta": theta})
-    res = observer.simulate(sc)
+    res = observer.simulate(sc, engine="python")
     assert_momentum_balance(sc, res)
     assert check_poisson_steps(sc, res)["impacts"] > 0
 
@@ -150,7 +161,7 @@ CHAIN = {"param.N": 10, "simulation.h": 1e-3, "simulation.t_end": 3.0}
 @pytest.fixture(scope="module")
 def chain_poisson():
     sc = observer.load_scenario("rocking_chain", {**CHAIN, "param.law": "poisson"})
-    return sc, observer.simulate(sc)
+    return sc, observer.simulate(sc, engine="python")
 
 
 def test_poisson_inequality_conditions_on_every_chain_step(chain_poisson):
@@ -165,29 +176,33 @@ def test_poisson_inequality_conditions_on_every_chain_step(chain_poisson):
 
 def test_newton_step_laws_on_the_chain():
     sc = observer.load_scenario("rocking_chain", {**CHAIN, "param.law": "newton"})
-    res = observer.simulate(sc)
+    res = observer.simulate(sc, engine="python")
     assert_momentum_balance(sc, res)
     assert check_newton_steps(sc, res) >= 100
 
 
-def test_chain_resting_contacts_do_not_hop(chain_poisson):
-    """On a step without impact (Λ_C = 0 on every closed contact, hence γ_k ≥ 0 there) no
-    contact that carries an impulse leaves: γ_{k+1} = τ = −ε∘γ_k ≤ 0 where P > 0 (a resting
-    contact, γ_k = 0, ends at γ_{k+1} = 0: the e = 0 law)."""
-    sc, res = chain_poisson
-    st = stepper_of(sc)
+def test_chain_resting_contacts_do_not_hop():
+    """Chain N = 10 (20 contacts, Poisson, global ε = 0.9) on a slowly rising ground
+    (Y = 2 mm, Ω = 2 rad/s, no clearance): the contacts carry the chain's load for long
+    stretches. A closed contact that rests (|γ_k| ≤ 1e-9·YΩ) and carries an impulse never
+    leaves with a positive velocity beyond 1e-9·YΩ (measured ≤ 3.5e-11·YΩ over 257 such
+    steps): the step restitutes no part of the contact force (the e = 0 law)."""
+    vs = 0.002 * 2.0
+    sc = observer.load_scenario("rocking_chain", {"param.N": 10, "simulation.h": 1e-3,
+                                                  "simulation.t_end": 3.0, "param.Y": 0.002,
+                                                  "param.Omega": 2.0, "param.s_L": 0.0,
+                                                  "param.s_R": 0.0, "param.law": "poisson"})
+    res = observer.simulate(sc, engine="python")
+    assert_momentum_balance(sc, res)
+    counts = check_poisson_steps(sc, res)
     resting = 0
     for k in np.flatnonzero(res.active[1:].any(axis=1)):
         A = np.flatnonzero(res.active[k + 1])
-        _, lam_c, _ = st.target(k, res.u[k], A)
-        if np.any(lam_c > 0):
-            continue
-        _, g1 = gammas(sc, res, k, A)
-        P = res.P[k + 1, A]
-        carried = P > 0
-        resting += int(carried.sum())
-        assert np.all(g1[carried] <= RTOL * velocity_scale(sc, res, k, A)), (k, g1[carried])
-    assert resting > 0
+        g0, g1 = gammas(sc, res, k, A)
+        rest = (np.abs(g0) <= 1e-9 * vs) & (res.P[k + 1, A] > 0)
+        resting += int(rest.sum())
+        assert np.all(g1[rest] <= 1e-9 * vs), (k, g1[rest])
+    assert resting >= 100 and counts["steps"] >= 1000, (resting, counts)
 
 
 def block_on_ground(eps: tuple[float, float], law: str = "poisson") -> Scenario:
@@ -202,14 +217,15 @@ def block_on_ground(eps: tuple[float, float], law: str = "poisson") -> Scenario:
         "simulation": {"t_end": 4.0, "h": 1e-3, "theta": 0.5}}, "block")
 
 
-@pytest.mark.parametrize("eps", [(0.8, 0.8), (0.8, 0.3)])
+@pytest.mark.parametrize("eps", [(0.8, 0.8), (0.3, 0.3), (0.0, 0.0)])
 def test_landed_block_rests_without_hopping(eps):
     """After its bounces die out (Zeno time ≈ 0.4 s for ε = 0.8) the block rests: over the
-    last 2 s both contacts stay closed, the velocities stay at round-off level and each
-    contact carries its share of the weight, P_1 + P_2 = m g h, every step — for equal and
-    unequal ε (Poisson's inequality form)."""
+    last 2 s both contacts stay closed, the velocities stay at round-off level and the
+    contacts carry the weight, P_1 + P_2 = m g h, every step (global ε; with unequal ε
+    Glocker's law on the whole step impulse restitutes part of the contact force: README,
+    limitations)."""
     sc = block_on_ground(eps)
-    res = observer.simulate(sc)
+    res = observer.simulate(sc, engine="python")
     late = res.t >= 2.0
     assert res.active[late].all()
     assert np.abs(res.u[late]).max() <= 1e-12
@@ -226,7 +242,7 @@ def test_poisson_equals_newton_for_one_contact(name, theta):
     over = {"simulation.theta": theta}
     if name == "double_mass":
         over.update({"simulation.t_end": 5.0})
-    runs = {law: observer.simulate(observer.load_scenario(name, {**over, "impact.law": law}))
+    runs = {law: observer.simulate(observer.load_scenario(name, {**over, "impact.law": law}), engine="python")
             for law in ("newton", "poisson")}
     a, b = runs["newton"], runs["poisson"]
     assert a.P.max() > 0
@@ -247,11 +263,12 @@ def two_independent_balls(law: str, eps: tuple[float, float]) -> Scenario:
 
 
 def test_poisson_equals_newton_on_uncoupled_contacts():
-    """The multi-contact Poisson target reduces to Newton's −ε∘γ_k on decoupled contacts,
-    for approaching and separating closed contacts alike (to round-off)."""
+    """On decoupled contacts (Ĝ diagonal) the multi-contact Poisson path (Glocker's phases on
+    γ̃) gives Newton's step, for approaching and separating closed contacts alike (to
+    round-off)."""
     eps = (0.8, 0.5)
-    a = observer.simulate(two_independent_balls("newton", eps))
-    b = observer.simulate(two_independent_balls("poisson", eps))
+    a = observer.simulate(two_independent_balls("newton", eps), engine="python")
+    b = observer.simulate(two_independent_balls("poisson", eps), engine="python")
     assert (a.active.all(axis=1)).sum() > 50          # both contacts closed on the same steps
     for x, y in ((a.q, b.q), (a.u, b.u), (a.P, b.P)):
         np.testing.assert_allclose(y, x, rtol=0, atol=1e-12 * np.abs(x).max())
@@ -269,7 +286,7 @@ def test_poisson_ball_rest_time_unbiased():
     assert t_exact == pytest.approx(86.9946, abs=1e-4)
     sc = observer.load_scenario("bouncing_ball", {"param.restitution": e, "param.law": "poisson",
                                                   "param.h0": h0, "param.g0": g})
-    res = observer.simulate(sc, h=1e-3, t_end=90.0)
+    res = observer.simulate(sc, h=1e-3, t_end=90.0, engine="python")
     t_last = res.t[np.flatnonzero(res.q[:, 0] > level)[-1]]
     assert abs(t_last - t_exact) <= 0.1 and abs(t_last - 87.03) <= 0.1, (t_last, t_exact)
 

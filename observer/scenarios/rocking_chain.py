@@ -45,14 +45,21 @@ def matrices(N: int, m: float, b: float, H: float, a: float, k: float, c: float)
     C = np.zeros((n, n))
     W = np.zeros((n, n))
     for j in range(N):                       # interface j+1 joins block j (ground if j = 0) to j+1
-        D = np.zeros((2, n))                 # D = E_{j+1} − E_j
-        D[:, 2 * j:2 * j + 2] = np.eye(2)
-        if j > 0:
-            D[:, 2 * j - 2:2 * j] = -np.eye(2)
-        K += D.T @ K_int @ D
-        C += D.T @ C_int @ D
+        # D = E_{j+1} − E_j (2×n): Dᵀ X D adds X on the (j+1, j+1) block, −X on the
+        # off-diagonal blocks and X on the (j, j) block (assembled in place, O(N) overall)
+        hi = slice(2 * j, 2 * j + 2)
+        lo = slice(2 * j - 2, 2 * j) if j > 0 else None
+        for Mat, X in ((K, K_int), (C, C_int)):
+            Mat[hi, hi] += X
+            if lo is not None:
+                Mat[lo, lo] += X
+                Mat[lo, hi] -= X
+                Mat[hi, lo] -= X
         for side, x in enumerate((-b, b)):
-            W[:, 2 * j + side] = D.T @ np.array([1.0, x])
+            w = np.array([1.0, x])
+            W[hi, 2 * j + side] = w
+            if lo is not None:
+                W[lo, 2 * j + side] = -w
     return M, C, K, W, K_int, C_int
 
 
