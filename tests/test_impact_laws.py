@@ -7,7 +7,8 @@ module's own numbers:
 * Newton: ``0 ≤ γ⁺ + e∘γ⁻ ⊥ Λ ≥ 0`` with ``γ⁺ = γ⁻ + GΛ``;
 * Poisson (Glocker's inequality form): compression ``0 ≤ γ_C ⊥ Λ_C ≥ 0``, expansion
   ``0 ≤ γ_E ⊥ Λ_E − ε∘Λ_C ≥ 0``; the one-contact closed form agrees with the LCP path;
-* the discrete Poisson target ``τ = γ_E − (1+ε)∘γ_C`` (``−εγ_k`` for one contact, bitwise);
+* the discrete Poisson step: Glocker's law on ``γ̃ = (γ_free + ε∘γ_k)/(1+ε)`` (Newton's
+  closed form for one contact, bitwise);
 * :meth:`ImpactLaw.build` rejects bad input with an error naming the field.
 
 Tolerance: 1e-12 relative to the size of the velocities and impulses (2×2 and 3×3
@@ -24,7 +25,7 @@ import pytest
 from observer.contact.lcp import LCPSolution
 from observer.errors import InputError
 from observer.impact import (LAWS, NEWTON, POISSON, ImpactLaw, impact, newton_impact,
-                             poisson_impact, poisson_phases, poisson_target)
+                             poisson_impact, poisson_phases, poisson_step)
 
 TOL = 1e-12
 
@@ -169,7 +170,7 @@ def test_poisson_phases_satisfy_glockers_conditions(G, gm, eps):
 
 def test_the_cases_exercise_every_branch():
     """The CASES above contain a separating-after-compression contact and an active
-    expansion LCP (μ > 0), so the target's −(1+ε)γ_C term and μ are both tested."""
+    expansion LCP (μ > 0), so both phases of the multi-contact law are exercised."""
     G, gm, eps = CASES[6]
     lc = lcp_enum(G, gm)
     gc = gm + G @ lc
@@ -206,38 +207,64 @@ def test_poisson_one_contact_closed_form_equals_the_lcp_path(gm, eps):
     assert lam[0] == pytest.approx((1 + eps) * max(0.0, -gm / 2.5), abs=1e-15)
 
 
+def gamma_free_of(gk: np.ndarray) -> np.ndarray:
+    """A free velocity γ_free = γ_k + δ with an O(h)-like smooth change δ of mixed signs."""
+    return gk + 0.05 * np.array([-1.0, 0.5, -0.25])[:gk.size]
+
+
 @pytest.mark.parametrize("G,gk,eps", CASES, ids=IDS)
-def test_poisson_target_from_the_phases(G, gk, eps):
-    tau, lam_c, lam_e = poisson_target(G, gk, eps, Recorder())
-    lc = lcp_enum(G, gk)
-    mu = lcp_enum(G, gk + G @ lc + G @ (eps * lc))
-    gc = gk + G @ lc
-    ge = gc + G @ (eps * lc + mu)
-    scale = np.abs(gk).max() + np.abs(G).max() * np.abs(lc).max() * 3
+def test_poisson_step_is_glockers_law_on_the_step_velocity(G, gk, eps):
+    """P = Λ_C + Λ_E with Glocker's conditions in γ̃ = (γ_free + ε∘γ_k)/(1+ε):
+    ``0 ≤ γ̃ + GΛ_C ⊥ Λ_C ≥ 0`` and ``0 ≤ γ̃ + GP ⊥ Λ_E − ε∘Λ_C ≥ 0``."""
+    gf = gamma_free_of(gk)
+    P, lam_c, lam_e = poisson_step(G, gf, gk, eps, Recorder())
+    gt = (gf + eps * gk) / (1.0 + eps)
+    lc = lcp_enum(G, gt)
+    mu = lcp_enum(G, gt + G @ lc + G @ (eps * lc))
+    scale = np.abs(gk).max() + np.abs(G).max() * (np.abs(lc).max() + np.abs(mu).max()) * 3
     np.testing.assert_allclose(lam_c, lc, rtol=0, atol=TOL * scale)
     np.testing.assert_allclose(lam_e, eps * lc + mu, rtol=0, atol=TOL * scale)
-    np.testing.assert_allclose(tau, ge - (1 + eps) * gc, rtol=0, atol=TOL * scale)
+    np.testing.assert_allclose(P, (1 + eps) * lc + mu, rtol=0, atol=TOL * scale)
+    assert_complementary(gt + G @ lam_c, lam_c, scale, "compression in γ̃")
+    assert_complementary(gt + G @ P, lam_e - eps * lam_c, scale, "expansion in γ̃")
 
 
-def test_poisson_target_on_an_uncoupled_separating_contact_is_newtons():
-    """G diagonal: each contact on its own, so τ_i = −ε_iγ_k,i for either sign of γ_k,i."""
+@pytest.mark.parametrize("G,gk,eps", CASES, ids=IDS)
+def test_poisson_step_without_smooth_change_is_the_poisson_impact(G, gk, eps):
+    """δ = 0 (γ_free = γ_k): γ̃ = γ_k, so the step's impulse is Glocker's impact impulse."""
+    P, _, _ = poisson_step(G, gk.copy(), gk, eps, Recorder())
+    lc = lcp_enum(G, gk)
+    mu = lcp_enum(G, gk + G @ lc + G @ (eps * lc))
+    np.testing.assert_allclose(P, (1 + eps) * lc + mu, rtol=0, atol=1e-13)
+
+
+def test_poisson_step_on_uncoupled_contacts_is_newtons():
+    """G diagonal: each contact on its own, P_i = max(0, −(γ_free,i + ε_iγ_k,i)/G_ii)."""
     G = np.diag([2.0, 0.5, 1.0])
-    gk = np.array([-1.0, 0.4, 0.0])
+    gk = np.array([-1.0, 0.4, -0.2])
+    gf = np.array([-1.1, 0.3, 0.5])
     eps = np.array([0.3, 0.6, 0.9])
-    tau, lam_c, lam_e = poisson_target(G, gk, eps, Recorder())
-    np.testing.assert_allclose(tau, -eps * gk, rtol=0, atol=1e-15)
-    np.testing.assert_allclose(lam_c, [0.5, 0.0, 0.0], rtol=0, atol=1e-15)
-    np.testing.assert_allclose(lam_e, [0.15, 0.0, 0.0], rtol=0, atol=1e-15)
+    P, lam_c, lam_e = poisson_step(G, gf, gk, eps, Recorder())
+    newton = np.maximum(0.0, -(gf + eps * gk) / np.diag(G))
+    np.testing.assert_allclose(P, newton, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(lam_c, newton / (1 + eps), rtol=0, atol=1e-15)
+    assert newton[0] > 0 and newton[1] == 0.0 and newton[2] == 0.0
 
 
-@pytest.mark.parametrize("gk", [-1.3, 0.0, 0.8])
-def test_poisson_target_one_contact_is_bitwise_newtons(gk):
+@pytest.mark.parametrize("gk,gf", [(-1.3, -1.2), (-1.3, 0.2), (0.0, -0.1), (0.8, 0.7), (0.8, -0.5)])
+def test_poisson_step_one_contact_is_bitwise_newtons(gk, gf):
+    """One contact: Newton's closed form ``max(0, −(γ_free + εγ_k)/G)`` to the last bit,
+    without a solver call; Λ_C = P/(1+ε), Λ_E = P − Λ_C."""
     eps = np.array([0.45])
-    g = np.array([gk])
-    tau, lam_c, lam_e = poisson_target(np.array([[3.0]]), g, eps, no_solve)
-    assert np.array_equal(tau, -eps * g)
-    assert lam_c[0] == pytest.approx(max(0.0, -gk / 3.0), abs=1e-15)
-    assert lam_e[0] == pytest.approx(0.45 * max(0.0, -gk / 3.0), abs=1e-15)
+    G = np.array([[3.0]])
+    P, lam_c, lam_e = poisson_step(G, np.array([gf]), np.array([gk]), eps, no_solve)
+    b = gf + 0.45 * gk
+    expected = -b / 3.0 if b < 0.0 else 0.0
+    assert P.shape == lam_c.shape == lam_e.shape == (1,)
+    assert P[0] == expected
+    assert lam_c[0] == expected / 1.45
+    assert lam_e[0] == expected - expected / 1.45
+    assert lam_e[0] == pytest.approx(0.45 * lam_c[0], abs=1e-15)
 
 
 # ---------------------------------------------------------------------------------------
