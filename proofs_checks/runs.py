@@ -1,13 +1,11 @@
-"""Simulated runs for the run-based checks: a replay of the library's time loop that keeps
-what the checks need (pre-projection states, predicted gaps) and lets tests swap the
-projection metric.
+"""Simulated runs for the run-based checks, through the library's one time loop.
 
-The replay calls the library's own stepper (:class:`observer.stepping.MoreauJean`):
-``predicted_active`` for the master's closed set, ``step(..., project=False)`` for the
-smooth and impulsive part of every step and, with the default ``metric=None``,
-``MoreauJean.project`` for the position jumps; it is therefore bitwise identical to
-:func:`observer.simulate` with the same settings (a test asserts it). With ``metric`` set,
-the position jumps use the given metric N instead of K::
+:func:`replay` runs :func:`observer.loop.run` — the same loop, engines and kernel as
+:func:`observer.simulate` — with every observer coupled to χ over the whole run and the
+loop's options the checks need: ``record_pre=True`` (the positions before the step's
+projection) and a swappable projection ``metric``. With the same settings and engine it is
+therefore bitwise identical to :func:`observer.simulate` (a test asserts it). With ``metric``
+set, the position jumps use the given metric N instead of K::
 
     q⁺ = q⁻ − N⁻¹W_I (W_Iᵀ N⁻¹ W_I)⁻¹ g_I(q⁻, t_{k+1})
 
@@ -27,6 +25,8 @@ import numpy as np
 from observer.model import LinearSystem
 from observer.observers import lyapunov
 from observer.scenario import Scenario
+from observer.loop import LoopInput
+from observer.loop import run as run_loop
 from observer.stepping import MoreauJean
 
 Projector = Callable[[int, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -144,8 +144,8 @@ def make_projector(stepper: MoreauJean, metric: np.ndarray | Projector | None) -
 
 def replay(scenario: Scenario, *, h: float | None = None, t_end: float | None = None,
            slaves: tuple[SlaveSpec, ...] | list[SlaveSpec] = (), master_projection: bool = False,
-           metric: np.ndarray | Projector | None = None, system: LinearSystem | None = None,
-           chi: np.ndarray | None = None) -> Run:
+           metric: np.ndarray | None = None, system: LinearSystem | None = None,
+           chi: np.ndarray | None = None, engine: str = "compiled") -> Run:
     """Simulate the master and observers coupled over the whole run, recording everything.
 
     Parameters
@@ -158,12 +158,14 @@ def replay(scenario: Scenario, *, h: float | None = None, t_end: float | None = 
         Observers; all are driven by the same χ (the master's closed set, or ``chi``).
     master_projection : bool
         Project the master on its own closed set (the "projected master").
-    metric : ndarray, callable or None
-        Projection metric of the position jumps (see :func:`make_projector`).
+    metric : ndarray or None
+        Projection metric N of the position jumps (None: K, the library's projection).
     system : LinearSystem, optional
         Replace the scenario's system (e.g. a known-bad one built with ``check=False``).
     chi : ndarray of bool, shape (N+1, m), optional
         Switching signal for the observers (row k+1 = step k) instead of the master's.
+    engine : {"compiled", "python"}
+        The loop's engine (:mod:`observer.loop`); the same default as :func:`observer.simulate`.
 
     Returns
     -------
@@ -172,40 +174,50 @@ def replay(scenario: Scenario, *, h: float | None = None, t_end: float | None = 
     system = system or scenario.system
     stepper = MoreauJean(system, scenario.law, h or scenario.h, t_end or scenario.t_end,
                          scenario.theta, solver=scenario.solver)
-    project, desc = make_projector(stepper, metric)
-    grid, S = stepper.grid, stepper.S
-    steps, n, m = grid.steps, system.n, system.m
-
-    def record(name: str, q0: np.ndarray, u0: np.ndarray, projected: bool) -> Trajectory:
-        tr = Trajectory(name, np.empty((steps + 1, n)), np.empty((steps + 1, n)),
-                        np.empty((steps + 1, n)), np.zeros((steps + 1, m)), np.zeros((steps + 1, m)),
-                        np.zeros((steps + 1, m), dtype=bool), projected)
-        tr.q[0] = tr.q_pre[0] = q0
-        tr.u[0] = u0
-        return tr
-
-    master = record("master", scenario.q0, scenario.u0, master_projection)
-    subs = [record(s.name, np.asarray(s.q0, float), np.asarray(s.u0, float), s.position_jumps)
-            for s in slaves]
-    g_pred = np.zeros((steps + 1, m))
-    chi_rec = np.zeros((steps + 1, m), dtype=bool)
+    steps, m = stepper.steps, system.m
+    slaves = list(slaves)
+    if callable(metric):
+        raise ValueError("replay takes a metric matrix N (or None for K), not a callable")
+    desc = _metric_description(stepper, metric)
     if chi is not None:
         chi = np.asarray(chi, dtype=bool)
         if chi.shape != (steps + 1, m):
             raise ValueError(f"chi has shape {chi.shape}, expected {(steps + 1, m)}")
-    h_, nu, nud = S.h, grid.nu, grid.nu_dot
-    for k in range(steps):
-        idx = np.flatnonzero(stepper.predicted_active(k, master.q[k], master.u[k]))
-        _advance(stepper, project, master, k, idx)
-        act = idx if chi is None else np.flatnonzero(chi[k + 1])
-        chi_rec[k + 1, act] = True
-        for tr in subs:
-            _advance(stepper, project, tr, k, act)
-    g_pred[1:] = (master.q[:-1] + 0.5 * h_ * master.u[:-1]) @ S.W + nu[:-1] + 0.5 * h_ * nud[:-1]
-    return Run(system, stepper, grid.t, master, {tr.name: tr for tr in subs}, chi_rec, g_pred, desc,
-               {"h": stepper.h, "t_end": float(grid.t[-1]), "theta": stepper.theta,
+    inp = LoopInput(stepper, np.stack([scenario.q0] + [np.asarray(s.q0, float) for s in slaves]),
+                    np.stack([scenario.u0] + [np.asarray(s.u0, float) for s in slaves]),
+                    np.array([False] + [s.position_jumps for s in slaves]), master_projection,
+                    coupling=None, chi=None if chi is None else chi[1:],
+                    metric=None if metric is None else np.asarray(metric, dtype=float))
+    out = run_loop(inp, engine=engine, record_pre=True)
+    t = stepper.time(out.rows)
+
+    def trajectory(i: int, name: str, projected: bool, active: np.ndarray) -> Trajectory:
+        return Trajectory(name, out.q[i], out.q_pre[i], out.u[i], out.P[i], out.sigma[i],
+                          active, projected)
+
+    master = trajectory(0, "master", master_projection, out.active)
+    chi_rec = out.chi if slaves else np.zeros_like(out.active)
+    if not slaves:
+        chi_rec = out.active.copy() if chi is None else chi
+    subs = [trajectory(i, s.name, s.position_jumps, chi_rec) for i, s in enumerate(slaves, start=1)]
+    g_pred = np.zeros((steps + 1, m))
+    g_pred[1:] = ((out.q[0, :-1] + 0.5 * stepper.h * out.u[0, :-1]) @ system.W + system.nu(t[:-1])
+                  + 0.5 * stepper.h * system.nu_dot(t[:-1]))
+    return Run(system, stepper, t, master, {tr.name: tr for tr in subs}, chi_rec, g_pred, desc,
+               {"h": stepper.h, "t_end": float(t[-1]), "theta": stepper.theta,
                 "master_projection": master_projection, "metric": metric, "system": system,
-                "chi_override": chi is not None}, scenario)
+                "chi_override": chi is not None, "engine": engine}, scenario)
+
+
+def _metric_description(stepper: MoreauJean, metric) -> str:
+    if metric is None:
+        return "K (library projection)"
+    N = np.asarray(metric, dtype=float)
+    if np.array_equal(N, stepper.system.K):
+        return "K (explicit matrix)"
+    if np.array_equal(N, np.eye(N.shape[0])):
+        return "identity (Euclidean)"
+    return "custom matrix"
 
 
 def slave_specs_of(run: Run) -> list[SlaveSpec]:
@@ -223,18 +235,6 @@ def rerun(run: Run, h: float) -> Run:
         raise ValueError("the run cannot be repeated at another step (no scenario, or an explicit χ)")
     return replay(run.scenario, h=h, t_end=st["t_end"], slaves=slave_specs_of(run),
                   master_projection=st["master_projection"], metric=st["metric"], system=st["system"])
-
-
-def _advance(stepper: MoreauJean, project: Projector, tr: Trajectory, k: int, idx: np.ndarray) -> None:
-    q1, u1, P, _ = stepper.step(k, tr.q[k], tr.u[k], idx, False)
-    tr.q_pre[k + 1] = q1
-    if tr.projected and idx.size:
-        q1, sig = project(k + 1, q1, idx)
-        tr.sigma[k + 1, idx] = sig
-    tr.q[k + 1], tr.u[k + 1] = q1, u1
-    if idx.size:
-        tr.P[k + 1, idx] = P
-        tr.active[k + 1, idx] = True
 
 
 def lyapunov_pair(system: LinearSystem, a: Trajectory, b: Trajectory, pre: bool = False) -> np.ndarray:
