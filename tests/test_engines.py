@@ -165,3 +165,36 @@ def test_kernel_failure_goes_to_the_reference_solver_and_is_recorded():
     # the same motion (the reference solver's accuracy, 1e-9 relative residual)
     np.testing.assert_allclose(co.q, py.q, rtol=0, atol=1e-8)
     np.testing.assert_allclose(co.u, py.u, rtol=0, atol=1e-8)
+
+
+def test_summary_store_streams_the_full_runs_metrics():
+    """store="summary": the kernel's streaming metrics over every step equal those computed
+    from the full trajectories (first passage, settling, the sums of the ΔV parts, V at the
+    kept rows), the master's closings equal the full run's, the deepest penetration is the
+    full run's minimum gap."""
+    sc = observer.load_scenario("double_mass", {"simulation.t_end": 6.0, "simulation.h": 5e-4})
+    full = observer.simulate(sc, observers=("jump", "nojump"))
+    summ = observer.simulate(sc, observers=("jump", "nojump"), store="summary", record_every=10)
+    sync = full.synchronization()
+    for _, row in summ.summary.iterrows():
+        ref = sync[sync.observer == row.observer].iloc[0]
+        for rho in (1e-3, 1e-6, 1e-9):
+            assert row[f"t_sync_{rho:g}"] == pytest.approx(ref[f"t_sync_{rho:g}"], abs=1e-12)
+            assert row[f"t_settle_{rho:g}"] == pytest.approx(ref[f"t_settle_{rho:g}"], abs=1e-12)
+        s = full.slaves[row.observer]
+        V = s.V
+        assert row.V_on == pytest.approx(V[0], rel=1e-14) and row.V_end == pytest.approx(V[-1], rel=1e-9, abs=1e-300)
+        assert row.rises == int(np.sum(np.diff(V) > 0))
+        for col, part in (("sum_damping", s.dV_damping), ("sum_impulse", s.dV_impulse),
+                          ("sum_projection", s.dV_projection)):
+            assert row[col] == pytest.approx(part.sum(), rel=1e-9, abs=1e-12 * V[0])
+        np.testing.assert_allclose(summ.slaves[row.observer].V, V[::10], rtol=1e-12, atol=0)
+    closings = int(np.sum(full.active[1:, 0] & ~full.active[:-1, 0]))
+    assert summ.summary.attrs["master_closings"] == [closings]
+    assert summ.metadata["min_gap"] == pytest.approx(full.g[1:].min(), rel=1e-12)
+    assert summ.t.size == full.t[::10].size
+
+
+def test_summary_store_refuses_the_python_engine():
+    with pytest.raises(observer.InputError, match="store"):
+        observer.simulate("bouncing_ball", engine="python", store="summary")
