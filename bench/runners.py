@@ -2,8 +2,15 @@
 
 Every row holds the case's declared fields, the metrics of its kind, the timing
 (``cpu_time_s`` from :func:`time.process_time` around the simulation only, ``wall_time_s``,
-``steps_per_s`` = steps / CPU time), ``status`` (``"ok"`` or ``"n/a"``), ``note`` and the
-environment of :func:`bench.results.environment` (versions, CPU, commit) plus ``date``.
+``steps_per_s`` = steps / CPU time; ``engine`` and ``loop_time_s``, the time loop's own wall
+time from the result's metadata), ``status`` (``"ok"`` or ``"n/a"``), ``note`` and the
+environment of :func:`bench.results.environment` (versions, CPU, commit, and
+``compile_time_s``: the kernel's compile or cache-load time, measured once per suite run by
+:func:`observer.loop.compile_time` before any case is timed, so no row pays it) plus ``date``.
+
+Engines: every simulation runs on the compiled engine (the default of
+:func:`observer.simulate`), except cases whose contact solver the kernel does not have
+(:func:`bench.suites.engine_for`: the numpy engine).
 
 Error norms (work-precision): for a trajectory q_h on the grid t_k and a reference q_ref,
 ``e_k = max_i |q_h,i(t_k) − q_ref,i(t_k)|``; the reported error ``err_mean`` is the time
@@ -36,7 +43,7 @@ from observer.switching import log_from_active
 from bench.perturb import perturb_log
 from bench.reference import closed_form_position
 from bench.results import now_iso
-from bench.suites import RHOS, Case
+from bench.suites import RHOS, Case, engine_for
 
 ERROR_NORM = "mean over t of max_i |q_i − q_ref,i|"
 MAX_PLOT_POINTS = 4000
@@ -90,10 +97,29 @@ def base_row(case: Case, sc) -> dict[str, Any]:
 
 
 def _timed(fn, *args, **kwargs):
-    gc.collect()
+    """``(fn(...), CPU seconds, wall seconds)``. (No ``gc.collect()`` before: with cvxpy and
+    pandas loaded a full collection costs ≈ 0.1 s, more than most runs.)"""
     c0, w0 = time.process_time(), time.perf_counter()
     out = fn(*args, **kwargs)
     return out, time.process_time() - c0, time.perf_counter() - w0
+
+
+def simulate(sc, case: Case, **kwargs):
+    """:func:`observer.simulate` on the case's engine (:func:`bench.suites.engine_for`),
+    timed: ``(result, cpu seconds, wall seconds)``."""
+    kwargs.setdefault("engine", engine_for(kwargs.get("solver") or case.solver))
+    return _timed(observer.simulate, sc, **kwargs)
+
+
+def engine_columns(res) -> dict[str, Any]:
+    """Engine, matrix structure and the loop's own wall time (from the result's metadata)."""
+    md = res.metadata
+    steps = md.get("steps") or 0
+    loop = md.get("wall_time_s", float("nan"))
+    return {"engine": md.get("engine", "python"), "structure": md.get("structure", ""),
+            "loop_time_s": loop, "loop_per_step_s": loop / steps if steps else float("nan"),
+            "run_compile_time_s": md.get("compile_time_s", 0.0),
+            "solver_fallbacks": md.get("solver_fallbacks", 0)}
 
 
 def _finish(rows: list[dict], ctx: Context) -> list[dict]:
@@ -104,7 +130,8 @@ def _finish(rows: list[dict], ctx: Context) -> list[dict]:
 def run_case(case: Case, ctx: Context) -> list[dict]:
     """Run one case; return its rows (environment and date included)."""
     runner = {"observers": run_observers, "work_precision": run_work_precision,
-              "robustness": run_robustness, "scaling": run_scaling, "checks": run_checks}[case.kind]
+              "robustness": run_robustness, "scaling": run_scaling, "checks": run_checks,
+              "peers": run_peers}[case.kind]
     return _finish(runner(case, ctx), ctx)
 
 
@@ -186,9 +213,9 @@ def run_observers(case: Case, ctx: Context) -> list[dict]:
                                  "projection q ← q − K⁻¹W L⁻¹g is undefined"})
             continue
         slaves = _slaves(case, sc, (name,))
-        res, cpu, wall = _timed(observer.simulate, sc, observers=slaves)
+        res, cpu, wall = simulate(sc, case, observers=slaves)
         steps = res.metadata["steps"]
-        rows.append({**row, **sync_metrics(res, name), "status": "ok", "note": "",
+        rows.append({**row, **sync_metrics(res, name), **engine_columns(res), "status": "ok", "note": "",
                      "cpu_time_s": cpu, "wall_time_s": wall, "steps": steps,
                      "steps_per_s": steps / cpu if cpu > 0 else float("nan"),
                      "cpu_scope": "master + this observer",
@@ -216,12 +243,30 @@ def _warm_up_reference(m: int) -> None:
         solver.solve(np.eye(k), -np.ones(k))
 
 
+def record_every(h: float, h_record: float | None) -> int:
+    """Steps between stored samples so that they are ``h_record`` apart (1 when h ≥ h_record).
+
+    Raises
+    ------
+    InputError
+        ``h_record`` is not an integer multiple of ``h``.
+    """
+    if h_record is None or h >= h_record * (1 - 1e-9):
+        return 1
+    k = int(round(h_record / h))
+    if abs(h_record / h - k) > 1e-6 * k:
+        raise InputError("h_record", f"h_record = {h_record} is not an integer multiple of h = {h}")
+    return k
+
+
 def _reference_run(case: Case, ctx: Context):
-    key = ("wp-ref", case.scenario, case.params, case.law, case.t_end, case.h_ref)
+    key = ("wp-ref", case.scenario, case.params, case.law, case.t_end, case.h_ref, case.h_record)
     if key not in ctx.cache:
+        ctx.cache = {k: v for k, v in ctx.cache.items() if not (isinstance(k, tuple) and k[0] == "wp-ref")}
         sc = observer.load_scenario(case.scenario, {**case.overrides(), "simulation.h": case.h_ref})
         names = tuple(n for n in OBSERVERS if not OBSERVERS[n] or sc.system.is_stiffness_definite())
-        res, cpu, _ = _timed(observer.simulate, sc, observers=names)
+        res, cpu, _ = _timed(observer.simulate, sc, observers=names, engine=engine_for("pivoting"),
+                             record_every=record_every(case.h_ref, case.h_record))
         ctx.cache[key] = (res, cpu)
     return ctx.cache[key]
 
@@ -240,7 +285,8 @@ def run_work_precision(case: Case, ctx: Context) -> list[dict]:
     sc = observer.load_scenario(case.scenario, case.overrides())
     if case.solver == "reference":
         _warm_up_reference(sc.system.m)
-    res, cpu, wall = _timed(observer.simulate, sc, solver=case.solver, observers=case.observers)
+    res, cpu, wall = simulate(sc, case, solver=case.solver, observers=case.observers,
+                              record_every=record_every(case.h, case.h_record))
     q = res.q if case.target == "master" else res.slaves[case.target].q
     row = {**base_row(case, sc), "target": case.target,
            "method": f"{case.scenario} · {case.target} · {sc.law.law} · {case.solver}",
@@ -258,14 +304,15 @@ def run_work_precision(case: Case, ctx: Context) -> list[dict]:
     else:
         ref, ref_cpu = _reference_run(case, ctx)
         ratio = case.h / case.h_ref
-        step = int(round(ratio))
-        if abs(ratio - step) > 1e-9 or step < 2:
+        if abs(ratio - round(ratio)) > 1e-9 * ratio or ratio < 2:
             raise InputError("h_ref", f"h = {case.h} is not an integer multiple of h_ref = {case.h_ref}")
+        spacing = res.t[1] - res.t[0] if res.t.size > 1 else case.h
+        step = int(round(spacing / (ref.t[1] - ref.t[0])))
         idx = np.arange(res.t.size) * step
         if idx[-1] >= ref.t.size or np.max(np.abs(ref.t[idx] - res.t)) > 1e-9:
             raise InputError("h_ref", "reference grid does not contain the grid of h")
         q_ref = (ref.q if case.target == "master" else ref.slaves[case.target].q)[idx]
-        ref_text = f"h/16 run (h_ref = h_min/16 = {case.h_ref:.4g} s, pivoting, same law)"
+        ref_text = f"h/16 run (h_ref = h_min/16 = {case.h_ref:.4g} s, pivoting, same law, compiled)"
         h_ref = case.h_ref
     steps = res.metadata["steps"]
     row.update(trajectory_error(res.t, q, q_ref))
@@ -273,15 +320,16 @@ def run_work_precision(case: Case, ctx: Context) -> list[dict]:
                cpu_time_s=cpu, wall_time_s=wall, steps=steps,
                steps_per_s=steps / cpu if cpu > 0 else float("nan"),
                cpu_scope="master" if case.target == "master" else "master + this observer",
-               contact_solves=res.metadata["contact_solves"],
-               solver_fallbacks=res.metadata["solver_fallbacks"])
+               contact_solves=res.metadata["contact_solves"], samples=int(res.t.size),
+               error_grid_s=float(res.t[1] - res.t[0]) if res.t.size > 1 else case.h,
+               **engine_columns(res))
     return [row]
 
 
 # ------------------------------------------------------------------------------- robustness
 def _base_log(sc, ctx: Context, key) -> pd.DataFrame:
     if key not in ctx.cache:
-        res = observer.simulate(sc)
+        res = observer.simulate(sc, engine=engine_for("pivoting"))
         ctx.cache[key] = log_from_active(res.t, res.active)
     return ctx.cache[key]
 
@@ -297,13 +345,13 @@ def run_robustness(case: Case, ctx: Context) -> list[dict]:
     path = ctx.artefacts / "logs" / f"{safe_name(case.case_id)}.csv"
     path.parent.mkdir(parents=True, exist_ok=True)
     log.to_csv(path, index=False, float_format="%.17g")
-    res, cpu, wall = _timed(observer.simulate, sc, observers=_slaves(case, sc, case.observers),
-                            source="log", log=path)
+    res, cpu, wall = simulate(sc, case, observers=_slaves(case, sc, case.observers),
+                              source="log", log=path)
     steps = res.metadata["steps"]
     rows = []
     for name in case.observers:
         rows.append({**base_row(case, sc), "observer": name, "perturbation": case.perturbation,
-                     "size": case.size, **sync_metrics(res, name),
+                     "size": case.size, **sync_metrics(res, name), **engine_columns(res),
                      "log_intervals": int(len(log)), "true_intervals": int(len(base)),
                      "log_file": str(path.relative_to(ctx.out_dir)), "status": "ok", "note": "",
                      "cpu_time_s": cpu, "wall_time_s": wall, "steps": steps,
@@ -313,32 +361,81 @@ def run_robustness(case: Case, ctx: Context) -> list[dict]:
 
 
 # ---------------------------------------------------------------------------------- scaling
+SETUP_STEPS = 10
+"""Steps of the short run whose CPU time is subtracted in :func:`run_scaling` (the per-call
+setup: scenario matrices, banded factorization, Ĝ = WᵀÂ⁻¹W, the grid)."""
+
+
 def run_scaling(case: Case, ctx: Context) -> list[dict]:
-    """The chain master alone: CPU time per step; then the same run under tracemalloc for
-    the peak traced memory (NumPy allocations included: matrices, caches, trajectories)."""
+    """The chain master alone: CPU time per step, with the per-call setup subtracted; then the
+    same run under tracemalloc for the peak traced memory (NumPy allocations included:
+    matrices, grid, trajectories).
+
+    ``cpu_per_step_s = (CPU(T) − CPU(10 h)) / (steps − 10)``: the CPU time of a 10-step run of
+    the same scenario (same setup, its grid is shorter; run second, so that first-call costs
+    fall on the long run) is taken off, so the fitted exponent is the step's, not the setup's
+    (at N = 1000 the setup is ≈ 1 s, the order of 4000 steps). A run too short for the
+    difference to be positive keeps CPU / steps (``cpu_scope`` says so).
+    ``cpu_per_step_total_s`` keeps the plain CPU / steps, ``loop_per_step_s`` the loop's own
+    wall time per step (metadata).
+    """
     sc = observer.load_scenario(case.scenario, case.overrides())
-    res, cpu, wall = _timed(observer.simulate, sc)
+    res, cpu, wall = simulate(sc, case)
+    short = sc.with_overrides({"simulation.t_end": SETUP_STEPS * sc.h})
+    _, cpu_setup, _ = simulate(short, case)          # after the main run: no first-call costs
     steps = res.metadata["steps"]
     closed = res.active[1:]
+    per_step = (cpu - cpu_setup) / (steps - SETUP_STEPS) if steps > SETUP_STEPS else float("nan")
+    scope = "master only, setup subtracted"
+    if not per_step > 0:                              # a run too short to resolve the setup
+        per_step, scope = cpu / steps, "master only, setup included (not resolved)"
     row = {**base_row(case, sc), "status": "ok", "note": "", "steps": steps,
-           "cpu_time_s": cpu, "wall_time_s": wall, "cpu_per_step_s": cpu / steps,
-           "wall_per_step_s": wall / steps, "steps_per_s": steps / cpu if cpu > 0 else float("nan"),
-           "cpu_scope": "master only", "contact_solves": res.metadata["contact_solves"],
+           "cpu_time_s": cpu, "wall_time_s": wall, "setup_cpu_time_s": cpu_setup,
+           "cpu_per_step_s": per_step, "cpu_per_step_total_s": cpu / steps,
+           "wall_per_step_s": wall / steps, "steps_per_s": 1.0 / per_step,
+           "cpu_scope": scope, "contact_solves": res.metadata["contact_solves"],
            "closed_step_fraction": float(closed.any(axis=1).mean()),
            "mean_active": float(closed.sum(axis=1).mean()),
-           "max_active": int(closed.sum(axis=1).max())}
+           "max_active": int(closed.sum(axis=1).max()), **engine_columns(res)}
     del res
     if case.memory:
         gc.collect()
         tracemalloc.start()
         try:
-            observer.simulate(sc)
+            observer.simulate(sc, engine=engine_for(case.solver))
             _, peak = tracemalloc.get_traced_memory()
         finally:
             tracemalloc.stop()
         row["peak_mem_mb"] = peak / 1e6
         row["trajectory_mb"] = (steps + 1) * (3 * sc.system.n + 3 * sc.system.m) * 8 / 1e6
     return [row]
+
+
+# ------------------------------------------------------------------------------------ peers
+PEER_REPEATS = 5
+"""Timing runs on each side of a peer case; the rows hold their medians."""
+
+
+def run_peers(case: Case, ctx: Context) -> list[dict]:
+    """Siconos and the toolkit on one peer problem (:func:`bench.peers.run_peer`); one row.
+
+    Without Siconos the case is :class:`Unavailable` (no row is written, a later run retries
+    it) and the message says how to get Siconos. The toolkit side runs on the compiled engine.
+    """
+    from bench import peers
+
+    ok, info = ctx.cache.get("siconos") or ctx.cache.setdefault("siconos", peers.siconos_available())
+    if not ok:
+        raise Unavailable(f"Siconos absent: {info}")
+    N = int(dict(case.params).get("param.N", 10))
+    problem = peers.peer_problem(case.scenario, h=case.h, t_end=case.t_end, N=N)
+    row = peers.run_peer(problem, repeats=PEER_REPEATS, engine=engine_for("pivoting")).iloc[0].to_dict()
+    if row.get("status") != "ok":
+        raise Unavailable(f"Siconos absent: {row.get('status')}")
+    out = {**base_row(case, None), **row, "kind": "peers", "name": case.name,
+           "N": N if case.scenario == "rocking_chain" else None,
+           "cpu_scope": "median wall time per step of the repeats (both sides)"}
+    return [out]
 
 
 # ----------------------------------------------------------------------------------- checks

@@ -9,11 +9,16 @@ Running the suite is :func:`bench.run.run_suite`; the kinds of cases are
 ``robustness``      observers driven by a perturbed closing log (delay, jitter, missed
                     impacts, false closings);
 ``scaling``         the master of ``rocking_chain`` for one N: CPU time per step, memory;
-``checks``          the proof-step checks of :mod:`proofs_checks` on one scenario.
+``checks``          the proof-step checks of :mod:`proofs_checks` on one scenario;
+``peers``           one problem in Siconos and in the toolkit (:mod:`bench.peers`): time per
+                    step of both, their ratio, the largest trajectory difference.
 
-``quick`` is a small version of every suite (minutes on 2 cores), ``full`` the real numbers,
-``smoke`` a seconds-long grid for the tests. Suites also say whether and how to run the
-pytest-benchmark micro-benchmarks of ``bench/micro``.
+``quick`` is a first look (≤ 30 s on 2 cores once the kernel is compiled), ``full`` the real
+numbers (≤ 10 minutes), ``peers`` the Siconos comparison alone, ``smoke`` a seconds-long grid
+for the tests. Suites also say whether and how to run the pytest-benchmark micro-benchmarks
+of ``bench/micro``. Every time loop runs on the compiled engine (the default of
+:func:`observer.simulate`) except where a case asks for a contact solver the kernel does not
+have (``solver`` other than ``"pivoting"``: the numpy engine, :func:`engine_for`).
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields
 from typing import Any
 
-KINDS = ("observers", "work_precision", "robustness", "scaling", "checks")
+KINDS = ("observers", "work_precision", "robustness", "scaling", "checks", "peers")
 
 RHOS = (1e-3, 1e-5, 1e-6, 1e-9)
 """Synchronization thresholds: for each ρ the rows hold the settling time (V stays ≤ ρ·V(t_on)
@@ -62,6 +67,10 @@ class Case:
         work_precision: ``"closed form"`` or ``"h/16 run"``.
     h_ref : float or None
         work_precision: step of the reference run (h_min/16 of the sweep).
+    h_record : float or None
+        work_precision: the error is measured on the grid of spacing max(h, h_record) (a
+        power-of-two multiple of h: the run and its reference keep every k-th step), so that
+        runs down to h = 1e-6 store at most a few 10⁵ samples; None keeps every step.
     perturbation : str
         robustness: one of :data:`bench.perturb.KINDS`.
     size : float
@@ -84,6 +93,7 @@ class Case:
     target: str = "master"
     reference: str = ""
     h_ref: float | None = None
+    h_record: float | None = None
     perturbation: str = "none"
     size: float = 0.0
     memory: bool = True
@@ -132,6 +142,18 @@ def _canon(v: Any) -> str:
     if isinstance(v, (tuple, list)):
         return "(" + ",".join(_canon(x) for x in v) + ")"
     return str(v)
+
+
+COMPILED_SOLVERS = ("pivoting",)
+"""Contact solvers the compiled kernel has (its exact closed form / block pivoting); the
+others (lemke, nnls, the cvxpy + OSQP reference) exist only in the numpy engine."""
+
+
+def engine_for(solver: str) -> str:
+    """The engine a case with contact solver ``solver`` runs on: ``"compiled"`` (the default
+    of :func:`observer.simulate`) when the kernel has the solver, else ``"python"`` — the
+    kernel would silently solve with its own pivoting method."""
+    return "compiled" if solver in COMPILED_SOLVERS else "python"
 
 
 @dataclass(frozen=True)
@@ -195,60 +217,84 @@ def _sweep(h_max: float, count: int) -> list[float]:
     return [h_max / 2 ** j for j in range(count)]
 
 
+WP_SIZES = {"quick": {"pivoting": 5, "reference": 3, "double_mass": 5, "double_mass_reference": 3},
+            "full": {"pivoting": 12, "reference": 7, "double_mass": 13, "double_mass_reference": 5}}
+"""Step sizes per sweep (halving). ``full``: the compiled runs go from 2e-3 s (1-DOF) and
+4e-3 s (double_mass) down to 2e-3/2¹¹ = 4e-3/2¹² ≈ 9.8e-7 s; the cvxpy/OSQP reference solver
+(~1 ms per contact solve, and the numpy engine's ≈ 25 µs per step) stops earlier: 7 and 5
+sizes in ``full``, the 3 largest steps in ``quick``."""
+
+H_RECORD = {"closed form": 2e-3 / 2 ** 6, "h/16 run": 4e-3 / 2 ** 9}
+"""Spacing of the grid the error is measured on (``Case.h_record``) in the ``full`` sweeps:
+3.1e-5 s (1-DOF, closed form; ≤ 3.2·10⁵ samples over 10 s) and 7.8e-6 s (double_mass; the
+h/16 reference at 6.1e-8 s keeps every 128th step)."""
+
+
 def work_precision_cases(full: bool) -> list[Case]:
-    """Error vs CPU time over ≥ 5 step sizes (halving), for both impact laws and both
-    contact solvers.
+    """Error vs CPU time over ≥ 5 (``full``: ≥ 8, down to ≈ 1e-6 s) step sizes (halving) on
+    the compiled engine, for both impact laws, and the same with the cvxpy/OSQP reference
+    solver over the largest steps (:data:`WP_SIZES`).
 
     * bouncing_ball, impact_oscillator: the master against its closed form;
     * double_mass: the master and each observer against a run at h_ref = h_min/16
       (pivoting solver, same law); with the cvxpy/OSQP reference solver (~100× slower per
-      contact solve) ``quick`` runs the master only, ``full`` the master and each observer.
+      contact solve, and only in the numpy engine) ``quick`` runs the master only, ``full``
+      the master and each observer.
     """
-    n = 7 if full else 5
+    sizes = WP_SIZES["full" if full else "quick"]
     cases: list[Case] = []
     for scen, T, h0 in (("bouncing_ball", 3.0, 2e-3), ("impact_oscillator", 10.0, 2e-3)):
         for law in ("newton", "poisson"):
             for solver in ("pivoting", "reference"):
-                for h in _sweep(h0, n):
+                for h in _sweep(h0, sizes[solver]):
+                    h_rec = H_RECORD["closed form"] if full and h < H_RECORD["closed form"] else None
                     cases.append(Case("work_precision", scen, law=law, solver=solver, h=h, t_end=T,
-                                      observers=(), reference="closed form"))
-    T = 2.0 if full else 1.0
-    hs = _sweep(4e-3, n)
+                                      observers=(), reference="closed form", h_record=h_rec))
+    T = 1.0
+    hs = _sweep(4e-3, sizes["double_mass"])
     h_ref = hs[-1] / 16
+    h_rec = H_RECORD["h/16 run"] if full else None
     for law in ("newton", "poisson"):
         for target in ("master", "jump", "nojump"):
             for h in hs:
                 cases.append(Case("work_precision", "double_mass", law=law, h=h, t_end=T,
                                   observers=() if target == "master" else (target,),
-                                  target=target, reference="h/16 run", h_ref=h_ref))
+                                  target=target, reference="h/16 run", h_ref=h_ref, h_record=h_rec))
+        ref_hs = hs[:sizes.get("double_mass_reference", len(hs))]
         for target in ("master", "jump", "nojump") if full else ("master",):
-            for h in hs:
+            for h in ref_hs:
                 cases.append(Case("work_precision", "double_mass", law=law, solver="reference", h=h,
                                   t_end=T, observers=() if target == "master" else (target,),
-                                  target=target, reference="h/16 run", h_ref=h_ref))
+                                  target=target, reference="h/16 run", h_ref=h_ref, h_record=h_rec))
     return cases
 
 
 # ------------------------------------------------------------------------------- robustness
 ROBUSTNESS_LEVELS = {
-    "quick": {"delay": (2e-4, 1e-3, 5e-3, 2e-2), "jitter": (2e-4, 1e-3, 5e-3),
+    "quick": {"delay": (1e-3, 5e-3, 2e-2), "jitter": (1e-3, 5e-3),
               "missed": (0.1, 0.3), "false": (1.0, 5.0)},
     "full": {"delay": (1e-4, 5e-4, 1e-3, 5e-3, 1e-2, 2e-2, 5e-2),
              "jitter": (1e-4, 5e-4, 1e-3, 5e-3, 1e-2, 2e-2),
              "missed": (0.05, 0.1, 0.2, 0.3, 0.5), "false": (0.5, 1.0, 2.0, 5.0, 10.0)},
 }
 RANDOM_KINDS = ("jitter", "missed", "false")
+ROBUSTNESS_SEEDS = {"quick": 3, "full": 20}
+"""Seeds per point of the random perturbations (a delay is deterministic: one run)."""
+BAND = (0.1, 0.9)
+"""Quantiles of the band the report draws over the seeds of a point (with the median)."""
 
 
 def robustness_cases(full: bool) -> list[Case]:
     """double_mass (coupled from t = 0) with χ from the master's own closing log, perturbed.
 
-    Random perturbations are repeated over seeds (3 in ``full``, 1 in ``quick``).
+    Random perturbations are repeated over :data:`ROBUSTNESS_SEEDS` seeds (20 in ``full``);
+    the report shows their median and the 10–90 % band (:data:`BAND`).
     """
+    key = "full" if full else "quick"
     h, T = (1e-4, 10.0) if full else (2e-4, 8.0)
-    seeds = (0, 1, 2) if full else (0,)
+    seeds = tuple(range(ROBUSTNESS_SEEDS[key]))
     cases = [Case("robustness", "double_mass", h=h, t_end=T)]
-    for kind, sizes in ROBUSTNESS_LEVELS["full" if full else "quick"].items():
+    for kind, sizes in ROBUSTNESS_LEVELS[key].items():
         for size in sizes:
             for seed in (seeds if kind in RANDOM_KINDS else (0,)):
                 cases.append(Case("robustness", "double_mass", h=h, t_end=T, perturbation=kind,
@@ -257,53 +303,98 @@ def robustness_cases(full: bool) -> list[Case]:
 
 
 # ---------------------------------------------------------------------------------- scaling
+SCALING_N = {"quick": (5, 10, 20, 50, 100, 200), "full": (5, 10, 20, 50, 100, 200, 500, 1000)}
+SCALING_FIT_FROM = 10
+"""The per-step exponent is fitted from N = 10 to the largest N (issue 9: ≤ 1.1 up to 1000)."""
+
+
 def scaling_cases(full: bool) -> list[Case]:
-    """rocking_chain master (no observers) for N = 5 … 200, h = 1e-3 s.
+    """rocking_chain master (no observers) for N = 5 … 200 (``full``: … 1000), h = 1e-3 s.
 
     Contacts close from t ≈ 1 s on (the ground motion has to build up), so the horizon
     covers 1 s (quick) or 3 s (full) of contact activity after that.
     """
-    Ns, T = ((5, 10, 20, 50, 100, 200), 4.0) if full else ((5, 10, 20, 50, 100, 200), 2.0)
+    key = "full" if full else "quick"
+    T = 4.0 if full else 2.0
     return [Case("scaling", "rocking_chain", params=(("param.N", N),), observers=(), h=1e-3, t_end=T)
-            for N in Ns]
+            for N in SCALING_N[key]]
+
+
+# ------------------------------------------------------------------------------------ peers
+PEER_CASES = (("impact_oscillator", 1e-4, 20.0, None), ("double_mass", 1e-4, 10.0, None),
+              ("rocking_chain", 1e-4, 2.0, 10))
+"""(problem, h, T, N): 2·10⁵ steps of the forced oscillator, 10⁵ of double_mass's master
+(Newton law, dropped from 1 mm), 2·10⁴ of the ground-frame chain with N = 10 (its contacts
+close after ≈ 1 s); :mod:`bench.peers` builds the problems."""
+
+
+def peer_cases() -> list[Case]:
+    """One ``peers`` case per problem of :data:`PEER_CASES` (master only, Newton law)."""
+    return [Case("peers", name, params=(("param.N", N),) if N else (), observers=(), law="newton",
+                 h=h, t_end=T) for name, h, T, N in PEER_CASES]
 
 
 CHECK_SCENARIOS = ("double_mass", "rocking_chain", "bouncing_ball", "impact_oscillator", "grazing")
+QUICK_CHECK_SCENARIOS = ("double_mass", "bouncing_ball", "impact_oscillator", "grazing")
+"""The quick suite leaves out the chain's checks (≈ 20 s of CPU: its A3 search and PSD checks
+enumerate many active sets); ``full`` runs all."""
 
 
-def check_cases() -> list[Case]:
+def check_cases(full: bool = True) -> list[Case]:
     """One :func:`proofs_checks.run_checks` call per built-in scenario (seed 0)."""
-    return [Case("checks", s, observers=()) for s in CHECK_SCENARIOS]
+    return [Case("checks", s, observers=()) for s in (CHECK_SCENARIOS if full else QUICK_CHECK_SCENARIOS)]
 
 
 # --------------------------------------------------------------------------------- micro
-MICRO_QUICK = ("--benchmark-min-rounds=5", "--benchmark-max-time=0.05", "--benchmark-warmup=on",
-               "--benchmark-warmup-iterations=3")
+MICRO_QUICK = ("--benchmark-min-rounds=5", "--benchmark-max-time=0.02", "--benchmark-warmup=on",
+               "--benchmark-warmup-iterations=1", "-k", "compiled or pivoting")
 MICRO_FULL = ("--benchmark-min-rounds=20", "--benchmark-max-time=0.5", "--benchmark-warmup=on")
+"""pytest arguments of the micro-benchmarks. ``quick`` times the compiled loops and the
+pivoting contact solver (each benchmark warms up first: compile and caches excluded); ``full``
+every benchmark (both engines, every solver) with ≥ 5 rounds (the loop benchmarks fix
+their own rounds, :data:`bench.micro` ``LOOP_ROUNDS``)."""
 
 
 def _settings(full: bool) -> dict:
+    key = "full" if full else "quick"
     obs = observer_cases(full)
+    sz = WP_SIZES[key]
+    sw = (f"compiled runs: {sz['pivoting']} step sizes halving from 2e-3 s (1-DOF; T = 3 s ball, "
+          f"10 s oscillator; closed form) down to {2e-3 / 2 ** (sz['pivoting'] - 1):.3g} s, and "
+          f"{sz['double_mass']} from 4e-3 s (double_mass, T = 1 s, against an h/16 run) down to "
+          f"{4e-3 / 2 ** (sz['double_mass'] - 1):.3g} s; cvxpy/OSQP reference solver (numpy engine): "
+          f"{sz['reference']} sizes (1-DOF), {sz.get('double_mass_reference', sz['double_mass'])} "
+          f"(double_mass)")
+    if full:
+        sw += (f"; errors on a grid of spacing max(h, {H_RECORD['closed form']:.3g} s) (1-DOF), "
+               f"max(h, {H_RECORD['h/16 run']:.3g} s) (double_mass)")
+    nseeds = ROBUSTNESS_SEEDS[key]
     return {
+        "engine": "compiled (numba kernel; compile time measured once per run, apart) for every "
+                  "run with the pivoting solver; numpy engine for the other contact solvers",
         "observers": "; ".join(f"{c.name}: h = {c.h:g} s, T = {c.t_end:g} s" for c in obs),
         "synchronization thresholds ρ": ", ".join(f"{r:g}" for r in RHOS),
-        "work-precision sweep": f"{7 if full else 5} step sizes, halving from 2e-3 s (1-DOF; "
-                                f"T = 3 s ball, 10 s oscillator) "
-                                f"and 4e-3 s (double_mass, T = {2.0 if full else 1.0:g} s)",
-        "robustness": "double_mass, " + ("h = 1e-4 s, T = 10 s, 3 seeds" if full
-                                         else "h = 2e-4 s, T = 8 s, 1 seed"),
-        "scaling": "rocking_chain master, h = 1e-3 s, " + ("T = 4 s, N = 5 … 200" if full
-                                                           else "T = 2 s, N = 5 … 200"),
+        "work-precision sweep": sw,
+        "robustness": ("double_mass, " + ("h = 1e-4 s, T = 10 s" if full else "h = 2e-4 s, T = 8 s")
+                       + f", {nseeds} seeds per random perturbation (median and "
+                         f"{100 * BAND[0]:.0f}–{100 * BAND[1]:.0f} % band), delay deterministic"),
+        "scaling": "rocking_chain master, h = 1e-3 s, " + ("T = 4 s" if full else "T = 2 s")
+                   + ", N = " + ", ".join(str(n) for n in SCALING_N[key])
+                   + f"; exponent fitted from N = {SCALING_FIT_FROM}",
+        "checks": ", ".join(CHECK_SCENARIOS if full else QUICK_CHECK_SCENARIOS),
+        "peers": ("; ".join(f"{p}: h = {h:g} s, {int(round(T / h))} steps" for p, h, T, _ in PEER_CASES)
+                  if full else "not in this suite (python -m bench run peers)"),
         "micro-benchmarks": " ".join(MICRO_FULL if full else MICRO_QUICK),
     }
 
 
 def _suite(name: str, description: str, full: bool, kinds: tuple[str, ...], micro: bool) -> Suite:
     builders = {"observers": observer_cases, "work_precision": work_precision_cases,
-                "robustness": robustness_cases, "scaling": scaling_cases}
+                "robustness": robustness_cases, "scaling": scaling_cases,
+                "checks": check_cases, "peers": lambda full: peer_cases()}
     cases: list[Case] = []
     for k in kinds:
-        cases += check_cases() if k == "checks" else builders[k](full)
+        cases += builders[k](full)
     return Suite(name, description, tuple(cases),
                  (MICRO_FULL if full else MICRO_QUICK) if micro else None, _settings(full))
 
@@ -319,7 +410,7 @@ def smoke_suite() -> Suite:
         Case("work_precision", "bouncing_ball", law="newton", h=1e-3, t_end=1.0, observers=(),
              reference="closed form"),
         Case("work_precision", "bouncing_ball", law="newton", h=5e-4, t_end=1.0, observers=(),
-             reference="closed form"),
+             reference="closed form", h_record=1e-3),
         Case("robustness", "double_mass", h=1e-3, t_end=1.0),
         Case("robustness", "double_mass", h=1e-3, t_end=1.0, perturbation="delay", size=5e-3),
         Case("scaling", "rocking_chain", params=(("param.N", 2),), observers=(), h=1e-3, t_end=0.2),
@@ -339,13 +430,16 @@ SUITES: dict[str, Suite] = {
                              True, ("work_precision",), False),
     "robustness": _suite("robustness", "observers under imperfect switching signals (full settings)",
                          True, ("robustness",), False),
-    "scaling": _suite("scaling", "rocking_chain N = 5 … 200: CPU time per step and memory",
+    "scaling": _suite("scaling", "rocking_chain N = 5 … 1000: CPU time per step and memory",
                       True, ("scaling",), False),
-    "micro": Suite("micro", "pytest-benchmark: one step, one contact solve (reference vs fast)",
+    "peers": _suite("peers", "Siconos and the toolkit on the same problems: time per step, "
+                             "trajectory difference (needs python3-siconos)", True, ("peers",), False),
+    "micro": Suite("micro", "pytest-benchmark: time loops on both engines, contact solves",
                    (), MICRO_FULL, {"micro-benchmarks": " ".join(MICRO_FULL)}),
-    "quick": _suite("quick", "small version of every suite (2-3 minutes on 2 cores)", False,
-                    ALL_KINDS, True),
-    "full": _suite("full", "every suite with the real numbers (about 12 minutes on 2 cores)", True, ALL_KINDS, True),
+    "quick": _suite("quick", "first look: small version of every suite (≤ 30 s on 2 cores, kernel "
+                             "compiled)", False, ALL_KINDS, True),
+    "full": _suite("full", "every suite with the real numbers, Siconos peers included (≤ 10 "
+                           "minutes on 2 cores)", True, ALL_KINDS + ("peers",), True),
     "smoke": smoke_suite(),
 }
 """Registry: suite name → :class:`Suite`."""

@@ -9,8 +9,15 @@
 * :func:`observer_headlines` — per scenario the headline ratio (deepest ρ at which both
   observers settle) and the no-jump verdict;
 * :func:`wp_orders` — fitted orders of the work-precision sweeps;
-* :func:`scaling_fits` — fitted exponents of the chain's cost against N;
-* :func:`micro_speedups` — speed-ups of the fast contact solvers over the reference.
+* :func:`robustness_bands` — per perturbation point and observer: the median and the
+  10–90 % band over seeds of the floor and the rate, the median settling times and how many
+  seeds settle;
+* :func:`scaling_fits` — fitted exponents of the chain's cost against N (the acceptance
+  exponent from N = 10 to the largest N);
+* :func:`micro_speedups` — speed-ups of the fast contact solvers over the reference;
+* :func:`micro_loops` — time per step of every loop benchmark, per engine, and the speed-up
+  of the compiled engine;
+* :func:`peer_summary` — Siconos against the toolkit: time ratios and trajectory differences.
 """
 
 from __future__ import annotations
@@ -20,7 +27,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from bench.suites import RHOS
+from bench.suites import BAND, RHOS, SCALING_FIT_FROM
 
 SETTLE = {rho: f"t_settle_{rho:g}" for rho in RHOS}
 """Row column of the settling time at each ρ."""
@@ -141,6 +148,49 @@ def settling_excursions(obs: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["name", "observer", "rho", "first", "settle", "above_after"])
 
 
+# ----------------------------------------------------------------------------- robustness
+def band(values, quantiles: tuple[float, float] = BAND) -> tuple[float, float, float]:
+    """``(median, q_lo, q_hi)`` of the finite values (numpy's linear quantiles); NaNs when none."""
+    x = np.asarray(values, dtype=float)
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return float("nan"), float("nan"), float("nan")
+    lo, hi = np.quantile(x, quantiles)
+    return float(np.median(x)), float(lo), float(hi)
+
+
+def robustness_bands(rob: pd.DataFrame, quantiles: tuple[float, float] = BAND) -> pd.DataFrame:
+    """One row per (perturbation, size, observer) over its seeds (``ok`` rows).
+
+    Columns: ``perturbation, size, observer, seeds``; for the floor (``floor_rel``) and the
+    rate: ``floor_median, floor_lo, floor_hi, rate_median, rate_lo, rate_hi`` (median and the
+    ``quantiles`` band, :func:`band`); per ρ in (1e-3, 1e-6): ``settle_<ρ>_median`` (median
+    settling time over the seeds, ``inf`` when at least half do not settle) and
+    ``settled_<ρ>`` (how many seeds settle within the window); ``log_intervals`` (median) and
+    ``true_intervals``.
+    """
+    cols = ["perturbation", "size", "observer", "seeds", "floor_median", "floor_lo", "floor_hi",
+            "rate_median", "rate_lo", "rate_hi"]
+    for rho in (1e-3, 1e-6):
+        cols += [f"settle_{rho:g}_median", f"settled_{rho:g}"]
+    cols += ["log_intervals", "true_intervals"]
+    rows = []
+    ok = rob[rob["status"] == "ok"] if "status" in rob else rob
+    for (kind, size, name), g in ok.groupby(["perturbation", "size", "observer"], sort=False):
+        rec = {"perturbation": kind, "size": float(size), "observer": name, "seeds": int(g["seed"].nunique())}
+        rec["floor_median"], rec["floor_lo"], rec["floor_hi"] = band(g["floor_rel"], quantiles)
+        rec["rate_median"], rec["rate_lo"], rec["rate_hi"] = band(g["rate"], quantiles)
+        for rho in (1e-3, 1e-6):
+            col = SETTLE[rho]
+            t = g[col].astype(float).to_numpy() if col in g else np.full(len(g), np.nan)
+            rec[f"settle_{rho:g}_median"] = float(np.median(t)) if len(t) else float("nan")
+            rec[f"settled_{rho:g}"] = int(np.isfinite(t).sum())
+        rec["log_intervals"] = float(g["log_intervals"].median()) if "log_intervals" in g else float("nan")
+        rec["true_intervals"] = float(g["true_intervals"].iloc[0]) if "true_intervals" in g else float("nan")
+        rows.append(rec)
+    return pd.DataFrame(rows, columns=cols)
+
+
 # ------------------------------------------------------------------------- work-precision
 def wp_orders(wp: pd.DataFrame) -> pd.DataFrame:
     """Per method (scenario · target · law · solver): fitted order p of the mean-norm error
@@ -165,23 +215,36 @@ def wp_orders(wp: pd.DataFrame) -> pd.DataFrame:
 
 
 # -------------------------------------------------------------------------------- scaling
-def scaling_fits(scal: pd.DataFrame, big_from: int = 50) -> pd.DataFrame:
-    """Fitted exponents p of quantity ∝ N^p: CPU time per step over all N, over N ≥
-    ``big_from`` (with ≥ 2 points) and the peak memory. Columns ``quantity, N_min, N_max,
-    exponent, coefficient`` (the fit's log-intercept)."""
+ACCEPTANCE_EXPONENT = 1.1
+"""Issue 9: the chain's time per step grows at most like N^1.1 from N = 10 to 1000."""
+
+
+def scaling_fits(scal: pd.DataFrame, big_from: int = 50,
+                 fit_from: int = SCALING_FIT_FROM) -> pd.DataFrame:
+    """Fitted exponents p of quantity ∝ N^p: CPU time per step over all N, from N =
+    ``fit_from`` (the acceptance fit: ``"CPU time per step (N ≥ 10)"``), over N ≥ ``big_from``
+    (each with ≥ 2 points and only when it differs from the full range), the loop's wall time
+    per step from N = ``fit_from`` (when the rows have it) and the peak memory. Columns
+    ``quantity, N_min, N_max, exponent, coefficient`` (the fit's log-intercept)."""
     scal = scal.sort_values("N")
     rows = []
 
     def add(quantity, sub, col):
+        if col not in sub:
+            return
         p, c = fit_power(sub["N"], sub[col])
         if not math.isnan(p):
             rows.append({"quantity": quantity, "N_min": sub["N"].min(), "N_max": sub["N"].max(),
                          "exponent": p, "coefficient": c})
 
     add("CPU time per step", scal, "cpu_per_step_s")
-    big = scal[scal["N"] >= big_from]
-    if len(big) >= 2:
-        add(f"CPU time per step (N ≥ {big_from})", big, "cpu_per_step_s")
+    for lo in (fit_from, big_from):
+        sub = scal[scal["N"] >= lo]
+        if len(sub) >= 2 and len(sub) < len(scal):
+            add(f"CPU time per step (N ≥ {lo})", sub, "cpu_per_step_s")
+    sub = scal[scal["N"] >= fit_from]
+    if len(sub) >= 2:
+        add(f"loop wall time per step (N ≥ {fit_from})", sub, "loop_per_step_s")
     if "peak_mem_mb" in scal:
         add("peak memory", scal, "peak_mem_mb")
     return pd.DataFrame(rows, columns=["quantity", "N_min", "N_max", "exponent", "coefficient"])
@@ -207,3 +270,49 @@ def micro_speedups(micro: pd.DataFrame) -> pd.DataFrame:
             rec[f"speedup_{s}"] = ref / rec[s] if len(v) and rec[s] > 0 else float("nan")
         rows.append(rec)
     return pd.DataFrame(rows)
+
+
+def micro_loops(micro: pd.DataFrame) -> pd.DataFrame:
+    """Loop benchmarks (``kind == "loop"``): one row per case with the median time per step
+    of each engine (median of the rounds ÷ steps), the speed-up compiled over python, the
+    steps, systems and compile time. Columns ``case, scenario, systems, steps, n, m,
+    compiled_s, python_s, speedup, rounds_compiled, rounds_python, compile_time_s``."""
+    cols = ["case", "scenario", "systems", "steps", "n", "m", "compiled_s", "python_s", "speedup",
+            "rounds_compiled", "rounds_python", "compile_time_s"]
+    if micro.empty or "kind" not in micro:
+        return pd.DataFrame(columns=cols)
+    lp = micro[micro["kind"] == "loop"]
+    rows = []
+    for case, g in lp.groupby("case", sort=False):
+        rec = {"case": case, "scenario": g["scenario"].iloc[0], "systems": g["systems"].iloc[0],
+               "steps": g["steps"].iloc[0], "n": g["n"].iloc[0], "m": g["m"].iloc[0],
+               "compile_time_s": g["compile_time_s"].max()}
+        for engine in ("compiled", "python"):
+            e = g[g["engine"] == engine]
+            rec[f"{engine}_s"] = float(e["median_s"].iloc[0] / e["steps"].iloc[0]) if len(e) else float("nan")
+            rec[f"rounds_{engine}"] = e["rounds"].iloc[0] if len(e) else float("nan")
+        rec["speedup"] = rec["python_s"] / rec["compiled_s"] if rec["compiled_s"] > 0 else float("nan")
+        rows.append(rec)
+    return pd.DataFrame(rows, columns=cols)
+
+
+def peer_summary(pe: pd.DataFrame) -> pd.DataFrame:
+    """Peer rows (``kind == "peers"``, status ok) → per problem: per-step times in µs (Siconos'
+    Python loop, Siconos' C++ ``run()``, the toolkit's whole :func:`observer.simulate` call and
+    its loop alone), the ratios Siconos ÷ toolkit (whole call and loop: > 1 means the toolkit
+    is faster) and the largest trajectory difference (max over q and u)."""
+    cols = ["problem", "n", "m", "h", "steps", "siconos_us", "siconos_run_us", "toolkit_us",
+            "toolkit_loop_us", "ratio", "ratio_loop", "ratio_run", "max_diff"]
+    rows = []
+    ok = pe[pe["status"] == "ok"] if "status" in pe else pe
+    for _, r in ok.iterrows():
+        sic, tk = float(r["siconos_ns_per_step"]), float(r["toolkit_ns_per_step"])
+        loop = float(r.get("toolkit_loop_ns_per_step", float("nan")))
+        run = float(r.get("siconos_run_ns_per_step", float("nan")))
+        rows.append({"problem": r["problem"], "n": r["n"], "m": r["m"], "h": r["h"], "steps": r["steps"],
+                     "siconos_us": sic / 1e3, "siconos_run_us": run / 1e3, "toolkit_us": tk / 1e3,
+                     "toolkit_loop_us": loop / 1e3, "ratio": sic / tk,
+                     "ratio_loop": sic / loop if loop > 0 else float("nan"),
+                     "ratio_run": run / tk,
+                     "max_diff": max(float(r["max_abs_diff_q"]), float(r["max_abs_diff_u"]))})
+    return pd.DataFrame(rows, columns=cols)

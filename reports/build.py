@@ -6,8 +6,10 @@ pytest-benchmark JSON of the micro-benchmarks next to them), draws the figures i
 ``out_dir/index.html``: header, contents, key numbers, one section per scenario (the paper's
 figures), the observer table with the no-jump/jump ratios of settling times (the time after
 which V stays below ρ·V(t_on); first passage as an extra column), work-precision diagrams with
-fitted orders, robustness curves, the scaling fit, the micro-benchmarks, the proof-check
-table, settings and tolerances, limitations and the exact command that reproduces it.
+fitted orders, robustness curves (median and 10–90 % band over seeds), the scaling fit, the
+Siconos peers, the micro-benchmarks (time per step of both engines, contact solves), the
+proof-check table, settings and tolerances, limitations and the exact command that
+reproduces it.
 """
 
 from __future__ import annotations
@@ -26,8 +28,9 @@ import pandas as pd
 
 from bench.suites import RHOS
 from reports import figures
-from reports.analysis import (FIRST, SETTLE, fit_power, has_settling, headline,  # noqa: F401
-                              micro_speedups, observer_ratios, scaling_fits, settling_excursions,
+from reports.analysis import (ACCEPTANCE_EXPONENT, FIRST, SETTLE, fit_power,  # noqa: F401
+                              has_settling, headline, micro_loops, micro_speedups, observer_ratios,
+                              peer_summary, robustness_bands, scaling_fits, settling_excursions,
                               wp_orders)
 from reports.tables import Table, fmt, fmt_int, fmt_pct, fmt_ratio, fmt_rho, fmt_time
 
@@ -106,6 +109,9 @@ def load_micro(paths: Iterable[Path]) -> tuple[pd.DataFrame, dict]:
             rows.append({"file": str(p), "group": b.get("group") or "", "name": b.get("name", ""),
                          "kind": ex.get("kind", ""), "solver": ex.get("solver", ""),
                          "m": ex.get("m"), "scenario": ex.get("scenario", ""),
+                         "case": ex.get("case", ""), "engine": ex.get("engine", ""),
+                         "steps": ex.get("steps"), "n": ex.get("n"), "systems": ex.get("systems"),
+                         "compile_time_s": ex.get("compile_time_s"),
                          "mean_s": st.get("mean"), "median_s": st.get("median"),
                          "stddev_s": st.get("stddev"), "min_s": st.get("min"),
                          "rounds": st.get("rounds"), "residual": ex.get("residual"),
@@ -341,7 +347,11 @@ def observer_prose(obs: pd.DataFrame, ratios: list[dict]) -> list[Block]:
 LIMITATIONS = [
     "Timings are CPU seconds of one process (time.process_time) on the machine in the header, "
     "with BLAS pinned to one thread; the machine may have been shared with other jobs. Compare "
-    "timings within one report, not across machines.",
+    "timings within one report, not across machines. Runs with the pivoting solver use the "
+    "compiled engine; the kernel's compile (or cache-load) time is measured once before any "
+    "case and is in no row's time. Runs with another contact solver (the cvxpy/OSQP reference) "
+    "use the numpy engine, the only one that has it, so their CPU times also contain the "
+    "slower loop.",
     "The quick suite uses coarser steps and shorter horizons than the full suite (see Settings), "
     "so its numbers differ from the full suite's; deep thresholds (1e-9) can sit below the "
     "discretization floor of the observer with jumps (the floor scales like h², THEORY §6.6).",
@@ -358,8 +368,12 @@ LIMITATIONS = [
     "not modelled.",
     "Scaling times the master only (no observers), from rest over the first 2 s (quick) or 4 s "
     "(full); contacts start to close after about 1 s, so the per-step time mixes free-flight "
-    "and contact steps (see 'mean closed contacts'). The memory is the peak traced by "
-    "tracemalloc (NumPy arrays included), not the resident set size.",
+    "and contact steps (see 'mean closed contacts'). The per-step time subtracts a 10-step run's "
+    "CPU time (the setup); it is a difference of two measurements and noisier than either. The "
+    "memory is the peak traced by tracemalloc (NumPy arrays included), not the resident set size.",
+    "The peer comparison needs Debian's python3-siconos; Siconos' time includes its Python "
+    "stepping loop (computeOneStep/nextStep from Python), the way its Python API is used; "
+    "'run()' is its C++ loop on the unforced system, for timing only.",
     "The micro-benchmarks solve fixed, small LCPs; the speed-up of the fast solver over the "
     "cvxpy/OSQP reference includes cvxpy's per-call overhead, which is most of the reference's time.",
     "A settling time only covers the coupling window: V may leave the threshold after t_off "
@@ -531,41 +545,7 @@ def build_report(result_files: Iterable[str | Path], out_dir: str | Path, *,
     if rob.empty:
         sec_rob.p("No robustness runs in these results.")
     else:
-        r0 = rob.iloc[0]
-        sec_rob.p(f"Scenario {r0['name']} (h = {fmt(r0['h'])} s, T = {fmt(r0['t_end'])} s, coupled "
-                  f"over the whole run). The observers read χ from the master's closing log "
-                  f"(source = \"log\") after one perturbation: "
-                  + "; ".join(f"{k}: {PLABELS[k]}" for k in PKINDS) + ". "
-                  "Seeds: numpy.random.default_rng(seed) per run.")
-        sec_rob.figure(figures.robustness_figure(rob, list(PKINDS), PLABELS, PUNITS), "No robustness data.")
-        t = Table("Robustness: floor and rate of V against the perturbation (median over seeds)",
-                  ["perturbation", "size", "seeds", "observer", "floor / V(t_on)", "rate (1/s)",
-                   "settles below 1e−3", "settles below 1e−6", "log intervals (true)"])
-        for (kind, size, name), g in rob.groupby(["perturbation", "size", "observer"], sort=False):
-            unit = PUNITS.get(kind, "")
-            t.add(["none (exact χ)" if kind == "none" else kind,
-                   "0" if kind == "none" else fmt(size, unit=unit), str(g["seed"].nunique()),
-                   OBS_NAMES.get(name, name), fmt(g["floor_rel"].median()), fmt(g["rate"].median()),
-                   _median_time(g, SETTLE[1e-3]), _median_time(g, SETTLE[1e-6]),
-                   f"{fmt_int(g['log_intervals'].median())} ({fmt_int(g['true_intervals'].iloc[0])})"])
-        sec_rob.table(t)
-        items = []
-        for name in ("jump", "nojump"):
-            base = rob[(rob["perturbation"] == "none") & (rob["observer"] == name)]
-            if base.empty:
-                continue
-            parts = []
-            for kind in PKINDS[1:]:
-                g = rob[(rob["perturbation"] == kind) & (rob["observer"] == name)]
-                if g.empty:
-                    continue
-                med = g.groupby("size")["floor_rel"].median()
-                over = med[med > 1e-6]
-                parts.append(f"{kind}: " + (f"floor above 1e-6 from {fmt(over.index.min(), unit=PUNITS[kind])}"
-                                            if len(over) else "floor stays below 1e-6 for every size"))
-            items.append(f"Observer {OBS_NAMES[name]} (exact χ: floor {fmt(base['floor_rel'].iloc[0])}·V(t_on), "
-                         f"rate {fmt(base['rate'].iloc[0])}/s): " + "; ".join(parts) + ".")
-        sec_rob.items(items)
+        sec_rob.blocks += robustness_blocks(rob, key_numbers, PKINDS, PLABELS, PUNITS)
     sections.append(sec_rob)
 
     # -- scaling -------------------------------------------------------------------------------
@@ -574,41 +554,11 @@ def build_report(result_files: Iterable[str | Path], out_dir: str | Path, *,
     if scal.empty:
         sec_sc.p("No scaling runs in these results.")
     else:
-        scal = scal.sort_values("N")
-        fits = scaling_fits(scal).set_index("quantity")
-        cpu_fit = fits.loc["CPU time per step"] if "CPU time per step" in fits.index else None
-        p_t, c_t = ((float(cpu_fit["exponent"]), float(cpu_fit["coefficient"])) if cpu_fit is not None
-                    else (float("nan"), float("nan")))
-        fit_mem = ((float(fits.loc["peak memory", "exponent"]), float(fits.loc["peak memory", "coefficient"]))
-                   if "peak memory" in fits.index else None)
-        big = scal[scal["N"] >= 50]
-        p_big = float(fits.loc["CPU time per step (N ≥ 50)", "exponent"]) \
-            if "CPU time per step (N ≥ 50)" in fits.index else float("nan")
-        sec_sc.p(f"Master only (no observers), h = {fmt(scal['h'].iloc[0])} s, T = "
-                 f"{fmt(scal['t_end'].iloc[0])} s from rest; CPU time per step = CPU time / steps; "
-                 "memory = peak traced by tracemalloc during a second, identical run.")
-        sec_sc.figure(figures.scaling_figure(scal, (p_t, c_t), fit_mem), "No scaling data.")
-        t = Table("Scaling of the chain: CPU time per step and memory against N",
-                  ["N", "n = m", "steps", "CPU per step (µs)", "steps/s", "mean closed contacts",
-                   "max closed contacts", "peak memory (MB)", "trajectory storage (MB)"])
-        for _, r in scal.iterrows():
-            t.add([fmt_int(r["N"]), fmt_int(r["n"]), fmt_int(r["steps"]), fmt(r["cpu_per_step_s"] * 1e6),
-                   fmt(r["steps_per_s"]), fmt(r["mean_active"]), fmt_int(r["max_active"]),
-                   fmt(r.get("peak_mem_mb")), fmt(r.get("trajectory_mb"))])
-        sec_sc.table(t)
-        t2 = Table("Fitted exponents (log-log least squares): quantity ∝ N^p",
-                   ["quantity", "N range", "exponent p"])
-        for quantity, r in fits.iterrows():
-            t2.add([quantity, f"{fmt_int(r['N_min'])} … {fmt_int(r['N_max'])}", f"{r['exponent']:.2f}"])
-        sec_sc.table(t2)
-        msg = f"Chain scaling: CPU time per step ∝ N^{p_t:.2f} over N = {fmt_int(scal['N'].min())} … {fmt_int(scal['N'].max())}"
-        if len(big) >= 2:
-            msg += f" (N^{p_big:.2f} for N ≥ 50)"
-        key_numbers.append(msg + ".")
-        sec_sc.p(msg + ". Below N ≈ 50 the per-step cost is dominated by the Python overhead of the "
-                       "step; above, by the dense O(n²) matrix-vector products (and O(|A|³) "
-                       "contact solves when many contacts are closed).")
+        sec_sc.blocks += scaling_blocks(scal, key_numbers)
     sections.append(sec_sc)
+
+    # -- peers ----------------------------------------------------------------------------------
+    sections.append(peers_section(df, key_numbers))
 
     # -- micro ----------------------------------------------------------------------------------
     sec_mi = Section("micro", "Micro-benchmarks: one step, one contact solve")
@@ -616,6 +566,7 @@ def build_report(result_files: Iterable[str | Path], out_dir: str | Path, *,
         sec_mi.p("No micro-benchmark results (pytest-benchmark JSON) next to these results files; "
                  "run `python -m bench run SUITE` (it runs `pytest bench/micro --benchmark-json=...`).")
     else:
+        sec_mi.blocks += loop_blocks(micro, key_numbers)
         sp = micro_speedups(micro)
         if len(sp):
             t = Table("Speed-up of the fast contact solvers over the cvxpy/OSQP reference (mean time per solve)",
@@ -630,14 +581,14 @@ def build_report(result_files: Iterable[str | Path], out_dir: str | Path, *,
                                + ", ".join(f"{fmt_ratio(r['speedup_pivoting'])}× at m = {fmt_int(r['m'])}"
                                            for _, r in sp.iterrows()) + " (mean time per solve).")
         sec_mi.figure(figures.micro_figure(micro), "No contact-solve benchmarks.")
-        t = Table("All micro-benchmarks (pytest-benchmark; times per call)",
+        t = Table("All micro-benchmarks (pytest-benchmark; times per call, a loop call is a whole window)",
                   ["group", "benchmark", "mean (µs)", "median (µs)", "std dev (µs)", "rounds",
                    "LCP residual"])
         micro = micro.assign(_m=micro["m"].fillna(-1).astype(float))
         for _, r in micro.sort_values(["kind", "_m", "mean_s"], ascending=[False, True, True]).iterrows():
             t.add([r["group"], r["name"].replace("test_", ""), fmt(r["mean_s"] * 1e6),
                    fmt(r["median_s"] * 1e6), fmt(r["stddev_s"] * 1e6), fmt_int(r["rounds"]),
-                   fmt(r["residual"], na="n/a (step)")])
+                   fmt(r["residual"], na="n/a (time loop)")])
         sec_mi.table(t)
         sec_mi.p(f"Source: {micro_meta.get('file')} (pytest-benchmark {micro_meta.get('version')}, "
                  f"{micro_meta.get('datetime')}).")
@@ -676,6 +627,216 @@ def build_report(result_files: Iterable[str | Path], out_dir: str | Path, *,
     path = out_dir / "index.html"
     path.write_text(page, encoding="utf-8")
     return path
+
+
+def _band_cell(median: float, lo: float, hi: float, seeds: int) -> str:
+    """"median [lo – hi]" for several seeds, the value alone for one (deterministic) run."""
+    if seeds <= 1 or math.isnan(lo):
+        return fmt(median)
+    return f"{fmt(median)} [{fmt(lo)} – {fmt(hi)}]"
+
+
+def robustness_blocks(rob: pd.DataFrame, key_numbers: list[str], kinds, labels, units) -> list[Block]:
+    """The robustness section: setting, figure (median and 10–90 % band over seeds), the table
+    of :func:`reports.analysis.robustness_bands` and one line per observer."""
+    from bench.suites import BAND
+
+    lo_pct, hi_pct = (f"{100 * q:.0f}" for q in BAND)
+    bands = robustness_bands(rob)
+    r0 = rob.iloc[0]
+    rnd = bands[bands["perturbation"].isin(["jitter", "missed", "false"])]
+    seeds = int(rnd["seeds"].max()) if len(rnd) else 1
+    blocks = [Block("p", f"Scenario {r0['name']} (h = {fmt(r0['h'])} s, T = {fmt(r0['t_end'])} s, "
+                         f"coupled over the whole run). The observers read χ from the master's "
+                         f"closing log (source = \"log\") after one perturbation: "
+                         + "; ".join(f"{k}: {labels[k]}" for k in kinds) + ". "
+                         f"Random perturbations (jitter, missed, false) are run with {seeds} seeds per "
+                         f"point (numpy.random.default_rng(seed)); each cell gives the median over "
+                         f"the seeds and, in brackets, the {lo_pct}–{hi_pct} % band (numpy's linear "
+                         f"quantiles). A delay is deterministic: one run per size.")]
+    fig = figures.robustness_figure(rob, list(kinds), labels, units, bands)
+    blocks.append(Block("p", "No robustness data.") if fig is None else Block("figure", fig))
+    t = Table(f"Robustness: floor and rate of V against the perturbation (median [{lo_pct}–{hi_pct} %] "
+              f"over seeds)",
+              ["perturbation", "size", "seeds", "observer", "floor / V(t_on)", "rate (1/s)",
+               "settles below 1e−3 (median; seeds settled)", "settles below 1e−6 (median; seeds settled)",
+               "log intervals (true)"])
+    for _, b in bands.iterrows():
+        kind, n = b["perturbation"], int(b["seeds"])
+        settle = [f"{fmt_time(b[f'settle_{rho:g}_median'])}; {int(b[f'settled_{rho:g}'])}/{n}"
+                  for rho in (1e-3, 1e-6)]
+        t.add(["none (exact χ)" if kind == "none" else kind,
+               "0" if kind == "none" else fmt(b["size"], unit=units.get(kind, "")), str(n),
+               OBS_NAMES.get(b["observer"], b["observer"]),
+               _band_cell(b["floor_median"], b["floor_lo"], b["floor_hi"], n),
+               _band_cell(b["rate_median"], b["rate_lo"], b["rate_hi"], n), *settle,
+               f"{fmt_int(b['log_intervals'])} ({fmt_int(b['true_intervals'])})"])
+    blocks.append(Block("table", t))
+    items = []
+    for name in ("jump", "nojump"):
+        base = bands[(bands["perturbation"] == "none") & (bands["observer"] == name)]
+        if base.empty:
+            continue
+        parts = []
+        for kind in kinds[1:]:
+            g = bands[(bands["perturbation"] == kind) & (bands["observer"] == name)]
+            if g.empty:
+                continue
+            over = g[g["floor_median"] > 1e-6]
+            parts.append(f"{kind}: " + (f"median floor above 1e-6 from {fmt(over['size'].min(), unit=units[kind])}"
+                                        if len(over) else "median floor below 1e-6 for every size"))
+        b0 = base.iloc[0]
+        items.append(f"Observer {OBS_NAMES[name]} (exact χ: floor {fmt(b0['floor_median'])}·V(t_on), "
+                     f"rate {fmt(b0['rate_median'])}/s): " + "; ".join(parts) + ".")
+    blocks.append(Block("list", items))
+    if items:
+        key_numbers.append(f"Robustness ({seeds} seeds per random perturbation, medians): "
+                           + " ".join(items))
+    return blocks
+
+
+def scaling_blocks(scal: pd.DataFrame, key_numbers: list[str]) -> list[Block]:
+    """The scaling section: figure, the per-N table and the fitted exponents of
+    :func:`reports.analysis.scaling_fits`; the acceptance exponent (from N = 10) in the text."""
+    from bench.suites import SCALING_FIT_FROM
+
+    scal = scal.sort_values("N")
+    fits = scaling_fits(scal).set_index("quantity")
+    acc = f"CPU time per step (N ≥ {SCALING_FIT_FROM})"
+    key = acc if acc in fits.index else "CPU time per step"
+    p_acc, c_acc = ((float(fits.loc[key, "exponent"]), float(fits.loc[key, "coefficient"]))
+                    if key in fits.index else (float("nan"), float("nan")))
+    fit_mem = ((float(fits.loc["peak memory", "exponent"]), float(fits.loc["peak memory", "coefficient"]))
+               if "peak memory" in fits.index else None)
+    blocks = [Block("p", f"Master only (no observers), h = {fmt(scal['h'].iloc[0])} s, T = "
+                         f"{fmt(scal['t_end'].iloc[0])} s from rest, compiled engine "
+                         f"({', '.join(dict.fromkeys(scal.get('structure', pd.Series(['n/a'])).fillna('n/a').astype(str)))} "
+                         "matrices). CPU time per step = (CPU time of the run − CPU time of a 10-step "
+                         "run of the same scenario) / (steps − 10): the per-call setup (matrices, "
+                         "factorization, grid) is subtracted, so the fit measures the step. Memory = "
+                         "peak traced by tracemalloc during a third, identical run.")]
+    fig = figures.scaling_figure(scal, (p_acc, c_acc), fit_mem)
+    blocks.append(Block("p", "No scaling data.") if fig is None else Block("figure", fig))
+    t = Table("Scaling of the chain: CPU time per step and memory against N",
+              ["N", "n = m", "steps", "CPU per step (µs)", "loop wall per step (µs)", "setup CPU (s)",
+               "steps/s", "mean closed contacts", "max closed contacts", "peak memory (MB)",
+               "trajectory storage (MB)"])
+    for _, r in scal.iterrows():
+        t.add([fmt_int(r["N"]), fmt_int(r["n"]), fmt_int(r["steps"]), fmt(r["cpu_per_step_s"] * 1e6),
+               fmt(r.get("loop_per_step_s", float("nan")) * 1e6), fmt(r.get("setup_cpu_time_s")),
+               fmt(r["steps_per_s"]), fmt(r["mean_active"]), fmt_int(r["max_active"]),
+               fmt(r.get("peak_mem_mb")), fmt(r.get("trajectory_mb"))])
+    blocks.append(Block("table", t))
+    t2 = Table("Fitted exponents (log-log least squares): quantity ∝ N^p",
+               ["quantity", "N range", "exponent p"])
+    for quantity, r in fits.iterrows():
+        t2.add([quantity, f"{fmt_int(r['N_min'])} … {fmt_int(r['N_max'])}", f"{r['exponent']:.2f}"])
+    blocks.append(Block("table", t2))
+    n_lo, n_hi = int(scal["N"].min()), int(scal["N"].max())
+    msg = f"Chain scaling: CPU time per step ∝ N^{p_acc:.2f}"
+    if key == acc:
+        msg += f" from N = {SCALING_FIT_FROM} to {n_hi}"
+        others = [f"{q.replace('CPU time per step', '').strip() or f'all N from {n_lo}'}: "
+                  f"N^{fits.loc[q, 'exponent']:.2f}" for q in fits.index
+                  if q.startswith("CPU time per step") and q != acc]
+        if others:
+            msg += " (" + "; ".join(others) + ")"
+    else:
+        msg += f" over N = {n_lo} … {n_hi}"
+    if n_lo <= SCALING_FIT_FROM and n_hi >= 1000:
+        verdict = "met" if p_acc <= ACCEPTANCE_EXPONENT else "NOT met"
+        msg += f"; acceptance (≤ {ACCEPTANCE_EXPONENT} from N = 10 to 1000): {verdict}"
+    else:
+        msg += f"; the acceptance fit (≤ {ACCEPTANCE_EXPONENT} from N = 10 to 1000) needs the full suite"
+    key_numbers.append(msg + ".")
+    blocks.append(Block("p", msg + ". The step costs O(n) for the banded free velocity and "
+                             "O(n|A| + |A|³) for |A| closed contacts; 'mean closed contacts' says how "
+                             "many there are."))
+    return blocks
+
+
+def loop_blocks(micro: pd.DataFrame, key_numbers: list[str]) -> list[Block]:
+    """Time per step of the loop benchmarks (:func:`reports.analysis.micro_loops`)."""
+    ml = micro_loops(micro)
+    if ml.empty:
+        return []
+    ct = float(ml["compile_time_s"].max())
+    t = Table("Time loop per step on both engines (median of the rounds ÷ steps; compile time excluded)",
+              ["case", "systems", "n", "m", "steps", "compiled (µs/step)", "python (µs/step)",
+               "speed-up", "rounds (compiled / python)"])
+    for _, r in ml.iterrows():
+        t.add([r["case"], fmt_int(r["systems"]), fmt_int(r["n"]), fmt_int(r["m"]), fmt_int(r["steps"]),
+               fmt(r["compiled_s"] * 1e6), fmt(r["python_s"] * 1e6),
+               f"{fmt_ratio(r['speedup'])}×" if not math.isnan(r["speedup"]) else "n/a",
+               f"{fmt_int(r['rounds_compiled'])} / {fmt_int(r['rounds_python'])}"])
+    key_numbers.append("Time per step, compiled engine (python engine): "
+                       + ", ".join(f"{r['case']} {fmt(r['compiled_s'] * 1e6)} µs"
+                                   + (f" ({fmt(r['python_s'] * 1e6)} µs)" if not math.isnan(r["python_s"]) else "")
+                                   for _, r in ml.iterrows())
+                       + f"; kernel compile/cache load {fmt(ct)} s, not included.")
+    return [Block("p", "Every loop benchmark times observer.loop.run — the loop observer.simulate "
+                       "calls — on a fixed window of a built-in scenario (same steps on both engines), "
+                       "full trajectory stored; the stepper is built before timing and the kernel "
+                       f"compiled (or loaded from numba's cache) first, in {fmt(ct)} s. Per step = "
+                       "median over the rounds of one call ÷ steps."),
+            Block("table", t)]
+
+
+def peers_section(df: pd.DataFrame, key_numbers: list[str]) -> Section:
+    """Siconos against the toolkit on the same problems (:mod:`bench.peers`): per-step times,
+    their ratios and the largest trajectory difference; without Siconos, how to get it."""
+    from bench import peers
+
+    sec = Section("peers", "Peers: Siconos on the same problems")
+    pe = df[(df["kind"] == "peers") & (df["status"] == "ok")] if "kind" in df else pd.DataFrame()
+    notes = [n for n in _unavailable_notes(df) if n.startswith("peers:")]
+    if pe.empty:
+        if notes:
+            sec.p(f"No peer results: Siconos was not available when the suite ran. To get it: "
+                  f"{peers.HOW_TO_GET}; then run the suite again (finished cases are skipped).")
+            sec.items(notes)
+            key_numbers.append("Peers: no Siconos results — Siconos was absent (the Peers section "
+                               "says how to get it).")
+            return sec
+        ok, info = peers.siconos_available()
+        where = (f"Siconos is available here ({info})" if ok
+                 else f"Siconos is not available here: {info}")
+        sec.p("No peer results: these suites have no peer cases. The comparison with Siconos is "
+              "the suite `python -m bench run peers` (also part of `nox -s report -- full`). "
+              f"{where}.")
+        return sec
+    summ = peer_summary(pe)
+    sec.p(f"Siconos {pe['siconos_version'].iloc[0]} and the toolkit run the same discrete scheme "
+          "(Moreau–Jean θ = ½, Newton's law, one Siconos Interaction per contact, LCP by Lemke), so "
+          "their trajectories agree to round-off. Siconos runs under Debian's system Python in a "
+          "subprocess; its time is the stepping loop alone (a Python loop of computeOneStep/"
+          "nextStep that writes fExt every step when the problem is forced). 'Siconos run()' is "
+          "Siconos' own C++ loop with the force held at its constant part — no Python per step, "
+          "a different trajectory when the problem is forced, timing only. The toolkit runs on "
+          "its compiled engine: 'simulate' is the whole observer.simulate() call (setup and "
+          "result included), 'loop' its time loop alone. Medians of "
+          f"{fmt_int(pe['repeats'].max())} repeats on each side; ratio = Siconos ÷ toolkit "
+          "(> 1: the toolkit is faster).")
+    t = Table("Siconos vs toolkit: time per step and largest trajectory difference",
+              ["problem", "n", "m", "h (s)", "steps", "Siconos (µs/step)", "Siconos run() (µs/step)",
+               "toolkit simulate (µs/step)", "toolkit loop (µs/step)", "ratio (simulate)",
+               "ratio (loop)", "ratio run() / simulate", "max |Δq|", "max |Δu|", "note"])
+    for (_, r), (_, sm) in zip(pe.iterrows(), summ.iterrows()):
+        t.add([str(r["problem"]), fmt_int(r["n"]), fmt_int(r["m"]), fmt(r["h"]), fmt_int(r["steps"]),
+               fmt(sm["siconos_us"]), fmt(sm["siconos_run_us"]), fmt(sm["toolkit_us"]),
+               fmt(sm["toolkit_loop_us"]), f"{fmt_ratio(sm['ratio'])}×", f"{fmt_ratio(sm['ratio_loop'])}×",
+               f"{fmt_ratio(sm['ratio_run'])}×", fmt(r["max_abs_diff_q"]), fmt(r["max_abs_diff_u"]),
+               str(r.get("note") or "—")])
+    sec.table(t)
+    if notes:
+        sec.p("Some peer cases were skipped in the last run:")
+        sec.items(notes)
+    worst = float(summ["max_diff"].max())
+    key_numbers.append("Peers (Siconos ÷ toolkit time per step, whole simulate call / loop alone): "
+                       + ", ".join(f"{r['problem']} {fmt_ratio(r['ratio'])}× / {fmt_ratio(r['ratio_loop'])}×"
+                                   for _, r in summ.iterrows())
+                       + f"; trajectories differ by at most {fmt(worst)}.")
+    return sec
 
 
 def _unavailable_notes(df: pd.DataFrame) -> list[str]:
@@ -757,8 +918,13 @@ def settings_section(df: pd.DataFrame, suites: list[str]) -> Section:
            "(observer.metrics.sync_time)"])
     t.add(["floor", "median of V over the last 10 % of the coupling window"])
     t.add(["rate", "−slope of the least-squares line through log V over the window, up to V ≤ 1e-9·V(t_on)"])
-    t.add(["work-precision error", ERROR_NORM + " (time average, trapezoid on the grid of h)"])
-    t.add(["reference without closed form", "run at h_ref = h_min/16 (pivoting solver, same law), compared on the common grid"])
+    t.add(["work-precision error", ERROR_NORM + " (time average, trapezoid on the stored grid: every "
+           "step, or every k-th step at spacing h_record for the smallest h of the full sweeps)"])
+    t.add(["reference without closed form", "run at h_ref = h_min/16 (pivoting solver, same law, compiled engine), "
+           "compared on the common grid"])
+    t.add(["robustness band", "median and 10–90 % quantiles (numpy, linear) over the seeds of a point"])
+    t.add(["scaling exponent", "least-squares slope of log(CPU time per step) against log N from N = 10 "
+           f"(acceptance ≤ {ACCEPTANCE_EXPONENT} up to N = 1000)"])
     t.add(["contact-solve acceptance", "relative LCP residual ‖min(x, Gx+b)‖∞ / max(‖b‖∞, ‖Gx‖∞) ≤ 1e-9, "
            "else the step falls back to the reference solver (counted)"])
     t.add(["micro-benchmark acceptance", "every timed solve must have residual ≤ 1e-9"])

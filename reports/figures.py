@@ -154,32 +154,38 @@ def work_precision_figure(wp: pd.DataFrame, orders: dict[str, float]) -> Figure 
 
 
 def robustness_figure(rob: pd.DataFrame, kinds: list[str], labels: dict[str, str],
-                      units: dict[str, str]) -> Figure | None:
+                      units: dict[str, str], bands: pd.DataFrame | None = None) -> Figure | None:
     """Floor (median of V/V(t_on) at the end of the window) and decay rate against the size of
-    each perturbation, per observer; the unperturbed value as a horizontal line."""
+    each perturbation, per observer: the median over seeds (markers) and the band of
+    :func:`reports.analysis.robustness_bands` (shaded, where a point has several seeds); the
+    unperturbed value as a horizontal line."""
+    from reports.analysis import robustness_bands
+
     rob = rob[rob["status"] == "ok"]
     if rob.empty:
         return None
-    base = rob[rob["perturbation"] == "none"]
-    kinds = [k for k in kinds if k != "none" and (rob["perturbation"] == k).any()]
+    bands = robustness_bands(rob) if bands is None else bands
+    base = bands[bands["perturbation"] == "none"]
+    kinds = [k for k in kinds if k != "none" and (bands["perturbation"] == k).any()]
     if not kinds:
         return None
     fig, axes = plt.subplots(2, len(kinds), figsize=(3.6 * len(kinds), 6.0), squeeze=False)
     for j, kind in enumerate(kinds):
-        sub = rob[rob["perturbation"] == kind]
+        sub = bands[bands["perturbation"] == kind].sort_values("size")
         for name, g in sub.groupby("observer", sort=False):
-            agg = g.groupby("size").agg(floor=("floor_rel", "median"), rate=("rate", "median"),
-                                        fmin=("floor_rel", "min"), fmax=("floor_rel", "max"))
-            x = agg.index.to_numpy(dtype=float)
+            x = g["size"].to_numpy(dtype=float)
             c = COLORS.get(name)
-            axes[0, j].loglog(x, _positive(agg["floor"]), "o-", color=c, ms=4, label=LABELS.get(name, name))
-            if g["seed"].nunique() > 1:
-                axes[0, j].fill_between(x, _positive(agg["fmin"]), _positive(agg["fmax"]), color=c, alpha=0.15)
-            axes[1, j].semilogx(x, agg["rate"], "o-", color=c, ms=4, label=LABELS.get(name, name))
+            axes[0, j].loglog(x, _positive(g["floor_median"]), "o-", color=c, ms=4,
+                              label=LABELS.get(name, name))
+            axes[1, j].semilogx(x, g["rate_median"], "o-", color=c, ms=4, label=LABELS.get(name, name))
+            if g["seeds"].max() > 1:
+                axes[0, j].fill_between(x, _positive(g["floor_lo"]), _positive(g["floor_hi"]), color=c,
+                                        alpha=0.15)
+                axes[1, j].fill_between(x, g["rate_lo"], g["rate_hi"], color=c, alpha=0.15)
             b = base[base["observer"] == name]
             if not b.empty:
-                axes[0, j].axhline(float(b["floor_rel"].iloc[0]), color=c, lw=0.8, ls=":")
-                axes[1, j].axhline(float(b["rate"].iloc[0]), color=c, lw=0.8, ls=":")
+                axes[0, j].axhline(float(b["floor_median"].iloc[0]), color=c, lw=0.8, ls=":")
+                axes[1, j].axhline(float(b["rate_median"].iloc[0]), color=c, lw=0.8, ls=":")
         sizes = np.sort(sub["size"].unique().astype(float))
         for a in axes[:, j]:
             a.set_xticks(sizes, [f"{x:g}" for x in sizes], fontsize=7)
@@ -198,7 +204,7 @@ def robustness_figure(rob: pd.DataFrame, kinds: list[str], labels: dict[str, str
     fig.tight_layout()
     return Figure(to_data_uri(fig), "robustness: floor and rate against the perturbation size",
                   "Dotted horizontal lines: the same observer with the exact switching signal. "
-                  "Shaded band (when several seeds): min–max over seeds; markers: median.")
+                  "Markers: median over seeds; shaded band: 10–90 % of the seeds.")
 
 
 def scaling_figure(sc: pd.DataFrame, fit_time: tuple[float, float], fit_mem: tuple[float, float] | None
@@ -214,7 +220,7 @@ def scaling_figure(sc: pd.DataFrame, fit_time: tuple[float, float], fit_mem: tup
     p, c = fit_time
     ax.loglog(N, np.exp(c) * N ** p * 1e6, "--", color="tab:blue", label=f"fit ∝ N^{p:.2f}")
     ax.set_xlabel("N (blocks; n = m = 2N)")
-    ax.set_ylabel("CPU time per step (µs)")
+    ax.set_ylabel("CPU time per step, setup subtracted (µs)")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     ax = axes[1]

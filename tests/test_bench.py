@@ -21,8 +21,11 @@ import pytest
 from bench.perturb import KINDS, perturb_log
 from bench.reference import ExactImpactOscillator, ball_position, closed_form_position
 from bench.results import ResultsFile, load_results
+from bench.peers import PROBLEMS
 from bench.run import results_path, run_suite
-from bench.suites import SUITES, Case, Suite, get_suite
+from bench.runners import record_every
+from bench.suites import CHECK_SCENARIOS, RANDOM_KINDS, SUITES, Case, Suite, engine_for, get_suite
+from observer.errors import InputError
 from observer.scenarios import bouncing_ball as bb
 from observer.switching import read_log, validate_log
 
@@ -61,18 +64,28 @@ def test_case_ids_are_stable_and_unique():
 @pytest.mark.parametrize("name", ["quick", "full"])
 def test_quick_and_full_cover_every_kind_and_the_issue_grid(name):
     suite = SUITES[name]
+    full = name == "full"
     kinds = Counter(c.kind for c in suite.cases)
-    assert set(kinds) == {"observers", "work_precision", "robustness", "scaling", "checks"}
+    expected = {"observers", "work_precision", "robustness", "scaling", "checks"}
+    assert set(kinds) == (expected | {"peers"} if full else expected)
     assert suite.micro is not None
     obs = {c.name for c in suite.of_kind("observers")}
     assert {"double_mass", "rocking_chain", "grazing", "bouncing_ball (Zeno)"} <= obs
     assert any("persistent" in n for n in obs)
     chain = [c for c in suite.of_kind("observers") if c.scenario == "rocking_chain"][0]
     assert dict(chain.params)["param.N"] == 10
-    # work-precision: ≥ 5 step sizes per method, both laws and both contact solvers
+    # work-precision: ≥ 5 step sizes per compiled method (full: ≥ 8, down to ≈ 1e-6 s), ≥ 3
+    # with the cvxpy/OSQP solver (numpy engine; full: ≥ 5), both laws and both contact solvers
     wp = suite.of_kind("work_precision")
     methods = Counter((c.scenario, c.target, c.law, c.solver) for c in wp)
-    assert min(methods.values()) >= 5
+    assert min(v for k, v in methods.items() if k[3] == "pivoting") >= 5
+    assert min(v for k, v in methods.items() if k[3] == "reference") >= (5 if full else 3)
+    if full:
+        compiled = {k: v for k, v in methods.items() if engine_for(k[3]) == "compiled"}
+        assert min(compiled.values()) >= 8
+        for key in compiled:
+            hs = [c.h for c in wp if (c.scenario, c.target, c.law, c.solver) == key]
+            assert min(hs) <= 1e-6 < 2 * min(hs)
     assert {c.law for c in wp} == {"newton", "poisson"}
     assert {c.solver for c in wp} == {"pivoting", "reference"}
     assert {c.target for c in wp} == {"master", "jump", "nojump"}
@@ -80,9 +93,37 @@ def test_quick_and_full_cover_every_kind_and_the_issue_grid(name):
         assert c.reference in ("closed form", "h/16 run")
         if c.reference == "h/16 run":
             assert c.h / c.h_ref >= 16 - 1e-9
-    # robustness: every perturbation kind; scaling: the issue's N values
-    assert {c.perturbation for c in suite.of_kind("robustness")} == set(KINDS)
-    assert [dict(c.params)["param.N"] for c in suite.of_kind("scaling")] == [5, 10, 20, 50, 100, 200]
+        if c.h_record is not None:     # the grids of h, h_record and h_ref nest (powers of two)
+            for h in (c.h, c.h_ref or c.h):
+                k = max(h, c.h_record) / min(h, c.h_record)
+                assert abs(k - round(k)) < 1e-9 and (round(k) & (round(k) - 1)) == 0
+    # robustness: every perturbation kind; full: ≥ 20 seeds per random point
+    rob = suite.of_kind("robustness")
+    assert {c.perturbation for c in rob} == set(KINDS)
+    seeds = Counter((c.perturbation, c.size) for c in rob if c.perturbation in RANDOM_KINDS)
+    assert min(seeds.values()) >= (20 if full else 3)
+    # scaling: up to N = 1000 in full, from N = 5
+    Ns = [dict(c.params)["param.N"] for c in suite.of_kind("scaling")]
+    assert Ns == ([5, 10, 20, 50, 100, 200, 500, 1000] if full else [5, 10, 20, 50, 100, 200])
+    if full:
+        assert [c.scenario for c in suite.of_kind("peers")] == list(PROBLEMS)
+        assert {c.scenario for c in suite.of_kind("checks")} == set(CHECK_SCENARIOS)
+
+
+def test_engine_follows_the_contact_solver():
+    """Runs with the pivoting solver use the compiled kernel; the kernel has no other solver,
+    so cvxpy/lemke/nnls runs use the numpy engine (they would silently use pivoting)."""
+    assert engine_for("pivoting") == "compiled"
+    for solver in ("reference", "lemke", "nnls"):
+        assert engine_for(solver) == "python"
+
+
+def test_record_every_from_h_record():
+    assert record_every(1e-3, None) == 1 and record_every(1e-3, 5e-4) == 1
+    assert record_every(2e-3 / 2 ** 11, 2e-3 / 2 ** 6) == 32
+    assert record_every(4e-3 / 2 ** 12 / 16, 4e-3 / 2 ** 9) == 128
+    with pytest.raises(InputError, match="h_record"):
+        record_every(3e-4, 1e-3)
 
 
 # ----------------------------------------------------------------------------- results file
@@ -150,6 +191,19 @@ def test_smoke_suite_rows_are_tidy_and_complete(smoke_run):
         read_log(out / f, 1)
     sc = df[df["kind"] == "scaling"]
     assert (sc["peak_mem_mb"] > 0).all() and (sc["cpu_per_step_s"] > 0).all()
+    # compiled engine everywhere (pivoting solver), compile time measured once and apart
+    timed = df[(df["status"] == "ok") & df["kind"].isin(["observers", "work_precision", "robustness",
+                                                          "scaling"])]
+    assert (timed["engine"] == "compiled").all()
+    assert (timed["run_compile_time_s"] == 0).all()               # no row paid the compile
+    assert df["compile_time_s"].notna().all() and df["compile_time_s"].nunique() == 1
+    assert summary.compile_time_s == pytest.approx(df["compile_time_s"].iloc[0])
+    assert (timed["loop_time_s"] > 0).all() and (timed["loop_time_s"] <= timed["wall_time_s"]).all()
+    # h_record: the h = 5e-4 run keeps every 2nd step, its error is measured on the 1e-3 grid
+    rec = wp[wp["h"] == 5e-4].iloc[0]
+    full = wp[wp["h"] == 1e-3].iloc[0]
+    assert rec["error_grid_s"] == pytest.approx(1e-3) and rec["samples"] == full["samples"]
+    assert rec["steps"] == 2 * full["steps"]
 
 
 def test_rerun_of_a_finished_suite_computes_nothing(smoke_run):
@@ -216,6 +270,19 @@ def test_limit_runs_only_the_first_cases_then_resume(tmp_path):
     assert (s2.ran, s2.skipped) == (1, 1)
     rows = ResultsFile(results_path("mini", tmp_path)).rows()
     assert rows[0] == first[0] and len(rows) == 2
+
+
+def test_reference_solver_runs_on_the_numpy_engine(tmp_path):
+    """A work-precision point with the cvxpy/OSQP solver really uses it (numpy engine), and its
+    trajectory equals the compiled pivoting run's (both solve the same LCPs exactly)."""
+    cases = tuple(Case("work_precision", "bouncing_ball", law="newton", solver=s, h=2e-3, t_end=1.5,
+                       observers=(), reference="closed form") for s in ("pivoting", "reference"))
+    summary = run_suite(Suite("eng", "", cases), tmp_path, progress=False)
+    assert summary.failed == []
+    rows = load_results([results_path("eng", tmp_path)]).set_index("solver")
+    assert rows.loc["pivoting", "engine"] == "compiled" and rows.loc["reference", "engine"] == "python"
+    assert rows.loc["reference", "contact_solves"] > 0
+    assert rows.loc["reference", "err_mean"] == pytest.approx(rows.loc["pivoting", "err_mean"], rel=1e-6)
 
 
 def test_failed_case_is_reported_and_retried(tmp_path):

@@ -22,6 +22,10 @@ from oracles import oracle
 
 import observer
 from bench import peers
+from bench.results import ResultsFile
+from bench.run import results_path, run_suite, unavailable_path
+from bench.runners import PEER_REPEATS
+from bench.suites import SUITES, Case, Suite
 from observer.errors import InputError
 from observer.scenarios import rocking_chain
 
@@ -184,3 +188,40 @@ def test_run_peer_row():
     assert row["siconos_run_ns_per_step"] > 0
     assert row["max_abs_diff_q"] <= TRAJECTORY_TOL and row["max_abs_diff_u"] <= TRAJECTORY_TOL
     assert row["siconos_version"] == SICONOS_INFO
+
+
+# ------------------------------------------------------------------------ the bench suite
+PEER_CASE = Case("peers", "impact_oscillator", observers=(), law="newton", h=1e-3, t_end=2.0)
+
+
+def test_peers_suite_declares_the_three_problems():
+    cases = SUITES["peers"].cases
+    assert [c.scenario for c in cases] == list(peers.PROBLEMS)
+    assert all(c.kind == "peers" and c.law == "newton" and c.observers == () for c in cases)
+    assert dict(cases[-1].params)["param.N"] == 10
+    assert [c.case_id for c in SUITES["full"].of_kind("peers")] == [c.case_id for c in cases]
+
+
+def test_peer_case_without_siconos_writes_no_row_and_says_how_to_get_it(no_siconos, tmp_path):
+    summary = run_suite(Suite("pe", "", (PEER_CASE,)), tmp_path, progress=False)
+    assert summary.ran == 0 and summary.failed == []
+    (cid, msg), = summary.unavailable
+    assert cid == PEER_CASE.case_id and msg.startswith("Siconos absent") and peers.HOW_TO_GET in msg
+    assert not results_path("pe", tmp_path).exists()
+    assert peers.HOW_TO_GET in unavailable_path("pe", tmp_path).read_text()
+
+
+@needs_siconos
+def test_peer_case_row(tmp_path):
+    """One suite row per peer case: both timings, their ratio recomputed, the trajectory
+    difference within the acceptance, the compiled engine on the toolkit side."""
+    summary = run_suite(Suite("pe", "", (PEER_CASE,)), tmp_path, progress=False)
+    assert summary.failed == [] and summary.unavailable == [] and summary.ran == 1
+    row = ResultsFile(results_path("pe", tmp_path)).rows()[0]
+    assert row["kind"] == "peers" and row["problem"] == "impact_oscillator" and row["status"] == "ok"
+    assert row["steps"] == 2000 and row["repeats"] == PEER_REPEATS
+    assert row["toolkit_engine"] == "compiled"
+    assert row["ratio"] == pytest.approx(row["siconos_ns_per_step"] / row["toolkit_ns_per_step"])
+    assert 0 < row["toolkit_loop_ns_per_step"] <= row["toolkit_ns_per_step"]
+    assert max(row["max_abs_diff_q"], row["max_abs_diff_u"]) <= TRAJECTORY_TOL
+    assert row["compile_time_s"] >= 0
