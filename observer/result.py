@@ -205,7 +205,7 @@ def run_metadata(scenario, stepper, out) -> dict:
     fallback to the reference solver), versions, timing (compile time apart)."""
     meta = dict(scenario.parameters())
     st = out.stats
-    meta.update(h=stepper.h, theta=stepper.theta, steps=stepper.grid.steps,
+    meta.update(h=stepper.h, theta=stepper.theta, steps=stepper.steps,
                 engine=out.engine, structure="dense" if stepper.S.band is None else "banded",
                 record_every=int(out.rows[1] - out.rows[0]) if out.rows.size > 1 else 1,
                 solver=stepper.solver.name, contact_solves=st["contact_solves"],
@@ -215,7 +215,7 @@ def run_metadata(scenario, stepper, out) -> dict:
                 min_gap=st.get("min_gap"), min_gap_t=(float(stepper.time(st["min_gap_step"]))
                                                       if st.get("min_gap_step", -1) >= 0 else None),
                 compile_time_s=out.compile_time_s,
-                steps_per_second=stepper.grid.steps / out.run_time_s if out.run_time_s > 0 else float("nan"),
+                steps_per_second=stepper.steps / out.run_time_s if out.run_time_s > 0 else float("nan"),
                 versions=package_versions(), platform=platform.platform(),
                 argv=" ".join(sys.argv))
     return meta

@@ -198,3 +198,19 @@ def test_summary_store_streams_the_full_runs_metrics():
 def test_summary_store_refuses_the_python_engine():
     with pytest.raises(observer.InputError, match="store"):
         observer.simulate("bouncing_ball", engine="python", store="summary")
+
+
+def test_compiled_run_never_builds_the_whole_grid(monkeypatch):
+    """The compiled engine advances window by window: a run (full or summary) does not touch
+    the stepper's whole-grid signals, so memory does not grow with the horizon beyond the
+    kept rows (a 1e8-step summary run of impact_oscillator stays under 200 MB)."""
+    from observer.stepping import MoreauJean
+
+    def forbidden(self):
+        raise AssertionError("the whole grid was built")
+
+    monkeypatch.setattr(MoreauJean, "grid", property(forbidden))
+    res = observer.simulate("double_mass", observers=("jump", "nojump"), t_end=1.0, store="summary")
+    assert res.metadata["steps"] == 10_000 and res.summary is not None
+    res = observer.simulate("rocking_chain", observers=("jump", "nojump"), t_end=0.5)
+    assert res.q.shape[0] == 5001
