@@ -106,7 +106,7 @@ def solve_lcp(G, b, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter):
     """Exact LCP solve; returns ``(iterations, status, residual)`` and x in ``x[:a]``.
 
     One contact: closed form. Several: block principal pivoting started from
-    ``{i : b_i < 0}``; every infeasible index (basic with ``G_ii x_i < −tol``, non-basic with
+    ``{i : b_i < 0}``; every infeasible index (basic with ``x_i < 0``, non-basic with
     ``w_i < −tol``, tol = 16·a·eps·(|b_i| + (|G||x|)_i)) is flipped while their number
     decreases, then three more full flips, then Murty's single flip of the largest index.
     """
@@ -148,7 +148,7 @@ def solve_lcp(G, b, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter):
                 ag += abs(G[i, j]) * abs(x[j])
             tol = ROUNDOFF * a * EPS * (abs(b[i]) + ag)
             if basic[i]:
-                bad = G[i, i] * x[i] < -tol
+                bad = x[i] < 0.0                      # exact sign test (observer.contact.lcp)
             else:
                 bad = gx + b[i] < -tol
             infeas[i] = bad
