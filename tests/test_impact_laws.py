@@ -251,7 +251,8 @@ def test_poisson_step_on_uncoupled_contacts_is_newtons():
     assert newton[0] > 0 and newton[1] == 0.0 and newton[2] == 0.0
 
 
-@pytest.mark.parametrize("gk,gf", [(-1.3, -1.2), (-1.3, 0.2), (0.0, -0.1), (0.8, 0.7), (0.8, -0.5)])
+@pytest.mark.parametrize("gk,gf", [(-1.3, -1.2), (-1.3, 0.2), (0.0, -0.1), (0.8, 0.7), (0.8, -0.5),
+                                   (0.4, 0.1)])
 def test_poisson_step_one_contact_is_bitwise_newtons(gk, gf):
     """One contact: Newton's closed form ``max(0, −(γ_free + εγ_k)/G)`` to the last bit,
     without a solver call; Λ_C = P/(1+ε), Λ_E = P − Λ_C."""

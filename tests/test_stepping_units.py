@@ -31,7 +31,7 @@ from observer.impact import ImpactLaw
 from observer.model import Harmonic, LinearSystem
 from observer.observers import ObserverConfig, check_observer_name, lyapunov, lyapunov_decrements
 from observer.stepping import (BANDED_MIN_N, Grid, MoreauJean, SchemeMatrices, bandwidth,
-                               check_step_parameters, to_band)
+                               check_step_parameters, grid_steps, to_band)
 
 RTOL = 1e-12
 
@@ -320,12 +320,41 @@ def test_choose_structure():
 # ---------------------------------------------------------------------------------------
 @pytest.mark.parametrize("t_end,h,t0,steps", [(1.0, 0.1, 0.0, 10), (1.05, 0.1, 0.0, 11),
                                               (0.3, 0.1, 0.0, 3), (2.0, 0.25, 1.0, 4),
-                                              (1.0 + 1e-8, 0.1, 0.0, 11)])
+                                              (1.0 + 1e-8, 0.1, 0.0, 11), (0.1, 0.1, 0.0, 1)])
 def test_grid_step_count(t_end, h, t0, steps):
     g = Grid.build(two_dof(), h, t_end, 0.5, t0)
     assert g.steps == steps and g.t.shape == (steps + 1,)
     close(g.t, t0 + h * np.arange(steps + 1))
     assert g.t[0] == t0
+
+
+def test_grid_steps_default_start_time_is_zero():
+    assert grid_steps(0.1, 1.0) == 10 and grid_steps(0.1, 1.0, 0.5) == 5
+
+
+def test_grid_window_is_a_bitwise_slice_of_the_grid():
+    s, h, th = two_dof(), 0.1, 0.75
+    g = Grid.build(s, h, 1.5, th, 0.5)
+    w = Grid.window(s, h, th, 0.5, 3, 6)
+    assert g.k0 == 0 and w.k0 == 3 and w.steps == 3
+    assert np.array_equal(w.t, g.t[3:7])
+    assert np.array_equal(w.fbar, g.fbar[3:6])
+    assert np.array_equal(w.nu, g.nu[3:7]) and np.array_equal(w.nu_dot, g.nu_dot[3:7])
+
+
+def test_stepper_keeps_its_law_and_step_count_with_a_start_time():
+    law = ImpactLaw.build("newton", 0.5, 2)
+    st = MoreauJean(two_dof(), law, 0.1, 1.0, t0=0.5)
+    assert st.law is law and st.steps == 5 and st.t0 == 0.5
+    assert st.grid.steps == 5 and st.grid.t[0] == 0.5
+
+
+def test_fallback_before_any_step_reports_step_zero():
+    st = stepper(system=one_dof(), e=(0.5,), h=0.1)
+    st.solver = EnumSolver(residual=1.0, method="fake")
+    st._fallback = EnumSolver()
+    with pytest.warns(RuntimeWarning, match=r"^fake residual 1 at step 0 \(t = 0\);"):
+        st.impulse(3, np.array([-2.0]), np.array([-2.1]), np.array([0]))
 
 
 @pytest.mark.parametrize("t_end,t0", [(0.0, 0.0), (1.0, 1.0), (0.5, 1.0)])
