@@ -785,6 +785,7 @@ def test_observer_config_defaults_and_validation(tmp_path):
     assert cfg.q0.tolist() == [3.0, 4.0] and cfg.u0.tolist() == [5.0, 6.0]
     assert cfg.coupling == (1.0, 1.0) and isinstance(cfg.coupling[0], float)
     assert cfg.source == "self" and cfg.observers == ("jump",)
+    assert ObserverConfig.from_table({"coupling": [0.5, 2.0]}, 2, qm, um).coupling == (0.5, 2.0)
     bad = [({"q": [1.0]}, "observer.q"), ({"u": [1, 2, 3]}, "observer.u"),
            ({"coupling": [2.0, 1.0]}, "observer.coupling"), ({"coupling": [1.0]}, "observer.coupling"),
            ({"source": "oracle"}, "observer.source"), ({"source": "log"}, "observer.log"),
@@ -799,7 +800,7 @@ def test_observer_config_defaults_and_validation(tmp_path):
         ObserverConfig.from_table({"coupling": [2.0, 1.0]}, 2, qm, um)
     with pytest.raises(InputError, match=r"must be one of \['master', 'log', 'self'\], got 'oracle'"):
         ObserverConfig.from_table({"source": "oracle"}, 2, qm, um)
-    with pytest.raises(InputError, match="needs a log file path"):
+    with pytest.raises(InputError, match=r'^observer.log: source = "log" needs a log file path$'):
         ObserverConfig.from_table({"source": "log"}, 2, qm, um)
 
 
