@@ -52,18 +52,23 @@ def cmd_run(args) -> int:
     observers = [o for o in (args.observers or "").split(",") if o]
     res = simulate(sc, h=args.h, t_end=args.t_end, solver=args.solver, observers=observers,
                    source=args.source, log=args.log, engine=args.engine,
-                   record_every=args.record_every)
+                   record_every=args.record_every, store=args.store)
     path = res.write(args.out)
     meta = res.metadata
     msg = (f"{sc.name}: {meta['steps']} steps of h = {meta['h']:g} in {meta['wall_time_s']:.2f} s "
            f"({meta['steps_per_second']:.0f} steps/s, {meta['engine']} engine"
            + (f", compiled in {meta['compile_time_s']:.1f} s" if meta['compile_time_s'] > 0.05 else "")
            + f"), {int(res.active[1:].any(axis=1).sum())} "
-           f"steps with closed contacts, max contact residual {meta['max_contact_residual']:.1e}"
+           + ("steps" if meta["record_every"] == 1 else f"of the {res.t.size - 1} kept rows")
+           + f" with closed contacts, max contact residual {meta['max_contact_residual']:.1e}"
            + (f", {meta['solver_fallbacks']} steps re-solved by the reference solver"
               if meta['solver_fallbacks'] else ""))
     print(msg)
-    if res.slaves:
+    if res.summary is not None:
+        print("synchronization over every step (store=summary; times from t_on; inf = not reached):")
+        cols = [c for c in res.summary.columns if c.startswith(("observer", "V_on", "V_end", "t_sync", "t_settle"))]
+        print(res.summary[cols].to_string(index=False, float_format=lambda x: f"{x:.3g}"))
+    elif res.slaves:
         summary = res.synchronization()
         print("synchronization (times from t_on to V <= rho V(t_on); inf = not reached):")
         print(summary.drop(columns=["master_closings"]).to_string(index=False, float_format=lambda x: f"{x:.3g}"))
@@ -127,8 +132,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--log", help="closing log CSV (contact,t_close,t_open) for --source log")
     s.add_argument("--engine", choices=["compiled", "python"], default="compiled",
                    help="time loop: the numba kernel (default) or the numpy reference")
-    s.add_argument("--record-every", type=int, default=1, metavar="K",
-                   help="keep every K-th step (default 1)")
+    s.add_argument("--record-every", type=int, default=None, metavar="K",
+                   help="keep every K-th step (default 1; about 10 000 rows with --store summary)")
+    s.add_argument("--store", choices=["full", "summary"], default="full",
+                   help="summary: V, its parts and the synchronization times computed over every "
+                        "step in the kernel, trajectories kept only every K-th step")
     s.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override (param.NAME for builder parameters, else dotted TOML key)")
     s.add_argument("--out", required=True, help="output file (.csv or .parquet)")
