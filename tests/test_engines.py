@@ -214,3 +214,18 @@ def test_compiled_run_never_builds_the_whole_grid(monkeypatch):
     assert res.metadata["steps"] == 10_000 and res.summary is not None
     res = observer.simulate("rocking_chain", observers=("jump", "nojump"), t_end=0.5)
     assert res.q.shape[0] == 5001
+
+
+def test_cli_engine_and_store_options(tmp_path, capsys):
+    from observer.cli import main
+    out = tmp_path / "run.csv"
+    assert main(["run", "double_mass", "--t-end", "1", "--observers", "jump,nojump", "--engine",
+                 "python", "--out", str(out)]) == 0
+    assert "python engine" in capsys.readouterr().out
+    assert main(["run", "double_mass", "--t-end", "1", "--observers", "jump,nojump", "--store",
+                 "summary", "--record-every", "10", "--out", str(tmp_path / "s.parquet")]) == 0
+    text = capsys.readouterr().out
+    assert "compiled engine" in text and "t_settle_1e-06" in text and "of the 1000 kept rows" in text
+    assert main(["run", "double_mass", "--store", "summary", "--engine", "python",
+                 "--out", str(tmp_path / "x.csv")]) == 2
+    assert capsys.readouterr().err.strip() == 'error: store: store="summary" needs engine="compiled"'
