@@ -207,9 +207,11 @@ def run(session: nox.Session) -> None:
 def bench(session: nox.Session) -> None:
     """Run a benchmark suite: ``nox -s bench -- SUITE [--limit K]`` (default ``quick``).
 
-    Suites: quick, full, observers, work_precision, robustness, scaling, micro, smoke
+    Suites: quick, full, observers, work_precision, robustness, scaling, peers, micro, smoke
     (``python -m bench list``). Rows are appended to ``bench/results/SUITE.jsonl`` as runs
-    finish; rerunning resumes an interrupted suite without recomputing finished rows.
+    finish; rerunning resumes an interrupted suite without recomputing finished rows. The
+    ``peers`` cases (also in ``full``) need Debian's ``python3-siconos`` under
+    ``/usr/bin/python3``; without it they are skipped with a note, nothing fails.
     """
     session.install("-e", ".[bench]")
     suite = session.posargs[0] if session.posargs else "quick"
@@ -222,6 +224,8 @@ def report(session: nox.Session) -> None:
 
     Runs the suite first if its results are missing or incomplete (finished rows are
     kept), then writes ``reports/out/SUITE/index.html`` (self-contained; open it in a browser).
+    The time loops run on the compiled engine; its compile (or numba cache load) time is
+    measured once before the cases and reported apart.
     """
     session.install("-e", ".[bench]")
     suite = session.posargs[0] if session.posargs else "quick"

@@ -715,7 +715,8 @@ def scaling_blocks(scal: pd.DataFrame, key_numbers: list[str]) -> list[Block]:
                          "run of the same scenario) / (steps − 10): the per-call setup (matrices, "
                          "factorization, grid) is subtracted, so the fit measures the step. Memory = "
                          "peak traced by tracemalloc during a third, identical run.")]
-    fig = figures.scaling_figure(scal, (p_acc, c_acc), fit_mem)
+    fig = figures.scaling_figure(scal, (p_acc, c_acc), fit_mem,
+                                 SCALING_FIT_FROM if key == acc else None)
     blocks.append(Block("p", "No scaling data.") if fig is None else Block("figure", fig))
     t = Table("Scaling of the chain: CPU time per step and memory against N",
               ["N", "n = m", "steps", "CPU per step (µs)", "loop wall per step (µs)", "setup CPU (s)",
@@ -736,7 +737,7 @@ def scaling_blocks(scal: pd.DataFrame, key_numbers: list[str]) -> list[Block]:
     msg = f"Chain scaling: CPU time per step ∝ N^{p_acc:.2f}"
     if key == acc:
         msg += f" from N = {SCALING_FIT_FROM} to {n_hi}"
-        others = [f"{q.replace('CPU time per step', '').strip() or f'all N from {n_lo}'}: "
+        others = [f"{q.replace('CPU time per step', '').strip().strip('()') or f'all N from {n_lo}'}: "
                   f"N^{fits.loc[q, 'exponent']:.2f}" for q in fits.index
                   if q.startswith("CPU time per step") and q != acc]
         if others:

@@ -669,6 +669,7 @@ def test_scaling_exponents_are_recomputed(synthetic_report):
     key = next(i for i in page.sections["key-numbers"].items if i.startswith("Chain scaling"))
     assert key.startswith(f"Chain scaling: CPU time per step ∝ N^{p10:.2f} from N = 10 to 1000")
     assert f"all N from 5: N^{expected['CPU time per step']:.2f}" in key
+    assert f"; N ≥ 50: N^{expected['CPU time per step (N ≥ 50)']:.2f})" in key
     assert ("acceptance (≤ 1.1 from N = 10 to 1000): met" in key) == (round(p10, 2) <= 1.1)
     per_step = page.table("scaling", "Scaling of the chain").column("CPU per step (µs)")
     assert [_num(c) for c in per_step] == pytest.approx(list(sc["cpu_per_step_s"] * 1e6), rel=5e-3)
