@@ -62,7 +62,8 @@ def cmd_run(args) -> int:
            + ("steps" if meta["record_every"] == 1 else f"of the {res.t.size - 1} kept rows")
            + f" with closed contacts, max contact residual {meta['max_contact_residual']:.1e}"
            + (f", {meta['solver_fallbacks']} steps re-solved by the reference solver"
-              if meta['solver_fallbacks'] else ""))
+              if meta['solver_fallbacks'] else "")
+           + (f" ({meta['engine_note']})" if meta.get("engine_note") else ""))
     print(msg)
     if res.summary is not None:
         print("synchronization over every step (store=summary; times from t_on; inf = not reached):")

@@ -7,6 +7,7 @@ t_k → t_{k+1} (the impulse of that step and the closed set it used).
 
 from __future__ import annotations
 
+import functools
 import json
 import platform
 import sys
@@ -20,8 +21,8 @@ from observer.errors import InputError
 from observer.model import LinearSystem
 
 
-def package_versions() -> dict[str, str]:
-    """Versions of Python, the toolkit and its numerical stack, for result metadata."""
+@functools.lru_cache(maxsize=None)
+def _versions() -> tuple:
     from importlib import metadata
 
     import observer
@@ -32,7 +33,12 @@ def package_versions() -> dict[str, str]:
             out[pkg] = metadata.version(pkg)
         except metadata.PackageNotFoundError:
             out[pkg] = "not installed"
-    return out
+    return tuple(out.items())
+
+
+def package_versions() -> dict[str, str]:
+    """Versions of Python, the toolkit and its numerical stack, for result metadata (read once)."""
+    return dict(_versions())
 
 
 @dataclass

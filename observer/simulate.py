@@ -75,7 +75,9 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         Closing log for ``source="log"`` (default: the scenario's ``observer.log``).
     engine : {"compiled", "python"}
         The time loop (:mod:`observer.loop`): the numba kernel (default) or the readable
-        numpy reference; both give the same trajectories to round-off.
+        numpy reference; both give the same trajectories to round-off. The kernel solves its
+        contact problems by block pivoting (the ``"pivoting"`` solver); with another
+        ``solver`` the run uses the python engine and ``metadata["engine_note"]`` says so.
     record_every : int, optional
         Keep every k-th step (row r = step r·k); default 1, or about 10 000 rows with
         ``store="summary"``. The per-step decrements of V need every step and are left out
@@ -101,6 +103,12 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     if overrides:
         sc = sc.with_overrides(overrides)
     check_engine(engine)
+    engine_note = None
+    if engine == "compiled" and sc.solver != "pivoting":
+        # the kernel solves its LCPs by compiled block pivoting only; other solvers run on
+        # the numpy engine, and the result says so
+        engine, engine_note = "python", (f"solver {sc.solver!r} runs on the python engine "
+                                         "(the compiled kernel has block pivoting only)")
     system = sc.system
     stepper = MoreauJean(system, sc.law, sc.h, sc.t_end, sc.theta, solver=sc.solver,
                          residual_tol=residual_tol,
@@ -136,6 +144,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     out = run_loop(inp, engine=engine, record_every=record_every, store=store)
 
     meta = run_metadata(sc, stepper, out)
+    if engine_note:
+        meta["engine_note"] = engine_note
     t = stepper.time(out.rows)
     res = SimulationResult(t, out.q[0], out.u[0], out.P[0], out.active, system, meta, sigma=out.sigma[0])
     if slaves:

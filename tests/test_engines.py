@@ -229,3 +229,12 @@ def test_cli_engine_and_store_options(tmp_path, capsys):
     assert main(["run", "double_mass", "--store", "summary", "--engine", "python",
                  "--out", str(tmp_path / "x.csv")]) == 2
     assert capsys.readouterr().err.strip() == 'error: store: store="summary" needs engine="compiled"'
+
+
+def test_other_solvers_run_on_the_python_engine_and_say_so():
+    res = observer.simulate("bouncing_ball", t_end=0.6, solver="lemke")
+    assert res.metadata["engine"] == "python" and res.metadata["solver"] == "lemke"
+    assert "python engine" in res.metadata["engine_note"]
+    ref = observer.simulate("bouncing_ball", t_end=0.6)
+    assert ref.metadata["engine"] == "compiled" and "engine_note" not in ref.metadata
+    np.testing.assert_allclose(res.q, ref.q, rtol=0, atol=1e-12)
