@@ -180,6 +180,20 @@ def solve_lcp(G, b, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter):
     return max_iter, LCP_FAILED, np.inf
 
 
+@njit(cache=True, inline="always")
+def _solve_counted(G, b, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
+    """:func:`solve_lcp`, counted in ``stats`` ([solves, iterations, max residual]); False
+    when the solve failed or its residual exceeds ``tol``."""
+    it, st, res = solve_lcp(G, b, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter)
+    stats[0] += 1
+    stats[1] += it
+    if st != OK or not res <= tol:
+        return False
+    if res > stats[2]:
+        stats[2] = res
+    return True
+
+
 # ---------------------------------------------------------------------------------------
 # banded symmetric matrices (lower band storage: ab[d, j] = A[j + d, j])
 # ---------------------------------------------------------------------------------------
@@ -316,25 +330,15 @@ def step_system(k, q, u, act, a, project, law, sch, wk, out):
             # Newton, and Poisson on one contact (the same map): LCP(Ĝ, γ_free + e∘γ_k)
             for r in range(a):
                 bvec[r] = gc[r] + e[act[r]] * gk[r]
-            it, st, res = solve_lcp(G, bvec, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter)
-            stats[0] += 1
-            stats[1] += it
-            if st != OK or not res <= tol:
+            if not _solve_counted(G, bvec, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
                 return LCP_FAILED
-            if res > stats[2]:
-                stats[2] = res
         else:
             # Poisson: Glocker's phases with Ĝ on γ̃ = (γ_free + ε∘γ_k)/(1+ε)
             for r in range(a):
                 er = e[act[r]]
                 bvec[r] = (gc[r] + er * gk[r]) / (1.0 + er)
-            it, st, res = solve_lcp(G, bvec, a, lc, basic, infeas, Gs, rhs, sol, Lf, max_iter)
-            stats[0] += 1
-            stats[1] += it
-            if st != OK or not res <= tol:
+            if not _solve_counted(G, bvec, a, lc, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
                 return LCP_FAILED
-            if res > stats[2]:
-                stats[2] = res
             for r in range(a):                                   # γ_C = γ̃ + ĜΛ_C
                 acc = 0.0
                 for c in range(a):
@@ -345,13 +349,8 @@ def step_system(k, q, u, act, a, project, law, sch, wk, out):
                 for c in range(a):
                     acc += G[r, c] * (e[act[c]] * lc[c])
                 le[r] = gc[r] + acc
-            it, st, res = solve_lcp(G, le, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter)
-            stats[0] += 1
-            stats[1] += it
-            if st != OK or not res <= tol:
+            if not _solve_counted(G, le, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
                 return LCP_FAILED
-            if res > stats[2]:
-                stats[2] = res
             for r in range(a):                                   # P = Λ_C + (ε∘Λ_C + μ)
                 x[r] = lc[r] + (e[act[r]] * lc[r] + x[r])
         for r in range(a):

@@ -199,19 +199,8 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool) -> LoopOutp
         chi = None
         for s in range(S):
             q, u = states[s]
-            if s == 0:
-                act = np.flatnonzero(stepper.predicted_active(k, q, u))
-                proj = inp.master_projection
-                chi = act if chi_log is None else np.flatnonzero(chi_log[k])
-            elif coupled[k]:
-                act, proj = chi, bool(inp.jumps[s])
-            else:
-                act, proj = np.flatnonzero(stepper.predicted_active(k, q, u)), inp.master_projection
-            q1, u1, P, _ = stepper.step(k, q, u, act, False)
-            q_pre = q1
-            sig = None
-            if proj and act.size:
-                q1, sig = _project(stepper, inp.metric, NinvW, L, k + 1, q1, act)
+            q1, u1, P, sig, q_pre, act, chi = _python_step(inp, stepper, NinvW, L, k, s, q, u, chi,
+                                                           coupled[k], None if chi_log is None else chi_log[k])
             states[s] = (q1, u1)
             if r >= 0:
                 rec["q"][s, r], rec["u"][s, r] = q1, u1
@@ -231,6 +220,28 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool) -> LoopOutp
                       {"contact_solves": st.contact_solves, "iterations": st.iterations,
                        "max_residual": st.max_residual, "fallbacks": st.fallbacks},
                       [], 0.0, run_time)
+
+
+def _python_step(inp: LoopInput, stepper: MoreauJean, NinvW, L, k: int, s: int, q, u, chi,
+                 coupled_k: bool, chi_row):
+    """Step k of system s with the numpy stepper: its closed set (the master's predictor, χ
+    while coupled, else its own predictor), the step, the projection. Returns
+    ``(q1, u1, P, Σ or None, q_pre, closed set, χ)``; χ is the master's set (or the log's
+    row) after the master's step, and passed through otherwise."""
+    if s == 0:
+        act = np.flatnonzero(stepper.predicted_active(k, q, u))
+        proj = inp.master_projection
+        chi = act if chi_row is None else np.flatnonzero(chi_row)
+    elif coupled_k:
+        act, proj = chi, bool(inp.jumps[s])
+    else:
+        act, proj = np.flatnonzero(stepper.predicted_active(k, q, u)), inp.master_projection
+    q1, u1, P, _ = stepper.step(k, q, u, act, False)
+    q_pre = q1
+    sig = None
+    if proj and act.size:
+        q1, sig = _project(stepper, inp.metric, NinvW, L, k + 1, q1, act)
+    return q1, u1, P, sig, q_pre, act, chi
 
 
 def _project(stepper, metric, NinvW, L, k, q, act):
@@ -435,22 +446,12 @@ def _fallback_step(inp, stepper, k, s, qs, us, chi_now, record_every, record_pre
                    coupled_k, chi_row) -> None:
     """Step k of system s, which the kernel could not solve, with the reference solver."""
     ref = _reference_stepper(stepper)
-    q, u = qs[s], us[s]
+    NinvW, L = projection_matrices(ref, inp.metric)
+    q1, u1, P, sig, q_pre, act, chi = _python_step(inp, ref, NinvW, L, k, s, qs[s], us[s],
+                                                   np.flatnonzero(chi_now), coupled_k, chi_row)
     if s == 0:
-        act = np.flatnonzero(ref.predicted_active(k, q, u))
-        proj = inp.master_projection
         chi_now[:] = False
-        chi_now[act if chi_row is None else np.flatnonzero(chi_row)] = True
-    elif coupled_k:
-        act, proj = np.flatnonzero(chi_now), bool(inp.jumps[s])
-    else:
-        act, proj = np.flatnonzero(ref.predicted_active(k, q, u)), inp.master_projection
-    q1, u1, P, _ = ref.step(k, q, u, act, False)
-    q_pre = q1
-    sig = None
-    if proj and act.size:
-        NinvW, L = projection_matrices(ref, inp.metric)
-        q1, sig = _project(ref, inp.metric, NinvW, L, k + 1, q1, act)
+        chi_now[chi] = True
     qs[s], us[s] = q1, u1
     if (k + 1) % record_every == 0:
         r = (k + 1) // record_every
