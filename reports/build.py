@@ -345,6 +345,13 @@ def observer_prose(obs: pd.DataFrame, ratios: list[dict]) -> list[Block]:
 
 
 LIMITATIONS = [
+    "What holds in discrete time (θ = ½), for the error between two solutions driven by the same "
+    "closed sets: the identity ΔV = damping + impulse (+ projection) holds exactly up to round-off; "
+    "the damping term is ≤ 0 (C ⪰ 0) and the projection term ≤ 0 (a K-orthogonal projection) "
+    "exactly; the impulse term has no sign in discrete time: besides the impact map's own term "
+    "(≤ 0 when the map is monotone, A3) it carries a slack −(1−ε)/(2(1+ε))ΔPᵀΔδ with Δδ = O(h), "
+    "which vanishes only as h → 0 (or for ε = 1). V may therefore rise on an impact step by an "
+    "O(h) amount; the proof-check table reports where, and the fitted order of that slack.",
     "Timings are CPU seconds of one process (time.process_time) on the machine in the header, "
     "with BLAS pinned to one thread; the machine may have been shared with other jobs. Compare "
     "timings within one report, not across machines. Runs with the pivoting solver use the "

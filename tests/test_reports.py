@@ -220,6 +220,18 @@ def test_report_has_every_section_and_a_reproduce_command(smoke_report):
     assert "Fitted orders of convergence" in html and "Fitted exponents" in html
 
 
+def test_limitations_state_what_holds_in_discrete_time(smoke_report):
+    """The report states the discrete facts as the README does: the identity exact, damping
+    and projection ≤ 0 exactly, the impulse term without sign (an O(h) slack)."""
+    index, _ = smoke_report
+    html = index.read_text(encoding="utf-8")
+    lim = html[html.index('id="limitations"'):]
+    lim = lim[:lim.index("</section>")] if "</section>" in lim else lim
+    for phrase in ("holds exactly up to round-off", "no sign in discrete time",
+                   "vanishes only as h → 0", "−(1−ε)/(2(1+ε))ΔPᵀΔδ"):
+        assert phrase in lim, phrase
+
+
 def test_report_tables_are_titled_and_have_no_nan_cells(smoke_report):
     index, _ = smoke_report
     p = _Cells()
