@@ -71,6 +71,9 @@ from observer.model import LinearSystem
 from observer.validation import as_scalar
 
 
+STRUCTURES = ("dense", "banded", "auto")
+"""Matrix structures of :meth:`SchemeMatrices.build`."""
+
 BANDED_MIN_N = 64
 """Smallest n for which a banded structure is used (smaller systems stay dense)."""
 
@@ -150,6 +153,8 @@ class SchemeMatrices:
     @staticmethod
     def build(system: LinearSystem, h: float, theta: float, structure: str = "dense") -> "SchemeMatrices":
         """Precompute the scheme; ``structure`` is "dense", "banded" or "auto"."""
+        if structure not in STRUCTURES:
+            raise InputError("structure", f"must be one of {list(STRUCTURES)}, got {structure!r}")
         if structure == "auto":
             structure = SchemeMatrices.choose_structure(system)
         if structure == "banded":

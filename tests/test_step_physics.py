@@ -328,3 +328,20 @@ def test_solver_exception_with_failing_reference_raises():
     with pytest.raises(ContactSolverError, match="raising raised .* the reference solver raised"):
         for k in range(st.grid.steps):
             q, u, _, _ = st.step(k, q, u, np.flatnonzero(st.predicted_active(k, q, u)))
+
+
+@pytest.mark.parametrize("structure", ["DENSE", "XXdenseXX", "sparse", ""])
+def test_unknown_structure_is_refused(structure):
+    sc = observer.load_scenario("bouncing_ball")
+    with pytest.raises(observer.InputError, match=r"^structure: must be one of \['dense', 'banded', 'auto'\]"):
+        MoreauJean(sc.system, sc.law, sc.h, sc.t_end, sc.theta, structure=structure)
+
+
+def test_default_structure_is_dense():
+    """The stepper's default (the numpy reference) builds the dense matrices."""
+    sc = observer.load_scenario("rocking_chain", {"param.N": 40})
+    st = MoreauJean(sc.system, sc.law, sc.h, 0.01, sc.theta)
+    assert st.S.band is None and st.S.Bu is not None
+    from observer.stepping import SchemeMatrices
+    assert SchemeMatrices.build(sc.system, 1e-3, 0.5).band is None
+    assert SchemeMatrices.build(sc.system, 1e-3, 0.5, "auto").band is not None
