@@ -25,13 +25,16 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
 
 from observer.errors import InputError
 from observer.stepping import Grid, MoreauJean
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 ENGINES = ("compiled", "python")
 """Registered engines; the first is the default."""

@@ -57,7 +57,7 @@ plain float arrays and index arrays only, ready for a compiled kernel.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg as sla
