@@ -249,7 +249,7 @@ def check_projection_psd(K: np.ndarray, W: np.ndarray, *, rng: np.random.Generat
             worst_cond = (float(cond[jc]), idx[jc])
     I = worst[1]
     S = np.zeros((m, m))
-    S[np.ix_(I, I)] = np.linalg.solve(L[np.ix_(I, I)], np.eye(I.size))
+    S[np.ix_(I, I)] = np.linalg.lstsq(L[np.ix_(I, I)], np.eye(I.size), rcond=None)[0]   # L_I may be singular
     witness = {"min_relative_eigenvalue": worst[0], "worst_set": I.tolist(), "eigenvalues_L_I_inv": worst[2],
                "min_eigenvalue_P_Linv_PT": float(np.linalg.eigvalsh(0.5 * (S + S.T))[0]),
                "max_condition_L_I": worst_cond[0], "max_condition_set": worst_cond[1].tolist(),

@@ -481,3 +481,16 @@ def test_projection_closed_form_not_applicable_reasons():
     assert r.passed is None and r.name == "projection_closed_form"
     assert r.equation == "eqs. (13)-(14), proof of Proposition 1"
     assert r.reason == "the run has no observer with position jumps"
+
+
+def test_projection_psd_with_singular_contact_block_reports_instead_of_crashing():
+    """K = I and two identical contact directions: L_{01} = [[1, 1], [1, 1]] is singular. The
+    check returns a verdict with its witness (the least-squares block) instead of raising."""
+    import numpy as np
+    from proofs_checks.projection import check_projection_psd
+    K = np.eye(3)
+    W = np.array([[1.0, 1.0], [0.0, 0.0], [0.0, 0.0]])
+    r = check_projection_psd(K, W, rng=np.random.default_rng(0))
+    assert r.name == "projection_psd"
+    assert r.witness["sets_examined"] == 3
+    assert np.isfinite(r.witness["min_eigenvalue_P_Linv_PT"])
