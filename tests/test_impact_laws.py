@@ -17,11 +17,11 @@ well-conditioned problems).
 
 from __future__ import annotations
 
-import itertools
 
 import numpy as np
 import pytest
 
+from lcp_enum import lcp_enum
 from observer.contact.lcp import LCPSolution
 from observer.errors import InputError
 from observer.impact import (LAWS, NEWTON, POISSON, ImpactLaw, impact, newton_impact,
@@ -30,19 +30,6 @@ from observer.impact import (LAWS, NEWTON, POISSON, ImpactLaw, impact, newton_im
 TOL = 1e-12
 
 
-def lcp_enum(G: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The solution of ``0 ≤ Gx + b ⊥ x ≥ 0`` (G ≻ 0) by trying every active set."""
-    m = b.size
-    tol = 1e-13 * (1.0 + np.abs(b).max())
-    for r in range(m + 1):
-        for J in itertools.combinations(range(m), r):
-            J = list(J)
-            x = np.zeros(m)
-            if J:
-                x[J] = np.linalg.solve(G[np.ix_(J, J)], -b[J])
-            if np.all(x >= -tol) and np.all(G @ x + b >= -tol):
-                return np.maximum(x, 0.0)
-    raise AssertionError("no active set solves the LCP")
 
 
 class Recorder:
