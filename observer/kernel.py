@@ -546,10 +546,18 @@ def advance(k0, k1, s0, kb, qs, us, jumps, master_projection, coupled, chi_log, 
            AinvWT, Ghat, G0, KinvWT, L, e, tol)
     wk = (np.empty(n), np.empty((10, m)), np.empty((4, m, m)), np.zeros((2, m), np.bool_))
     out = (q1, u1, P, sig, qpre, stats)
+    # step k is recorded (row (k+1)/record_every) when (k+1) % record_every == 0: counted,
+    # not divided, per step
+    d = (record_every - (k0 + 1) % record_every) % record_every   # k0 + d: the next recorded step
+    until = d + 1
+    r = (k0 + 1 + d) // record_every - 1
     for k in range(k0, k1):
         kl = k - kb
-        rec = (k + 1) % record_every == 0
-        r = (k + 1) // record_every
+        until -= 1
+        rec = until == 0
+        if rec:
+            r += 1
+            until = record_every
         first = s0 if k == k0 else 0
         for s in range(first, S):
             q = qs[s]

@@ -30,8 +30,6 @@ from observer.impact import (LAWS, NEWTON, POISSON, ImpactLaw, impact, newton_im
 TOL = 1e-12
 
 
-
-
 class Recorder:
     """A ``solve`` callable built on :func:`lcp_enum` that records its problems."""
 
