@@ -7,6 +7,7 @@ t_k → t_{k+1} (the impulse of that step and the closed set it used).
 
 from __future__ import annotations
 
+import enum
 import functools
 import json
 import platform
@@ -62,6 +63,111 @@ class SlaveTrajectory:
     sigma: np.ndarray
 
 
+class RunState(str, enum.Enum):
+    """How a run ended: ``ok``, ``fallback`` (some contact problems were re-solved by the
+    reference solver) or ``stopped`` (the run ended before ``t_end``)."""
+
+    OK = "ok"
+    FALLBACK = "fallback"
+    STOPPED = "stopped"
+
+
+@dataclass(frozen=True)
+class RunStatus:
+    """The state a run ended in and why (empty reason for ``ok``).
+
+    Attributes
+    ----------
+    state : RunState
+    reason : str
+        One line a user can act on, e.g. ``"3 steps re-solved by the reference solver"``.
+    """
+
+    state: RunState = RunState.OK
+    reason: str = ""
+
+    def __post_init__(self):
+        try:
+            object.__setattr__(self, "state", RunState(self.state))
+        except ValueError:
+            raise InputError("status.state", f"must be one of {[s.value for s in RunState]}, "
+                                             f"got {self.state!r}") from None
+        if self.state is not RunState.OK and not self.reason:
+            raise InputError("status.reason", f"a {self.state.value!r} status needs a reason")
+
+    @property
+    def ok(self) -> bool:
+        """True only for a run that ended normally without any fallback."""
+        return self.state is RunState.OK
+
+    @classmethod
+    def from_metadata(cls, metadata: dict) -> "RunStatus":
+        """The status a run's metadata implies: ``fallback`` when ``solver_fallbacks > 0``."""
+        n = int(metadata.get("solver_fallbacks") or 0)
+        if n:
+            return cls(RunState.FALLBACK, f"{n} step(s) re-solved by the reference solver "
+                                          "(metadata fallback_steps)")
+        return cls()
+
+    def to_dict(self) -> dict:
+        return {"state": self.state.value, "reason": self.reason}
+
+
+@dataclass(frozen=True)
+class StepStats:
+    """Work and health counters of a run (from the stepper's statistics).
+
+    Attributes
+    ----------
+    steps, contact_solves, solver_iterations, solver_fallbacks : int
+    fallback_steps : tuple of int
+        Steps whose contact problem was re-solved by the reference solver.
+    max_contact_residual : float
+        Largest complementarity residual of any solved contact problem.
+    min_gap : float or None
+        Deepest gap of the master over every step (negative: penetration).
+    wall_time_s, compile_time_s : float
+    """
+
+    steps: int = 0
+    contact_solves: int = 0
+    solver_iterations: int = 0
+    solver_fallbacks: int = 0
+    fallback_steps: tuple = ()
+    max_contact_residual: float = 0.0
+    min_gap: float | None = None
+    wall_time_s: float = float("nan")
+    compile_time_s: float = float("nan")
+
+    @classmethod
+    def from_metadata(cls, metadata: dict) -> "StepStats":
+        """Counters read from the metadata :func:`run_metadata` builds (missing keys: defaults)."""
+        fb = tuple(int(f["step"]) if isinstance(f, dict) else int(f)
+                   for f in metadata.get("fallback_steps") or ())
+        num = {k: metadata[k] for k in ("steps", "contact_solves", "solver_iterations",
+                                         "solver_fallbacks", "max_contact_residual", "min_gap",
+                                         "wall_time_s", "compile_time_s")
+               if metadata.get(k) is not None}
+        return cls(fallback_steps=fb, **num)
+
+
+#: Columns of :attr:`SimulationResult.events` (one row per impact/contact event of the
+#: event-driven integrator): event time, contact index, event kind (e.g. ``"impact"``,
+#: ``"release"``), contact velocity before/after and the impulse.
+EVENT_COLUMNS = ("time", "contact", "kind", "gamma_minus", "gamma_plus", "impulse")
+
+
+def check_events(events: pd.DataFrame | None) -> pd.DataFrame | None:
+    """``events`` must be None or a DataFrame with exactly :data:`EVENT_COLUMNS`."""
+    if events is None:
+        return None
+    if not isinstance(events, pd.DataFrame):
+        raise InputError("events", f"must be a pandas DataFrame or None, got {type(events).__name__}")
+    if tuple(events.columns) != EVENT_COLUMNS:
+        raise InputError("events", f"columns must be {list(EVENT_COLUMNS)}, got {list(events.columns)}")
+    return events
+
+
 @dataclass
 class SimulationResult:
     """A master run (and optionally observer runs) on the grid ``t``.
@@ -83,6 +189,13 @@ class SimulationResult:
     summary : DataFrame or None
         ``store="summary"`` runs: the kernel's per-observer metrics over every step
         (:func:`observer.loop.summary_frame`).
+    status : RunStatus
+        How the run ended (ok / fallback / stopped, with the reason); by default derived
+        from ``metadata`` (:meth:`RunStatus.from_metadata`).
+    stats : StepStats
+        Step statistics; by default read from ``metadata``.
+    events : DataFrame or None
+        Event-driven runs: one row per event, columns :data:`EVENT_COLUMNS`.
     """
 
     t: np.ndarray
@@ -96,6 +209,18 @@ class SimulationResult:
     slaves: dict = field(default_factory=dict)
     sigma: np.ndarray | None = None
     summary: pd.DataFrame | None = None
+    status: RunStatus | None = None
+    stats: StepStats | None = None
+    events: pd.DataFrame | None = None
+
+    def __post_init__(self):
+        if self.status is None:
+            self.status = RunStatus.from_metadata(self.metadata)
+        elif not isinstance(self.status, RunStatus):
+            raise InputError("status", f"must be a RunStatus, got {type(self.status).__name__}")
+        if self.stats is None:
+            self.stats = StepStats.from_metadata(self.metadata)
+        check_events(self.events)
 
     @property
     def g(self) -> np.ndarray:
