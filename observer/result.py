@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from observer.errors import InputError
+from observer.io import jsonable, read_frame, read_result, write_frame  # noqa: F401 (re-exported)
 from observer.model import LinearSystem
 
 
@@ -253,7 +254,8 @@ class SimulationResult:
                 cols[f"{name}_u{j}"] = s.u[:, j]
             cols[f"V_{name}"] = s.V
         df = pd.DataFrame(cols)
-        df.attrs.update(json.loads(json.dumps(self.metadata, default=_jsonable)))
+        df.attrs.update(json.loads(json.dumps(self.metadata, default=jsonable)))
+        df.attrs["status"] = self.status.to_dict()
         return df
 
     def synchronization(self, rhos: tuple[float, ...] = (1e-3, 1e-6, 1e-9)) -> pd.DataFrame:
@@ -281,54 +283,17 @@ class SimulationResult:
         return pd.DataFrame(rows)
 
     def write(self, path: str | Path) -> Path:
-        """Write :meth:`to_frame` as CSV (metadata in a leading ``# metadata:`` line) or Parquet."""
-        return write_frame(self.to_frame(), path)
-
-
-def _jsonable(x):
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, (np.floating, np.integer, np.bool_)):
-        return x.item()
-    return str(x)
-
-
-def write_frame(df: pd.DataFrame, path: str | Path) -> Path:
-    """Write a DataFrame by extension: ``.csv`` (metadata as a JSON comment line) or ``.parquet``."""
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in (".csv", ".parquet"):
-        raise InputError("--out", f"unsupported extension {path.suffix!r}; use .csv or .parquet")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if suffix == ".csv":
-        with path.open("w", newline="") as fh:
-            fh.write("# metadata: " + json.dumps(df.attrs, default=_jsonable) + "\n")
-            df.to_csv(fh, index=False, float_format="%.17g")
-    else:
-        df.to_parquet(path, index=False)
-    return path
-
-
-def read_frame(path: str | Path) -> pd.DataFrame:
-    """Read a result written by :func:`write_frame`, restoring ``attrs`` (the metadata)."""
-    path = Path(path)
-    if not path.exists():
-        raise InputError(str(path), "file not found")
-    try:
-        if path.suffix.lower() == ".parquet":
-            return pd.read_parquet(path)
-        with path.open() as fh:
-            first = fh.readline()
-        has_meta = first.startswith("# metadata:")
-        df = pd.read_csv(path, skiprows=1 if has_meta else 0)
-        if has_meta:
-            df.attrs.update(json.loads(first[len("# metadata:"):]))
-    except (UnicodeDecodeError, ValueError, OSError) as exc:
-        raise InputError(str(path), f"not a result file written by this toolkit ({exc})") from None
-    if "t" not in df.columns:
-        raise InputError(str(path), "not a result file (no column 't')")
-    flags = [c for c in df.columns if c.startswith(("active", "chi"))]
-    return df.astype({c: float for c in df.columns if c not in flags})
+        """Write :meth:`to_frame` as ``.csv`` (plain header, metadata in the ``NAME.json``
+        sidecar) or ``.parquet`` (metadata in the schema metadata), see :mod:`observer.io`.
+        With :attr:`events`, they go to ``NAME.events.csv``/``.parquet`` beside it (named in
+        the metadata as ``events_file``)."""
+        path = Path(path)
+        df = self.to_frame()
+        if self.events is not None:
+            events_path = path.with_name(f"{path.stem}.events{path.suffix}")
+            df.attrs["events_file"] = events_path.name
+            write_frame(self.events, events_path)
+        return write_frame(df, path)
 
 
 def run_metadata(scenario, stepper, out) -> dict:

@@ -6,11 +6,16 @@ Runs are short (``bouncing_ball``/``double_mass`` over at most 0.05 s).
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pandas as pd
+import pyarrow.parquet as pq
 import pytest
 
+import observer
 from observer import InputError, simulate
+from observer.io import PARQUET_KEY, read_frame, read_result
 from observer.result import EVENT_COLUMNS, RunState, RunStatus, SimulationResult, StepStats
 
 
@@ -81,3 +86,120 @@ def test_events_with_wrong_type_or_columns_are_refused(observed_run, bad):
     with pytest.raises(InputError) as ei:
         _bare(observed_run, events=bad)
     assert ei.value.field == "events"
+
+
+# ---------------------------------------------------------------------------------------
+# files any tool reads
+# ---------------------------------------------------------------------------------------
+def documented_columns(n: int, m: int, observers: tuple[str, ...]) -> list[str]:
+    """The columns README/`to_frame` document, spelled out independently of the code."""
+    cols = ["t"] + [f"{p}{j}" for p, w in (("q", n), ("u", n), ("g", m), ("P", m), ("active", m))
+                    for j in range(w)]
+    if observers:
+        cols += [f"chi{j}" for j in range(m)]
+    for ob in observers:
+        cols += [f"{ob}_q{j}" for j in range(n)] + [f"{ob}_u{j}" for j in range(n)] + [f"V_{ob}"]
+    return cols
+
+
+DM_COLUMNS = documented_columns(2, 1, ("jump", "nojump"))
+
+
+def test_plain_read_csv_gives_the_documented_columns_and_exact_values(observed_run, tmp_path):
+    path = observed_run.write(tmp_path / "run.csv")
+    first = path.read_text(encoding="utf-8").splitlines()[0]
+    assert first == ",".join(DM_COLUMNS)                      # a plain header row, nothing above
+    df = pd.read_csv(path)
+    assert list(df.columns) == DM_COLUMNS and len(df) == 51
+    assert np.array_equal(df["t"].to_numpy(), observed_run.t)             # %.17g: exact
+    assert np.array_equal(df["q1"].to_numpy(), observed_run.q[:, 1])
+    assert np.array_equal(df["V_jump"].to_numpy(), observed_run.slaves["jump"].V)
+    assert np.array_equal(df["active0"].to_numpy(), observed_run.active[:, 0].astype(int))
+    side = json.loads((tmp_path / "run.json").read_text(encoding="utf-8"))
+    assert side["scenario"] == "double_mass" and side["h"] == 1e-3 and side["steps"] == 50
+    assert side["observers"] == ["jump", "nojump"]
+    assert side["status"] == {"state": "ok", "reason": ""}
+
+
+def test_plain_read_parquet_gives_the_documented_columns_and_schema_metadata(observed_run, tmp_path):
+    path = observed_run.write(tmp_path / "run.parquet")
+    df = pd.read_parquet(path)
+    assert list(df.columns) == DM_COLUMNS
+    assert np.array_equal(df["V_nojump"].to_numpy(), observed_run.slaves["nojump"].V)
+    raw = pq.read_schema(path).metadata[PARQUET_KEY]
+    meta = json.loads(raw)
+    assert meta["scenario"] == "double_mass" and meta["status"]["state"] == "ok"
+    assert not (tmp_path / "run.json").exists()                # Parquet needs no sidecar
+
+
+@pytest.mark.parametrize("ext", ["csv", "parquet"])
+def test_read_result_returns_frame_and_metadata(observed_run, tmp_path, ext):
+    expected = observed_run.to_frame()
+    df, meta = read_result(observed_run.write(tmp_path / f"r.{ext}"))
+    assert list(df.columns) == DM_COLUMNS
+    for col in DM_COLUMNS:
+        assert np.array_equal(df[col].to_numpy(), expected[col].to_numpy()), col
+    assert meta == expected.attrs
+    assert df["P0"].dtype == np.float64 and df["active0"].dtype.kind == "i"
+    assert read_frame(tmp_path / f"r.{ext}").attrs == meta          # the attrs view agrees
+
+
+def test_csv_without_sidecar_reads_with_empty_metadata(observed_run, tmp_path):
+    observed_run.to_frame().to_csv(tmp_path / "edited.csv", index=False)   # e.g. a spreadsheet
+    df, meta = read_result(tmp_path / "edited.csv")
+    assert meta == {} and list(df.columns) == DM_COLUMNS
+
+
+def test_legacy_csv_with_a_metadata_comment_line_is_still_read(tmp_path):
+    path = tmp_path / "old.csv"
+    path.write_text('# metadata: {"h": 0.1}\nt,q0\n0,1.5\n0.1,2.5\n', encoding="utf-8")
+    df, meta = read_result(path)
+    assert meta == {"h": 0.1} and df["q0"].tolist() == [1.5, 2.5]
+
+
+@pytest.mark.parametrize("name, field_part", [("x.xlsx", "unsupported extension"),
+                                              ("missing.csv", "file not found")])
+def test_bad_result_paths_name_the_file(tmp_path, name, field_part):
+    with pytest.raises(InputError) as ei:
+        read_result(tmp_path / name)
+    assert field_part in str(ei.value) and ei.value.field == str(tmp_path / name)
+
+
+def test_a_csv_that_is_not_a_result_is_refused(tmp_path):
+    (tmp_path / "other.csv").write_text("a,b\n1,2\n", encoding="utf-8")
+    with pytest.raises(InputError, match="no column 't'"):
+        read_result(tmp_path / "other.csv")
+
+
+def test_write_refuses_unknown_extension_and_leaves_no_file(observed_run, tmp_path):
+    with pytest.raises(InputError) as ei:
+        observed_run.write(tmp_path / "x.txt")
+    assert ei.value.field == "--out"
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("ext", ["csv", "parquet"])
+def test_events_are_written_beside_the_result(observed_run, tmp_path, ext):
+    ev = _events(3)
+    res = _bare(observed_run, metadata=dict(observed_run.metadata), events=ev)
+    path = res.write(tmp_path / f"ev.{ext}")
+    _, meta = read_result(path)
+    assert meta["events_file"] == f"ev.events.{ext}"
+    back = (pd.read_csv if ext == "csv" else pd.read_parquet)(tmp_path / meta["events_file"])
+    assert list(back.columns) == list(EVENT_COLUMNS)
+    assert np.array_equal(back["time"].to_numpy(), ev["time"].to_numpy())
+    assert back["kind"].tolist() == ["impact"] * 3
+
+
+def test_cli_run_files_read_by_plain_pandas(tmp_path):
+    """`observer run double_mass --observers jump,nojump --out …` (in process): both formats
+    give the documented columns, V_jump and V_nojump included."""
+    from observer.cli import main
+
+    for ext in ("csv", "parquet"):
+        out = tmp_path / f"dm.{ext}"
+        assert main(["run", "double_mass", "--observers", "jump,nojump", "--h", "1e-3",
+                     "--t-end", "0.02", "--out", str(out)]) == 0
+        df = (pd.read_csv if ext == "csv" else pd.read_parquet)(out)
+        assert list(df.columns) == DM_COLUMNS and len(df) == 21
+        assert np.isfinite(df[["V_jump", "V_nojump"]].to_numpy()).all()
