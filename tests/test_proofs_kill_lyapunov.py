@@ -1,0 +1,708 @@
+"""proofs_checks.lyapunov, part by part, on tiny replays (numpy engine, ≤ 300 steps each).
+
+Every quantity of :func:`proofs_checks.lyapunov.decrement_parts` is recomputed here from
+the returned states with per-step loops written from the module docstring (the θ-scheme
+energy identity, the closed-form projection part L_I = W_IᵀK⁻¹W_I, the exact impulse split
+with δ = W_Aᵀ(Δu_free − v_k) from the free step Â(u_free − u_k) = h(f̄ − Cu_k − K(q_k + hθu_k)),
+Glocker's mean velocity for Poisson on several contacts, and the documented round-off
+bound); the pair summary, the verdict, witness and reason of
+:func:`~proofs_checks.lyapunov.check_lyapunov_decrease` are recomputed from those parts;
+the attribution of a positive ΔV to each part is driven by hand-built parts; Theorem 1's
+:func:`~proofs_checks.lyapunov.check_convergence` runs on hand-built exponentially decaying
+trajectories whose every witness entry is known in closed form or by a direct loop.
+Written against the mutation run of ``lyapunov.py`` (``tests/mutants/proofs_checks_lyapunov.md``).
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import proofs_checks as pc
+from observer.metrics import decay_rate
+from proofs_checks import lyapunov as ly
+from proofs_checks.runs import SlaveSpec, replay
+
+EPS = np.finfo(float).eps
+
+CASES = {
+    # (scenario, overrides, h, t_end)
+    "dm_newton": ("double_mass", {"impact.law": "newton", "impact.restitution": 0.3}, 1e-2, 2.0),
+    "dm_newton_theta": ("double_mass", {"impact.law": "newton", "impact.restitution": 0.3,
+                                        "simulation.theta": 0.75}, 1e-2, 2.0),
+    "chain_poisson": ("rocking_chain", {"param.N": 1, "initial.u": [-0.5, 0.3]}, 2e-3, 0.6),
+    "chain_newton": ("rocking_chain", {"param.N": 1, "initial.u": [-0.5, 0.3], "impact.law": "newton",
+                                       "impact.restitution": [0.2, 0.7], "simulation.theta": 0.75},
+                     2e-3, 0.6),
+}
+
+
+@pytest.fixture(scope="module")
+def runs():
+    out = {}
+    for key, (name, ov, h, t_end) in CASES.items():
+        sc = pc.load(name, ov)
+        specs = pc.CheckContext(sc, pc.CheckSettings(h=h, t_end=t_end)).slave_specs()
+        out[key] = replay(sc, h=h, t_end=t_end, slaves=specs, engine="python")
+    return out
+
+
+# ----------------------------------------------------------------------------- reference parts
+def _member(run, name):
+    return run.master if name == "master" else run.slaves[name]
+
+
+def _ref_parts(run, a, b):
+    """ΔV and its parts by per-step loops (module docstring of proofs_checks.lyapunov)."""
+    s = run.system
+    M, C, K, W = s.M, s.C, s.K, s.W
+    Cb = (C + C.T) / 2
+    h, th = run.h, run.theta
+    A, B = _member(run, a), _member(run, b)
+    N = run.t.size - 1
+    Ahat = M + h * th * C + h * h * th * th * K
+    L = W.T @ np.linalg.inv(K) @ W
+    L = (L + L.T) / 2
+    nu = s.nu(run.t)
+    e_all = np.broadcast_to(np.asarray(run.stepper.law.restitution, float), (W.shape[1],))
+    newton = run.stepper.law.law == "newton"
+    keys = ("total", "damping", "impulse", "numerical", "projection", "projection_jump",
+            "projection_unprojected_gap", "impulse_complementarity", "impulse_delassus",
+            "impulse_slack", "impulse_target", "impulse_set_mismatch", "residual")
+    out = {k: np.zeros(N) for k in keys}
+    V = np.zeros(N + 1)
+    for k in range(N + 1):
+        v, e = A.u[k] - B.u[k], A.q[k] - B.q[k]
+        V[k] = v @ M @ v / 2 + e @ K @ e / 2
+    out["V"] = V
+    for k in range(N):
+        v0, v1 = A.u[k] - B.u[k], A.u[k + 1] - B.u[k + 1]
+        e0, e1, em = A.q[k] - B.q[k], A.q[k + 1] - B.q[k + 1], A.q_pre[k + 1] - B.q_pre[k + 1]
+        dP = A.P[k + 1] - B.P[k + 1]
+        vt = (1 - th) * v0 + th * v1
+        dv, de = v1 - v0, em - e0
+        out["total"][k] = V[k + 1] - V[k]
+        out["damping"][k] = -h * vt @ Cb @ vt
+        out["impulse"][k] = (W.T @ (v0 + v1) / 2) @ dP
+        out["numerical"][k] = -(th - 0.5) * (dv @ M @ dv + de @ K @ de - (W.T @ dv) @ dP)
+        out["projection"][k] = e1 @ K @ e1 / 2 - em @ K @ em / 2
+        I = np.flatnonzero(A.active[k + 1] & B.active[k + 1])
+        if I.size and (A.projected or B.projected):
+            gA = A.q_pre[k + 1] @ W[:, I] + nu[k + 1, I]
+            gB = B.q_pre[k + 1] @ W[:, I] + nu[k + 1, I]
+            Li = np.linalg.inv(L[np.ix_(I, I)])
+            dg = gA - gB
+            dr = (0 * gA if A.projected else gA) - (0 * gB if B.projected else gB)
+            out["projection_jump"][k] = -dg @ Li @ dg / 2
+            out["projection_unprojected_gap"][k] = dr @ Li @ dr / 2
+        split = ("impulse_complementarity", "impulse_delassus", "impulse_slack", "impulse_target")
+        if not np.array_equal(A.active[k + 1], B.active[k + 1]):
+            out["impulse_set_mismatch"][k] = out["impulse"][k]
+            for key in split:
+                out[key][k] = np.nan
+            continue
+        act = np.flatnonzero(A.active[k + 1])
+        if act.size == 0:
+            continue
+        WA = W[:, act]
+        E = e_all[act]
+        D = np.diag((1 - E) / (1 + E))
+        G = WA.T @ np.linalg.solve(Ahat, WA)
+        dP = dP[act]
+        du_free = np.linalg.solve(Ahat, -h * C @ v0 - h * K @ (e0 + h * th * v0))
+        delta = WA.T @ du_free
+        out["impulse_slack"][k] = -dP @ D @ delta / 2
+        if not newton and act.size > 1:
+            gbar_G = WA.T @ v0 + delta / (1 + E) + G @ dP / 2
+            out["impulse_complementarity"][k] = dP @ gbar_G
+            continue
+        dy = WA.T @ v1 + E * (WA.T @ v0)
+        out["impulse_complementarity"][k] = dP @ (np.eye(act.size) + D) @ dy / 2
+        out["impulse_delassus"][k] = -dP @ D @ G @ dP / 2
+    out["residual"] = out["total"] - out["damping"] - out["impulse"] - out["numerical"] - out["projection"]
+    out["roundoff"] = _ref_roundoff(run, A, B)
+    return out
+
+
+def _ref_roundoff(run, A, B):
+    """The documented bound of roundoff_allowance, one step at a time."""
+    s = run.system
+    M, C, K, W = s.M, s.C, s.K, s.W
+    n = M.shape[0]
+    h, th, t = run.h, run.theta, run.t
+    kA = np.linalg.cond(M + h * th * C + (h * th) ** 2 * K)
+    proj = A.projected or B.projected
+    kK = np.linalg.cond(K)
+    KiW = np.linalg.solve(K, W)
+    Ld = np.abs(np.sum(W * KiW, axis=0))
+    nu = s.nu(t)
+    f = s.f(t)
+    N = t.size - 1
+    tot = np.zeros(N)
+
+    def rho(X, k):
+        au = np.abs(X.u[k]) + np.abs(X.u[k + 1])
+        aq = np.abs(X.q[k]) + np.abs(X.q_pre[k + 1])
+        fb = np.abs((1 - th) * f[k] + th * f[k + 1])
+        ru = kA * (np.abs(M) @ au + h * np.abs(C) @ au + h * np.abs(K) @ aq + h * fb
+                   + np.abs(W) @ np.abs(X.P[k + 1]))
+        rq = aq + h * au
+        rp = np.zeros(n)
+        if X.projected and proj:
+            gt = np.zeros(W.shape[1])
+            for j in range(W.shape[1]):
+                if X.active[k + 1, j]:
+                    gt[j] = (np.abs(W[:, j]) @ np.abs(X.q_pre[k + 1]) + abs(nu[k + 1, j])) / (
+                        Ld[j] if Ld[j] > 0 else 1.0)
+            rp = np.abs(X.q_pre[k + 1]) + np.abs(X.q[k + 1]) + kK * (np.abs(KiW) @ (np.abs(X.sigma[k + 1]) + gt))
+        return ru, rq, rp
+
+    def ev(v, e):
+        return np.abs(v) @ np.abs(M) @ np.abs(v) + np.abs(e) @ np.abs(K) @ np.abs(e)
+
+    for k in range(N):
+        (ua, qa, pa), (ub, qb, pb) = rho(A, k), rho(B, k)
+        v0, v1 = A.u[k] - B.u[k], A.u[k + 1] - B.u[k + 1]
+        e0, e1, em = A.q[k] - B.q[k], A.q[k + 1] - B.q[k + 1], A.q_pre[k + 1] - B.q_pre[k + 1]
+        vt = np.abs((1 - th) * v0 + th * v1)
+        Ket = np.abs(K @ ((1 - th) * e0 + th * em))
+        tot[k] = (vt @ (ua + ub) + Ket @ (qa + qb) + np.abs(K @ e1) @ (pa + pb)
+                  + ev(v0, e0) + ev(v1, e1) + np.abs(em) @ np.abs(K) @ np.abs(em))
+    return 4.0 * (n + 2) * EPS * tot
+
+
+def _pairs(run):
+    return ly.run_pairs(run)
+
+
+def _close(x, y, scale):
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    assert np.array_equal(np.isnan(x), np.isnan(y))
+    ok = ~np.isnan(x)
+    assert np.all(np.abs(x[ok] - y[ok]) <= 1e-9 * scale[ok] + 1e-300), np.max(np.abs(x[ok] - y[ok]) / scale[ok])
+
+
+# ----------------------------------------------------------------------------- decrement_parts
+@pytest.mark.parametrize("case", list(CASES))
+def test_decrement_parts_equal_the_loop_recomputation(runs, case):
+    run = runs[case]
+    covered = set()
+    for label, a, b in _pairs(run):
+        p = ly.decrement_parts(run, a, b)
+        ref = _ref_parts(run, a, b)
+        scale = ref["V"][:-1] + ref["roundoff"] + 1e-300
+        assert p["V"].shape == (run.t.size,)
+        assert np.allclose(p["V"], ref["V"], rtol=1e-12, atol=0)
+        for key in ("total", "damping", "impulse", "numerical", "projection", "projection_jump",
+                    "projection_unprojected_gap", "impulse_complementarity", "impulse_delassus",
+                    "impulse_slack", "impulse_target", "impulse_set_mismatch"):
+            _close(p[key], ref[key], scale)
+        _close(p["projection_cf"], ref["projection_jump"] + ref["projection_unprojected_gap"], scale)
+        assert np.allclose(p["roundoff"], ref["roundoff"], rtol=1e-10, atol=0), label
+        _close(p["residual"], p["total"] - p["damping"] - p["impulse"] - p["numerical"] - p["projection"], scale)
+        # the allowance bounds the identity's round-off, and is not vacuous
+        assert np.all(np.abs(p["residual"]) <= p["roundoff"]), label
+        assert np.max(p["roundoff"] / (p["V"][:-1] + p["V"][1:])) < 1e-6, label
+        # the exact split of the impulse part (where both members used the same set)
+        pieces = p["impulse_complementarity"] + p["impulse_delassus"] + p["impulse_slack"] + p["impulse_target"]
+        same = ~np.isnan(pieces)
+        assert np.all(np.abs(pieces[same] - p["impulse"][same]) <= 1e-9 * scale[same] + p["roundoff"][same])
+        covered.update(k for k in ("damping", "impulse_slack", "projection_jump", "projection_unprojected_gap",
+                                   "numerical", "impulse_set_mismatch") if np.any(p[k] != 0))
+    # each case exercises the parts it is here for
+    assert {"damping", "impulse_slack"} <= covered
+    if "theta" in case or case == "chain_newton":
+        assert "numerical" in covered
+    if case.startswith("chain"):
+        assert "projection_unprojected_gap" in covered and "projection_jump" in covered
+
+
+def test_poisson_several_contacts_use_glockers_split(runs):
+    """Poisson with both corners closed: Delassus piece 0, complementarity = ΔPᵀΔγ̄_G; one
+    contact: the Newton split (Delassus piece ≠ 0 somewhere)."""
+    run = runs["chain_poisson"]
+    A, B = run.slaves["jump_a"], run.slaves["jump_b"]
+    p = ly.decrement_parts(run, "jump_a", "jump_b")
+    both = np.flatnonzero(A.active[1:].all(axis=1) & B.active[1:].all(axis=1))
+    one = np.flatnonzero((A.active[1:].sum(axis=1) == 1) & np.all(A.active[1:] == B.active[1:], axis=1))
+    assert both.size and one.size
+    assert np.all(p["impulse_delassus"][both] == 0.0) and np.all(p["impulse_target"][both] == 0.0)
+    assert np.any(p["impulse_complementarity"][both] != 0.0)
+    assert np.any(p["impulse_delassus"][one] != 0.0)
+
+
+def test_set_mismatch_steps_are_not_split():
+    """A member whose closed set differs at a step: the impulse there is reported as a set
+    mismatch and its split is NaN; the other steps are split."""
+    sc = pc.load("double_mass", {"impact.law": "newton", "impact.restitution": 0.3})
+    specs = pc.CheckContext(sc, pc.CheckSettings(h=1e-2, t_end=1.0)).slave_specs()
+    run = replay(sc, h=1e-2, t_end=1.0, slaves=specs, engine="python")
+    k = int(np.flatnonzero(run.slaves["jump_a"].active[1:, 0])[0])
+    import copy
+    tr = copy.copy(run.slaves["nojump_b"])
+    tr.active = tr.active.copy()
+    tr.active[k + 1, 0] = False
+    run.slaves = dict(run.slaves, nojump_b=tr)
+    p = ly.decrement_parts(run, "nojump_a", "nojump_b")
+    ref = _ref_parts(run, "nojump_a", "nojump_b")
+    for key in ("impulse_complementarity", "impulse_delassus", "impulse_slack", "impulse_target"):
+        assert np.isnan(p[key][k]) and np.isnan(ref[key][k])
+        assert np.isnan(p[key]).sum() == 1
+    assert p["impulse_set_mismatch"][k] == p["impulse"][k] != 0.0
+    assert np.count_nonzero(p["impulse_set_mismatch"]) == 1
+
+
+# ----------------------------------------------------------------------------- check, on runs
+def _expected_summary(run, label, a, b):
+    p = _ref_parts(run, a, b)
+    Vk, r = p["V"][:-1], p["roundoff"]
+
+    def rel(x, allow):
+        x = np.where(np.isnan(x), -np.inf, x - allow)
+        return np.array([x[i] / Vk[i] if Vk[i] > 0 else (np.inf if x[i] > 0 else -np.inf if x[i] < 0 else 0.0)
+                         for i in range(x.size)])
+
+    def worst(x, allow=r):
+        q = rel(x, allow)
+        return float(q.max()), int(np.argmax(q))
+
+    A, B = _member(run, a), _member(run, b)
+    crit = {"dV": worst(p["total"] - p["projection_unprojected_gap"]),
+            "identity": worst(np.abs(p["residual"])),
+            "projection": worst(np.abs(p["projection"] - p["projection_jump"] - p["projection_unprojected_gap"]))
+            if (A.projected or B.projected) else (-np.inf, 0),
+            "damping_sign": worst(p["damping"]), "projection_sign": worst(p["projection_jump"])}
+    return p, crit, worst
+
+
+@pytest.mark.parametrize("case", ["dm_newton", "chain_newton"])
+def test_check_witness_recomputed_from_the_parts(runs, case):
+    run = runs[case]
+    r = ly.check_lyapunov_decrease(run, order_factors=())
+    labels = [lab for lab, _, _ in _pairs(run)]
+    assert r.witness["pairs"] == labels
+    worst_dv = []
+    for label, a, b in _pairs(run):
+        p, crit, worst = _expected_summary(run, label, a, b)
+        for c, (val, _) in crit.items():
+            assert r.witness[f"{label}: max_{c}"] == pytest.approx(val, rel=1e-6, abs=1e-15), (label, c)
+        for key in ly.PARTS + ly.SUBPARTS + ("residual",):
+            assert r.witness[f"{label}: max_{key}/V"] == pytest.approx(worst(p[key], 0 * p["roundoff"])[0],
+                                                                      rel=1e-6, abs=1e-15), (label, key)
+        k = crit["dV"][1]
+        assert r.witness[f"{label}: worst_step"] == k
+        assert r.witness[f"{label}: worst_time"] == run.t[k]
+        assert r.witness[f"{label}: V_at_worst"] == pytest.approx(p["V"][k], rel=1e-12)
+        assert r.witness[f"{label}: roundoff_at_worst"] == pytest.approx(p["roundoff"][k], rel=1e-10)
+        for key in ("total",) + ly.PARTS + ly.SUBPARTS:
+            ref = p["projection_jump"][k] + p["projection_unprojected_gap"][k] if key == "projection_cf" else p[key][k]
+            assert r.witness[f"{label}: {key}_at_worst"] == pytest.approx(ref, rel=1e-6, abs=1e-12 * p["V"][k]), key
+        cand = {c: p[c][k] for c in ("damping", "numerical", "residual") + ly.SUBPARTS if not np.isnan(p[c][k])}
+        best = max(cand, key=cand.get)
+        cause = best if crit["dV"][0] > 0 and cand[best] > 0 else ""
+        assert r.witness[f"{label}: cause"] == cause, label
+        worst_dv.append(crit["dV"][0])
+    assert r.witness["max_dV_beyond_roundoff"] == pytest.approx(max(worst_dv), rel=1e-6)
+    for key in ly.SLACKS:
+        assert math.isnan(r.witness[f"slack_order_{key}"])
+        vals = []
+        for label, a, b in _pairs(run):
+            p, _, worst = _expected_summary(run, label, a, b)
+            vals.append(max(worst(p[key])[0], 0.0))
+        assert r.witness[f"max_{key}/V"] == pytest.approx(max(vals), rel=1e-6, abs=1e-300)
+
+
+def test_check_fails_on_the_impulse_slack_with_its_exact_reason(runs):
+    run = runs["dm_newton"]
+    r = ly.check_lyapunov_decrease(run, order_factors=())
+    label = "jump pair"
+    p, crit, _ = _expected_summary(run, label, "jump_a", "jump_b")
+    val, k = crit["dV"]
+    assert r.passed is False and r.tolerance == 0.0 and r.margin == pytest.approx(-val, rel=1e-6)
+    assert r.witness["worst_pair"] == label and r.witness["worst_criterion"] == "dV"
+    V = p["V"][k]
+    text = (f"impulse term of the discrete impact law positive: {p['impulse'][k] / V:+.2g}·V at step {k} "
+            f"(t = {run.t[k]:.6g}) in the jump pair (ΔV beyond round-off {val:+.2g}·V); its slack −½ΔPᵀDδ = "
+            f"{p['impulse_slack'][k] / V:+.2g}·V (smooth velocity change δ = O(h) within the step, "
+            "D = (1−e)/(1+e)) has no sign in discrete time")
+    assert r.reason.startswith(text), r.reason
+    # each (criterion, cause) once: the master–jump pair has the same cause and adds no text
+    assert r.reason.count("impulse term of the discrete impact law") == 1
+    assert r.reason == text
+    assert r.summary_keys[:3] == ("worst_pair", "worst_criterion", "max_dV_beyond_roundoff")
+    # near miss on the tolerance
+    assert ly.check_lyapunov_decrease(run, tolerance=0.999 * val, order_factors=()).passed is False
+    r2 = ly.check_lyapunov_decrease(run, tolerance=1.001 * val, order_factors=())
+    assert r2.passed is True and r2.tolerance == 1.001 * val
+
+
+def test_identity_tolerance_pins_the_other_criteria(runs):
+    """With the dV tolerance opened, identity-type criteria use identity_tolerance: a huge
+    tolerance passes, a negative one (below round-off) fails on the identity."""
+    run = runs["dm_newton"]
+    ok = ly.check_lyapunov_decrease(run, tolerance=1.0, order_factors=())
+    assert ok.passed is True and ok.witness["worst_criterion"] == "dV" and ok.reason == ""
+    worst_pair = max(_pairs(run), key=lambda pr: _expected_summary(run, *pr)[1]["dV"][0])[0]
+    assert ok.witness["worst_pair"] == worst_pair
+    ident = max(_expected_summary(run, *pr)[1]["identity"][0] for pr in _pairs(run))
+    bad = ly.check_lyapunov_decrease(run, tolerance=1.0, identity_tolerance=1.001 * ident, order_factors=())
+    assert bad.passed is False and bad.witness["worst_criterion"] == "identity"
+    assert bad.tolerance == 1.001 * ident
+    assert "the step does not satisfy the θ-scheme energy identity (" in bad.reason
+
+
+def test_slack_order_reported_with_the_reruns(runs):
+    """order_factors (1, 2): re-runs at 2h; the slack row at h is the base, the order is the
+    slope of the two reported slacks."""
+    run = runs["dm_newton"]
+    r = ly.check_lyapunov_decrease(run, order_factors=(1.0, 2.0))
+    hs = r.witness["slack_h"]
+    sl = r.witness["slack_impulse_slack_slack"]
+    assert np.allclose(hs, [run.h, 2 * run.h], rtol=1e-15)
+    assert sl[0] == r.witness["max_impulse_slack/V"] > 0 and sl[1] > 0
+    p = math.log(sl[1] / sl[0]) / math.log(2.0)
+    assert r.witness["slack_order_impulse_slack"] == pytest.approx(p, rel=1e-9)
+    assert math.isnan(r.witness["slack_order_impulse_target"])
+    if p > 0:
+        assert f"dV ≤ 0 holds up to an O(h^{p:.2g}) slack from the discrete impact law, vanishing as h → 0" in r.reason
+    assert r.reason.index("impulse term") < r.reason.index("slack from the discrete impact law")
+
+
+def test_order_fit_skipped_for_an_explicit_chi():
+    sc = pc.load("double_mass", {"impact.law": "newton", "impact.restitution": 0.3})
+    specs = pc.CheckContext(sc, pc.CheckSettings(h=1e-2, t_end=1.0)).slave_specs()
+    base = replay(sc, h=1e-2, t_end=1.0, slaves=specs, engine="python")
+    run = replay(sc, h=1e-2, t_end=1.0, slaves=specs, engine="python", chi=base.chi)
+    r = ly.check_lyapunov_decrease(run)
+    assert "no scenario, or an explicit χ" in r.witness["slack_fit_skipped"]
+    assert math.isnan(r.witness["slack_order_impulse_slack"])
+
+
+def test_not_applicable_without_pairs(runs):
+    r = ly.check_lyapunov_decrease(runs["dm_newton"], pairs=[])
+    assert r.passed is None and "the run has no pair" in r.reason and "eq. (17)" in r.equation
+    assert r.name == "lyapunov_decrease"
+
+
+# ----------------------------------------------------------------------------- attribution (hand-built parts)
+def _fake_parts(N=3, step=1, **pieces):
+    p = {k: np.zeros(N) for k in ly.PARTS + ly.SUBPARTS + ("total", "residual", "projection_cf", "roundoff")}
+    p["V"] = np.full(N + 1, 2.0)
+    for key, val in pieces.items():
+        p[key][step] = val
+    p["impulse"] = p["impulse_complementarity"] + p["impulse_delassus"] + p["impulse_slack"] + p["impulse_target"]
+    p["projection"] = p["projection_jump"] + p["projection_unprojected_gap"]
+    p["projection_cf"] = p["projection"].copy()
+    p["total"] = p["damping"] + p["impulse"] + p["numerical"] + p["projection"] + p["residual"]
+    return p
+
+
+def _fake_run(projected=(True, True)):
+    slaves = {"a": SimpleNamespace(projected=projected[0]), "b": SimpleNamespace(projected=projected[1])}
+    return SimpleNamespace(t=np.array([0.0, 0.25, 0.5, 0.75]), slaves=slaves,
+                           master=SimpleNamespace(projected=False), scenario=None, settings={})
+
+
+def _check_with(monkeypatch, parts, projected=(True, True), **kw):
+    monkeypatch.setattr(ly, "decrement_parts", lambda run, a, b, examine=None: parts)
+    return ly.check_lyapunov_decrease(_fake_run(projected), pairs=[("test pair", "a", "b")],
+                                      order_factors=(), **kw)
+
+
+@pytest.mark.parametrize("cause,pieces,phrase", [
+    ("impulse_slack", {"impulse_slack": 0.4, "impulse_complementarity": -0.1},
+     "impulse term of the discrete impact law positive: +0.15·V at step 1 (t = 0.25) in the test pair "
+     "(ΔV beyond round-off +0.15·V); its slack −½ΔPᵀDδ = +0.2·V"),
+    ("impulse_target", {"impulse_target": 0.4},
+     "impulse term of the discrete Poisson step positive: +0.2·V at step 1 (t = 0.25) in the test pair "
+     "(ΔV beyond round-off +0.2·V); its target term ΔPᵀ(I+E)⁻¹Δr = +0.2·V (Glocker's target in the step's "
+     "LCP, several contacts) is positive"),
+    ("impulse_delassus", {"impulse_delassus": 0.6},
+     "impulse term positive: +0.3·V at step 1 (t = 0.25) in the test pair; its Delassus part −½ΔPᵀDĜΔP > 0 "
+     "(per-contact restitution: sym(DĜ) is not positive semi-definite)"),
+    ("impulse_complementarity", {"impulse_complementarity": 0.2},
+     "impulse term positive: +0.1·V at step 1 (t = 0.25) in the test pair; the step impulses violate "
+     "complementarity 0 ≤ γ_{k+1} − τ ⊥ P ≥ 0"),
+    ("projection_jump", {"projection_jump": 0.2},
+     "position-jump part positive: +0.1·V at step 1 (t = 0.25) in the test pair: P_I L_I⁻¹ P_Iᵀ is not PSD"),
+    ("damping", {"damping": 0.2},
+     "damping term positive: +0.1·V at step 1 (t = 0.25) in the test pair: C̄ is not positive semi-definite"),
+    ("numerical", {"numerical": 0.2},
+     "θ-numerical term positive: +0.1·V at step 1 (t = 0.25) in the test pair (θ ≠ ½)"),
+])
+def test_a_positive_dV_is_attributed_to_the_part_that_caused_it(monkeypatch, cause, pieces, phrase):
+    r = _check_with(monkeypatch, _fake_parts(**pieces))
+    assert r.passed is False and r.witness["test pair: cause"] == cause
+    assert r.reason.startswith(phrase), r.reason
+    assert r.witness["worst_pair"] == "test pair"
+
+
+def test_unprojected_gap_is_reported_not_counted(monkeypatch):
+    """A positive ΔV made only of the plain master's penetration term passes (not counted)."""
+    r = _check_with(monkeypatch, _fake_parts(projection_unprojected_gap=0.2), projected=(True, False))
+    assert r.passed is True and r.witness["test pair: max_dV"] <= 0
+    assert r.witness["max_projection_unprojected_gap/V"] == pytest.approx(0.1)
+    # with a damping increase beside it, the unprojected gap is named when it is the largest part
+    p = _fake_parts(projection_unprojected_gap=0.4, numerical=0.1)
+    r = _check_with(monkeypatch, p, projected=(True, False))
+    assert r.passed is False and r.witness["test pair: cause"] == "projection_unprojected_gap"
+    assert r.reason.startswith("projection term positive: +0.2·V at step 1 (t = 0.25) in the test pair; the "
+                               "unprojected member (plain master) is not on its closed contacts")
+
+
+def test_residual_cause_and_no_cause(monkeypatch):
+    r = _check_with(monkeypatch, _fake_parts(residual=0.2))
+    assert r.witness["test pair: cause"] == "residual"
+    assert r.reason.startswith("V increases beyond round-off (+0.1·V at step 1) in the test pair; "
+                               "the step does not satisfy the θ-scheme energy identity (test pair)")
+    # ΔV > 0 while every candidate part is ≤ 0 at that step (only the realized projection part)
+    p = _fake_parts()
+    p["projection"][1] = 0.2
+    p["total"][1] = 0.2
+    r = _check_with(monkeypatch, p)
+    assert r.witness["test pair: cause"] == ""
+    assert "V increases beyond round-off (+0.1·V at step 1) in the test pair" in r.reason
+    assert "K-metric projection" in r.reason
+
+
+def test_failure_texts_of_the_sign_criteria(monkeypatch):
+    p = _fake_parts(damping=0.2, impulse_complementarity=-0.3)     # ΔV < 0, damping > 0
+    r = _check_with(monkeypatch, p)
+    assert r.passed is False and r.witness["worst_criterion"] == "damping_sign"
+    assert r.reason == "the damping part −h v_θᵀC̄v_θ is positive: C̄ is not positive semi-definite (test pair)"
+    p = _fake_parts(projection_jump=0.2, impulse_complementarity=-0.3)
+    r = _check_with(monkeypatch, p)
+    assert r.witness["worst_criterion"] == "projection_sign"
+    assert r.reason == "the jump part is positive: P_I L_I⁻¹ P_Iᵀ is not PSD (test pair)"
+    assert r.margin == pytest.approx(-0.1)
+    # identity_tolerance just above / below the excess (near miss)
+    assert _check_with(monkeypatch, p, identity_tolerance=0.1001).passed is True
+    assert _check_with(monkeypatch, p, identity_tolerance=0.0999).passed is False
+
+
+def test_projection_criterion_only_for_projected_members(monkeypatch):
+    p = _fake_parts(impulse_complementarity=-0.3)
+    p["projection_cf"][1] = 0.1                                    # closed form ≠ realized
+    r = _check_with(monkeypatch, p)
+    assert r.witness["test pair: max_projection"] == pytest.approx(0.05)
+    assert "the position jumps are not the K-metric projection" in r.reason
+    r = _check_with(monkeypatch, p, projected=(False, False))
+    assert r.witness["test pair: max_projection"] == -np.inf and r.passed is True
+    assert r.reason == "observers without position jumps (K not ≻ 0): no jump part"
+    r = _check_with(monkeypatch, p, projected=(False, True))
+    assert r.witness["test pair: max_projection"] == pytest.approx(0.05)
+    assert "observers without position jumps" not in r.reason
+
+
+def test_zero_V_step_gives_an_infinite_relative_increase(monkeypatch):
+    p = _fake_parts(damping=0.2)
+    p["V"][1] = 0.0
+    r = _check_with(monkeypatch, p)
+    assert r.passed is False and r.witness["test pair: max_dV"] == np.inf
+    assert "damping term positive: +inf·V at step 1" in r.reason
+
+
+def test_order_note_when_the_slack_does_not_decrease(monkeypatch):
+    parts = _fake_parts(impulse_slack=0.4, impulse_complementarity=-0.1)
+    monkeypatch.setattr(ly, "slack_order", lambda run, base, factors: {
+        "h": np.array([0.01, 0.02, 0.04]), "impulse_slack_order": -0.5, "impulse_target_order": float("nan"),
+        "projection_unprojected_gap_order": 2.0})
+    monkeypatch.setattr(ly, "decrement_parts", lambda run, a, b, examine=None: parts)
+    r = ly.check_lyapunov_decrease(_fake_run(), pairs=[("test pair", "a", "b")], order_factors=(1.0, 2.0, 4.0))
+    assert r.witness["slack_order_impulse_slack"] == -0.5
+    assert ("the positive slack from the discrete impact law does not decrease with h over h ∈ [0.01, 0.04] "
+            "(fitted order -0.5; not in the asymptotic range?)") in r.reason
+    assert r.witness["slack_order_projection_unprojected_gap"] == 2.0
+    assert "plain master's penetration" not in r.reason          # base slack 0: no note
+    assert r.reason.count("; ") >= 2
+
+
+def test_order_note_alone_when_nothing_fails(monkeypatch):
+    parts = _fake_parts(projection_unprojected_gap=0.2)
+    calls = []
+
+    def fake_order(run, base, factors):
+        calls.append(factors)
+        return {"h": np.array([0.01, 0.02]), "impulse_slack_order": float("nan"),
+                "impulse_target_order": float("nan"), "projection_unprojected_gap_order": 1.5}
+    monkeypatch.setattr(ly, "slack_order", fake_order)
+    monkeypatch.setattr(ly, "decrement_parts", lambda run, a, b, examine=None: parts)
+    r = ly.check_lyapunov_decrease(_fake_run((True, False)), pairs=[("test pair", "a", "b")],
+                                   order_factors=[1.0, 2.0])
+    assert calls == [(1.0, 2.0)]
+    assert r.passed is True
+    assert r.reason == ("dV ≤ 0 holds up to an O(h^1.5) slack from the plain master's penetration (master–jump "
+                        "pair, not counted), vanishing as h → 0")
+
+
+def test_no_order_fit_when_nothing_is_positive(monkeypatch):
+    parts = _fake_parts()
+    parts["damping"][:] = -0.2
+    parts["total"][:] = -0.2
+    monkeypatch.setattr(ly, "slack_order", lambda *a: pytest.fail("no re-run expected"))
+    monkeypatch.setattr(ly, "decrement_parts", lambda run, a, b, examine=None: parts)
+    r = ly.check_lyapunov_decrease(_fake_run(), pairs=[("test pair", "a", "b")])
+    assert r.passed is True and "slack_h" not in r.witness
+    assert r.margin == pytest.approx(0.1)          # −max dV/V = 0.2/2
+
+
+# ----------------------------------------------------------------------------- positive_slack
+def test_positive_slack_is_the_max_over_pairs(runs):
+    run = runs["dm_newton"]
+    got = ly.positive_slack(run)
+    for key in ly.SLACKS:
+        vals = [max(_expected_summary(run, *pr)[2](_ref_parts(run, pr[1], pr[2])[key])[0], 0.0)
+                for pr in _pairs(run)]
+        assert got[key] == pytest.approx(max(vals), rel=1e-6, abs=1e-300), key
+    assert got["impulse_slack"] > 0 and got["projection_unprojected_gap"] > 0
+
+
+# ----------------------------------------------------------------------------- Theorem 1 (hand-built)
+def _conv_run(n_steps=400, T=4.0, rate=1.0, K=None, C=None, closed_from=0.95, c_end=None, slaves=2):
+    """Two observers: A decays as e^{−rate·t}·(q̂, û), B at rest; A's contact closes over the
+    last 5 % with a constant impulse."""
+    t = np.linspace(0.0, T, n_steps + 1)
+    K = np.array([[3.0, -1.0], [-1.0, 2.0]]) if K is None else K
+    C = np.array([[0.5, 0.1], [0.1, 0.4]]) if C is None else C
+    system = SimpleNamespace(M=np.diag([1.0, 2.0]), C=C, K=K, W=np.array([[1.0], [0.5]]))
+    decay = np.exp(-rate * t)[:, None]
+    q = decay * np.array([0.3, -0.2]) + (0.0 if c_end is None else np.asarray(c_end))
+    u = decay * np.array([-0.1, 0.25])
+    active = np.zeros((t.size, 1), bool)
+    active[int(closed_from * n_steps) + 1:, 0] = True
+    P = np.where(active, 0.01, 0.0)
+    A = SimpleNamespace(q=q, u=u, P=P, active=active)
+    B = SimpleNamespace(q=np.zeros_like(q), u=np.zeros_like(u), P=np.zeros_like(P), active=active.copy())
+    names = ["obs_a", "obs_b", "obs_c"][:slaves]
+    members = dict(zip(names, [A, B, B]))
+    return SimpleNamespace(system=system, t=t, h=T / n_steps, theta=0.5, slaves=members)
+
+
+def test_convergence_witness_by_hand():
+    run = _conv_run()
+    r = ly.check_convergence(run, rho=1e-3, window=0.1)
+    A, B = run.slaves["obs_a"], run.slaves["obs_b"]
+    M, K, W, C = run.system.M, run.system.K, run.system.W, run.system.C
+    Cb = (C + C.T) / 2
+    v, e = A.u - B.u, A.q - B.q
+    T = np.array([x @ M @ x / 2 for x in v])
+    U = np.array([x @ K @ x / 2 for x in e])
+    V = T + U
+    w = r.witness
+    assert w["V0"] == pytest.approx(V[0], rel=1e-12) and w["V_end"] == pytest.approx(V[-1], rel=1e-12)
+    dec = math.log10(V[0] / V[-1])
+    assert dec == pytest.approx(2 * 4.0 / math.log(10), rel=1e-9)          # V ∝ e^{−2t}
+    assert w["decades"] == pytest.approx(dec, rel=1e-12) and w["required_decades"] == pytest.approx(3.0)
+    assert w["decay_rate"] == pytest.approx(2.0, rel=1e-9) == decay_rate(run.t, V)
+    assert r.passed is True and r.margin == pytest.approx(dec - 3.0, rel=1e-12) and r.tolerance == 0.0
+    assert w["kinetic_end_rel"] == pytest.approx(T[-1] / V[0]) and w["potential_end_rel"] == pytest.approx(U[-1] / V[0])
+    h = run.h
+    diss = sum(h * ((v[k] + v[k + 1]) / 2) @ Cb @ ((v[k] + v[k + 1]) / 2) for k in range(v.shape[0] - 1))
+    assert w["dissipated_eq20"] == pytest.approx(diss, rel=1e-12)
+    assert w["V0_minus_Vend"] == pytest.approx(V[0] - V[-1], rel=1e-12)
+    imp = [((v[k] + v[k + 1]) / 2) @ W @ (A.P[k + 1] - B.P[k + 1]) for k in range(v.shape[0] - 1)]
+    assert w["positive_impulse_sum"] == pytest.approx(sum(max(x, 0.0) for x in imp), rel=1e-12)
+    k0 = int(0.9 * 400)
+    c = e[k0:].mean(axis=0)
+    assert np.allclose(w["c"], c, rtol=1e-12)
+    drift = max(math.sqrt((x - e[-1]) @ K @ (x - e[-1])) for x in e[k0:]) / math.sqrt(2 * V[0])
+    assert w["e_drift_last_window"] == pytest.approx(drift, rel=1e-12)
+    assert w["c_K_norm_rel"] == pytest.approx(math.sqrt(c @ K @ c) / math.sqrt(2 * V[0]), rel=1e-12)
+    Lam = (A.P[k0 + 1:] - B.P[k0 + 1:]).sum(axis=0) / (run.t[-1] - run.t[k0])
+    assert np.allclose(w["Lambda_tilde"], Lam, rtol=1e-12) and Lam[0] > 0
+    bal = np.linalg.norm(K @ c - W @ Lam) / (np.linalg.norm(K @ c) + np.linalg.norm(W @ Lam))
+    assert w["eq21_balance_residual"] == pytest.approx(bal, rel=1e-12)
+    assert w["closed_in_window"] == [0]
+    assert np.allclose(w["WIt_c"], c @ W[:, [0]], rtol=1e-12)
+    above = np.flatnonzero(V > 1e-3 * V[0])
+    assert w["time_to_rho"] == run.t[above[-1] + 1]
+    assert w["time_to_rho"] == pytest.approx(math.log(1e3) / 2, abs=run.h)
+    assert w["horizon"] == 4.0 and w["observers"] == ["obs_a", "obs_b"]
+    assert r.summary_keys == ("decades", "decay_rate", "V_end", "kinetic_end_rel", "potential_end_rel",
+                              "c_K_norm_rel", "eq21_balance_residual", "horizon")
+    assert r.name == "convergence" and r.equation == "Theorem 1; eqs. (18)-(21)" and r.reason == ""
+
+
+def test_convergence_window_and_explicit_members():
+    run = _conv_run(slaves=3)
+    r = ly.check_convergence(run, "obs_c", "obs_a", window=0.5)
+    assert r.witness["observers"] == ["obs_c", "obs_a"]
+    e = run.slaves["obs_c"].q - run.slaves["obs_a"].q
+    assert np.allclose(r.witness["c"], e[200:].mean(axis=0), rtol=1e-12)
+    assert r.witness["closed_in_window"] == [0]
+    # the window before the contact closes: nothing closed, WIt_c empty
+    r = ly.check_convergence(_conv_run(closed_from=0.97), window=0.02)
+    assert r.witness["closed_in_window"] == [0]
+    run = _conv_run()
+    run.slaves["obs_a"].active[-10:] = False                      # open over the last 2.5 %
+    r = ly.check_convergence(run, window=0.02)
+    assert r.witness["closed_in_window"] == [] and r.witness["WIt_c"].shape == (0,)
+    r = ly.check_convergence(run, window=0.1)
+    assert r.witness["closed_in_window"] == [0]
+
+
+def test_convergence_rho_near_miss_and_reasons():
+    run = _conv_run()
+    dec = 8.0 / math.log(10)
+    assert ly.check_convergence(run, rho=10 ** -(dec * 0.999)).passed is True
+    r = ly.check_convergence(run, rho=10 ** -(dec * 1.001))
+    assert r.passed is False and r.margin == pytest.approx(-dec * 0.001, rel=1e-6)
+    # v has decayed (T_end ≪ U_end): e → c ≠ 0
+    assert "v has not decayed (a longer horizon may be needed)" in r.reason
+    assert r.reason.startswith(f"V fell only {dec:.2f} decades in 4 s; ")
+    # e → c ≠ 0: positions settle at an offset, velocities vanish
+    r = ly.check_convergence(_conv_run(c_end=[0.05, 0.05], rate=3.0))
+    assert r.passed is False
+    assert "v → 0 but e → c ≠ 0 (c balanced by the averaged constraint force, eq. (21))" in r.reason
+    assert r.witness["time_to_rho"] == np.inf
+
+
+def test_convergence_growing_V_fails_on_the_rate():
+    run = _conv_run(rate=-0.1, T=1.0)
+    r = ly.check_convergence(run, rho=0.999999)
+    assert r.witness["decay_rate"] < 0
+    assert r.passed is False and r.margin == -1.0
+    assert r.reason.startswith("V does not decay (fitted rate -0.2")
+    run = _conv_run(rate=-0.1, T=1.0)
+    assert ly.check_convergence(run, rho=10.0).margin == -1.0       # decades reached, rate still wins
+
+
+def test_convergence_time_to_rho_zero_and_V_end_zero():
+    run = _conv_run()
+    run.slaves["obs_a"].q[1:] = 0.0
+    run.slaves["obs_a"].u[1:] = 0.0
+    r = ly.check_convergence(run, rho=0.5)
+    assert r.witness["decades"] == np.inf and r.witness["time_to_rho"] == run.t[1]
+    # V = 0 after the first step: no positive samples to fit a rate on, so no decay is shown
+    assert r.passed is False and r.margin == -1.0 and r.reason == "V does not decay (fitted rate nan 1/s)"
+
+
+def test_convergence_not_applicable_cases():
+    K_semi = np.array([[1.0, 1.0], [1.0, 1.0]])
+    r = ly.check_convergence(_conv_run(K=K_semi))
+    assert r.passed is None and r.reason.startswith("K is not positive definite (λ_min = ")
+    assert "Theorem 1 needs K ≻ 0" in r.reason
+    # near miss on the relative floor: λ_min = 2e-12·λ_max is applicable, 0.5e-12 is not
+    assert ly.check_convergence(_conv_run(K=np.diag([1.0, 2e-12]))).passed is not None
+    assert ly.check_convergence(_conv_run(K=np.diag([1.0, 0.5e-12]))).passed is None
+    assert ly.check_convergence(_conv_run(K=-np.eye(2))).passed is None
+    r = ly.check_convergence(_conv_run(C=np.diag([1.0, 0.0])))
+    assert r.passed is None and r.reason.startswith("C̄ is only positive semi-definite (λ_min = 0")
+    assert ly.check_convergence(_conv_run(C=np.diag([1.0, 2e-12]))).passed is not None
+    assert ly.check_convergence(_conv_run(C=np.diag([1.0, 0.5e-12]))).passed is None
+    assert ly.check_convergence(_conv_run(C=np.diag([1.0, -0.5e-12]))).passed is None
+    assert ly.check_convergence(_conv_run(C=-np.eye(2))).passed is None
+    # an indefinite C̄ is checked (V grows)
+    assert ly.check_convergence(_conv_run(C=np.diag([1.0, -0.5]))).passed is not None
+    # C asymmetric: its symmetric part decides
+    assert ly.check_convergence(_conv_run(C=np.array([[1.0, 3.0], [-3.0, 1.0]]))).passed is True
+    r = ly.check_convergence(_conv_run(slaves=1))
+    assert r.passed is None and r.reason == "the run needs two observers"
+    run = _conv_run()
+    run.slaves["obs_a"].q[0] = 0.0
+    run.slaves["obs_a"].u[0] = 0.0
+    r = ly.check_convergence(run)
+    assert r.passed is None and r.reason == "the two observers start in the same state (V0 = 0)"
