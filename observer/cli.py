@@ -8,9 +8,12 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from observer.errors import ContactSolverError, InputError
+from observer.validation import check_output_path
+
+IMAGE_SUFFIXES = (".png", ".svg", ".pdf")
+"""Image formats ``plot --out`` writes."""
 
 
 def parse_pairs(items: list[str] | None, flag: str = "--set") -> dict[str, str]:
@@ -33,7 +36,7 @@ def cmd_scenarios(args) -> int:
 
 
 def cmd_show(args) -> int:
-    from observer.simulate import load_scenario
+    from observer.scenario import load_scenario
     from observer.tomlio import dumps
     sc = load_scenario(args.scenario, parse_pairs(args.set))
     header = f"{sc.name}: {sc.description}\n"
@@ -47,7 +50,10 @@ def cmd_show(args) -> int:
 
 
 def cmd_run(args) -> int:
-    from observer.simulate import simulate, load_scenario
+    from observer.io import SUFFIXES
+    from observer.scenario import load_scenario
+    from observer.simulate import simulate
+    check_output_path("--out", args.out, SUFFIXES)
     sc = load_scenario(args.scenario, parse_pairs(args.set))
     observers = [o for o in (args.observers or "").split(",") if o]
     res = simulate(sc, h=args.h, t_end=args.t_end, solver=args.solver, observers=observers,
@@ -80,6 +86,7 @@ def cmd_run(args) -> int:
 def cmd_plot(args) -> int:
     from observer.plotting import plot_run
     from observer.result import read_frame
+    check_output_path("--out", args.out, IMAGE_SUFFIXES)
     df = read_frame(args.result)
     path = plot_run(df, args.out, dof=args.dof)
     print(f"wrote {path}")
@@ -98,12 +105,12 @@ def cmd_log(args) -> int:
 
     from observer.result import read_frame
     from observer.switching import log_from_active
+    out = check_output_path("--out", args.out, (".csv",))
     df = read_frame(args.result)
     cols = sorted((c for c in df.columns if c.startswith("active")), key=lambda c: int(c[6:]))
     if not cols:
         raise InputError(args.result, "no active0.. columns: not a result written by 'run'")
     log = log_from_active(df["t"].to_numpy(), df[cols].to_numpy().astype(bool))
-    out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     log.to_csv(out, index=False, float_format="%.17g")
     impacts = int(np.sum(log["t_open"] == log["t_close"]))

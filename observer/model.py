@@ -16,8 +16,9 @@ from typing import Any
 import numpy as np
 
 from observer.errors import InputError
-from observer.validation import (as_array, as_scalar, broadcast_vector, check_psd, extreme_eigenvalues,
-                                 check_spd, check_symmetric)
+from observer.validation import (PROJECTION_COND_MAX, as_array, as_scalar, broadcast_vector,
+                                 check_independent_columns, check_psd, check_spd, check_symmetric,
+                                 extreme_eigenvalues, projection_condition)
 
 
 @dataclass(frozen=True)
@@ -136,17 +137,7 @@ class LinearSystem:
             check_symmetric("system.C", C)
             check_psd("system.C", C)
             check_psd("system.K", K)
-            if m > n:
-                sv_min, sv_max = 0.0, 1.0
-            elif m <= 512:
-                sv = np.linalg.svd(W, compute_uv=False)
-                sv_min, sv_max = float(sv[-1]), float(sv[0])
-            else:       # large (banded) W: from the extreme eigenvalues of WᵀW, O(m·bw²)
-                lo, hi = extreme_eigenvalues(W.T @ W)
-                sv_min, sv_max = np.sqrt(max(lo, 0.0)), np.sqrt(max(hi, 0.0))
-            if m > n or sv_min <= 1e-12 * sv_max:
-                raise InputError("system.W", "columns are not linearly independent "
-                                 f"(smallest singular value {sv_min:.3g})")
+            check_independent_columns("system.W", W)
         for name, arr in (("M", M), ("C", C), ("K", K), ("W", W)):
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
@@ -199,10 +190,35 @@ class LinearSystem:
         return bool(lo > 0.0 and lo > 1e-12 * hi)
 
     def require_definite_stiffness(self, why: str) -> None:
-        """Raise :class:`InputError` on ``system.K`` unless K ≻ 0."""
+        """Raise :class:`InputError` unless the K-metric projection is computable.
+
+        Needs K ≻ 0 (else the error names ``system.K``) and a projection metric
+        ``L = WᵀK⁻¹W`` whose condition number is at most :data:`PROJECTION_COND_MAX` (else
+        it names ``system.W``): every active set's ``L_I`` is a principal submatrix of L,
+        so ``cond(L_I) ≤ cond(L)`` (Cauchy interlacing) and the check covers every closed
+        set χ can present to the projection of eqs. (13)-(14).
+        """
         if not self.is_stiffness_definite():
             raise InputError("system.K", f"must be positive definite for {why} "
                              f"(smallest eigenvalue {self.stiffness_eigenvalue_range()[0]:.3g})")
+        cond = self.projection_condition()
+        if not cond <= PROJECTION_COND_MAX:
+            raise InputError("system.W", f"columns are nearly dependent in the K metric, as {why} "
+                             f"needs them independent: cond(WᵀK⁻¹W) = {cond:.3g} > "
+                             f"{PROJECTION_COND_MAX:.3g} (the projection multiplier "
+                             "Σ_I = −L_I⁻¹g_I of eqs. (13)-(14) would keep fewer than 6 digits)")
+
+    def projection_condition(self) -> float:
+        """Condition number of the projection metric ``L = WᵀK⁻¹W`` (needs K ≻ 0; cached).
+
+        Cheap first: ``cond(L) ≤ cond(K)·cond(W)²``; when that bound exceeds
+        :data:`PROJECTION_COND_MAX`, L is formed and its extreme eigenvalues computed.
+        """
+        cached = self.__dict__.get("_L_cond")
+        if cached is None:
+            cached = projection_condition(self.K, self.W, self.stiffness_eigenvalue_range())
+            object.__setattr__(self, "_L_cond", cached)
+        return cached
 
     def energy(self, q: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Mechanical energy ½uᵀMu + ½qᵀKq (kinetic plus elastic), time-major input allowed."""

@@ -35,8 +35,7 @@ import numpy as np
 from observer.errors import InputError
 from observer.impact import ImpactLaw
 from observer.model import Harmonic, LinearSystem
-from observer.stepping import check_step_parameters
-from observer.validation import as_array, as_scalar
+from observer.validation import as_array, as_scalar, check_step_parameters
 
 _HARMONIC = {"amplitude": None, "omega": None, "phase": None}
 SCHEMA: dict = {
@@ -250,3 +249,98 @@ def check_initial_gap(field_name: str, system: LinearSystem, q0: np.ndarray, t0:
     if np.min(g) < -INITIAL_GAP_TOL * scale:
         j = int(np.argmin(g))
         raise InputError(field_name, f"initial state penetrates contact {j}: g = {g[j]:.6g} < 0")
+
+
+BUILDER_FAILURES = (np.linalg.LinAlgError, ZeroDivisionError, FloatingPointError, OverflowError)
+"""Numerical failures of a built-in's document builder, reported as bad ``param.*`` values."""
+
+
+def check_builder_parameters(name: str, params: dict[str, Any]) -> dict[str, Any]:
+    """Validate ``param.*`` values of built-in ``name`` against its defaults; return them.
+
+    A parameter must exist; a numeric default needs a finite number (an integer default an
+    integer), a string default a string. Ranges are the builder's and the model's to check.
+    """
+    from observer.scenarios import SCENARIOS
+    defaults = SCENARIOS[name].PARAMETERS
+    out = {}
+    for key, value in params.items():
+        field_name = f"param.{key}"
+        if key not in defaults:
+            raise InputError(field_name, f"unknown parameter of scenario {name!r} "
+                             f"(known: {', '.join(defaults)})")
+        default = defaults[key]
+        if isinstance(default, str):
+            if not isinstance(value, str):
+                raise InputError(field_name, f"must be a string, got {value!r}")
+        elif isinstance(default, (int, float)) and not isinstance(default, bool):
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise InputError(field_name, f"must be a number, got {value!r}")
+            value = as_scalar(field_name, value)
+            if isinstance(default, int):
+                if value != int(value):
+                    raise InputError(field_name, f"must be an integer, got {value!r}")
+                value = int(value)
+        out[key] = value
+    return out
+
+
+def builtin_scenario_document(name: str, params: dict[str, Any] | None = None) -> dict:
+    """The document of built-in ``name`` built with ``params``; bad values become :class:`InputError`.
+
+    A numerical failure of the builder (a singular K for the static equilibrium, a division
+    by zero...) is reported on the parameters that were set (``param.k1: ...``).
+    """
+    from observer.scenarios import builtin_document
+    params = check_builder_parameters(name, dict(params or {}))
+    try:
+        return builtin_document(name, params)
+    except BUILDER_FAILURES as exc:
+        raise InputError(_param_fields(params), f"scenario {name!r} cannot be built with "
+                         f"{_param_text(params)}: {type(exc).__name__}: {exc}") from None
+
+
+def _param_fields(params: dict[str, Any]) -> str:
+    return ", ".join(f"param.{k}" for k in params) or "param"
+
+
+def _param_text(params: dict[str, Any]) -> str:
+    return ", ".join(f"{k} = {v!r}" for k, v in params.items()) or "its default parameters"
+
+
+def load_scenario(name_or_path: "str | Path | Scenario",
+                  overrides: dict[str, Any] | None = None) -> Scenario:
+    """Load a built-in scenario by name or a TOML file by path, with dotted-key overrides.
+
+    Keys ``param.NAME`` set a built-in's builder parameter (e.g. ``{"param.N": 5}`` for
+    ``rocking_chain``); every other key addresses the TOML document
+    (``{"simulation.h": 1e-3, "impact.law": "newton"}``). String values are parsed as
+    TOML values, so CLI ``--set`` strings work unchanged. A model error caused by the
+    builder parameters (``param.m1 = 0`` makes M singular) names the parameters.
+    """
+    from observer.scenarios import SCENARIOS
+    from observer.tomlio import read_toml
+    overrides = dict(overrides or {})
+    if isinstance(name_or_path, Scenario):
+        return name_or_path.with_overrides(overrides) if overrides else name_or_path
+    params = {k[len("param."):]: (parse_value(v) if isinstance(v, str) else v)
+              for k, v in overrides.items() if k.startswith("param.")}
+    rest = {k: v for k, v in overrides.items() if not k.startswith("param.")}
+    name = str(name_or_path)
+    if name in SCENARIOS:
+        doc, source = builtin_scenario_document(name, params), name
+    elif name.endswith(".toml") or Path(name).exists():
+        if params:
+            raise InputError("param." + next(iter(params)),
+                             "builder parameters apply only to built-in scenarios")
+        doc, source = read_toml(name), name
+    else:
+        raise InputError("scenario", f"{name!r} is neither a built-in scenario "
+                         f"({', '.join(SCENARIOS)}) nor an existing .toml file")
+    try:
+        return Scenario.from_dict(apply_overrides(doc, rest), source)
+    except InputError as exc:
+        if not params or exc.field in rest:
+            raise
+        raise InputError(_param_fields(params), f"scenario {name!r} built with "
+                         f"{_param_text(params)} is invalid: {exc}") from None

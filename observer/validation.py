@@ -1,7 +1,13 @@
-"""Small validators that turn raw user data into float arrays or raise :class:`InputError`."""
+"""Small validators that turn raw user data into float arrays or raise :class:`InputError`.
+
+This is the model layer's validation: the scenario, the model and the stepper all import
+from here (never the other way round).
+"""
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -27,6 +33,8 @@ def as_array(field: str, value: Any, shape: tuple[int | None, ...]) -> np.ndarra
         got = "x".join(str(a) for a in arr.shape) or "scalar"
         raise InputError(field, f"wrong shape: expected {want}, got {got}")
     if not np.all(np.isfinite(arr)):
+        if arr.ndim == 0:
+            raise InputError(field, f"is NaN or infinity ({float(arr)!r})")
         bad = np.argwhere(~np.isfinite(arr))[0]
         raise InputError(field, f"contains NaN or infinity (first at index {tuple(int(i) for i in bad)})")
     return arr
@@ -104,3 +112,143 @@ def check_psd(field: str, A: np.ndarray) -> None:
     scale = max(abs(lo), abs(hi), 1.0e-300)
     if lo < -PSD_RTOL * scale:
         raise InputError(field, f"matrix is not positive semi-definite (smallest eigenvalue {lo:.3g})")
+
+
+def _bandwidth(A: np.ndarray) -> int:
+    i, j = np.nonzero(A)
+    return int(np.max(np.abs(i - j))) if i.size else 0
+
+
+def _to_band(S: np.ndarray, bw: int) -> np.ndarray:
+    band = np.zeros((bw + 1, S.shape[0]))
+    for d in range(bw + 1):
+        band[d, :S.shape[0] - d] = np.diagonal(S, -d)
+    return band
+
+
+W_SV_RTOL = float(np.sqrt(np.finfo(float).eps))
+"""Smallest accepted σ_min(W)/σ_max(W) (√ε ≈ 1.5e-8). The contact problems work with Delassus
+matrices ``W_AᵀÂ⁻¹W_A``, which square W's conditioning: below √ε they are numerically singular
+(cond ≥ 1/ε) and the complementarity residual cannot be held (measured: σ_min/σ_max = 1e-9 on
+``double_mass`` with a second contact fails the reference solver's residual at step 0)."""
+
+PROJECTION_COND_MAX = 1e-6 / float(np.finfo(float).eps)
+"""Largest accepted cond(L) of the projection metric ``L = WᵀK⁻¹W`` (≈ 4.5e9): the multiplier
+``Σ_I = −L_I⁻¹g_I`` of eqs. (13)-(14) is then computed with a relative error of at most
+cond(L_I)·ε ≤ 1e-6 on every active set I (cond(L_I) ≤ cond(L), Cauchy interlacing)."""
+
+
+def singular_value_range(W: np.ndarray) -> tuple[float, float]:
+    """Smallest and largest singular value of W (n×m, m ≤ n); (0, 1) when m > n.
+
+    Dense SVD up to m = 512; beyond, from the extreme eigenvalues of WᵀW (banded, O(m·bw²)).
+    """
+    n, m = W.shape
+    if m > n:
+        return 0.0, 1.0
+    if m <= 512:
+        sv = np.linalg.svd(W, compute_uv=False)
+        return float(sv[-1]), float(sv[0])
+    lo, hi = extreme_eigenvalues(W.T @ W)
+    return float(np.sqrt(max(lo, 0.0))), float(np.sqrt(max(hi, 0.0)))
+
+
+def check_independent_columns(field: str, W: np.ndarray) -> tuple[float, float]:
+    """Raise unless the columns of W are independent with σ_min/σ_max > :data:`W_SV_RTOL`.
+
+    Returns (σ_min, σ_max).
+    """
+    sv_min, sv_max = singular_value_range(W)
+    if W.shape[1] > W.shape[0] or sv_min <= 0.0:
+        raise InputError(field, f"columns are not linearly independent (smallest singular value "
+                         f"{sv_min:.3g}, {W.shape[1]} columns in dimension {W.shape[0]})")
+    if sv_min <= W_SV_RTOL * sv_max:
+        raise InputError(field, f"columns are nearly dependent: σ_min/σ_max = {sv_min / sv_max:.3g} "
+                         f"<= {W_SV_RTOL:.3g} = √ε, so the Delassus matrices WᵀÂ⁻¹W (cond "
+                         f"≈ {(sv_max / sv_min) ** 2:.3g}) are numerically singular")
+    return sv_min, sv_max
+
+
+def projection_condition(K: np.ndarray, W: np.ndarray,
+                         k_range: tuple[float, float] | None = None) -> float:
+    """Condition number of ``L = WᵀK⁻¹W`` (K ≻ 0), or an upper bound of it below the threshold.
+
+    First the bound ``cond(L) ≤ cond(K)·cond(W)²``; if it is at most
+    :data:`PROJECTION_COND_MAX` it is returned, otherwise L is formed (banded Cholesky of K
+    for large narrowly banded K) and its exact condition number returned.
+    """
+    lo_k, hi_k = k_range if k_range is not None else extreme_eigenvalues(K)
+    if not lo_k > 0.0:
+        return float("inf")
+    sv_min, sv_max = singular_value_range(W)
+    if sv_min <= 0.0:
+        return float("inf")
+    bound = (hi_k / lo_k) * (sv_max / sv_min) ** 2
+    if bound <= PROJECTION_COND_MAX:
+        return float(bound)
+    n = K.shape[0]
+    try:
+        bw = _bandwidth(K)
+        if n >= BANDED_EIG_MIN_N and bw <= n // 8:
+            KinvW = sla.cho_solve_banded((sla.cholesky_banded(_to_band(0.5 * (K + K.T), bw), lower=True),
+                                          True), W)
+        else:
+            KinvW = sla.cho_solve(sla.cho_factor(0.5 * (K + K.T)), W)
+    except np.linalg.LinAlgError:
+        return float("inf")
+    L = W.T @ KinvW
+    lo, hi = extreme_eigenvalues(0.5 * (L + L.T))
+    return float(hi / lo) if lo > 0.0 else float("inf")
+
+
+def check_step_parameters(h: Any, theta: Any) -> tuple[float, float]:
+    """Validate the step size h > 0 and the Moreau–Jean θ ∈ [½, 1]; return them as floats.
+
+    Raises
+    ------
+    InputError
+        Naming ``simulation.h`` or ``simulation.theta``.
+    """
+    h = as_scalar("simulation.h", h, positive=True)
+    theta = as_scalar("simulation.theta", theta, low=0.5, high=1.0)
+    return h, theta
+
+
+def check_output_path(field: str, path: Any, suffixes: tuple[str, ...]) -> Path:
+    """Validate an output file path before any work is done; return it as a :class:`Path`.
+
+    The suffix must be one of ``suffixes`` (case-insensitive), the path must not be an
+    existing directory, and its nearest existing ancestor must be a writable directory
+    (missing parent directories are created by the writers).
+    """
+    if not isinstance(path, (str, Path)) or not str(path).strip():
+        raise InputError(field, f"expected a file path, got {path!r}")
+    p = Path(path)
+    if p.suffix.lower() not in suffixes:
+        raise InputError(field, f"unsupported file type {p.suffix or '(none)'!r} of {str(p)!r}; "
+                         f"use one of {', '.join(suffixes)}")
+    if p.is_dir():
+        raise InputError(field, f"{str(p)!r} is a directory")
+    parent = p.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise InputError(field, f"cannot create {str(p)!r}: {str(parent)!r} is not a directory")
+    if parent == p.parent:
+        _probe_writable(field, p)
+    elif not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError(field, f"cannot write {str(p)!r}: directory {str(parent)!r} is not writable")
+    return p
+
+
+def _probe_writable(field: str, p: Path) -> None:
+    """Open ``p`` for appending (removing it again if it did not exist): the one test of
+    writability that also holds for root and for read-only or virtual file systems."""
+    existed = p.exists()
+    try:
+        with p.open("ab"):
+            pass
+    except OSError as exc:
+        raise InputError(field, f"cannot write {str(p)!r}: {exc.strerror or exc}") from None
+    if not existed:
+        p.unlink()
