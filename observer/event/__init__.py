@@ -1,0 +1,18 @@
+"""Exact event-driven integration (issue 11): exact flow between events, certified event
+isolation, impacts through the time-stepping impact laws, persistent contact, Zeno.
+
+- :mod:`observer.event.flow`: the exact flow (augmented matrix exponential) per active set;
+- :mod:`observer.event.roots`: certified isolation of the first zero of a gap or force;
+- :mod:`observer.event.master`: the master's event loop, :func:`run_master`.
+"""
+
+from observer.event.flow import Flow, flow_for
+
+__all__ = ["Flow", "flow_for", "run_master", "MasterEventResult"]
+
+
+def __getattr__(name):
+    if name in ("run_master", "MasterEventResult"):
+        from observer.event import master
+        return getattr(master, name)
+    raise AttributeError(name)

@@ -1,0 +1,450 @@
+"""The master's exact event-driven integration (issue 11): impacts, grazing, persistent contact, Zeno.
+
+Between events the master follows the exact flow of :mod:`observer.event.flow` for its
+current persistent-contact set I; the next event is the first zero, isolated by
+:func:`observer.event.roots.first_zero` (it cannot be missed), of
+
+* a gap g_j of an open contact (paper eq. (2)): a **cross** is an impact, a **touch**
+  (double root within round-off) a graze;
+* a force λ_i of a closed contact: a cross is a **lift-off**.
+
+Impacts go through the impact laws of time-stepping (:func:`observer.impact.impact`:
+generalized Newton, eq. (5), or Poisson, eq. (6)) with the Delassus matrix
+``G = W_Aᵀ M⁻¹ W_A`` of the closed set A, which holds every contact that is closed at
+the impact instant (simultaneous impacts: the multi-contact law). After an impact the
+contacts with ``γ⁺ = 0`` (within round-off) enter persistent contact if the
+acceleration LCP ``0 ≤ λ ⊥ γ̇ = G λ + γ̇_free ≥ 0`` gives them a positive force.
+
+Zeno: a run of impacts of one contact whose intervals shrink geometrically (consecutive
+ratios equal within :data:`ZENO_RATIO_SPREAD`) is stopped once the impact velocity has
+fallen by :data:`ZENO_VELOCITY_RATIO` (or the intervals reach the time resolution); the
+accumulation time ``t_∞ = t_k + Δ_k ρ/(1 − ρ)`` is extrapolated from the last ratio ρ
+(exact for a constant contact acceleration, THEORY §7.1), the state is carried to t_∞
+by the constrained flow, and the contact switches to persistent contact there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from observer.contact import get_solver
+from observer.event.flow import Flow, flow_for
+from observer.event.roots import RootIsolationError, first_zero, tolerance
+from observer.impact import ImpactLaw, impact
+from observer.scenario import Scenario
+
+CONTACT_TOL = 1e3
+"""A contact counts as closed (simultaneous impact, persistent contact) when |g| and the
+relevant velocity are within CONTACT_TOL × their round-off tolerance
+(:func:`observer.event.roots.tolerance`)."""
+
+INITIAL_GAP_RTOL = 1e-9
+"""At t0, |g_j| ≤ INITIAL_GAP_RTOL·max(1, Σ|r_j z|) counts as closed (the scenario's own
+acceptance of an initial penetration, :data:`observer.scenario.INITIAL_GAP_TOL`)."""
+
+ZENO_MIN_IMPACTS = 6
+"""Impacts of one run needed before a geometric accumulation is recognised."""
+
+ZENO_RATIO_SPREAD = 0.02
+"""Largest difference of the last two interval ratios Δ_k/Δ_{k−1} of a geometric run."""
+
+ZENO_VELOCITY_RATIO = 1e-9
+"""A geometric run is extrapolated once |γ⁻| has fallen below this fraction of its first value."""
+
+ZENO_MIN_INTERVAL = 1e-11
+"""... or once an interval is below this fraction of max(1, t) (the time resolution)."""
+
+EVENT_KINDS = ("impact", "graze", "stick", "liftoff", "accumulation")
+EVENT_COLUMNS = ["time", "contact", "kind", "gamma_minus", "gamma_plus", "impulse"]
+
+
+@dataclass
+class MasterEventResult:
+    """Result of :func:`run_master`.
+
+    Attributes
+    ----------
+    frame : DataFrame
+        The exact solution on ``t_k = k·h``: ``t, q0.., u0.., g0.., P0.., active0..``
+        (``P_j``: impulse of contact j in ``(t_{k−1}, t_k]``, impacts plus ∫λ dt;
+        ``active_j``: contact j closed at some instant of ``(t_{k−1}, t_k]``, row 0 at t0).
+    events : DataFrame
+        One row per event and contact: ``time, contact, kind, gamma_minus, gamma_plus, impulse``.
+    status : str
+        ``"ok"`` or ``"stopped: <reason>"`` (the frame is NaN after the stop).
+    closings, openings : list of ndarray
+        Per contact, the times it closes and opens again (χ_j = 1 on each
+        ``[closing, opening]``; an impact or graze is a zero-length interval; ``inf``:
+        still closed at t_end). The unresolved impacts of a Zeno tail (between the last
+        resolved impact and t_∞) are not listed; the tail is in :attr:`zeno`.
+    zeno : list of dict
+        Per accumulation: ``contact, t_inf, impacts_resolved, tail_time, tail_impulse, ratio``.
+    """
+
+    scenario: Scenario
+    h: float
+    t_end: float
+    frame: pd.DataFrame
+    events: pd.DataFrame
+    status: str
+    closings: list
+    openings: list
+    zeno: list = field(default_factory=list)
+
+    def intervals(self, j: int) -> np.ndarray:
+        """Closed intervals ``[closing, opening]`` of contact j, shape (k, 2)."""
+        return np.column_stack([self.closings[j], self.openings[j]]) if len(self.closings[j]) \
+            else np.zeros((0, 2))
+
+    def impact_times(self, j: int | None = None) -> np.ndarray:
+        """Times of the impacts (of contact j, or of any contact), in order."""
+        ev = self.events[self.events["kind"] == "impact"]
+        if j is not None:
+            ev = ev[ev["contact"] == j]
+        return np.unique(ev["time"].to_numpy())
+
+
+class _Run:
+    """Mutable state of one master run (the event loop's bookkeeping)."""
+
+    def __init__(self, scenario: Scenario, h: float, t_end: float, max_events: int,
+                 zeno_velocity_ratio: float) -> None:
+        self.sc = scenario
+        self.system = scenario.system
+        self.law: ImpactLaw = scenario.law
+        self.solve = get_solver(scenario.solver, field="simulation.solver").solve
+        self.n, self.m = self.system.n, self.system.m
+        self.h, self.t_end = h, t_end
+        self.max_events = max_events
+        self.zeno_velocity_ratio = zeno_velocity_ratio
+        count = int(np.floor(t_end / h + 1e-9)) + 1
+        self.t_grid = h * np.arange(count)
+        self.X = np.full((count, 2 * self.n), np.nan)
+        self.P = np.zeros((count, self.m))
+        self.k_next = 0
+        self.events: list[tuple] = []
+        self.closed_since: dict[int, float] = {}
+        self.intervals: list[list[tuple[float, float]]] = [[] for _ in range(self.m)]
+        self.zeno: list[dict] = []
+        self.history: dict[int, list[tuple[float, float]]] = {}
+        self.free_flow = flow_for(self.system, ())
+        self.Minv = self.free_flow.Minv
+
+    # -- sampling --------------------------------------------------------------------------
+    def fill(self, flow: Flow, t_a: float, x_a: np.ndarray, t_b: float, include_end: bool) -> None:
+        """Samples of the grid in ``[t_a, t_b)`` (``]`` with include_end) from the flow out of
+        (t_a, x_a), and the force impulses ∫λ dt of the persistent set per sample interval."""
+        tg, k = self.t_grid, self.k_next
+        forced = list(flow.active)
+        t_cur, z_cur = t_a, flow.z(t_a, x_a)
+        first = True
+        while k < tg.size and (tg[k] < t_b or (include_end and tg[k] <= t_b)):
+            dt = tg[k] - t_cur if first else self.h          # h: one cached exponential
+            z_new = flow.expm(dt) @ z_cur
+            z_new[2 * self.n:-1] = flow.oscillators(tg[k])
+            z_new[-1] = 1.0
+            self.X[k] = z_new[:2 * self.n]
+            if forced:
+                self.P[k, forced] += flow.force_rows @ (flow.phi(dt) @ z_cur)
+            t_cur, z_cur, first = tg[k], z_new, False
+            k += 1
+        if forced and k < tg.size and t_b > t_cur:
+            self.P[k, forced] += flow.force_rows @ (flow.phi(t_b - t_cur) @ z_cur)
+        self.k_next = k
+
+    def add_impulse(self, t: float, contacts, impulse) -> None:
+        """Add an impulse at time t to the sample interval ``(t_{k−1}, t_k]`` holding t."""
+        k = int(np.searchsorted(self.t_grid, t, side="left"))
+        if k < self.t_grid.size:
+            self.P[k, list(contacts)] += impulse
+
+    # -- bookkeeping -----------------------------------------------------------------------
+    def event(self, t, j, kind, gm, gp, imp) -> None:
+        self.events.append((float(t), int(j), kind, float(gm), float(gp), float(imp)))
+
+    def close(self, j: int, t: float) -> None:
+        self.closed_since.setdefault(j, t)
+
+    def open(self, j: int, t: float) -> None:
+        self.intervals[j].append((self.closed_since.pop(j, t), t))
+
+    def touch(self, j: int, t: float) -> None:
+        if j not in self.closed_since:
+            self.intervals[j].append((t, t))
+
+    # -- contact mechanics -----------------------------------------------------------------
+    def delassus(self, idx) -> np.ndarray:
+        W = self.system.W[:, list(idx)]
+        return W.T @ self.Minv @ W
+
+    def sticking(self, t: float, x: np.ndarray, cand: list[int]) -> list[int]:
+        """Contacts of ``cand`` (g = γ = 0) that keep a positive force: the acceleration LCP
+        ``0 ≤ λ ⊥ G λ + γ̇_free ≥ 0`` on cand."""
+        if not cand:
+            return []
+        z = self.free_flow.z(t, x)
+        rows = self.free_flow.velocity_rows @ self.free_flow.A
+        b = rows[cand] @ z
+        lam = self.solve(self.delassus(cand), b).x
+        tol = CONTACT_TOL * tolerance(rows[cand], z)
+        G = self.delassus(cand)
+        scale = np.abs(G) @ np.abs(lam) + tol
+        return [c for c, l, s in zip(cand, lam, scale) if l > CONTACT_TOL * 1e-13 * s]
+
+    def project(self, t: float, x: np.ndarray, idx: list[int]) -> np.ndarray:
+        """M-metric projection of (q, u) onto g_idx = 0, γ_idx = 0 (a round-off correction)."""
+        if not idx:
+            return x
+        n = self.n
+        W = self.system.W[:, idx]
+        G = self.delassus(idx)
+        g = self.free_flow.gaps(t, x)[idx]
+        gam = self.free_flow.velocities(t, x)[idx]
+        x = x.copy()
+        x[:n] -= self.Minv @ W @ np.linalg.solve(G, g)
+        x[n:] -= self.Minv @ W @ np.linalg.solve(G, gam)
+        return x
+
+    def collide(self, t: float, x: np.ndarray, persistent: tuple, trigger: set[int]):
+        """Impact at t on every closed contact; returns (x⁺, new persistent set, impact set)."""
+        fl = self.free_flow
+        z = fl.z(t, x)
+        g, gam = fl.gap_rows @ z, fl.velocity_rows @ z
+        tol_g = CONTACT_TOL * tolerance(fl.gap_rows, z)
+        tol_v = CONTACT_TOL * tolerance(fl.velocity_rows, z)
+        closing = {j for j in range(self.m) if abs(g[j]) <= tol_g[j] and gam[j] < tol_v[j]}
+        A = sorted(set(persistent) | set(trigger) | closing)
+        idx = np.array(A, dtype=int)
+        G = self.delassus(A)
+        gm = gam[idx]
+        lam = impact(self.law, G, gm, idx, self.solve) if np.any(gm < 0.0) else np.zeros(len(A))
+        lam = np.maximum(lam, 0.0)
+        x = x.copy()
+        x[self.n:] += self.Minv @ self.system.W[:, A] @ lam
+        gp = fl.velocities(t, x)[idx]
+        cand = [c for c, v in zip(A, gp) if v <= tol_v[c]]
+        stick = self.sticking(t, x, cand)
+        x = self.project(t, x, stick)
+        gp = fl.velocities(t, x)[idx]
+        for c, a, b, l in zip(A, gm, gp, lam):
+            if c in persistent:
+                if c not in stick:
+                    self.event(t, c, "liftoff", a, b, l)
+                    self.open(c, t)
+                elif l > 0.0:
+                    self.event(t, c, "impact", a, b, l)
+                continue
+            self.event(t, c, "impact" if a < -tol_v[c] else "graze", a, b, l)
+            if c in stick:
+                self.event(t, c, "stick", b, b, 0.0)
+                self.close(c, t)
+            else:
+                self.touch(c, t)
+        self.add_impulse(t, A, lam)
+        return x, tuple(stick), A, gm, lam
+
+    # -- Zeno ------------------------------------------------------------------------------
+    def zeno_check(self, j: int, t: float, gm: float, v_plus: float) -> float | None:
+        """Accumulation time t_∞ if contact j's impact run is geometric and resolved enough."""
+        hist = self.history.setdefault(j, [])
+        hist.append((t, abs(gm)))
+        if len(hist) < ZENO_MIN_IMPACTS:
+            return None
+        T = np.array([p[0] for p in hist[-4:]])
+        d = np.diff(T)
+        if np.any(d <= 0.0):
+            return None
+        r1, r2 = d[1] / d[0], d[2] / d[1]
+        if not (0.0 < r2 < 1.0 and 0.0 < r1 < 1.0 and abs(r2 - r1) <= ZENO_RATIO_SPREAD):
+            del hist[:-3]                      # not geometric: a new run starts
+            return None
+        v0 = hist[0][1]
+        if abs(gm) > self.zeno_velocity_ratio * v0 and d[2] > ZENO_MIN_INTERVAL * max(1.0, abs(t)):
+            return None
+        return t + d[2] * r2 / (1.0 - r2)
+
+    def accumulate(self, j: int, t: float, x: np.ndarray, persistent: tuple, t_inf: float,
+                   gm: float):
+        """Carry the state to the accumulation time t_∞ and switch j to persistent contact."""
+        hist = self.history.pop(j)
+        d = np.diff([p[0] for p in hist[-3:]])
+        ratio = d[1] / d[0]
+        setp = tuple(sorted(set(persistent) | {j}))
+        xp = self.project(t, x, list(setp))
+        flow = flow_for(self.system, setp)
+        self.fill(flow, t, xp, min(t_inf, self.t_end), include_end=t_inf >= self.t_end)
+        if t_inf >= self.t_end:
+            return None
+        x_inf = self.project(t_inf, flow.state(t, xp, t_inf - t), list(setp))
+        G = self.delassus([j])[0, 0]
+        e = float(self.law.restitution[j])
+        tail_impulse = (1.0 + e) * abs(gm) * ratio / (1.0 - ratio) / G
+        self.event(t_inf, j, "accumulation", -abs(gm) * ratio, 0.0, tail_impulse)
+        self.add_impulse(t_inf, [j], tail_impulse)
+        self.zeno.append({"contact": j, "t_inf": t_inf, "impacts_resolved": len(hist),
+                          "tail_time": t_inf - t, "tail_impulse": tail_impulse, "ratio": ratio})
+        stick = self.sticking(t_inf, x_inf, list(setp))
+        for c in setp:
+            if c in stick:
+                if c not in persistent:
+                    self.event(t_inf, c, "stick", 0.0, 0.0, 0.0)
+                self.close(c, t_inf)
+            elif c in persistent:
+                self.event(t_inf, c, "liftoff", 0.0, 0.0, 0.0)
+                self.open(c, t_inf)
+            else:
+                self.touch(c, t_inf)
+        return self.project(t_inf, x_inf, stick), tuple(stick)
+
+
+def run_master(scenario: Scenario, h: float | None = None, t_end: float | None = None,
+               max_events: int = 100_000,
+               zeno_velocity_ratio: float = ZENO_VELOCITY_RATIO) -> MasterEventResult:
+    """Exact event-driven run of the master of ``scenario`` (see module docstring).
+
+    Parameters
+    ----------
+    scenario : Scenario
+    h : float, optional
+        Output step of the sampled frame (default: the scenario's h).
+    t_end : float, optional
+        End time (default: the scenario's).
+    max_events : int
+        Hard cap on the number of events; reaching it stops the run with status
+        ``"stopped: event cap …"``.
+    zeno_velocity_ratio : float
+        See :data:`ZENO_VELOCITY_RATIO`.
+    """
+    h = float(scenario.h if h is None else h)
+    t_end = float(scenario.t_end if t_end is None else t_end)
+    run = _Run(scenario, h, t_end, max_events, zeno_velocity_ratio)
+    status = "ok"
+    t = 0.0
+    x = np.concatenate([scenario.q0, scenario.u0]).astype(float)
+    persistent = _initial_contacts(run, x)
+    x, persistent = persistent
+    certified: dict[tuple[str, int], float] = {}
+    n_events = 0
+    while True:
+        flow = flow_for(run.system, persistent)
+        free = [j for j in range(run.m) if j not in persistent]
+        rows = np.vstack([flow.gap_rows[free], flow.force_rows])
+        keys = [("g", j) for j in free] + [("f", j) for j in persistent]
+        cert = {i: certified[k] for i, k in enumerate(keys) if k in certified}
+        try:
+            zero, t_stop, _ = first_zero(flow, rows, t, flow.z(t, x), t_end, cert)
+        except RootIsolationError as exc:
+            status = f"stopped: {exc}"
+            break
+        if zero is None:
+            run.fill(flow, t, x, t_end, include_end=True)
+            break
+        run.fill(flow, t, x, zero.t, include_end=False)
+        t, x = zero.t, flow.x_of(zero.z)
+        kind, j = keys[zero.index]
+        n_events += 1
+        if n_events > max_events:
+            status = f"stopped: event cap {max_events} reached at t = {t:.17g}"
+            break
+        if zero.kind == "touch":                      # graze of a gap, or a force touching 0
+            certified[(kind, j)] = zero.resume
+            if kind == "g":
+                gam = flow.velocities(t, x)[j]
+                run.event(t, j, "graze", gam, gam, 0.0)
+                run.touch(j, t)
+            continue
+        certified = {}
+        if kind == "f":                                # lift-off: the force of j crosses zero
+            x, persistent, cert_new = _liftoff(run, t, x, persistent, j)
+            run.history.clear()
+            certified.update(cert_new)
+            continue
+        x, new_persistent, A, gm, lam = run.collide(t, x, persistent, {j})
+        if A == [j] and not persistent and not new_persistent:
+            v_plus = run.free_flow.velocities(t, x)[j]
+            t_inf = run.zeno_check(j, t, gm[0], v_plus)
+            if t_inf is not None:
+                out = run.accumulate(j, t, x, persistent, t_inf, gm[0])
+                if out is None:
+                    t = t_end
+                    break
+                x, new_persistent = out
+                t = t_inf
+        else:
+            run.history.clear()
+        persistent = new_persistent
+    if status == "ok" and run.k_next < run.t_grid.size:
+        status = "stopped: sampling incomplete"
+    return _result(run, scenario, status)
+
+
+def _initial_contacts(run: _Run, x: np.ndarray):
+    """Closed contacts at t0: an impact if approaching, persistent contact if the force is positive."""
+    fl = run.free_flow
+    z = fl.z(0.0, x)
+    g = fl.gap_rows @ z
+    scale = np.abs(fl.gap_rows) @ np.abs(z)
+    closed = {j for j in range(run.m) if abs(g[j]) <= INITIAL_GAP_RTOL * max(1.0, scale[j])}
+    if not closed:
+        return x, ()
+    qfix = x.copy()
+    idx = sorted(closed)
+    W = run.system.W[:, idx]
+    qfix[:run.n] -= run.Minv @ W @ np.linalg.solve(run.delassus(idx), g[idx])
+    x_new, stick, *_ = run.collide(0.0, qfix, (), set(idx))
+    return x_new, stick
+
+
+def _liftoff(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int):
+    """Contact j's force crossed zero: re-solve the acceleration LCP without j; j opens."""
+    rest = [c for c in persistent if c != j]
+    stick = run.sticking(t, x, rest)
+    leaving = [c for c in persistent if c not in stick]
+    for c in leaving:
+        run.event(t, c, "liftoff", 0.0, 0.0, 0.0)
+        run.open(c, t)
+    new = tuple(stick)
+    x = run.project(t, x, list(new))
+    # the gap of a lifting contact starts as g ≈ γ ≈ γ̇ ≈ 0 < γ̈: certify its cubic rise
+    flow = flow_for(run.system, new)
+    z = flow.z(t, x)
+    cert = {}
+    for c in leaving:
+        r = flow.gap_rows[c]
+        d3 = float(r @ np.linalg.matrix_power(flow.A, 3) @ z)
+        tol = float(CONTACT_TOL * tolerance(r[None, :], z)[0])
+        if d3 > 0.0:
+            cert[("g", c)] = t + (24.0 * tol / d3) ** (1.0 / 3.0)
+    return x, new, cert
+
+
+def _result(run: _Run, scenario: Scenario, status: str) -> MasterEventResult:
+    n, m = run.n, run.m
+    t_grid = run.t_grid
+    for j, since in list(run.closed_since.items()):
+        run.intervals[j].append((since, np.inf))
+    active = np.zeros((t_grid.size, m), dtype=np.int8)
+    for j in range(m):
+        for c, o in run.intervals[j]:
+            k0 = int(np.searchsorted(t_grid, c, side="left"))
+            k1 = int(np.searchsorted(t_grid, o, side="left")) if np.isfinite(o) else t_grid.size - 1
+            active[k0:min(k1, t_grid.size - 1) + 1, j] = 1
+    Q, U = run.X[:, :n], run.X[:, n:]
+    G = Q @ run.system.W + run.system.nu(t_grid)
+    cols: dict[str, np.ndarray] = {"t": t_grid}
+    for name, arr, width in (("q", Q, n), ("u", U, n), ("g", G, m), ("P", run.P, m)):
+        for j in range(width):
+            cols[f"{name}{j}"] = arr[:, j]
+    for j in range(m):
+        cols[f"active{j}"] = active[:, j]
+    frame = pd.DataFrame(cols)
+    frame.attrs.update({"scenario": scenario.name, "integrator": "event", "h": run.h,
+                        "t_end": run.t_end, "status": status})
+    events = pd.DataFrame(run.events, columns=EVENT_COLUMNS)
+    closings = [np.array([c for c, _ in iv]) for iv in run.intervals]
+    openings = [np.array([o for _, o in iv]) for iv in run.intervals]
+    return MasterEventResult(scenario, run.h, run.t_end, frame, events, status, closings,
+                             openings, run.zeno)
