@@ -1,0 +1,446 @@
+"""The bad-input matrix (issue 12, item 1): every malformed input is refused cleanly.
+
+Each row of :data:`CASES` is one malformed input: a scenario document edit, a builder
+parameter (``param.*``), a call of the Python API, a command-line option, an output path or
+a closing log (χ) CSV. For every row
+
+* the Python route raises :class:`observer.errors.InputError` whose ``field`` is the
+  offending field and whose message says what is wrong (a ``hint``);
+* the command-line route (where there is one) returns exit status 2 with exactly one line
+  on stderr, ``error: FIELD: ...``, no traceback, and writes no result file (so no result,
+  and no NaN in one, ever reaches the user).
+
+The command line runs in-process through :func:`observer.cli.main` (fast); a few rows run
+in a real subprocess to show that the interpreter prints no traceback either.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import pytest
+
+import observer
+from observer import cli
+from observer.errors import InputError
+from observer.model import Harmonic, LinearSystem
+from observer.scenario import load_scenario
+from observer.scenarios import builtin_document
+from observer.switching import read_log
+from observer.tomlio import dumps
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = "{tmp}/out.csv"
+"""Result path of the command-line runs; it must not exist after a refused run."""
+
+NEARLY_DEPENDENT_W = {"system.W": "[[1.0, 1.0], [0.0, 1e-9]]", "system.gap.offset": "[0.25, 0.25]"}
+"""σ_min/σ_max = 5e-10 (the issue's case; accepted before, since the check was 1e-12)."""
+
+K_METRIC_DEPENDENT_W = {"system.W": "[[1.0, 1.0], [0.0, 1e-6]]", "system.gap.offset": "[0.25, 0.26]"}
+"""σ_min/σ_max = 5e-7 (fine for the contact problems) but cond(WᵀK⁻¹W) ≈ 1e13 (the jump
+observer's projection metric)."""
+
+SINGULAR_K = {"system.K": "[[100.0, -100.0], [-100.0, 100.0]]"}
+"""PSD but singular: fine for the master and the no-jump observer, not for K-metric jumps."""
+
+
+@dataclass(frozen=True)
+class Bad:
+    """One malformed input: its Python route, its command line, the field and a hint."""
+
+    id: str
+    field: str
+    hint: str
+    call: Callable[[Path], Any] | None = None
+    argv: list[str] | None = None
+    cli_field: str | None = None     # the field the CLI names when it differs (argparse errors)
+    files: dict[str, str | bytes] = field(default_factory=dict)   # written to tmp first
+    kind: str = "api"                # doc, param, api, cli, log, out: where the input comes from
+
+
+def _set_args(overrides: dict[str, str]) -> list[str]:
+    return [a for k, v in overrides.items() for a in ("--set", f"{k}={v}")]
+
+
+def doc_case(id: str, overrides: dict[str, str], fld: str, hint: str, *,
+             observers: str | None = None) -> Bad:
+    """A TOML-document edit of ``double_mass`` (values are TOML text, as on the CLI)."""
+    obs = ["--observers", observers] if observers else []
+    if observers:
+        def call(tmp):
+            return observer.simulate(load_scenario("double_mass", overrides),
+                                     observers=observers.split(","), t_end=0.01)
+    else:
+        def call(tmp):
+            return load_scenario("double_mass", overrides)
+    argv = ["run", "double_mass", *_set_args(overrides), *obs, "--t-end", "0.01", "--out", OUT]
+    return Bad(id, fld, hint, call, argv, kind="doc")
+
+
+def param_case(id: str, scenario: str, overrides: dict[str, str], fld: str, hint: str, *,
+               observers: str | None = None) -> Bad:
+    """A builder parameter of a built-in scenario."""
+    def call(tmp):
+        sc = load_scenario(scenario, overrides)
+        if observers:
+            return observer.simulate(sc, observers=observers.split(","), t_end=0.01)
+        return sc
+    obs = ["--observers", observers] if observers else []
+    return Bad(id, fld, hint, call, ["run", scenario, *_set_args(overrides), *obs, "--out", OUT],
+               kind="param")
+
+
+def toml_case(id: str, edit: Callable[[dict], None], fld: str, hint: str) -> Bad:
+    """A scenario file written from ``double_mass``'s document after ``edit``."""
+    doc = builtin_document("double_mass")
+    edit(doc)
+    return Bad(id, fld, hint, lambda tmp: load_scenario(str(tmp / "case.toml")),
+               ["run", "{tmp}/case.toml", "--out", OUT], files={"case.toml": dumps(doc)}, kind="doc")
+
+
+def run_case(id: str, kwargs: dict, fld: str, hint: str, argv_opts: list[str] | None = None,
+             cli_field: str | None = None) -> Bad:
+    """A keyword of :func:`observer.simulate` and its command-line option."""
+    argv = None if argv_opts is None else ["run", "double_mass", "--t-end", "0.01", *argv_opts,
+                                           "--out", OUT]
+    return Bad(id, fld, hint, lambda tmp: observer.simulate("double_mass", **{"t_end": 0.01, **kwargs}),
+               argv, cli_field, kind="cli")
+
+
+LOG_OK = "contact,t_close,t_open\n0,0.001,0.002\n"
+
+
+def log_case(id: str, content: str | bytes, hint: str) -> Bad:
+    """A closing log CSV for ``--source log`` (double_mass has one contact)."""
+    return Bad(id, "observer.log", hint, lambda tmp: read_log(tmp / "log.csv", 1),
+               ["run", "double_mass", "--observers", "jump", "--source", "log", "--log",
+                "{tmp}/log.csv", "--t-end", "0.01", "--out", OUT], files={"log.csv": content}, kind="log")
+
+
+def out_case(id: str, argv: list[str], hint: str, files: dict | None = None) -> Bad:
+    """An unwritable or unsupported output path (checked before any work is done)."""
+    return Bad(id, "--out", hint, None, argv, files=files or {}, kind="out")
+
+
+def _harmonic(dim):
+    return Harmonic.build("f", dim)
+
+
+def _system(**kw):
+    args = dict(M=np.eye(2), C=np.zeros((2, 2)), K=np.eye(2), W=[[1.0], [0.0]], forcing=_harmonic(2),
+                gap=_harmonic(1))
+    args.update(kw)
+    return LinearSystem(**args)
+
+
+def _del(dotted):
+    def edit(doc):
+        *path, last = dotted.split(".")
+        node = doc
+        for p in path:
+            node = node[p]
+        del node[last]
+    return edit
+
+
+def _put(dotted, value):
+    def edit(doc):
+        *path, last = dotted.split(".")
+        node = doc
+        for p in path:
+            node = node.setdefault(p, {})
+        node[last] = value
+    return edit
+
+
+CASES: list[Bad] = [
+    # --- scenario document: matrices -----------------------------------------------------
+    doc_case("M-wrong-shape", {"system.M": "[[1.0, 0.0]]"}, "system.M", "square"),
+    doc_case("M-non-symmetric", {"system.M": "[[1.0, 0.5], [0.0, 1.0]]"}, "system.M", "not symmetric"),
+    doc_case("M-indefinite", {"system.M": "[[1.0, 0.0], [0.0, -1.0]]"}, "system.M", "positive definite"),
+    doc_case("M-near-singular", {"system.M": "[[1.0, 0.0], [0.0, 1e-17]]"}, "system.M",
+             "positive definite"),
+    doc_case("M-nan", {"system.M": "[[nan, 0.0], [0.0, 1.0]]"}, "system.M", "NaN"),
+    doc_case("M-text", {"system.M": '"heavy"'}, "system.M", "not a numeric array"),
+    doc_case("C-non-symmetric", {"system.C": "[[1.0, -1.0], [0.0, 2.0]]"}, "system.C", "not symmetric"),
+    doc_case("C-indefinite", {"system.C": "[[1.0, 0.0], [0.0, -1.0]]"}, "system.C", "semi-definite"),
+    doc_case("C-inf", {"system.C": "[[inf, 0.0], [0.0, 1.0]]"}, "system.C", "NaN or infinity"),
+    doc_case("K-indefinite", {"system.K": "[[-1.0, 0.0], [0.0, 1.0]]"}, "system.K", "semi-definite"),
+    doc_case("K-non-symmetric", {"system.K": "[[100.0, -50.0], [-100.0, 200.0]]"}, "system.K",
+             "not symmetric"),
+    doc_case("K-wrong-shape", {"system.K": "[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]"},
+             "system.K", "wrong shape"),
+    doc_case("K-singular-jump", SINGULAR_K, "system.K", "positive definite", observers="jump"),
+    doc_case("K-singular-master-projection", {**SINGULAR_K, "simulation.master_projection": "true"},
+             "system.K", "positive definite"),
+    doc_case("W-wrong-rows", {"system.W": "[[1.0], [0.0], [0.0]]"}, "system.W", "wrong shape"),
+    doc_case("W-dependent", {"system.W": "[[1.0, 2.0], [0.0, 0.0]]", "system.gap.offset": "[0.25, 0.25]"},
+             "system.W", "not linearly independent"),
+    doc_case("W-nearly-dependent", NEARLY_DEPENDENT_W, "system.W", "nearly dependent"),
+    doc_case("W-nearly-dependent-jump", NEARLY_DEPENDENT_W, "system.W", "nearly dependent",
+             observers="jump"),
+    doc_case("W-K-metric-dependent-jump", K_METRIC_DEPENDENT_W, "system.W", "cond(WᵀK⁻¹W)",
+             observers="jump,nojump"),
+    doc_case("W-no-columns", {"system.W": "[[], []]"}, "system.W", "at least one contact"),
+    doc_case("W-nan", {"system.W": "[[nan], [0.0]]"}, "system.W", "NaN"),
+    # --- scenario document: signals, law, state, settings --------------------------------
+    doc_case("forcing-constant-length", {"system.forcing.constant": "[1.0, 2.0, 3.0]"},
+             "system.forcing.constant", "wrong shape"),
+    doc_case("forcing-omega-negative", {"system.forcing.omega": "-6.0"}, "system.forcing.omega", ">= 0"),
+    doc_case("forcing-amplitude-nan", {"system.forcing.amplitude": "[0.0, nan]"},
+             "system.forcing.amplitude", "NaN"),
+    doc_case("gap-offset-inf", {"system.gap.offset": "[inf]"}, "system.gap.offset", "NaN or infinity"),
+    doc_case("gap-omega-nan", {"system.gap.omega": "nan"}, "system.gap.omega", "NaN"),
+    doc_case("law-unknown", {"impact.law": '"hertz"'}, "impact.law", "hertz"),
+    doc_case("restitution-above-one", {"impact.restitution": "1.5"}, "impact.restitution", "1.5"),
+    doc_case("restitution-negative", {"impact.restitution": "-0.1"}, "impact.restitution", "-0.1"),
+    doc_case("restitution-nan", {"impact.restitution": "nan"}, "impact.restitution", "NaN"),
+    doc_case("restitution-length", {"impact.restitution": "[0.5, 0.5]"}, "impact.restitution",
+             "wrong shape"),
+    doc_case("initial-q-length", {"initial.q": "[0.0]"}, "initial.q", "wrong shape"),
+    doc_case("initial-q-penetrates", {"initial.q": "[-0.3, -0.2]"}, "initial.q", "penetrates"),
+    doc_case("initial-u-nan", {"initial.u": "[nan, 0.0]"}, "initial.u", "NaN"),
+    doc_case("h-zero", {"simulation.h": "0.0"}, "simulation.h", "> 0"),
+    doc_case("h-negative", {"simulation.h": "-1e-3"}, "simulation.h", "> 0"),
+    doc_case("h-nan", {"simulation.h": "nan"}, "simulation.h", "NaN"),
+    doc_case("h-text", {"simulation.h": "fast"}, "simulation.h", "not a numeric"),
+    doc_case("t-end-zero", {"simulation.t_end": "0.0"}, "simulation.t_end", "> 0"),
+    doc_case("t-end-inf", {"simulation.t_end": "inf"}, "simulation.t_end", "NaN or infinity"),
+    doc_case("theta-low", {"simulation.theta": "0.3"}, "simulation.theta", ">= 0.5"),
+    doc_case("theta-high", {"simulation.theta": "1.5"}, "simulation.theta", "<= 1.0"),
+    doc_case("solver-unknown", {"simulation.solver": '"gauss"'}, "simulation.solver", "gauss"),
+    doc_case("master-projection-text", {"simulation.master_projection": '"yes"'},
+             "simulation.master_projection", "true or false"),
+    doc_case("unknown-key", {"simulation.foo": "1"}, "simulation.foo", "unknown key"),
+    doc_case("unknown-table", {"extra.x": "1"}, "extra", "unknown key"),
+    doc_case("unknown-forcing-key", {"system.forcing.bogus": "1"}, "system.forcing.bogus", "unknown key"),
+    doc_case("coupling-reversed", {"observer.coupling": "[5.0, 1.0]"}, "observer.coupling", "t_off",
+             observers="nojump"),
+    doc_case("source-unknown", {"observer.source": '"radio"'}, "observer.source", "radio",
+             observers="nojump"),
+    doc_case("observers-unknown", {"observer.observers": '["kalman"]'}, "observer.observers", "kalman",
+             observers="nojump"),
+    doc_case("observer-q-length", {"observer.q": "[0.0, 0.0, 0.0]"}, "observer.q", "wrong shape",
+             observers="jump"),
+    toml_case("missing-K", _del("system.K"), "system.K", "required key is missing"),
+    toml_case("missing-simulation", _del("simulation"), "simulation.t_end", "required key is missing"),
+    toml_case("system-not-a-table", _put("impact", "newton"), "impact", "must be a table"),
+    # --- builder parameters -----------------------------------------------------------------
+    param_case("param-k1-zero-jump", "double_mass", {"param.k1": "0"}, "param.k1", "cannot be built",
+               observers="jump"),
+    param_case("param-k1-zero", "double_mass", {"param.k1": "0"}, "param.k1", "Singular"),
+    param_case("param-m1-zero", "double_mass", {"param.m1": "0"}, "param.m1", "system.M"),
+    param_case("param-m1-negative", "double_mass", {"param.m1": "-1"}, "param.m1", "positive definite"),
+    param_case("param-restitution", "double_mass", {"param.restitution": "2"}, "param.restitution",
+               "impact.restitution"),
+    param_case("param-h-zero", "bouncing_ball", {"param.h": "0"}, "param.h", "simulation.h"),
+    param_case("param-F-inf", "double_mass", {"param.F": "inf"}, "param.F", "NaN or infinity"),
+    param_case("param-law-unknown", "impact_oscillator", {"param.law": '"hertz"'}, "param.law", "hertz"),
+    param_case("param-law-number", "impact_oscillator", {"param.law": "3"}, "param.law", "string"),
+    param_case("param-unknown", "double_mass", {"param.N": "3"}, "param.N", "unknown parameter"),
+    param_case("param-N-zero", "rocking_chain", {"param.N": "0"}, "param.N", "positive"),
+    param_case("param-N-fraction", "rocking_chain", {"param.N": "2.5"}, "param.N", "integer"),
+    param_case("param-N-nan", "rocking_chain", {"param.N": "nan"}, "param.N", "NaN"),
+    param_case("param-N-text", "rocking_chain", {"param.N": "many"}, "param.N", "must be a number"),
+    # --- Python API and command-line options ------------------------------------------------
+    run_case("h-option-nan", {"h": float("nan")}, "simulation.h", "NaN", ["--h", "nan"]),
+    run_case("h-option-zero", {"h": 0.0}, "simulation.h", "> 0", ["--h", "0"]),
+    run_case("h-option-negative", {"h": -1e-4}, "simulation.h", "> 0", ["--h=-1e-4"]),
+    run_case("t-end-option-inf", {"t_end": float("inf")}, "simulation.t_end", "NaN or infinity",
+             ["--t-end", "inf"]),
+    run_case("t-end-option-negative", {"t_end": -1.0}, "simulation.t_end", "> 0", ["--t-end=-1"]),
+    run_case("theta-keyword", {"theta": 2.0}, "simulation.theta", "<= 1.0"),
+    run_case("solver-option", {"solver": "gauss"}, "simulation.solver", "gauss", ["--solver", "gauss"]),
+    run_case("observer-option", {"observers": ["kalman"]}, "observer.observers", "kalman",
+             ["--observers", "kalman"]),
+    run_case("observer-duplicate", {"observers": ["jump", "jump"]}, "observer.observers", "unique",
+             ["--observers", "jump,jump"]),
+    run_case("source-option", {"observers": ["jump"], "source": "radio"}, "observer.source", "radio",
+             ["--observers", "jump", "--source", "radio"], cli_field="argument --source"),
+    run_case("log-source-without-log", {"observers": ["jump"], "source": "log"}, "observer.log",
+             "needs a log", ["--observers", "jump", "--source", "log"]),
+    run_case("log-file-missing", {"observers": ["jump"], "source": "log", "log": "/nonexistent/log.csv"},
+             "observer.log", "not found",
+             ["--observers", "jump", "--source", "log", "--log", "/nonexistent/log.csv"]),
+    run_case("engine-option", {"engine": "gpu"}, "engine", "gpu", ["--engine", "gpu"],
+             cli_field="argument --engine"),
+    run_case("record-every-zero", {"record_every": 0}, "record_every", "positive", ["--record-every", "0"]),
+    run_case("record-every-negative", {"record_every": -3}, "record_every", "positive",
+             ["--record-every=-3"]),
+    run_case("store-option", {"store": "everything"}, "store", "everything", ["--store", "everything"],
+             cli_field="argument --store"),
+    Bad("h-option-text", "argument --h", "invalid float value", None,
+        ["run", "double_mass", "--h", "fast", "--out", OUT], kind="cli"),
+    Bad("set-without-equals", "--set", "KEY=VALUE", None,
+        ["run", "double_mass", "--set", "simulation.h", "--out", OUT], kind="cli"),
+    Bad("set-inside-value", "simulation.h.x", "non-table", lambda tmp: load_scenario(
+        "double_mass", {"simulation.h.x": 1}), ["run", "double_mass", "--set", "simulation.h.x=1",
+                                                "--out", OUT]),
+    Bad("scenario-unknown", "scenario", "neither a built-in", lambda tmp: load_scenario("no_such"),
+        ["run", "no_such", "--out", OUT]),
+    Bad("scenario-file-missing", "{tmp}/missing.toml", "file not found",
+        lambda tmp: load_scenario(str(tmp / "missing.toml")), ["run", "{tmp}/missing.toml", "--out", OUT]),
+    Bad("scenario-file-invalid-toml", "{tmp}/bad.toml", "invalid TOML",
+        lambda tmp: load_scenario(str(tmp / "bad.toml")), ["run", "{tmp}/bad.toml", "--out", OUT],
+        files={"bad.toml": "[system\nM = 1"}),
+    Bad("param-on-toml-file", "param.N", "only to built-in",
+        lambda tmp: load_scenario(str(tmp / "case.toml"), {"param.N": 3}),
+        ["run", "{tmp}/case.toml", "--set", "param.N=3", "--out", OUT],
+        files={"case.toml": dumps(builtin_document("double_mass"))}),
+    Bad("out-missing", "the following arguments are required", "--out", None, ["run", "double_mass"],
+        kind="cli"),
+    Bad("subcommand-unknown", "argument command", "invalid choice", None, ["fly"], kind="cli"),
+    Bad("api-M-not-square", "system.M", "square", lambda tmp: _system(M=np.ones((2, 3)))),
+    Bad("api-forcing-dimension", "system.forcing", "dimension", lambda tmp: _system(forcing=_harmonic(3))),
+    Bad("api-gap-dimension", "system.gap", "dimension", lambda tmp: _system(gap=_harmonic(2))),
+    Bad("api-K-nan", "system.K", "NaN", lambda tmp: _system(K=[[np.nan, 0.0], [0.0, 1.0]])),
+    Bad("api-W-object", "system.W", "not a numeric array", lambda tmp: _system(W=[[{}], [0.0]])),
+    # --- closing log (χ) CSV ------------------------------------------------------------------
+    log_case("log-empty", "", "not a readable CSV"),
+    log_case("log-missing-column", "contact,t_close\n0,0.001\n", "missing column"),
+    log_case("log-not-a-number", "contact,t_close,t_open\n0,soon,0.002\n", "not a number"),
+    log_case("log-nan", "contact,t_close,t_open\n0,nan,0.002\n", "NaN"),
+    log_case("log-inf", "contact,t_close,t_open\n0,0.001,inf\n", "NaN"),
+    log_case("log-opens-before-closing", "contact,t_close,t_open\n0,0.002,0.001\n", "t_open < t_close"),
+    log_case("log-contact-out-of-range", "contact,t_close,t_open\n3,0.001,0.002\n", "unknown contact index"),
+    log_case("log-contact-negative", "contact,t_close,t_open\n-1,0.001,0.002\n", "unknown contact index"),
+    log_case("log-contact-fraction", "contact,t_close,t_open\n0.5,0.001,0.002\n", "unknown contact index"),
+    log_case("log-overlapping", "contact,t_close,t_open\n0,0.001,0.003\n0,0.002,0.004\n", "overlaps"),
+    log_case("log-unsorted", "contact,t_close,t_open\n0,0.003,0.004\n0,0.001,0.002\n", "not sorted"),
+    log_case("log-binary", b"\xff\xfe\x00\x81garbage\x00", "not a readable CSV"),
+    # --- output paths ------------------------------------------------------------------------
+    out_case("out-unsupported", ["run", "double_mass", "--out", "{tmp}/out.txt"], "unsupported file type"),
+    out_case("out-no-suffix", ["run", "double_mass", "--out", "{tmp}/out"], "unsupported file type"),
+    out_case("out-is-directory", ["run", "double_mass", "--out", "{tmp}/dir.csv"], "is a directory",
+             files={"dir.csv/keep": ""}),
+    out_case("out-parent-is-file", ["run", "double_mass", "--out", "{tmp}/file/out.csv"],
+             "is not a directory", files={"file": "x"}),
+    out_case("out-unwritable", ["run", "double_mass", "--out", "/proc/out.csv"], "cannot write"),
+    out_case("plot-out-unsupported", ["plot", "{tmp}/r.csv", "--out", "{tmp}/fig.xyz"],
+             "unsupported file type", files={"r.csv": "t,q0\n0,1\n"}),
+    out_case("log-out-parquet", ["log", "{tmp}/r.csv", "--out", "{tmp}/closings.parquet"],
+             "unsupported file type", files={"r.csv": "t,q0\n0,1\n"}),
+]
+
+
+def _prepare(case: Bad, tmp: Path) -> None:
+    for name, content in case.files.items():
+        path = tmp / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if name.endswith("/keep"):
+            continue
+        if isinstance(content, bytes):
+            path.write_bytes(content)
+        else:
+            path.write_text(content)
+
+
+def _fill(text: str, tmp: Path) -> str:
+    return text.replace("{tmp}", str(tmp))
+
+
+def test_the_matrix_has_at_least_60_distinct_bad_inputs():
+    ids = [c.id for c in CASES]
+    assert len(set(ids)) == len(ids)
+    assert len(CASES) >= 60
+    kinds = {k: sum(c.kind == k for c in CASES) for k in ("doc", "param", "api", "cli", "log", "out")}
+    assert all(v >= 5 for v in kinds.values()), kinds
+    assert sum(kinds.values()) == len(CASES)
+
+
+@pytest.mark.parametrize("case", [c for c in CASES if c.call is not None], ids=lambda c: c.id)
+def test_python_route_raises_input_error_naming_the_field(case, tmp_path):
+    _prepare(case, tmp_path)
+    with pytest.raises(InputError) as info:
+        case.call(tmp_path)
+    err = info.value
+    msg = str(err)
+    assert err.field == _fill(case.field, tmp_path), msg
+    assert msg.startswith(f"{err.field}: ") and "\n" not in msg, msg
+    assert case.hint in msg, msg
+
+
+@pytest.mark.parametrize("case", [c for c in CASES if c.argv is not None], ids=lambda c: c.id)
+def test_cli_exits_2_with_one_line_naming_the_field(case, tmp_path, capsys, monkeypatch):
+    _prepare(case, tmp_path)
+    monkeypatch.chdir(tmp_path)
+    argv = [_fill(a, tmp_path) for a in case.argv]
+    with _exit_code() as code:
+        code.value = cli.main(argv)
+    out, err = capsys.readouterr()
+    lines = err.splitlines()
+    assert code.value == 2, err
+    assert len(lines) == 1, err
+    expected = _fill(case.cli_field or case.field, tmp_path)
+    assert lines[0].startswith(f"error: {expected}"), lines[0]
+    assert case.hint in lines[0], lines[0]
+    assert "Traceback" not in err and out == ""
+    assert not (tmp_path / "out.csv").exists()
+
+
+class _exit_code:
+    """Context manager catching argparse's ``SystemExit`` as an exit code."""
+
+    value: int | None = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is SystemExit:
+            self.value = exc.code
+            return True
+        return False
+
+
+SUBPROCESS_CASES = ["W-nearly-dependent-jump", "param-k1-zero-jump", "h-option-nan", "log-overlapping",
+                    "out-unwritable"]
+
+
+def test_subprocess_prints_one_line_and_no_traceback(tmp_path):
+    """The real interpreter: status 2, one stderr line, no traceback (run in parallel)."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    procs = {}
+    for name in SUBPROCESS_CASES:
+        case = next(c for c in CASES if c.id == name)
+        tmp = tmp_path / name
+        tmp.mkdir()
+        _prepare(case, tmp)
+        argv = [_fill(a, tmp) for a in case.argv]
+        procs[name] = (tmp, case, subprocess.Popen([sys.executable, "-m", "observer", *argv], cwd=tmp,
+                                                   env=env, stdout=subprocess.PIPE,
+                                                   stderr=subprocess.PIPE, text=True))
+    for name, (tmp, case, proc) in procs.items():
+        out, err = proc.communicate(timeout=120)
+        assert proc.returncode == 2, (name, err)
+        assert "Traceback" not in err, (name, err)
+        lines = err.splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"error: {_fill(case.field, tmp)}"), (name, err)
+        assert not (tmp / "out.csv").exists()
+
+
+@pytest.mark.xfail(strict=True, raises=np.linalg.LinAlgError,
+                   reason="observer.simulate.load_scenario must re-export observer.scenario.load_scenario "
+                          "(change requested from the owner of simulate.py); remove this mark then")
+def test_public_api_loads_through_the_checked_loader():
+    """``observer.load_scenario`` (the façade) refuses a builder failure like the CLI does."""
+    with pytest.raises(InputError) as info:
+        observer.load_scenario("double_mass", {"param.k1": 0})
+    assert info.value.field == "param.k1"
+
+
+def test_nojump_accepts_what_only_the_jump_observer_refuses():
+    """The K-metric checks are specific: the same systems run with the no-jump observer,
+    and their results hold no NaN."""
+    for overrides in (SINGULAR_K, K_METRIC_DEPENDENT_W):
+        res = observer.simulate(load_scenario("double_mass", overrides), observers=["nojump"],
+                                t_end=0.05, engine="python")
+        frame = res.to_frame()
+        assert np.isfinite(frame.to_numpy(dtype=float)).all()
+        assert "V_nojump" in frame.columns
