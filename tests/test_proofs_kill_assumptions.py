@@ -1,0 +1,243 @@
+"""proofs_checks.assumptions (section 2 model assumptions) and proofs_checks.forcing (A2):
+every witness entry, margin, tolerance and text on matrices and signals whose spectra,
+singular values, sups and periods are known in closed form. Synthetic inputs only (well
+under a second). Written against the mutation runs of ``assumptions.py`` and ``forcing.py``
+(``tests/mutants/proofs_checks_small.md``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import proofs_checks as pc
+from observer.model import Harmonic
+from proofs_checks import forcing as fo
+
+ROT = np.array([[0.6, -0.8], [0.8, 0.6]])           # exact rotation (3-4-5)
+
+
+def _sym(eigs):
+    return ROT @ np.diag(eigs) @ ROT.T
+
+
+# ----------------------------------------------------------------------------- definiteness
+@pytest.mark.parametrize("check,name,label,equation", [
+    (pc.check_mass_spd, "mass_spd", "M", "section 2: M = Mᵀ ≻ 0"),
+    (pc.check_stiffness_spd, "stiffness_spd", "K", "section 2: K = Kᵀ ≻ 0; eq. (7)"),
+])
+def test_spd_witness_margin_and_texts(check, name, label, equation):
+    A = _sym([2.0, 8.0])
+    r = check(A)
+    w = r.witness
+    assert r.name == name and r.equation == equation and r.passed is True and r.tolerance == 0.0
+    assert w["lambda_min"] == pytest.approx(2.0, rel=1e-14) and w["lambda_max"] == pytest.approx(8.0, rel=1e-14)
+    assert w["relative_lambda_min"] == pytest.approx(0.25, rel=1e-14) and w["required"] == 1e-12
+    assert r.margin == pytest.approx(0.25 - 1e-12, rel=1e-14)
+    v = w["eigenvector_min"]
+    assert abs(abs(v @ ROT[:, 0]) - 1.0) < 1e-12                  # the eigenvector of λ = 2
+    assert w["asymmetry"] == pytest.approx(np.max(np.abs(A - A.T)) / 8.0, abs=1e-17)
+    assert r.summary_keys == ("lambda_min", "lambda_max", "relative_lambda_min", "asymmetry")
+    if name == "mass_spd":                   # below rcond_min: fails (K: semi-definite, n/a)
+        assert check(A, rcond_min=0.3).passed is False
+        assert check(A, rcond_min=0.3).margin == pytest.approx(0.25 - 0.3)
+    else:
+        assert check(A, rcond_min=0.3).passed is None
+    assert check(A, rcond_min=0.2).passed is True
+    # not symmetric: the asymmetry is the (negative) margin, against SYMMETRY_RTOL
+    B = np.array([[1.0, 0.3], [0.0, 2.0]])
+    r = check(B)
+    assert r.passed is False and r.margin == pytest.approx(-0.15) and r.tolerance == 1e-10
+    assert r.reason == f"{label} is not symmetric (max|A − Aᵀ|/max|A| = 0.15)"
+    assert r.summary_keys[0] == "asymmetry" and r.equation == equation and r.name == name
+    # negative definite scale: λ_max < 0, relative λ_min = λ_min/max|λ|
+    r = check(-_sym([2.0, 8.0]))
+    assert r.witness["relative_lambda_min"] == pytest.approx(-1.0) and r.passed is False
+
+
+def test_stiffness_semidefinite_reason_and_witness():
+    r = pc.check_stiffness_spd(_sym([0.0, 4.0]))
+    assert r.passed is None and math.isnan(r.margin) and math.isnan(r.tolerance)
+    assert r.reason.startswith("K is only positive semi-definite (λ_min = ")
+    assert r.reason.endswith("): free rigid-body mode; the position jumps (K-metric), eqs. (13)-(14) and "
+                             "Theorem 1 need K ≻ 0 (THEORY §2 erratum 6)")
+    assert r.witness["lambda_max"] == pytest.approx(4.0) and r.equation == "section 2: K = Kᵀ ≻ 0; eq. (7)"
+    assert r.summary_keys == ("lambda_min", "lambda_max", "relative_lambda_min", "asymmetry")
+    # the zero matrix: scale 0 → relative λ_min 0 → semi-definite
+    r = pc.check_stiffness_spd(np.zeros((2, 2)))
+    assert r.passed is None and r.witness["relative_lambda_min"] == 0.0 and r.witness["asymmetry"] == 0.0
+    # exactly −PSD_RTOL is still semi-definite; exactly rcond_min is definite
+    r = pc.check_stiffness_spd(np.diag([-1e-10, 1.0]))
+    assert r.passed is None
+    r = pc.check_stiffness_spd(np.diag([1e-12, 1.0]))
+    assert r.passed is True and r.margin == 0.0
+    # the mass matrix has no semi-definite exception
+    assert pc.check_mass_spd(np.diag([0.0, 1.0])).passed is False
+
+
+def test_damping_pd_texts_and_symmetric_part():
+    r = pc.check_damping_pd(np.zeros((2, 2)))
+    assert r.passed is None and r.name == "damping_pd" and math.isnan(r.margin) and math.isnan(r.tolerance)
+    assert r.witness == {"lambda_min": 0.0, "lambda_max": 0.0}
+    assert r.reason == "C = 0 (undamped): dV ≤ 0 holds, but Theorem 1's argument v → 0 needs C̄ ≻ 0"
+    assert r.equation == "proof of Theorem 1: C̄ ≻ 0, eq. (17)"
+    r = pc.check_damping_pd([[0.0, 0.0], [0.0, 1.0]])         # a list, semi-definite
+    assert r.passed is None and r.reason.startswith("C̄ is only positive semi-definite (λ_min = 0")
+    assert r.reason.endswith(": dV ≤ 0 holds, but Theorem 1's argument v → 0 (after eq. (20)) needs C̄ ≻ 0")
+    C = _sym([1.0, 3.0]) + np.array([[0.0, 5.0], [-5.0, 0.0]])  # skew part ignored, no asymmetry entry
+    r = pc.check_damping_pd(C)
+    assert r.passed is True and "asymmetry" not in r.witness
+    assert r.witness["relative_lambda_min"] == pytest.approx(1 / 3)
+    assert r.equation == "proof of Theorem 1: C̄ ≻ 0, eq. (17)" and r.name == "damping_pd"
+
+
+def test_constraints_independent_witness():
+    W = np.array([[3.0, 0.0], [0.0, 0.5], [0.0, 0.0]])
+    r = pc.check_constraints_independent(W)
+    w = r.witness
+    assert (w["n"], w["m"]) == (3, 2) and w["sigma_min"] == 0.5 and w["sigma_max"] == 3.0
+    assert w["condition_number"] == 6.0 and w["cond_max"] == 1e6
+    assert abs(abs(w["null_combination"][1]) - 1.0) < 1e-15
+    assert r.margin == pytest.approx(6.0 - math.log10(6.0), rel=1e-14) and r.tolerance == 0.0
+    assert r.reason == "" and r.name == "constraints_independent"
+    assert r.equation == "section 2: w_i linearly independent; eq. (21)"
+    assert r.summary_keys == ("condition_number", "sigma_min", "sigma_max", "null_combination")
+    assert pc.check_constraints_independent(W, cond_max=6.0).margin == 0.0
+    # m > n: σ_min = 0, cond = inf, margin −inf, with the reason
+    r = pc.check_constraints_independent([[1.0, 2.0, 0.5]])
+    assert r.passed is False and r.margin == -np.inf and r.witness["condition_number"] == np.inf
+    assert r.witness["sigma_min"] == 0.0 and r.reason == "more contacts than degrees of freedom (m > n)"
+    # exactly dependent columns (m ≤ n): σ_min = 0 → inf, no m > n reason
+    r = pc.check_constraints_independent(np.array([[1.0, 1.0], [0.0, 0.0]]))
+    assert r.witness["condition_number"] == np.inf and r.passed is False and r.reason == ""
+
+
+# ----------------------------------------------------------------------------- A2: common period
+def test_common_period_cases():
+    T, ok = fo.common_period(np.array([2.0, 3.0]))
+    assert ok is True and T == pytest.approx(2 * math.pi, rel=1e-15)       # cos 2t, cos 3t
+    T, ok = fo.common_period(np.array([0.0, -1.0, 4.0]))                  # only ω > 0 count
+    assert ok is True and T == pytest.approx(math.pi / 2, rel=1e-15)
+    assert fo.common_period(np.array([0.0])) == (1.0, True)
+    assert fo.common_period(np.array([])) == (1.0, True)
+    T, ok = fo.common_period(np.array([1.0, math.sqrt(2.0)]))
+    assert ok is False and T == pytest.approx(400 * math.pi, rel=1e-15)
+    # denominators up to max_denominator (default 64)
+    assert fo.common_period(np.array([64.0, 65.0]))[1] is True
+    T, ok = fo.common_period(np.array([64.0, 65.0]))
+    assert T == pytest.approx(2 * math.pi, rel=1e-13)
+    assert fo.common_period(np.array([65.0, 66.0]))[1] is False
+    T, ok = fo.common_period(np.array([65.0, 66.0]), max_denominator=65)
+    assert ok is True and T == pytest.approx(2 * math.pi, rel=1e-13)
+    # the 1e-12 relative matching tolerance
+    assert fo.common_period(np.array([1.0, 1.0 + 1e-11]))[1] is False
+    assert fo.common_period(np.array([1.0, 1.0 + 1e-13]))[1] is True
+
+
+def test_sup_norm_refines_between_samples():
+    f = lambda t: np.stack([np.sin(np.asarray(t, float)), 0 * np.asarray(t, float)], axis=-1)  # noqa: E731
+    S, ts = fo._sup_norm(f, 0.0, 3.0, 7)                  # π/2 is not a sample
+    assert S == pytest.approx(1.0, abs=1e-12) and ts == pytest.approx(math.pi / 2, abs=1e-5)
+    # only the best five samples are refined: a local max in a poor sample region is skipped,
+    # the global one (at 5π/2 on [0, 9]) is found
+    S, ts = fo._sup_norm(lambda t: np.stack([np.sin(np.asarray(t, float)) * (1 + 0.1 * np.asarray(t, float))],
+                                            axis=-1), 0.0, 9.0, 40)
+    ref = max(math.sin(x) * (1 + 0.1 * x) for x in np.linspace(7.0, 8.5, 300001))
+    assert S == pytest.approx(ref, rel=1e-10) and 7.0 < ts < 8.5
+    # a degenerate window: the only sample
+    S, ts = fo._sup_norm(f, 1.0, 1.0, 4)
+    assert S == pytest.approx(math.sin(1.0), rel=1e-15) and ts == 1.0
+    # the sample at the end of the window is refined inside the window only
+    S, ts = fo._sup_norm(f, 0.0, 1.0, 3)
+    assert S == pytest.approx(math.sin(1.0), rel=1e-12) and ts <= 1.0
+
+
+# ----------------------------------------------------------------------------- A2: the check
+def test_harmonic_witness_and_margin():
+    f = Harmonic.build("f", 2, constant=[1.0, 0.0],
+                       terms=[{"amplitude": [2.0, 0.0], "omega": 2.0, "phase": 0.0},
+                              {"amplitude": [0.0, 1.5], "omega": 3.0, "phase": 0.0}])
+    r = pc.check_forcing_bounded(f)
+    w = r.witness
+    U = math.hypot(3.0, 1.5)                                 # componentwise |c| + Σ|a|
+    assert w["analytic_bound"] == pytest.approx(U, rel=1e-15) and w["f_max"] == w["analytic_bound"]
+    assert np.allclose(w["componentwise_bound"], [3.0, 1.5], rtol=1e-15)
+    assert w["sup_norm"] == pytest.approx(U, rel=1e-9)       # t = 0 reaches it
+    assert w["period"] == pytest.approx(2 * math.pi) and w["commensurate"] is True
+    assert np.allclose(w["f_at_t_star"], f(w["t_star"]), rtol=1e-15)
+    assert r.margin == pytest.approx(1 - w["sup_norm"] / U, abs=1e-15) and r.tolerance == 1e-9
+    assert r.passed is True and r.reason == "" and r.name == "forcing_bounded"
+    assert r.equation == "A2: sup‖f(t)‖ ≤ f_max < ∞"
+    assert r.summary_keys == ("sup_norm", "analytic_bound", "f_max", "t_star", "period")
+    r = pc.check_forcing_bounded(f, f_max=2 * U, tolerance=0.0)
+    assert r.witness["f_max"] == 2 * U and r.margin == pytest.approx(0.5, rel=1e-9) and r.tolerance == 0.0
+
+
+def test_harmonic_zero_bound_and_incommensurate():
+    zero = Harmonic.build("f", 1)
+    r = pc.check_forcing_bounded(zero)
+    assert r.passed is True and r.margin == 0.0 and r.witness["sup_norm"] == 0.0
+    one = Harmonic.build("f", 1, constant=[1.0])
+    r = pc.check_forcing_bounded(one, f_max=0.0)
+    assert r.passed is False and r.margin == -np.inf
+    f = Harmonic.build("f", 1, terms=[{"amplitude": 1.0, "omega": 1.0, "phase": 0.0},
+                                      {"amplitude": 1.0, "omega": math.sqrt(2.0), "phase": 0.0}])
+    r = pc.check_forcing_bounded(f, samples_per_period=8)
+    assert r.witness["commensurate"] is False and r.witness["period"] == pytest.approx(400 * math.pi)
+    assert r.reason == "incommensurate frequencies: sup sampled over 200 slow periods"
+    # 200·8 samples over 200 slow periods: the sup 2 is approached (t = 0 is a sample)
+    assert r.witness["sup_norm"] == pytest.approx(2.0, rel=1e-12)
+
+
+def test_harmonic_with_nonfinite_amplitude_fails():
+    f = Harmonic.build("f", 1, constant=[1.0])
+    f = Harmonic(np.array([np.inf]), f.amplitude, f.omega, f.phase) if hasattr(f, "amplitude") else f
+    r = pc.check_forcing_bounded(f)
+    assert r.passed is False and r.margin == -np.inf and r.tolerance == 1e-9
+    assert r.reason == "forcing amplitudes are not finite" and r.name == "forcing_bounded"
+    assert r.summary_keys == ("sup_norm", "analytic_bound", "f_max", "t_star", "period")
+
+
+def test_generic_forcing_windows_and_growth():
+    calls = []
+
+    def ramp(t):
+        t = np.asarray(t, float)
+        calls.append(t.size)
+        return np.stack([t, 0 * t], axis=-1)
+    r = pc.check_forcing_bounded(ramp, horizon=1.0, windows=3, samples_per_period=16)
+    w = r.witness
+    assert w["window_lengths"] == [1.0, 2.0, 4.0]
+    assert w["window_sups"] == pytest.approx([1.0, 2.0, 4.0], rel=1e-12)
+    assert w["growth_last_doubling"] == pytest.approx(1.0, rel=1e-12)
+    assert w["sup_norm"] == pytest.approx(4.0) and math.isnan(w["analytic_bound"]) and w["f_max"] is None
+    assert w["t_star"] == pytest.approx(4.0)
+    assert calls[0] == 17 and 33 in calls and 65 in calls               # samples·2^j + 1
+    assert r.passed is False and r.margin == pytest.approx(-1.0) and r.tolerance == 0.05
+    assert r.reason == "sup‖f‖ keeps growing with the window (1 → 4): unbounded"
+    assert r.summary_keys == ("sup_norm", "growth_last_doubling", "t_star")
+    # near miss on growth_tol (default 0.05): sup grows by 4 % / 6 % in the last doubling
+    for g, ok in ((0.04, True), (0.06, False)):
+        def sat(t, g=g):
+            t = np.asarray(t, float)
+            return np.stack([np.where(t > 4.0, 1.0 + g, 1.0)], axis=-1)
+        r = pc.check_forcing_bounded(sat, horizon=1.0, windows=4, samples_per_period=8)
+        assert r.witness["growth_last_doubling"] == pytest.approx(g, rel=1e-9)
+        assert r.passed is ok
+        assert (r.reason == "no analytic bound: sup sampled over doubling windows") is ok
+
+
+def test_generic_forcing_with_a_claimed_bound_and_zero_signals():
+    f = lambda t: np.stack([np.cos(np.asarray(t, float))], axis=-1)   # noqa: E731
+    r = pc.check_forcing_bounded(f, f_max=2.0, horizon=1.0, windows=2)
+    assert r.margin == pytest.approx(0.5, rel=1e-12) and r.passed is True and r.tolerance == 1e-9
+    assert r.reason == "no analytic bound: sup sampled over a window" and r.witness["f_max"] == 2.0
+    assert r.summary_keys == ("sup_norm", "analytic_bound", "f_max", "t_star", "period")
+    z = lambda t: np.zeros((np.asarray(t).size, 1))                    # noqa: E731
+    r = pc.check_forcing_bounded(z, horizon=1.0, windows=2)
+    assert r.witness["growth_last_doubling"] == 0.0 and r.passed is True
+    late = lambda t: np.stack([np.where(np.asarray(t, float) > 1.5, 1.0, 0.0)], axis=-1)  # noqa: E731
+    r = pc.check_forcing_bounded(late, horizon=1.0, windows=2)
+    assert r.witness["growth_last_doubling"] == np.inf and r.passed is False
