@@ -284,12 +284,13 @@ def _free_velocity(k, q, u, h, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fba
 
 
 @njit(cache=True, inline="always")
-def step_system(k, q, u, act, a, project, law, sch, wk, out):
+def step_system(k, q, u, act, a, project, slot, law, sch, wk, out):
     """One Moreau–Jean step on the closed set ``act[:a]``.
 
     ``sch`` = (h, θ, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, f̄, ν, ν̇, W (CSC: Wp, Wi,
     Wv), (Â⁻¹W)ᵀ, Ĝ, G₀, (N⁻¹W)ᵀ, WᵀN⁻¹W, e, tol) — the n×m matrices transposed, so that
-    a contact's column is contiguous; ``wk`` = work buffers ((n,), (10, m),
+    a contact's column is contiguous; the projection's (N⁻¹W)ᵀ and WᵀN⁻¹W are stacks over
+    the projection metrics, ``slot`` selects this system's; ``wk`` = work buffers ((n,), (10, m),
     (4, m, m), (2, m) bool); ``out`` = (q1, u1, P, Σ, q_pre, stats) with stats = [solves,
     iterations, max residual]. Writes q_{k+1}, u_{k+1}, P[:a], Σ[:a] and the position before
     the projection; returns the status. (Tuples keep the call inlinable: numba inlines
@@ -370,11 +371,11 @@ def step_system(k, q, u, act, a, project, law, sch, wk, out):
             j = act[r]
             g[r] = _contact_rows(Wp, Wi, Wv, q1, j) + nu[k + 1, j]
         if a == 1:
-            s_[0] = -g[0] / L[act[0], act[0]]
+            s_[0] = -g[0] / L[slot, act[0], act[0]]
         else:
             for r in range(a):
                 for c in range(a):
-                    Gp[r, c] = L[act[r], act[c]]
+                    Gp[r, c] = L[slot, act[r], act[c]]
             if not _cholesky(Gp, a, Lf):
                 return PROJECTION_FAILED
             _cho_solve(Lf, a, g, s_)
@@ -384,7 +385,7 @@ def step_system(k, q, u, act, a, project, law, sch, wk, out):
             sig[r] = s_[r]
             j = act[r]
             for i in range(n):
-                q1[i] += KinvWT[j, i] * s_[r]
+                q1[i] += KinvWT[slot, j, i] * s_[r]
     return OK
 
 
@@ -510,7 +511,7 @@ def summary_start(qs, us, structure, Mq, Kq, bw, vprev, Vprev, summ, k_on, k_off
 # the loop: master (system 0) and observers (1..S-1)
 # ---------------------------------------------------------------------------------------
 @njit(cache=True)
-def advance(k0, k1, s0, kb, qs, us, jumps, master_projection, coupled, chi_log, use_log, chi_now,
+def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, chi_log, use_log, chi_now,
             record_every, rec_q, rec_u, rec_P, rec_sig, rec_act, rec_chi, rec_qpre, record_pre,
             summary, k_on, k_off, rhos, summ, vprev, Vprev, rec_V, closings, prev_act, Mq, Kq, Cq,
             law, h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, nu, nu_dot,
@@ -583,7 +584,7 @@ def advance(k0, k1, s0, kb, qs, us, jumps, master_projection, coupled, chi_log, 
             else:
                 a = predicted_active(kl, q, u, h, Wp, Wi, Wv, nu, nu_dot, act)
                 project = master_projection
-            status = step_system(kl, q, u, act, a, project, law, sch, wk, out)
+            status = step_system(kl, q, u, act, a, project, slots[s], law, sch, wk, out)
             if status != OK:
                 return k, s, status
             for i in range(n):

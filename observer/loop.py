@@ -15,9 +15,10 @@ predictor ``g_k + (h/2)γ_k ≤ 0`` (and is projected on it when ``master_projec
 is that set, or row k of a closing log; each observer steps on χ_k (projected when it has
 position jumps) while coupled, and otherwise on its own predicted set like the master.
 
-The projection metric of the position jumps is K (paper eqs. (13)-(14)); ``metric=N``
-projects in the N metric instead (``q⁺ = q⁻ − N⁻¹W_I(W_IᵀN⁻¹W_I)⁻¹g_I``), which the proof
-checks use to build known-bad integrators. ``record_pre=True`` also keeps the positions
+The projection metric of the position jumps is K (paper eqs. (13)-(14)); ``metrics`` gives
+each system its own metric N (``q⁺ = q⁻ − N⁻¹W_I(W_IᵀN⁻¹W_I)⁻¹g_I``: the registered designs
+projecting in the mass or identity metric), and ``metric=N`` replaces K for every system
+(the proof checks use it to build known-bad integrators). ``record_pre=True`` also keeps the positions
 before the projection (``q_pre``), which the position-jump part of eq. (17) needs.
 """
 
@@ -61,7 +62,9 @@ class LoopInput:
     chi : ndarray of bool, shape (N, m), optional
         χ_k given explicitly (row k = step k), overriding the master's set and the log.
     metric : ndarray (n, n) or None
-        Projection metric (None: K).
+        Projection metric of every system without its own (None: K).
+    metrics : tuple of (ndarray (n, n) or None), length S, optional
+        Per system, its own projection metric (None: ``metric``).
     """
 
     stepper: MoreauJean
@@ -74,6 +77,13 @@ class LoopInput:
     log: object = None
     chi: np.ndarray | None = None
     metric: np.ndarray | None = None
+    metrics: tuple | None = None
+
+    def metric_of(self, s: int) -> np.ndarray | None:
+        """The projection metric of system s (None: K)."""
+        if self.metrics is not None and self.metrics[s] is not None:
+            return np.asarray(self.metrics[s], dtype=float)
+        return self.metric
 
     def coupled(self, t: np.ndarray) -> np.ndarray:
         """Coupling of the steps of the window with grid points ``t`` (bool, len(t) − 1)."""
@@ -146,6 +156,23 @@ def projection_matrices(stepper: MoreauJean, metric: np.ndarray | None) -> tuple
     return NinvW, 0.5 * (L + L.T)
 
 
+def projection_slots(inp: LoopInput) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per system its slot in the stacks of the distinct projection metrics, and the stacks
+    ``(N⁻¹W)ᵀ`` (P, m, n) and ``WᵀN⁻¹W`` (P, m, m) (contiguous, in the kernel's layout)."""
+    S = inp.q0.shape[0]
+    slots, keys, NinvWT, L = np.zeros(S, np.int64), [], [], []
+    for s in range(S):
+        N = inp.metric_of(s)
+        key = None if N is None else N.tobytes()
+        if key not in keys:
+            keys.append(key)
+            a, b = projection_matrices(inp.stepper, N)
+            NinvWT.append(a.T)
+            L.append(b)
+        slots[s] = keys.index(key)
+    return slots, np.ascontiguousarray(np.stack(NinvWT)), np.ascontiguousarray(np.stack(L))
+
+
 STORES = ("full", "summary")
 WINDOW = 1 << 16
 """Steps per window of the compiled engine (the signals of one window are built at a time)."""
@@ -191,8 +218,8 @@ def _allocate(inp: LoopInput, record_every: int, record_pre: bool):
 def _run_python(inp: LoopInput, record_every: int, record_pre: bool) -> LoopOutput:
     stepper = inp.stepper
     rec, rows = _allocate(inp, record_every, record_pre)
-    NinvW, L = projection_matrices(stepper, inp.metric)
     S = inp.q0.shape[0]
+    proj = [projection_matrices(stepper, inp.metric_of(s)) for s in range(S)]
     states = [(inp.q0[s].copy(), inp.u0[s].copy()) for s in range(S)]
     coupled = inp.coupled(stepper.grid.t)
     chi_log = inp.chi_window(stepper.grid.t, 0)
@@ -202,7 +229,7 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool) -> LoopOutp
         chi = None
         for s in range(S):
             q, u = states[s]
-            q1, u1, P, sig, q_pre, act, chi = _python_step(inp, stepper, NinvW, L, k, s, q, u, chi,
+            q1, u1, P, sig, q_pre, act, chi = _python_step(inp, stepper, *proj[s], k, s, q, u, chi,
                                                            coupled[k], None if chi_log is None else chi_log[k])
             states[s] = (q1, u1)
             if r >= 0:
@@ -243,7 +270,7 @@ def _python_step(inp: LoopInput, stepper: MoreauJean, NinvW, L, k: int, s: int, 
     q_pre = q1
     sig = None
     if proj and act.size:
-        q1, sig = _project(stepper, inp.metric, NinvW, L, k + 1, q1, act)
+        q1, sig = _project(stepper, inp.metric_of(s), NinvW, L, k + 1, q1, act)
     return q1, u1, P, sig, q_pre, act, chi
 
 
@@ -284,15 +311,17 @@ def compile_time() -> float:
     return time.perf_counter() - t0
 
 
-def kernel_data(stepper: MoreauJean, metric: np.ndarray | None) -> tuple:
+def kernel_data(inp: LoopInput) -> tuple:
     """The scheme's constant arrays: ``(structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw)`` and
-    ``(Wp, Wi, Wv, (Â⁻¹W)ᵀ, Ĝ, G₀, (N⁻¹W)ᵀ, WᵀN⁻¹W, e, tol)`` in the kernel's order."""
+    ``(Wp, Wi, Wv, (Â⁻¹W)ᵀ, Ĝ, G₀, (N⁻¹W)ᵀ, WᵀN⁻¹W, e, tol)`` in the kernel's order, the last
+    two stacked over the distinct projection metrics (:func:`projection_slots`)."""
     from observer.kernel import STRUCTURE_BANDED, STRUCTURE_DENSE
 
+    stepper = inp.stepper
     S = stepper.S
     Wc = sp.csc_matrix(S.W)
     Wc.sort_indices()
-    NinvW, L = projection_matrices(stepper, metric)
+    _, NinvWT, L = projection_slots(inp)
     c = lambda a, dtype=np.float64: np.ascontiguousarray(a, dtype=dtype)  # noqa: E731
     dummy = np.zeros((1, 1))
     if S.band is None:
@@ -301,7 +330,7 @@ def kernel_data(stepper: MoreauJean, metric: np.ndarray | None) -> tuple:
         b = S.band
         head = (STRUCTURE_BANDED, dummy, dummy, dummy, c(b.Ru), c(b.Rq), c(b.Achol), int(b.bw))
     tail = (c(Wc.indptr, np.int64), c(Wc.indices, np.int64), c(Wc.data), c(S.AinvW.T), c(S.Ghat),
-            c(S.G0), c(NinvW.T), c(L), c(stepper.law.restitution), float(stepper.residual_tol))
+            c(S.G0), NinvWT, L, c(stepper.law.restitution), float(stepper.residual_tol))
     return head, tail
 
 
@@ -346,7 +375,8 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
     S = inp.q0.shape[0]
     ct = 0.0 if (warm or _COMPILED) else compile_time()
     rec, rows = _allocate(inp, record_every, record_pre)
-    head, tail = kernel_data(stepper, inp.metric)
+    head, tail = kernel_data(inp)
+    slots = projection_slots(inp)[0]
     qs, us = inp.q0.astype(float).copy(), inp.u0.astype(float).copy()
     jumps = np.asarray(inp.jumps, dtype=np.bool_)
     chi_now = np.zeros(m, dtype=np.bool_)
@@ -376,7 +406,7 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
         signals = (np.ascontiguousarray(grid.fbar), np.ascontiguousarray(grid.nu),
                    np.ascontiguousarray(grid.nu_dot))
         while k < k1:
-            k, s, status = advance(k, k1, s, kb, qs, us, jumps, bool(inp.master_projection), coupled,
+            k, s, status = advance(k, k1, s, kb, qs, us, jumps, slots, bool(inp.master_projection), coupled,
                                    chi_log, use_log, chi_now, record_every, rec["q"], rec["u"], rec["P"],
                                    rec["sigma"], rec["active"], rec["chi"], rec["q_pre"], record_pre,
                                    summary, k_on, k_off, rho_arr, summ, vprev, Vprev, rec_V, closings,
@@ -449,7 +479,7 @@ def _fallback_step(inp, stepper, k, s, qs, us, chi_now, record_every, record_pre
                    coupled_k, chi_row) -> None:
     """Step k of system s, which the kernel could not solve, with the reference solver."""
     ref = _reference_stepper(stepper)
-    NinvW, L = projection_matrices(ref, inp.metric)
+    NinvW, L = projection_matrices(ref, inp.metric_of(s))
     q1, u1, P, sig, q_pre, act, chi = _python_step(inp, ref, NinvW, L, k, s, qs[s], us[s],
                                                    np.flatnonzero(chi_now), coupled_k, chi_row)
     if s == 0:

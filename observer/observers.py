@@ -26,8 +26,72 @@ from observer.model import LinearSystem
 from observer.switching import SOURCES
 from observer.validation import as_array, as_scalar
 
-OBSERVERS = {"jump": True, "nojump": False}
-"""Registry: observer name -> whether it has position jumps."""
+METRICS = ("K", "mass", "identity")
+"""Projection metrics of the position jumps: N = K (the paper's, eqs. (13)-(14)), N = M, N = I."""
+
+
+@dataclass(frozen=True)
+class ObserverDesign:
+    """An observer design: what the slave does while χ_i = 1, and how plots show it.
+
+    Attributes
+    ----------
+    name : str
+        Stable name (``--observers``, result columns ``{name}_q0``, ``V_{name}``).
+    position_jumps : bool
+        Switched geometric constraints: the gap of each closed contact is set to zero by the
+        projection ``q⁺ = q⁻ − N⁻¹W_I(W_IᵀN⁻¹W_I)⁻¹g_I`` in the metric N (paper (13)-(14) for
+        N = K); without, switched kinematic constraints only.
+    metric : {"K", "mass", "identity"} or None
+        The projection metric N (None without position jumps).
+    label, color, linestyle : str
+        How figures and tables show the design.
+    """
+
+    name: str
+    position_jumps: bool
+    metric: str | None
+    label: str
+    color: str
+    linestyle: str = "-"
+
+    def __post_init__(self) -> None:
+        if self.position_jumps != (self.metric is not None) or (self.metric not in METRICS + (None,)):
+            raise ValueError(f"observer design {self.name!r}: metric {self.metric!r} does not match "
+                             f"position_jumps={self.position_jumps}")
+
+    @property
+    def needs_spd_K(self) -> bool:
+        """Only the K-metric projection needs K ≻ 0 (L_I = W_IᵀK⁻¹W_I)."""
+        return self.metric == "K"
+
+    def metric_matrix(self, system: LinearSystem) -> np.ndarray | None:
+        """The metric N as a matrix (None: K, the stepper's own cached projection)."""
+        if self.metric == "mass":
+            return system.M
+        if self.metric == "identity":
+            return np.eye(system.n)
+        return None
+
+
+OBSERVER_DESIGNS: dict[str, ObserverDesign] = {d.name: d for d in (
+    ObserverDesign("jump", True, "K", "jump (K metric)", "tab:blue"),
+    ObserverDesign("nojump", False, None, "no jump", "tab:red", "--"),
+    ObserverDesign("jump_mass", True, "mass", "jump (M metric)", "tab:green", "-."),
+    ObserverDesign("jump_identity", True, "identity", "jump (identity metric)", "tab:purple", ":"),
+)}
+"""Registry of observer designs: add a design here (one entry) and it runs everywhere
+(simulation, proof checks, suites, report)."""
+
+DEFAULT_OBSERVERS = ("jump", "nojump")
+"""The paper's two designs: what a run uses when nothing else is asked."""
+
+RATIOS: tuple[tuple[str, str], ...] = (("nojump", "jump"), ("jump", "jump_mass"),
+                                        ("jump", "jump_identity"))
+"""Settling-time ratios the report shows, as (baseline, candidate): baseline / candidate."""
+
+OBSERVERS = {name: d.position_jumps for name, d in OBSERVER_DESIGNS.items()}
+"""Observer name -> whether it has position jumps (derived from :data:`OBSERVER_DESIGNS`)."""
 
 
 @dataclass(frozen=True)
@@ -38,6 +102,14 @@ class Slave:
     position_jumps: bool
     q0: np.ndarray
     u0: np.ndarray
+    design: ObserverDesign | None = None
+
+    @property
+    def metric(self) -> str | None:
+        """The projection metric (K when built without a registered design)."""
+        if self.design is not None:
+            return self.design.metric
+        return "K" if self.position_jumps else None
 
 
 @dataclass(frozen=True)
@@ -73,7 +145,7 @@ class ObserverConfig:
             p = Path(log)
             if not p.is_absolute() and not p.exists() and (Path(base_dir) / p).exists():
                 log = str(Path(base_dir) / p)
-        names = tuple(table.get("observers", ("jump", "nojump")))
+        names = tuple(table.get("observers", DEFAULT_OBSERVERS))
         for name in names:
             check_observer_name(name)
         if "log_tolerance" in table:
@@ -83,8 +155,9 @@ class ObserverConfig:
 
 def check_observer_name(name: Any) -> None:
     """Raise unless ``name`` is a registered observer."""
-    if name not in OBSERVERS:
-        raise InputError("observer.observers", f"unknown observer {name!r}; choose from {sorted(OBSERVERS)}")
+    if name not in OBSERVER_DESIGNS:
+        raise InputError("observer.observers",
+                         f"unknown observer {name!r}; choose from {sorted(OBSERVER_DESIGNS)}")
 
 
 def lyapunov(system: LinearSystem, q_s: np.ndarray, u_s: np.ndarray, q_m: np.ndarray,

@@ -10,8 +10,8 @@ import numpy as np
 from observer.errors import InputError
 from observer.loop import LoopInput, check_engine, check_record_every, summary_frame
 from observer.loop import run as run_loop
-from observer.observers import OBSERVERS, ObserverConfig, Slave, check_observer_name, lyapunov, \
-    lyapunov_decrements
+from observer.observers import OBSERVER_DESIGNS, ObserverConfig, Slave, check_observer_name, \
+    lyapunov, lyapunov_decrements
 from observer.result import SimulationResult, SlaveTrajectory, run_metadata
 from observer.scenario import Scenario, apply_overrides, parse_value
 from observer.scenarios import SCENARIOS, builtin_document
@@ -126,8 +126,9 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         if coupling == "scenario":
             coupling = cfg.coupling
         log = log or cfg.log
-        if any(s.position_jumps for s in slaves):
-            system.require_definite_stiffness("the observer with position jumps")
+        for s in slaves:
+            if s.position_jumps and s.metric == "K":
+                system.require_definite_stiffness(f"the observer {s.name!r} (position jumps in the K metric)")
     if source is not None and source not in SOURCES:
         raise InputError("observer.source", f"must be one of {list(SOURCES)}, got {source!r}")
     log_frame = None
@@ -140,7 +141,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
                     np.stack([sc.u0] + [s.u0 for s in slaves]),
                     np.array([False] + [s.position_jumps for s in slaves]),
                     bool(sc.master_projection), None if coupling == "scenario" else coupling,
-                    source == "self", log_frame)
+                    source == "self", log_frame,
+                    metrics=(None,) + tuple(_metric_matrix(s, system) for s in slaves))
     out = run_loop(inp, engine=engine, record_every=record_every, store=store)
 
     meta = run_metadata(sc, stepper, out)
@@ -177,8 +179,16 @@ def _slaves(cfg: ObserverConfig, observers: list[str | Slave]) -> list[Slave]:
             out.append(ob)
             continue
         check_observer_name(ob)
-        out.append(Slave(ob, OBSERVERS[ob], cfg.q0, cfg.u0))
+        design = OBSERVER_DESIGNS[ob]
+        out.append(Slave(ob, design.position_jumps, cfg.q0, cfg.u0, design))
     names = [s.name for s in out]
     if len(set(names)) != len(names):
         raise InputError("observer.observers", f"observer names must be unique, got {names}")
     return out
+
+
+def _metric_matrix(slave: Slave, system) -> np.ndarray | None:
+    """The slave's projection metric as a matrix (None: K)."""
+    if slave.design is not None:
+        return slave.design.metric_matrix(system)
+    return None

@@ -17,6 +17,7 @@ Registry :data:`CHECKS` (name → function of a :class:`CheckContext`), in proof
 ``impact_monotone``           A3: impact map monotone for every active set (eq. (6))
 ``projection_closed_form``    eqs. (13)-(14): applied projection = closed form, every step
 ``projection_psd``            P_I L_I⁻¹ P_Iᵀ ⪰ 0 for every active set
+``projection_energy``         position jumps in the K metric never raise V; every design measured
 ``proposition1_exact``        Proposition 1, discrete: matched pairs bitwise identical
 ``proposition1_h_scaling``    Proposition 1, continuous limit: mismatched pairs → 0 with h
 ``lyapunov_decrease``         eq. (17): dV ≤ 0 per step, each part vs its closed form
@@ -54,6 +55,7 @@ from observer.scenario import Scenario
 from proofs_checks.assumptions import (check_constraints_independent, check_damping_pd, check_mass_spd,
                                        check_stiffness_spd)
 from proofs_checks.context import CheckContext, CheckSettings
+from proofs_checks.designs import check_projection_energy
 from proofs_checks.forcing import check_forcing_bounded
 from proofs_checks.lyapunov import check_convergence, check_lyapunov_decrease, decrement_parts
 from proofs_checks.monotonicity import check_impact_monotone
@@ -80,6 +82,8 @@ CHECKS: dict[str, Check] = {
         c.run, **c.options("projection_closed_form")),
     "projection_psd": lambda c: check_projection_psd(
         c.system.K, c.system.W, rng=c.rng("projection_psd"), **c.options("projection_psd")),
+    "projection_energy": lambda c: check_projection_energy(
+        c.scenario, c.slave_specs(), h=c.h, t_end=c.t_end, **c.options("projection_energy")),
     "proposition1_exact": lambda c: check_proposition1_exact(
         c.scenario, h=c.h, t_end=c.short_t_end, **c.options("proposition1_exact")),
     "proposition1_h_scaling": lambda c: check_proposition1_h_scaling(

@@ -34,12 +34,14 @@ Projector = Callable[[int, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray
 
 @dataclass(frozen=True)
 class SlaveSpec:
-    """An observer of the replay: name, design (position jumps or not) and initial state."""
+    """An observer of the replay: name, design (position jumps or not), initial state and its
+    own projection metric N (None: the replay's ``metric``, by default K)."""
 
     name: str
     position_jumps: bool
     q0: np.ndarray
     u0: np.ndarray
+    metric: np.ndarray | None = None
 
 
 @dataclass
@@ -99,6 +101,8 @@ class Run:
     scenario: Scenario | None = None
     """The scenario of the replay (with ``settings["metric"]`` and ``settings["system"]``
     it lets a check re-run the same case at other step sizes, :func:`rerun`)."""
+    slave_metrics: dict = field(default_factory=dict)
+    """Observer name → its own projection metric N (only observers that have one)."""
 
     @property
     def h(self) -> float:
@@ -187,7 +191,8 @@ def replay(scenario: Scenario, *, h: float | None = None, t_end: float | None = 
                     np.stack([scenario.u0] + [np.asarray(s.u0, float) for s in slaves]),
                     np.array([False] + [s.position_jumps for s in slaves]), master_projection,
                     coupling=None, chi=None if chi is None else chi[1:],
-                    metric=None if metric is None else np.asarray(metric, dtype=float))
+                    metric=None if metric is None else np.asarray(metric, dtype=float),
+                    metrics=(None,) + tuple(s.metric for s in slaves))
     out = run_loop(inp, engine=engine, record_pre=True)
     t = stepper.time(out.rows)
 
@@ -206,7 +211,8 @@ def replay(scenario: Scenario, *, h: float | None = None, t_end: float | None = 
     return Run(system, stepper, t, master, {tr.name: tr for tr in subs}, chi_rec, g_pred, desc,
                {"h": stepper.h, "t_end": float(t[-1]), "theta": stepper.theta,
                 "master_projection": master_projection, "metric": metric, "system": system,
-                "chi_override": chi is not None, "engine": engine}, scenario)
+                "chi_override": chi is not None, "engine": engine}, scenario,
+               {s.name: s.metric for s in slaves if s.metric is not None})
 
 
 def _metric_description(stepper: MoreauJean, metric) -> str:
@@ -222,7 +228,8 @@ def _metric_description(stepper: MoreauJean, metric) -> str:
 
 def slave_specs_of(run: Run) -> list[SlaveSpec]:
     """The observers of a run as :class:`SlaveSpec` (initial states and designs)."""
-    return [SlaveSpec(name, tr.projected, tr.q[0].copy(), tr.u[0].copy()) for name, tr in run.slaves.items()]
+    return [SlaveSpec(name, tr.projected, tr.q[0].copy(), tr.u[0].copy(), run.slave_metrics.get(name))
+            for name, tr in run.slaves.items()]
 
 
 def rerun(run: Run, h: float) -> Run:

@@ -97,11 +97,13 @@ def test_check_result_record_and_views():
 def test_registry_order_and_docstrings_cite_the_paper():
     assert list(pc.CHECKS) == ["mass_spd", "stiffness_spd", "damping_pd", "constraints_independent",
                                "switching_generated", "forcing_bounded", "impact_monotone",
-                               "projection_closed_form", "projection_psd", "proposition1_exact",
-                               "proposition1_h_scaling", "lyapunov_decrease", "convergence"]
+                               "projection_closed_form", "projection_psd", "projection_energy",
+                               "proposition1_exact", "proposition1_h_scaling", "lyapunov_decrease",
+                               "convergence"]
     for fn in (pc.check_mass_spd, pc.check_stiffness_spd, pc.check_damping_pd, pc.check_constraints_independent,
                pc.check_switching_generated, pc.check_forcing_bounded, pc.check_impact_monotone,
-               pc.check_projection_closed_form, pc.check_projection_psd, pc.check_proposition1_exact,
+               pc.check_projection_closed_form, pc.check_projection_psd, pc.check_projection_energy,
+               pc.check_proposition1_exact,
                pc.check_proposition1_h_scaling, pc.check_lyapunov_decrease, pc.check_convergence):
         doc = fn.__doc__
         assert any(s in doc for s in ("eq.", "eqs.", "A1", "A2", "A3", "section 2", "Theorem 1",
@@ -598,7 +600,7 @@ def test_all_checks_pass_on_builtin_scenarios(name, t_end, h):
     na = set(df.check[df.passed.isna()])
     if name == "bouncing_ball":
         assert na == {"stiffness_spd", "damping_pd", "projection_closed_form", "projection_psd",
-                      "proposition1_h_scaling", "convergence"}
+                      "projection_energy", "proposition1_h_scaling", "convergence"}
         assert all(r.reason for r in results if r.passed is None)
     else:
         assert na == set()
