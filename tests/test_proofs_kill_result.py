@@ -1,0 +1,120 @@
+"""proofs_checks.result.CheckResult: its verdict rule and every text view, character by
+character, on hand-built results (synthetic, well under a second). Written against the
+mutation run of ``result.py`` (``tests/mutants/proofs_checks_small.md``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from proofs_checks.result import STATUS_TEXT, CheckResult, _fmt, _jsonable
+
+
+def test_from_margin_verdict_edge_and_negative_zero():
+    r = CheckResult.from_margin("x", -0.1, 0.1, {}, "eq")
+    assert r.passed is True and r.margin == -0.1 and r.tolerance == 0.1    # margin = −tolerance passes
+    assert CheckResult.from_margin("x", -0.1000001, 0.1, {}, "eq").passed is False
+    r = CheckResult.from_margin("x", -0.0, 0, {"a": 1}, "eq (1)", ("a",), "why")
+    assert math.copysign(1.0, r.margin) == 1.0 and r.passed is True
+    assert isinstance(r.tolerance, float) and r.witness == {"a": 1}
+    assert (r.name, r.equation, r.summary_keys, r.reason) == ("x", "eq (1)", ("a",), "why")
+    assert r.scenario == "" and r.elapsed == 0.0
+    r = CheckResult.from_margin("x", np.float64(np.nan), 1.0, {}, "eq")
+    assert r.passed is False and isinstance(r.passed, bool)
+    assert CheckResult.from_margin("x", np.inf, 0.0, {}, "").passed is True
+    assert CheckResult.from_margin("x", -np.inf, 1e300, {}, "").passed is False
+
+
+def test_not_applicable_record():
+    r = CheckResult.not_applicable("y", "because", "A1", k=3)
+    assert r.passed is None and math.isnan(r.margin) and math.isnan(r.tolerance)
+    assert r.witness == {"k": 3} and r.reason == "because" and r.equation == "A1" and r.name == "y"
+    assert CheckResult.not_applicable("y", "r").equation == ""
+    assert STATUS_TEXT == {True: "PASS", False: "FAIL", None: "n/a"}
+
+
+def test_summary_texts():
+    w = {"a": 1.23456, "b": "s", "c": np.arange(3.0), "d": 7}
+    r = CheckResult.from_margin("x", 1.0, 0.0, w, "eq", ("c", "a", "missing"))
+    assert r.summary() == "c=[0, 1, 2], a=1.235"
+    r = CheckResult.from_margin("x", 1.0, 0.0, dict(w, e=5), "eq")          # no keys: the first four
+    assert r.summary() == "a=1.235, b=s, c=[0, 1, 2], d=7"
+    r = CheckResult.from_margin("x", -1.0, 0.0, {"a": 2.0}, "eq", ("a",), "bad thing")
+    assert r.summary() == "bad thing | a=2"
+    r = CheckResult.from_margin("x", -1.0, 0.0, {}, "eq", (), "bad thing")
+    assert r.summary() == "bad thing"
+    r = CheckResult.from_margin("x", 1.0, 0.0, {"a": 2.0}, "eq", ("a",), "a note")
+    assert r.summary() == "a=2; a note"
+    r = CheckResult.from_margin("x", 1.0, 0.0, {}, "eq", (), "a note")
+    assert r.summary() == "a note"
+    r = CheckResult.not_applicable("y", "because")
+    assert r.summary() == "not applicable: because"
+    long = CheckResult.not_applicable("y", "z" * 200)
+    assert long.summary() == ("not applicable: " + "z" * 200)[:107] + "..."
+    assert len(long.summary(20)) == 20 and long.summary(20).endswith("...")
+    exact = CheckResult.not_applicable("y", "z" * 94)             # 16 + 94 = 110: not cut
+    assert exact.summary() == "not applicable: " + "z" * 94
+
+
+def test_message_lines():
+    r = CheckResult.from_margin("chk", -0.5, 0.125, {"a": 1.5, "v": np.arange(3.0)}, "eq. (0)", ("v",),
+                                "it broke")
+    r.scenario = "sc"
+    assert r.message().splitlines() == [
+        "chk [eq. (0)] FAIL on sc",
+        "  margin    = -0.5 (tolerance 0.125; satisfied when margin >= -tolerance)",
+        "  reason    = it broke",
+        "  witness:",
+        "    a = 1.5",
+        "    v = [0, 1, 2]",
+    ]
+    na = CheckResult.not_applicable("chk", "no K", "A1")
+    assert na.message().splitlines() == ["chk [A1] NOT APPLICABLE", "  reason    = no K"]
+    ok = CheckResult.from_margin("chk", 2.0, 0.0, {}, "E")
+    assert ok.message() == "chk [E] PASS\n  margin    = 2 (tolerance 0; satisfied when margin >= -tolerance)"
+
+
+def test_rows_dicts_and_truth_value():
+    r = CheckResult.from_margin("chk", -0.5, 0.1, {"v": np.arange(2), "x": np.float64(np.inf),
+                                                   "s": {1}, "o": object}, "eq", ("v",), "why")
+    r.scenario, r.elapsed = "sc", 1.5
+    row = r.to_row()
+    assert row == {"scenario": "sc", "check": "chk", "equation": "eq", "status": "FAIL", "passed": False,
+                   "margin": -0.5, "tolerance": 0.1, "witness": "why | v=[0, 1]", "reason": "why",
+                   "elapsed": 1.5}
+    long = CheckResult.from_margin("c", 1.0, 0.0, {"a": "q" * 300}, "e", ("a",))
+    assert long.to_row()["witness"] == "a=" + "q" * 300                   # the row is not cut
+    d = r.to_dict()
+    assert d["status"] == "FAIL" and "summary_keys" not in d
+    assert d["witness"]["v"] == [0, 1] and d["witness"]["x"] == "Infinity"
+    assert d["witness"]["s"] == [1] and d["witness"]["o"] == str(object)
+    assert d["margin"] == -0.5 and d["name"] == "chk" and d["passed"] is False
+    json.dumps(d)
+    assert CheckResult.not_applicable("y", "r").to_dict()["margin"] == "NaN"
+    with pytest.raises(TypeError, match="use CheckResult.passed"):
+        bool(r)
+
+
+def test_jsonable_and_fmt():
+    assert _jsonable(np.array([[1, 2]])) == [[1, 2]]
+    assert _jsonable(np.float32(0.5)) == 0.5 and type(_jsonable(np.int64(3))) is int
+    assert _jsonable(np.bool_(True)) is True
+    assert _jsonable((1, 2)) == [1, 2] and _jsonable(frozenset([4])) == [4]
+    assert _jsonable(1 + 2j) == "(1+2j)"
+    assert _fmt(1.23456789) == "1.235" and _fmt(np.float32(2.0)) == "2"
+    assert _fmt(True) == "True" and _fmt(np.int64(4)) == "4" and _fmt("s") == "s" and _fmt(np.bool_(False)) == "False"
+    assert _fmt([1.0, 2.5]) == "[1, 2.5]" and _fmt((1, 2)) == "[1, 2]"
+    assert _fmt(np.arange(10)) == "[0, 1, 2, 3, 4, 5, 6, 7, ...]"
+    assert _fmt(np.arange(8)) == "[0, 1, 2, 3, 4, 5, 6, 7]"
+    assert _fmt(np.arange(10), long=True) == "[" + ", ".join(map(str, range(10))) + "]"
+    assert _fmt(np.arange(70.0), long=True).endswith("63, ...]")
+    assert _fmt(np.arange(64.0), long=True).endswith(", 63]")
+    assert _fmt(np.eye(2)) == "(2x2)[1, 0, 0, 1]"
+    assert _fmt(np.array([True, False])) == "[True, False]"
+    assert _fmt(np.array([1 + 1j])) == "[1.+1.j]"
+    assert _fmt(None) == "None" and _fmt(["a"]) == "['a']"
+    assert _fmt(np.array(0.123456)) == "[0.1235]"
