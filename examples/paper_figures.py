@@ -79,4 +79,5 @@ fig.savefig(args.out / "figure3_first_mass.png", dpi=120)
 #    never within the run). The paper: the observer with jumps synchronises faster.
 sync = result.synchronization()
 print(sync[["observer"] + [c for c in sync.columns if c.startswith("t_sync_")]].to_string(index=False))
-print(f"wrote {args.out / 'figure2_lyapunov.png'} and {args.out / 'figure3_first_mass.png'}")
+for png in ("figure2_lyapunov.png", "figure3_first_mass.png"):
+    print("wrote", args.out / png)
