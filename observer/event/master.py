@@ -57,6 +57,10 @@ ZENO_VELOCITY_RATIO = 1e-9
 ZENO_MIN_INTERVAL = 1e-11
 """... or once an interval is below this fraction of max(1, t) (the time resolution)."""
 
+ZENO_HOP_ROUNDOFF = 1e4
+"""... or once the next hop height is below this many round-offs of the gap (beyond it the
+impact sequence is driven by round-off, no longer by the dynamics)."""
+
 EVENT_KINDS = ("impact", "graze", "stick", "liftoff", "accumulation")
 EVENT_COLUMNS = ["time", "contact", "kind", "gamma_minus", "gamma_plus", "impulse"]
 
@@ -237,7 +241,8 @@ class _Run:
                 elif l > 0.0:
                     self.event(t, c, "impact", a, b, l)
                 continue
-            self.event(t, c, "impact" if a < -tol_v[c] else "graze", a, b, l)
+            if a < -tol_v[c] or l > 0.0 or c not in stick:
+                self.event(t, c, "impact" if a < -tol_v[c] else "graze", a, b, l)
             if c in stick:
                 self.event(t, c, "stick", b, b, 0.0)
                 self.close(c, t)
@@ -247,8 +252,16 @@ class _Run:
         return x, tuple(stick), A, gm, lam
 
     # -- Zeno ------------------------------------------------------------------------------
-    def zeno_check(self, j: int, t: float, gm: float, v_plus: float) -> float | None:
-        """Accumulation time t_∞ if contact j's impact run is geometric and resolved enough."""
+    def zeno_check(self, j: int, t: float, x: np.ndarray, gm: float) -> float | None:
+        """Accumulation time t_∞ if contact j's impact run is geometric and resolved enough:
+        its impact velocity fell by ``zeno_velocity_ratio``, or its intervals reach the time
+        resolution, or its next hop ``γ⁺²/(2|γ̇|)`` is within ZENO_HOP_ROUNDOFF round-offs of g."""
+        fl = self.free_flow
+        z = fl.z(t, x)
+        v_plus = float(fl.velocity_rows[j] @ z)
+        accel = float(fl.velocity_rows[j] @ fl.A @ z)
+        hop = v_plus * v_plus / (2.0 * -accel) if accel < 0.0 else np.inf
+        tol_g = float(tolerance(fl.gap_rows[j:j + 1], z)[0])
         hist = self.history.setdefault(j, [])
         hist.append((t, abs(gm)))
         if len(hist) < ZENO_MIN_IMPACTS:
@@ -262,7 +275,8 @@ class _Run:
             del hist[:-3]                      # not geometric: a new run starts
             return None
         v0 = hist[0][1]
-        if abs(gm) > self.zeno_velocity_ratio * v0 and d[2] > ZENO_MIN_INTERVAL * max(1.0, abs(t)):
+        if (abs(gm) > self.zeno_velocity_ratio * v0 and d[2] > ZENO_MIN_INTERVAL * max(1.0, abs(t))
+                and hop > ZENO_HOP_ROUNDOFF * tol_g):
             return None
         return t + d[2] * r2 / (1.0 - r2)
 
@@ -364,8 +378,7 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
             continue
         x, new_persistent, A, gm, lam = run.collide(t, x, persistent, {j})
         if A == [j] and not persistent and not new_persistent:
-            v_plus = run.free_flow.velocities(t, x)[j]
-            t_inf = run.zeno_check(j, t, gm[0], v_plus)
+            t_inf = run.zeno_check(j, t, x, gm[0])
             if t_inf is not None:
                 out = run.accumulate(j, t, x, persistent, t_inf, gm[0])
                 if out is None:
@@ -387,7 +400,10 @@ def _initial_contacts(run: _Run, x: np.ndarray):
     z = fl.z(0.0, x)
     g = fl.gap_rows @ z
     scale = np.abs(fl.gap_rows) @ np.abs(z)
-    closed = {j for j in range(run.m) if abs(g[j]) <= INITIAL_GAP_RTOL * max(1.0, scale[j])}
+    gam = fl.velocity_rows @ z
+    tol_v = CONTACT_TOL * tolerance(fl.velocity_rows, z)
+    closed = {j for j in range(run.m)
+              if abs(g[j]) <= INITIAL_GAP_RTOL * max(1.0, scale[j]) and gam[j] <= tol_v[j]}
     if not closed:
         return x, ()
     qfix = x.copy()
