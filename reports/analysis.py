@@ -1,23 +1,27 @@
 """The report's numbers as DataFrames, computed from the tidy result rows (no HTML).
 
-:mod:`reports.build` formats these frames; tests recompute them from the rows.
+The sections of :mod:`reports.sections` format these frames; tests recompute them from the
+rows. Designs, ratio pairs, thresholds and solvers come from :mod:`reports.registry`.
 
-* :func:`observer_ratios` — per scenario and threshold ρ: the settling times of the two
-  observers (time after t_on from which V stays ≤ ρ·V(t_on) until the end of the coupling
-  window, :func:`observer.metrics.settling_time`), their ratio no-jump / jump, and the
-  first-passage times and ratio for comparison;
-* :func:`observer_headlines` — per scenario the headline ratio (deepest ρ at which both
-  observers settle) and the no-jump verdict;
-* :func:`wp_orders` — fitted orders of the work-precision sweeps;
+* :func:`observer_runs` — the observer table: one row per observer run;
+* :func:`observer_ratios` — per scenario, declared (baseline, candidate) pair and threshold ρ:
+  the settling times (time after t_on from which V stays ≤ ρ·V(t_on) until the end of the
+  coupling window, :func:`observer.metrics.settling_time`), their ratio baseline / candidate,
+  and the first-passage times and ratio for comparison; :func:`headline` picks one per pair;
+* :func:`settle_verdict` — what one observer run does (converges, persistent contact, …);
+* :func:`design_summary` — per registered design: runs, applicable runs, median final V;
+* :func:`wp_orders` — fitted orders of the work-precision sweeps; :func:`solver_comparison`
+  — each fast contact solver against the reference on the same method;
 * :func:`robustness_bands` — per perturbation point and observer: the median and the
-  10–90 % band over seeds of the floor and the rate, the median settling times and how many
-  seeds settle;
+  quantile band over seeds of the floor and the rate, the median settling times and how many
+  seeds settle; :func:`robustness_summary` — where each perturbation breaks each observer;
 * :func:`scaling_fits` — fitted exponents of the chain's cost against N (the acceptance
-  exponent from N = 10 to the largest N);
+  exponent from N = ``SCALING_FIT_FROM`` to the largest N);
 * :func:`micro_speedups` — speed-ups of the fast contact solvers over the reference;
 * :func:`micro_loops` — time per step of every loop benchmark, per engine, and the speed-up
   of the compiled engine;
-* :func:`peer_summary` — Siconos against the toolkit: time ratios and trajectory differences.
+* :func:`peer_summary` — Siconos against the toolkit: time ratios and trajectory differences;
+* :func:`check_counts` — proof-check statuses per design and in total.
 """
 
 from __future__ import annotations
@@ -27,7 +31,12 @@ import math
 import numpy as np
 import pandas as pd
 
-from bench.suites import BAND, RHOS, SCALING_FIT_FROM
+from bench.suites import BAND, SCALING_FIT_FROM
+from reports import registry
+from reports.tables import text
+
+RHOS = registry.rhos()
+"""Synchronization thresholds of the rows (:func:`reports.registry.rhos`)."""
 
 SETTLE = {rho: f"t_settle_{rho:g}" for rho in RHOS}
 """Row column of the settling time at each ρ."""
@@ -65,18 +74,18 @@ def _get(row: pd.Series | None, col: str) -> float:
     return float(v) if v is not None else float("nan")
 
 
-def time_ratio(t_jump: float, t_nojump: float) -> float:
-    """t_no-jump / t_jump: ``inf`` when only the jump observer gets there (or t_jump = 0 <
-    t_no-jump), ``0`` when only the no-jump observer does, NaN when neither or unknown."""
-    if math.isnan(t_jump) or math.isnan(t_nojump):
+def time_ratio(t_cand: float, t_base: float) -> float:
+    """t_base / t_cand: ``inf`` when only the candidate gets there (or t_cand = 0 < t_base),
+    ``0`` when only the baseline does, NaN when neither or unknown."""
+    if math.isnan(t_cand) or math.isnan(t_base):
         return float("nan")
-    if math.isinf(t_jump):
-        return float("nan") if math.isinf(t_nojump) else 0.0
-    if math.isinf(t_nojump):
+    if math.isinf(t_cand):
+        return float("nan") if math.isinf(t_base) else 0.0
+    if math.isinf(t_base):
         return float("inf")
-    if t_jump == 0:
-        return 1.0 if t_nojump == 0 else float("inf")
-    return t_nojump / t_jump
+    if t_cand == 0:
+        return 1.0 if t_base == 0 else float("inf")
+    return t_base / t_cand
 
 
 def _pick(g: pd.DataFrame, observer: str) -> pd.Series | None:
@@ -84,53 +93,139 @@ def _pick(g: pd.DataFrame, observer: str) -> pd.Series | None:
     return sel.iloc[0] if len(sel) else None
 
 
-def observer_ratios(obs: pd.DataFrame) -> pd.DataFrame:
-    """One row per (scenario name, ρ): settling and first-passage times of both observers.
+RATIO_COLUMNS = ["name", "baseline", "candidate", "rho", "settle_base", "settle_cand", "ratio",
+                 "first_base", "first_cand", "first_ratio", "base_ok", "cand_ok"]
 
-    Columns: ``name, rho, settle_jump, settle_nojump, ratio`` (settling-time ratio no-jump /
-    jump, :func:`time_ratio`), ``first_jump, first_nojump, first_ratio`` (the same with first
-    passage), ``jump_ok, nojump_ok`` (the observer applies and ran). Times are seconds from
-    t_on; ``inf`` = not within the window, NaN = no run / not applicable.
+
+def _pair_rows(name: str, b: pd.Series, c: pd.Series, pair: tuple[str, str]) -> list[dict]:
+    rows = []
+    for rho in RHOS:
+        sb, sc = _get(b, SETTLE[rho]), _get(c, SETTLE[rho])
+        fb, fc = _get(b, FIRST[rho]), _get(c, FIRST[rho])
+        rows.append({"name": name, "baseline": pair[0], "candidate": pair[1], "rho": rho,
+                     "settle_base": sb, "settle_cand": sc, "ratio": time_ratio(sc, sb),
+                     "first_base": fb, "first_cand": fc, "first_ratio": time_ratio(fc, fb),
+                     "base_ok": b.get("status") == "ok", "cand_ok": c.get("status") == "ok"})
+    return rows
+
+
+def observer_ratios(obs: pd.DataFrame, pairs=None) -> pd.DataFrame:
+    """One row per (scenario name, declared pair, ρ): settling and first-passage times.
+
+    Parameters
+    ----------
+    obs : DataFrame
+        Observer rows (``kind == "observers"``).
+    pairs : sequence of (baseline, candidate), optional
+        Default: the declared :data:`observer.observers.RATIOS`. A pair appears for a scenario
+        when both observers have a row there.
+
+    Returns
+    -------
+    DataFrame
+        Columns ``name, baseline, candidate, rho, settle_base, settle_cand, ratio`` (settling
+        time ratio baseline / candidate, :func:`time_ratio`), ``first_base, first_cand,
+        first_ratio`` (the same with first passage), ``base_ok, cand_ok`` (the observer
+        applies and ran). Times are seconds from t_on; ``inf`` = not within the window, NaN =
+        not applicable.
     """
+    pairs = registry.ratio_pairs() if pairs is None else pairs
     rows = []
     for name, g in obs.groupby("name", sort=False):
-        j, n = _pick(g, "jump"), _pick(g, "nojump")
-        for rho in RHOS:
-            sj, sn = _get(j, SETTLE[rho]), _get(n, SETTLE[rho])
-            fj, fn = _get(j, FIRST[rho]), _get(n, FIRST[rho])
-            rows.append({"name": name, "rho": rho, "settle_jump": sj, "settle_nojump": sn,
-                         "ratio": time_ratio(sj, sn), "first_jump": fj, "first_nojump": fn,
-                         "first_ratio": time_ratio(fj, fn),
-                         "jump_ok": j is not None and j.get("status") == "ok",
-                         "nojump_ok": n is not None and n.get("status") == "ok"})
-    return pd.DataFrame(rows, columns=["name", "rho", "settle_jump", "settle_nojump", "ratio",
-                                       "first_jump", "first_nojump", "first_ratio", "jump_ok",
-                                       "nojump_ok"])
+        for pair in pairs:
+            b, c = _pick(g, pair[0]), _pick(g, pair[1])
+            if b is not None and c is not None:
+                rows += _pair_rows(name, b, c, pair)
+    return pd.DataFrame(rows, columns=RATIO_COLUMNS)
 
 
 def headline(ratios: pd.DataFrame) -> dict:
-    """The headline of one scenario's rows of :func:`observer_ratios`.
+    """The headline of one scenario's rows of :func:`observer_ratios` for one pair.
 
     ``kind`` is ``"ratio"`` (both observers settle below some ρ: the deepest such ρ, its
-    ratio and times), ``"jump only"`` (only the observer with jumps settles; ``rho`` is the
-    deepest ρ it settles below), ``"neither"``, ``"no jump observer"`` or ``"unknown"``
-    (rows without settling times).
+    ratio and times), ``"candidate only"`` / ``"baseline only"`` (only that observer settles;
+    ``rho`` is the deepest ρ it settles below), ``"neither"``, ``"candidate n/a"`` (the
+    candidate design does not apply) or ``"unknown"`` (rows without settling times).
     """
-    if not ratios["jump_ok"].any():
-        return {"kind": "no jump observer"}
-    if ratios["settle_jump"].isna().all():
+    if not ratios["cand_ok"].any():
+        return {"kind": "candidate n/a"}
+    if ratios["settle_cand"].isna().all():
         return {"kind": "unknown"}
-    both = ratios[np.isfinite(ratios["settle_jump"]) & np.isfinite(ratios["settle_nojump"])]
+    shallowest = float(ratios["rho"].max())
+    both = ratios[np.isfinite(ratios["settle_cand"]) & np.isfinite(ratios["settle_base"])]
     if len(both):
         r = both.sort_values("rho").iloc[0]
-        return {"kind": "ratio", "rho": r["rho"], "ratio": r["ratio"], "settle_jump": r["settle_jump"],
-                "settle_nojump": r["settle_nojump"], "first_ratio": r["first_ratio"]}
-    jump = ratios[np.isfinite(ratios["settle_jump"])]
-    if len(jump):
-        r = jump.sort_values("rho").iloc[0]
-        return {"kind": "jump only", "rho": r["rho"], "settle_jump": r["settle_jump"],
-                "shallowest": float(ratios["rho"].max())}
-    return {"kind": "neither", "shallowest": float(ratios["rho"].max())}
+        return {"kind": "ratio", "rho": r["rho"], "ratio": r["ratio"], "settle_cand": r["settle_cand"],
+                "settle_base": r["settle_base"], "first_ratio": r["first_ratio"]}
+    for kind, col in (("candidate only", "settle_cand"), ("baseline only", "settle_base")):
+        one = ratios[np.isfinite(ratios[col])]
+        if len(one):
+            r = one.sort_values("rho").iloc[0]
+            return {"kind": kind, "rho": r["rho"], "settle": r[col], "shallowest": shallowest}
+    return {"kind": "neither", "shallowest": shallowest}
+
+
+PERSISTENT_FRACTION = 0.99
+"""An observer that does not settle is said to face persistent contact when the master is
+closed in at least this fraction of the steps (χ ≡ 1 in practice)."""
+
+
+def settle_verdict(row: pd.Series | None) -> dict:
+    """What one observer run does, from its settling times: ``kind`` in {"no run", "n/a",
+    "unknown", "persistent contact", "no settling", "converges"} with ``rho`` (the deepest ρ it
+    settles below, or the shallowest it misses), ``floor_rel`` and ``closed_fraction``."""
+    if row is None:
+        return {"kind": "no run"}
+    if row.get("status") != "ok":
+        return {"kind": "n/a", "note": text(row.get("note"))}
+    settle = {rho: _get(row, c) for rho, c in SETTLE.items()}
+    if any(math.isnan(v) for v in settle.values()):
+        return {"kind": "unknown"}
+    shallow = max(RHOS)
+    closed = float(row.get("master_closed_fraction", float("nan")) or float("nan"))
+    if math.isinf(settle[shallow]):
+        kind = "persistent contact" if closed >= PERSISTENT_FRACTION else "no settling"
+        return {"kind": kind, "rho": shallow, "floor_rel": float(row["floor_rel"]),
+                "closed_fraction": closed}
+    deepest = min(rho for rho, v in settle.items() if not math.isinf(v))
+    return {"kind": "converges", "rho": deepest}
+
+
+def observer_runs(obs: pd.DataFrame) -> pd.DataFrame:
+    """The observer table as numbers: one row per run, in registry order of the designs
+    within each scenario. Columns ``name, observer, status, note, h, t_on, t_off, V_on``,
+    the settling and first-passage time at each ρ (``settle_<ρ>``, ``first_<ρ>``), ``rate,
+    floor_rel, V_end_rel, e_q_end, master_closings, cpu_time_s, steps_per_s``."""
+    cols = ["name", "observer", "status", "note", "h", "t_on", "t_off", "V_on"]
+    cols += [f"settle_{rho:g}" for rho in RHOS] + [f"first_{rho:g}" for rho in RHOS]
+    cols += ["rate", "floor_rel", "V_end_rel", "e_q_end", "master_closings", "cpu_time_s",
+             "steps_per_s"]
+    rows = []
+    for name, g in obs.groupby("name", sort=False):
+        for observer in registry.in_registry_order(g["observer"]):
+            r = _pick(g, observer)
+            rec = {c: r.get(c) for c in cols}
+            ok = r.get("status") == "ok"
+            for rho in RHOS:
+                rec[f"settle_{rho:g}"] = _get(r, SETTLE[rho]) if ok else float("nan")
+                rec[f"first_{rho:g}"] = _get(r, FIRST[rho]) if ok else float("nan")
+            rows.append(rec)
+    return pd.DataFrame(rows, columns=cols)
+
+
+def design_summary(obs: pd.DataFrame) -> pd.DataFrame:
+    """Per registered observer design (registry order): scenarios where it ran (``runs``),
+    where it applies (``applicable``), and the median over those of the final V/V(t_on)
+    (``median_V_end_rel``) and of the rate. A registered design without rows has 0 runs."""
+    rows = []
+    for name in registry.designs():
+        g = obs[obs["observer"] == name] if len(obs) else obs
+        ok = g[g["status"] == "ok"] if len(g) else g
+        rows.append({"observer": name, "runs": int(len(g)), "applicable": int(len(ok)),
+                     "median_V_end_rel": float(ok["V_end_rel"].median()) if len(ok) else float("nan"),
+                     "median_rate": float(ok["rate"].median()) if len(ok) else float("nan")})
+    return pd.DataFrame(rows, columns=["observer", "runs", "applicable", "median_V_end_rel",
+                                       "median_rate"])
 
 
 def settling_excursions(obs: pd.DataFrame) -> pd.DataFrame:
@@ -159,19 +254,26 @@ def band(values, quantiles: tuple[float, float] = BAND) -> tuple[float, float, f
     return float(np.median(x)), float(lo), float(hi)
 
 
+ROBUST_RHOS = (1e-3, 1e-6)
+"""Thresholds whose settling times the robustness table shows (median over seeds)."""
+ROBUST_FLOOR = 1e-6
+"""A perturbation "breaks" an observer from the smallest size whose median floor / V(t_on)
+exceeds this value (:func:`robustness_summary`)."""
+
+
 def robustness_bands(rob: pd.DataFrame, quantiles: tuple[float, float] = BAND) -> pd.DataFrame:
     """One row per (perturbation, size, observer) over its seeds (``ok`` rows).
 
     Columns: ``perturbation, size, observer, seeds``; for the floor (``floor_rel``) and the
     rate: ``floor_median, floor_lo, floor_hi, rate_median, rate_lo, rate_hi`` (median and the
-    ``quantiles`` band, :func:`band`); per ρ in (1e-3, 1e-6): ``settle_<ρ>_median`` (median
+    ``quantiles`` band, :func:`band`); per ρ in :data:`ROBUST_RHOS`: ``settle_<ρ>_median`` (median
     settling time over the seeds, ``inf`` when at least half do not settle) and
     ``settled_<ρ>`` (how many seeds settle within the window); ``log_intervals`` (median) and
     ``true_intervals``.
     """
     cols = ["perturbation", "size", "observer", "seeds", "floor_median", "floor_lo", "floor_hi",
             "rate_median", "rate_lo", "rate_hi"]
-    for rho in (1e-3, 1e-6):
+    for rho in ROBUST_RHOS:
         cols += [f"settle_{rho:g}_median", f"settled_{rho:g}"]
     cols += ["log_intervals", "true_intervals"]
     rows = []
@@ -180,7 +282,7 @@ def robustness_bands(rob: pd.DataFrame, quantiles: tuple[float, float] = BAND) -
         rec = {"perturbation": kind, "size": float(size), "observer": name, "seeds": int(g["seed"].nunique())}
         rec["floor_median"], rec["floor_lo"], rec["floor_hi"] = band(g["floor_rel"], quantiles)
         rec["rate_median"], rec["rate_lo"], rec["rate_hi"] = band(g["rate"], quantiles)
-        for rho in (1e-3, 1e-6):
+        for rho in ROBUST_RHOS:
             col = SETTLE[rho]
             t = g[col].astype(float).to_numpy() if col in g else np.full(len(g), np.nan)
             rec[f"settle_{rho:g}_median"] = float(np.median(t)) if len(t) else float("nan")
@@ -217,6 +319,8 @@ def wp_orders(wp: pd.DataFrame) -> pd.DataFrame:
 # -------------------------------------------------------------------------------- scaling
 ACCEPTANCE_EXPONENT = 1.1
 """Issue 9: the chain's time per step grows at most like N^1.1 from N = 10 to 1000."""
+ACCEPTANCE_N_MAX = 1000
+"""The largest N the acceptance exponent must hold up to (from ``SCALING_FIT_FROM``)."""
 
 
 def scaling_fits(scal: pd.DataFrame, big_from: int = 50,
@@ -252,24 +356,26 @@ def scaling_fits(scal: pd.DataFrame, big_from: int = 50,
 
 # ---------------------------------------------------------------------------------- micro
 def micro_speedups(micro: pd.DataFrame) -> pd.DataFrame:
-    """Per contact count m: mean time per solve of the reference and of each fast solver,
-    and the speed-ups reference / solver."""
-    if micro.empty:
-        return pd.DataFrame()
+    """Per contact count m: mean time per solve of the reference and of each registered fast
+    solver (:func:`reports.registry.fast_solvers`), and the speed-ups reference / solver.
+    Columns ``m, reference, <solver>, speedup_<solver>`` (seconds; NaN: not benchmarked)."""
+    solvers = registry.fast_solvers()
+    cols = ["m", "reference"] + [c for s in solvers for c in (s, f"speedup_{s}")]
+    if micro.empty or "kind" not in micro:
+        return pd.DataFrame(columns=cols)
     cs = micro[micro["kind"] == "contact_solve"]
     rows = []
     for m, g in cs.groupby("m"):
-        ref = g[g["solver"] == "reference"]["mean_s"]
+        ref = g[g["solver"] == registry.REFERENCE_SOLVER]["mean_s"]
         if ref.empty:
             continue
-        ref = float(ref.iloc[0])
-        rec = {"m": int(m), "reference": ref}
-        for s in ("pivoting", "lemke", "nnls"):
+        rec = {"m": int(m), "reference": float(ref.iloc[0])}
+        for s in solvers:
             v = g[g["solver"] == s]["mean_s"]
             rec[s] = float(v.iloc[0]) if len(v) else float("nan")
-            rec[f"speedup_{s}"] = ref / rec[s] if len(v) and rec[s] > 0 else float("nan")
+            rec[f"speedup_{s}"] = rec["reference"] / rec[s] if len(v) and rec[s] > 0 else float("nan")
         rows.append(rec)
-    return pd.DataFrame(rows)
+    return pd.DataFrame(rows, columns=cols)
 
 
 def micro_loops(micro: pd.DataFrame) -> pd.DataFrame:
@@ -316,3 +422,70 @@ def peer_summary(pe: pd.DataFrame) -> pd.DataFrame:
                      "ratio_run": run / tk,
                      "max_diff": max(float(r["max_abs_diff_q"]), float(r["max_abs_diff_u"]))})
     return pd.DataFrame(rows, columns=cols)
+
+
+def robustness_summary(bands: pd.DataFrame, floor: float = ROBUST_FLOOR) -> pd.DataFrame:
+    """Per observer with an unperturbed run: its floor and rate with the exact χ
+    (``base_floor, base_rate``) and, per perturbation kind, the smallest size whose median
+    floor exceeds ``floor`` (``breaks_from``; NaN: every size stays below). One row per
+    (observer, perturbation)."""
+    cols = ["observer", "perturbation", "base_floor", "base_rate", "breaks_from"]
+    rows = []
+    for name in registry.in_registry_order(bands["observer"]):
+        base = bands[(bands["perturbation"] == "none") & (bands["observer"] == name)]
+        if base.empty:
+            continue
+        b0 = base.iloc[0]
+        for kind in dict.fromkeys(bands["perturbation"]):
+            g = bands[(bands["perturbation"] == kind) & (bands["observer"] == name)]
+            if kind == "none" or g.empty:
+                continue
+            over = g[g["floor_median"] > floor]
+            rows.append({"observer": name, "perturbation": kind, "base_floor": b0["floor_median"],
+                         "base_rate": b0["rate_median"],
+                         "breaks_from": float(over["size"].min()) if len(over) else float("nan")})
+    return pd.DataFrame(rows, columns=cols)
+
+
+# ------------------------------------------------------------------- work-precision solvers
+def solver_comparison(orders: pd.DataFrame) -> pd.DataFrame:
+    """The same method (scenario · target · law) with each fast contact solver and with the
+    reference solver: total CPU time of the sweep, its ratio reference / solver and the
+    smallest errors. Columns ``scenario, target, law, solver, cpu_solver, cpu_reference,
+    ratio, best_err_solver, best_err_reference``."""
+    cols = ["scenario", "target", "law", "solver", "cpu_solver", "cpu_reference", "ratio",
+            "best_err_solver", "best_err_reference"]
+    if orders.empty:
+        return pd.DataFrame(columns=cols)
+    keys = ["scenario", "target", "law"]
+    ref = orders[orders["solver"] == registry.REFERENCE_SOLVER]
+    fast = orders[orders["solver"] != registry.REFERENCE_SOLVER]
+    both = fast.merge(ref, on=keys, suffixes=("_s", "_r"))
+    rows = [{"scenario": r["scenario"], "target": r["target"], "law": r["law"],
+             "solver": r["solver_s"], "cpu_solver": r["cpu_total_s"], "cpu_reference": r["cpu_total_r"],
+             "ratio": r["cpu_total_r"] / r["cpu_total_s"], "best_err_solver": r["best_err_s"],
+             "best_err_reference": r["best_err_r"]} for _, r in both.iterrows()]
+    return pd.DataFrame(rows, columns=cols)
+
+
+# --------------------------------------------------------------------------- proof checks
+CHECK_STATUSES = ("PASS", "FAIL", "n/a")
+"""Status values of a proof-check row."""
+
+
+def check_counts(ch: pd.DataFrame) -> pd.DataFrame:
+    """Per design the check rows concern (column ``design`` of the rows, "" for checks of the
+    model; every registered design listed, with zeros when it has no rows) and in total
+    (``design == "all"``): how many rows have each status, and on how many scenarios.
+    Columns ``design, scenarios, PASS, FAIL, n/a``."""
+    design = ch["design"].fillna("").astype(str) if "design" in ch else pd.Series("", index=ch.index)
+    groups = [("all", ch)] + [(d, ch[design == d]) for d in registry.designs()]
+    extra = [d for d in dict.fromkeys(design) if d and d not in registry.designs()]
+    groups += [(d, ch[design == d]) for d in extra]
+    rows = []
+    for name, g in groups:
+        status = g["check_status"].astype(str) if len(g) else pd.Series(dtype=str)
+        rec = {"design": name, "scenarios": int(g["scenario"].nunique()) if len(g) else 0}
+        rec.update({s: int((status == s).sum()) for s in CHECK_STATUSES})
+        rows.append(rec)
+    return pd.DataFrame(rows, columns=["design", "scenarios", *CHECK_STATUSES])

@@ -1,7 +1,7 @@
 """Figures of the report: matplotlib (Agg) → PNG → ``data:`` URI, so the page is self-contained.
 
-Colours follow the paper: master black, observer with position jumps blue, observer
-without red. Every function returns a :class:`Figure` (data URI + alt text) or None when
+Colours, labels and line styles come from the observer designs
+(:func:`reports.registry.look`: master black, each design its registered look). Every function returns a :class:`Figure` (data URI + alt text) or None when
 there is nothing to draw (the report then says so instead of showing an empty plot).
 """
 
@@ -19,9 +19,8 @@ from matplotlib.ticker import NullFormatter  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-COLORS = {"master": "black", "jump": "tab:blue", "nojump": "tab:red"}
-STYLES = {"master": "-", "jump": "--", "nojump": ":"}
-LABELS = {"master": "master", "jump": "observer with jumps", "nojump": "observer without jumps"}
+from reports.registry import MASTER, REFERENCE_SOLVER, contact_solvers, look  # noqa: E402
+
 DPI = 96
 
 
@@ -74,12 +73,11 @@ def scenario_figure(traj: pd.DataFrame, title: str, observers: list[str], window
     t = traj["t"].to_numpy()
     fig, axes = plt.subplots(3, 1, figsize=(8.6, 6.6), sharex=True)
     for ax, var, label in ((axes[0], "g", contact_label), (axes[1], "q", coord_label)):
-        ax.plot(t, traj[f"master_{var}"], color=COLORS["master"], lw=1.3, ls="-", label=LABELS["master"])
-        for name in observers:
-            col = f"{name}_{var}"
+        for name in (MASTER, *observers):
+            col, lk = f"{name}_{var}", look(name)
             if col in traj:
-                ax.plot(t, traj[col], color=COLORS.get(name), lw=1.0, ls=STYLES.get(name, "--"),
-                        label=LABELS.get(name, name))
+                ax.plot(t, traj[col], color=lk.color, lw=1.3 if name == MASTER else 1.0,
+                        ls=lk.linestyle, label=lk.label)
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
     axes[0].axhline(0.0, color="0.5", lw=0.6)
@@ -89,8 +87,9 @@ def scenario_figure(traj: pd.DataFrame, title: str, observers: list[str], window
     for name in observers:
         col = f"V_{name}"
         if col in traj:
-            ax.semilogy(t, _positive(traj[col]), color=COLORS.get(name), lw=1.0,
-                        label=f"V, {LABELS.get(name, name)}")
+            lk = look(name)
+            ax.semilogy(t, _positive(traj[col]), color=lk.color, ls=lk.linestyle, lw=1.0,
+                        label=f"V, {lk.label}")
             drawn = True
     if not drawn:
         plt.close(fig)
@@ -118,14 +117,13 @@ def work_precision_figure(wp: pd.DataFrame, orders: dict[str, float]) -> Figure 
     fig, axes = plt.subplots(len(groups), 2, figsize=(10.5, 3.1 * len(groups)), squeeze=False)
     for i, (scen, target) in enumerate(groups):
         sub = wp[(wp["scenario"] == scen) & (wp["target"] == target)]
-        color = COLORS.get(target, "black")
+        color = look(target).color
         for method, g in sub.groupby("method", sort=False):
             g = g.sort_values("h")
             law, solver = g["law"].iloc[0], g["solver"].iloc[0]
             ls = "-" if law == "newton" else "--"
-            marker = "o" if solver == "pivoting" else "s"
-            mfc = color if solver == "pivoting" else "none"
-            ms = 5 if solver == "pivoting" else 8
+            fast = solver != REFERENCE_SOLVER
+            marker, mfc, ms = ("o", color, 5) if fast else ("s", "none", 8)
             label = f"{law} · {solver} (p = {orders.get(method, float('nan')):.2f})"
             axes[i, 0].loglog(g["cpu_time_s"], g["err_mean"], ls=ls, marker=marker, color=color,
                               mfc=mfc, ms=ms, lw=1.1, label=label)
@@ -134,7 +132,7 @@ def work_precision_figure(wp: pd.DataFrame, orders: dict[str, float]) -> Figure 
         hs = np.sort(sub["h"].unique())
         ref = sub["err_mean"].median() * hs / np.median(hs)
         axes[i, 1].loglog(hs, ref, color="0.6", lw=0.8, ls="-.", label="slope 1")
-        what = LABELS.get(target, target)
+        what = look(target).label
         refname = sub["reference"].iloc[0].split(" (")[0]
         axes[i, 0].set_title(f"{scen}: {what} (reference: {refname})", fontsize=9, loc="left")
         axes[i, 0].set_xlabel("CPU time (s)")
@@ -148,9 +146,10 @@ def work_precision_figure(wp: pd.DataFrame, orders: dict[str, float]) -> Figure 
     return Figure(to_data_uri(fig), "work-precision diagrams: error against CPU time and against h",
                   "Left: error (time average of max_i |q_i − q_ref,i|) against CPU time "
                   "(work-precision). Right: the same error against h, with a slope-1 guide. Solid: "
-                  "Newton law; dashed: Poisson law; filled circles: pivoting solver; open squares: "
+                  "Newton law; dashed: Poisson law; filled circles: fast contact solver; open squares: "
                   "cvxpy/OSQP reference solver (same errors, more CPU time). Colours: master black, "
-                  "observer with jumps blue, observer without jumps red.")
+                  + ", ".join(f"{look(t).label} {look(t).color.replace('tab:', '')}"
+                              for t in dict.fromkeys(wp["target"]) if t != MASTER) + ".")
 
 
 def robustness_figure(rob: pd.DataFrame, kinds: list[str], labels: dict[str, str],
@@ -174,10 +173,9 @@ def robustness_figure(rob: pd.DataFrame, kinds: list[str], labels: dict[str, str
         sub = bands[bands["perturbation"] == kind].sort_values("size")
         for name, g in sub.groupby("observer", sort=False):
             x = g["size"].to_numpy(dtype=float)
-            c = COLORS.get(name)
-            axes[0, j].loglog(x, _positive(g["floor_median"]), "o-", color=c, ms=4,
-                              label=LABELS.get(name, name))
-            axes[1, j].semilogx(x, g["rate_median"], "o-", color=c, ms=4, label=LABELS.get(name, name))
+            c, lab = look(name).color, look(name).label
+            axes[0, j].loglog(x, _positive(g["floor_median"]), "o-", color=c, ms=4, label=lab)
+            axes[1, j].semilogx(x, g["rate_median"], "o-", color=c, ms=4, label=lab)
             if g["seeds"].max() > 1:
                 axes[0, j].fill_between(x, _positive(g["floor_lo"]), _positive(g["floor_hi"]), color=c,
                                         alpha=0.15)
@@ -243,6 +241,13 @@ def scaling_figure(sc: pd.DataFrame, fit_time: tuple[float, float], fit_mem: tup
     return Figure(to_data_uri(fig), "scaling of the rocking chain with N")
 
 
+def solver_colors() -> dict[str, str]:
+    """One colour per registered contact solver (the reference grey, the others the
+    matplotlib cycle in registry order)."""
+    fast = [s for s in contact_solvers() if s != REFERENCE_SOLVER]
+    return {REFERENCE_SOLVER: "0.35", **{s: f"C{i}" for i, s in enumerate(fast)}}
+
+
 def micro_figure(micro: pd.DataFrame) -> Figure | None:
     """Mean time of one contact solve per solver and size (log scale bars)."""
     cs = micro[micro["kind"] == "contact_solve"]
@@ -252,7 +257,7 @@ def micro_figure(micro: pd.DataFrame) -> Figure | None:
     solvers = list(dict.fromkeys(cs["solver"]))
     fig, ax = plt.subplots(figsize=(7.5, 3.4))
     width = 0.8 / len(solvers)
-    colors = {"reference": "0.35", "pivoting": "tab:blue", "lemke": "tab:orange", "nnls": "tab:green"}
+    colors = solver_colors()
     for i, s in enumerate(solvers):
         vals = [float(cs[(cs["m"] == m) & (cs["solver"] == s)]["mean_s"].mean()) * 1e6 for m in sizes]
         ax.bar(np.arange(len(sizes)) + (i - (len(solvers) - 1) / 2) * width, vals, width,

@@ -25,17 +25,12 @@ class Table:
     columns: list[str]
     rows: list[list[str]] = field(default_factory=list)
     note: str = ""
-    numeric: list[bool] | None = None
 
     def add(self, cells: Iterable[Any]) -> None:
         cells = [c if isinstance(c, str) else fmt(c) for c in cells]
         if len(cells) != len(self.columns):
             raise ValueError(f"table {self.title!r}: {len(cells)} cells for {len(self.columns)} columns")
         self.rows.append(cells)
-
-    def __post_init__(self):
-        if self.numeric is None:
-            self.numeric = [False] * len(self.columns)
 
 
 def _isnan(x: Any) -> bool:
@@ -111,3 +106,29 @@ def fmt_rho(x: Any) -> str:
         if abs(e - round(e)) < 1e-9:
             return f"1e{int(round(e))}".replace("-", "−")
     return fmt(v)
+
+
+def ratio_text(x: Any) -> str:
+    """A ratio with 2 decimals, "∞", or "n/a"."""
+    if _isnan(x):
+        return "n/a"
+    v = float(x)
+    return "∞" if math.isinf(v) else f"{v:.2f}"
+
+
+def band_cell(median: float, lo: float, hi: float, seeds: int) -> str:
+    """"median [lo – hi]" for several seeds, the value alone for one (deterministic) run."""
+    if seeds <= 1 or _isnan(lo):
+        return fmt(median)
+    return f"{fmt(median)} [{fmt(lo)} – {fmt(hi)}]"
+
+
+def fmt_window(t_on: Any, t_off: Any) -> str:
+    """A coupling window "[t_on, t_off]"."""
+    return f"[{fmt(t_on)}, {fmt(t_off)}]"
+
+
+def text(x: Any) -> str:
+    """A text cell of a row: '' for a missing value (None or NaN, as a concat of rows of
+    different kinds leaves them), else ``str(x)``."""
+    return "" if _isnan(x) else str(x)

@@ -22,7 +22,9 @@ import pytest
 
 from bench.results import ResultsFile
 from bench.run import micro_path, results_path, run_suite
+from observer.observers import OBSERVER_DESIGNS
 from reports.analysis import fit_power
+from reports.context import load_rows
 from reports.browser import check_page, find_chromium
 from reports.build import build_report
 from reports.tables import fmt, fmt_ratio, fmt_rho, fmt_time
@@ -258,7 +260,9 @@ def test_report_is_self_contained(smoke_report):
 def test_not_applicable_and_not_reached_are_spelled_out(smoke_report):
     index, _ = smoke_report
     html = index.read_text(encoding="utf-8")
-    assert "n/a (K = 0" in html                          # jump observer on the bouncing ball
+    rows = load_rows([results_path("smoke", _)])
+    na = rows[(rows["kind"] == "observers") & (rows["status"] != "ok")]
+    assert len(na) and all(f"n/a ({note}" in html for note in na["note"])  # the reason, spelled out
     assert "not reached" in html                         # 1 s runs do not reach 1e-9
 
 
@@ -267,7 +271,7 @@ def test_proof_check_section_shows_the_check_rows(smoke_report, tmp_path):
     margin); without, the section says why (no crash)."""
     index, out = smoke_report
     page = _parse(index)
-    rows = pd.DataFrame(ResultsFile(results_path("smoke", out)).rows())
+    rows = load_rows([results_path("smoke", out)])
     checks = rows[rows["kind"] == "checks"]
     assert len(checks) > 0                      # proofs_checks is part of this repository
     table = page.table("proof-checks", "Proof-check table")
@@ -277,10 +281,8 @@ def test_proof_check_section_shows_the_check_rows(smoke_report, tmp_path):
             (r["scenario"], r["check"], r["check_status"])
         if r["check_status"] != "n/a":
             assert _num(cells["margin"]) == pytest.approx(r["margin"], rel=5e-3, abs=1e-300)
-    lines = [line for line in results_path("smoke", out).read_text().splitlines()
-             if '"kind":"checks"' not in line]
-    path = tmp_path / "nochecks.jsonl"
-    path.write_text("\n".join(lines) + "\n")
+    path = tmp_path / "nochecks.csv"
+    rows[rows["kind"] != "checks"].drop(columns="results_dir").to_csv(path, index=False)
     page = build_report([path], tmp_path / "r").read_text(encoding="utf-8")
     assert "No proof-check results" in page and "Proof-check table" not in page
 
@@ -507,12 +509,10 @@ def _micro_json() -> dict:
 @pytest.fixture(scope="module")
 def synthetic_report(tmp_path_factory):
     out = tmp_path_factory.mktemp("synthetic")
-    rf = ResultsFile(out / "synthetic.jsonl")
-    for case_id, rows in _synthetic_rows():
-        rf.append_case("synthetic", case_id, rows)
+    path = _rows_file(out / "synthetic.jsonl", _synthetic_rows())
     (out / "synthetic-micro.json").write_text(json.dumps(_micro_json()))
-    index = build_report([rf.path], out / "report")
-    return _parse(index), pd.DataFrame(rf.rows())
+    index = build_report([path], out / "report")
+    return _parse(index), load_rows([path])
 
 
 def _settle(name: str, observer: str, rho: float) -> float:
@@ -529,7 +529,8 @@ def test_observer_ratios_are_settling_time_ratios(synthetic_report):
     from the settling ratio (1.50, 1.50), so a ratio of first passages is caught."""
     page, _ = synthetic_report
     table = page.table("observers", "Settling-time ratio")
-    cells = {r["scenario"]: r for r in table.dicts()}
+    cells = {r["scenario"]: r for r in table.dicts() if r["baseline / candidate"] == "nojump / jump"}
+    assert set(cells) == set(OBSERVERS) | {"ball"}
     for rho in RHO_KEYS:
         col = f"ratio at ρ = {fmt_rho(rho)}"
         tj, tn = _settle("dm", "jump", rho), _settle("dm", "nojump", rho)
@@ -554,9 +555,10 @@ def test_observer_headline_uses_settling_times_at_the_deepest_common_rho(synthet
     1e−9, not the first-passage 4.80."""
     page, _ = synthetic_report
     tn, tj = _settle("dm", "nojump", 1e-9), _settle("dm", "jump", 1e-9)
-    expected = f"settling-time ratio no-jump/jump = {tn / tj:.2f} at ρ = 1e−9"
+    expected = f"settling-time ratio nojump/jump = {tn / tj:.2f} at ρ = 1e−9"
     first = _first("dm", "nojump", 1e-9) / _first("dm", "jump", 1e-9)
-    head = page.table("observers", "Settling-time ratio").dicts()[0]["headline"]
+    head = next(r["headline"] for r in page.table("observers", "Settling-time ratio").dicts()
+                if (r["scenario"], r["baseline / candidate"]) == ("dm", "nojump / jump"))
     assert head.startswith(expected) and f"first-passage ratio {first:.2f}" in head
     assert _nums(head.split("(")[1])[:2] == pytest.approx([tn, tj], rel=5e-3)
     obs_items = page.sections["observers"].items
@@ -598,7 +600,7 @@ def test_observer_table_shows_settling_and_first_passage_columns(synthetic_repor
     table = page.table("observers", "Observer table")
     first_col = next(c for c in table.columns if c.startswith("first passage"))
     rows = [r for r in table.dicts() if r["scenario"] == "dm"]
-    assert [r["observer"] for r in rows] == ["with jumps (new)", "without jumps ([4])"]
+    assert [r["observer"] for r in rows] == [OBSERVER_DESIGNS[o].label for o in ("jump", "nojump")]
     for r, obs in zip(rows, ("jump", "nojump")):
         for rho in RHO_KEYS:
             assert _num(r[f"settles below {fmt_rho(rho)}"]) == pytest.approx(_settle("dm", obs, rho))
@@ -639,7 +641,7 @@ def test_work_precision_orders_are_recomputed_from_the_points(synthetic_report):
     p_dm = _fitted(dm["h"], dm["err_mean"])
     text = page.sections["work-precision"].text()
     assert f"p = {p_osc:.2f} … {p_osc:.2f} (impact_oscillator)" in text
-    assert f"double_mass poisson (h/16 reference) p = {p_dm:.2f}" in text
+    assert f"double_mass poisson (h/16 run reference) p = {p_dm:.2f}" in text
     jump = wp[(wp["target"] == "jump")]
     assert any(f"poisson {_fitted(jump['h'], jump['err_mean']):.2f}" in i
                for i in page.sections["key-numbers"].items)
@@ -652,9 +654,10 @@ def test_solver_comparison_totals_are_recomputed(synthetic_report):
     piv = wp[wp["solver"] == "pivoting"]["cpu_time_s"].sum()
     ref = wp[wp["solver"] == "reference"]["cpu_time_s"].sum()
     r = page.table("work-precision", "Contact solvers on the same method").dicts()[0]
-    assert _num(r["CPU pivoting (s)"]) == pytest.approx(piv, rel=5e-3)
+    assert (r["scenario"], r["solver"]) == ("double_mass", "pivoting")
+    assert _num(r["CPU solver (s)"]) == pytest.approx(piv, rel=5e-3)
     assert _num(r["CPU reference (s)"]) == pytest.approx(ref, rel=5e-3)
-    assert _num(r["ratio"]) == pytest.approx(ref / piv, rel=5e-3)
+    assert _num(r["ratio reference / solver"]) == pytest.approx(ref / piv, rel=5e-3)
 
 
 def test_scaling_exponents_are_recomputed(synthetic_report):
@@ -697,7 +700,7 @@ def test_robustness_median_and_band_are_recomputed(synthetic_report):
     assert len(table) == 2 * len(ROB_POINTS)
     for cells in table:
         kind = "none" if cells["perturbation"].startswith("none") else cells["perturbation"]
-        name = "jump" if cells["observer"] == "with jumps (new)" else "nojump"
+        name = next(n for n, d in OBSERVER_DESIGNS.items() if d.label == cells["observer"])
         g = rob[(rob["perturbation"] == kind) & (rob["observer"] == name)]
         if kind != "none":
             g = g[np.isclose(g["size"].astype(float), _num(cells["size"]), rtol=5e-3)]
@@ -735,7 +738,7 @@ def test_peers_section_ratios_are_recomputed(synthetic_report):
     page, rows = synthetic_report
     pe = rows[rows["kind"] == "peers"].set_index("problem")
     cells = _peer_cells(page)
-    assert list(cells) == [p[0] for p in PEERS]
+    assert sorted(cells) == sorted(p[0] for p in PEERS)
     for prob, r in pe.iterrows():
         c = cells[prob]
         assert _num(c["Siconos (µs/step)"]) == pytest.approx(r["siconos_ns_per_step"] / 1e3, rel=5e-3)
@@ -758,10 +761,12 @@ def test_peers_section_ratios_are_recomputed(synthetic_report):
 
 
 def _rows_file(path: Path, cases: list[tuple[str, list[dict]]]) -> Path:
-    rf = ResultsFile(path)
+    """Hand-made rows stored as a suite named ``path.stem`` (bench.results' case store); the
+    path build_report reads."""
+    store = ResultsFile(path)
     for case_id, rows in cases:
-        rf.append_case(path.stem, case_id, rows)
-    return rf.path
+        store.append_case(path.stem, case_id, rows)
+    return store.path
 
 
 def test_peers_section_without_siconos(tmp_path, monkeypatch):
@@ -844,12 +849,19 @@ def test_proof_check_table_lists_every_check_row(synthetic_report):
 
 
 # ----------------------------------------------------------------------------- analysis frames
+# reports.analysis returns every table as a DataFrame: these tests check the frames without HTML,
+# against numbers recomputed from the hand-made rows.
+def _obs_frame() -> pd.DataFrame:
+    return pd.DataFrame([r for _, rows in _observer_rows() for r in rows])
+
+
 def test_analysis_observer_ratios_frame():
-    """reports.analysis.observer_ratios against the ratios recomputed from the rows."""
+    """observer_ratios for the declared pair (nojump, jump): t_nojump / t_jump per ρ from the
+    rows; a pair whose observers did not both run is left out."""
     from reports.analysis import headline, observer_ratios
 
-    obs = pd.DataFrame([r for _, rows in _observer_rows() for r in rows])
-    frame = observer_ratios(obs)
+    frame = observer_ratios(_obs_frame(), pairs=(("nojump", "jump"), ("jump", "jump_mass")))
+    assert set(zip(frame["baseline"], frame["candidate"])) == {("nojump", "jump")}
     assert len(frame) == 3 * len(RHO_KEYS)
     dm = frame[frame["name"] == "dm"].set_index("rho")
     for rho in RHO_KEYS:
@@ -858,5 +870,136 @@ def test_analysis_observer_ratios_frame():
     stuck = frame[frame["name"] == "stuck"].set_index("rho")
     assert list(stuck["ratio"].iloc[:3]) == [INF] * 3 and np.isnan(stuck.loc[1e-9, "ratio"])
     assert headline(frame[frame["name"] == "dm"])["rho"] == 1e-9
-    assert headline(frame[frame["name"] == "stuck"])["kind"] == "jump only"
-    assert headline(frame[frame["name"] == "ball"])["kind"] == "no jump observer"
+    h = headline(frame[frame["name"] == "stuck"])
+    assert h["kind"] == "candidate only" and h["settle"] == _settle("stuck", "jump", 1e-6)
+    assert headline(frame[frame["name"] == "ball"])["kind"] == "candidate n/a"
+
+
+def test_analysis_ratio_of_a_reversed_pair_is_the_reciprocal():
+    """Declaring (jump, nojump) instead gives t_jump / t_nojump: the reciprocal where finite."""
+    from reports.analysis import observer_ratios
+
+    fwd = observer_ratios(_obs_frame(), pairs=(("nojump", "jump"),)).set_index(["name", "rho"])
+    rev = observer_ratios(_obs_frame(), pairs=(("jump", "nojump"),)).set_index(["name", "rho"])
+    both = np.isfinite(fwd["ratio"]) & (fwd["ratio"] > 0)
+    assert both.sum() == len(RHO_KEYS)                     # dm only
+    assert (fwd["ratio"][both] * rev["ratio"][both]).to_numpy() == pytest.approx(1.0, rel=1e-12)
+
+
+def test_analysis_observer_runs_and_design_summary():
+    """observer_runs: one row per run, the settling times of the rows; design_summary: every
+    registered design listed, runs and applicable runs counted from the rows."""
+    from reports.analysis import design_summary, observer_runs
+
+    obs = _obs_frame()
+    runs = observer_runs(obs)
+    assert len(runs) == len(obs)
+    dm_jump = runs[(runs["name"] == "dm") & (runs["observer"] == "jump")].iloc[0]
+    assert [dm_jump[f"settle_{rho:g}"] for rho in RHO_KEYS] == list(OBSERVERS["dm"]["jump"][1])
+    assert np.isnan(runs[(runs["name"] == "ball") & (runs["observer"] == "jump")]["settle_0.001"].iloc[0])
+    summ = design_summary(obs).set_index("observer")
+    assert list(summ.index) == list(OBSERVER_DESIGNS)
+    for name in OBSERVER_DESIGNS:
+        mine = obs[obs["observer"] == name]
+        assert summ.loc[name, "runs"] == len(mine)
+        assert summ.loc[name, "applicable"] == int((mine["status"] == "ok").sum())
+
+
+def test_analysis_solver_comparison_and_check_counts():
+    """solver_comparison: sums of the CPU times of each solver's sweep; check_counts: statuses
+    counted per design (every registered design present) and in total."""
+    from reports.analysis import check_counts, solver_comparison, wp_orders
+
+    rows = pd.DataFrame([r for _, rs in _synthetic_rows() for r in rs])
+    wp = rows[rows["kind"] == "work_precision"]
+    comp = solver_comparison(wp_orders(wp))
+    assert len(comp) == 1
+    sel = wp[(wp["scenario"] == "double_mass") & (wp["target"] == "master")]
+    piv, ref = (sel[sel["solver"] == s]["cpu_time_s"].sum() for s in ("pivoting", "reference"))
+    assert comp["cpu_solver"].iloc[0] == pytest.approx(piv) and comp["ratio"].iloc[0] == pytest.approx(ref / piv)
+    ch = rows[rows["kind"] == "checks"].assign(design=["", "jump", ""])
+    counts = check_counts(ch).set_index("design")
+    assert list(counts.index) == ["all", *OBSERVER_DESIGNS]
+    for status in ("PASS", "FAIL", "n/a"):
+        assert counts.loc["all", status] == sum(c[3] == status for c in CHECKS)
+    assert (counts.loc["jump", "FAIL"], counts.loc["jump", "PASS"]) == (1, 0)
+    assert counts.loc["nojump", ["PASS", "FAIL", "n/a"]].sum() == 0
+
+
+def test_analysis_robustness_summary_breaks_from_the_first_size_above_the_floor():
+    from reports.analysis import ROBUST_FLOOR, robustness_bands, robustness_summary
+
+    rows = pd.DataFrame([r for _, rs in _synthetic_rows() for r in rs])
+    rob = rows[rows["kind"] == "robustness"]
+    summ = robustness_summary(robustness_bands(rob))
+    for _, r in summ.iterrows():
+        g = rob[(rob["observer"] == r["observer"]) & (rob["perturbation"] == r["perturbation"])]
+        medians = g.groupby("size")["floor_rel"].median()
+        above = medians[medians > ROBUST_FLOOR]
+        if len(above):
+            assert r["breaks_from"] == above.index.min()
+        else:
+            assert np.isnan(r["breaks_from"])
+
+
+# ----------------------------------------------------------------------------- registries
+def test_a_registered_design_shows_in_every_observer_table(tmp_path, monkeypatch):
+    """A toy design added to the registry (one entry) and to the declared ratios: its runs appear
+    in the observer table under its label, its ratio against the baseline is recomputed from the
+    rows, and the design and proof-check summaries list it with its counts."""
+    from observer.observers import ObserverDesign
+    from reports import registry
+
+    toy = ObserverDesign("toy", True, "identity", "toy design (test)", "tab:olive", "-.")
+    monkeypatch.setitem(OBSERVER_DESIGNS, "toy", toy)
+    monkeypatch.setattr(registry, "RATIOS", (("nojump", "jump"), ("nojump", "toy")))
+    cases = _observer_rows()
+    dm_jump = next(r for r in cases[0][1] if r["observer"] == "jump")
+    slow = 1.7                                              # the toy settles 1.7× later than jump
+    toy_row = {**dm_jump, "observer": "toy",
+               **{f"t_settle_{k}": slow * dm_jump[f"t_settle_{k}"] for k in RHO_KEYS.values()},
+               **{f"t_sync_{k}": slow * dm_jump[f"t_sync_{k}"] for k in RHO_KEYS.values()}}
+    cases.append(("observers:dm:toy", [toy_row]))
+    cases.append(("checks", [{"kind": "checks", "scenario": "dm", "name": "dm", "check": c, "design": d,
+                              "equation": "(16)", "check_status": st, "margin": mg, "tolerance": 0.0,
+                              "witness": "w", "reason": "", "status": "ok"}
+                             for c, d, st, mg in (("lyapunov_decrease", "toy", "FAIL", -1.0),
+                                                  ("proposition1_exact", "toy", "PASS", 0.0),
+                                                  ("mass_spd", "", "PASS", 1.0))]))
+    page = _parse(build_report([_rows_file(tmp_path / "toy.jsonl", cases)], tmp_path / "r"))
+    observers = [r for r in page.table("observers", "Observer table").dicts() if r["scenario"] == "dm"]
+    assert [r["observer"] for r in observers] == [OBSERVER_DESIGNS[o].label for o in ("jump", "nojump")] \
+        + [toy.label]
+    ratio = {(r["scenario"], r["baseline / candidate"]): r
+             for r in page.table("observers", "Settling-time ratio").dicts()}
+    for rho in RHO_KEYS:
+        cell = ratio[("dm", "nojump / toy")][f"ratio at ρ = {fmt_rho(rho)}"]
+        t_toy = slow * _settle("dm", "jump", rho)
+        assert _nums(cell)[:3] == pytest.approx([_settle("dm", "nojump", rho) / t_toy,
+                                                 _settle("dm", "nojump", rho), t_toy], rel=5e-3)
+    assert ("stuck", "nojump / toy") not in ratio           # the toy did not run there
+    designs = {r["design"]: r for r in page.table("observers", "Registered observer designs").dicts()}
+    assert list(designs) == list(OBSERVER_DESIGNS)
+    assert (designs["toy"]["label"], designs["toy"]["runs"]) == (toy.label, "1")
+    per_design = {r["design"]: r for r in page.table("proof-checks", "Proof checks per observer design").dicts()}
+    assert (per_design["toy"]["PASS"], per_design["toy"]["FAIL"]) == ("1", "1")
+    assert per_design["nojump"]["PASS"] == "0"
+    checks = page.table("proof-checks", "Proof-check table").dicts()
+    assert [r["design"] for r in checks] == [toy.label, toy.label, "—"]
+
+
+def test_rows_are_ordered_whatever_the_storage_order():
+    """load order of case files carries no meaning: order_rows sorts by suite, the declared case
+    order (case id for an undeclared suite) and the row within the case."""
+    from reports.context import order_rows
+
+    rows = pd.DataFrame([{"suite": "synthetic", "case_id": cid, "row": i, **r}
+                         for cid, rs in _synthetic_rows() for i, r in enumerate(rs)])
+    shuffled = rows.sample(frac=1.0, random_state=3).reset_index(drop=True)
+    a, b = order_rows(rows), order_rows(shuffled)
+    assert a[["case_id", "row"]].values.tolist() == b[["case_id", "row"]].values.tolist()
+    assert list(a["case_id"]) == sorted(rows["case_id"])      # undeclared suite: by case id
+    from bench.suites import SUITES
+    quick = [c.case_id for c in SUITES["quick"].cases][:5]
+    declared = pd.DataFrame({"suite": "quick", "case_id": quick[::-1], "row": 0})
+    assert list(order_rows(declared)["case_id"]) == quick     # declared suite: declared order

@@ -1,0 +1,56 @@
+"""The pieces a report section is made of: :class:`Block` (paragraph, list, table, figure,
+details, preformatted text) and :class:`Section` (a titled list of blocks and subsections)."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import Any
+
+from reports.figures import Figure
+from reports.tables import Table
+
+
+@dataclass
+class Block:
+    """One piece of a section: ``kind`` in {"p", "list", "table", "figure", "details", "pre"}."""
+
+    kind: str
+    content: Any
+    summary: str = ""
+
+
+@dataclass
+class Section:
+    """A section of the page: ``id`` (the anchor), ``title``, blocks and subsections."""
+
+    id: str
+    title: str
+    blocks: list = field(default_factory=list)
+    subsections: list = field(default_factory=list)
+
+    def p(self, text: str) -> None:
+        self.blocks.append(Block("p", text))
+
+    def items(self, items: list[str]) -> None:
+        self.blocks.append(Block("list", items))
+
+    def table(self, t: Table) -> None:
+        self.blocks.append(Block("table", t))
+
+    def figure(self, f: Figure | None, missing: str) -> None:
+        if f is None:
+            self.p(missing)
+        else:
+            self.blocks.append(Block("figure", f))
+
+    def details(self, summary: str, t: Table) -> None:
+        self.blocks.append(Block("details", t, summary))
+
+    def pre(self, text: str) -> None:
+        self.blocks.append(Block("pre", text))
+
+
+def slug(text: str) -> str:
+    """An HTML id from a title: lower case, runs of other characters replaced by ``-``."""
+    return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-") or "x"

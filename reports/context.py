@@ -1,0 +1,182 @@
+"""What every report section reads: the result rows, the micro-benchmarks and the run's
+settings, loaded once (:func:`load_context`), plus the key-number lines sections add.
+
+:func:`load_rows` is the only place the report reads benchmark storage (:mod:`bench.results`).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable
+
+import pandas as pd
+
+
+def load_rows(files: list[Path]) -> pd.DataFrame:
+    """The tidy result rows of ``files`` (one DataFrame, a ``results_dir`` column per row), in
+    a fixed order (:func:`order_rows`). The only place the report reads benchmark storage."""
+    from bench.results import load_results
+    return order_rows(load_results(files))
+
+
+def _declared_order(suite: str) -> dict[str, int]:
+    from bench.suites import SUITES
+
+    declared = SUITES.get(suite)
+    return {c.case_id: i for i, c in enumerate(declared.cases)} if declared is not None else {}
+
+
+def order_rows(df: pd.DataFrame) -> pd.DataFrame:
+    """Rows sorted by suite (first appearance), the suite's declared case order (case id for a
+    suite :mod:`bench.suites` does not declare), then the row index within the case: storage
+    order (one file per case) carries no meaning, the page must not depend on it."""
+    if df.empty or not {"suite", "case_id"} <= set(df.columns):
+        return df
+    suites = list(dict.fromkeys(df["suite"].astype(str)))
+    pos = pd.Series(float("inf"), index=df.index)
+    for s in suites:
+        sel = df["suite"].astype(str) == s
+        pos[sel] = df.loc[sel, "case_id"].map(_declared_order(s)).fillna(float("inf"))
+    keys = pd.DataFrame({"suite": df["suite"].astype(str).map(suites.index), "pos": pos,
+                         "case": df["case_id"].astype(str),
+                         "row": df["row"] if "row" in df else pd.Series(range(len(df)), index=df.index)})
+    order = keys.sort_values(["suite", "pos", "case", "row"], kind="stable").index
+    return df.loc[order].reset_index(drop=True)
+
+
+def _suite_of(path: Path) -> str:
+    return path.stem[:-len("-micro")] if path.stem.endswith("-micro") else path.stem
+
+
+def discover_micro(result_files: Iterable[Path]) -> list[Path]:
+    """``<dir>/<suite>-micro.json`` next to each results file, where it exists."""
+    out = []
+    for p in result_files:
+        cand = p.parent / f"{_suite_of(p)}-micro.json"
+        if cand.exists() and cand not in out:
+            out.append(cand)
+    return out
+
+
+MICRO_EXTRA = ("kind", "solver", "m", "scenario", "case", "engine", "steps", "n", "systems",
+               "compile_time_s", "residual", "iterations")
+"""``extra_info`` keys of a pytest-benchmark record kept as columns."""
+MICRO_STATS = {"mean_s": "mean", "median_s": "median", "stddev_s": "stddev", "min_s": "min",
+               "rounds": "rounds"}
+"""Columns taken from a record's ``stats`` (times in seconds)."""
+
+
+def _micro_row(path: Path, b: dict) -> dict:
+    st, ex = b.get("stats", {}), b.get("extra_info", {})
+    row = {"file": str(path), "group": b.get("group") or "", "name": b.get("name", "")}
+    row.update({k: ex.get(k, "" if k in ("kind", "solver", "scenario", "case", "engine") else None)
+                for k in MICRO_EXTRA})
+    row.update({col: st.get(key) for col, key in MICRO_STATS.items()})
+    return row
+
+
+def load_micro(paths: Iterable[Path]) -> tuple[pd.DataFrame, dict]:
+    """pytest-benchmark JSON files → one row per benchmark (times in seconds), and metadata."""
+    rows, meta = [], {}
+    for p in paths:
+        data = json.loads(Path(p).read_text())
+        meta = {"datetime": data.get("datetime", ""), "version": data.get("version", ""),
+                "cpu": (data.get("machine_info", {}).get("cpu", {}) or {}).get("brand_raw", ""),
+                "file": str(p)}
+        rows += [_micro_row(Path(p), b) for b in data.get("benchmarks", [])]
+    return pd.DataFrame(rows), meta
+
+
+def load_trajectory(row: pd.Series) -> pd.DataFrame | None:
+    """The downsampled trajectory a result row points to (``None`` when it has none)."""
+    rel = row.get("trajectory")
+    if not isinstance(rel, str) or not rel:
+        return None
+    path = Path(row.get("results_dir", ".")) / rel
+    return pd.read_parquet(path) if path.exists() else None
+
+
+@dataclass
+class ReportContext:
+    """Shared input of the sections.
+
+    Attributes
+    ----------
+    df : DataFrame
+        Every result row of the suites (column ``kind`` says which runner wrote it).
+    files : list of Path
+        The results files read.
+    micro, micro_meta : DataFrame, dict
+        Micro-benchmark rows (:func:`load_micro`) and the metadata of their file.
+    suites : list of str
+        Suite names in the rows, in order of appearance.
+    command : str
+        The one command that reproduces the page.
+    out_dir : Path
+        Output folder of the page.
+    key_numbers : list of str
+        Lines for the "Key numbers" section, appended by the sections as they are built.
+    """
+
+    df: pd.DataFrame
+    files: list
+    micro: pd.DataFrame
+    micro_meta: dict
+    suites: list
+    command: str
+    out_dir: Path
+    key_numbers: list = field(default_factory=list)
+
+    def rows(self, kind: str, ok_only: bool = False) -> pd.DataFrame:
+        """The rows one runner wrote (``kind``), optionally only those with status ok."""
+        if "kind" not in self.df:
+            return pd.DataFrame()
+        sel = self.df[self.df["kind"] == kind]
+        if ok_only and "status" in sel:
+            sel = sel[sel["status"] == "ok"]
+        return sel.copy()
+
+    def unavailable_notes(self, prefix: str) -> list[str]:
+        """Cases the last suite run skipped (``<suite>.unavailable.json``) whose id starts
+        with ``prefix``: "case id: reason"."""
+        notes = []
+        if not {"suite", "results_dir"} <= set(self.df.columns):
+            return notes
+        for (suite, folder), _ in self.df.groupby(["suite", "results_dir"]):
+            path = Path(folder) / f"{suite}.unavailable.json"
+            if path.exists():
+                try:
+                    notes += [f"{cid}: {msg}" for cid, msg in json.loads(path.read_text()).items()]
+                except (OSError, ValueError):
+                    continue
+        return [n for n in notes if n.startswith(prefix)]
+
+
+def load_context(result_files: Iterable[str | Path], out_dir: str | Path, *,
+                 micro_files: Iterable[str | Path] | None = None,
+                 command: str | None = None) -> ReportContext:
+    """Read the results files (and micro-benchmark JSON) into a :class:`ReportContext`.
+
+    Raises
+    ------
+    FileNotFoundError
+        A results file does not exist.
+    ValueError
+        The files hold no rows.
+    """
+    files = [Path(p) for p in result_files]
+    missing = [str(p) for p in files if not p.exists()]
+    if missing:
+        raise FileNotFoundError(f"results file(s) not found: {', '.join(missing)}")
+    df = load_rows(files)
+    if df.empty:
+        raise ValueError("the results files contain no rows")
+    micro_paths = [Path(p) for p in micro_files] if micro_files is not None else discover_micro(files)
+    micro, micro_meta = load_micro(micro_paths)
+    suites = list(dict.fromkeys(df["suite"].astype(str)))
+    if command is None:
+        command = f"nox -s report -- {suites[0] if len(suites) == 1 else 'SUITE'}"
+    return ReportContext(df=df, files=files, micro=micro, micro_meta=micro_meta, suites=suites,
+                         command=command, out_dir=Path(out_dir))

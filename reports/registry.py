@@ -1,0 +1,128 @@
+"""The toolkit's registries as the report sees them — the one place the report learns which
+observer designs, ratios, thresholds, scenarios and contact solvers exist.
+
+Every section iterates over these functions instead of naming designs or solvers, so a design
+added to :data:`observer.observers.OBSERVER_DESIGNS` (or a solver added to
+:data:`observer.contact.CONTACT_SOLVERS`) shows in the report without touching ``reports/``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterable
+
+from observer.contact import CONTACT_SOLVERS
+from observer.scenarios import SCENARIOS
+
+try:
+    from observer.observers import OBSERVER_DESIGNS, RATIOS
+except ImportError:  # pragma: no cover - until the design registry is committed (issue 10 item 1)
+    from observer.observers import OBSERVERS as _OBSERVERS
+
+    @dataclass(frozen=True)
+    class _Design:
+        name: str
+        position_jumps: bool
+        label: str
+        color: str
+        linestyle: str
+
+        @property
+        def metric(self) -> str | None:
+            return "K" if self.position_jumps else None
+
+    _LOOKS = {True: ("tab:blue", "--"), False: ("tab:red", ":")}
+    OBSERVER_DESIGNS = {n: _Design(n, j, n, *_LOOKS[j]) for n, j in _OBSERVERS.items()}
+    RATIOS = tuple((b, c) for b in _OBSERVERS for c in _OBSERVERS if not _OBSERVERS[b] and _OBSERVERS[c])
+
+MASTER = "master"
+"""Name of the observed system in trajectories and work-precision rows."""
+REFERENCE_SOLVER = "reference"
+"""The contact solver the others are compared with (cvxpy + OSQP)."""
+
+
+def rhos() -> tuple[float, ...]:
+    """The synchronization thresholds ρ the suites record (one list, defined in the suites)."""
+    from bench.suites import RHOS
+    return tuple(RHOS)
+
+
+@dataclass(frozen=True)
+class Look:
+    """How a figure or table shows one system: label, colour and line style."""
+
+    name: str
+    label: str
+    color: str
+    linestyle: str
+
+
+def look(name: str) -> Look:
+    """The look of ``name``: the master, a registered design, or a grey fallback."""
+    if name == MASTER:
+        return Look(MASTER, "master", "black", "-")
+    d = OBSERVER_DESIGNS.get(name)
+    if d is None:
+        return Look(name, name, "0.5", "-")
+    return Look(name, d.label, d.color, d.linestyle)
+
+
+def label(name: str) -> str:
+    """Display label of an observer design (or of the master)."""
+    return look(name).label
+
+
+def designs() -> tuple[str, ...]:
+    """Registered observer designs, in registry order."""
+    return tuple(OBSERVER_DESIGNS)
+
+
+def in_registry_order(names: Iterable[str]) -> list[str]:
+    """``names`` (without repeats) sorted by registry order; unregistered names last."""
+    order = {n: i for i, n in enumerate(OBSERVER_DESIGNS)}
+    uniq = list(dict.fromkeys(names))
+    return sorted(uniq, key=lambda n: (order.get(n, len(order)), uniq.index(n)))
+
+
+def ratio_pairs() -> tuple[tuple[str, str], ...]:
+    """Declared (baseline, candidate) pairs: the report shows t_baseline / t_candidate."""
+    return tuple(RATIOS)
+
+
+def contact_solvers() -> tuple[str, ...]:
+    """Registered contact solvers, in registry order."""
+    return tuple(CONTACT_SOLVERS)
+
+
+def fast_solvers() -> tuple[str, ...]:
+    """Contact solvers compared against :data:`REFERENCE_SOLVER`."""
+    return tuple(s for s in CONTACT_SOLVERS if s != REFERENCE_SOLVER)
+
+
+def scenario_description(name: str) -> str:
+    """One-line description of a built-in scenario ('' for an unknown one)."""
+    return str(getattr(SCENARIOS.get(name), "DESCRIPTION", "") or "")
+
+
+def plot_labels(name: str, dof: int, contact: int) -> tuple[str, str]:
+    """Axis labels (coordinate, gap) of a scenario's figure, from its metadata when it has
+    them (``observer.scenarios.info(name).plot``), else generic ones."""
+    plot = _scenario_info(name, "plot")
+    labels = getattr(plot, "labels", None) or (plot.get("labels") if isinstance(plot, dict) else None)
+    if labels:
+        return tuple(labels)[:2]
+    return f"q{dof}", f"gap g{contact} (m)"
+
+
+def scenario_notes(name: str) -> str:
+    """The scenario's own notes (what is drawn, what to watch), '' when it has none."""
+    return str(_scenario_info(name, "notes") or "")
+
+
+def _scenario_info(name: str, field: str):
+    import observer.scenarios as scenarios
+
+    info = getattr(scenarios, "info", None)
+    if info is None or name not in SCENARIOS:
+        return None
+    return getattr(info(name), field, None)

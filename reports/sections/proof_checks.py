@@ -1,0 +1,85 @@
+"""Proof-step checks (:mod:`proofs_checks`): counts per status, per registered observer design,
+and every check row with its margin, tolerance and witness."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from reports import analysis, registry
+from reports.analysis import CHECK_STATUSES
+from reports.blocks import Section
+from reports.context import ReportContext
+from reports.tables import Table, fmt, fmt_int, text
+
+TITLE = "Proof-step checks (proofs_checks)"
+WITNESS_CHARS = 220
+"""Longest witness / reason shown in a cell (longer ones end with "…")."""
+
+
+def _why_missing() -> str:
+    try:
+        import proofs_checks  # noqa: F401
+    except Exception as exc:  # pragma: no cover - a broken package is reported, not fatal
+        return f"proofs_checks is not importable here ({type(exc).__name__}: {exc})."
+    return ("proofs_checks is importable, but these results have no check rows; run the suite "
+            "again (finished cases are skipped, the checks are added).")
+
+
+def _design_of(r: pd.Series) -> str:
+    d = r.get("design")
+    return registry.label(d) if isinstance(d, str) and d else "—"
+
+
+def checks_table(ch: pd.DataFrame) -> Table:
+    """Every check row."""
+    t = Table("Proof-check table: status, margin, tolerance and witness per scenario and check",
+              ["scenario", "check", "design", "equation", "status", "margin", "tolerance",
+               "witness / reason"])
+    for _, r in ch.iterrows():
+        st = str(r["check_status"])
+        na = st == "n/a"
+        reason, wit = text(r.get("reason")), text(r.get("witness"))
+        detail = (reason if na else wit or reason) or "—"
+        if len(detail) > WITNESS_CHARS:
+            detail = detail[:WITNESS_CHARS - 3] + "…"
+        t.add([r["scenario"], r["check"], _design_of(r), text(r.get("equation")) or "—", st,
+               "n/a" if na else fmt(r["margin"]), "n/a" if na else fmt(r["tolerance"]), detail])
+    return t
+
+
+def design_counts_table(counts: pd.DataFrame) -> Table:
+    """Check statuses per registered observer design (zeros: no rows for that design)."""
+    t = Table("Proof checks per observer design (rows whose check concerns that design)",
+              ["design", "label", "scenarios", *CHECK_STATUSES])
+    for _, r in counts[counts["design"] != "all"].iterrows():
+        t.add([r["design"], registry.label(r["design"]), fmt_int(r["scenarios"]),
+               *(fmt_int(r[s]) for s in CHECK_STATUSES)])
+    return t
+
+
+def build(ctx: ReportContext) -> Section:
+    """The proof-check section; adds the status counts to the key numbers."""
+    sec = Section("proof-checks", TITLE)
+    ch = ctx.rows("checks")
+    notes = ctx.unavailable_notes("checks:")
+    if ch.empty:
+        sec.p("No proof-check results. " + _why_missing())
+        if notes:
+            sec.p("The last suite run skipped the checks:")
+            sec.items(notes)
+        ctx.key_numbers.append("Proof-step checks: no results (see the proof-check section).")
+        return sec
+    if notes:
+        sec.p("Some check cases were skipped in the last run (shown rows are from earlier runs):")
+        sec.items(notes)
+    counts = analysis.check_counts(ch)
+    total = counts[counts["design"] == "all"].iloc[0]
+    sec.p(f"{len(ch)} checks on {total['scenarios']} scenarios: "
+          + ", ".join(f"{total[s]} {s}" for s in CHECK_STATUSES) + ". "
+          "margin ≥ −tolerance means satisfied; the witness is where the margin is worst. "
+          "n/a: the check's hypotheses do not hold for that system (reason given).")
+    ctx.key_numbers.append(f"Proof-step checks: {total['PASS']} PASS, {total['FAIL']} FAIL, "
+                           f"{total['n/a']} not applicable, over {total['scenarios']} scenarios.")
+    sec.table(design_counts_table(counts))
+    sec.table(checks_table(ch))
+    return sec

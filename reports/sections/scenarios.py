@@ -1,0 +1,74 @@
+"""Scenarios: per scenario the paper's figure (a gap, a coordinate and log V of every observer
+that ran), the settings of the run, its observer table and the headline of each declared pair."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from reports import figures, registry
+from reports.blocks import Section, slug
+from reports.context import ReportContext, load_trajectory
+from reports.sections.observers import observer_table, ratio_rows
+from reports.tables import fmt, fmt_window, text
+
+TITLE = "Scenarios: trajectories and Lyapunov function (the paper's figures)"
+
+
+def _settings_text(r0: pd.Series, ok: bool) -> str:
+    params = f", {text(r0.get('params'))}" if text(r0.get("params")) else ""
+    window = fmt_window(r0.get("t_on"), r0.get("t_off")) if ok else "n/a"
+    return (f"Settings: h = {fmt(r0['h'])} s, T = {fmt(r0['t_end'])} s, coupling window {window} s, "
+            f"law {r0['law']}, solver {r0['solver']}{params}.")
+
+
+def _intro(scen: str, r0: pd.Series, ok: bool) -> str:
+    desc = registry.scenario_description(scen)
+    notes = registry.scenario_notes(scen)
+    parts = [desc[:1].upper() + desc[1:] + "." if desc else "", notes, _settings_text(r0, ok)]
+    return " ".join(p for p in parts if p)
+
+
+def _figure(name: str, scen: str, ok: pd.DataFrame, r0: pd.Series):
+    if ok.empty:
+        return None
+    traj = load_trajectory(r0)
+    if traj is None:
+        return None
+    dof, con = (0 if pd.isna(r0.get(c)) else int(r0.get(c)) for c in ("plot_dof", "plot_contact"))
+    coord, gap = registry.plot_labels(scen, dof, con)
+    window = (float(r0["t_on"]), float(r0["t_off"]))
+    observers = registry.in_registry_order(ok["observer"])
+    return figures.scenario_figure(traj, str(name), observers, window, coord, gap)
+
+
+def scenario_subsection(name: str, g: pd.DataFrame, ratios: list[dict]) -> Section:
+    """One scenario's subsection (figure, settings, observer table, headlines)."""
+    scen = g["scenario"].iloc[0]
+    sub = Section(f"scn-{slug(str(name))}", str(name))
+    ok = g[g["status"] == "ok"]
+    r0 = ok.iloc[0] if len(ok) else g.iloc[0]
+    sub.p(_intro(scen, r0, len(ok) > 0))
+    sub.figure(_figure(name, scen, ok, r0), "No trajectory file for this scenario (rerun the suite).")
+    sub.table(observer_table(g, f"Synchronization of the observers on {name}"))
+    for rec in (r for r in ratios if r["name"] == name):
+        sub.p(f"Headline (settling times): {rec['headline']}. Baseline {rec['pair'][0]}: "
+              f"{rec['verdict']}.")
+    return sub
+
+
+def build(ctx: ReportContext) -> Section:
+    """The scenario section: one subsection per scenario name in the observer rows."""
+    sec = Section("scenarios", TITLE)
+    obs = ctx.rows("observers")
+    if obs.empty:
+        sec.p("No observer runs in these results.")
+        return sec
+    designs = registry.in_registry_order(obs["observer"])
+    sec.p("Each run couples the observers to the master through the master's own closed set χ "
+          "(same grid) inside the shaded window. Master: black, solid; "
+          + "; ".join(f"{registry.label(d)}: {registry.look(d).color.replace('tab:', '')}, "
+                      f"line style '{registry.look(d).linestyle}'" for d in designs) + ".")
+    ratios = ratio_rows(obs)
+    for name, g in obs.groupby("name", sort=False):
+        sec.subsections.append(scenario_subsection(name, g, ratios))
+    return sec
