@@ -45,7 +45,7 @@ system = scenario.system
 print(f"{scenario.name}: n = {system.n} DOF, m = {system.m} contacts, {scenario.law.law} law, "
       f"h = {scenario.h:g} s, t_end = {scenario.t_end:g} s")
 
-# 2. Simulate the master and the two observers named in the file's [observer] table.
+# 2. Simulate the master and both observers (they start from the file's [observer] state).
 result = observer.simulate(scenario, observers=("jump", "nojump"))
 frame = result.to_frame()            # t, q0.., g0.., active0.., jump_q0.., V_jump, V_nojump
 closings = (frame.filter(like="active").diff() > 0).sum()            # 0 -> 1 per contact
