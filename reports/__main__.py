@@ -1,12 +1,12 @@
 """``python -m reports``: build the HTML report of one or more suites.
 
-    python -m reports quick                                   # bench/results/quick.jsonl
-    python -m reports bench/results/quick.jsonl --out reports/out/quick
+    python -m reports quick                                   # bench/results/quick.cases
+    python -m reports bench/results/quick.cases --out reports/out/quick
     python -m reports quick --check                           # + headless Chromium check
 
-An argument that is not an existing file is taken as a suite name and resolved to
-``RESULTS/<name>.jsonl`` (``--results``, default ``bench/results``). ``--out`` defaults to
-``reports/out/<first suite>``.
+An argument that is not an existing path is taken as a suite name and resolved to its results
+under ``--results`` (default ``bench/results``; :func:`reports.context.suite_results`).
+``--out`` defaults to ``reports/out/<first suite>``.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from pathlib import Path
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m reports", description=__doc__.split("\n\n")[0])
     p.add_argument("inputs", nargs="*", default=["quick"],
-                   help="results files (.jsonl/.csv) or suite names (default: quick)")
+                   help="results (case folders, .csv, .parquet) or suite names (default: quick)")
     p.add_argument("--out", default=None, help="output folder (default reports/out/<suite>)")
     p.add_argument("--results", default="bench/results", help="folder of suite results")
     p.add_argument("--micro", nargs="*", default=None, help="pytest-benchmark JSON files "
@@ -30,17 +30,19 @@ def main(argv: list[str] | None = None) -> int:
                    help="open the page in headless Chromium and check images and console")
     args = p.parse_args(argv)
 
+    from reports.context import suite_results
+
     files = []
     for item in args.inputs:
         path = Path(item)
-        if not path.exists() and path.suffix not in (".jsonl", ".csv"):
-            path = Path(args.results) / f"{item}.jsonl"
+        if not path.exists() and path.suffix not in (".jsonl", ".csv", ".parquet"):
+            path = suite_results(item, args.results)
         if not path.exists():
             print(f"error: no results for {item!r} ({path} does not exist); run "
                   f"`python -m bench run {Path(item).stem}` first", file=sys.stderr)
             return 2
         files.append(path)
-    out = Path(args.out) if args.out else Path("reports/out") / files[0].stem
+    out = Path(args.out) if args.out else Path("reports/out") / files[0].name.split(".")[0]
     from reports.build import build_report
     t0 = time.perf_counter()
     index = build_report(files, out, micro_files=args.micro, command=args.command)

@@ -21,6 +21,17 @@ def load_rows(files: list[Path]) -> pd.DataFrame:
     return order_rows(load_results(files))
 
 
+def suite_results(suite: str, folder: str | Path) -> Path:
+    """Where :mod:`bench` stores the results of ``suite`` under ``folder`` (what
+    :func:`load_rows` takes): the case folder ``<suite>.cases`` (one Parquet file per case), or
+    ``<suite>.jsonl`` where the storage predates it."""
+    try:
+        from bench.results import CASES_SUFFIX
+    except ImportError:  # pragma: no cover - JSON-lines storage
+        CASES_SUFFIX = ".jsonl"
+    return Path(folder) / f"{suite}{CASES_SUFFIX}"
+
+
 def _declared_order(suite: str) -> dict[str, int]:
     from bench.suites import SUITES
 

@@ -72,6 +72,11 @@ def label(name: str) -> str:
     return look(name).label
 
 
+def design(name: str):
+    """The registered design ``name`` (its ``position_jumps``, ``metric``, ``label``, …)."""
+    return OBSERVER_DESIGNS[name]
+
+
 def designs() -> tuple[str, ...]:
     """Registered observer designs, in registry order."""
     return tuple(OBSERVER_DESIGNS)

@@ -1003,3 +1003,9 @@ def test_rows_are_ordered_whatever_the_storage_order():
     quick = [c.case_id for c in SUITES["quick"].cases][:5]
     declared = pd.DataFrame({"suite": "quick", "case_id": quick[::-1], "row": 0})
     assert list(order_rows(declared)["case_id"]) == quick     # declared suite: declared order
+
+
+def test_suite_names_resolve_to_where_bench_stores_them(tmp_path):
+    from reports.context import suite_results
+
+    assert suite_results("quick", tmp_path) == results_path("quick", tmp_path)

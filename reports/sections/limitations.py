@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from reports import registry
 from reports.analysis import RHOS
 from reports.blocks import Section
 from reports.context import ReportContext
@@ -18,6 +19,17 @@ DISCRETE_TIME = (
     "(≤ 0 when the map is monotone, A3) it carries a slack −(1−ε)/(2(1+ε))ΔPᵀΔδ with Δδ = O(h), "
     "which vanishes only as h → 0 (or for ε = 1). V may therefore rise on an impact step by an "
     "O(h) amount; the proof-check table reports where, and the fitted order of that slack.")
+
+
+def metric_item() -> list[str]:
+    """Designs whose position jump projects in another metric than K (registry)."""
+    other = [f"{d.name} ({d.metric} metric)" for d in map(registry.design, registry.designs())
+             if d.position_jumps and d.metric != "K"]
+    if not other:
+        return []
+    return [f"The sign of the projection term holds for the K-metric projection only: {', '.join(other)} "
+            "project in another metric, so their position jump can raise V = ½vᵀMv + ½eᵀKe; the "
+            "observer table and the proof checks measure what it does."]
 TIMINGS = (
     "Timings are CPU seconds of one process (time.process_time) on the machine in the header, "
     "with BLAS pinned to one thread; the machine may have been shared with other jobs. Compare "
@@ -100,7 +112,7 @@ def peers_item(ctx: ReportContext) -> list[str]:
 
 def limitations(ctx: ReportContext) -> list[str]:
     """Every limitation line for these results."""
-    return ([DISCRETE_TIME, TIMINGS, thresholds_item(ctx)] + work_precision_items(ctx)
+    return ([DISCRETE_TIME] + metric_item() + [TIMINGS, thresholds_item(ctx)] + work_precision_items(ctx)
             + not_applicable_items(ctx) + robustness_item(ctx) + scaling_item(ctx)
             + peers_item(ctx) + list(FIXED))
 

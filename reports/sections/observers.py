@@ -166,9 +166,8 @@ def design_table(obs: pd.DataFrame) -> Table:
     t = Table("Registered observer designs: runs in these results, median final V / V(t_on)",
               ["design", "label", "position jumps (metric)", "runs", "applicable",
                "median V_end / V(t_on)", "median rate (1/s)"])
-    from observer.observers import OBSERVER_DESIGNS
     for _, r in analysis.design_summary(obs).iterrows():
-        d = OBSERVER_DESIGNS[r["observer"]]
+        d = registry.design(r["observer"])
         t.add([d.name, d.label, f"yes ({d.metric})" if d.position_jumps else "no", fmt_int(r["runs"]),
                fmt_int(r["applicable"]), fmt(r["median_V_end_rel"], na="n/a (no applicable run)"),
                fmt(r["median_rate"], na="n/a (no applicable run)")])
