@@ -574,8 +574,12 @@ def _conv_run(n_steps=400, T=4.0, rate=1.0, K=None, C=None, closed_from=0.95, c_
     active = np.zeros((t.size, 1), bool)
     active[int(closed_from * n_steps) + 1:, 0] = True
     P = np.where(active, 0.01, 0.0)
-    A = SimpleNamespace(q=q, u=u, P=P, active=active)
-    B = SimpleNamespace(q=np.zeros_like(q), u=np.zeros_like(u), P=np.zeros_like(P), active=active.copy())
+    # B moves on its own (not a rest state), A = B + the decaying error
+    qB = np.stack([0.1 * np.sin(t), 0.05 * np.cos(2 * t)], axis=1)
+    uB = np.stack([0.1 * np.cos(t), -0.1 * np.sin(2 * t)], axis=1)
+    PB = np.where(active, 0.004, 0.0)
+    A = SimpleNamespace(q=q + qB, u=u + uB, P=P + PB, active=active)
+    B = SimpleNamespace(q=qB, u=uB, P=PB, active=active.copy())
     names = ["obs_a", "obs_b", "obs_c"][:slaves]
     members = dict(zip(names, [A, B, B]))
     return SimpleNamespace(system=system, t=t, h=T / n_steps, theta=0.5, slaves=members)
@@ -583,7 +587,7 @@ def _conv_run(n_steps=400, T=4.0, rate=1.0, K=None, C=None, closed_from=0.95, c_
 
 def test_convergence_witness_by_hand():
     run = _conv_run()
-    r = ly.check_convergence(run, rho=1e-3, window=0.1)
+    r = ly.check_convergence(run)                     # defaults: rho = 1e-3, window = 0.1
     A, B = run.slaves["obs_a"], run.slaves["obs_b"]
     M, K, W, C = run.system.M, run.system.K, run.system.W, run.system.C
     Cb = (C + C.T) / 2
@@ -672,8 +676,8 @@ def test_convergence_growing_V_fails_on_the_rate():
 
 def test_convergence_time_to_rho_zero_and_V_end_zero():
     run = _conv_run()
-    run.slaves["obs_a"].q[1:] = 0.0
-    run.slaves["obs_a"].u[1:] = 0.0
+    A, B = run.slaves["obs_a"], run.slaves["obs_b"]
+    A.q[1:], A.u[1:] = B.q[1:], B.u[1:]
     r = ly.check_convergence(run, rho=0.5)
     assert r.witness["decades"] == np.inf and r.witness["time_to_rho"] == run.t[1]
     # V = 0 after the first step: no positive samples to fit a rate on, so no decay is shown
@@ -684,13 +688,32 @@ def test_convergence_not_applicable_cases():
     K_semi = np.array([[1.0, 1.0], [1.0, 1.0]])
     r = ly.check_convergence(_conv_run(K=K_semi))
     assert r.passed is None and r.reason.startswith("K is not positive definite (λ_min = ")
-    assert "Theorem 1 needs K ≻ 0" in r.reason
+    assert r.reason.endswith("): V is not a norm of the error; Theorem 1 needs K ≻ 0")
+    assert r.name == "convergence" and r.equation == "Theorem 1; eqs. (18)-(21)"
+    r = ly.check_convergence(_conv_run(K=np.diag([-2.0, 5.0])))
+    assert r.passed is None and r.reason.startswith("K is not positive definite (λ_min = -2): ")
+    # scale-free floor: λ_min/λ_max against 1e-12 with λ_max = 5 ≠ 1
+    assert ly.check_convergence(_conv_run(K=np.diag([5.0, 1.5e-11]))).passed is not None
+    assert ly.check_convergence(_conv_run(K=np.diag([5.0, 0.5e-11]))).passed is None
+    assert ly.check_convergence(_conv_run(K=np.diag([5.0, 5e-12]))).passed is None          # = floor
+    assert ly.check_convergence(_conv_run(K=np.diag([0.2, 0.1]))).passed is not None        # λ_max < 1
+    assert ly.check_convergence(_conv_run(K=np.diag([0.0, 0.0]))).passed is None
+    assert ly.check_convergence(_conv_run(C=np.diag([5.0, 1.5e-11]))).passed is not None
+    assert ly.check_convergence(_conv_run(C=np.diag([5.0, 0.5e-11]))).passed is None
+    assert ly.check_convergence(_conv_run(C=np.diag([5.0, -5e-12]))).passed is None         # |λ_min| = floor
+    assert ly.check_convergence(_conv_run(C=np.diag([0.2, 0.1]))).passed is not None
+    assert ly.check_convergence(_conv_run(C=np.diag([0.0, 0.0]))).passed is None
+    assert ly.check_convergence(_conv_run(C=np.diag([-1.0, 0.0]))).passed is None
     # near miss on the relative floor: λ_min = 2e-12·λ_max is applicable, 0.5e-12 is not
     assert ly.check_convergence(_conv_run(K=np.diag([1.0, 2e-12]))).passed is not None
     assert ly.check_convergence(_conv_run(K=np.diag([1.0, 0.5e-12]))).passed is None
     assert ly.check_convergence(_conv_run(K=-np.eye(2))).passed is None
     r = ly.check_convergence(_conv_run(C=np.diag([1.0, 0.0])))
-    assert r.passed is None and r.reason.startswith("C̄ is only positive semi-definite (λ_min = 0")
+    assert r.passed is None and r.reason.startswith("C̄ is only positive semi-definite (λ_min = 0): ")
+    assert r.reason.endswith("Theorem 1 needs C̄ ≻ 0 (an indefinite C̄ is checked and fails)")
+    assert r.name == "convergence" and r.equation == "Theorem 1; eqs. (18)-(21)"
+    r = ly.check_convergence(_conv_run(C=np.diag([3e-13, 1.0])))
+    assert r.reason.startswith("C̄ is only positive semi-definite (λ_min = 3e-13): ")
     assert ly.check_convergence(_conv_run(C=np.diag([1.0, 2e-12]))).passed is not None
     assert ly.check_convergence(_conv_run(C=np.diag([1.0, 0.5e-12]))).passed is None
     assert ly.check_convergence(_conv_run(C=np.diag([1.0, -0.5e-12]))).passed is None
@@ -701,8 +724,15 @@ def test_convergence_not_applicable_cases():
     assert ly.check_convergence(_conv_run(C=np.array([[1.0, 3.0], [-3.0, 1.0]]))).passed is True
     r = ly.check_convergence(_conv_run(slaves=1))
     assert r.passed is None and r.reason == "the run needs two observers"
+    assert r.name == "convergence" and r.equation == "Theorem 1; eqs. (18)-(21)"
+    # one member named, the other not: the default pair
+    r = ly.check_convergence(_conv_run(slaves=3), "obs_c")
+    assert r.witness["observers"] == ["obs_a", "obs_b"]
+    r = ly.check_convergence(_conv_run(slaves=3), None, "obs_c")
+    assert r.witness["observers"] == ["obs_a", "obs_b"]
     run = _conv_run()
-    run.slaves["obs_a"].q[0] = 0.0
-    run.slaves["obs_a"].u[0] = 0.0
+    A, B = run.slaves["obs_a"], run.slaves["obs_b"]
+    A.q[0], A.u[0] = B.q[0], B.u[0]
     r = ly.check_convergence(run)
     assert r.passed is None and r.reason == "the two observers start in the same state (V0 = 0)"
+    assert r.name == "convergence" and r.equation == "Theorem 1; eqs. (18)-(21)"

@@ -1,0 +1,304 @@
+"""proofs_checks' API around the checks: the registry runner (``run_checks``, ``select``,
+``results_frame``), the assertion helpers, the command line and the check context
+(settings, seeded generators, the observers' initial states), on the algebraic checks only
+(no simulation, except one 40-step replay). Written against the mutation runs of
+``__init__.py``, ``asserts.py``, ``cli.py`` and ``context.py``
+(``tests/mutants/proofs_checks_small.md``).
+"""
+
+from __future__ import annotations
+
+import json
+import zlib
+
+import numpy as np
+import pytest
+import scipy.linalg as sla
+
+import proofs_checks as pc
+from observer.errors import InputError
+from proofs_checks import cli
+from proofs_checks.context import CheckContext, CheckSettings
+from proofs_checks.result import CheckResult
+
+
+# ----------------------------------------------------------------------------- select / run_checks
+def test_select_parses_and_validates():
+    assert pc.select(None) == list(pc.CHECKS)
+    assert pc.select(" mass_spd , ,stiffness_spd") == ["mass_spd", "stiffness_spd"]
+    assert pc.select(["damping_pd,mass_spd", "convergence"]) == ["damping_pd", "mass_spd", "convergence"]
+    with pytest.raises(InputError) as info:
+        pc.select("mass_spd,bogus")
+    assert info.value.field == "--only"
+    assert info.value.problem == f"unknown check 'bogus'; choose from {', '.join(pc.CHECKS)}"
+
+
+def test_run_checks_order_settings_progress_and_timing():
+    seen = []
+    res = pc.run_checks("bouncing_ball", "stiffness_spd,mass_spd", progress=seen.append)
+    assert [r.name for r in res] == ["stiffness_spd", "mass_spd"] and seen == res
+    assert all(r.scenario == "bouncing_ball" and 0 < r.elapsed < 5 for r in res)
+    # options reach the check; overrides reach the scenario
+    res = pc.run_checks("double_mass", "mass_spd", options={"mass_spd": {"rcond_min": 1.5}})
+    assert res[0].witness["required"] == 1.5 and res[0].passed is False
+    res = pc.run_checks("double_mass", "mass_spd", overrides={"param.m1": 4.0})
+    assert res[0].witness["lambda_max"] == pytest.approx(4.0)
+    # explicit settings win over seed/h/t_end/options
+    res = pc.run_checks("double_mass", "mass_spd", options={"mass_spd": {"rcond_min": 1.5}},
+                        settings=CheckSettings())
+    assert res[0].passed is True
+    with pytest.raises(InputError) as info:
+        pc.run_checks("double_mass", "mass_spd", options={"nope": {}, "mass_spd": {}})
+    assert info.value.field == "options" and info.value.problem.startswith("unknown check(s) ['nope']; choose from ")
+
+
+def test_a_crashing_check_is_a_failed_result_but_input_errors_propagate(monkeypatch):
+    res = pc.run_checks("double_mass", "mass_spd", options={"mass_spd": {"bogus": 1}})
+    r = res[0]
+    assert r.passed is False and np.isnan(r.margin) and np.isnan(r.tolerance)
+    assert r.witness == {"exception": "TypeError"} and r.reason.startswith("raised TypeError: ")
+    assert "bogus" in r.reason and r.scenario == "double_mass" and r.name == "mass_spd"
+
+    def bad(ctx):
+        raise InputError("system.K", "broken")
+    monkeypatch.setitem(pc.CHECKS, "mass_spd", bad)
+    with pytest.raises(InputError, match="system.K: broken"):
+        pc.run_checks("double_mass", "mass_spd")
+
+
+def test_registry_passes_each_checks_ingredients(monkeypatch):
+    """Each lambda of the registry hands its check the right ingredient and options."""
+    sc = pc.load("double_mass")
+    res = {r.name: r for r in pc.run_checks(sc, ["mass_spd", "stiffness_spd", "damping_pd",
+                                                 "constraints_independent", "forcing_bounded"],
+                                            options={"stiffness_spd": {"rcond_min": 0.5},
+                                                     "damping_pd": {"rcond_min": 0.5},
+                                                     "constraints_independent": {"cond_max": 0.5},
+                                                     "forcing_bounded": {"f_max": 1.0}})}
+    s = sc.system
+    assert res["mass_spd"].witness["lambda_max"] == pytest.approx(np.linalg.eigvalsh(s.M)[-1])
+    assert res["stiffness_spd"].witness["lambda_max"] == pytest.approx(np.linalg.eigvalsh(s.K)[-1])
+    assert res["stiffness_spd"].witness["required"] == 0.5
+    assert res["damping_pd"].witness["lambda_max"] == pytest.approx(np.linalg.eigvalsh(s.C)[-1])
+    assert res["damping_pd"].witness["required"] == 0.5
+    assert res["constraints_independent"].witness["cond_max"] == 0.5
+    assert res["forcing_bounded"].witness["f_max"] == 1.0
+
+
+def test_results_frame_columns_and_rows():
+    res = pc.run_checks("bouncing_ball", "mass_spd,stiffness_spd")
+    df = pc.results_frame(res)
+    assert list(df.columns) == ["scenario", "check", "equation", "status", "passed", "margin", "tolerance",
+                                "witness", "reason", "elapsed"]
+    assert df.check.tolist() == ["mass_spd", "stiffness_spd"] and df.status.tolist() == ["PASS", "n/a"]
+    assert pc.results_frame([]).shape == (0, 10)
+
+
+# ----------------------------------------------------------------------------- assertion helpers
+def test_assert_result_messages():
+    bad = CheckResult.from_margin("chk", -0.5, 0.125, {"a": 1.0}, "eq", ("a",), "why")
+    bad.scenario = "sc"
+    with pytest.raises(AssertionError) as info:
+        pc.assert_result(bad)
+    assert str(info.value) == ("proof check chk failed on sc: margin -0.5 (tolerance 0.125); why | a=1\n"
+                               + bad.message())
+    bad.scenario = ""
+    with pytest.raises(AssertionError, match=r"^proof check chk failed: margin"):
+        pc.assert_result(bad)
+    na = CheckResult.not_applicable("chk", "no K")
+    assert pc.assert_result(na) is na
+    with pytest.raises(AssertionError) as info:
+        pc.assert_result(na, allow_not_applicable=False)
+    assert str(info.value) == "proof check chk is not applicable: no K\n" + na.message()
+    ok = CheckResult.from_margin("chk", 1.0, 0.0, {}, "eq")
+    assert pc.assert_result(ok, allow_not_applicable=False) is ok
+
+
+def test_helpers_names_docs_and_scenario_mode():
+    h = pc.assert_mass_spd
+    assert h.__name__ == h.__qualname__ == "assert_mass_spd"
+    assert h.__doc__.startswith("Assert that :func:`proofs_checks.assumptions.check_mass_spd` passes.\n\n")
+    assert h.__doc__.endswith("Checked: M = Mᵀ ≻ 0 (section 2, after eq. (1)).")
+    assert "See :mod:`proofs_checks.asserts`." in h.__doc__
+    r = pc.assert_mass_spd(np.eye(2))                                  # direct mode
+    assert r.passed is True and r.scenario == ""
+    with pytest.raises(AssertionError):
+        pc.assert_mass_spd(np.eye(2), rcond_min=2.0)
+    # scenario mode: run_checks keywords are taken out, the rest are the check's options
+    r = pc.assert_mass_spd("double_mass", seed=3, h=1e-3, t_end=1.0, overrides={"param.m1": 4.0}, rcond_min=0.2)
+    assert r.scenario == "double_mass" and r.witness["required"] == 0.2
+    assert r.witness["lambda_max"] == pytest.approx(4.0)
+    with pytest.raises(AssertionError, match="mass_spd failed on double_mass"):
+        pc.assert_mass_spd(pc.load("double_mass"), rcond_min=2.0)
+    from pathlib import Path
+    with pytest.raises(InputError):
+        pc.assert_mass_spd(Path("no_such_file.toml"))
+    r = pc.assert_stiffness_spd("bouncing_ball")
+    assert r.passed is None
+    assert sorted(n for n in dir(pc) if n.startswith("assert_") and n not in ("assert_checks", "assert_result")) \
+        == sorted(f"assert_{n}" for n in pc.CHECKS if hasattr(pc, f"assert_{n}"))
+
+
+def test_assert_checks_message(monkeypatch):
+    with pytest.raises(AssertionError) as info:
+        pc.assert_checks("bouncing_ball", "mass_spd,stiffness_spd", allow_not_applicable=False)
+    text = str(info.value)
+    assert text.startswith("1 of 2 proof checks failed on bouncing_ball: stiffness_spd\n")
+    assert "check" in text.splitlines()[1] and "status" in text.splitlines()[1]
+    assert text.count("NOT APPLICABLE") == 1 and "\n\nstiffness_spd [" in text
+    assert len(pc.assert_checks("bouncing_ball", "mass_spd,stiffness_spd")) == 2
+
+
+# ----------------------------------------------------------------------------- command line
+def test_format_table_exact():
+    a = CheckResult.from_margin("mass_spd", 0.25, 0.0, {"x": 1.0}, "eq", ("x",))
+    a.elapsed = 0.04
+    b = CheckResult.not_applicable("k", "why")
+    b.elapsed = 12.0
+    lines = cli.format_table([a, b]).splitlines()
+    assert lines == [
+        "  check     status      margin       tol    time  witness",
+        "  mass_spd  PASS          0.25         0    0.0s  x=1",
+        "  k         n/a              -         -   12.0s  not applicable: why",
+    ]
+    assert cli._fmt(float("nan")) == "-" and cli._fmt(1234.5) == "1.23e+03"
+    assert cli.STATUS_WIDTH == 6
+
+
+def test_cli_options_parsing():
+    assert cli._options(None) == {}
+    assert cli._options(["mass_spd.rcond_min=0.5", "mass_spd.x=[1, 2]", "damping_pd.rcond_min=1e-3"]) == {
+        "mass_spd": {"rcond_min": 0.5, "x": [1, 2]}, "damping_pd": {"rcond_min": 1e-3}}
+    for bad in ("nope.x=1", "mass_spd=1", "mass_spd.=1"):
+        with pytest.raises(InputError) as info:
+            cli._options([bad])
+        assert info.value.field == "--option"
+        assert info.value.problem.startswith("expected CHECK.KEYWORD=VALUE with CHECK one of mass_spd, ")
+        assert info.value.problem.endswith(f", got {bad.split('=')[0]!r}")
+
+
+def test_cli_run_output_json_and_codes(tmp_path, capsys):
+    out = tmp_path / "a" / "b.json"
+    code = cli.main(["double_mass", "--only", "mass_spd", "--only", "stiffness_spd", "--seed", "4",
+                     "--h", "0.002", "--t-end", "1.5", "--set", "param.m1=2", "--option",
+                     "mass_spd.rcond_min=0.25", "--json", str(out)])
+    text = capsys.readouterr()
+    assert code == 0 and text.err == ""
+    lines = text.out.splitlines()
+    assert lines[0] == ("double_mass (double_mass): n = 2, m = 1, poisson law, restitution 0.8 (global); "
+                        "seed 4, run h = 0.002")
+    assert lines[1].startswith("  check ") and lines[2].startswith("  mass_spd ")
+    assert lines[4].startswith("  -> 2 passed, 0 failed, 0 not applicable in ")
+    assert lines[-1] == f"wrote {out}"
+    doc = json.loads(out.read_text())
+    assert doc["settings"] == {"seed": 4, "h": 0.002, "t_end": 1.5, "options": {"mass_spd": {"rcond_min": 0.25}},
+                               "overrides": {"param.m1": "2"}, "scenarios": ["double_mass"]}
+    assert set(doc) == {"settings", "platform", "python", "wall_time_s", "results"}
+    assert doc["wall_time_s"] > 0 and [r["name"] for r in doc["results"]] == ["mass_spd", "stiffness_spd"]
+    assert doc["results"][0]["witness"]["required"] == 0.25
+    # failure: exit 1 and the count on stderr
+    code = cli.main(["double_mass", "bouncing_ball", "--only", "mass_spd,stiffness_spd",
+                     "--option", "mass_spd.rcond_min=2"])
+    text = capsys.readouterr()
+    assert code == 1 and text.err == "2 check(s) FAILED\n"
+    assert "  -> 0 passed, 1 failed, 1 not applicable in " in text.out
+    assert "bouncing_ball (bouncing_ball): n = 1, m = 1" in text.out
+    # per-contact restitution
+    cli.main(["rocking_chain", "--set", "param.N=1", "--set", "impact.restitution=[0.5, 0.25]",
+              "--only", "mass_spd"])
+    assert "restitution [0.5, 0.25]; seed 0, run h = " in capsys.readouterr().out
+
+
+def test_cli_all_list_and_bad_steps(capsys, monkeypatch):
+    from observer.scenarios import SCENARIOS
+    assert cli.main(["--list"]) == 0
+    assert capsys.readouterr().out.splitlines() == list(pc.CHECKS)
+    assert cli.main(["all", "--only", "mass_spd"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("  -> 1 passed") == len(SCENARIOS)
+    for args, text in ((["--h", "0"], "error: --h: must be > 0, got 0.0"),
+                       (["--t-end", "-1"], "error: --t-end: must be > 0, got -1.0"),
+                       (["--h", "nan"], "error: --h: must be > 0, got nan")):
+        assert cli.main(["double_mass", *args]) == 2
+        assert capsys.readouterr().err.strip() == text
+    assert cli.main([]) == 2
+    assert capsys.readouterr().err.strip() == ("error: SCENARIO: give at least one scenario (a built-in name, "
+                                               "a .toml file, or 'all')")
+    # every scenario is validated before any check runs
+    assert cli.main(["double_mass", "no_such_scenario"]) == 2
+    assert capsys.readouterr().out == ""
+    p = cli.build_parser()
+    assert p.prog == "python -m proofs_checks" and ", ".join(pc.CHECKS) in p.description
+    assert p.parse_args(["x"]).seed == 0
+
+
+# ----------------------------------------------------------------------------- context
+def test_context_defaults_and_rng_streams():
+    sc = pc.load("double_mass")
+    ctx = CheckContext(sc)
+    assert ctx.settings == CheckSettings() and ctx.h == sc.h
+    assert ctx.t_end == min(sc.t_end, 40_000 * sc.h)
+    assert ctx.short_t_end == min(sc.t_end, 20_000 * sc.h)
+    assert ctx.system is sc.system and ctx.law is sc.law
+    ctx = CheckContext(sc, CheckSettings(seed=7, h=1e-3, max_steps=100, short_steps=50,
+                                         options={"mass_spd": {"rcond_min": 0.1}}))
+    assert ctx.h == 1e-3 and ctx.t_end == pytest.approx(0.1) and ctx.short_t_end == pytest.approx(0.05)
+    assert CheckContext(sc, CheckSettings(t_end=0.3)).short_t_end == 0.3
+    assert CheckContext(sc, CheckSettings(t_end=0.3)).t_end == 0.3
+    opts = ctx.options("mass_spd")
+    opts["x"] = 1
+    assert ctx.options("mass_spd") == {"rcond_min": 0.1} and ctx.options("other") == {}
+    ref = np.random.default_rng([7, zlib.crc32(b"abc")]).random(3)
+    assert np.array_equal(ctx.rng("abc").random(3), ref)
+    assert not np.array_equal(ctx.rng("abd").random(3), ref)
+
+
+def _specs_by_hand(sc, seed=0):
+    s = sc.system
+    n = s.n
+    g = np.random.default_rng([seed, zlib.crc32(b"slaves")])
+    q_scale = max(np.max(np.abs(sc.q0)), np.max(np.abs(s.nu(0.0))), 1e-3)
+    dq = 0.02 * q_scale
+    jumps = bool(np.all(np.linalg.eigvalsh(s.K) > 0))
+    omega = np.sqrt(max(sla.eigh(s.K, s.M, eigvals_only=True)[0], 0.0)) if jumps else 1.0
+    du = dq * max(omega, 1.0)
+    z = g.standard_normal((2, 2 * n))
+    obs = sc.observer or {}
+    qa, ua = np.asarray(obs.get("q", sc.q0), float), np.asarray(obs.get("u", sc.u0), float)
+    if np.array_equal(qa, sc.q0) and np.array_equal(ua, sc.u0):
+        qa, ua = sc.q0 + dq * z[0, :n], sc.u0 + du * z[0, n:]
+    qb, ub = sc.q0 + dq * z[1, :n], sc.u0 + du * z[1, n:]
+    return jumps, (qa, ua), (qb, ub)
+
+
+@pytest.mark.parametrize("name,ov", [("double_mass", {}), ("bouncing_ball", {}),
+                                     ("double_mass", {"observer.q": None})])
+def test_slave_specs_by_hand(name, ov):
+    if ov:
+        sc = pc.load(name)
+        sc = pc.load(name, {"observer.q": sc.q0.tolist(), "observer.u": sc.u0.tolist()})
+    else:
+        sc = pc.load(name)
+    specs = CheckContext(sc, CheckSettings(seed=0)).slave_specs()
+    jumps, (qa, ua), (qb, ub) = _specs_by_hand(sc)
+    names = (["jump_a", "jump_b"] if jumps else []) + ["nojump_a", "nojump_b"]
+    assert [s.name for s in specs] == names
+    assert [s.position_jumps for s in specs] == [n.startswith("jump") for n in names]
+    for s in specs:
+        q, u = (qa, ua) if s.name.endswith("_a") else (qb, ub)
+        assert np.allclose(s.q0, q, rtol=1e-14, atol=1e-15) and np.allclose(s.u0, u, rtol=1e-14, atol=1e-15)
+    if ov:
+        assert not np.array_equal(specs[0].q0, sc.q0)            # perturbed away from the master
+
+
+def test_shared_run_and_visited_sets():
+    sc = pc.load("rocking_chain", {"param.N": 1, "initial.u": [-0.5, 0.3]})
+    ctx = CheckContext(sc, CheckSettings(h=2e-3, t_end=0.6))
+    run = ctx.run
+    assert ctx.run is run and run.h == 2e-3 and run.t[-1] == pytest.approx(0.6)
+    assert list(run.slaves) == ["jump_a", "jump_b", "nojump_a", "nojump_b"]
+    act = run.master.active[1:]
+    expected = {tuple(np.flatnonzero(r)) for r in act if r.any()}
+    got = ctx.visited_sets()
+    assert {tuple(x) for x in got} == expected and len(got) == len(expected) >= 2
+    assert all(x.dtype.kind == "i" for x in got)
