@@ -287,17 +287,20 @@ class _Run:
         d = np.diff([p[0] for p in hist[-3:]])
         ratio = d[1] / d[0]
         setp = tuple(sorted(set(persistent) | {j}))
+        # the tail in the limit: persistent contact from t_k on; the projection γ⁺ → 0 is the
+        # impulse −G⁻¹γ⁺ at t_k, the rest of the tail's impulse is ∫λ dt over [t_k, t_∞]
+        gam = self.free_flow.velocities(t, x)[list(setp)]
+        proj_impulse = -np.linalg.solve(self.delassus(setp), gam)
         xp = self.project(t, x, list(setp))
+        self.add_impulse(t, setp, proj_impulse)
         flow = flow_for(self.system, setp)
         self.fill(flow, t, xp, min(t_inf, self.t_end), include_end=t_inf >= self.t_end)
         if t_inf >= self.t_end:
             return None
         x_inf = self.project(t_inf, flow.state(t, xp, t_inf - t), list(setp))
-        G = self.delassus([j])[0, 0]
-        e = float(self.law.restitution[j])
-        tail_impulse = (1.0 + e) * abs(gm) * ratio / (1.0 - ratio) / G
+        k = setp.index(j)
+        tail_impulse = float(proj_impulse[k] + flow.force_impulse(t, xp, t_inf - t)[k])
         self.event(t_inf, j, "accumulation", -abs(gm) * ratio, 0.0, tail_impulse)
-        self.add_impulse(t_inf, [j], tail_impulse)
         self.zeno.append({"contact": j, "t_inf": t_inf, "impacts_resolved": len(hist),
                           "tail_time": t_inf - t, "tail_impulse": tail_impulse, "ratio": ratio})
         stick = self.sticking(t_inf, x_inf, list(setp))

@@ -37,6 +37,12 @@ WINDOW = 0.5
 ROUNDOFF = 64.0 * np.finfo(float).eps
 """Round-off tolerance of a functional: ``ROUNDOFF · Σ_j |r_ij z_j|`` (its evaluation error)."""
 
+TOUCH_FACTOR = 1e3
+"""A local minimum of ψ_i within ±TOUCH_FACTOR round-off tolerances of zero is a **touch**
+(graze): round-off accumulated along a run (about 1e-13 relative after 50 s on the
+grazing scenario) must not turn an exact graze into a miss or a crossing. A minimum
+above it is a miss, below it a crossing (an impact, however shallow)."""
+
 TIME_RTOL = 2.0 * np.finfo(float).eps
 """Newton refinement stops when the step is below ``TIME_RTOL · max(1, |t|)``."""
 
@@ -167,14 +173,15 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
     tau_m = _refine(fs, i, 1, a, za, 0.0, span, s_m)
     z_m = flow.expm(tau_m) @ za
     m_star = fs.value(i, 0, z_m)
-    if m_star > tol:
+    touch = TOUCH_FACTOR * tol
+    if m_star > touch:
         return "positive", a + span
     t_m = a + tau_m
-    if m_star >= -tol:
+    if m_star >= -touch:
         z_m = _reset(flow, t_m, z_m)
-        # ψ ≥ m* + (ψ''_min/2)(t − t_m)² with ψ''_min ≥ d2 − bound·span > 0: above 2·tol after
+        # ψ ≥ m* + (ψ''_min/2)(t − t_m)² with ψ''_min ≥ d2 − bound·span > 0: above 2·touch after
         curv = d2 - bound * span
-        resume = t_m + np.sqrt(max(2.0 * (2.0 * tol - m_star), 0.0) / curv)
+        resume = t_m + np.sqrt(max(2.0 * (2.0 * touch - m_star), 0.0) / curv)
         return "touch", Zero(t_m, i, "touch", z_m, m_star, fs.value(i, 1, z_m), float(resume))
     tau = _refine(fs, i, 0, a, za, 0.0, tau_m, 0.5 * tau_m)
     z = _reset(flow, a + tau, flow.expm(tau) @ za)
@@ -258,7 +265,9 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
                 zero = _zero_now(fs, i, a, za, d)
                 return zero, zero.t, zero.z
             s = first_cubic_zero(max(d0, 0.0), d1, d2, bound[i], w)
-            if s < w and d1 < 0.0 < d2:
+            near_touch = d1 < 0.0 < d2 and -d1 / d2 <= w and \
+                d0 - d1 * d1 / (2.0 * d2) <= 2.0 * TOUCH_FACTOR * tol[i]
+            if (s < w or near_touch) and d1 < 0.0 < d2:
                 res = _convex_minimum(fs, i, a, za, d0, d1, d2, bound[i], w, tol[i])
                 if res is not None:
                     if res[0] != "positive":

@@ -1,0 +1,299 @@
+"""Exact event-driven master (issue 11, items 1, 2 and 4): flow, root isolation, event loop.
+
+Every expected value is computed here independently of :mod:`observer.event`: closed forms
+(THEORY §7.1 bouncing ball, §7.2 impact oscillator, §7.5 static contact), the analytic
+solution of the grazing oscillator, an analytic one-period map with ``scipy.optimize.brentq``,
+and Siconos' event-driven reference outputs (``BouncingBallED.ref``, ``LinearOscillatorED.ref``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+import observer
+from observer.event.flow import Flow, expm_pade13, flow_for
+from observer.event.master import run_master
+from observer.event.roots import first_zero
+from observer.scenario import Scenario
+
+from oracles import SICONOS, oracle
+
+G0 = 9.81
+
+
+def siconos_impact_times(name: str) -> np.ndarray:
+    """Impact times of a Siconos event-driven output: the rows written twice (pre, post)."""
+    data = np.loadtxt(oracle("siconos", name), skiprows=1)
+    t = data[:, 0]
+    return t[np.flatnonzero(np.diff(t) == 0.0)]
+
+
+def siconos_ball(mass: float, K: list[float], q0: list[float], e: float, t_end: float) -> Scenario:
+    """Siconos' 3-DOF ball (x, y, angle; README of the oracles): M = diag(m, m, I), gap q[0]."""
+    inertia = (0.6 if any(K) else 0.4) * mass * 0.1 ** 2
+    doc = {"scenario": {"name": "siconos_ball"},
+           "system": {"M": np.diag([mass, mass, inertia]).tolist(), "C": np.zeros((3, 3)).tolist(),
+                      "K": np.diag(K).tolist(), "W": [[1.0], [0.0], [0.0]],
+                      "forcing": {"constant": [-mass * G0, 0.0, 0.0]}, "gap": {"offset": [0.0]}},
+           "impact": {"law": "newton", "restitution": e},
+           "initial": {"q": q0, "u": [0.0, 0.0, 0.0]},
+           "simulation": {"t_end": t_end, "h": 1e-2}}
+    return Scenario.from_dict(doc)
+
+
+# -- the exact flow --------------------------------------------------------------------------
+
+def test_pade_exponential_of_a_rotation_is_exact_to_roundoff():
+    w = 316.2277660168379
+    for dt in (1e-4, 1e-2, 1.0):
+        exact = np.array([[np.cos(w * dt), np.sin(w * dt)], [-np.sin(w * dt), np.cos(w * dt)]])
+        assert np.max(np.abs(expm_pade13(np.array([[0.0, w], [-w, 0.0]]) * dt) - exact)) \
+            <= 50 * np.finfo(float).eps * max(1.0, w * dt)
+
+
+def test_free_flow_matches_the_forced_oscillator_closed_form():
+    """x'' + x = cos(ωt) from x(0) = −0.5, x'(0) = 0: x = (x0 − γ_f)cos t + γ_f cos ωt."""
+    sc = observer.load_scenario("impact_oscillator")
+    fl = Flow(sc.system)
+    w, gf = 2.8, 1.0 / (1.0 - 2.8 ** 2)
+    for t in (0.3, 1.7, 5.0):
+        q, u = fl.state(0.0, np.array([-0.5, 0.0]), t)
+        assert q == pytest.approx((-0.5 - gf) * np.cos(t) + gf * np.cos(w * t), abs=1e-14)
+        assert u == pytest.approx(-(-0.5 - gf) * np.sin(t) - gf * w * np.sin(w * t), abs=1e-14)
+
+
+def test_free_flow_with_singular_stiffness_is_the_parabola():
+    sc = observer.load_scenario("bouncing_ball")
+    fl = Flow(sc.system)
+    for t in (0.1, 0.45):
+        q, u = fl.state(0.0, np.array([1.0, 0.0]), t)
+        assert q == pytest.approx(1.0 - G0 * t * t / 2, abs=1e-15)
+        assert u == pytest.approx(-G0 * t, abs=1e-15)
+
+
+def test_constrained_flow_force_is_the_static_preload():
+    """double_mass at rest on the ground: λ_s = −g_s/(wᵀK⁻¹w) (THEORY §7.5), held for F = 0."""
+    sc = observer.load_scenario("double_mass", {"param.F": 0.0})
+    K, W = sc.system.K, sc.system.W[:, 0]
+    q_s = np.linalg.solve(K, sc.system.forcing.constant)
+    lam_s = -(W @ q_s + 0.25) / (W @ np.linalg.solve(K, W))
+    fl = flow_for(sc.system, (0,))
+    x0 = np.concatenate([sc.q0, sc.u0])
+    assert fl.forces(0.0, x0)[0] == pytest.approx(lam_s, rel=1e-13)
+    x1 = fl.state(0.0, x0, 3.0)
+    assert np.max(np.abs(x1 - x0)) <= 1e-13
+    assert fl.force_impulse(0.0, x0, 0.5)[0] == pytest.approx(0.5 * lam_s, rel=1e-12)
+
+
+def test_force_impulse_is_the_integral_of_the_force():
+    sc = observer.load_scenario("double_mass")
+    fl = flow_for(sc.system, (0,))
+    x0 = np.concatenate([sc.q0, sc.u0])
+    s = np.linspace(0.0, 0.08, 2001)
+    lam = np.array([fl.forces(t, fl.state(0.0, x0, t))[0] for t in s])
+    simpson = (s[1] - s[0]) / 3 * (lam[0] + lam[-1] + 4 * lam[1:-1:2].sum() + 2 * lam[2:-1:2].sum())
+    assert fl.force_impulse(0.0, x0, 0.08)[0] == pytest.approx(simpson, rel=1e-10)
+
+
+# -- root isolation ----------------------------------------------------------------------------
+
+def test_a_dip_below_zero_shorter_than_any_sampling_step_is_found():
+    """Grazing orbit pushed 1e-10·X into the wall: the gap is negative for ~2e-5 s only."""
+    sc = observer.load_scenario("grazing", {"param.clearance": -1e-10})
+    fl = Flow(sc.system)
+    x0 = np.concatenate([sc.q0, sc.u0])
+    zero, t, _ = first_zero(fl, fl.gap_rows, 0.0, fl.z(0.0, x0), 20.0)
+    zeta, F, w = 0.05, 1.0, 0.8
+    X = F / np.hypot(1 - w * w, 2 * zeta * w)
+    delta = np.arctan2(2 * zeta * w, 1 - w * w)
+    t_cross = (delta - np.arccos(1.0 - 1e-10)) / w
+    g = lambda s: X * (1 - 1e-10) - X * np.cos(w * s - delta)   # noqa: E731  the analytic gap
+    t_exact = brentq(g, t_cross - 1e-3, delta / w, xtol=1e-15)
+    assert zero is not None and zero.kind == "cross"
+    assert abs(zero.t - t_exact) <= 1e-10
+    grid = np.arange(0.0, 1.0, 1e-3)
+    assert np.all(g(grid) > 0.0), "a 1 ms sampling would have missed it"
+
+
+# -- acceptance: bouncing ball -------------------------------------------------------------------
+
+def test_bouncing_ball_impacts_accumulation_and_rest():
+    h0, e = 1.0, 0.8
+    res = run_master(observer.load_scenario("bouncing_ball"), h=1e-2)
+    assert res.status == "ok"
+    t1, v1 = np.sqrt(2 * h0 / G0), np.sqrt(2 * G0 * h0)
+    k = np.arange(1, 31)
+    closed_form = t1 + (2 * v1 / G0) * e * (1 - e ** (k - 1)) / (1 - e)
+    impacts = res.impact_times(0)
+    assert np.max(np.abs(impacts[:30] - closed_form)) <= 1e-12
+    t_inf = np.sqrt(2 * h0 / G0) * (1 + e) / (1 - e)
+    assert len(res.zeno) == 1 and abs(res.zeno[0]["t_inf"] - t_inf) <= 1e-9
+    kinds = res.events["kind"].tolist()
+    assert kinds[-2:] == ["accumulation", "stick"]
+    rest = res.frame[res.frame["t"] > t_inf + 1e-6]
+    assert np.all(rest["q0"].abs() <= 1e-15) and np.all(rest["u0"].abs() <= 1e-15)
+    # persistent contact: the impulse per full output step is m g h (λ = m g)
+    assert np.allclose(rest["P0"].iloc[1:], G0 * 1e-2, rtol=1e-12)
+    # momentum balance on every output step, impacts and the Zeno tail included:
+    # m(u_k − u_{k−1}) = −m g h + P_k
+    f = res.frame
+    balance = np.diff(f["u0"]) + G0 * 1e-2 - f["P0"].to_numpy()[1:]
+    assert np.max(np.abs(balance)) <= 1e-12
+    assert res.intervals(0)[-1, 0] == pytest.approx(t_inf, abs=1e-9)
+    assert np.isinf(res.intervals(0)[-1, 1])
+
+
+def test_bouncing_ball_matches_siconos_event_driven_impact_times():
+    ref = siconos_impact_times("BouncingBallED.ref")
+    res = run_master(siconos_ball(1.0, [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], 0.9, 8.5))
+    ours = res.impact_times(0)
+    assert ref.size == 44 and ours.size >= ref.size
+    assert np.max(np.abs(ours[:ref.size] - ref)) <= 1e-10
+
+
+def test_linear_oscillator_matches_siconos_up_to_accumulation_then_persistent_contact():
+    ref = siconos_impact_times("LinearOscillatorED.ref")
+    assert ref.size == 220
+    mass = 1e-3
+    res = run_master(siconos_ball(mass, [100.0, 100.0, 0.0], [1.0, 0.001, 0.0], 0.9, 1.5), h=1e-3)
+    assert res.status == "ok"
+    ours = res.impact_times(0)
+    (zeno,) = res.zeno
+    resolved = ours.size
+    assert resolved >= 150
+    assert np.max(np.abs(ours - ref[:resolved])) <= 1e-8
+    # Siconos' remaining impacts lie in the extrapolated tail, and both switch to contact there
+    assert np.all(ref[resolved:] >= ours[-1] - 1e-8)
+    assert np.all(ref[resolved:] <= zeno["t_inf"] + 1e-8)
+    assert abs(zeno["t_inf"] - 0.870279) <= 1e-6
+    after = res.frame[res.frame["t"] > zeno["t_inf"] + 1e-3]
+    assert np.all(after["active0"] == 1) and np.all(np.abs(after["g0"]) <= 1e-15)
+    # λ = m g behind the wall at the spring's rest position: Siconos' lambda(2) column
+    data = np.loadtxt(oracle("siconos", "LinearOscillatorED.ref"), skiprows=1)
+    assert data[-1, 6] == pytest.approx(mass * G0, rel=1e-6)
+    assert np.allclose(after["P0"] / 1e-3, data[-1, 6], rtol=1e-6)
+
+
+# -- acceptance: forced impact oscillator (THEORY §7.2) ----------------------------------------
+
+def one_period_map(t_a: float, v_plus: float, w: float, r: float) -> tuple[float, float]:
+    """Analytic next impact of x'' + x = cos ωt (x ≤ 0) from x(t_a) = 0, x'(t_a) = v_plus."""
+    gf = 1.0 / (1.0 - w * w)
+    A = -gf * np.cos(w * t_a)
+    B = v_plus + gf * w * np.sin(w * t_a)
+    x = lambda t: A * np.cos(t - t_a) + B * np.sin(t - t_a) + gf * np.cos(w * t)  # noqa: E731
+    s = np.linspace(t_a + 1e-9, t_a + 4 * np.pi, 40001)
+    k = np.flatnonzero(x(s) > 0.0)[0]
+    t_b = brentq(x, s[k - 1], s[k], xtol=1e-15, rtol=4 * np.finfo(float).eps)
+    v = -A * np.sin(t_b - t_a) + B * np.cos(t_b - t_a) - gf * w * np.sin(w * t_b)
+    return t_b, -r * v
+
+
+def test_impact_oscillator_one_one_orbit():
+    """ω = 2.8, r = 0.8, σ = 0: V from THEORY §7.2's quadratic, the period T = 2π/ω.
+
+    The (1,1) orbit is unstable: the multiplier of the analytic one-period map is
+    λ ≈ −2.958, so a round-off deviation of ~3e-15 reaches 1e-10 after ten periods, for any
+    integrator. Checked: (a) V and T to 1e-10 for the first ten periods, and the deviation
+    growing exactly like |λ|^k afterwards (no integration error added); (b) over all 50
+    periods, each period of the run equals the analytic one-period map applied to the
+    run's own previous impact, to 1e-10 (the event integrator is exact per period).
+    """
+    w, r = 2.8, 0.8
+    gf = 1.0 / (1.0 - w * w)
+    kappa, mu = (1 + r) / 2 / np.tan(np.pi / w), (1 - r) / (2 * w)
+    V = abs(gf) / np.hypot(kappa, mu)
+    phase = np.arctan2(-mu * V / gf, kappa * V / gf)          # ω t0
+    T = 2 * np.pi / w
+    assert V == pytest.approx(0.336177, abs=1e-6)
+    x_star = np.array([phase / w, -r * V])
+    t_next, v_next = one_period_map(*x_star, w, r)
+    assert abs(t_next - phase / w - T) <= 1e-12 and abs(v_next + r * V) <= 1e-12
+    step = 1e-6
+    jac = np.column_stack([(np.array(one_period_map(*(x_star + d), w, r)) -
+                            np.array(one_period_map(*(x_star - d), w, r))) / (2 * step)
+                           for d in (np.array([step, 0.0]), np.array([0.0, step]))])
+    lam = np.max(np.abs(np.linalg.eigvals(jac)))
+    assert lam > 2.9                                            # unstable
+    periods = 50
+    sc = observer.load_scenario("impact_oscillator", {
+        "system.forcing.phase": float(phase), "initial.q": [0.0], "initial.u": [-r * V],
+        "simulation.t_end": (periods + 0.5) * T, "simulation.h": 0.05})
+    res = run_master(sc)
+    assert res.status == "ok"
+    imp = res.events[res.events["kind"] == "impact"]
+    times, g_minus, g_plus = (imp[c].to_numpy() for c in ("time", "gamma_minus", "gamma_plus"))
+    k = np.arange(1, times.size + 1)
+    dev = np.maximum(np.abs(times - k * T), np.abs(-g_minus - V))
+    assert times.size >= periods - 5
+    assert np.all(dev[:10] <= 1e-10)
+    linear = 1e-14 * lam ** k <= 1e-4
+    assert np.all(dev[linear] <= 1e-14 * lam ** k[linear])
+    # per period: x = q, g = σ − q, so ẋ⁺ = −γ⁺ and the approach speed is −γ⁻; the run's
+    # time is the map's time minus t0 (the forcing phase ωt0)
+    t0 = phase / w
+    t_prev, v_prev = 0.0, -r * V
+    for t_k, gm, gp in zip(times, g_minus, g_plus):
+        t_pred, v_pred = one_period_map(t0 + t_prev, v_prev, w, r)
+        assert abs(t_pred - t0 - t_k) <= 1e-10
+        assert abs(-v_pred / r + gm) <= 1e-10
+        t_prev, v_prev = t_k, -gp
+
+
+# -- acceptance: grazing ------------------------------------------------------------------------
+
+def test_every_graze_of_the_steady_orbit_is_found_at_its_exact_time():
+    """Clearance 0: x = X cos(ωt − δ) touches σ = X at ωt − δ = 2πk (analytic), nothing else."""
+    zeta, F, w = 0.05, 1.0, 0.8
+    delta = np.arctan2(2 * zeta * w, 1 - w * w)
+    res = run_master(observer.load_scenario("grazing"), h=1e-2, t_end=60.0)
+    assert res.status == "ok"
+    exact = (delta + 2 * np.pi * np.arange(0, 20)) / w
+    exact = exact[exact <= 60.0]
+    ev = res.events
+    assert set(ev["kind"]) == {"graze"}
+    assert len(ev) == exact.size
+    assert np.max(np.abs(ev["time"].to_numpy() - exact)) <= 1e-10
+    assert np.all(ev["impulse"] == 0.0)
+    assert np.all(res.intervals(0)[:, 0] == res.intervals(0)[:, 1])
+
+
+def test_a_near_miss_is_no_graze_and_a_shallow_crossing_is_an_impact():
+    res = run_master(observer.load_scenario("grazing", {"param.clearance": 1e-7}), h=0.05,
+                     t_end=30.0)
+    assert res.status == "ok" and res.events.empty
+    res = run_master(observer.load_scenario("grazing", {"param.clearance": -1e-10}), h=0.05,
+                     t_end=1.0)
+    first = res.events.iloc[0]
+    assert first["kind"] == "impact" and first["gamma_minus"] < 0.0
+    assert first["gamma_plus"] == pytest.approx(-0.8 * first["gamma_minus"], rel=1e-12)
+
+
+# -- double mass ----------------------------------------------------------------------------------
+
+def test_double_mass_runs_twenty_seconds_with_liftoff_zeno_and_rest():
+    sc = observer.load_scenario("double_mass")
+    res = run_master(sc, h=0.05, t_end=20.0)
+    assert res.status == "ok"
+    frame, ev = res.frame, res.events
+    assert not frame.isna().any().any()
+    assert frame["g0"].min() >= -1e-14
+    counts = ev["kind"].value_counts()
+    assert counts["liftoff"] >= 15 and counts["accumulation"] >= 15
+    # each landing ends in an accumulation and persistent contact, each contact phase in a lift-off
+    kinds = ev[ev["kind"].isin(["stick", "liftoff"])]["kind"].tolist()
+    assert all(a != b for a, b in zip(kinds, kinds[1:]))
+    # the impacts obey the law: γ⁺ = −ε γ⁻ (one contact: Newton's value)
+    imp = ev[ev["kind"] == "impact"]
+    assert np.allclose(imp["gamma_plus"], -0.8 * imp["gamma_minus"], rtol=1e-12, atol=1e-15)
+    # closed intervals are ordered and disjoint
+    iv = res.intervals(0)
+    assert np.all(iv[:, 1] >= iv[:, 0]) and np.all(iv[1:, 0] >= iv[:-1, 1])
+
+
+def test_event_cap_stops_with_a_clear_status():
+    res = run_master(observer.load_scenario("bouncing_ball"), h=1e-2, max_events=10)
+    assert res.status.startswith("stopped: event cap 10")
+    assert res.frame["q0"].isna().any()
