@@ -133,7 +133,8 @@ class _Run:
         self.closed_since: dict[int, float] = {}
         self.intervals: list[list[tuple[float, float]]] = [[] for _ in range(self.m)]
         self.zeno: list[dict] = []
-        self.history: dict[int, list[tuple[float, float]]] = {}
+        self.history: dict[tuple, list[tuple[float, float]]] = {}
+        self.last_key: tuple | None = None
         self.free_flow = flow_for(self.system, ())
         self.Minv = self.free_flow.Minv
 
@@ -252,22 +253,27 @@ class _Run:
         return x, tuple(stick), A, gm, lam
 
     # -- Zeno ------------------------------------------------------------------------------
-    def zeno_check(self, j: int, t: float, x: np.ndarray, gm: float) -> float | None:
-        """Accumulation time t_∞ if contact j's impact run is geometric and resolved enough:
-        its impact velocity fell by ``zeno_velocity_ratio``, or its intervals reach the time
-        resolution, or its next hop ``γ⁺²/(2|γ̇|)`` is within ZENO_HOP_ROUNDOFF round-offs of g."""
+    def zeno_check(self, key: tuple, t: float, x: np.ndarray, gm: np.ndarray) -> float | None:
+        """Accumulation time t_∞ if the run of impacts of the contact set ``key`` is geometric
+        and resolved enough: its impact speed max|γ⁻| fell by ``zeno_velocity_ratio``, or its
+        intervals reach the time resolution, or its next hop ``γ⁺²/(2|γ̇|)`` is within
+        ZENO_HOP_ROUNDOFF round-offs of the gap."""
         fl = self.free_flow
         z = fl.z(t, x)
-        v_plus = float(fl.velocity_rows[j] @ z)
-        accel = float(fl.velocity_rows[j] @ fl.A @ z)
-        hop = v_plus * v_plus / (2.0 * -accel) if accel < 0.0 else np.inf
-        tol_g = float(tolerance(fl.gap_rows[j:j + 1], z)[0])
-        hist = self.history.setdefault(j, [])
-        hist.append((t, abs(gm)))
+        idx = list(key)
+        v_plus = fl.velocity_rows[idx] @ z
+        accel = fl.velocity_rows[idx] @ fl.A @ z
+        hop = np.where(accel < 0.0, v_plus * v_plus / (2.0 * np.abs(accel) + 1e-300), np.inf)
+        hop_small = bool(np.all(hop <= ZENO_HOP_ROUNDOFF * tolerance(fl.gap_rows[idx], z)))
+        speed = float(np.max(np.abs(gm)))
+        if self.last_key != key:
+            self.history.clear()
+            self.last_key = key
+        hist = self.history.setdefault(key, [])
+        hist.append((t, speed))
         if len(hist) < ZENO_MIN_IMPACTS:
             return None
-        T = np.array([p[0] for p in hist[-4:]])
-        d = np.diff(T)
+        d = np.diff([p[0] for p in hist[-4:]])
         if np.any(d <= 0.0):
             return None
         r1, r2 = d[1] / d[0], d[2] / d[1]
@@ -275,20 +281,24 @@ class _Run:
             del hist[:-3]                      # not geometric: a new run starts
             return None
         v0 = hist[0][1]
-        if (abs(gm) > self.zeno_velocity_ratio * v0 and d[2] > ZENO_MIN_INTERVAL * max(1.0, abs(t))
-                and hop > ZENO_HOP_ROUNDOFF * tol_g):
+        if (speed > self.zeno_velocity_ratio * v0 and d[2] > ZENO_MIN_INTERVAL * max(1.0, abs(t))
+                and not hop_small):
             return None
         return t + d[2] * r2 / (1.0 - r2)
 
-    def accumulate(self, j: int, t: float, x: np.ndarray, persistent: tuple, t_inf: float,
-                   gm: float):
-        """Carry the state to the accumulation time t_∞ and switch j to persistent contact."""
-        hist = self.history.pop(j)
+    def accumulate(self, key: tuple, t: float, x: np.ndarray, persistent: tuple, t_inf: float,
+                   speed: float):
+        """Carry the state to the accumulation time t_∞ and switch ``key`` to persistent contact.
+
+        The tail in the limit is persistent contact from the last resolved impact t_k on:
+        the projection γ⁺ → 0 at t_k is the impulse −G⁻¹γ⁺, the rest of the tail's impulse
+        is ∫λ dt over [t_k, t_∞] (so the frame's momentum balance holds exactly).
+        """
+        hist = self.history.pop(key)
+        self.last_key = None
         d = np.diff([p[0] for p in hist[-3:]])
         ratio = d[1] / d[0]
-        setp = tuple(sorted(set(persistent) | {j}))
-        # the tail in the limit: persistent contact from t_k on; the projection γ⁺ → 0 is the
-        # impulse −G⁻¹γ⁺ at t_k, the rest of the tail's impulse is ∫λ dt over [t_k, t_∞]
+        setp = tuple(sorted(set(persistent) | set(key)))
         gam = self.free_flow.velocities(t, x)[list(setp)]
         proj_impulse = -np.linalg.solve(self.delassus(setp), gam)
         xp = self.project(t, x, list(setp))
@@ -298,11 +308,13 @@ class _Run:
         if t_inf >= self.t_end:
             return None
         x_inf = self.project(t_inf, flow.state(t, xp, t_inf - t), list(setp))
-        k = setp.index(j)
-        tail_impulse = float(proj_impulse[k] + flow.force_impulse(t, xp, t_inf - t)[k])
-        self.event(t_inf, j, "accumulation", -abs(gm) * ratio, 0.0, tail_impulse)
-        self.zeno.append({"contact": j, "t_inf": t_inf, "impacts_resolved": len(hist),
-                          "tail_time": t_inf - t, "tail_impulse": tail_impulse, "ratio": ratio})
+        tail = proj_impulse + flow.force_impulse(t, xp, t_inf - t)
+        for c in key:
+            self.event(t_inf, c, "accumulation", -speed * ratio, 0.0, tail[setp.index(c)])
+        self.zeno.append({"contact": key[0] if len(key) == 1 else key, "t_inf": t_inf,
+                          "impacts_resolved": len(hist), "tail_time": t_inf - t,
+                          "tail_impulse": float(np.sum([tail[setp.index(c)] for c in key])),
+                          "ratio": ratio})
         stick = self.sticking(t_inf, x_inf, list(setp))
         for c in setp:
             if c in stick:
@@ -341,8 +353,7 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
     status = "ok"
     t = 0.0
     x = np.concatenate([scenario.q0, scenario.u0]).astype(float)
-    persistent = _initial_contacts(run, x)
-    x, persistent = persistent
+    x, persistent = _initial_contacts(run, x)
     certified: dict[tuple[str, int], float] = {}
     n_events = 0
     while True:
@@ -380,10 +391,12 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
             certified.update(cert_new)
             continue
         x, new_persistent, A, gm, lam = run.collide(t, x, persistent, {j})
-        if A == [j] and not persistent and not new_persistent:
-            t_inf = run.zeno_check(j, t, x, gm[0])
+        key = tuple(c for c in A if c not in new_persistent)
+        if key and set(new_persistent) == set(persistent):
+            bouncing = [A.index(c) for c in key]
+            t_inf = run.zeno_check(key, t, x, gm[bouncing])
             if t_inf is not None:
-                out = run.accumulate(j, t, x, persistent, t_inf, gm[0])
+                out = run.accumulate(key, t, x, persistent, t_inf, float(np.max(np.abs(gm[bouncing]))))
                 if out is None:
                     t = t_end
                     break
