@@ -34,29 +34,31 @@ import numpy as np
 import pandas as pd
 
 import observer
-from observer import OBSERVERS, Slave
+from observer import Slave
+from observer.observers import OBSERVER_DESIGNS
+from observer.scenarios import SCENARIOS, info
 from observer.contact import get_solver
 from observer.errors import InputError
 from observer.metrics import excursions_after_passage, settling_time, switchings
 from observer.switching import log_from_active
 
 from bench.perturb import perturb_log
-from bench.reference import closed_form_position
+from observer.closed_form import closed_form_position
 from bench.results import now_iso
-from bench.suites import RHOS, Case, engine_for
+from observer.metrics import RHOS, settle_column
+
+from bench.suites import Case, engine_for
 
 ERROR_NORM = "mean over t of max_i |q_i − q_ref,i|"
 MAX_PLOT_POINTS = 4000
-PLOT_CHOICE = {"rocking_chain": (1, 1)}
-"""(coordinate, contact) drawn in the per-scenario figures (default (0, 0)); for the chain
-φ₁ (rotation of the lowest block) and the right ground corner, as in the paper's Fig. 5."""
-PLOT_LABELS = {
-    "rocking_chain": ("φ₁ (rad)", "corner gap (m)"),
-    "double_mass": ("q₁ (m)", "gap (m)"),
-    "bouncing_ball": ("height q (m)", "gap (m)"),
-}
-"""Axis labels (coordinate, gap) of the report's per-scenario figures; default
-("q<dof> (m)", "gap g<contact> (m)")."""
+
+
+def plot_choice(scenario: str) -> tuple[int, int]:
+    """(coordinate, contact) the per-scenario figures draw (the scenario's ``PLOT``)."""
+    if scenario not in SCENARIOS:
+        return 0, 0
+    meta = info(scenario)
+    return meta.dof, meta.contact
 
 
 class Unavailable(RuntimeError):
@@ -140,12 +142,8 @@ def _slaves(case: Case, sc, names) -> list[Slave]:
     if case.slave_offset is None:
         return list(names)
     dq, du = (np.asarray(x, dtype=float) for x in case.slave_offset)
-    return [Slave(name, OBSERVERS[name], sc.q0 + dq, sc.u0 + du) for name in names]
-
-
-def settle_column(rho: float) -> str:
-    """Row column of the settling time at ρ (:func:`observer.metrics.settling_time`)."""
-    return f"t_settle_{rho:g}"
+    return [Slave(name, OBSERVER_DESIGNS[name].position_jumps, sc.q0 + dq, sc.u0 + du,
+                  OBSERVER_DESIGNS[name]) for name in names]
 
 
 REQUIRED_COLUMNS = {"observers": tuple(settle_column(r) for r in RHOS),
@@ -157,7 +155,7 @@ to the stale file and their cases rerun (:func:`bench.run.run_suite`)."""
 def sync_metrics(res, name: str) -> dict[str, Any]:
     """Synchronization metrics of observer ``name`` in a result (window = coupling window).
 
-    Per threshold ρ in :data:`bench.suites.RHOS`: ``t_sync_ρ`` the first passage of
+    Per threshold ρ in :data:`observer.metrics.RHOS`: ``t_sync_ρ`` the first passage of
     V ≤ ρ·V(t_on), ``t_settle_ρ`` the settling time (V stays below until t_off) and
     ``above_after_ρ`` the fraction of window samples after the first passage with V back
     above the threshold.
@@ -203,13 +201,13 @@ def run_observers(case: Case, ctx: Context) -> list[dict]:
     observer); rows carry the synchronization metrics; a downsampled trajectory of the
     master and all observers is saved for the report's figures."""
     sc = observer.load_scenario(case.scenario, case.overrides())
-    dof, contact = PLOT_CHOICE.get(case.scenario, (0, 0))
+    dof, contact = plot_choice(case.scenario)
     rows, frames = [], []
     for name in case.observers:
         row = {**base_row(case, sc), "observer": name}
-        if OBSERVERS[name] and not sc.system.is_stiffness_definite():
+        if OBSERVER_DESIGNS[name].needs_spd_K and not sc.system.is_stiffness_definite():
             rows.append({**row, "status": "n/a",
-                         "note": "K is not positive definite (K = 0 here): the position-jump "
+                         "note": "K is not positive definite (K = 0 here): the K-metric "
                                  "projection q ← q − K⁻¹W L⁻¹g is undefined"})
             continue
         slaves = _slaves(case, sc, (name,))
@@ -264,7 +262,8 @@ def _reference_run(case: Case, ctx: Context):
     if key not in ctx.cache:
         ctx.cache = {k: v for k, v in ctx.cache.items() if not (isinstance(k, tuple) and k[0] == "wp-ref")}
         sc = observer.load_scenario(case.scenario, {**case.overrides(), "simulation.h": case.h_ref})
-        names = tuple(n for n in OBSERVERS if not OBSERVERS[n] or sc.system.is_stiffness_definite())
+        names = tuple(n for n, d in OBSERVER_DESIGNS.items()
+                      if not d.needs_spd_K or sc.system.is_stiffness_definite())
         res, cpu, _ = _timed(observer.simulate, sc, observers=names, engine=engine_for("pivoting"),
                              record_every=record_every(case.h_ref, case.h_record))
         ctx.cache[key] = (res, cpu)
@@ -297,9 +296,7 @@ def run_work_precision(case: Case, ctx: Context) -> list[dict]:
         q_ref = closed_form_position(sc, res.t)
         if q_ref is None:
             raise InputError("reference", f"no closed form implemented for {case.scenario}")
-        ref_text = {"bouncing_ball": "closed form (THEORY §7.1: impact times, parabolic flights)",
-                    "impact_oscillator": "closed form (event-driven: exact free flight, "
-                                         "impacts by brentq)"}.get(case.scenario, "closed form")
+        ref_text = info(case.scenario).reference_text or "closed form"
         ref_cpu, h_ref = float("nan"), None
     else:
         ref, ref_cpu = _reference_run(case, ctx)

@@ -23,14 +23,16 @@ have (``solver`` other than ``"pivoting"``: the numpy engine, :func:`engine_for`
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import Any, Callable, Iterator
+
+from observer.impact import IMPACT_LAWS
+from observer.metrics import RHOS  # noqa: F401  (the one threshold list; rows hold one column per ρ)
+from observer.observers import OBSERVER_DESIGNS
+from observer.scenarios import SCENARIOS, info
 
 KINDS = ("observers", "work_precision", "robustness", "scaling", "checks", "peers")
-
-RHOS = (1e-3, 1e-5, 1e-6, 1e-9)
-"""Synchronization thresholds: for each ρ the rows hold the settling time (V stays ≤ ρ·V(t_on)
-until the end of the coupling window) and the first-passage time (first V ≤ ρ·V(t_on))."""
 
 
 @dataclass(frozen=True)
@@ -187,29 +189,28 @@ class Suite:
 
 
 # --------------------------------------------------------------------------------- observers
-def observer_cases(full: bool) -> list[Case]:
-    """Jump vs no-jump on double_mass, rocking_chain (N = 10), bouncing_ball (Zeno), grazing,
-    impact_oscillator and a persistent-contact case (double_mass with F = 0).
+def _pick(pair, full: bool):
+    """A (quick, full) pair's entry (a scalar is both)."""
+    return pair[1 if full else 0] if isinstance(pair, tuple) else pair
 
-    Scenarios without an ``[observer]`` table get an explicit initial offset of the
-    observers. bouncing_ball has K = 0, so only the no-jump observer applies there.
+
+def observer_cases(full: bool) -> list[Case]:
+    """Every registered observer design on every scenario's declared observer settings
+    (``SUITE["observers"]`` of its module, :func:`observer.scenarios.info`).
+
+    Scenarios without an ``[observer]`` table declare an explicit initial offset of the
+    observers; designs whose projection needs K ≻ 0 are skipped where K is singular (the
+    runner records why).
     """
-    h_dm, T_dm = (1e-4, 20.0) if full else (2e-4, 10.0)
-    h_ch = 1e-4 if full else 2e-4
-    h_1 = 1e-4 if full else 1e-3
-    return [
-        Case("observers", "double_mass", h=h_dm, t_end=T_dm),
-        Case("observers", "rocking_chain", params=(("param.N", 10),), h=h_ch, t_end=8.0),
-        Case("observers", "bouncing_ball", label="bouncing_ball (Zeno)", h=h_1, t_end=6.0,
-             slave_offset=((0.2,), (-1.0,))),
-        Case("observers", "grazing", h=h_1 if full else 1e-3, t_end=40.0,
-             slave_offset=((0.1,), (0.0,))),
-        Case("observers", "impact_oscillator", h=h_1 if full else 1e-3, t_end=20.0,
-             slave_offset=((0.1,), (0.0,))),
-        Case("observers", "double_mass", label="persistent contact (double_mass, F = 0)",
-             params=(("param.F", 0.0),), h=1e-4 if full else 5e-4, t_end=20.0 if full else 10.0,
-             slave_offset=((0.01, 0.0), (0.0, 0.0))),
-    ]
+    designs = tuple(OBSERVER_DESIGNS)
+    cases = []
+    for name in SCENARIOS:
+        for spec in info(name).suite.get("observers") or ():
+            cases.append(Case("observers", name, label=spec.get("label", ""),
+                              params=tuple(spec.get("params", ())), observers=designs,
+                              h=_pick(spec.get("h"), full), t_end=_pick(spec.get("t_end"), full),
+                              slave_offset=spec.get("slave_offset")))
+    return cases
 
 
 # ---------------------------------------------------------------------------- work-precision
@@ -217,8 +218,8 @@ def _sweep(h_max: float, count: int) -> list[float]:
     return [h_max / 2 ** j for j in range(count)]
 
 
-WP_SIZES = {"quick": {"pivoting": 5, "reference": 3, "double_mass": 5, "double_mass_reference": 3},
-            "full": {"pivoting": 12, "reference": 7, "double_mass": 13, "double_mass_reference": 5}}
+WP_SIZES = {"quick": {"pivoting": 5, "reference": 3, "h/16 run": 5, "h/16 run reference": 3},
+            "full": {"pivoting": 12, "reference": 7, "h/16 run": 13, "h/16 run reference": 5}}
 """Step sizes per sweep (halving). ``full``: the compiled runs go from 2e-3 s (1-DOF) and
 4e-3 s (double_mass) down to 2e-3/2¹¹ = 4e-3/2¹² ≈ 9.8e-7 s; the cvxpy/OSQP reference solver
 (~1 ms per contact solve, and the numpy engine's ≈ 25 µs per step) stops earlier: 7 and 5
@@ -230,42 +231,64 @@ H_RECORD = {"closed form": 2e-3 / 2 ** 6, "h/16 run": 4e-3 / 2 ** 9}
 h/16 reference at 6.1e-8 s keeps every 128th step)."""
 
 
+def _wp_targets(spec: dict) -> tuple[str, ...]:
+    targets = spec.get("targets", ("master",))
+    if "observers" in targets:
+        targets = ("master",) + tuple(OBSERVER_DESIGNS)
+    return tuple(targets)
+
+
+def _wp_closed_form(name: str, spec: dict, sizes: dict, full: bool) -> list[Case]:
+    cases = []
+    for law in IMPACT_LAWS:
+        for solver in ("pivoting", "reference"):
+            for h in _sweep(spec["h0"], sizes[solver]):
+                h_rec = H_RECORD["closed form"] if full and h < H_RECORD["closed form"] else None
+                cases.append(Case("work_precision", name, law=law, solver=solver, h=h,
+                                  t_end=spec["t_end"], observers=(), reference="closed form",
+                                  h_record=h_rec))
+    return cases
+
+
+def _wp_fine_run(name: str, spec: dict, sizes: dict, full: bool) -> list[Case]:
+    hs = _sweep(spec["h0"], sizes["h/16 run"])
+    h_ref = hs[-1] / 16
+    h_rec = H_RECORD["h/16 run"] if full else None
+    targets = _wp_targets(spec)
+    cases = []
+    for law in IMPACT_LAWS:
+        for solver, sweep, tg in (("pivoting", hs, targets),
+                                  ("reference", hs[:sizes["h/16 run reference"]],
+                                   targets if full else ("master",))):
+            for target in tg:
+                for h in sweep:
+                    cases.append(Case("work_precision", name, law=law, solver=solver, h=h,
+                                      t_end=spec["t_end"],
+                                      observers=() if target == "master" else (target,),
+                                      target=target, reference="h/16 run", h_ref=h_ref,
+                                      h_record=h_rec))
+    return cases
+
+
 def work_precision_cases(full: bool) -> list[Case]:
     """Error vs CPU time over ≥ 5 (``full``: ≥ 8, down to ≈ 1e-6 s) step sizes (halving) on
-    the compiled engine, for both impact laws, and the same with the cvxpy/OSQP reference
-    solver over the largest steps (:data:`WP_SIZES`).
+    the compiled engine, for every registered impact law, and the same with the cvxpy/OSQP
+    reference solver over the largest steps (:data:`WP_SIZES`), for every scenario that
+    declares a sweep (``SUITE["work_precision"]``):
 
-    * bouncing_ball, impact_oscillator: the master against its closed form;
-    * double_mass: the master and each observer against a run at h_ref = h_min/16
-      (pivoting solver, same law); with the cvxpy/OSQP reference solver (~100× slower per
-      contact solve, and only in the numpy engine) ``quick`` runs the master only, ``full``
-      the master and each observer.
+    * with a closed form (``reference`` in its module): the master against it;
+    * otherwise the master and each declared target against a run at h_ref = h_min/16
+      (pivoting solver, same law); with the cvxpy/OSQP reference solver ``quick`` runs the
+      master only, ``full`` every target.
     """
     sizes = WP_SIZES["full" if full else "quick"]
     cases: list[Case] = []
-    for scen, T, h0 in (("bouncing_ball", 3.0, 2e-3), ("impact_oscillator", 10.0, 2e-3)):
-        for law in ("newton", "poisson"):
-            for solver in ("pivoting", "reference"):
-                for h in _sweep(h0, sizes[solver]):
-                    h_rec = H_RECORD["closed form"] if full and h < H_RECORD["closed form"] else None
-                    cases.append(Case("work_precision", scen, law=law, solver=solver, h=h, t_end=T,
-                                      observers=(), reference="closed form", h_record=h_rec))
-    T = 1.0
-    hs = _sweep(4e-3, sizes["double_mass"])
-    h_ref = hs[-1] / 16
-    h_rec = H_RECORD["h/16 run"] if full else None
-    for law in ("newton", "poisson"):
-        for target in ("master", "jump", "nojump"):
-            for h in hs:
-                cases.append(Case("work_precision", "double_mass", law=law, h=h, t_end=T,
-                                  observers=() if target == "master" else (target,),
-                                  target=target, reference="h/16 run", h_ref=h_ref, h_record=h_rec))
-        ref_hs = hs[:sizes.get("double_mass_reference", len(hs))]
-        for target in ("master", "jump", "nojump") if full else ("master",):
-            for h in ref_hs:
-                cases.append(Case("work_precision", "double_mass", law=law, solver="reference", h=h,
-                                  t_end=T, observers=() if target == "master" else (target,),
-                                  target=target, reference="h/16 run", h_ref=h_ref, h_record=h_rec))
+    for name in SCENARIOS:
+        meta = info(name)
+        spec = meta.suite.get("work_precision")
+        if spec:
+            build = _wp_closed_form if meta.reference is not None else _wp_fine_run
+            cases += build(name, spec, sizes, full)
     return cases
 
 
@@ -334,15 +357,17 @@ def peer_cases() -> list[Case]:
                  h=h, t_end=T) for name, h, T, N in PEER_CASES]
 
 
-CHECK_SCENARIOS = ("double_mass", "rocking_chain", "bouncing_ball", "impact_oscillator", "grazing")
-QUICK_CHECK_SCENARIOS = ("double_mass", "bouncing_ball", "impact_oscillator", "grazing")
-"""The quick suite leaves out the chain's checks (≈ 20 s of CPU: its A3 search and PSD checks
-enumerate many active sets); ``full`` runs all."""
+def check_scenarios(full: bool = True) -> tuple[str, ...]:
+    """Scenarios whose proof checks a suite runs: those declaring ``SUITE["checks"]`` as
+    ``"quick"`` (every suite) or ``"full"`` (the full suite only: the chain's A3 search and PSD
+    checks enumerate many active sets, ≈ 20 s of CPU)."""
+    levels = ("quick", "full") if full else ("quick",)
+    return tuple(n for n in SCENARIOS if info(n).suite.get("checks") in levels)
 
 
 def check_cases(full: bool = True) -> list[Case]:
-    """One :func:`proofs_checks.run_checks` call per built-in scenario (seed 0)."""
-    return [Case("checks", s, observers=()) for s in (CHECK_SCENARIOS if full else QUICK_CHECK_SCENARIOS)]
+    """One :func:`proofs_checks.run_checks` call per scenario of :func:`check_scenarios` (seed 0)."""
+    return [Case("checks", s, observers=()) for s in check_scenarios(full)]
 
 
 # --------------------------------------------------------------------------------- micro
@@ -360,12 +385,18 @@ def _settings(full: bool) -> dict:
     key = "full" if full else "quick"
     obs = observer_cases(full)
     sz = WP_SIZES[key]
-    sw = (f"compiled runs: {sz['pivoting']} step sizes halving from 2e-3 s (1-DOF; T = 3 s ball, "
-          f"10 s oscillator; closed form) down to {2e-3 / 2 ** (sz['pivoting'] - 1):.3g} s, and "
-          f"{sz['double_mass']} from 4e-3 s (double_mass, T = 1 s, against an h/16 run) down to "
-          f"{4e-3 / 2 ** (sz['double_mass'] - 1):.3g} s; cvxpy/OSQP reference solver (numpy engine): "
-          f"{sz['reference']} sizes (1-DOF), {sz.get('double_mass_reference', sz['double_mass'])} "
-          f"(double_mass)")
+    sweeps = []
+    for name in SCENARIOS:
+        meta = info(name)
+        spec = meta.suite.get("work_precision")
+        if spec:
+            ref = "closed form" if meta.reference is not None else "h/16 run"
+            count = sz["pivoting" if ref == "closed form" else "h/16 run"]
+            sweeps.append(f"{name}: {count} step sizes halving from {spec['h0']:g} s down to "
+                          f"{spec['h0'] / 2 ** (count - 1):.3g} s, T = {spec['t_end']:g} s, "
+                          f"against its {ref}")
+    sw = ("compiled runs: " + "; ".join(sweeps) + f"; cvxpy/OSQP reference solver (numpy "
+          f"engine): {sz['reference']} sizes (closed form), {sz['h/16 run reference']} (h/16 run)")
     if full:
         sw += (f"; errors on a grid of spacing max(h, {H_RECORD['closed form']:.3g} s) (1-DOF), "
                f"max(h, {H_RECORD['h/16 run']:.3g} s) (double_mass)")
@@ -382,7 +413,7 @@ def _settings(full: bool) -> dict:
         "scaling": "rocking_chain master, h = 1e-3 s, " + ("T = 4 s" if full else "T = 2 s")
                    + ", N = " + ", ".join(str(n) for n in SCALING_N[key])
                    + f"; exponent fitted from N = {SCALING_FIT_FROM}",
-        "checks": ", ".join(CHECK_SCENARIOS if full else QUICK_CHECK_SCENARIOS),
+        "checks": ", ".join(check_scenarios(full)),
         "peers": ("; ".join(f"{p}: h = {h:g} s, {int(round(T / h))} steps" for p, h, T, _ in PEER_CASES)
                   if full else "not in this suite (python -m bench run peers)"),
         "micro-benchmarks": " ".join(MICRO_FULL if full else MICRO_QUICK),
@@ -422,27 +453,43 @@ def smoke_suite() -> Suite:
                  {"note": "smoke test settings; numbers are not meaningful"})
 
 
-ALL_KINDS = ("observers", "work_precision", "robustness", "scaling", "checks")
-
-SUITES: dict[str, Suite] = {
-    "observers": _suite("observers", "jump vs no-jump observers across scenarios (full settings)",
-                        True, ("observers",), False),
-    "work_precision": _suite("work_precision", "error vs CPU time, fitted orders (full settings)",
-                             True, ("work_precision",), False),
-    "robustness": _suite("robustness", "observers under imperfect switching signals (full settings)",
-                         True, ("robustness",), False),
-    "scaling": _suite("scaling", "rocking_chain N = 5 … 1000: CPU time per step and memory",
-                      True, ("scaling",), False),
-    "peers": _suite("peers", "Siconos and the toolkit on the same problems: time per step, "
-                             "trajectory difference (needs python3-siconos)", True, ("peers",), False),
-    "micro": Suite("micro", "pytest-benchmark: time loops on both engines, contact solves",
-                   (), MICRO_FULL, {"micro-benchmarks": " ".join(MICRO_FULL)}),
-    "quick": _suite("quick", "first look: small version of every suite (≤ 30 s on 2 cores, kernel "
-                             "compiled)", False, ALL_KINDS, True),
-    "full": _suite("full", "every suite with the real numbers, Siconos peers included (≤ 10 "
-                           "minutes on 2 cores)", True, ALL_KINDS + ("peers",), True),
-    "smoke": smoke_suite(),
+_SUITE_BUILDERS: dict[str, Callable[[], Suite]] = {
+    "observers": lambda: _suite("observers", "every observer design across scenarios (full "
+                                "settings)", True, ("observers",), False),
+    "work_precision": lambda: _suite("work_precision", "error vs CPU time, fitted orders (full "
+                                     "settings)", True, ("work_precision",), False),
+    "robustness": lambda: _suite("robustness", "observers under imperfect switching signals "
+                                 "(full settings)", True, ("robustness",), False),
+    "scaling": lambda: _suite("scaling", "rocking_chain N = 5 … 1000: CPU time per step and "
+                              "memory", True, ("scaling",), False),
+    "peers": lambda: _suite("peers", "Siconos and the toolkit on the same problems: time per "
+                            "step, trajectory difference (needs python3-siconos)", True,
+                            ("peers",), False),
+    "micro": lambda: Suite("micro", "pytest-benchmark: time loops on both engines, contact "
+                           "solves", (), MICRO_FULL, {"micro-benchmarks": " ".join(MICRO_FULL)}),
+    "quick": lambda: _suite("quick", "first look: small version of every suite (≤ 30 s on 2 "
+                            "cores, kernel compiled)", False, KINDS[:-1], True),
+    "full": lambda: _suite("full", "every suite with the real numbers, Siconos peers included "
+                           "(≤ 10 minutes on 2 cores)", True, KINDS, True),
+    "smoke": smoke_suite,
 }
+
+
+class _Suites(Mapping):
+    """Suite name → :class:`Suite`, built from the registries (scenarios, observer designs,
+    impact laws) when looked up, so that a design or scenario registered later is in it."""
+
+    def __getitem__(self, name: str) -> Suite:
+        return _SUITE_BUILDERS[name]()
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(_SUITE_BUILDERS)
+
+    def __len__(self) -> int:
+        return len(_SUITE_BUILDERS)
+
+
+SUITES: Mapping[str, Suite] = _Suites()
 """Registry: suite name → :class:`Suite`."""
 
 

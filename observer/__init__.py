@@ -4,16 +4,17 @@ Public API (a contract relied on by the benchmarks, reports and users):
 
 * :func:`load_scenario` — a built-in scenario by name or a TOML file, with overrides;
 * :func:`simulate` — Moreau–Jean simulation of the master and its observers;
-* :data:`SCENARIOS`, :data:`CONTACT_SOLVERS`, :data:`OBSERVERS` — registries;
+* :data:`SCENARIOS`, :data:`OBSERVER_DESIGNS`, :data:`IMPACT_LAWS`, :data:`CONTACT_SOLVERS` —
+  registries (add an entry, and it runs everywhere);
 * :class:`LinearSystem`, :class:`ImpactLaw`, :class:`Scenario`, :class:`MoreauJean`,
   :class:`SimulationResult`, :class:`Slave`.
 """
 
 from observer.contact import CONTACT_SOLVERS
 from observer.errors import ContactSolverError, InputError
-from observer.impact import ImpactLaw
+from observer.impact import IMPACT_LAWS, ImpactLaw
 from observer.model import Harmonic, LinearSystem
-from observer.observers import OBSERVERS, Slave, lyapunov
+from observer.observers import OBSERVER_DESIGNS, ObserverDesign, Slave, lyapunov
 from observer.result import SimulationResult, read_frame
 from observer.scenario import Scenario
 from observer.scenarios import SCENARIOS
@@ -22,6 +23,6 @@ from observer.stepping import MoreauJean
 
 __version__ = "0.1.0"
 
-__all__ = ["CONTACT_SOLVERS", "ContactSolverError", "Harmonic", "ImpactLaw", "InputError",
-           "LinearSystem", "MoreauJean", "OBSERVERS", "SCENARIOS", "Scenario", "SimulationResult",
+__all__ = ["CONTACT_SOLVERS", "ContactSolverError", "Harmonic", "IMPACT_LAWS", "ImpactLaw", "InputError",
+           "LinearSystem", "MoreauJean", "OBSERVER_DESIGNS", "ObserverDesign", "SCENARIOS", "Scenario", "SimulationResult",
            "Slave", "load_scenario", "lyapunov", "read_frame", "simulate", "__version__"]

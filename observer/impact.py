@@ -10,6 +10,12 @@ velocity γ⁻ and impulse Λ ≥ 0, the post-impact velocity is γ⁺ = γ⁻ +
 
 For one contact the two coincide exactly.
 
+:data:`IMPACT_LAWS` is the registry: each :class:`ImpactLawDefinition` carries the law's
+impact map (the continuous law on (G, γ⁻), which the event-driven integrator and the proof
+checks call), its step map (the discrete impulse of one Moreau–Jean step, which both
+time-stepping engines realise) and the integer code of the compiled kernel (None: a law
+only the python engine runs). A new law is one function pair plus one registry entry.
+
 :func:`poisson_step` is the discrete Poisson step of :mod:`observer.stepping`: Glocker's law
 with the step's Delassus matrix on the step's pre-impact velocity, equal to the discrete
 Newton step for one contact.
@@ -26,10 +32,37 @@ from observer.contact.lcp import LCPSolution
 from observer.errors import InputError
 from observer.validation import broadcast_vector
 
-LAWS = ("newton", "poisson")
 NEWTON, POISSON = 0, 1
+"""The compiled kernel's integer codes of the built-in laws."""
 
 Solve = Callable[[np.ndarray, np.ndarray], LCPSolution]
+ImpactMap = Callable[[np.ndarray, np.ndarray, np.ndarray, Solve], np.ndarray]
+StepMap = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Solve],
+                   tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
+@dataclass(frozen=True)
+class ImpactLawDefinition:
+    """One registered impact law.
+
+    Attributes
+    ----------
+    name : str
+    impact_map : callable ``(G, γ⁻, e, solve) -> Λ``
+        The impact law on a closed set with Delassus matrix G (paper eqs. (5)/(6)).
+    step_map : callable ``(Ĝ, γ_free, γ_k, e, solve) -> (P, Λ_C, Λ_E)``
+        The impulse of one time step with the step's Delassus matrix Ĝ (Λ_C, Λ_E the phases
+        where the law has them, else empty).
+    code : int or None
+        Integer code of the compiled kernel; None runs the law on the python engine only.
+    description : str
+    """
+
+    name: str
+    impact_map: ImpactMap
+    step_map: StepMap
+    code: int | None
+    description: str
 
 
 @dataclass(frozen=True)
@@ -49,8 +82,8 @@ class ImpactLaw:
     @staticmethod
     def build(law: Any, restitution: Any, m: int) -> "ImpactLaw":
         """Validate the law name and broadcast/validate the restitution to m contacts."""
-        if law not in LAWS:
-            raise InputError("impact.law", f"must be one of {list(LAWS)}, got {law!r}")
+        if law not in IMPACT_LAWS:
+            raise InputError("impact.law", f"must be one of {list(IMPACT_LAWS)}, got {law!r}")
         e = broadcast_vector("impact.restitution", restitution, m)
         if np.any(e < 0.0) or np.any(e > 1.0):
             raise InputError("impact.restitution", f"must lie in [0, 1], got {e.tolist()}")
@@ -58,9 +91,14 @@ class ImpactLaw:
         return ImpactLaw(law, e)
 
     @property
-    def code(self) -> int:
-        """Integer code used inside the time loop (NEWTON = 0, POISSON = 1)."""
-        return NEWTON if self.law == "newton" else POISSON
+    def definition(self) -> ImpactLawDefinition:
+        """The registered law (:data:`IMPACT_LAWS`)."""
+        return IMPACT_LAWS[self.law]
+
+    @property
+    def code(self) -> int | None:
+        """Integer code used inside the compiled kernel (None: python engine only)."""
+        return self.definition.code
 
     @property
     def is_global(self) -> bool:
@@ -124,9 +162,26 @@ def poisson_step(G: np.ndarray, gamma_free: np.ndarray, gamma_k: np.ndarray, eps
     return lam_c + lam_e, lam_c, lam_e
 
 
+def newton_step(G: np.ndarray, gamma_free: np.ndarray, gamma_k: np.ndarray, e: np.ndarray,
+                solve: Solve) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Impulse of the discrete Newton step (Siconos' law ``0 ≤ γ_{k+1} + e∘γ_k ⊥ P ≥ 0``):
+    ``P = LCP(G, γ_free + e∘γ_k)``; no phases (empty Λ_C, Λ_E)."""
+    return solve(G, gamma_free + e * gamma_k).x, np.zeros(0), np.zeros(0)
+
+
+IMPACT_LAWS: dict[str, ImpactLawDefinition] = {d.name: d for d in (
+    ImpactLawDefinition("newton", newton_impact, newton_step, NEWTON,
+                        "generalized Newton: 0 ≤ γ⁺ + e∘γ⁻ ⊥ Λ ≥ 0 (eq. (5))"),
+    ImpactLawDefinition("poisson", poisson_impact, poisson_step, POISSON,
+                        "generalized Poisson, Glocker's inequality form (eq. (6))"),
+)}
+"""Registry of impact laws: name → :class:`ImpactLawDefinition`."""
+
+LAWS = tuple(IMPACT_LAWS)
+"""The registered law names (derived from :data:`IMPACT_LAWS`)."""
+
+
 def impact(law: ImpactLaw, G: np.ndarray, gamma_minus: np.ndarray, active: np.ndarray,
            solve: Solve) -> np.ndarray:
     """Impulse Λ of ``law`` on the contacts ``active`` (index array) for Delassus matrix G."""
-    e = law.restitution[active]
-    fn = newton_impact if law.code == NEWTON else poisson_impact
-    return fn(G, gamma_minus, e, solve)
+    return law.definition.impact_map(G, gamma_minus, law.restitution[active], solve)

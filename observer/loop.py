@@ -179,7 +179,7 @@ WINDOW = 1 << 16
 
 
 def run(inp: LoopInput, engine: str = "compiled", record_every: int = 1,
-        record_pre: bool = False, store: str = "full", rhos: tuple = (1e-3, 1e-6, 1e-9)) -> LoopOutput:
+        record_pre: bool = False, store: str = "full", rhos: tuple | None = None) -> LoopOutput:
     """Advance the master and the observers of ``inp`` over the stepper's grid.
 
     ``store="summary"`` (compiled engine) also computes, streaming over every step, what the
@@ -194,7 +194,9 @@ def run(inp: LoopInput, engine: str = "compiled", record_every: int = 1,
         if store == "summary":
             raise InputError("store", 'store="summary" needs engine="compiled"')
         return _run_python(inp, record_every, record_pre)
-    return _run_compiled(inp, record_every, record_pre, store == "summary", tuple(rhos))
+    from observer.metrics import RHOS
+    return _run_compiled(inp, record_every, record_pre, store == "summary",
+                         tuple(RHOS if rhos is None else rhos))
 
 
 def _allocate(inp: LoopInput, record_every: int, record_pre: bool):
@@ -456,6 +458,7 @@ def summary_frame(out: LoopOutput, names: list[str], t0: float, h: float) -> "pd
 
     from observer.kernel import (F_DAMP, F_IMP, F_MAXIMP, F_MAXINC, F_NINC, F_PROJ, F_VEND, F_VMAX,
                                  F_VON, SUMMARY_FIELDS)
+    from observer.metrics import settle_column, sync_column
 
     sm = out.summary
     f, rhos, k_on, k_off = sm["fields"], sm["rhos"], sm["k_on"], sm["k_off"]
@@ -468,8 +471,8 @@ def summary_frame(out: LoopOutput, names: list[str], t0: float, h: float) -> "pd
                "max_impulse_rel": f[s, F_MAXIMP]}
         for i, rho in enumerate(rhos):
             first, last = f[s, SUMMARY_FIELDS + i], f[s, SUMMARY_FIELDS + len(rhos) + i]
-            row[f"t_sync_{rho:g}"] = (first - k_on) * h if first >= 0 else float("inf")
-            row[f"t_settle_{rho:g}"] = (0.0 if last < 0 else float("inf") if last >= k_off
+            row[sync_column(rho)] = (first - k_on) * h if first >= 0 else float("inf")
+            row[settle_column(rho)] = (0.0 if last < 0 else float("inf") if last >= k_off
                                         else (last + 1 - k_on) * h)
         rows.append(row)
     return pd.DataFrame(rows)

@@ -12,8 +12,19 @@ from __future__ import annotations
 
 import numpy as np
 
-RHOS = (1e-3, 1e-6, 1e-9)
-"""Default fractions ρ for :func:`sync_time`."""
+RHOS = (1e-3, 1e-5, 1e-6, 1e-9)
+"""The synchronization thresholds ρ (fractions of V(t_on)), the one list every result, suite
+row and report column uses: :func:`sync_column` and :func:`settle_column` name the columns."""
+
+
+def sync_column(rho: float) -> str:
+    """Column of the first-passage time to ρ·V(t_on): ``t_sync_1e-06``."""
+    return f"t_sync_{rho:g}"
+
+
+def settle_column(rho: float) -> str:
+    """Column of the settling time below ρ·V(t_on): ``t_settle_1e-06``."""
+    return f"t_settle_{rho:g}"
 
 
 def sync_time(t: np.ndarray, V: np.ndarray, rho: float, t_on: float = 0.0,
@@ -108,11 +119,6 @@ def floor(t: np.ndarray, V: np.ndarray, t_from: float, t_to: float | None = None
     """Median of V over [t_from, t_to] (the level V settles at)."""
     sel = (t >= t_from) & (t <= (t[-1] if t_to is None else t_to))
     return float(np.median(V[sel]))
-
-
-def window_medians(t: np.ndarray, V: np.ndarray, edges: np.ndarray) -> np.ndarray:
-    """Medians of V over consecutive windows [edges[i], edges[i+1])."""
-    return np.array([np.median(V[(t >= a) & (t < b)]) for a, b in zip(edges[:-1], edges[1:])])
 
 
 def switchings(active: np.ndarray) -> int:

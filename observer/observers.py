@@ -90,10 +90,6 @@ RATIOS: tuple[tuple[str, str], ...] = (("nojump", "jump"), ("jump", "jump_mass")
                                         ("jump", "jump_identity"))
 """Settling-time ratios the report shows, as (baseline, candidate): baseline / candidate."""
 
-OBSERVERS = {name: d.position_jumps for name, d in OBSERVER_DESIGNS.items()}
-"""Observer name -> whether it has position jumps (derived from :data:`OBSERVER_DESIGNS`)."""
-
-
 @dataclass(frozen=True)
 class Slave:
     """One observer: a name, its design and its initial state (any state, also one with g < 0)."""

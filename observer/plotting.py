@@ -1,4 +1,5 @@
-"""Paper-style figures of a run: trajectories (master black, jump blue, no-jump red) and log V."""
+"""Paper-style figures of a run: trajectories (master black, each observer design in its
+registered colour and style: jump blue, no-jump red, …) and log V."""
 
 from __future__ import annotations
 
@@ -8,8 +9,13 @@ import numpy as np
 import pandas as pd
 
 from observer.errors import InputError
+from observer.observers import OBSERVER_DESIGNS
 
-COLORS = {"master": "black", "jump": "tab:blue", "nojump": "tab:red"}
+
+def _style(name: str) -> dict:
+    """Colour and line style of observer ``name`` (its design's; matplotlib's cycle otherwise)."""
+    d = OBSERVER_DESIGNS.get(name)
+    return {} if d is None else {"color": d.color, "ls": d.linestyle}
 
 
 def observer_names(df: pd.DataFrame) -> list[str]:
@@ -36,10 +42,9 @@ def plot_run(df: pd.DataFrame, out: str | Path, dof: int = 0) -> Path:
     fig, axes = plt.subplots(rows, 1, figsize=(8, 2.4 * rows + 0.6), sharex=True)
     t = df["t"].to_numpy()
     for ax, var in zip(axes, ("q", "u")):
-        ax.plot(t, df[f"{var}{dof}"], color=COLORS["master"], lw=1.2, label="master")
+        ax.plot(t, df[f"{var}{dof}"], color="black", lw=1.2, label="master")
         for name in names:
-            ax.plot(t, df[f"{name}_{var}{dof}"], color=COLORS.get(name, None), lw=0.9,
-                    ls="--", label=name)
+            ax.plot(t, df[f"{name}_{var}{dof}"], lw=0.9, label=name, **_style(name))
         ax.set_ylabel(f"${var}_{{{dof}}}$")
         ax.grid(alpha=0.3)
     axes[0].legend(loc="upper right", fontsize=8)
@@ -47,8 +52,7 @@ def plot_run(df: pd.DataFrame, out: str | Path, dof: int = 0) -> Path:
         ax = axes[2]
         for name in names:
             V = df[f"V_{name}"].to_numpy()
-            ax.semilogy(t, np.where(V > 0, V, np.nan), color=COLORS.get(name, None), lw=1.0,
-                        label=f"V {name}")
+            ax.semilogy(t, np.where(V > 0, V, np.nan), lw=1.0, label=f"V {name}", **_style(name))
         ax.set_ylabel("V")
         ax.grid(alpha=0.3, which="both")
         ax.legend(loc="upper right", fontsize=8)

@@ -109,6 +109,9 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         # the numpy engine, and the result says so
         engine, engine_note = "python", (f"solver {sc.solver!r} runs on the python engine "
                                          "(the compiled kernel has block pivoting only)")
+    if engine == "compiled" and sc.law.code is None:
+        engine, engine_note = "python", (f"impact law {sc.law.law!r} runs on the python engine "
+                                         "(it has no code in the compiled kernel)")
     system = sc.system
     stepper = MoreauJean(system, sc.law, sc.h, sc.t_end, sc.theta, solver=sc.solver,
                          residual_tol=residual_tol,

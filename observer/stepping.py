@@ -66,7 +66,7 @@ import scipy.sparse as sp
 from observer.contact import get_solver
 from observer.contact.lcp import LCPSolution
 from observer.errors import ContactSolverError, InputError
-from observer.impact import NEWTON, ImpactLaw, poisson_step
+from observer.impact import ImpactLaw
 from observer.model import LinearSystem
 from observer.validation import as_scalar
 
@@ -302,7 +302,6 @@ class MoreauJean:
         self._t_end = t_end
         self._grid: Grid | None = None
         self.stats = StepStats()
-        self._law_code = law.code
         self._e = np.asarray(law.restitution)
         self._fallback = None
         self._k = 0
@@ -408,9 +407,7 @@ class MoreauJean:
         W_A, _, Ghat, _, _, _, e_A = self._active_slices(active)
         gamma_k = u @ W_A + self.grid.nu_dot[k, active]
         gamma_free = u_free @ W_A + self.grid.nu_dot[k + 1, active]
-        if self._law_code == NEWTON:
-            return self._solve(Ghat, gamma_free + e_A * gamma_k).x, np.zeros(0), np.zeros(0)
-        return poisson_step(Ghat, gamma_free, gamma_k, e_A, self._solve)
+        return self.law.definition.step_map(Ghat, gamma_free, gamma_k, e_A, self._solve)
 
     def free_velocity(self, k: int, q: np.ndarray, u: np.ndarray) -> np.ndarray:
         """u_free of step k (no contact impulse)."""

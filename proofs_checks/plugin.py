@@ -29,8 +29,10 @@ from __future__ import annotations
 
 import pytest
 
-BUILTIN_SCENARIOS = ("double_mass", "rocking_chain", "bouncing_ball", "impact_oscillator", "grazing")
-"""Names of the built-in scenarios (kept equal to :data:`observer.SCENARIOS` by a test)."""
+from observer.scenarios import SCENARIOS
+
+BUILTIN_SCENARIOS = tuple(SCENARIOS)
+"""Names of the built-in scenarios (:data:`observer.SCENARIOS`): one fixture each."""
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -821,6 +821,7 @@ def test_observer_config_resolves_the_log_beside_the_scenario(tmp_path, monkeypa
 def test_observer_names():
     check_observer_name("jump")
     check_observer_name("nojump")
-    with pytest.raises(InputError, match=r"unknown observer 'slow'; choose from \['jump', 'nojump'\]") as info:
+    with pytest.raises(InputError, match=r"unknown observer 'slow'; choose from \['jump', 'jump_identity', "
+                                         r"'jump_mass', 'nojump'\]") as info:
         check_observer_name("slow")
     assert info.value.field == "observer.observers"

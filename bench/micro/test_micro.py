@@ -35,7 +35,6 @@ With ``--benchmark-disable`` (the test suite's run) every loop covers only
 
 from __future__ import annotations
 
-import dataclasses
 
 import numpy as np
 import pytest
@@ -116,7 +115,7 @@ def loop_input(scenario: str, overrides: dict, observers: tuple, steps: int, eng
     :func:`observer.simulate` builds it (observers from the ``[observer]`` table, coupled over
     the whole window)."""
     from observer.loop import LoopInput
-    from observer.observers import OBSERVERS, ObserverConfig
+    from observer.observers import OBSERVER_DESIGNS, ObserverConfig
 
     sc = observer.load_scenario(scenario, overrides)
     sc = sc.with_overrides({"simulation.t_end": steps * sc.h})
@@ -125,12 +124,9 @@ def loop_input(scenario: str, overrides: dict, observers: tuple, steps: int, eng
     cfg = ObserverConfig.from_table(sc.observer, sc.system.n, sc.q0, sc.u0) if observers else None
     q0 = np.stack([sc.q0] + [cfg.q0 for _ in observers])
     u0 = np.stack([sc.u0] + [cfg.u0 for _ in observers])
-    jumps = np.array([False] + [bool(OBSERVERS[o]) for o in observers])
-    kwargs = {}
-    if "coupled" in {f.name for f in dataclasses.fields(LoopInput)}:   # earlier LoopInput
-        kwargs["coupled"] = np.ones(stepper.grid.steps, dtype=bool)
+    jumps = np.array([False] + [OBSERVER_DESIGNS[o].position_jumps for o in observers])
     return LoopInput(stepper=stepper, q0=q0, u0=u0, jumps=jumps,
-                     master_projection=bool(sc.master_projection), **kwargs)
+                     master_projection=bool(sc.master_projection))
 
 
 @pytest.fixture(scope="module")

@@ -1,14 +1,29 @@
 """Built-in scenarios, each a small module that builds its system from physical parameters.
 
 Every module defines ``DESCRIPTION`` (one line), ``PARAMETERS`` (defaults) and
-``document(**params) -> dict`` (a scenario document, see :mod:`observer.scenario`).
-:data:`SCENARIOS` maps the stable names to the modules.
+``document(**params) -> dict`` (a scenario document, see :mod:`observer.scenario`), and may
+declare its metadata (read by :func:`info`, with defaults):
+
+* ``PLOT`` — ``dict(dof=0, contact=0, labels=("q (m)", "gap (m)"))``: the coordinate and
+  contact the figures draw, and their axis labels;
+* ``reference(scenario, t) -> q`` and ``REFERENCE_TEXT`` — a closed form of the master, if
+  one exists (the work-precision suite measures errors against it);
+* ``NOTES`` — what the scenario shows, for the report;
+* ``SUITE`` — its default benchmark settings: ``observers`` (a list of case settings:
+  ``label``, ``params``, ``h`` and ``t_end`` as (quick, full) pairs, ``slave_offset``),
+  ``work_precision`` (``h0``, ``t_end``, ``targets``), ``checks`` (``"quick"``: in every
+  suite, ``"full"``: only in the full one, ``None``: never).
+
+:data:`SCENARIOS` maps the stable names to the modules: adding a scenario is one module
+plus one entry there, and every list of scenarios (CLI, proof checks, suites, report)
+derives from it.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from types import ModuleType
-from typing import Any
+from typing import Any, Callable
 
 from observer.errors import InputError
 from observer.scenarios import (bouncing_ball, double_mass, grazing, impact_oscillator,
@@ -36,3 +51,36 @@ def builtin_document(name: str, params: dict[str, Any] | None = None) -> dict:
             if isinstance(params[key], bool) or not isinstance(params[key], (int, float)):
                 raise InputError(f"param.{key}", f"must be a number, got {params[key]!r}")
     return module.document(**params)
+
+
+@dataclass(frozen=True)
+class ScenarioInfo:
+    """What a scenario module declares about itself (see the module docstring)."""
+
+    name: str
+    description: str
+    parameters: dict
+    dof: int = 0
+    contact: int = 0
+    labels: tuple[str, str] = ("q (m)", "gap (m)")
+    reference: Callable | None = None
+    reference_text: str = ""
+    notes: str = ""
+    suite: dict = field(default_factory=dict)
+
+
+DEFAULT_SUITE = {"observers": [{}], "work_precision": None, "checks": "quick"}
+"""Benchmark settings of a scenario that declares none: one observers case at its own h and
+t_end, no work-precision sweep, its proof checks in every suite."""
+
+
+def info(name: str) -> ScenarioInfo:
+    """The metadata of built-in scenario ``name``."""
+    if name not in SCENARIOS:
+        raise InputError("scenario", f"unknown scenario {name!r}; choose from {', '.join(SCENARIOS)}")
+    mod = SCENARIOS[name]
+    plot = {"dof": 0, "contact": 0, "labels": ("q (m)", "gap (m)"), **getattr(mod, "PLOT", {})}
+    suite = {**DEFAULT_SUITE, **getattr(mod, "SUITE", {})}
+    return ScenarioInfo(name, mod.DESCRIPTION, dict(mod.PARAMETERS), int(plot["dof"]),
+                        int(plot["contact"]), tuple(plot["labels"]), getattr(mod, "reference", None),
+                        getattr(mod, "REFERENCE_TEXT", ""), getattr(mod, "NOTES", ""), suite)

@@ -30,6 +30,24 @@ def impact_times(h0: float, g0: float, e: float, count: int) -> np.ndarray:
     return t1 + (2 * v1 / g0) * e * (1 - e ** (k - 1)) / (1 - e)
 
 
+PLOT = dict(dof=0, contact=0, labels=("height q (m)", "gap (m)"))
+NOTES = ("K = 0: only the no-jump observer applies; Zeno accumulation of impacts, then "
+         "persistent contact.")
+REFERENCE_TEXT = "closed form (THEORY §7.1: impact times, parabolic flights)"
+SUITE = {
+    "observers": [dict(label="bouncing_ball (Zeno)", h=(1e-3, 1e-4), t_end=(6.0, 6.0),
+                       slave_offset=((0.2,), (-1.0,)))],
+    "work_precision": dict(h0=2e-3, t_end=3.0, targets=("master",)),
+    "checks": "quick",
+}
+
+
+def reference(scenario, t):
+    """The closed form of THEORY §7.1 (:func:`observer.closed_form.ball_reference`)."""
+    from observer.closed_form import ball_reference
+    return ball_reference(scenario, t)
+
+
 def document(**overrides) -> dict:
     p = {**PARAMETERS, **overrides}
     return {

@@ -44,6 +44,18 @@ def static_equilibrium(M, K, W, f_grav, nu0):
     return q_s + Kinv_w * lam, lam
 
 
+PLOT = dict(dof=0, contact=0, labels=("q₁ (m)", "gap (m)"))
+NOTES = ("the paper's Example 1: the lower mass lifts off once per forcing period; with F = 0 "
+         "it comes to rest in persistent contact.")
+SUITE = {
+    "observers": [dict(h=(2e-4, 1e-4), t_end=(10.0, 20.0)),
+                  dict(label="persistent contact (double_mass, F = 0)", params=(("param.F", 0.0),),
+                       h=(5e-4, 1e-4), t_end=(10.0, 20.0), slave_offset=((0.01, 0.0), (0.0, 0.0)))],
+    "work_precision": dict(h0=4e-3, t_end=1.0, targets=("master", "jump", "nojump")),
+    "checks": "quick",
+}
+
+
 def document(**overrides) -> dict:
     """The scenario document for the given parameters (see :data:`PARAMETERS`)."""
     p = {**PARAMETERS, **overrides}

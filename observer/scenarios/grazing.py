@@ -23,6 +23,13 @@ def steady_state(zeta: float, F: float, omega: float) -> tuple[float, float]:
     return float(X), float(np.arctan2(2 * zeta * omega, 1 - omega ** 2))
 
 
+NOTES = "the steady amplitude just touches the wall: grazing contacts every period."
+SUITE = {
+    "observers": [dict(h=(1e-3, 1e-4), t_end=(40.0, 40.0), slave_offset=((0.1,), (0.0,)))],
+    "checks": "quick",
+}
+
+
 def document(**overrides) -> dict:
     p = {**PARAMETERS, **overrides}
     X, delta = steady_state(p["zeta"], p["F"], p["omega"])

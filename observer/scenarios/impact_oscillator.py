@@ -14,6 +14,22 @@ PARAMETERS = dict(zeta=0.0, A=1.0, omega=2.8, sigma=0.0, restitution=0.8, law="n
                   q0=-0.5, u0=0.0, h=1e-3, t_end=20.0)
 
 
+NOTES = "isolated impacts on a periodic orbit: the (1,1) orbit of THEORY §7.2."
+REFERENCE_TEXT = "closed form (event-driven: exact free flight, impacts by brentq)"
+SUITE = {
+    "observers": [dict(h=(1e-3, 1e-4), t_end=(20.0, 20.0), slave_offset=((0.1,), (0.0,)))],
+    "work_precision": dict(h0=2e-3, t_end=10.0, targets=("master",)),
+    "checks": "quick",
+}
+
+
+def reference(scenario, t):
+    """The exact solution (:func:`observer.closed_form.oscillator_reference`): undamped,
+    one harmonic forcing term, fixed wall; None otherwise."""
+    from observer.closed_form import oscillator_reference
+    return oscillator_reference(scenario, t)
+
+
 def document(**overrides) -> dict:
     p = {**PARAMETERS, **overrides}
     return {

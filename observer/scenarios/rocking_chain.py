@@ -63,6 +63,15 @@ def matrices(N: int, m: float, b: float, H: float, a: float, k: float, c: float)
     return M, C, K, W, K_int, C_int
 
 
+PLOT = dict(dof=1, contact=1, labels=("φ₁ (rad)", "corner gap (m)"))
+"""φ₁ (rotation of the lowest block) and its right ground corner, as in the paper's Fig. 5."""
+NOTES = "the paper's Example 2: dense clusters of simultaneous impacts on many contacts."
+SUITE = {
+    "observers": [dict(params=(("param.N", 10),), h=(2e-4, 1e-4), t_end=(8.0, 8.0))],
+    "checks": "full",
+}
+
+
 def document(**overrides) -> dict:
     p = {**PARAMETERS, **overrides}
     N = int(p["N"])
