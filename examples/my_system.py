@@ -13,7 +13,7 @@ The script
    assumptions A1-A3, eqs. (13)-(14), (17), ...) and prints the table.
 
 Exit status: 0 when no check FAILed (PASS or n/a = not applicable), 1 when one did, so the
-script can gate a CI job. A FAIL is a finding, not a crash: read its witness (e.g. the
+script can gate a CI job; 2 with one line ``error: FIELD: ...`` on stderr for bad input. A FAIL is a finding, not a crash: read its witness (e.g. the
 discrete impulse slack of ``lyapunov_decrease``, an O(h) effect explained in the README).
 
     python examples/my_system.py [path/to/system.toml] [--out DIR] [--quick]
@@ -38,9 +38,14 @@ parser.add_argument("--quick", action="store_true", help="h = 1e-3 s and 3 s: a 
 args = parser.parse_args()
 args.out.mkdir(parents=True, exist_ok=True)
 
-# 1. Load: a typo in the file gives one line naming the field (observer.InputError).
+# 1. Load. Bad input (a typo, a matrix that is not symmetric PSD, ...) raises
+#    observer.InputError, whose message names the field: print it and exit with status 2.
 overrides = {"simulation.h": 1e-3, "simulation.t_end": 3.0} if args.quick else {}
-scenario = observer.load_scenario(args.toml, overrides)
+try:
+    scenario = observer.load_scenario(args.toml, overrides)
+except observer.InputError as exc:
+    print(f"error: {exc}", file=sys.stderr)
+    sys.exit(2)
 system = scenario.system
 print(f"{scenario.name}: n = {system.n} DOF, m = {system.m} contacts, {scenario.law.law} law, "
       f"h = {scenario.h:g} s, t_end = {scenario.t_end:g} s")
@@ -77,6 +82,6 @@ table.to_csv(args.out / f"{scenario.name}_checks.csv", index=False)   # with the
 
 failed = table.loc[table["status"] == "FAIL", "check"].tolist()
 for row in table[table["status"] == "FAIL"].itertuples():
-    print(f"FAIL {row.check}: {row.reason} | witness: {row.witness}")
+    print(f"FAIL {row.check}: {row.witness}")                        # reason, then witness
 print(f"{len(table) - len(failed)} of {len(table)} checks without failure; failed: {failed or 'none'}")
 sys.exit(1 if failed else 0)

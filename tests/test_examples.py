@@ -38,11 +38,22 @@ def _run(script: str, out: Path, *extra: str) -> subprocess.CompletedProcess:
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory) -> dict:
-    """name -> (CompletedProcess, output directory) for the three scripts."""
+    """name -> (CompletedProcess, output directory) for the three scripts, plus ``my_system.py``
+    on the built-in double_mass exported as TOML (``failing``: ``lyapunov_decrease`` fails
+    there, the honest discrete failure documented in the README) and on a file with a
+    missing key (``bad_input``)."""
     out = {}
     for script in ("paper_figures.py", "my_system.py", "measured_log.py"):
         d = tmp_path_factory.mktemp(script.removesuffix(".py"))
         out[script] = (_run(script, d), d)
+    d = tmp_path_factory.mktemp("failing")
+    toml = subprocess.run([sys.executable, "-m", "observer", "show", "double_mass"], cwd=REPO,
+                          capture_output=True, text=True, timeout=300, check=True).stdout
+    (d / "double_mass.toml").write_text(toml)
+    out["failing"] = (_run("my_system.py", d, str(d / "double_mass.toml")), d)
+    d = tmp_path_factory.mktemp("bad_input")
+    (d / "bad.toml").write_text("[system]\nM = [[1.0]]\nK = [[1.0]]\nW = [[1.0]]\n")
+    out["bad_input"] = (_run("my_system.py", d, str(d / "bad.toml")), d)
     return out
 
 
@@ -127,6 +138,30 @@ def test_my_system_prints_every_proof_check_and_exits_by_the_verdicts(runs):
     saved = pd.read_csv(out / "three_masses_checks.csv")
     assert list(saved["check"]) == list(CHECKS)
     assert list(saved["status"].fillna("n/a")) == list(table["status"])
+
+
+def test_my_system_exits_1_and_explains_a_failed_check(runs):
+    from proofs_checks import CHECKS
+    proc, out = runs["failing"]
+    table = _table(proc.stdout, "check")
+    table = table[table["status"].isin(["PASS", "FAIL", "n/a"])]
+    assert list(table["check"]) == list(CHECKS)
+    failed = list(table.loc[table["status"] == "FAIL", "check"])
+    assert failed, ("double_mass (quick: h = 1e-3) is expected to fail lyapunov_decrease, the O(h) "
+                    f"impulse slack of the README; no check failed:\n{proc.stdout}")
+    assert proc.returncode == 1, proc.stderr[-3000:]
+    for name in failed:                          # each failure printed with its witness
+        assert any(line.startswith(f"FAIL {name}: ") and len(line) > 40 for line in proc.stdout.splitlines())
+    assert proc.stdout.rstrip().splitlines()[-1].endswith(f"failed: {failed}")
+    assert (out / "double_mass.png").is_file()
+
+
+def test_my_system_bad_input_exits_2_naming_the_field(runs):
+    proc, out = runs["bad_input"]
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: system.C"), proc.stderr   # the missing key
+    assert "Traceback" not in proc.stderr and proc.stdout == ""
 
 
 def test_my_system_simulates_both_contacts_and_plots(runs):
