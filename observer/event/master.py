@@ -75,6 +75,9 @@ class MasterEventResult:
         The exact solution on ``t_k = k·h``: ``t, q0.., u0.., g0.., P0.., active0..``
         (``P_j``: impulse of contact j in ``(t_{k−1}, t_k]``, impacts plus ∫λ dt;
         ``active_j``: contact j closed at some instant of ``(t_{k−1}, t_k]``, row 0 at t0).
+    segments : list of tuple
+        The exact solution: ``(t_start, t_stop, held contacts, x(t_start))`` per flow piece
+        (see :meth:`state`).
     events : DataFrame
         One row per event and contact: ``time, contact, kind, gamma_minus, gamma_plus, impulse``.
     status : str
@@ -82,8 +85,9 @@ class MasterEventResult:
     closings, openings : list of ndarray
         Per contact, the times it closes and opens again (χ_j = 1 on each
         ``[closing, opening]``; an impact or graze is a zero-length interval; ``inf``:
-        still closed at t_end). The unresolved impacts of a Zeno tail (between the last
-        resolved impact and t_∞) are not listed; the tail is in :attr:`zeno`.
+        still closed at t_end). A Zeno tail (between the last resolved impact and t_∞, with
+        infinitely many impacts) counts as closed: its interval starts at the last resolved
+        impact; the extrapolation is in :attr:`zeno`.
     zeno : list of dict
         Per accumulation: ``contact, t_inf, impacts_resolved, tail_time, tail_impulse, ratio``.
     """
@@ -97,6 +101,15 @@ class MasterEventResult:
     closings: list
     openings: list
     zeno: list = field(default_factory=list)
+    segments: list = field(default_factory=list)
+
+    def state(self, t: float) -> np.ndarray:
+        """Exact state ``(q, u)`` at any time t of the run (right-continuous at impacts), from
+        :attr:`segments`: ``(t_start, t_stop, held contacts, x(t_start))`` of each flow piece."""
+        for t_a, t_b, active, x_a in reversed(self.segments):
+            if t_a <= t <= t_b:
+                return flow_for(self.scenario.system, active).state(t_a, x_a, t - t_a)
+        raise ValueError(f"t = {t!r} is outside the run [0, {self.t_end!r}]")
 
     def intervals(self, j: int) -> np.ndarray:
         """Closed intervals ``[closing, opening]`` of contact j, shape (k, 2)."""
@@ -135,6 +148,7 @@ class _Run:
         self.zeno: list[dict] = []
         self.history: dict[tuple, list[tuple[float, float]]] = {}
         self.last_key: tuple | None = None
+        self.segments: list[tuple[float, float, tuple, np.ndarray]] = []
         self.free_flow = flow_for(self.system, ())
         self.Minv = self.free_flow.Minv
 
@@ -142,6 +156,8 @@ class _Run:
     def fill(self, flow: Flow, t_a: float, x_a: np.ndarray, t_b: float, include_end: bool) -> None:
         """Samples of the grid in ``[t_a, t_b)`` (``]`` with include_end) from the flow out of
         (t_a, x_a), and the force impulses ∫λ dt of the persistent set per sample interval."""
+        if t_b > t_a or include_end:
+            self.segments.append((float(t_a), float(t_b), flow.active, np.array(x_a, dtype=float)))
         tg, k = self.t_grid, self.k_next
         forced = list(flow.active)
         t_cur, z_cur = t_a, flow.z(t_a, x_a)
@@ -299,6 +315,10 @@ class _Run:
         d = np.diff([p[0] for p in hist[-3:]])
         ratio = d[1] / d[0]
         setp = tuple(sorted(set(persistent) | set(key)))
+        for c in key:          # the tail is densely closed: χ_c = 1 from the last resolved impact
+            if self.intervals[c] and self.intervals[c][-1] == (t, t):
+                self.intervals[c].pop()
+            self.closed_since[c] = t
         gam = self.free_flow.velocities(t, x)[list(setp)]
         proj_impulse = -np.linalg.solve(self.delassus(setp), gam)
         xp = self.project(t, x, list(setp))
@@ -321,11 +341,10 @@ class _Run:
                 if c not in persistent:
                     self.event(t_inf, c, "stick", 0.0, 0.0, 0.0)
                 self.close(c, t_inf)
-            elif c in persistent:
-                self.event(t_inf, c, "liftoff", 0.0, 0.0, 0.0)
-                self.open(c, t_inf)
             else:
-                self.touch(c, t_inf)
+                if c in persistent:
+                    self.event(t_inf, c, "liftoff", 0.0, 0.0, 0.0)
+                self.open(c, t_inf)
         return self.project(t_inf, x_inf, stick), tuple(stick)
 
 
@@ -479,4 +498,4 @@ def _result(run: _Run, scenario: Scenario, status: str) -> MasterEventResult:
     closings = [np.array([c for c, _ in iv]) for iv in run.intervals]
     openings = [np.array([o for _, o in iv]) for iv in run.intervals]
     return MasterEventResult(scenario, run.h, run.t_end, frame, events, status, closings,
-                             openings, run.zeno)
+                             openings, run.zeno, run.segments)
