@@ -40,10 +40,10 @@ import numpy as np
 import pytest
 
 import observer
-from observer.contact import get_solver
+from observer.contact import CONTACT_SOLVERS, get_solver
 
 SIZES = (1, 4, 20)
-SOLVERS = ("reference", "pivoting", "lemke", "nnls")
+SOLVERS = tuple(CONTACT_SOLVERS)
 
 
 def delassus(m: int) -> np.ndarray:

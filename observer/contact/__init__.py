@@ -69,41 +69,34 @@ class PivotingSolver:
         return sol
 
 
-class LemkeSolver:
-    """Lemke's algorithm for every size (exact pivoting; handles PSD G)."""
+class ExactSolver:
+    """A solver made of one exact LCP function ``fn(G, b) -> LCPSolution | None`` (None, or
+    ``numpy.linalg.LinAlgError``, means no solution: raised as ``ContactSolverError`` with
+    ``failure`` as the message)."""
 
-    name = "lemke"
-
-    def solve(self, G: np.ndarray, b: np.ndarray) -> LCPSolution:
-        sol = lemke(G, b)
-        if sol is None:
-            raise ContactSolverError("lemke: ended on a secondary ray (infeasible LCP)")
-        return sol
-
-
-class NNLSSolver:
-    """Cholesky factor + ``scipy.optimize.nnls`` (exact for SPD G)."""
-
-    name = "nnls"
+    def __init__(self, name: str, fn, failure: str) -> None:
+        self.name, self._fn, self._failure = name, fn, failure
 
     def solve(self, G: np.ndarray, b: np.ndarray) -> LCPSolution:
         try:
-            return nnls_cholesky(G, b)
+            sol = self._fn(G, b)
         except np.linalg.LinAlgError:
-            raise ContactSolverError("nnls: Delassus matrix is not positive definite") from None
+            sol = None
+        if sol is None:
+            raise ContactSolverError(f"{self.name}: {self._failure}")
+        return sol
 
 
-class ReferenceSolver:
-    """cvxpy + OSQP on the equivalent convex QP, compiled once per problem size."""
-
-    name = "reference"
-
-    def solve(self, G: np.ndarray, b: np.ndarray) -> LCPSolution:
-        return solve_reference(G, b)
-
-
-CONTACT_SOLVERS = {cls.name: cls for cls in (PivotingSolver, LemkeSolver, NNLSSolver, ReferenceSolver)}
-"""Registry: stable name -> solver class."""
+CONTACT_SOLVERS = {
+    "pivoting": PivotingSolver,
+    "lemke": lambda: ExactSolver("lemke", lemke, "ended on a secondary ray (infeasible LCP)"),
+    "nnls": lambda: ExactSolver("nnls", nnls_cholesky, "Delassus matrix is not positive definite"),
+    "reference": lambda: ExactSolver("reference", solve_reference, "no solution"),
+}
+"""Registry: stable name → solver factory (``pivoting``: block pivoting with Lemke as
+fallback; ``lemke``: Lemke's algorithm, any PSD G; ``nnls``: NNLS on the Cholesky factor, SPD G;
+``reference``: cvxpy + OSQP on the equivalent convex QP, compiled once per size). The
+micro-benchmarks and the report iterate over it."""
 
 
 def get_solver(name: str, field: str = "solver", **options):
@@ -113,16 +106,16 @@ def get_solver(name: str, field: str = "solver", **options):
     an option the solver does not have raises ``InputError`` naming ``field``.
     """
     try:
-        cls = CONTACT_SOLVERS[name]
+        factory = CONTACT_SOLVERS[name]
     except (KeyError, TypeError):
         raise InputError(field, f"unknown contact solver {name!r}; "
                          f"choose from {sorted(CONTACT_SOLVERS)}") from None
     try:
-        return cls(**options)
+        return factory(**options)
     except TypeError:
         raise InputError(field, f"contact solver {name!r} takes no options "
                          f"{sorted(options)}") from None
 
 
-__all__ = ["ACCEPT_RESIDUAL", "CONTACT_SOLVERS", "LCPSolution", "get_solver", "lcp_residual", "PivotingSolver",
-           "LemkeSolver", "NNLSSolver", "ReferenceSolver"]
+__all__ = ["ACCEPT_RESIDUAL", "CONTACT_SOLVERS", "ExactSolver", "LCPSolution", "PivotingSolver",
+           "get_solver", "lcp_residual"]
