@@ -38,12 +38,18 @@ from reports.tables import text
 RHOS = registry.rhos()
 """Synchronization thresholds of the rows (:func:`reports.registry.rhos`)."""
 
-SETTLE = {rho: f"t_settle_{rho:g}" for rho in RHOS}
+SETTLE = {rho: registry.settle_column(rho) for rho in RHOS}
 """Row column of the settling time at each ρ."""
-FIRST = {rho: f"t_sync_{rho:g}" for rho in RHOS}
+FIRST = {rho: registry.sync_column(rho) for rho in RHOS}
 """Row column of the first-passage time at each ρ."""
-ABOVE = {rho: f"above_after_{rho:g}" for rho in RHOS}
+ABOVE = {rho: registry.above_column(rho) for rho in RHOS}
 """Row column: fraction of window samples after the first passage with V back above ρ·V(t_on)."""
+
+
+def rho_col(prefix: str, rho: float, suffix: str = "") -> str:
+    """Column of a per-ρ quantity in the frames of this module (``settle_1e-06``,
+    ``settle_1e-06_median``): the one place these names are built."""
+    return f"{prefix}_{rho:g}{suffix}"
 
 
 def fit_power(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
@@ -197,7 +203,7 @@ def observer_runs(obs: pd.DataFrame) -> pd.DataFrame:
     the settling and first-passage time at each ρ (``settle_<ρ>``, ``first_<ρ>``), ``rate,
     floor_rel, V_end_rel, e_q_end, master_closings, cpu_time_s, steps_per_s``."""
     cols = ["name", "observer", "status", "note", "h", "t_on", "t_off", "V_on"]
-    cols += [f"settle_{rho:g}" for rho in RHOS] + [f"first_{rho:g}" for rho in RHOS]
+    cols += [rho_col("settle", rho) for rho in RHOS] + [rho_col("first", rho) for rho in RHOS]
     cols += ["rate", "floor_rel", "V_end_rel", "e_q_end", "master_closings", "cpu_time_s",
              "steps_per_s"]
     rows = []
@@ -207,8 +213,8 @@ def observer_runs(obs: pd.DataFrame) -> pd.DataFrame:
             rec = {c: r.get(c) for c in cols}
             ok = r.get("status") == "ok"
             for rho in RHOS:
-                rec[f"settle_{rho:g}"] = _get(r, SETTLE[rho]) if ok else float("nan")
-                rec[f"first_{rho:g}"] = _get(r, FIRST[rho]) if ok else float("nan")
+                rec[rho_col("settle", rho)] = _get(r, SETTLE[rho]) if ok else float("nan")
+                rec[rho_col("first", rho)] = _get(r, FIRST[rho]) if ok else float("nan")
             rows.append(rec)
     return pd.DataFrame(rows, columns=cols)
 
@@ -274,7 +280,7 @@ def robustness_bands(rob: pd.DataFrame, quantiles: tuple[float, float] = BAND) -
     cols = ["perturbation", "size", "observer", "seeds", "floor_median", "floor_lo", "floor_hi",
             "rate_median", "rate_lo", "rate_hi"]
     for rho in ROBUST_RHOS:
-        cols += [f"settle_{rho:g}_median", f"settled_{rho:g}"]
+        cols += [rho_col("settle", rho, "_median"), rho_col("settled", rho)]
     cols += ["log_intervals", "true_intervals"]
     rows = []
     ok = rob[rob["status"] == "ok"] if "status" in rob else rob
@@ -285,8 +291,8 @@ def robustness_bands(rob: pd.DataFrame, quantiles: tuple[float, float] = BAND) -
         for rho in ROBUST_RHOS:
             col = SETTLE[rho]
             t = g[col].astype(float).to_numpy() if col in g else np.full(len(g), np.nan)
-            rec[f"settle_{rho:g}_median"] = float(np.median(t)) if len(t) else float("nan")
-            rec[f"settled_{rho:g}"] = int(np.isfinite(t).sum())
+            rec[rho_col("settle", rho, "_median")] = float(np.median(t)) if len(t) else float("nan")
+            rec[rho_col("settled", rho)] = int(np.isfinite(t).sum())
         rec["log_intervals"] = float(g["log_intervals"].median()) if "log_intervals" in g else float("nan")
         rec["true_intervals"] = float(g["true_intervals"].iloc[0]) if "true_intervals" in g else float("nan")
         rows.append(rec)

@@ -14,26 +14,7 @@ from typing import Iterable
 from observer.contact import CONTACT_SOLVERS
 from observer.scenarios import SCENARIOS
 
-try:
-    from observer.observers import OBSERVER_DESIGNS, RATIOS
-except ImportError:  # pragma: no cover - until the design registry is committed (issue 10 item 1)
-    from observer.observers import OBSERVERS as _OBSERVERS
-
-    @dataclass(frozen=True)
-    class _Design:
-        name: str
-        position_jumps: bool
-        label: str
-        color: str
-        linestyle: str
-
-        @property
-        def metric(self) -> str | None:
-            return "K" if self.position_jumps else None
-
-    _LOOKS = {True: ("tab:blue", "--"), False: ("tab:red", ":")}
-    OBSERVER_DESIGNS = {n: _Design(n, j, n, *_LOOKS[j]) for n, j in _OBSERVERS.items()}
-    RATIOS = tuple((b, c) for b in _OBSERVERS for c in _OBSERVERS if not _OBSERVERS[b] and _OBSERVERS[c])
+from observer.observers import OBSERVER_DESIGNS, RATIOS
 
 MASTER = "master"
 """Name of the observed system in trajectories and work-precision rows."""
@@ -42,9 +23,28 @@ REFERENCE_SOLVER = "reference"
 
 
 def rhos() -> tuple[float, ...]:
-    """The synchronization thresholds ρ the suites record (one list, defined in the suites)."""
-    from bench.suites import RHOS
+    """The synchronization thresholds ρ (the one list, :data:`observer.metrics.RHOS`)."""
+    from observer.metrics import RHOS
     return tuple(RHOS)
+
+
+def settle_column(rho: float) -> str:
+    """Row column of the settling time below ρ·V(t_on) (named by :mod:`observer.metrics`)."""
+    from observer import metrics
+    return metrics.settle_column(rho) if hasattr(metrics, "settle_column") else f"t_settle_{rho:g}"
+
+
+def sync_column(rho: float) -> str:
+    """Row column of the first-passage time to ρ·V(t_on) (named by :mod:`observer.metrics`)."""
+    from observer import metrics
+    return metrics.sync_column(rho) if hasattr(metrics, "sync_column") else f"t_sync_{rho:g}"
+
+
+def above_column(rho: float) -> str:
+    """Row column: fraction of the window samples after the first passage with V back above
+    ρ·V(t_on) (named by :mod:`observer.metrics` once it names it)."""
+    from observer import metrics
+    return metrics.above_column(rho) if hasattr(metrics, "above_column") else f"above_after_{rho:g}"
 
 
 @dataclass(frozen=True)
@@ -106,14 +106,13 @@ def fast_solvers() -> tuple[str, ...]:
 
 def scenario_description(name: str) -> str:
     """One-line description of a built-in scenario ('' for an unknown one)."""
-    return str(getattr(SCENARIOS.get(name), "DESCRIPTION", "") or "")
+    return str(_scenario_info(name, "description") or getattr(SCENARIOS.get(name), "DESCRIPTION", "") or "")
 
 
 def plot_labels(name: str, dof: int, contact: int) -> tuple[str, str]:
-    """Axis labels (coordinate, gap) of a scenario's figure, from its metadata when it has
-    them (``observer.scenarios.info(name).plot``), else generic ones."""
-    plot = _scenario_info(name, "plot")
-    labels = getattr(plot, "labels", None) or (plot.get("labels") if isinstance(plot, dict) else None)
+    """Axis labels (coordinate, gap) of a scenario's figure from its metadata
+    (``observer.scenarios.info(name).labels``), generic ones for a scenario without."""
+    labels = _scenario_info(name, "labels")
     if labels:
         return tuple(labels)[:2]
     return f"q{dof}", f"gap g{contact} (m)"
@@ -125,9 +124,10 @@ def scenario_notes(name: str) -> str:
 
 
 def _scenario_info(name: str, field: str):
+    """A field of ``observer.scenarios.info(name)`` (None for an unknown scenario)."""
     import observer.scenarios as scenarios
 
-    info = getattr(scenarios, "info", None)
+    info = getattr(scenarios, "info", None)  # scenario metadata (issue 10 item 2)
     if info is None or name not in SCENARIOS:
         return None
     return getattr(info(name), field, None)

@@ -49,8 +49,8 @@ def observer_table(obs: pd.DataFrame, title: str | None = None) -> Table:
             t.add(head + ["n/a", f"n/a ({reason})"] + ["n/a"] * (len(cols) - 5))
             continue
         t.add(head + [fmt_window(r["t_on"], r["t_off"]), fmt(r["V_on"])]
-              + [fmt_time(r[f"settle_{rho:g}"]) for rho in RHOS]
-              + [" / ".join(fmt_time(r[f"first_{rho:g}"]) for rho in RHOS)]
+              + [fmt_time(r[analysis.rho_col("settle", rho)]) for rho in RHOS]
+              + [" / ".join(fmt_time(r[analysis.rho_col("first", rho)]) for rho in RHOS)]
               + [fmt(r["rate"]), fmt(r["floor_rel"]), fmt(r["V_end_rel"]), fmt(r["e_q_end"]),
                  fmt_int(r["master_closings"]), fmt(r["cpu_time_s"]), fmt(r["steps_per_s"])])
     return t

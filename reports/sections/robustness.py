@@ -34,13 +34,16 @@ def intro(rob: pd.DataFrame, bands: pd.DataFrame) -> str:
     single = ", ".join(k for k in dict.fromkeys(bands["perturbation"])
                        if k != "none" and k not in set(rnd["perturbation"])) or "none"
     r0 = rob.iloc[0]
+    seeds_text = (f"Perturbations run with several seeds ({random_kinds}) have {seeds} seeds per point "
+                  f"(numpy.random.default_rng(seed)); each cell gives the median over the seeds and, "
+                  f"in brackets, the {lo}–{hi} % band (numpy's linear quantiles). One run per size: "
+                  f"{single}." if len(rnd) else
+                  f"Every point here is one run (one seed); with several seeds a cell gives the "
+                  f"median and the {lo}–{hi} % band.")
     return (f"Scenario {', '.join(dict.fromkeys(rob['name'].astype(str)))} (h = {fmt(r0['h'])} s, "
             f"T = {fmt(r0['t_end'])} s, coupled over the whole run). The observers read χ from the "
             f"master's closing log (source = \"log\") after one perturbation: "
-            + "; ".join(f"{k}: {labels[k]}" for k in kinds) + ". "
-            f"Perturbations run with several seeds ({random_kinds}) have {seeds} seeds per point "
-            f"(numpy.random.default_rng(seed)); each cell gives the median over the seeds and, in "
-            f"brackets, the {lo}–{hi} % band (numpy's linear quantiles). One run per size: {single}.")
+            + "; ".join(f"{k}: {labels[k]}" for k in kinds) + ". " + seeds_text)
 
 
 def bands_table(bands: pd.DataFrame) -> Table:
@@ -54,7 +57,8 @@ def bands_table(bands: pd.DataFrame) -> Table:
               + ["log intervals (true)"])
     for _, b in bands.iterrows():
         kind, n = b["perturbation"], int(b["seeds"])
-        settle = [f"{fmt_time(b[f'settle_{rho:g}_median'])}; {int(b[f'settled_{rho:g}'])}/{n}"
+        settle = [f"{fmt_time(b[analysis.rho_col('settle', rho, '_median')])}; "
+                  f"{int(b[analysis.rho_col('settled', rho)])}/{n}"
                   for rho in ROBUST_RHOS]
         t.add(["none (exact χ)" if kind == "none" else kind,
                "0" if kind == "none" else fmt(b["size"], unit=units.get(kind, "")), str(n),

@@ -21,10 +21,18 @@ def _settings_text(r0: pd.Series, ok: bool) -> str:
             f"law {r0['law']}, solver {r0['solver']}{params}.")
 
 
+def _sentence(text: str) -> str:
+    """``text`` with a capital first letter and a final full stop ('' stays '')."""
+    text = text.strip()
+    if not text:
+        return ""
+    return text[:1].upper() + text[1:] + ("" if text.endswith(".") else ".")
+
+
 def _intro(scen: str, r0: pd.Series, ok: bool) -> str:
     desc = registry.scenario_description(scen)
     notes = registry.scenario_notes(scen)
-    parts = [desc[:1].upper() + desc[1:] + "." if desc else "", notes, _settings_text(r0, ok)]
+    parts = [_sentence(desc), _sentence(notes), _settings_text(r0, ok)]
     return " ".join(p for p in parts if p)
 
 
