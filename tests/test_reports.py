@@ -489,13 +489,17 @@ def _synthetic_rows() -> list[tuple[str, list[dict]]]:
     return cases
 
 
+RESIDUAL_PER_SECOND = 1e-10
+"""Synthetic LCP residual of a solve: proportional to its mean time (distinct per solve)."""
+
+
 def _micro_json() -> dict:
     return {"datetime": "2024-01-01T00:00:00", "version": "4.0.0", "machine_info": {"cpu": {}},
             "benchmarks": [{"group": f"contact solve m={m}", "name": f"test_solve[{solver}-{m}]",
                             "stats": {"mean": mean, "median": mean, "stddev": mean / 10,
                                       "min": mean, "rounds": 5},
                             "extra_info": {"kind": "contact_solve", "solver": solver, "m": m,
-                                           "residual": 0.0}}
+                                           "residual": mean * RESIDUAL_PER_SECOND}}
                            for (m, solver), mean in MICRO_MEANS.items()]
             + [{"group": "time loop", "name": f"test_loop[{engine}-{case}]",
                 "stats": {"mean": 1.1 * med, "median": med, "stddev": med / 10, "min": med,
@@ -1009,3 +1013,31 @@ def test_suite_names_resolve_to_where_bench_stores_them(tmp_path):
     from reports.context import suite_results
 
     assert suite_results("quick", tmp_path) == results_path("quick", tmp_path)
+
+
+def test_limitations_and_settings_quote_the_rows_and_the_registries(synthetic_report):
+    """The numbers in the limitations and settings prose come from the rows, the suites'
+    thresholds and the solvers' acceptance constant, not from fixed text."""
+    from observer.contact import ACCEPT_RESIDUAL
+    from observer.metrics import RHOS
+
+    page, rows = synthetic_report
+    lim = "\n".join(page.sections["limitations"].items)
+    assert f"the deepest threshold ({fmt_rho(min(RHOS))})" in lim
+    scal = rows[rows["kind"] == "scaling"]
+    assert f"from rest over T = {fmt(float(scal['t_end'].iloc[0]))} s;" in lim
+    assert "Robustness uses double_mass and" in lim
+    ball = rows[(rows["name"] == "ball") & (rows["status"] != "ok")].iloc[0]
+    assert f"ball: the design {ball['observer']} does not apply ({ball['note']})" in lim
+    for design in ("jump_mass", "jump_identity"):
+        if design in OBSERVER_DESIGNS:
+            assert f"{design} ({OBSERVER_DESIGNS[design].metric} metric)" in lim
+    refs = set(rows.loc[rows["kind"] == "work_precision", "reference"]) - {"closed form (event-driven)"}
+    assert all(r in lim for r in refs)
+    settings = {r["quantity"]: r["definition / value"]
+                for r in page.table("settings", "Tolerances and definitions").dicts()}
+    assert settings["synchronization thresholds ρ"] == ", ".join(fmt(r) for r in RHOS)
+    assert f"≤ {fmt(ACCEPT_RESIDUAL)} for block pivoting" in settings["contact-solve acceptance"]
+    worst = max(MICRO_MEANS.values()) * RESIDUAL_PER_SECOND
+    assert settings["largest residual of a timed contact solve"] == fmt(worst)
+    assert settings["ratios (baseline / candidate)"].startswith("nojump/jump")
