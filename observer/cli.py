@@ -168,8 +168,9 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def guarded(func, *args) -> int:
-    """Call ``func(*args)``; turn input, solver and file errors into one ``error:`` line on
-    stderr and exit status 2 (130 on Ctrl-C). Shared by every command line of the toolkit."""
+    """Call ``func(*args)``; turn input, solver, file and out-of-memory errors into one
+    ``error:`` line on stderr and exit status 2 (130 on Ctrl-C). Shared by every command line
+    of the toolkit."""
     try:
         return func(*args)
     except (InputError, ContactSolverError) as exc:
@@ -177,6 +178,10 @@ def guarded(func, *args) -> int:
         return 2
     except OSError as exc:
         print(f"error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print("error: --store: the run's recorded rows do not fit in memory; keep fewer rows "
+              "(--record-every K, or --store summary) or shorten the run (--t-end, --h)", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)

@@ -35,7 +35,7 @@ import numpy as np
 from observer.errors import InputError
 from observer.impact import ImpactLaw
 from observer.model import Harmonic, LinearSystem
-from observer.validation import as_array, as_scalar, check_step_parameters
+from observer.validation import as_array, as_scalar, check_step_count, check_step_parameters
 
 _HARMONIC = {"amplitude": None, "omega": None, "phase": None}
 SCHEMA: dict = {
@@ -189,6 +189,7 @@ class Scenario:
         simd = doc["simulation"]
         h, theta = check_step_parameters(simd["h"], simd.get("theta", 0.5))
         t_end = as_scalar("simulation.t_end", simd["t_end"], positive=True)
+        check_step_count(h, t_end)
         solver = simd.get("solver", "pivoting")
         from observer.contact import get_solver
         get_solver(solver, field="simulation.solver")

@@ -214,6 +214,26 @@ def check_step_parameters(h: Any, theta: Any) -> tuple[float, float]:
     return h, theta
 
 
+MAX_STEPS = 2 ** 53
+"""Largest number of steps of a run: the grid t_k = t0 + k·h evaluates k as a float, and
+beyond 2^53 consecutive k are no longer distinct (nor could any array hold the run)."""
+
+
+def check_step_count(h: float, t_end: float, t0: float = 0.0) -> float:
+    """Raise unless ``(t_end − t0)/h`` steps fit in :data:`MAX_STEPS`; return that count.
+
+    Raises
+    ------
+    InputError
+        Naming ``simulation.h`` (the message gives h, t_end and the step count).
+    """
+    steps = (t_end - t0) / h
+    if not steps <= MAX_STEPS:
+        raise InputError("simulation.h", f"h = {h!r} up to t_end = {t_end!r} gives {steps:.3g} steps, "
+                         f"more than the 2^53 ≈ {float(MAX_STEPS):.3g} a grid can count")
+    return steps
+
+
 def check_output_path(field: str, path: Any, suffixes: tuple[str, ...]) -> Path:
     """Validate an output file path before any work is done; return it as a :class:`Path`.
 
