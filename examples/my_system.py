@@ -6,9 +6,10 @@ contacts (columns of W and the gap offsets), the impact law and the initial stat
 
 The script
 1. loads the file and prints the system (n, m, the law),
-2. simulates the master with both observers (with and without position jumps), plots the
-   master's gaps and each observer's error Lyapunov function V (paper eq. (16)) to
-   DIR/NAME.png and prints how fast V falls,
+2. simulates the master with every registered observer design (with position jumps in the
+   K metric, the paper's; without; jumps in other metrics), plots the master's gaps and
+   each observer's error Lyapunov function V (paper eq. (16)) to DIR/NAME.png and prints
+   how fast V falls,
 3. runs every numerical check of Proposition 1 and Theorem 1 (``proofs_checks.run_checks``:
    assumptions A1-A3, eqs. (13)-(14), (17), ...) and prints the table.
 
@@ -50,16 +51,20 @@ system = scenario.system
 print(f"{scenario.name}: n = {system.n} DOF, m = {system.m} contacts, {scenario.law.law} law, "
       f"h = {scenario.h:g} s, t_end = {scenario.t_end:g} s")
 
-# 2. Simulate the master and both observers (they start from the file's [observer] state).
-result = observer.simulate(scenario, observers=("jump", "nojump"))
-frame = result.to_frame()            # t, q0.., g0.., active0.., jump_q0.., V_jump, V_nojump
+# 2. Simulate the master and every registered observer design, all started from the file's
+#    [observer] state: "jump" (the paper's, position jumps in the K metric), "nojump" (the
+#    earlier design) and whatever else observer.OBSERVER_DESIGNS holds (other metrics).
+designs = observer.OBSERVER_DESIGNS
+result = observer.simulate(scenario, observers=tuple(designs))
+frame = result.to_frame()            # t, q0.., g0.., active0.., jump_q0.., V_jump, V_nojump, ...
 closings = (frame.filter(like="active").diff() > 0).sum()            # 0 -> 1 per contact
 print("master closings per contact:", closings.to_dict())
 fig, (ax_g, ax_v) = plt.subplots(2, 1, sharex=True, figsize=(7, 5))
 for j in range(system.m):                                            # the master's gaps
     ax_g.plot(frame["t"], frame[f"g{j}"], lw=0.8, label=f"$g_{j}$")
-for name, color in (("jump", "tab:blue"), ("nojump", "tab:red")):    # eq. (16) per observer
-    ax_v.semilogy(frame["t"], frame[f"V_{name}"].where(frame[f"V_{name}"] > 0), color=color, label=name)
+for name, d in designs.items():                                      # eq. (16) per observer
+    ax_v.semilogy(frame["t"], frame[f"V_{name}"].where(frame[f"V_{name}"] > 0), color=d.color,
+                  ls=d.linestyle, label=d.label)
 ax_g.set(ylabel="gap [m]", title=scenario.name)
 ax_v.set(ylabel="V", xlabel="t [s]")
 for ax in (ax_g, ax_v):
