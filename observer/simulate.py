@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Iterable
 
 import numpy as np
 
@@ -13,39 +13,9 @@ from observer.loop import run as run_loop
 from observer.observers import OBSERVER_DESIGNS, ObserverConfig, Slave, check_observer_name, \
     lyapunov, lyapunov_decrements
 from observer.result import SimulationResult, SlaveTrajectory, run_metadata
-from observer.scenario import Scenario, apply_overrides, parse_value
-from observer.scenarios import SCENARIOS, builtin_document
+from observer.scenario import Scenario, load_scenario  # noqa: F401  (re-exported: observer.load_scenario)
 from observer.stepping import MoreauJean
 from observer.switching import SOURCES, read_log
-from observer.tomlio import read_toml
-
-
-def load_scenario(name_or_path: str | Path | Scenario, overrides: dict[str, Any] | None = None) -> Scenario:
-    """Load a built-in scenario by name or a TOML file by path, with dotted-key overrides.
-
-    Keys ``param.NAME`` set a built-in's builder parameter (e.g. ``{"param.N": 5}`` for
-    ``rocking_chain``); every other key addresses the TOML document
-    (``{"simulation.h": 1e-3, "impact.law": "newton"}``). String values are parsed as
-    TOML values, so CLI ``--set`` strings work unchanged.
-    """
-    overrides = dict(overrides or {})
-    if isinstance(name_or_path, Scenario):
-        return name_or_path.with_overrides(overrides) if overrides else name_or_path
-    params = {k[len("param."):]: (parse_value(v) if isinstance(v, str) else v)
-              for k, v in overrides.items() if k.startswith("param.")}
-    rest = {k: v for k, v in overrides.items() if not k.startswith("param.")}
-    name = str(name_or_path)
-    if name in SCENARIOS:
-        doc, source = builtin_document(name, params), name
-    elif name.endswith(".toml") or Path(name).exists():
-        if params:
-            raise InputError("param." + next(iter(params)),
-                             "builder parameters apply only to built-in scenarios")
-        doc, source = read_toml(name), name
-    else:
-        raise InputError("scenario", f"{name!r} is neither a built-in scenario "
-                         f"({', '.join(SCENARIOS)}) nor an existing .toml file")
-    return Scenario.from_dict(apply_overrides(doc, rest), source)
 
 
 def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: float | None = None, *,

@@ -42,6 +42,16 @@ def _spectrum(A: np.ndarray) -> tuple[np.ndarray, float, float]:
     return eig, scale, asym
 
 
+def not_definite_reason(K: np.ndarray, consequence: str) -> str | None:
+    """None if the symmetric part of K is positive definite (λ_min > 1e-12·λ_max, the rule of
+    :meth:`observer.model.LinearSystem.is_stiffness_definite`), else why not, and
+    ``consequence``: the one K-definiteness test of the run-based checks."""
+    eig = np.linalg.eigvalsh(0.5 * (K + K.T))
+    if eig[-1] <= 0 or eig[0] <= 1e-12 * abs(eig[-1]):
+        return f"K is not positive definite (λ_min = {eig[0]:.3g}): {consequence}"
+    return None
+
+
 def _definite(name: str, label: str, A: np.ndarray, equation: str, *, symmetric: bool,
               semidefinite_ok_reason: str | None, rcond_min: float) -> CheckResult:
     eig, scale, asym = _spectrum(A)

@@ -74,6 +74,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from observer.metrics import decay_rate
+from proofs_checks.assumptions import not_definite_reason
 from proofs_checks.result import CheckResult
 from proofs_checks.runs import Run, Trajectory, rerun
 
@@ -576,10 +577,9 @@ def check_convergence(run: Run, a: str | None = None, b: str | None = None, *, r
     name, eq = "convergence", "Theorem 1; eqs. (18)-(21)"
     sys_ = run.system
     Cbar = 0.5 * (sys_.C + sys_.C.T)
-    wK = np.linalg.eigvalsh(0.5 * (sys_.K + sys_.K.T))
-    if wK[-1] <= 0 or wK[0] <= 1e-12 * wK[-1]:
-        return CheckResult.not_applicable(name, f"K is not positive definite (λ_min = {wK[0]:.3g}): V is not "
-                                          "a norm of the error; Theorem 1 needs K ≻ 0", eq)
+    why = not_definite_reason(sys_.K, "V is not a norm of the error; Theorem 1 needs K ≻ 0")
+    if why:
+        return CheckResult.not_applicable(name, why, eq)
     wC = np.linalg.eigvalsh(Cbar)
     if wC[-1] <= 0 or abs(wC[0]) <= 1e-12 * wC[-1]:
         return CheckResult.not_applicable(name, f"C̄ is only positive semi-definite (λ_min = {wC[0]:.3g}): "

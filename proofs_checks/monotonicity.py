@@ -115,33 +115,40 @@ def delassus(system: LinearSystem, active: np.ndarray) -> np.ndarray:
 
 
 def candidate_sets(m: int, rng: np.random.Generator, *, exhaustive_up_to: int = 10,
-                   random_sets: int = 32, visited: list | None = None) -> list[np.ndarray]:
+                   random_sets: int = 32, visited: list | None = None,
+                   min_random_size: int = 3) -> list[np.ndarray]:
     """Active sets to examine: all nonempty subsets for ``m ≤ exhaustive_up_to``; else all
-    singletons and pairs, the full set, ``random_sets`` random subsets of random sizes and
-    the ``visited`` sets (closed sets reached by a run)."""
+    singletons and pairs, the full set and ``random_sets`` random subsets of random sizes
+    (from ``min_random_size`` to m); then the ``visited`` sets (closed sets reached by a
+    run). Each set once, sorted, in this order."""
     sets: dict[bytes, np.ndarray] = {}
+    for ix in _set_sequence(m, rng, exhaustive_up_to, random_sets, min_random_size):
+        add_set(sets, ix)
+    for v in visited or []:
+        add_set(sets, v)
+    return list(sets.values())
 
-    def add(ix) -> None:
-        a = np.unique(np.asarray(ix, dtype=np.int64))
-        if a.size:
-            sets.setdefault(a.tobytes(), a)
 
+def add_set(sets: dict, ix) -> None:
+    """Add the sorted nonempty index set ``ix`` to ``sets`` (keyed by its bytes) once."""
+    a = np.unique(np.asarray(ix, dtype=np.int64))
+    if a.size:
+        sets.setdefault(a.tobytes(), a)
+
+
+def _set_sequence(m: int, rng: np.random.Generator, exhaustive_up_to: int, random_sets: int,
+                  min_random_size: int):
     if m <= exhaustive_up_to:
         for k in range(1, m + 1):
-            for c in itertools.combinations(range(m), k):
-                add(c)
-    else:
-        for i in range(m):
-            add([i])
-        for c in itertools.combinations(range(m), 2):
-            add(c)
-        add(range(m))
-        for _ in range(random_sets):
-            k = int(rng.integers(3, m + 1))
-            add(rng.choice(m, size=k, replace=False))
-    for v in visited or []:
-        add(v)
-    return list(sets.values())
+            yield from itertools.combinations(range(m), k)
+        return
+    for i in range(m):
+        yield [i]
+    yield from itertools.combinations(range(m), 2)
+    yield range(m)
+    for _ in range(random_sets):
+        k = int(rng.integers(min_random_size, m + 1))
+        yield rng.choice(m, size=k, replace=False)
 
 
 def _samples(prob: _SetProblem, rng: np.random.Generator, count: int) -> list[tuple[np.ndarray, np.ndarray]]:

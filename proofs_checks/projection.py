@@ -33,6 +33,8 @@ import itertools
 import numpy as np
 import scipy.linalg as sla
 
+from proofs_checks.assumptions import not_definite_reason
+from proofs_checks.monotonicity import add_set, candidate_sets
 from proofs_checks.result import CheckResult
 from proofs_checks.runs import Run, Trajectory
 
@@ -41,11 +43,8 @@ EPS = float(np.finfo(float).eps)
 
 def _stiffness_reason(K: np.ndarray) -> str | None:
     """None if K ≻ 0, else why the K-metric checks are not applicable."""
-    eig = np.linalg.eigvalsh(0.5 * (K + K.T))
-    if eig[-1] <= 0 or eig[0] <= 1e-12 * abs(eig[-1]):
-        return (f"K is not positive definite (λ_min = {eig[0]:.3g}): the K-metric projection, "
-                "eqs. (13)-(14) and L_I = W_IᵀK⁻¹W_I need K ≻ 0")
-    return None
+    return not_definite_reason(K, "the K-metric projection, eqs. (13)-(14) and L_I = W_IᵀK⁻¹W_I "
+                                  "need K ≻ 0")
 
 
 def check_projection_closed_form(run: Run, *, slaves: tuple[str, ...] | None = None,
@@ -164,20 +163,11 @@ def check_projection_closed_form(run: Run, *, slaves: tuple[str, ...] | None = N
 def _subsets(m: int, rng: np.random.Generator, exhaustive_up_to: int, samples: int,
              L: np.ndarray) -> tuple[list[np.ndarray], bool]:
     if m <= exhaustive_up_to:
-        return [np.array(c) for k in range(1, m + 1) for c in itertools.combinations(range(m), k)], True
+        return candidate_sets(m, rng, exhaustive_up_to=exhaustive_up_to), True
     sets = {}
-
-    def add(ix):
-        a = np.unique(np.asarray(ix, dtype=np.int64))
-        sets.setdefault(a.tobytes(), a)
-
-    for i in range(m):
-        add([i])
-    for c in itertools.combinations(range(m), 2):
-        add(c)
-    add(range(m))
-    for _ in range(samples):
-        add(rng.choice(m, size=int(rng.integers(1, m + 1)), replace=False))
+    for a in candidate_sets(m, rng, exhaustive_up_to=exhaustive_up_to, random_sets=samples,
+                            min_random_size=1):
+        add_set(sets, a)
     # greedy chain of worst-conditioned subsets: grow from the worst pair
     def cond(ix):
         w = np.linalg.eigvalsh(L[np.ix_(ix, ix)])
@@ -189,7 +179,7 @@ def _subsets(m: int, rng: np.random.Generator, exhaustive_up_to: int, samples: i
         rest = [j for j in range(m) if j not in cur]
         j = max(rest, key=lambda j: cond(cur + [j]))
         cur = cur + [j]
-        add(cur)
+        add_set(sets, cur)
     return list(sets.values()), False
 
 
