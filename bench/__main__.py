@@ -3,7 +3,14 @@
     python -m bench list
     python -m bench show quick
     python -m bench run quick [--out bench/results] [--limit K] [--no-progress] [--no-micro]
+    python -m bench run full --workers 2                  # a local Dask cluster of 2 workers
+    python -m bench run full --scheduler tcp://host:8786  # an existing Dask scheduler
+    python -m bench run quick --workers 0                 # in this process, no Dask
     python -m bench status quick
+
+Each finished case is written at once (``OUT/<suite>.cases/<key>.parquet``): a killed worker,
+a killed ``python -m bench run`` or a restarted sweep loses no finished case and computes none
+twice.
 
 The BLAS thread count is pinned to 1 (unless already set) before NumPy is imported: the
 systems are small, and threaded BLAS on small matrices only adds contention and noise to
@@ -24,6 +31,17 @@ from collections import Counter  # noqa: E402
 from bench import RESULTS_DIR  # noqa: E402
 
 
+def _workers(text: str) -> int:
+    """``--workers``: an integer ≥ 0."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text!r}")
+    return n
+
+
 def main(argv: list[str] | None = None) -> int:
     from bench.suites import SUITES, get_suite
 
@@ -42,6 +60,12 @@ def main(argv: list[str] | None = None) -> int:
                            help="run at most K of the remaining cases")
             s.add_argument("--no-progress", action="store_true", help="no progress bar")
             s.add_argument("--no-micro", action="store_true", help="skip the micro-benchmarks")
+            s.add_argument("--workers", type=_workers, default=1,
+                           help="worker processes of the local Dask cluster (default %(default)s; "
+                                "0: run in this process without Dask)")
+            s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                           help="run on an existing Dask scheduler (e.g. tcp://host:8786) "
+                                "instead of a local cluster")
     args = p.parse_args(argv)
 
     if args.cmd == "list":
@@ -61,16 +85,16 @@ def main(argv: list[str] | None = None) -> int:
         for c in suite.cases:
             print(c.case_id)
         return 0
-    from bench.results import ResultsFile
+    from bench.results import CaseStore
     from bench.run import results_path, run_suite
     if args.cmd == "status":
-        done = ResultsFile(results_path(suite.name, args.out)).done_ids()
-        n_done = sum(c.case_id in done for c in suite.cases)
+        store = CaseStore(results_path(suite.name, args.out))
+        n_done = sum(store.has(c.case_id) for c in suite.cases)
         print(f"{suite.name}: {n_done}/{len(suite.cases)} cases done "
               f"({results_path(suite.name, args.out)})")
         return 0
     summary = run_suite(suite, args.out, progress=not args.no_progress, limit=args.limit,
-                        micro=not args.no_micro)
+                        micro=not args.no_micro, workers=args.workers, scheduler=args.scheduler)
     print(summary.text())
     micro_failed = summary.micro_status.startswith("failed")
     return 1 if summary.failed or micro_failed else 0

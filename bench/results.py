@@ -1,32 +1,32 @@
-"""Append-only, resumable results files: one tidy JSON object per line, one line per run.
+"""Benchmark results: one Parquet file per finished case; loading a suite is a concat.
 
 Layout of a suite's output folder ``OUT`` (default ``bench/results``)::
 
-    OUT/<suite>.jsonl              the tidy rows (appended as runs finish; never rewritten
-                                   except to drop the torn tail of an interrupted write)
-    OUT/<suite>.csv                the same rows as CSV, exported when the suite completes
-    OUT/<suite>-micro.json         pytest-benchmark JSON of the micro-benchmarks
-    OUT/<suite>/traj/<case>.parquet  downsampled trajectories for the report's figures
-    OUT/<suite>/logs/<case>.csv      perturbed closing logs of the robustness suite
+    OUT/<suite>.cases/<key>.parquet   the rows of one finished case (key: hash of its case_id,
+                                      i.e. of its declared parameters)
+    OUT/<suite>.cases/stale/          case files no longer in the suite, or written without a
+                                      column the report now needs (kept, not loaded)
+    OUT/<suite>.csv                   all rows as CSV, exported when a run of the suite ends
+    OUT/<suite>-micro.json            pytest-benchmark JSON of the micro-benchmarks
+    OUT/<suite>/traj/<case>.parquet   downsampled trajectories for the report's figures
+    OUT/<suite>/logs/<case>.csv       perturbed closing logs of the robustness suite
 
-Every row carries ``case_id`` (stable across runs: derived from the case's declared fields),
-``case_rows`` (how many rows the case writes) and ``row`` (0-based index within the case).
-A case is *done* when all its rows are in the file; its rows are written with a single
-``write`` followed by ``flush`` and ``fsync``. A case whose rows are incomplete (the process
-was killed in the middle of a write) is dropped when the file is opened again and is rerun.
-
-JSON-lines rather than CSV because the kinds of runs (observers, work-precision, robustness,
-scaling) have different metric columns; :func:`load_results` turns any set of files into one
-DataFrame (missing columns are NaN there, and the report only reads the columns of a kind).
+A case file is written under a temporary name in the same folder and renamed: it appears
+complete or not at all, whatever kills the writer. A case is *done* when its file exists, so
+a killed process (client or worker) loses at most the cases it was running, and a rerun
+computes none twice. Every row carries ``suite``, ``case_id``, ``case_rows`` (rows of the
+case) and ``row`` (0-based index within the case); the kinds of runs have different metric
+columns, so :func:`load_results` concatenates with NaN for a kind's missing columns.
 """
 
 from __future__ import annotations
 
-import json
+import hashlib
 import os
 import platform
 import subprocess
 import sys
+import uuid
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Iterable
@@ -34,170 +34,178 @@ from typing import Any, Iterable
 from observer.result import package_versions
 
 RESERVED = ("suite", "case_id", "case_rows", "row")
+#: Suffix of a suite's folder of case files (``OUT/<suite>.cases``).
+CASES_SUFFIX = ".cases"
+STALE = "stale"
 
 
-def _jsonable(x: Any) -> Any:
-    """JSON fallback for NumPy scalars/arrays and paths."""
-    try:
-        import numpy as np
-    except ImportError:  # pragma: no cover - numpy is a hard dependency
-        np = None
-    if np is not None:
-        if isinstance(x, np.ndarray):
-            return x.tolist()
-        if isinstance(x, (np.floating, np.integer, np.bool_)):
-            return x.item()
-    if isinstance(x, Path):
-        return str(x)
-    return str(x)
+def case_key(case_id: str) -> str:
+    """File name stem of a case: the first 20 hex digits of SHA-256 of its ``case_id``."""
+    return hashlib.sha256(case_id.encode("utf-8")).hexdigest()[:20]
 
 
-def dumps_row(row: dict) -> str:
-    """One row as a single JSON line (``Infinity``/``NaN`` kept, as Python's json does)."""
-    return json.dumps(row, default=_jsonable, allow_nan=True, separators=(",", ":"))
+def _table(rows: list[dict]):
+    """A pyarrow table of ``rows`` with the union of their keys as columns (null where a row
+    lacks one); a column mixing kinds of values (a number in one row, text in another) is
+    stored as text rather than refused."""
+    import pyarrow as pa
+
+    names = list(dict.fromkeys(k for r in rows for k in r))
+    columns = {}
+    for k in names:
+        values = [r.get(k) for r in rows]
+        try:
+            columns[k] = pa.array(values)
+        except (pa.ArrowInvalid, pa.ArrowTypeError):
+            columns[k] = pa.array([None if v is None else str(v) for v in values])
+    return pa.table(columns)
 
 
-class ResultsFile:
-    """An append-only JSON-lines results file with case-level resume.
+class CaseStore:
+    """The folder of one suite's case files.
 
     Parameters
     ----------
-    path : str or Path
-        The ``.jsonl`` file (created with its folder on the first append).
+    folder : str or Path
+        ``OUT/<suite>.cases`` (:func:`bench.run.results_path`); created on the first write.
+        Its parent is the results folder the rows' artefact paths are relative to.
     """
 
-    def __init__(self, path: str | Path):
-        self.path = Path(path)
+    def __init__(self, folder: str | Path):
+        self.folder = Path(folder)
 
-    # -- reading ---------------------------------------------------------------------------
-    def _scan(self) -> tuple[list[dict], bool]:
-        """All complete cases' rows in file order, and whether anything had to be dropped."""
-        if not self.path.exists():
-            return [], False
-        rows: list[dict] = []
-        dropped = False
-        with self.path.open("r", encoding="utf-8") as fh:
-            for line in fh:
-                if not line.endswith("\n"):          # torn last line of a killed write
-                    dropped = True
-                    break
-                line = line.strip()
-                if not line:
-                    continue
-                try:
-                    rows.append(json.loads(line))
-                except json.JSONDecodeError:
-                    dropped = True
-        groups: dict[str, list[dict]] = {}
-        for r in rows:
-            groups.setdefault(r.get("case_id", ""), []).append(r)
-        keep: list[dict] = []
-        complete: set[str] = set()
-        for cid, grp in groups.items():
-            need = int(grp[0].get("case_rows", len(grp)))
-            idx = {int(r.get("row", i)) for i, r in enumerate(grp)}
-            if len(grp) == need and idx == set(range(need)):
-                complete.add(cid)
-            else:
-                dropped = True
-        keep = [r for r in rows if r.get("case_id", "") in complete]
-        return keep, dropped
+    @property
+    def path(self) -> Path:
+        """The folder (what :func:`load_results` takes)."""
+        return self.folder
 
-    def rows(self) -> list[dict]:
-        """Rows of the complete cases, in the order they were written."""
-        return self._scan()[0]
+    def case_path(self, case_id: str) -> Path:
+        """``FOLDER/<case_key>.parquet``."""
+        return self.folder / f"{case_key(case_id)}.parquet"
 
-    def done_ids(self) -> set[str]:
-        """``case_id`` of every complete case."""
-        return {r["case_id"] for r in self.rows()}
+    def files(self) -> list[Path]:
+        """The case files, sorted by name (stale ones excluded)."""
+        return sorted(self.folder.glob("*.parquet")) if self.folder.is_dir() else []
 
-    def repair(self) -> int:
-        """Drop the rows of incomplete cases and torn lines (atomic rewrite); return how many
-        lines were removed (0 when the file was clean and is left untouched)."""
-        if not self.path.exists():
-            return 0
-        keep, dropped = self._scan()
-        if not dropped:
-            return 0
-        with self.path.open("r", encoding="utf-8") as fh:
-            before = sum(1 for _ in fh)
-        self._rewrite(keep)
-        return before - len(keep)
+    def has(self, case_id: str) -> bool:
+        """Whether the case is done (its file exists)."""
+        return self.case_path(case_id).exists()
 
-    def prune(self, keep_ids: set[str]) -> int:
-        """Move the rows of cases not in ``keep_ids`` (the grid declaration changed) to
-        ``<stem>.stale.jsonl`` next to the file; return how many rows were moved."""
-        rows = self.rows()
-        stale = [r for r in rows if r.get("case_id") not in keep_ids]
-        if not stale:
-            return 0
-        archive = self.path.with_name(self.path.stem + ".stale.jsonl")
-        with archive.open("a", encoding="utf-8") as fh:
-            for r in stale:
-                fh.write(dumps_row(r) + "\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        self._rewrite([r for r in rows if r.get("case_id") in keep_ids])
-        return len(stale)
-
-    def _rewrite(self, rows: list[dict]) -> None:
-        """Replace the file by ``rows`` atomically (write a temporary file, fsync, rename)."""
-        tmp = self.path.with_suffix(self.path.suffix + ".tmp")
-        with tmp.open("w", encoding="utf-8") as fh:
-            for r in rows:
-                fh.write(dumps_row(r) + "\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, self.path)
-
-    # -- writing ---------------------------------------------------------------------------
-    def append_case(self, suite: str, case_id: str, rows: list[dict]) -> None:
-        """Append all rows of one case with one write, then flush and fsync."""
+    def write_case(self, suite: str, case_id: str, rows: list[dict]) -> Path:
+        """Write the rows of one finished case: a temporary file, then an atomic rename."""
         if not rows:
             raise ValueError(f"case {case_id!r} produced no rows")
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        lines = []
-        for i, r in enumerate(rows):
-            clash = [k for k in RESERVED if k in r]
-            if clash:
-                raise ValueError(f"row of case {case_id!r} uses reserved column(s) {clash}")
-            lines.append(dumps_row({"suite": suite, "case_id": case_id, "case_rows": len(rows),
-                                    "row": i, **r}))
-        with self.path.open("a", encoding="utf-8") as fh:
-            fh.write("\n".join(lines) + "\n")
-            fh.flush()
-            os.fsync(fh.fileno())
+        clash = sorted({k for r in rows for k in RESERVED if k in r})
+        if clash:
+            raise ValueError(f"row of case {case_id!r} uses reserved column(s) {clash}")
+        import pyarrow.parquet as pq
+
+        table = _table([{"suite": suite, "case_id": case_id, "case_rows": len(rows), "row": i, **r}
+                        for i, r in enumerate(rows)])
+        self.folder.mkdir(parents=True, exist_ok=True)
+        final = self.case_path(case_id)
+        tmp = self.folder / f".{final.stem}.{uuid.uuid4().hex}.tmp"
+        pq.write_table(table, tmp)
+        os.replace(tmp, final)
+        return final
+
+    append_case = write_case
+
+    def frame(self):
+        """All rows of the done cases, one DataFrame (cases in file-name order)."""
+        import pandas as pd
+
+        frames = [pd.read_parquet(f) for f in self.files()]
+        frames = [f for f in frames if len(f)]
+        if not frames:
+            return pd.DataFrame()
+        return pd.concat(frames, ignore_index=True, sort=False)
+
+    def rows(self) -> list[dict]:
+        """The rows as written (Python values, NaN kept; a key absent from a row and null in
+        its file is left out), cases in file-name order."""
+        import pyarrow.parquet as pq
+
+        return [{k: v for k, v in r.items() if v is not None}
+                for f in self.files() for r in pq.read_table(f).to_pylist()]
+
+    def done_ids(self) -> set[str]:
+        """``case_id`` of every done case."""
+        import pyarrow.parquet as pq
+
+        return {pq.read_table(f, columns=["case_id"]).column(0)[0].as_py() for f in self.files()}
+
+    def retire(self, case_ids: Iterable[str]) -> int:
+        """Move the files of ``case_ids`` to ``FOLDER/stale/`` (they are then rerun); return
+        how many rows they held."""
+        import pyarrow.parquet as pq
+
+        moved = 0
+        for cid in case_ids:
+            src = self.case_path(cid)
+            if src.exists():
+                moved += pq.read_metadata(src).num_rows
+                (self.folder / STALE).mkdir(exist_ok=True)
+                os.replace(src, self.folder / STALE / src.name)
+        return moved
+
+    def retire_undeclared(self, keep_ids: Iterable[str]) -> int:
+        """Retire the files whose case is not in ``keep_ids`` (the grid changed)."""
+        keys = {case_key(c) for c in keep_ids}
+        stray = [f for f in self.files() if f.stem not in keys]
+        import pyarrow.parquet as pq
+
+        ids = [pq.read_table(f, columns=["case_id"]).column(0)[0].as_py() for f in stray]
+        return self.retire(ids)
+
+
+#: The former name of :class:`CaseStore` (its ``rows``/``done_ids``/``append_case`` API).
+ResultsFile = CaseStore
 
 
 def load_results(paths: Iterable[str | Path]):
-    """Read results files (``.jsonl`` written by :class:`ResultsFile`, or an exported ``.csv``)
-    into one DataFrame. A column ``results_dir`` records each row's folder (artefact paths in
-    the rows are relative to it)."""
+    """Read suite results into one DataFrame (a concat).
+
+    Parameters
+    ----------
+    paths : iterable of path
+        Case folders ``OUT/<suite>.cases`` (:func:`bench.run.results_path`), or exported
+        ``.csv``/``.parquet`` files.
+
+    Returns
+    -------
+    DataFrame
+        The rows, with a column ``results_dir``: the folder each row's artefact paths are
+        relative to (``OUT``). Empty when there is nothing.
+    """
     import pandas as pd
 
     frames = []
-    for p in paths:
-        p = Path(p)
-        if p.suffix == ".jsonl":
-            df = pd.DataFrame(ResultsFile(p).rows())
+    for p in map(Path, paths):
+        if p.is_dir():
+            df = CaseStore(p).frame()
         elif p.suffix == ".csv":
             df = pd.read_csv(p)
+        elif p.suffix == ".parquet":
+            df = pd.read_parquet(p)
+        elif not p.exists():
+            raise FileNotFoundError(f"{p}: no such results folder or file")
         else:
-            raise ValueError(f"{p}: not a results file (expected .jsonl or .csv)")
-        df["results_dir"] = str(p.parent)
-        frames.append(df)
+            raise ValueError(f"{p}: not a results folder or file (expected OUT/<suite>{CASES_SUFFIX}, "
+                             ".csv or .parquet)")
+        if len(df):
+            df["results_dir"] = str(p.parent)
+            frames.append(df)
     if not frames:
         return pd.DataFrame()
     return pd.concat(frames, ignore_index=True, sort=False)
 
 
-def export_csv(jsonl: str | Path, csv: str | Path | None = None) -> Path:
-    """Write the complete rows of ``jsonl`` as CSV next to it (same stem) and return the path."""
-    import pandas as pd
-
-    jsonl = Path(jsonl)
-    csv = Path(csv) if csv is not None else jsonl.with_suffix(".csv")
-    pd.DataFrame(ResultsFile(jsonl).rows()).to_csv(csv, index=False, float_format="%.10g")
+def export_csv(folder: str | Path, csv: str | Path | None = None) -> Path:
+    """Write the rows of a case folder as one CSV (default ``OUT/<suite>.csv``)."""
+    folder = Path(folder)
+    csv = Path(csv) if csv is not None else folder.with_suffix(".csv")
+    CaseStore(folder).frame().to_csv(csv, index=False, float_format="%.10g")
     return csv
 
 

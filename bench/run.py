@@ -1,26 +1,35 @@
-"""Run a suite: resume from its results file, append each finished case, then the micro-benchmarks.
+"""Run a suite: every case not yet on disk, in this process or on a Dask cluster, each finished
+case written at once (its own Parquet file, :class:`bench.results.CaseStore`); then the
+micro-benchmarks.
 
 >>> from bench.run import run_suite
->>> summary = run_suite("smoke", out_dir="bench/results")     # doctest: +SKIP
+>>> summary = run_suite("smoke", out_dir="bench/results")               # doctest: +SKIP
+>>> summary = run_suite("full", workers=2)                                # local Dask cluster
+>>> summary = run_suite("full", scheduler="tcp://host:8786")             # an existing scheduler
 
-An interrupted run (Ctrl-C, a killed process, a crash) loses at most the case that was
-running: every finished case is already on disk, and the next run skips it.
+A case's file is written by whoever ran it (this process or a Dask worker) before it reports
+back, so a killed worker, a killed client (Ctrl-C, SIGKILL, a crash) or a restarted sweep loses
+no finished case, and the next run computes none of them again. On a remote scheduler the
+workers need this checkout importable (same environment, ``PYTHONPATH``) and ``OUT`` on a
+shared file system.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import os
 import subprocess
 import sys
 import time
 import traceback
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from bench import RESULTS_DIR
-from bench.results import ResultsFile, environment, export_csv
-from bench.suites import Suite, get_suite
+from bench.results import CASES_SUFFIX, STALE, CaseStore, environment, export_csv
+from bench.suites import Case, Suite, get_suite
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -36,26 +45,24 @@ class RunSummary:
     ran: int = 0
     failed: list = field(default_factory=list)
     unavailable: list = field(default_factory=list)
-    repaired_lines: int = 0
     stale_rows: int = 0
     micro: Path | None = None
     micro_status: str = "not requested"
     seconds: float = 0.0
     compile_time_s: float | None = None
+    where: str = "this process"
 
     def text(self) -> str:
         lines = [f"suite {self.suite}: {self.total} cases, {self.skipped} already done, "
                  f"{self.ran} run, {len(self.failed)} failed, {len(self.unavailable)} unavailable "
-                 f"({self.seconds:.1f} s)", f"results: {self.results}"]
+                 f"({self.seconds:.1f} s, {self.where})", f"results: {self.results}"]
         if self.compile_time_s is not None:
             lines.append(f"compiled kernel ready in {self.compile_time_s:.2f} s (compile or load "
                          f"from numba's cache; before any case was timed, included in the total)")
-        if self.repaired_lines:
-            lines.append(f"dropped {self.repaired_lines} line(s) of an interrupted case")
         if self.stale_rows:
             lines.append(f"moved {self.stale_rows} row(s) of cases no longer in the suite (or "
                          f"written without a column the report now needs) to "
-                         f"{self.results.stem}.stale.jsonl")
+                         f"{self.results / STALE}")
         for cid, msg in self.failed:
             lines.append(f"FAILED {cid}: {msg}")
         for cid, msg in self.unavailable:
@@ -65,9 +72,20 @@ class RunSummary:
         return "\n".join(lines)
 
 
+@dataclass(frozen=True)
+class Outcome:
+    """What became of one case: ``ran`` (its file written), ``done`` (its file was already
+    there: nothing computed), ``unavailable`` or ``failed`` (with the message)."""
+
+    case_id: str
+    state: str
+    message: str = ""
+
+
 def results_path(suite: str, out_dir: str | Path = RESULTS_DIR) -> Path:
-    """``OUT/<suite>.jsonl``."""
-    return Path(out_dir) / f"{suite}.jsonl"
+    """``OUT/<suite>.cases``: the folder of the suite's case files (what
+    :func:`bench.results.load_results` takes)."""
+    return Path(out_dir) / f"{suite}{CASES_SUFFIX}"
 
 
 def unavailable_path(suite: str, out_dir: str | Path = RESULTS_DIR) -> Path:
@@ -83,7 +101,7 @@ def micro_path(suite: str, out_dir: str | Path = RESULTS_DIR) -> Path:
 def outdated_ids(rows: list[dict]) -> set[str]:
     """Cases with a row that lacks a column its kind requires now
     (:data:`bench.runners.REQUIRED_COLUMNS`, e.g. settling times added after the row was
-    written): they are moved to the stale file and run again."""
+    written): their files are moved to the stale folder and the cases run again."""
     from bench.runners import REQUIRED_COLUMNS
 
     return {r.get("case_id", "") for r in rows
@@ -91,70 +109,107 @@ def outdated_ids(rows: list[dict]) -> set[str]:
             and any(c not in r for c in REQUIRED_COLUMNS.get(r.get("kind", ""), ()))}
 
 
+_KERNEL_TIME: list[float] = []
+
+
+def kernel_ready() -> float:
+    """Compile the time-loop kernel, or load it from numba's on-disk cache, once per process,
+    before any case is timed (:func:`observer.loop.compile_time`); return the seconds it took
+    the first time (NaN when the toolkit has no compiled engine)."""
+    if not _KERNEL_TIME:
+        try:
+            from observer.loop import compile_time
+        except ImportError:
+            _KERNEL_TIME.append(float("nan"))
+        else:
+            _KERNEL_TIME.append(float(compile_time()))
+    return _KERNEL_TIME[0]
+
+
+def execute_case(case: Case, suite: str, out_dir: str | Path, env: dict) -> Outcome:
+    """Run one case in this process (the client or a Dask worker) and write its file.
+
+    Nothing is computed when the case's file exists (a worker that died after writing it, or
+    a case finished by an earlier sweep). The kernel is made ready in this process first, so
+    no case pays its compile time; ``compile_time_s`` and ``pid`` in the rows are this
+    process's.
+    """
+    from bench.runners import Context, Unavailable, run_case
+
+    store = CaseStore(results_path(suite, out_dir))
+    if store.has(case.case_id):
+        return Outcome(case.case_id, "done")
+    env = {**env, "compile_time_s": kernel_ready(), "pid": os.getpid()}
+    try:
+        rows = run_case(case, Context(suite, Path(out_dir), env))
+    except Unavailable as exc:
+        return Outcome(case.case_id, "unavailable", str(exc))
+    except KeyboardInterrupt:
+        raise
+    except Exception as exc:  # record and go on; the case is retried next time
+        if os.environ.get("BENCH_TRACEBACK"):
+            traceback.print_exc()
+        return Outcome(case.case_id, "failed", f"{type(exc).__name__}: {exc}")
+    store.write_case(suite, case.case_id, rows)
+    return Outcome(case.case_id, "ran")
+
+
 def run_suite(suite: str | Suite, out_dir: str | Path = RESULTS_DIR, *, progress: bool = True,
-              limit: int | None = None, micro: bool = True) -> RunSummary:
-    """Run the cases of ``suite`` that are not yet in its results file.
+              limit: int | None = None, micro: bool = True, workers: int | None = None,
+              scheduler: str | None = None, client=None) -> RunSummary:
+    """Run the cases of ``suite`` that are not yet on disk.
 
     Parameters
     ----------
     suite : str or Suite
         A name in :data:`bench.suites.SUITES` or a Suite.
     out_dir : path
-        Results folder (``OUT/<suite>.jsonl`` plus artefacts).
+        Results folder (``OUT/<suite>.cases/`` plus artefacts).
     progress : bool
         Show a tqdm progress bar (on stderr).
     limit : int, optional
         Run at most this many of the remaining cases (to test interruption/resume).
     micro : bool
         Also run the suite's pytest-benchmark micro-benchmarks if their JSON is missing.
+    workers : int, optional
+        Run the cases on a local Dask cluster of this many single-threaded worker processes.
+    scheduler : str, optional
+        Address of an existing Dask scheduler to run the cases on (``tcp://host:8786``).
+    client : distributed.Client, optional
+        A client to run the cases on (the caller keeps and closes it).
+        With none of ``workers``, ``scheduler``, ``client``: in this process, one by one.
 
     Returns
     -------
     RunSummary
     """
-    from bench.runners import Context, Unavailable, run_case
-
     suite = get_suite(suite) if isinstance(suite, str) else suite
     out_dir = Path(out_dir)
     t0 = time.perf_counter()
-    rf = ResultsFile(results_path(suite.name, out_dir))
-    summary = RunSummary(suite.name, rf.path, len(suite.cases))
-    summary.repaired_lines = rf.repair()
-    summary.stale_rows = rf.prune({c.case_id for c in suite.cases} - outdated_ids(rf.rows()))
-    done = rf.done_ids()
-    todo = [c for c in suite.cases if c.case_id not in done]
+    store = CaseStore(results_path(suite.name, out_dir))
+    summary = RunSummary(suite.name, store.path, len(suite.cases))
+    summary.stale_rows = (store.retire_undeclared(c.case_id for c in suite.cases)
+                          + store.retire(outdated_ids(store.rows())))
+    todo = [c for c in suite.cases if not store.has(c.case_id)]
     summary.skipped = len(suite.cases) - len(todo)
     if limit is not None:
         todo = todo[:max(0, limit)]
-    ctx = Context(suite.name, out_dir, environment())
-    if todo:
-        summary.compile_time_s = ctx.env["compile_time_s"] = kernel_ready()
-    bar = _progress(todo, suite.name, enabled=progress and bool(todo))
-    for case in bar:
-        bar.set_postfix_str(f"{case.kind}: {case.name}"[:60])
-        try:
-            rows = run_case(case, ctx)
-        except Unavailable as exc:
-            summary.unavailable.append((case.case_id, str(exc)))
-            continue
-        except KeyboardInterrupt:
-            raise
-        except Exception as exc:  # record and go on; the case is retried next time
-            summary.failed.append((case.case_id, f"{type(exc).__name__}: {exc}"))
-            if os.environ.get("BENCH_TRACEBACK"):
-                traceback.print_exc()
-            continue
-        rf.append_case(suite.name, case.case_id, rows)
-        summary.ran += 1
-    bar.close()
-    if rf.path.exists():
-        export_csv(rf.path)
-    note = unavailable_path(suite.name, out_dir)
-    if summary.unavailable:
-        note.parent.mkdir(parents=True, exist_ok=True)
-        note.write_text(json.dumps(dict(summary.unavailable), indent=1))
-    elif note.exists():
-        note.unlink()
+    env = environment()
+    if todo and client is None and scheduler is None:
+        # compiled here first (local workers then load it from numba's disk cache); on a
+        # remote cluster each worker makes it ready before its first case
+        summary.compile_time_s = kernel_ready()
+    with _executor(workers, scheduler, client) as (where, outcomes):
+        summary.where = where
+        bar = _progress(len(todo), suite.name, enabled=progress and bool(todo))
+        for out in outcomes(todo, suite.name, out_dir, env):
+            bar.set_postfix_str(out.case_id[:60])
+            bar.update(1)
+            _record(summary, out)
+        bar.close()
+    if store.files():
+        export_csv(store.path, out_dir / f"{suite.name}.csv")
+    _write_unavailable(summary, unavailable_path(suite.name, out_dir))
     if micro and suite.micro is not None:
         summary.micro = micro_path(suite.name, out_dir)
         summary.micro_status = run_micro(suite, summary.micro)
@@ -162,19 +217,78 @@ def run_suite(suite: str | Suite, out_dir: str | Path = RESULTS_DIR, *, progress
     return summary
 
 
-def kernel_ready() -> float:
-    """Compile the time-loop kernel, or load it from numba's on-disk cache, once, before any
-    case is timed (:func:`observer.loop.compile_time`); return the seconds it took (NaN when
-    the toolkit has no compiled engine)."""
-    try:
-        from observer.loop import compile_time
-    except ImportError:
-        return float("nan")
-    return float(compile_time())
+def _record(summary: RunSummary, out: Outcome) -> None:
+    if out.state == "ran":
+        summary.ran += 1
+    elif out.state == "done":
+        summary.skipped += 1
+    elif out.state == "unavailable":
+        summary.unavailable.append((out.case_id, out.message))
+    else:
+        summary.failed.append((out.case_id, out.message))
 
 
-class _NoBar(list):
+def _write_unavailable(summary: RunSummary, note: Path) -> None:
+    if summary.unavailable:
+        note.parent.mkdir(parents=True, exist_ok=True)
+        note.write_text(json.dumps(dict(summary.unavailable), indent=1))
+    elif note.exists():
+        note.unlink()
+
+
+def _in_process(cases, suite, out_dir, env):
+    for case in cases:
+        yield execute_case(case, suite, out_dir, env)
+
+
+def _on_dask(client):
+    """An outcome generator submitting every case to ``client``, yielding as they finish."""
+    from bench.results import case_key
+
+    def outcomes(cases, suite, out_dir, env):
+        from distributed import as_completed
+
+        # one key per (results folder, case): a resubmitted case still running for a killed
+        # client is joined, not computed a second time
+        folder = str(Path(out_dir).resolve())
+        futures = {client.submit(execute_case, c, suite, str(out_dir), env, pure=False,
+                                 key=f"bench-{suite}-{case_key(folder + '|' + c.case_id)}"): c
+                   for c in cases}
+        for fut in as_completed(futures):
+            try:
+                yield fut.result()
+            except Exception as exc:  # e.g. KilledWorker: the case is retried next time
+                yield Outcome(futures[fut].case_id, "failed", f"{type(exc).__name__}: {exc}")
+    return outcomes
+
+
+@contextmanager
+def _executor(workers: int | None, scheduler: str | None, client):
+    """``(where, outcomes)``: a description and the function that runs cases and yields
+    their :class:`Outcome` (in this process, or on a Dask client it opens and closes)."""
+    if client is not None:
+        yield f"Dask client {client.scheduler.address}", _on_dask(client)
+        return
+    if not workers and not scheduler:
+        yield "this process", _in_process
+        return
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        with Client(scheduler) as c:
+            yield f"Dask scheduler {scheduler}", _on_dask(c)
+        return
+    with LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
+                      dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
+            Client(cluster) as c:
+        yield f"local Dask cluster of {int(workers)} worker(s)", _on_dask(c)
+
+
+class _NoBar:
     """Stand-in for a tqdm bar when tqdm is missing or progress is off."""
+
+    def update(self, n: int) -> None:
+        pass
 
     def set_postfix_str(self, text: str) -> None:
         pass
@@ -183,17 +297,17 @@ class _NoBar(list):
         pass
 
 
-def _progress(items: list, name: str, enabled: bool):
+def _progress(total: int, name: str, enabled: bool):
     """A tqdm progress bar on stderr (cases done / total, elapsed, ETA) if available."""
     if enabled:
         try:
             from tqdm import tqdm
         except ImportError:
-            print(f"{name}: {len(items)} cases to run (install tqdm for a progress bar)",
+            print(f"{name}: {total} cases to run (install tqdm for a progress bar)",
                   file=sys.stderr)
         else:
-            return tqdm(items, desc=name, unit="case", file=sys.stderr, dynamic_ncols=True)
-    return _NoBar(items)
+            return tqdm(total=total, desc=name, unit="case", file=sys.stderr, dynamic_ncols=True)
+    return _NoBar()
 
 
 def run_micro(suite: Suite, json_path: Path, force: bool = False) -> str:

@@ -20,11 +20,11 @@ import pytest
 
 from bench.perturb import KINDS, perturb_log
 from bench.reference import ExactImpactOscillator, ball_position, closed_form_position
-from bench.results import ResultsFile, load_results
+from bench.results import CaseStore, case_key, load_results
 from bench.peers import PROBLEMS
 from bench.run import results_path, run_suite
 from bench.runners import record_every
-from bench.suites import CHECK_SCENARIOS, RANDOM_KINDS, SUITES, Case, Suite, engine_for, get_suite
+from bench.suites import RANDOM_KINDS, SUITES, Case, Suite, check_scenarios, engine_for, get_suite
 from observer.errors import InputError
 from observer.scenarios import bouncing_ball as bb
 from observer.switching import read_log, validate_log
@@ -107,7 +107,7 @@ def test_quick_and_full_cover_every_kind_and_the_issue_grid(name):
     assert Ns == ([5, 10, 20, 50, 100, 200, 500, 1000] if full else [5, 10, 20, 50, 100, 200])
     if full:
         assert [c.scenario for c in suite.of_kind("peers")] == list(PROBLEMS)
-        assert {c.scenario for c in suite.of_kind("checks")} == set(CHECK_SCENARIOS)
+        assert {c.scenario for c in suite.of_kind("checks")} == set(check_scenarios())
 
 
 def test_engine_follows_the_contact_solver():
@@ -127,32 +127,49 @@ def test_record_every_from_h_record():
 
 
 # ----------------------------------------------------------------------------- results file
-def test_results_file_append_resume_and_repair(tmp_path):
-    rf = ResultsFile(tmp_path / "s.jsonl")
-    assert rf.rows() == [] and rf.done_ids() == set()
-    rf.append_case("s", "a", [{"x": 1.0, "t": float("inf")}, {"x": 2.0, "t": float("nan")}])
-    rf.append_case("s", "b", [{"x": 3.0}])
-    assert rf.done_ids() == {"a", "b"}
-    rows = rf.rows()
-    assert rows[0]["t"] == float("inf") and np.isnan(rows[1]["t"])
-    assert [r["row"] for r in rows] == [0, 1, 0] and rows[0]["case_rows"] == 2
-    # an interrupted write: first row of case c complete, its second row torn
-    with rf.path.open("a") as fh:
-        fh.write(json.dumps({"suite": "s", "case_id": "c", "case_rows": 2, "row": 0, "x": 4}) + "\n")
-        fh.write('{"suite": "s", "case_id": "c", "case_ro')
-    assert rf.done_ids() == {"a", "b"}
-    assert rf.repair() == 2
-    assert rf.repair() == 0
-    assert len(rf.path.read_text().splitlines()) == 3
-    rf.append_case("s", "c", [{"x": 4}, {"x": 5}])
-    assert rf.done_ids() == {"a", "b", "c"}
-    assert rf.prune({"a", "c"}) == 1
-    assert rf.done_ids() == {"a", "c"}
-    assert (tmp_path / "s.stale.jsonl").read_text().count('"case_id":"b"') == 1
+def test_case_store_write_resume_and_retire(tmp_path):
+    store = CaseStore(tmp_path / "s.cases")
+    assert store.rows() == [] and store.done_ids() == set() and store.files() == []
+    store.write_case("s", "a", [{"x": 1.0, "t": float("inf")}, {"x": 2.0, "t": float("nan")}])
+    store.write_case("s", "b", [{"x": 3.0, "note": "text"}])
+    assert store.done_ids() == {"a", "b"} and store.has("a") and not store.has("c")
+    # one Parquet file per case, named by the hash of its case id, nothing else in the folder
+    assert sorted(p.name for p in store.folder.iterdir()) == \
+        sorted(f"{case_key(c)}.parquet" for c in ("a", "b"))
+    a = pd.read_parquet(store.case_path("a"))
+    assert a["case_id"].tolist() == ["a", "a"] and a["row"].tolist() == [0, 1]
+    assert a["case_rows"].tolist() == [2, 2] and a["suite"].tolist() == ["s", "s"]
+    assert a["t"].iloc[0] == float("inf") and np.isnan(a["t"].iloc[1])
+    rows = {(r["case_id"], r["row"]): r for r in store.rows()}
+    assert rows[("b", 0)] == {"suite": "s", "case_id": "b", "case_rows": 1, "row": 0, "x": 3.0,
+                              "note": "text"}
+    # a column with a number in one row and text in another is kept (as text)
+    store.write_case("s", "c", [{"x": 4.0, "m": 1.5}, {"x": 5.0, "m": "n/a"}])
+    assert pd.read_parquet(store.case_path("c"))["m"].tolist() == ["1.5", "n/a"]
+    assert store.retire({"b"}) == 1 and store.done_ids() == {"a", "c"}
+    assert (store.folder / "stale" / f"{case_key('b')}.parquet").exists()
+    assert store.retire_undeclared({"a"}) == 2 and store.done_ids() == {"a"}
     with pytest.raises(ValueError, match="reserved"):
-        rf.append_case("s", "d", [{"case_id": "x"}])
-    df = load_results([rf.path])
-    assert len(df) == 4 and set(df["case_id"]) == {"a", "c"}
+        store.write_case("s", "d", [{"case_id": "x"}])
+    with pytest.raises(ValueError, match="no rows"):
+        store.write_case("s", "d", [])
+    assert not store.has("d") and not list(store.folder.glob("*.tmp"))
+    df = load_results([store.path])
+    assert len(df) == 2 and set(df["case_id"]) == {"a"} and (df["results_dir"] == str(tmp_path)).all()
+
+
+def test_load_results_concatenates_kinds_and_refuses_other_files(tmp_path):
+    store = CaseStore(tmp_path / "k.cases")
+    store.write_case("k", "p", [{"kind": "one", "a": 1.0}])
+    store.write_case("k", "q", [{"kind": "two", "b": "x"}])
+    df = load_results([store.path]).set_index("case_id")
+    assert np.isnan(df.loc["q", "a"]) and df.loc["q", "b"] == "x" and df.loc["p", "a"] == 1.0
+    assert load_results([]).empty
+    with pytest.raises(FileNotFoundError):
+        load_results([tmp_path / "none.cases"])
+    (tmp_path / "x.txt").write_text("x")
+    with pytest.raises(ValueError, match="not a results"):
+        load_results([tmp_path / "x.txt"])
 
 
 # ----------------------------------------------------------------------------- running
@@ -206,56 +223,48 @@ def test_smoke_suite_rows_are_tidy_and_complete(smoke_run):
     assert rec["steps"] == 2 * full["steps"]
 
 
+def _snapshot(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(folder.glob("*.parquet"))}
+
+
 def test_rerun_of_a_finished_suite_computes_nothing(smoke_run):
     out, _ = smoke_run
-    before = results_path("smoke", out).read_text()
+    before = _snapshot(results_path("smoke", out))
     summary = run_suite("smoke", out, progress=False, micro=False)
     assert summary.ran == 0 and summary.skipped == summary.total - len(summary.unavailable)
-    assert results_path("smoke", out).read_text() == before
+    assert _snapshot(results_path("smoke", out)) == before
 
 
 def test_interrupted_suite_resumes_without_recomputing(tmp_path):
-    """Kill `python -m bench run smoke` after its first finished case, then rerun: the rows
-    written before the kill are kept byte for byte, the rest is added, no duplicates."""
+    """Kill `python -m bench run smoke` (in-process mode) after its first finished case, then
+    rerun: the case files written before the kill are kept byte for byte, the rest is added,
+    every case exactly once."""
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    cmd = [sys.executable, "-m", "bench", "run", "smoke", "--out", str(tmp_path), "--no-progress"]
-    path = results_path("smoke", tmp_path)
+    cmd = [sys.executable, "-m", "bench", "run", "smoke", "--out", str(tmp_path), "--no-progress",
+           "--workers", "0"]
+    store = CaseStore(results_path("smoke", tmp_path))
     proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
     try:
         deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and proc.poll() is None:
-            if path.exists() and len(ResultsFile(path).done_ids()) >= 1:
-                break
+        while time.monotonic() < deadline and proc.poll() is None and not store.files():
             time.sleep(0.01)
         os.killpg(proc.pid, signal.SIGKILL)
     finally:
         proc.wait(timeout=30)
-    done_before = ResultsFile(path).done_ids()
-    total = len(SMOKE.cases)
-    if len(done_before) >= total - 1:
+    before = _snapshot(store.folder)
+    done_before = store.done_ids()
+    if len(done_before) >= len(SMOKE.cases) - 1:
         pytest.skip("the suite finished before it could be killed")
     assert len(done_before) >= 1
-    kept = []
-    for line in path.read_text().splitlines(keepends=True):
-        try:
-            if line.endswith("\n") and json.loads(line)["case_id"] in done_before:
-                kept.append(line)
-        except json.JSONDecodeError:
-            pass
-    rows_before = {(r["case_id"], r["row"]): r for r in ResultsFile(path).rows()}
     res = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stdout + res.stderr
-    rows_after = ResultsFile(path).rows()
-    keys = [(r["case_id"], r["row"]) for r in rows_after]
+    after = _snapshot(store.folder)
+    assert {k: after[k] for k in before} == before                        # not recomputed
+    rows = store.rows()
+    keys = [(r["case_id"], r["row"]) for r in rows]
     assert len(keys) == len(set(keys))                                    # no duplicates
-    assert {r["case_id"] for r in rows_after} >= {c.case_id for c in SMOKE.cases if c.kind != "checks"}
-    for key, r in rows_before.items():                                    # not recomputed
-        after = next(x for x in rows_after if (x["case_id"], x["row"]) == key)
-        # rows of every kind carry "date"; timing columns only some kinds (a missing one must
-        # stay missing)
-        assert after["date"] == r["date"] and after.get("cpu_time_s") == r.get("cpu_time_s")
-    assert path.read_text().startswith("".join(kept))
+    assert {r["case_id"] for r in rows} >= {c.case_id for c in SMOKE.cases if c.kind != "checks"}
     assert f"{len(done_before)} already done" in res.stdout
 
 
@@ -267,11 +276,13 @@ def test_limit_runs_only_the_first_cases_then_resume(tmp_path):
              t_end=0.05, memory=False)))
     s1 = run_suite(suite, tmp_path, progress=False, limit=1)
     assert (s1.ran, s1.skipped) == (1, 0)
-    first = ResultsFile(results_path("mini", tmp_path)).rows()
+    store = CaseStore(results_path("mini", tmp_path))
+    assert store.done_ids() == {suite.cases[0].case_id}
+    first = _snapshot(store.folder)
     s2 = run_suite(suite, tmp_path, progress=False)
     assert (s2.ran, s2.skipped) == (1, 1)
-    rows = ResultsFile(results_path("mini", tmp_path)).rows()
-    assert rows[0] == first[0] and len(rows) == 2
+    after = _snapshot(store.folder)
+    assert {k: after[k] for k in first} == first and len(after) == 2 and len(store.rows()) == 2
 
 
 def test_reference_solver_runs_on_the_numpy_engine(tmp_path):
@@ -293,7 +304,7 @@ def test_failed_case_is_reported_and_retried(tmp_path):
     summary = run_suite(Suite("bad", "", (bad,)), tmp_path, progress=False)
     assert summary.ran == 0 and len(summary.failed) == 1
     assert "closed form" in summary.failed[0][1]
-    assert ResultsFile(results_path("bad", tmp_path)).done_ids() == set()
+    assert CaseStore(results_path("bad", tmp_path)).done_ids() == set()
 
 
 def test_cli_list_show_status(tmp_path):
@@ -484,15 +495,16 @@ def test_rows_without_settling_times_are_rerun(tmp_path):
               reference="closed form")
     suite = Suite("old", "", (obs, wp))
     run_suite(suite, tmp_path, progress=False, micro=False)
-    path = results_path("old", tmp_path)
-    rows = ResultsFile(path).rows()
-    old = [{k: v for k, v in r.items() if not k.startswith(("t_settle_", "above_after_"))}
-           for r in rows]
-    path.write_text("".join(json.dumps(r) + "\n" for r in old))
+    store = CaseStore(results_path("old", tmp_path))
+    path = store.case_path(obs.case_id)
+    old = pd.read_parquet(path)
+    old.drop(columns=[c for c in old.columns if c.startswith(("t_settle_", "above_after_"))]) \
+        .to_parquet(path, index=False)
+    wp_bytes = store.case_path(wp.case_id).read_bytes()
     summary = run_suite(suite, tmp_path, progress=False, micro=False)
     assert summary.ran == 1 and summary.skipped == 1 and summary.stale_rows == 2
-    new = ResultsFile(path).rows()
+    new = store.rows()
     assert all("t_settle_1e-09" in r for r in new if r["kind"] == "observers")
-    assert [r for r in new if r["kind"] == "work_precision"] == [old[2]]
-    stale = path.with_name("old.stale.jsonl").read_text().splitlines()
-    assert len(stale) == 2 and all('"t_settle_' not in line for line in stale)
+    assert store.case_path(wp.case_id).read_bytes() == wp_bytes          # kept as it was
+    stale = pd.read_parquet(store.folder / "stale" / path.name)
+    assert len(stale) == 2 and not any(c.startswith("t_settle_") for c in stale.columns)
