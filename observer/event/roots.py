@@ -91,22 +91,63 @@ def tolerance(rows: np.ndarray, z: np.ndarray) -> np.ndarray:
 
 
 def first_cubic_zero(d0: float, d1: float, d2: float, bound: float, width: float) -> float:
-    """First s in (0, width] where ``d0 + d1 s + d2 s²/2 − bound s³/6`` reaches 0 (else width).
+    """A safe step: s ≤ the first s in (0, width] where ``L(s) = d0 + d1 s + d2 s²/2 − bound s³/6``
+    reaches 0 (width if L stays positive), within a relative 1e-13 below it.
 
-    ``d0 ≥ 0`` is assumed (a leaving functional at zero: d0 = 0, d1 > 0 or d1 = 0 < d2).
+    ``d0 ≥ 0`` is assumed (a leaving functional at zero: d0 = 0 with L increasing first).
+    L is split at its critical points into monotone pieces; the first piece whose end is
+    not positive holds the zero, isolated by bisection keeping ``L(lo) > 0``.
     """
     if d0 + min(d1, 0.0) * width + min(d2, 0.0) * width * width / 2 - bound * width ** 3 / 6 > 0.0:
         return width
-    coeffs = np.array([-bound / 6.0, d2 / 2.0, d1, d0])
-    nz = np.flatnonzero(coeffs)
-    if nz.size == 0:
-        return width
-    roots = np.roots(coeffs[nz[0]:])
-    floor = 1e-13 * width if d0 == 0.0 else 0.0
-    real = [r.real for r in roots if abs(r.imag) <= 1e-9 * max(abs(r.real), 1e-300) and r.real > floor]
-    if not real:
-        return width
-    return min(min(real), width)
+    a3, a2, a1 = -bound / 6.0, d2 / 2.0, d1
+
+    def L(x: float) -> float:
+        return ((a3 * x + a2) * x + a1) * x + d0
+
+    crit = [c for c in _quadratic_roots(3.0 * a3, 2.0 * a2, a1) if 0.0 < c < width]
+    lo = 0.0
+    for hi in sorted(crit) + [width]:
+        f_hi = L(hi)
+        if f_hi <= 0.0:
+            return _illinois(L, lo, hi, L(lo), f_hi)
+        lo = hi
+    return width
+
+
+def _illinois(L, lo: float, hi: float, f_lo: float, f_hi: float) -> float:
+    """Regula falsi (Illinois variant) on a monotone piece with ``L(lo) ≥ 0 ≥ L(hi)``; returns
+    the left end ``lo`` (L(lo) > 0 kept, or lo = the start) once ``hi − lo ≤ 1e-13·hi``."""
+    side = 0
+    for _ in range(200):
+        if hi - lo <= 1e-13 * hi:
+            break
+        x = (lo * f_hi - hi * f_lo) / (f_hi - f_lo) if f_hi != f_lo else 0.5 * (lo + hi)
+        if not lo < x < hi:
+            x = 0.5 * (lo + hi)
+        fx = L(x)
+        if fx > 0.0:
+            lo, f_lo = x, fx
+            if side == -1:
+                f_hi *= 0.5
+            side = -1
+        else:
+            hi, f_hi = x, fx
+            if side == 1:
+                f_lo *= 0.5
+            side = 1
+    return lo
+
+
+def _quadratic_roots(A: float, B: float, C: float) -> list[float]:
+    """Real roots of ``A x² + B x + C`` (numerically stable form)."""
+    if A == 0.0:
+        return [-C / B] if B != 0.0 else []
+    disc = B * B - 4.0 * A * C
+    if disc < 0.0:
+        return []
+    q = -0.5 * (B + np.copysign(np.sqrt(disc), B))
+    return [q / A, C / q] if q != 0.0 else [0.0]
 
 
 class FunctionalSet:
@@ -120,6 +161,7 @@ class FunctionalSet:
         for _ in range(3):
             self.d.append(self.d[-1] @ A)
         self.third_norm = np.linalg.norm(self.d[3] * flow.scale, axis=1)
+        self.abs_d = [np.abs(r) for r in self.d[:3]]
 
     def __len__(self) -> int:
         return self.rows.shape[0]
@@ -241,9 +283,8 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
             return None, t_end, za
         w = min(window, t_end - a)
         d = np.array([fs.d[k] @ za for k in range(3)])
-        tol = tolerance(fs.rows, za)
-        tol1 = tolerance(fs.d[1], za)
-        tol2 = tolerance(fs.d[2], za)
+        az = np.abs(za)
+        tol, tol1, tol2 = (ROUNDOFF * (r @ az) + np.finfo(float).tiny for r in fs.abs_d)
         bound = fs.third_norm * growth * np.linalg.norm(za / flow.scale) * (1.0 + 1e-12)
         step = w
         for i in range(len(fs)):
