@@ -21,7 +21,7 @@ from observer.switching import SOURCES, read_log
 def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: float | None = None, *,
              solver: str | None = None, theta: float | None = None,
              master_projection: bool | None = None,
-             observers: Iterable[str | Slave] = (), source: str | None = None,
+             observers: Iterable[str | Slave] | str = (), source: str | None = None,
              coupling: tuple[float, float] | None | str = "scenario",
              log: str | Path | None = None, residual_tol: float = 1e-9,
              engine: str = "compiled", record_every: int | None = None,
@@ -34,9 +34,12 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         Built-in name, TOML path or a loaded :class:`Scenario`.
     h, t_end, solver, theta, master_projection
         Override the scenario's settings.
-    observers : iterable of str or Slave
-        ``"jump"``/``"nojump"`` start from the scenario's ``[observer]`` state; a
-        :class:`~observer.observers.Slave` gives its own name, design and state.
+    observers : iterable of str or Slave, or "scenario"
+        Registered design names (:data:`~observer.observers.OBSERVER_DESIGNS`) start from the
+        scenario's ``[observer]`` state; a :class:`~observer.observers.Slave` gives its own
+        name, design and state; ``"scenario"`` runs the designs the scenario's
+        ``[observer] observers`` lists (none when it has no ``[observer]`` table). Default:
+        none (the master alone).
     source : {"master", "log", "self"}, optional
         Switching signal (default: the scenario's ``observer.source``, else "master").
     coupling : (t_on, t_off) or None
@@ -89,6 +92,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     if record_every is None:
         record_every = max(1, stepper.steps // 10_000) if store == "summary" else 1
     record_every = check_record_every(record_every)
+    if isinstance(observers, str):
+        observers = scenario_observers(sc) if observers == "scenario" else [observers]
     observers = list(observers)
     slaves: list[Slave] = []
     if observers:
@@ -165,3 +170,11 @@ def _metric_matrix(slave: Slave, system) -> np.ndarray | None:
     if slave.design is not None:
         return slave.design.metric_matrix(system)
     return None
+
+
+def scenario_observers(sc: Scenario) -> list[str]:
+    """The observer designs a scenario asks for: its ``[observer] observers`` (the paper's two
+    designs when the table leaves the key out), none without an ``[observer]`` table."""
+    if not sc.observer:
+        return []
+    return list(ObserverConfig.from_table(sc.observer, sc.system.n, sc.q0, sc.u0).observers)
