@@ -320,6 +320,16 @@ def test_cli_list_show_status(tmp_path):
     assert bad.returncode == 2 and "unknown suite" in bad.stderr
 
 
+@pytest.mark.parametrize("value", ["-1", "two"])
+def test_cli_refuses_a_bad_worker_count(value, capsys):
+    from bench.__main__ import main
+
+    with pytest.raises(SystemExit) as ei:
+        main(["run", "smoke", "--workers", value])
+    assert ei.value.code == 2
+    assert "--workers" in capsys.readouterr().err
+
+
 # ----------------------------------------------------------------------------- perturbations
 @pytest.fixture
 def log():
