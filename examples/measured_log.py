@@ -6,8 +6,9 @@ timing errors. This script
 1. simulates the observed system (the master of ``double_mass``) and writes its closings
    as a log, at the step midpoints where the scheme decides them (an exact log),
 2. makes "measured" logs from it: every interval endpoint moved by a Gaussian timing
-   error of standard deviation σ (seeded: ``np.random.default_rng(seed)``), then sorted
-   and merged where the errors made intervals overlap (as a sensor would report them),
+   error of standard deviation σ (an impact as a whole; seeded:
+   ``np.random.default_rng(seed)``), then sorted and merged where the errors made
+   intervals overlap (as a sensor would report them),
 3. runs both observers with ``source="log"`` (they see only the log; V is still measured
    against the true master, paper eq. (16)) and prints and plots their settling times.
 
@@ -58,10 +59,12 @@ def exact_log(frame):
 
 
 def measured(log, sigma, rng):
-    """Endpoints moved by N(0, σ²) errors, intervals sorted and overlapping ones merged."""
-    noisy = log.assign(t_close=log["t_close"] + rng.normal(0.0, sigma, len(log)),
-                       t_open=log["t_open"] + rng.normal(0.0, sigma, len(log)))
-    noisy["t_open"] = noisy[["t_close", "t_open"]].max(axis=1)
+    """Endpoints moved by N(0, σ²) errors (an impact, zero length, as a whole), intervals
+    sorted and overlapping ones merged."""
+    err_close, err_open = rng.normal(0.0, sigma, (2, len(log)))
+    err_open = np.where(log["t_open"] == log["t_close"], err_close, err_open)
+    noisy = log.assign(t_close=log["t_close"] + err_close, t_open=log["t_open"] + err_open)
+    noisy["t_open"] = noisy[["t_close", "t_open"]].max(axis=1)        # a contact opens after it closes
     merged = []
     for j, a, b in noisy.sort_values(["contact", "t_close"]).itertuples(index=False):
         if merged and merged[-1][0] == j and a <= merged[-1][2]:
@@ -79,7 +82,11 @@ def smooth(V):
 def settling(t, V, rho):
     """Time from t = 0 after which the 0.1 s running median of V stays ≤ ρ·V(0)."""
     above = np.flatnonzero(smooth(V) > rho * V[0])
-    return 0.0 if above.size == 0 else np.inf if above[-1] == len(t) - 1 else t[above[-1] + 1] - t[0]
+    if above.size == 0:
+        return 0.0                          # never above
+    if above[-1] == len(t) - 1:
+        return np.inf                       # still above at the end of the run
+    return t[above[-1] + 1] - t[0]
 
 
 truth = exact_log(observer.simulate(scenario).to_frame())          # 1. the master's closings
