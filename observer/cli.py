@@ -180,8 +180,8 @@ def guarded(func, *args) -> int:
         print(f"error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return 2
     except MemoryError:
-        print("error: --store: the run's recorded rows do not fit in memory; keep fewer rows "
-              "(--record-every K, or --store summary) or shorten the run (--t-end, --h)", file=sys.stderr)
+        print("error: --store: the run does not fit in memory; keep fewer rows (--record-every K, "
+              "or --store summary), shorten the run (--t-end, --h) or use a smaller system", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)

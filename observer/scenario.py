@@ -106,6 +106,9 @@ def apply_overrides(doc: dict, overrides: dict[str, Any]) -> dict:
     doc = dict(doc)
     for key, value in overrides.items():
         parts = key.split(".")
+        if not all(part.strip() for part in parts):
+            raise InputError(key or "--set", f"empty key component in {key!r} (expected a dotted "
+                             "key such as simulation.h)")
         node = doc
         for part in parts[:-1]:
             child = node.get(part, {})
@@ -252,8 +255,10 @@ def check_initial_gap(field_name: str, system: LinearSystem, q0: np.ndarray, t0:
         raise InputError(field_name, f"initial state penetrates contact {j}: g = {g[j]:.6g} < 0")
 
 
-BUILDER_FAILURES = (np.linalg.LinAlgError, ZeroDivisionError, FloatingPointError, OverflowError)
-"""Numerical failures of a built-in's document builder, reported as bad ``param.*`` values."""
+BUILDER_FAILURES = (np.linalg.LinAlgError, ZeroDivisionError, FloatingPointError, OverflowError,
+                    MemoryError)
+"""Failures of a built-in's document builder (numerical, or a system too large to build),
+reported as bad ``param.*`` values."""
 
 
 def check_builder_parameters(name: str, params: dict[str, Any]) -> dict[str, Any]:
@@ -328,6 +333,9 @@ def load_scenario(name_or_path: "str | Path | Scenario",
               for k, v in overrides.items() if k.startswith("param.")}
     rest = {k: v for k, v in overrides.items() if not k.startswith("param.")}
     name = str(name_or_path)
+    if not name.strip():
+        raise InputError("scenario", "empty name: give a built-in scenario "
+                         f"({', '.join(SCENARIOS)}) or a .toml file")
     if name in SCENARIOS:
         doc, source = builtin_scenario_document(name, params), name
     elif name.endswith(".toml") or Path(name).exists():

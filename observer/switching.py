@@ -33,9 +33,12 @@ def read_log(path: str | Path, m: int) -> pd.DataFrame:
     Errors name the file, the row and the problem: unknown contact index, NaN,
     ``t_open < t_close``, intervals of one contact not sorted or overlapping.
     """
+    if not isinstance(path, (str, Path)) or not str(path).strip():
+        raise InputError("observer.log", f"must be a file path, got {path!r}")
     path = Path(path)
-    if not path.exists():
-        raise InputError("observer.log", f"file not found: {path}")
+    if not path.is_file():
+        raise InputError("observer.log", f"file not found: {path}" if not path.exists()
+                         else f"{path} is not a file")
     try:
         df = pd.read_csv(path, comment="#")
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:

@@ -24,6 +24,10 @@ def read_toml(path: str | Path) -> dict:
             return tomllib.load(fh)
     except FileNotFoundError:
         raise InputError(str(path), "file not found") from None
+    except IsADirectoryError:
+        raise InputError(str(path), "is a directory, not a TOML file") from None
+    except UnicodeDecodeError as exc:
+        raise InputError(str(path), f"invalid TOML (not UTF-8 text: {exc.reason})") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(str(path), f"invalid TOML ({exc})") from None
 
