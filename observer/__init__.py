@@ -15,7 +15,7 @@ from observer.errors import ContactSolverError, InputError
 from observer.impact import IMPACT_LAWS, ImpactLaw
 from observer.model import Harmonic, LinearSystem
 from observer.observers import OBSERVER_DESIGNS, ObserverDesign, Slave, lyapunov
-from observer.result import SimulationResult, read_frame
+from observer.result import SimulationResult, read_frame, read_result
 from observer.scenario import Scenario
 from observer.scenarios import SCENARIOS
 from observer.simulate import load_scenario, simulate
@@ -25,4 +25,4 @@ __version__ = "0.1.0"
 
 __all__ = ["CONTACT_SOLVERS", "ContactSolverError", "Harmonic", "IMPACT_LAWS", "ImpactLaw", "InputError",
            "LinearSystem", "MoreauJean", "OBSERVER_DESIGNS", "ObserverDesign", "SCENARIOS", "Scenario", "SimulationResult",
-           "Slave", "load_scenario", "lyapunov", "read_frame", "simulate", "__version__"]
+           "Slave", "load_scenario", "lyapunov", "read_frame", "read_result", "simulate", "__version__"]

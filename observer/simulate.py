@@ -126,27 +126,34 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     meta = run_metadata(sc, stepper, out)
     if engine_note:
         meta["engine_note"] = engine_note
-    t = stepper.time(out.rows)
-    res = SimulationResult(t, out.q[0], out.u[0], out.P[0], out.active, system, meta, sigma=out.sigma[0])
+    names = [s.name for s in slaves]
     if slaves:
-        res.chi = out.chi
-        master = {"q": out.q[0], "u": out.u[0], "P": out.P[0], "sigma": out.sigma[0]}
-        for i, s in enumerate(slaves, start=1):
-            traj = {"q": out.q[i], "u": out.u[i], "P": out.P[i], "sigma": out.sigma[i]}
-            V = (out.V[i] if out.V is not None
-                 else lyapunov(system, traj["q"], traj["u"], master["q"], master["u"]))
-            parts = (lyapunov_decrements(system, sc.h, traj, master) if record_every == 1
-                     else {"damping": None, "impulse": None, "projection": None})
-            res.slaves[s.name] = SlaveTrajectory(s.name, traj["q"], traj["u"], traj["P"], V,
-                                                 parts["damping"], parts["impulse"],
-                                                 parts["projection"], traj["sigma"])
-        meta.update(observers=[s.name for s in slaves], source=source,
+        meta.update(observers=names, source=source,
                     coupling=None if coupling in ("scenario", None) else list(coupling),
                     log=str(log) if log else None)
+    master = {"q": out.q[0], "u": out.u[0], "P": out.P[0], "sigma": out.sigma[0]}
+    trajectories = {s.name: _trajectory(system, sc.h, out, i, s.name, master, record_every)
+                    for i, s in enumerate(slaves, start=1)}
+    summary = None
     if out.summary is not None:
-        res.summary = summary_frame(out, [s.name for s in slaves], stepper.t0, stepper.h)
-        res.summary.attrs["master_closings"] = out.summary["closings"].tolist()
-    return res
+        summary = summary_frame(out, names, stepper.t0, stepper.h)
+        summary.attrs["master_closings"] = out.summary["closings"].tolist()
+    return SimulationResult(stepper.time(out.rows), out.q[0], out.u[0], out.P[0], out.active,
+                            system, meta, chi=out.chi if slaves else None, slaves=trajectories,
+                            sigma=out.sigma[0], summary=summary)
+
+
+def _trajectory(system, h: float, out, i: int, name: str, master: dict,
+                record_every: int) -> SlaveTrajectory:
+    """Observer ``i`` of the loop's output as a :class:`SlaveTrajectory` (V and, when every
+    step is kept, its per-step damping/impulse/projection parts)."""
+    traj = {"q": out.q[i], "u": out.u[i], "P": out.P[i], "sigma": out.sigma[i]}
+    V = (out.V[i] if out.V is not None
+         else lyapunov(system, traj["q"], traj["u"], master["q"], master["u"]))
+    parts = (lyapunov_decrements(system, h, traj, master) if record_every == 1
+             else {"damping": None, "impulse": None, "projection": None})
+    return SlaveTrajectory(name, traj["q"], traj["u"], traj["P"], V, parts["damping"],
+                           parts["impulse"], parts["projection"], traj["sigma"])
 
 
 def _slaves(cfg: ObserverConfig, observers: list[str | Slave]) -> list[Slave]:
