@@ -56,6 +56,12 @@ class Look:
     color: str
     linestyle: str
 
+    @property
+    def description(self) -> str:
+        """Colour and line style in words ("blue, dashed")."""
+        styles = {"-": "solid", "--": "dashed", ":": "dotted", "-.": "dash-dotted"}
+        return f"{self.color.replace('tab:', '')}, {styles.get(self.linestyle, self.linestyle)}"
+
 
 def look(name: str) -> Look:
     """The look of ``name``: the master, a registered design, or a grey fallback."""

@@ -850,6 +850,10 @@ def test_proof_check_table_lists_every_check_row(synthetic_report):
                            f"{counts['FAIL']} FAIL, {counts['n/a']} n/a.")
     assert f"Proof-step checks: {counts['PASS']} PASS, {counts['FAIL']} FAIL" in \
         "\n".join(page.sections["key-numbers"].items)
+    # these rows do not say which design a check concerns: every design listed, no counts claimed
+    per_design = page.table("proof-checks", "Proof checks per observer design").dicts()
+    assert [r["design"] for r in per_design] == list(OBSERVER_DESIGNS)
+    assert all(r["PASS"].startswith("n/a") for r in per_design)
 
 
 # ----------------------------------------------------------------------------- analysis frames

@@ -47,13 +47,18 @@ def checks_table(ch: pd.DataFrame) -> Table:
     return t
 
 
-def design_counts_table(counts: pd.DataFrame) -> Table:
-    """Check statuses per registered observer design (zeros: no rows for that design)."""
+NO_DESIGN = "n/a (the check rows name no design)"
+
+
+def design_counts_table(counts: pd.DataFrame, named: bool) -> Table:
+    """Check statuses per registered observer design (zeros: no rows for that design); every
+    cell n/a when the rows do not say which design a check concerns (``named`` False)."""
     t = Table("Proof checks per observer design (rows whose check concerns that design)",
               ["design", "label", "scenarios", *CHECK_STATUSES])
     for _, r in counts[counts["design"] != "all"].iterrows():
-        t.add([r["design"], registry.label(r["design"]), fmt_int(r["scenarios"]),
-               *(fmt_int(r[s]) for s in CHECK_STATUSES)])
+        cells = ([fmt_int(r["scenarios"])] + [fmt_int(r[s]) for s in CHECK_STATUSES] if named
+                 else [NO_DESIGN] * (1 + len(CHECK_STATUSES)))
+        t.add([r["design"], registry.label(r["design"]), *cells])
     return t
 
 
@@ -80,6 +85,7 @@ def build(ctx: ReportContext) -> Section:
           "n/a: the check's hypotheses do not hold for that system (reason given).")
     ctx.key_numbers.append(f"Proof-step checks: {total['PASS']} PASS, {total['FAIL']} FAIL, "
                            f"{total['n/a']} not applicable, over {total['scenarios']} scenarios.")
-    sec.table(design_counts_table(counts))
+    named = "design" in ch and ch["design"].map(text).astype(bool).any()
+    sec.table(design_counts_table(counts, named))
     sec.table(checks_table(ch))
     return sec

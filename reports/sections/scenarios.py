@@ -73,9 +73,9 @@ def build(ctx: ReportContext) -> Section:
         return sec
     designs = registry.in_registry_order(obs["observer"])
     sec.p("Each run couples the observers to the master through the master's own closed set χ "
-          "(same grid) inside the shaded window. Master: black, solid; "
-          + "; ".join(f"{registry.label(d)}: {registry.look(d).color.replace('tab:', '')}, "
-                      f"line style '{registry.look(d).linestyle}'" for d in designs) + ".")
+          "(same grid) inside the shaded window. "
+          + "; ".join(f"{registry.label(d)}: {registry.look(d).description}"
+                      for d in (registry.MASTER, *designs)) + ".")
     ratios = ratio_rows(obs)
     for name, g in obs.groupby("name", sort=False):
         sec.subsections.append(scenario_subsection(name, g, ratios))
