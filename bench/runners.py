@@ -47,6 +47,7 @@ from observer.closed_form import closed_form_position
 from bench.results import now_iso
 from observer.metrics import RHOS, settle_column
 
+from bench.schema import check_row
 from bench.suites import Case, engine_for
 
 ERROR_NORM = "mean over t of max_i |q_i − q_ref,i|"
@@ -125,8 +126,10 @@ def engine_columns(res) -> dict[str, Any]:
 
 
 def _finish(rows: list[dict], ctx: Context) -> list[dict]:
+    """The rows, each checked against its kind's schema (:mod:`bench.schema`), with the date
+    and the environment."""
     date = now_iso()
-    return [{**r, "date": date, **ctx.env} for r in rows]
+    return [{**check_row(r), "date": date, **ctx.env} for r in rows]
 
 
 def run_case(case: Case, ctx: Context) -> list[dict]:
@@ -146,8 +149,7 @@ def _slaves(case: Case, sc, names) -> list[Slave]:
                   OBSERVER_DESIGNS[name]) for name in names]
 
 
-REQUIRED_COLUMNS = {"observers": tuple(settle_column(r) for r in RHOS),
-                    "robustness": tuple(settle_column(r) for r in RHOS)}
+REQUIRED_COLUMNS = {kind: tuple(settle_column(r) for r in RHOS) for kind in ("observers", "robustness")}
 """Columns every row of a kind must have; rows written before a column existed are moved
 to the stale file and their cases rerun (:func:`bench.run.run_suite`)."""
 
