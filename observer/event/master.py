@@ -17,10 +17,12 @@ acceleration LCP ``0 ≤ λ ⊥ γ̇ = G λ + γ̇_free ≥ 0`` gives them a pos
 
 Zeno: a run of impacts of one contact whose intervals shrink geometrically (consecutive
 ratios equal within :data:`ZENO_RATIO_SPREAD`) is stopped once the impact velocity has
-fallen by :data:`ZENO_VELOCITY_RATIO` (or the intervals reach the time resolution); the
-accumulation time ``t_∞ = t_k + Δ_k ρ/(1 − ρ)`` is extrapolated from the last ratio ρ
-(exact for a constant contact acceleration, THEORY §7.1), the state is carried to t_∞
-by the constrained flow, and the contact switches to persistent contact there.
+fallen by :data:`ZENO_VELOCITY_RATIO`, or the intervals reach the time resolution, or the
+hops reach the gap's round-off; the accumulation time t_∞ is extrapolated
+(:meth:`_Run.tail_time`: geometric, ``t_k + Δ_k ρ/(1 − ρ)``, exact for a constant contact
+acceleration, THEORY §7.1, with a first-order correction of the ratio for one contact),
+the state is carried to t_∞ by the constrained flow, and the contacts switch to
+persistent contact there if the acceleration LCP gives them a positive force.
 """
 
 from __future__ import annotations
@@ -60,6 +62,9 @@ ZENO_MIN_INTERVAL = 1e-11
 ZENO_HOP_ROUNDOFF = 1e4
 """... or once the next hop height is below this many round-offs of the gap (beyond it the
 impact sequence is driven by round-off, no longer by the dynamics)."""
+
+STALL_EVENTS = 50
+"""Events at one and the same instant after which the run stops (no progress)."""
 
 EVENT_KINDS = ("impact", "graze", "stick", "liftoff", "accumulation")
 EVENT_COLUMNS = ["time", "contact", "kind", "gamma_minus", "gamma_plus", "impulse"]
@@ -300,7 +305,31 @@ class _Run:
         if (speed > self.zeno_velocity_ratio * v0 and d[2] > ZENO_MIN_INTERVAL * max(1.0, abs(t))
                 and not hop_small):
             return None
-        return t + d[2] * r2 / (1.0 - r2)
+        return t + self.tail_time(key, d[1], d[2])
+
+    def tail_time(self, key: tuple, d_prev: float, d_last: float) -> float:
+        """Duration of the unresolved tail after an interval d_last (preceded by d_prev).
+
+        Several contacts: geometric with the last ratio ρ, ``d_last ρ/(1 − ρ)``. One contact:
+        as the hops vanish the contact acceleration is frozen and the ratio tends to the
+        restitution e (THEORY §7.1); the deviation ρ − e is proportional to the interval, so
+        the tail is summed with ``ρ_i = e + c Δ_i``, c fitted to the last ratio (error
+        O(Δ²) instead of O(Δ)).
+        """
+        ratio = d_last / d_prev
+        if len(key) != 1:
+            return d_last * ratio / (1.0 - ratio)
+        e = float(self.law.restitution[key[0]])
+        c = (ratio - e) / d_prev
+        tail, step = 0.0, d_last
+        for _ in range(100_000):
+            step *= e + c * step
+            tail += step
+            if not 0.0 < e + c * step < 1.0:
+                return d_last * ratio / (1.0 - ratio)
+            if step <= 1e-17 * max(tail, 1e-300):
+                break
+        return tail
 
     def accumulate(self, key: tuple, t: float, x: np.ndarray, persistent: tuple, t_inf: float,
                    speed: float):
@@ -374,7 +403,7 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
     x = np.concatenate([scenario.q0, scenario.u0]).astype(float)
     x, persistent = _initial_contacts(run, x)
     certified: dict[tuple[str, int], float] = {}
-    n_events = 0
+    n_events, same_time, t_last_event = 0, 0, -np.inf
     while True:
         flow = flow_for(run.system, persistent)
         free = [j for j in range(run.m) if j not in persistent]
@@ -395,6 +424,12 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
         n_events += 1
         if n_events > max_events:
             status = f"stopped: event cap {max_events} reached at t = {t:.17g}"
+            break
+        same_time = same_time + 1 if t == t_last_event else 0
+        t_last_event = t
+        if same_time >= STALL_EVENTS:
+            status = (f"stopped: no progress, {STALL_EVENTS} events at t = {t:.17g} "
+                      f"(contact {j}, a degenerate contact state)")
             break
         if zero.kind == "touch":                      # graze of a gap, or a force touching 0
             certified[(kind, j)] = zero.resume
