@@ -202,6 +202,7 @@ class Scenario:
         if projection:
             system.require_definite_stiffness("simulation.master_projection")
         check_initial_gap("initial.q", system, q0)
+        check_finite_energy("initial", system, q0, u0)
         meta = doc.get("scenario", {})
         return Scenario(str(meta.get("name", Path(source).stem if source else "custom")),
                         str(meta.get("description", "")), system, law, q0, u0, t_end, h, theta,
@@ -244,6 +245,24 @@ class Scenario:
                 "theta": self.theta, "t_end": self.t_end, "law": self.law.law,
                 "restitution": self.law.restitution.tolist(), "solver": self.solver,
                 "master_projection": self.master_projection}
+
+
+def check_finite_energy(prefix: str, system: LinearSystem, q: np.ndarray, u: np.ndarray) -> None:
+    """Raise unless the state's kinetic ½uᵀMu and elastic ½qᵀKq energies are finite numbers.
+
+    Every number of a run (V, its parts, the energy balance) is a quadratic form of the
+    states: a finite state whose energy overflows (``u = 1e200``) would hand back inf/NaN.
+    Errors name ``PREFIX.u`` or ``PREFIX.q``.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        kinetic = 0.5 * float(u @ system.M @ u)
+        elastic = 0.5 * float(q @ system.K @ q)
+        gaps = q @ system.W
+    if not np.isfinite(kinetic):
+        raise InputError(f"{prefix}.u", f"kinetic energy ½uᵀMu overflows ({kinetic}): the state is too large")
+    if not (np.isfinite(elastic) and np.all(np.isfinite(gaps))):
+        raise InputError(f"{prefix}.q", f"elastic energy ½qᵀKq or the gaps overflow ({elastic}): "
+                         "the state is too large")
 
 
 def check_initial_gap(field_name: str, system: LinearSystem, q0: np.ndarray, t0: float = 0.0) -> None:

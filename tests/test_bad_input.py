@@ -206,6 +206,8 @@ CASES: list[Bad] = [
     doc_case("initial-q-length", {"initial.q": "[0.0]"}, "initial.q", "wrong shape"),
     doc_case("initial-q-penetrates", {"initial.q": "[-0.3, -0.2]"}, "initial.q", "penetrates"),
     doc_case("initial-u-nan", {"initial.u": "[nan, 0.0]"}, "initial.u", "NaN"),
+    doc_case("initial-u-overflowing-energy", {"initial.u": "[1e200, 0.0]"}, "initial.u", "overflows"),
+    doc_case("initial-q-overflowing-energy", {"initial.q": "[1e200, 1e200]"}, "initial.q", "overflow"),
     doc_case("h-zero", {"simulation.h": "0.0"}, "simulation.h", "> 0"),
     doc_case("h-negative", {"simulation.h": "-1e-3"}, "simulation.h", "> 0"),
     doc_case("h-nan", {"simulation.h": "nan"}, "simulation.h", "NaN"),
