@@ -376,3 +376,54 @@ def test_safe_step_never_passes_the_first_zero_of_the_cubic_bound():
         assert 0.0 <= s <= first + 1e-12 * width
         # and not needlessly short: the sampled zero is within one grid cell after s
         assert s >= first - width / 20000 * 1.0001 or s == width
+
+
+def test_first_zero_is_the_earliest_of_many_functionals():
+    """Random functionals of the impact oscillator's augmented state against dense sampling
+    plus brentq: the returned zero is the earliest sign change of any of them (never a
+    later one found first in row order, never a missed one)."""
+    sc = observer.load_scenario("impact_oscillator")
+    fl = Flow(sc.system)
+    z0 = fl.z(0.0, np.array([-0.5, 0.3]))
+    dt, horizon = 1e-3, 6.0
+    step = fl.expm(dt)
+    zs = [z0]
+    for _ in range(int(horizon / dt)):
+        z = step @ zs[-1]
+        zs.append(z)
+    zs = np.array(zs)
+    ts = dt * np.arange(zs.shape[0])
+    rng = np.random.default_rng(7)
+    checked = 0
+    for _ in range(40):
+        rows = rng.normal(size=(3, fl.N))
+        rows[:, -1] += rng.uniform(0.05, 1.0, size=3) - rows @ z0      # ψ_i(0) ∈ [0.05, 1]
+        psi = zs @ rows.T
+        firsts = [np.flatnonzero(psi[:, i] <= 0.0) for i in range(3)]
+        firsts = [ts[f[0]] if f.size else np.inf for f in firsts]
+        i_min = int(np.argmin(firsts))
+        if not np.isfinite(firsts[i_min]):
+            continue
+        k = int(round(firsts[i_min] / dt))
+        if min(abs(psi[k, i_min]), abs(psi[k - 1, i_min])) < 1e-6 or np.any(
+                np.abs(psi[max(k - 2, 0):k + 2]) < 1e-6):
+            continue                                              # ambiguous for the sampler
+        exact = brentq(lambda t: rows[i_min] @ fl.expm(t) @ z0, ts[k - 1], ts[k], xtol=1e-15)
+        zero, _, _ = first_zero(fl, rows, 0.0, z0, horizon)
+        assert zero is not None and zero.index == i_min
+        assert abs(zero.t - exact) <= 1e-9
+        checked += 1
+    assert checked >= 20
+
+
+def test_first_zero_returns_the_earlier_zero_of_a_later_row():
+    """Ball thrown up (q = 0.5t − g t²/2): ψ_0 = 0.01 − q crosses at 0.02733 before its
+    minimum (a convex window), ψ_1 = u − u_B crosses earlier, at exactly 0.02."""
+    fl = Flow(observer.load_scenario("bouncing_ball").system)
+    z0 = fl.z(0.0, np.array([0.0, 0.5]))
+    u_b = 0.5 - G0 * 0.02
+    rows = np.array([[-1.0, 0.0, 0.01], [0.0, 1.0, -u_b]])
+    zero, _, _ = first_zero(fl, rows, 0.0, z0, 1.0)
+    assert zero.index == 1 and abs(zero.t - 0.02) <= 1e-15
+    zero, _, _ = first_zero(fl, rows[:1], 0.0, z0, 1.0)
+    assert abs(zero.t - (0.5 - np.sqrt(0.25 - 2 * G0 * 0.01)) / G0) <= 1e-15

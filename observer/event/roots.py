@@ -247,6 +247,52 @@ def _zero_now(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d: np.ndarray
     return Zero(a + tau, i, "cross", z, fs.value(i, 0, z), fs.value(i, 1, z), a + tau)
 
 
+def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, tols, bound: np.ndarray,
+               w: float, certified: dict[int, float]) -> tuple[float, list[Zero]]:
+    """Largest step from a over which no functional is certified to vanish, and the zeros
+    found exactly on the way (convex minima, zeros at a). Vectorised quick test first: a
+    functional whose cubic bound stays positive on the whole window needs no more work."""
+    tol, tol1, tol2 = tols
+    d0, d1, d2 = d
+    step = w
+    found: list[Zero] = []
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s_min = np.where((d1 < 0.0) & (d2 > 0.0), -d1 / d2, np.inf)
+        near_touch = (s_min <= w) & (d0 - d1 * d1 / (2.0 * d2) <= 2.0 * TOUCH_FACTOR * tol)
+    quick = (d0 > tol) & ~near_touch & (
+        d0 + np.minimum(d1, 0.0) * w + np.minimum(d2, 0.0) * w * w / 2 - bound * w ** 3 / 6 > 0.0)
+    for i in np.flatnonzero(~quick):
+        i = int(i)
+        until = certified.get(i, -np.inf)
+        if until > a:
+            step = min(step, until - a)
+            continue
+        leaving = d1[i] > tol1[i] or (abs(d1[i]) <= tol1[i] and d2[i] > tol2[i])
+        convex = d1[i] < 0.0 < d2[i]
+        if d0[i] <= tol[i] and not leaving:
+            res = _convex_minimum(fs, i, a, za, d0[i], d1[i], d2[i], bound[i], w, tol[i]) \
+                if convex else None
+            if res is None:
+                found.append(_zero_now(fs, i, a, za, d))
+            elif res[0] == "positive":
+                certified[i] = res[1]
+                step = min(step, res[1] - a)
+            else:
+                found.append(res[1])
+            continue
+        s = first_cubic_zero(max(d0[i], 0.0), d1[i], d2[i], bound[i], w)
+        if (s < w or near_touch[i]) and convex:
+            res = _convex_minimum(fs, i, a, za, d0[i], d1[i], d2[i], bound[i], w, tol[i])
+            if res is not None:
+                if res[0] != "positive":
+                    found.append(res[1])
+                    continue
+                certified[i] = res[1]
+                s = res[1] - a
+        step = min(step, s)
+    return step, found
+
+
 def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: float,
                certified: dict[int, float] | None = None) -> tuple[Zero | None, float, np.ndarray]:
     """First zero in ``[t0, t_end]`` of any functional ``rows[i]·z(t)`` along ``flow``.
@@ -286,37 +332,13 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
         az = np.abs(za)
         tol, tol1, tol2 = (ROUNDOFF * (r @ az) + np.finfo(float).tiny for r in fs.abs_d)
         bound = fs.third_norm * growth * np.linalg.norm(za / flow.scale) * (1.0 + 1e-12)
-        step = w
-        for i in range(len(fs)):
-            until = certified.get(i, -np.inf)
-            if until > a:
-                step = min(step, until - a)
-                continue
-            d0, d1, d2 = d[:, i]
-            leaving = d1 > tol1[i] or (abs(d1) <= tol1[i] and d2 > tol2[i])
-            if d0 <= tol[i] and not leaving:
-                if d1 < 0.0 and d2 > 0.0:
-                    res = _convex_minimum(fs, i, a, za, d0, d1, d2, bound[i], w, tol[i])
-                    if res is not None and res[0] != "positive":
-                        return res[1], res[1].t, res[1].z
-                    if res is not None:
-                        certified[i] = res[1]
-                        step = min(step, res[1] - a)
-                        continue
-                zero = _zero_now(fs, i, a, za, d)
-                return zero, zero.t, zero.z
-            s = first_cubic_zero(max(d0, 0.0), d1, d2, bound[i], w)
-            near_touch = d1 < 0.0 < d2 and -d1 / d2 <= w and \
-                d0 - d1 * d1 / (2.0 * d2) <= 2.0 * TOUCH_FACTOR * tol[i]
-            if (s < w or near_touch) and d1 < 0.0 < d2:
-                res = _convex_minimum(fs, i, a, za, d0, d1, d2, bound[i], w, tol[i])
-                if res is not None:
-                    if res[0] != "positive":
-                        return res[1], res[1].t, res[1].z
-                    certified[i] = res[1]
-                    s = res[1] - a
-            step = min(step, s)
-        # a zero of ψ_i is never inside (a, a + step): a cross found above is returned first
+        step, found = _safe_step(fs, a, za, d, (tol, tol1, tol2), bound, w, certified)
+        # no functional without a found zero vanishes in (a, a + step): the earliest found zero
+        # within that reach is the first zero; one beyond it is recomputed later
+        if found:
+            first = min(found, key=lambda zr: zr.t)
+            if first.t <= a + step:
+                return first, first.t, first.z
         step = max(step, 0.0)
         zero = _earliest_pending(fs, a, za, step, d, tol)
         if zero is not None:
