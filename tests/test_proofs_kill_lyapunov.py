@@ -736,3 +736,99 @@ def test_convergence_not_applicable_cases():
     r = ly.check_convergence(run)
     assert r.passed is None and r.reason == "the two observers start in the same state (V0 = 0)"
     assert r.name == "convergence" and r.equation == "Theorem 1; eqs. (18)-(21)"
+
+
+def _exact_run(e, u, *, M=1.0, K=1.0, C=1.0, T=None, active=None):
+    """One degree of freedom, one contact, B at rest: V = ½Mu² + ½Ke² exactly (powers of two)."""
+    e, u = np.asarray(e, float)[:, None], np.asarray(u, float)[:, None]
+    t = np.arange(e.shape[0], dtype=float) * (1.0 if T is None else T / (e.shape[0] - 1))
+    act = np.zeros((t.size, 1), bool) if active is None else np.asarray(active, bool)[:, None]
+    A = SimpleNamespace(q=e, u=u, P=np.zeros_like(e), active=act)
+    B = SimpleNamespace(q=0 * e, u=0 * u, P=np.zeros_like(e), active=act.copy())
+    system = SimpleNamespace(M=np.array([[M]]), K=np.array([[K]]), C=np.array([[C]]), W=np.array([[1.0]]))
+    return SimpleNamespace(system=system, t=t, h=t[1] - t[0], theta=0.5, slaves={"a": A, "b": B})
+
+
+def test_convergence_exact_thresholds():
+    """V = [½, ½, ⅛, …, ⅛]: with ρ = ¼ the run reaches exactly ρ·V0 (margin 0: passes, no
+    reason); the time to ρ is the first step with V ≤ ρV0 (not <)."""
+    e = [1.0, 1.0] + [0.5] * 6
+    run = _exact_run(e, [0.0] * 8)
+    r = ly.check_convergence(run, rho=0.25)
+    assert r.margin == 0.0 and r.passed is True and r.reason == ""
+    assert r.witness["time_to_rho"] == run.t[2]
+    # the last step drops below: time_to_rho = t_end (not inf)
+    run = _exact_run([1.0] * 7 + [0.25], [0.0] * 8)
+    r = ly.check_convergence(run, rho=0.25)
+    assert r.witness["time_to_rho"] == run.t[-1]
+    # ρ ≥ 1: V never above ρ·V0 → time 0
+    assert ly.check_convergence(_exact_run(e, [0.0] * 8), rho=1.0).witness["time_to_rho"] == 0.0
+
+
+def test_convergence_reason_uses_the_last_kinetic_and_potential_parts():
+    """T_end = 1 = 1e-3·U_end exactly (M = 2, K = 2000): 'v has not decayed' (strict <);
+    T at the step before the end does not matter."""
+    n = 12
+    e = np.ones(n)
+    u = np.zeros(n)
+    u[0] = 40.0                                   # V0 = 1600 + 1000: less than 3 decades above
+    u[-1] = 1.0                                   # T_end = ½·2·1 = 1, U_end = ½·2000·1 = 1000
+    run = _exact_run(e, u, M=2.0, K=2000.0)
+    r = ly.check_convergence(run)
+    assert r.passed is False and r.reason.endswith("v has not decayed (a longer horizon may be needed)")
+    u[-1] = 0.5                                   # T_end = ¼ < 1
+    u[-2] = 30.0                                  # the step before: large, irrelevant
+    r = ly.check_convergence(_exact_run(e, u, M=2.0, K=2000.0))
+    assert r.reason.endswith("v → 0 but e → c ≠ 0 (c balanced by the averaged constraint force, eq. (21))")
+
+
+def test_convergence_zero_rate_fails():
+    """A constant V = 1 (log V = 0): the fitted rate is exactly 0, not > 0: fails (margin min(decades − 3, −1) = −3)."""
+    run = _exact_run([1.0] * 8, [0.0] * 8, K=2.0)
+    r = ly.check_convergence(run)
+    assert r.witness["decay_rate"] == 0.0
+    assert r.passed is False and r.margin == -3.0 and r.reason.startswith("V does not decay (fitted rate ")
+
+
+def test_convergence_closed_window_edges():
+    """The window's contacts are those closed in steps k0 … N−1 (rows k0+1 … N) of the
+    first observer: a closing in row k0 is outside, one in row k0+1 inside; and the contact
+    index is reported, not the flag (two contacts, only the second closes)."""
+    n_steps = 20
+    run = _conv_run(n_steps=n_steps, T=2.0)
+    A = run.slaves["obs_a"]
+    A.active = np.zeros((n_steps + 1, 2), bool)
+    run.system.W = np.array([[1.0, 0.0], [0.5, 1.0]])
+    A.P = np.zeros((n_steps + 1, 2))
+    run.slaves["obs_b"].P = np.zeros((n_steps + 1, 2))
+    k0 = int(0.9 * n_steps)                       # 18
+    A.active[k0 + 1, 1] = True
+    r = ly.check_convergence(run)
+    assert r.witness["closed_in_window"] == [1]
+    assert r.witness["WIt_c"].shape == (1,)
+    assert r.witness["WIt_c"][0] == pytest.approx(r.witness["c"] @ run.system.W[:, 1], rel=1e-12)
+    A.active[:] = False
+    A.active[k0, 1] = True
+    r = ly.check_convergence(run)
+    assert r.witness["closed_in_window"] == [] and r.witness["WIt_c"].shape == (0,)
+
+
+def test_convergence_three_dof_floors_use_the_extreme_eigenvalues():
+    def run3(K, C):
+        t = np.linspace(0.0, 2.0, 101)
+        d = np.exp(-t)[:, None]
+        A = SimpleNamespace(q=d * [0.1, 0.2, -0.1], u=d * [0.0, 0.1, 0.1], P=np.zeros((101, 1)),
+                            active=np.zeros((101, 1), bool))
+        B = SimpleNamespace(q=0 * A.q, u=0 * A.u, P=A.P, active=A.active)
+        system = SimpleNamespace(M=np.eye(3), K=np.asarray(K, float), C=np.asarray(C, float),
+                                 W=np.array([[1.0], [0.0], [0.0]]))
+        return SimpleNamespace(system=system, t=t, h=0.02, theta=0.5, slaves={"a": A, "b": B})
+    C = np.eye(3)
+    # λ_min = 2e-12 ≤ 1e-12·λ_max = 5e-12 (not the middle eigenvalue 1): not applicable
+    assert ly.check_convergence(run3(np.diag([5.0, 1.0, 2e-12]), C)).passed is None
+    assert ly.check_convergence(run3(np.diag([5.0, 1.0, 1.0]), C)).passed is not None
+    # C̄ with two negative eigenvalues and a positive one: indefinite, checked (not n/a)
+    assert ly.check_convergence(run3(np.eye(3), np.diag([-1.0, -1.0, 1.0]))).passed is not None
+    assert ly.check_convergence(run3(np.eye(3), np.diag([-1.0, 1.0, 1.0]))).passed is not None
+    # λ_min = 2e-12 against λ_max = 5 (not the middle one)
+    assert ly.check_convergence(run3(np.eye(3), np.diag([5.0, 1.0, 2e-12]))).passed is None
