@@ -215,6 +215,19 @@ class Flow:
                 self._phi_cache.popitem(last=False)
         return hit
 
+    def power_stack(self, dt: float, count: int) -> np.ndarray:
+        """``exp(A j dt)`` for j = 1..count, shape (count, N, N) (cached for one (dt, count)):
+        a whole block of equally spaced samples in one product."""
+        key = (float(dt), int(count))
+        if getattr(self, "_stack_key", None) != key:
+            E = self.expm(dt)
+            stack = np.empty((count, self.N, self.N))
+            stack[0] = E
+            for j in range(1, count):
+                stack[j] = E @ stack[j - 1]
+            self._stack, self._stack_key = stack, key
+        return self._stack
+
     # -- the flow --------------------------------------------------------------------------
     def propagate(self, t0: float, z0: np.ndarray, dt: float) -> np.ndarray:
         """Augmented state at ``t0 + dt`` from z0 at t0; the oscillators reset analytically."""

@@ -63,6 +63,9 @@ ZENO_HOP_ROUNDOFF = 1e4
 """... or once the next hop height is below this many round-offs of the gap (beyond it the
 impact sequence is driven by round-off, no longer by the dynamics)."""
 
+SAMPLE_BLOCK = 256
+"""Output samples computed per block product (``exp(A j h)``, j = 1..SAMPLE_BLOCK)."""
+
 STALL_EVENTS = 50
 """Events at one and the same instant after which the run stops (no progress)."""
 
@@ -165,21 +168,34 @@ class _Run:
             self.segments.append((float(t_a), float(t_b), flow.active, np.array(x_a, dtype=float)))
         tg, k = self.t_grid, self.k_next
         forced = list(flow.active)
+        end = int(np.searchsorted(tg, t_b, side="right" if include_end else "left"))
         t_cur, z_cur = t_a, flow.z(t_a, x_a)
-        first = True
-        while k < tg.size and (tg[k] < t_b or (include_end and tg[k] <= t_b)):
-            dt = tg[k] - t_cur if first else self.h          # h: one cached exponential
-            z_new = flow.expm(dt) @ z_cur
-            z_new[2 * self.n:-1] = flow.oscillators(tg[k])
-            z_new[-1] = 1.0
-            self.X[k] = z_new[:2 * self.n]
+        if k < end:                                   # first sample: from the segment start
+            z_cur = self._sample(flow, k, tg[k] - t_a, z_cur, forced)
+            t_cur, k = tg[k], k + 1
+        while k < end:                                # the rest: blocks of equal steps h
+            count = min(end - k, SAMPLE_BLOCK)
+            stack = flow.power_stack(self.h, SAMPLE_BLOCK)[:count]
+            Z = stack @ z_cur                         # (count, N)
+            Z[:, 2 * self.n:-1] = _oscillator_block(flow, tg[k:k + count])
+            Z[:, -1] = 1.0
+            self.X[k:k + count] = Z[:, :2 * self.n]
             if forced:
-                self.P[k, forced] += flow.force_rows @ (flow.phi(dt) @ z_cur)
-            t_cur, z_cur, first = tg[k], z_new, False
-            k += 1
+                prev = np.vstack([z_cur[None, :], Z[:-1]])
+                self.P[k:k + count, forced] += prev @ (flow.force_rows @ flow.phi(self.h)).T
+            z_cur, t_cur, k = Z[-1], tg[k + count - 1], k + count
         if forced and k < tg.size and t_b > t_cur:
             self.P[k, forced] += flow.force_rows @ (flow.phi(t_b - t_cur) @ z_cur)
         self.k_next = k
+
+    def _sample(self, flow: Flow, k: int, dt: float, z: np.ndarray, forced: list) -> np.ndarray:
+        z_new = flow.expm(dt) @ z
+        z_new[2 * self.n:-1] = flow.oscillators(self.t_grid[k])
+        z_new[-1] = 1.0
+        self.X[k] = z_new[:2 * self.n]
+        if forced:
+            self.P[k, forced] += flow.force_rows @ (flow.phi(dt) @ z)
+        return z_new
 
     def add_impulse(self, t: float, contacts, impulse) -> None:
         """Add an impulse at time t to the sample interval ``(t_{k−1}, t_k]`` holding t."""
@@ -375,6 +391,15 @@ class _Run:
                     self.event(t_inf, c, "liftoff", 0.0, 0.0, 0.0)
                 self.open(c, t_inf)
         return self.project(t_inf, x_inf, stick), tuple(stick)
+
+
+def _oscillator_block(flow: Flow, t: np.ndarray) -> np.ndarray:
+    """Oscillator states ``(cos ω_k t, sin ω_k t)_k`` at the times t, shape (len(t), 2F)."""
+    w = np.asarray(flow.freqs, dtype=float)
+    out = np.empty((t.size, 2 * w.size))
+    out[:, 0::2] = np.cos(np.outer(t, w))
+    out[:, 1::2] = np.sin(np.outer(t, w))
+    return out
 
 
 def run_master(scenario: Scenario, h: float | None = None, t_end: float | None = None,

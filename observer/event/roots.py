@@ -225,7 +225,7 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
         curv = d2 - bound * span
         resume = t_m + np.sqrt(max(2.0 * (2.0 * touch - m_star), 0.0) / curv)
         return "touch", Zero(t_m, i, "touch", z_m, m_star, fs.value(i, 1, z_m), float(resume))
-    tau = _refine(fs, i, 0, a, za, 0.0, tau_m, 0.5 * tau_m)
+    tau = _refine(fs, i, 0, a, za, 0.0, tau_m, 0.5 * tau_m) if d0 > 0.0 else 0.0
     z = _reset(flow, a + tau, flow.expm(tau) @ za)
     return "cross", Zero(a + tau, i, "cross", z, fs.value(i, 0, z), fs.value(i, 1, z), a + tau)
 
