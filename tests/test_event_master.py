@@ -431,3 +431,23 @@ def test_first_zero_returns_the_earlier_zero_of_a_later_row():
     assert zero.index == 1 and abs(zero.t - 0.02) <= 1e-15
     zero, _, _ = first_zero(fl, rows[:1], 0.0, z0, 1.0)
     assert abs(zero.t - (0.5 - np.sqrt(0.25 - 2 * G0 * 0.01)) / G0) <= 1e-15
+
+
+def test_held_contacts_follow_a_moving_ground_with_the_force_of_newtons_law():
+    """One rocking block on the harmonically moving ground, both corners held: g = γ = 0 stay
+    zero, and λ equals W⁻¹(M u̇ − f + Kq + Cu) with u̇ = −W⁻ᵀν̈ (W square, exact kinematics)."""
+    sc = observer.load_scenario("rocking_chain", {"param.N": 1})
+    sysm = sc.system
+    fl = flow_for(sysm, (0, 1))
+    Wt_inv = np.linalg.inv(sysm.W.T)
+    (omega,) = sysm.gap.omega                      # ν = ν_0 + a sin(Ωt): ν̈ = −Ω²(ν − ν_0)
+    nu_ddot = lambda t: -omega ** 2 * (sysm.nu(t) - sysm.gap.constant)   # noqa: E731
+    x0 = np.concatenate([-Wt_inv @ sysm.nu(0.0), -Wt_inv @ sysm.nu_dot(0.0)])
+    for t in (0.3, 0.7, 1.9):
+        x = fl.state(0.0, x0, t)
+        q, u = x[:2], x[2:]
+        assert np.max(np.abs(sysm.gaps(q, t))) <= 1e-13
+        assert np.max(np.abs(sysm.contact_velocities(u, t))) <= 1e-12
+        u_dot = -Wt_inv @ nu_ddot(t)
+        lam = np.linalg.solve(sysm.W, sysm.M @ u_dot - sysm.f(t) + sysm.K @ q + sysm.C @ u)
+        assert np.allclose(fl.forces(t, x), lam, rtol=1e-10, atol=1e-10)
