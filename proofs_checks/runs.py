@@ -193,6 +193,8 @@ def replay(scenario: Scenario, *, h: float | None = None, t_end: float | None = 
                     coupling=None, chi=None if chi is None else chi[1:],
                     metric=None if metric is None else np.asarray(metric, dtype=float),
                     metrics=(None,) + tuple(s.metric for s in slaves))
+    if stepper.law.code is None:           # a registered law the compiled kernel does not have
+        engine = "python"
     out = run_loop(inp, engine=engine, record_pre=True)
     t = stepper.time(out.rows)
 
