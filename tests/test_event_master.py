@@ -451,3 +451,30 @@ def test_held_contacts_follow_a_moving_ground_with_the_force_of_newtons_law():
         u_dot = -Wt_inv @ nu_ddot(t)
         lam = np.linalg.solve(sysm.W, sysm.M @ u_dot - sysm.f(t) + sysm.K @ q + sysm.C @ u)
         assert np.allclose(fl.forces(t, x), lam, rtol=1e-10, atol=1e-10)
+
+
+def test_double_mass_lifts_off_when_the_contact_force_of_the_pinned_system_vanishes():
+    """Independent oracle: with mass 1 pinned on the ground (q1 = −d0), mass 2 is a forced
+    damped oscillator (solve_ivp, rtol 1e-12) and λ = m1 g + k1(q1 − q2) − c1 u2 (row 1 of
+    M u̇ = f − Cu − Kq + Wλ); the first lift-off is λ's first zero."""
+    from scipy.integrate import solve_ivp
+    m1, m2, k1, k2, c1, c2, d0, F, Om = 1.0, 1.0, 100.0, 100.0, 1.0, 1.0, 0.25, 5.0, 6.0
+    sc = observer.load_scenario("double_mass")
+    q1 = -d0
+
+    def rhs(t, y):
+        q2, u2 = y
+        return [u2, (-m2 * G0 + F * np.cos(Om * t) + k1 * q1 - (k1 + k2) * q2 - (c1 + c2) * u2) / m2]
+
+    sol = solve_ivp(rhs, (0.0, 0.5), [sc.q0[1], 0.0], method="DOP853", rtol=1e-13, atol=1e-15,
+                    dense_output=True)
+    lam = lambda t: m1 * G0 + k1 * (q1 - sol.sol(t)[0]) - c1 * sol.sol(t)[1]   # noqa: E731
+    assert lam(0.0) == pytest.approx(2.215, abs=1e-3)          # THEORY §7.5 preload
+    s = np.linspace(0.0, 0.5, 5001)
+    k = np.flatnonzero(np.array([lam(t) for t in s]) <= 0.0)[0]
+    t_liftoff = brentq(lam, s[k - 1], s[k], xtol=1e-14)
+    res = run_master(sc, h=0.05, t_end=0.5)
+    ev = res.events
+    first = ev[ev["kind"] == "liftoff"]["time"].iloc[0]
+    assert abs(first - t_liftoff) <= 1e-9
+    assert res.intervals(0)[0, 0] == 0.0 and res.intervals(0)[0, 1] == first
