@@ -15,7 +15,13 @@ the impact instant (simultaneous impacts: the multi-contact law). After an impac
 contacts with ``γ⁺ = 0`` (within round-off) enter persistent contact if the
 acceleration LCP ``0 ≤ λ ⊥ γ̇ = G λ + γ̇_free ≥ 0`` gives them a positive force.
 
-Zeno: a run of impacts of one contact whose intervals shrink geometrically (consecutive
+Grazing (stated tolerances): a **touch**, a local minimum of g_j within
+:data:`observer.event.roots.TOUCH_FACTOR` round-offs of zero, is a graze with zero impulse
+(the run continues past it); a crossing with ``|γ⁻| ≤`` CONTACT_TOL round-offs of γ is
+labelled a graze too, and its (tiny) impulse is applied. A minimum above the touch band
+is a miss: no event.
+
+Zeno: a run of impacts of one contact set whose intervals shrink geometrically (consecutive
 ratios equal within :data:`ZENO_RATIO_SPREAD`) is stopped once the impact velocity has
 fallen by :data:`ZENO_VELOCITY_RATIO`, or the intervals reach the time resolution, or the
 hops reach the gap's round-off; the accumulation time t_∞ is extrapolated
@@ -519,7 +525,8 @@ def _liftoff(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int):
         run.open(c, t)
     new = tuple(stick)
     x = run.project(t, x, list(new))
-    # the gap of a lifting contact starts as g ≈ γ ≈ γ̇ ≈ 0 < γ̈: certify its cubic rise
+    # the gap of a lifting contact starts as g ≈ γ ≈ γ̇ ≈ 0 < γ̈ (g ≈ γ̈ s³/6): skip the
+    # round-off band of its cubic rise (up to 4 tolerances), where no sign is decidable
     flow = flow_for(run.system, new)
     z = flow.z(t, x)
     cert = {}
