@@ -209,10 +209,12 @@ class LinearSystem:
                              "Σ_I = −L_I⁻¹g_I of eqs. (13)-(14) would keep fewer than 6 digits)")
 
     def projection_condition(self) -> float:
-        """Condition number of the projection metric ``L = WᵀK⁻¹W`` (needs K ≻ 0; cached).
+        """Condition number of the projection metric ``L = WᵀK⁻¹W``, or an upper bound of it
+        that is already within :data:`PROJECTION_COND_MAX` (needs K ≻ 0; cached).
 
-        Cheap first: ``cond(L) ≤ cond(K)·cond(W)²``; when that bound exceeds
-        :data:`PROJECTION_COND_MAX`, L is formed and its extreme eigenvalues computed.
+        Cheap first: ``cond(L) ≤ cond(K)·cond(W)²``; only when that bound exceeds the
+        threshold is L formed and its exact condition number computed
+        (:func:`observer.validation.projection_condition`).
         """
         cached = self.__dict__.get("_L_cond")
         if cached is None:
