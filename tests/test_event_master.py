@@ -23,6 +23,16 @@ from oracles import oracle
 G0 = 9.81
 
 
+def siconos_smooth_rows(name: str) -> np.ndarray:
+    """The rows of a Siconos event-driven output that are not at an impact (written once)."""
+    data = np.loadtxt(oracle("siconos", name), skiprows=1)
+    t = data[:, 0]
+    at_impact = np.zeros(t.size, dtype=bool)
+    at_impact[:-1] |= np.diff(t) == 0.0
+    at_impact[1:] |= np.diff(t) == 0.0
+    return data[~at_impact]
+
+
 def siconos_impact_times(name: str) -> np.ndarray:
     """Impact times of a Siconos event-driven output: the rows written twice (pre, post)."""
     data = np.loadtxt(oracle("siconos", name), skiprows=1)
@@ -91,7 +101,7 @@ def test_force_impulse_is_the_integral_of_the_force():
     sc = observer.load_scenario("double_mass")
     fl = flow_for(sc.system, (0,))
     x0 = np.concatenate([sc.q0, sc.u0])
-    s = np.linspace(0.0, 0.08, 2001)
+    s = np.linspace(0.0, 0.08, 401)
     lam = np.array([fl.forces(t, fl.state(0.0, x0, t))[0] for t in s])
     simpson = (s[1] - s[0]) / 3 * (lam[0] + lam[-1] + 4 * lam[1:-1:2].sum() + 2 * lam[2:-1:2].sum())
     assert fl.force_impulse(0.0, x0, 0.08)[0] == pytest.approx(simpson, rel=1e-10)
@@ -158,13 +168,18 @@ def test_bouncing_ball_matches_siconos_event_driven_impact_times():
     ours = res.impact_times(0)
     assert ref.size == 44 and ours.size >= ref.size
     assert np.max(np.abs(ours[:ref.size] - ref)) <= 1e-10
+    # the whole trajectory at Siconos' output times (LSODAR at its tolerance)
+    rows = siconos_smooth_rows("BouncingBallED.ref")
+    x = np.array([res.state(t) for t in rows[:, 0]])
+    assert np.max(np.abs(x[:, 0] - rows[:, 1])) <= 1e-11
+    assert np.max(np.abs(x[:, 3] - rows[:, 2])) <= 1e-9
 
 
 def test_linear_oscillator_matches_siconos_up_to_accumulation_then_persistent_contact():
     ref = siconos_impact_times("LinearOscillatorED.ref")
     assert ref.size == 220
     mass = 1e-3
-    res = run_master(siconos_ball(mass, [100.0, 100.0, 0.0], [1.0, 0.001, 0.0], 0.9, 1.5), h=1e-3)
+    res = run_master(siconos_ball(mass, [100.0, 100.0, 0.0], [1.0, 0.001, 0.0], 0.9, 1.5), h=1e-2)
     assert res.status == "ok"
     ours = res.impact_times(0)
     (zeno,) = res.zeno
@@ -175,12 +190,19 @@ def test_linear_oscillator_matches_siconos_up_to_accumulation_then_persistent_co
     assert np.all(ref[resolved:] >= ours[-1] - 1e-8)
     assert np.all(ref[resolved:] <= zeno["t_inf"] + 1e-8)
     assert abs(zeno["t_inf"] - 0.870279) <= 1e-6
-    after = res.frame[res.frame["t"] > zeno["t_inf"] + 1e-3]
+    after = res.frame[res.frame["t"] > zeno["t_inf"] + 1e-2]
     assert np.all(after["active0"] == 1) and np.all(np.abs(after["g0"]) <= 1e-15)
     # λ = m g behind the wall at the spring's rest position: Siconos' lambda(2) column
     data = np.loadtxt(oracle("siconos", "LinearOscillatorED.ref"), skiprows=1)
     assert data[-1, 6] == pytest.approx(mass * G0, rel=1e-6)
-    assert np.allclose(after["P0"] / 1e-3, data[-1, 6], rtol=1e-6)
+    # the trajectory at Siconos' output times, x (wall) and y (free spring) coordinates
+    rows = siconos_smooth_rows("LinearOscillatorED.ref")
+    rows = rows[rows[:, 0] <= 1.5]
+    x = np.array([res.state(t) for t in rows[:, 0]])
+    assert np.max(np.abs(x[:, 0] - rows[:, 1])) <= 1e-10
+    assert np.max(np.abs(x[:, 1] - rows[:, 7])) <= 1e-10
+    assert np.max(np.abs(x[:, 4] - rows[:, 8])) <= 1e-7
+    assert np.allclose(after["P0"] / 1e-2, data[-1, 6], rtol=1e-6)
 
 
 # -- acceptance: forced impact oscillator (THEORY §7.2) ----------------------------------------

@@ -152,7 +152,7 @@ class _Run:
         self.max_events = max_events
         self.zeno_velocity_ratio = zeno_velocity_ratio
         count = int(np.floor(t_end / h + 1e-9)) + 1
-        self.t_grid = h * np.arange(count)
+        self.t_grid = np.minimum(h * np.arange(count), t_end)     # k·h may exceed t_end by an ulp
         self.X = np.full((count, 2 * self.n), np.nan)
         self.P = np.zeros((count, self.m))
         self.k_next = 0
