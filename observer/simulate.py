@@ -6,13 +6,15 @@ from pathlib import Path
 from typing import Iterable
 
 import numpy as np
+import pandas as pd
 
 from observer.errors import InputError
 from observer.loop import LoopInput, check_engine, check_record_every, summary_frame
 from observer.loop import run as run_loop
 from observer.observers import OBSERVER_DESIGNS, ObserverConfig, Slave, check_observer_name, \
     lyapunov, lyapunov_decrements
-from observer.result import SimulationResult, SlaveTrajectory, run_metadata
+from observer.result import (EVENT_COLUMNS, RunStatus, SimulationResult, SlaveTrajectory,
+                             package_versions, run_metadata)
 from observer.scenario import Scenario, load_scenario  # noqa: F401  (re-exported: observer.load_scenario)
 from observer.stepping import MoreauJean
 from observer.switching import SOURCES, read_log
@@ -25,7 +27,7 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
              coupling: tuple[float, float] | None | str = "scenario",
              log: str | Path | None = None, residual_tol: float = 1e-9,
              engine: str = "compiled", record_every: int | None = None,
-             store: str = "full") -> SimulationResult:
+             store: str = "full", integrator: str = "time-stepping") -> SimulationResult:
     """Simulate the master (and the observers) of ``scenario`` with the Moreau–Jean scheme.
 
     Parameters
@@ -62,12 +64,22 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         trajectories only at the recorded rows: memory independent of the horizon beyond
         that (``result.summary``).
 
+    integrator : {"time-stepping", "event"}
+        ``"event"``: the exact event-driven integrator (:mod:`observer.event`): exact flow
+        between events, impact times to round-off, Zeno resolved into persistent contact; the
+        observers switch at the master's exact closing and opening times. The result is
+        sampled on the grid t_k = k·h; ``engine``, ``solver`` (other than pivoting),
+        ``record_every`` and ``store`` are time-stepping options and are refused.
+
     Returns
     -------
     SimulationResult
         With one :class:`~observer.result.SlaveTrajectory` per observer (V relative to the
-        master) and the switching signal ``chi``.
+        master), the switching signal ``chi`` and ``events`` (time-stepping: the master's
+        closing and opening steps, an approximation of the event table).
     """
+    if integrator not in INTEGRATORS:
+        raise InputError("integrator", f"must be one of {list(INTEGRATORS)}, got {integrator!r}")
     sc = load_scenario(scenario)
     overrides = {k: v for k, v in (("simulation.h", h), ("simulation.t_end", t_end),
                                    ("simulation.solver", solver), ("simulation.theta", theta),
@@ -75,6 +87,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
                  if v is not None}
     if overrides:
         sc = sc.with_overrides(overrides)
+    if integrator == "event":
+        return _simulate_event(sc, observers, source, coupling, log, engine, record_every, store)
     check_engine(engine)
     engine_note = None
     if engine == "compiled" and sc.solver != "pivoting":
@@ -138,9 +152,109 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     if out.summary is not None:
         summary = summary_frame(out, names, stepper.t0, stepper.h)
         summary.attrs["master_closings"] = out.summary["closings"].tolist()
-    return SimulationResult(stepper.time(out.rows), out.q[0], out.u[0], out.P[0], out.active,
+    t = stepper.time(out.rows)
+    events = stepping_events(t, out.q[0], out.u[0], out.P[0], out.active, system) \
+        if record_every == 1 else None
+    return SimulationResult(t, out.q[0], out.u[0], out.P[0], out.active,
                             system, meta, chi=out.chi if slaves else None, slaves=trajectories,
-                            sigma=out.sigma[0], summary=summary)
+                            sigma=out.sigma[0], summary=summary, events=events)
+
+
+INTEGRATORS = ("time-stepping", "event")
+
+
+def stepping_events(t, q, u, P, active, system) -> pd.DataFrame:
+    """The event table of a time-stepped master, approximately: a closing step with an
+    impulse is an ``impact`` (γ⁻ = γ_k, γ⁺ = γ_{k+1}, the step's impulse; time t_k), a
+    closing step without one a ``stick``, an opening step a ``liftoff``."""
+    gamma = u @ system.W + system.nu_dot(t)
+    rows = []
+    closing = active[1:] & ~active[:-1]
+    opening = ~active[1:] & active[:-1]
+    for k, j in zip(*np.nonzero(closing | opening)):
+        kind = "liftoff" if opening[k, j] else ("impact" if P[k + 1, j] > 0 else "stick")
+        rows.append((float(t[k]), int(j), kind, float(gamma[k, j]), float(gamma[k + 1, j]),
+                     float(P[k + 1, j])))
+    return pd.DataFrame(rows, columns=list(EVENT_COLUMNS)).astype(
+        {"time": float, "contact": int, "kind": str, "gamma_minus": float, "gamma_plus": float,
+         "impulse": float})
+
+
+def _simulate_event(sc: Scenario, observers, source, coupling, log, engine, record_every,
+                    store) -> SimulationResult:
+    """:func:`simulate` with ``integrator="event"`` (see there)."""
+    from observer.event.master import run_master
+    from observer.event.observers import run_observers
+
+    for name, value, default in (("engine", engine, "compiled"), ("record_every", record_every, None),
+                                 ("store", store, "full")):
+        if value != default:
+            raise InputError(name, f"is a time-stepping option; integrator=\"event\" samples "
+                             f"on the grid t_k = k·h (got {name} = {value!r})")
+    if sc.solver != "pivoting":
+        raise InputError("simulation.solver", "the event-driven integrator solves its impact "
+                         f"problems by pivoting (got {sc.solver!r})")
+    system = sc.system
+    if isinstance(observers, str):
+        observers = scenario_observers(sc) if observers == "scenario" else [observers]
+    observers = list(observers)
+    master = run_master(sc)
+    df = master.frame
+    n, m = system.n, system.m
+    t = df["t"].to_numpy(float)
+    cols = lambda p, k: df[[f"{p}{j}" for j in range(k)]].to_numpy()  # noqa: E731
+    q, u, P, active = cols("q", n), cols("u", n), cols("P", m), cols("active", m).astype(bool)
+    meta = {"scenario": sc.name, "integrator": "event", "h": sc.h, "t_end": sc.t_end,
+            "n": n, "m": m, "law": sc.law.law, "restitution": sc.law.restitution.tolist(),
+            "steps": int(t.size - 1), "master_status": master.status,
+            "events": int(len(master.events)), "zeno": master.zeno,
+            "versions": package_versions()}
+    slaves, chi = {}, None
+    status = RunStatus() if master.status == "ok" else RunStatus("stopped", f"master: {master.status}")
+    if observers:
+        base_dir = str(Path(sc.source).parent) if sc.source.endswith(".toml") else None
+        cfg = ObserverConfig.from_table(sc.observer, n, sc.q0, sc.u0, base_dir)
+        specs = _slaves(cfg, observers)
+        source = source or cfg.source
+        intervals = _event_intervals(sc, master, source, log or cfg.log,
+                                     cfg.coupling if coupling == "scenario" else coupling)
+        obs = run_observers(master, sc, specs, intervals=intervals)
+        chi = obs.chi
+        for name, r in obs.runs.items():
+            slaves[name] = SlaveTrajectory(name, r.q, r.u, r.P, r.V, None, None, None, r.sigma)
+        meta.update(observers=list(obs.runs), source=source,
+                    observer_events={name: int(len(r.events)) for name, r in obs.runs.items()})
+        if obs.status != "ok" and status.ok:
+            status = RunStatus("stopped", f"observer {obs.status}")
+    return SimulationResult(t, q, u, P, active, system, meta, chi=chi, slaves=slaves,
+                            sigma=np.zeros_like(P), events=master.events[list(EVENT_COLUMNS)],
+                            status=status)
+
+
+def _event_intervals(sc: Scenario, master, source: str, log, coupling) -> list[np.ndarray]:
+    """χ's closed intervals per contact: the master's exact ones, or a closing log's, clipped
+    to the coupling window."""
+    m = sc.system.m
+    if source == "log":
+        if log is None:
+            raise InputError("observer.log", "source = \"log\" needs a log file")
+        frame = read_log(log, m)
+        ivs = [frame.loc[frame.contact == j, ["t_close", "t_open"]].to_numpy(float) for j in range(m)]
+    elif source == "master":
+        ivs = [np.asarray(master.intervals(j), float).reshape(-1, 2) for j in range(m)]
+    else:
+        raise InputError("observer.source", f"the event-driven integrator drives observers by "
+                         f"the master or a log, not {source!r}")
+    if coupling in (None, "scenario"):
+        return ivs
+    t_on, t_off = coupling
+    out = []
+    for iv in ivs:
+        iv = iv[(iv[:, 1] >= t_on) & (iv[:, 0] <= t_off)].copy()
+        iv[:, 0] = np.maximum(iv[:, 0], t_on)
+        iv[:, 1] = np.minimum(iv[:, 1], t_off)
+        out.append(iv)
+    return out
 
 
 def _trajectory(system, h: float, out, i: int, name: str, master: dict,
