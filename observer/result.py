@@ -20,6 +20,7 @@ import pandas as pd
 
 from observer.errors import InputError
 from observer.io import jsonable, read_frame, read_result, write_frame  # noqa: F401 (re-exported)
+from observer.metrics import RHOS
 from observer.model import LinearSystem
 
 
@@ -152,6 +153,20 @@ class StepStats:
         return cls(fallback_steps=fb, **num)
 
 
+class ReadOnlyDict(dict):
+    """A dict that refuses every mutation (a frozen result's metadata and observers)."""
+
+    def _refuse(self, *args, **kwargs):
+        raise TypeError("a SimulationResult is frozen: build a new one "
+                        "(dataclasses.replace) instead of changing it")
+
+    __setitem__ = __delitem__ = __ior__ = _refuse
+    clear = pop = popitem = setdefault = update = _refuse
+
+    def __reduce__(self):
+        return type(self), (dict(self),)
+
+
 #: Columns of :attr:`SimulationResult.events` (one row per impact/contact event of the
 #: event-driven integrator): event time, contact index, event kind (e.g. ``"impact"``,
 #: ``"release"``), contact velocity before/after and the impulse.
@@ -169,9 +184,12 @@ def check_events(events: pd.DataFrame | None) -> pd.DataFrame | None:
     return events
 
 
-@dataclass
+@dataclass(frozen=True)
 class SimulationResult:
-    """A master run (and optionally observer runs) on the grid ``t``.
+    """A master run (and optionally observer runs) on the grid ``t``, complete and frozen.
+
+    Built once with every field (``dataclasses.replace`` makes a changed copy); ``metadata``
+    and ``slaves`` are read-only mappings, the arrays are not written to after construction.
 
     Attributes
     ----------
@@ -215,13 +233,14 @@ class SimulationResult:
     events: pd.DataFrame | None = None
 
     def __post_init__(self):
-        if self.status is None:
-            self.status = RunStatus.from_metadata(self.metadata)
-        elif not isinstance(self.status, RunStatus):
-            raise InputError("status", f"must be a RunStatus, got {type(self.status).__name__}")
-        if self.stats is None:
-            self.stats = StepStats.from_metadata(self.metadata)
-        check_events(self.events)
+        meta = ReadOnlyDict(self.metadata)
+        status = RunStatus.from_metadata(meta) if self.status is None else self.status
+        if not isinstance(status, RunStatus):
+            raise InputError("status", f"must be a RunStatus, got {type(status).__name__}")
+        for name, value in (("metadata", meta), ("slaves", ReadOnlyDict(self.slaves)),
+                            ("status", status), ("events", check_events(self.events)),
+                            ("stats", self.stats or StepStats.from_metadata(meta))):
+            object.__setattr__(self, name, value)
 
     @property
     def g(self) -> np.ndarray:
@@ -258,13 +277,14 @@ class SimulationResult:
         df.attrs["status"] = self.status.to_dict()
         return df
 
-    def synchronization(self, rhos: tuple[float, ...] = (1e-3, 1e-6, 1e-9)) -> pd.DataFrame:
+    def synchronization(self, rhos: tuple[float, ...] = RHOS) -> pd.DataFrame:
         """One row per observer: first-passage times ``t_sync_ρ`` (from t_on, to V ≤ ρ·V(t_on))
         and settling times ``t_settle_ρ`` (after which V stays below ρ·V(t_on) for the rest of
         the window, :func:`observer.metrics.settling_time`), the fitted exponential rate of V
         over the coupling window, V(t_on), the final V and the floor (median of V over the
         last 10 % of the window). ``inf`` marks a threshold never reached."""
-        from observer.metrics import decay_rate, floor, settling_time, switchings, sync_time
+        from observer.metrics import (decay_rate, floor, settle_column, settling_time, switchings,
+                                      sync_column, sync_time)
 
         coupling = self.metadata.get("coupling") or [float(self.t[0]), float(self.t[-1])]
         t_on, t_off = float(coupling[0]), min(float(coupling[1]), float(self.t[-1]))
@@ -273,8 +293,8 @@ class SimulationResult:
             k_on = int(np.searchsorted(self.t, t_on))
             row = {"observer": name, "t_on": t_on, "t_off": t_off, "V_on": float(s.V[k_on])}
             for rho in rhos:
-                row[f"t_sync_{rho:g}"] = sync_time(self.t, s.V, rho, t_on, t_off)
-                row[f"t_settle_{rho:g}"] = settling_time(self.t, s.V, rho, t_on, t_off)
+                row[sync_column(rho)] = sync_time(self.t, s.V, rho, t_on, t_off)
+                row[settle_column(rho)] = settling_time(self.t, s.V, rho, t_on, t_off)
             row["rate"] = decay_rate(self.t, s.V, t_on, t_off)
             row["V_end"] = float(s.V[-1])
             row["floor"] = floor(self.t, s.V, t_off - 0.1 * (t_off - t_on), t_off)

@@ -6,7 +6,9 @@ Runs are short (``bouncing_ball``/``double_mass`` over at most 0.05 s).
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import pickle
 
 import numpy as np
 import pandas as pd
@@ -144,6 +146,10 @@ def test_read_result_returns_frame_and_metadata(observed_run, tmp_path, ext):
     assert read_frame(tmp_path / f"r.{ext}").attrs == meta          # the attrs view agrees
 
 
+def test_read_result_is_public_api():
+    assert observer.read_result is read_result and "read_result" in observer.__all__
+
+
 def test_csv_without_sidecar_reads_with_empty_metadata(observed_run, tmp_path):
     observed_run.to_frame().to_csv(tmp_path / "edited.csv", index=False)   # e.g. a spreadsheet
     df, meta = read_result(tmp_path / "edited.csv")
@@ -203,3 +209,39 @@ def test_cli_run_files_read_by_plain_pandas(tmp_path):
         df = (pd.read_csv if ext == "csv" else pd.read_parquet)(out)
         assert list(df.columns) == DM_COLUMNS and len(df) == 21
         assert np.isfinite(df[["V_jump", "V_nojump"]].to_numpy()).all()
+
+
+# ---------------------------------------------------------------------------------------
+# frozen
+# ---------------------------------------------------------------------------------------
+def test_result_is_frozen_after_construction(observed_run):
+    res = observed_run
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        res.chi = None
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        res.status = RunStatus("stopped", "x")
+    with pytest.raises(TypeError, match="frozen"):
+        res.metadata["h"] = 1.0
+    with pytest.raises(TypeError, match="frozen"):
+        res.slaves["other"] = res.slaves["jump"]
+    with pytest.raises(TypeError, match="frozen"):
+        res.metadata.update(h=1.0)
+    assert res.metadata["h"] == 1e-3 and set(res.slaves) == {"jump", "nojump"}
+
+
+def test_replace_and_pickle_give_equal_frozen_copies(observed_run):
+    stopped = dataclasses.replace(observed_run, status=RunStatus("stopped", "SIGINT at step 30"))
+    assert stopped.status.state is RunState.STOPPED and observed_run.status.ok
+    assert stopped.metadata == observed_run.metadata
+    back = pickle.loads(pickle.dumps(observed_run))
+    assert back.metadata == observed_run.metadata and back.status == observed_run.status
+    assert np.array_equal(back.slaves["jump"].V, observed_run.slaves["jump"].V)
+    with pytest.raises(TypeError, match="frozen"):
+        back.metadata["h"] = 2.0
+
+
+def test_the_caller_cannot_change_a_result_through_its_own_dicts(observed_run):
+    meta, slaves = dict(observed_run.metadata), dict(observed_run.slaves)
+    res = _bare(observed_run, metadata=meta, slaves=slaves)
+    meta["h"], slaves["extra"] = 5.0, None
+    assert res.metadata["h"] == 1e-3 and "extra" not in res.slaves
