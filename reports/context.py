@@ -109,6 +109,21 @@ def load_trajectory(row: pd.Series) -> pd.DataFrame | None:
     return pd.read_parquet(path) if path.exists() else None
 
 
+PEERS_KIND = "peers"
+"""Rows of the Siconos comparison (declared by :mod:`bench.peers`, not by the schema)."""
+
+
+def schema_columns(kind: str) -> tuple[str, ...]:
+    """The columns :mod:`bench.schema` declares for rows of ``kind`` (none for peer rows)."""
+    from bench.schema import ROWS
+
+    if kind == PEERS_KIND:
+        return ()
+    if kind not in ROWS:
+        raise ValueError(f"kind: unknown row kind {kind!r} (known: {', '.join([*ROWS, PEERS_KIND])})")
+    return tuple(ROWS[kind])
+
+
 @dataclass
 class ReportContext:
     """Shared input of the sections.
@@ -141,13 +156,20 @@ class ReportContext:
     key_numbers: list = field(default_factory=list)
 
     def rows(self, kind: str, ok_only: bool = False) -> pd.DataFrame:
-        """The rows one runner wrote (``kind``), optionally only those with status ok."""
-        if "kind" not in self.df:
-            return pd.DataFrame()
-        sel = self.df[self.df["kind"] == kind]
+        """The rows of one case kind, with every column :mod:`bench.schema` declares for it
+        (NaN where the rows lack one); optionally only those with status ok.
+
+        Raises
+        ------
+        ValueError
+            ``kind`` is not a kind of :data:`bench.schema.ROWS` (nor ``"peers"``).
+        """
+        declared = schema_columns(kind)
+        sel = self.df[self.df["kind"] == kind] if "kind" in self.df else pd.DataFrame()
         if ok_only and "status" in sel:
             sel = sel[sel["status"] == "ok"]
-        return sel.copy()
+        missing = [c for c in declared if c not in sel.columns]
+        return sel.assign(**{c: float("nan") for c in missing}) if len(sel) else sel.copy()
 
     def unavailable_notes(self, prefix: str) -> list[str]:
         """Cases the last suite run skipped (``<suite>.unavailable.json``) whose id starts

@@ -11,8 +11,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Iterable
 
+from observer import metrics
 from observer.contact import CONTACT_SOLVERS
-from observer.scenarios import SCENARIOS
+from observer.scenarios import SCENARIOS, info
 
 from observer.observers import OBSERVER_DESIGNS, RATIOS
 
@@ -24,26 +25,23 @@ REFERENCE_SOLVER = "reference"
 
 def rhos() -> tuple[float, ...]:
     """The synchronization thresholds ρ (the one list, :data:`observer.metrics.RHOS`)."""
-    from observer.metrics import RHOS
-    return tuple(RHOS)
+    return tuple(metrics.RHOS)
 
 
 def settle_column(rho: float) -> str:
     """Row column of the settling time below ρ·V(t_on) (named by :mod:`observer.metrics`)."""
-    from observer import metrics
-    return metrics.settle_column(rho) if hasattr(metrics, "settle_column") else f"t_settle_{rho:g}"
+    return metrics.settle_column(rho)
 
 
 def sync_column(rho: float) -> str:
     """Row column of the first-passage time to ρ·V(t_on) (named by :mod:`observer.metrics`)."""
-    from observer import metrics
-    return metrics.sync_column(rho) if hasattr(metrics, "sync_column") else f"t_sync_{rho:g}"
+    return metrics.sync_column(rho)
 
 
 def above_column(rho: float) -> str:
     """Row column: fraction of the window samples after the first passage with V back above
-    ρ·V(t_on) (named by :mod:`observer.metrics` once it names it)."""
-    from observer import metrics
+    ρ·V(t_on) (named by :mod:`observer.metrics` once it names it; :mod:`bench.schema` spells it
+    out today)."""
     return metrics.above_column(rho) if hasattr(metrics, "above_column") else f"above_after_{rho:g}"
 
 
@@ -111,29 +109,18 @@ def fast_solvers() -> tuple[str, ...]:
 
 
 def scenario_description(name: str) -> str:
-    """One-line description of a built-in scenario ('' for an unknown one)."""
-    return str(_scenario_info(name, "description") or getattr(SCENARIOS.get(name), "DESCRIPTION", "") or "")
+    """One-line description of a scenario ('' for one that is not registered)."""
+    return info(name).description if name in SCENARIOS else ""
 
 
 def plot_labels(name: str, dof: int, contact: int) -> tuple[str, str]:
-    """Axis labels (coordinate, gap) of a scenario's figure from its metadata
-    (``observer.scenarios.info(name).labels``), generic ones for a scenario without."""
-    labels = _scenario_info(name, "labels")
-    if labels:
-        return tuple(labels)[:2]
+    """Axis labels (coordinate, gap) of a scenario's figure (``info(name).labels``); generic
+    ones for a scenario that is not registered."""
+    if name in SCENARIOS:
+        return tuple(info(name).labels)[:2]
     return f"q{dof}", f"gap g{contact} (m)"
 
 
 def scenario_notes(name: str) -> str:
     """The scenario's own notes (what is drawn, what to watch), '' when it has none."""
-    return str(_scenario_info(name, "notes") or "")
-
-
-def _scenario_info(name: str, field: str):
-    """A field of ``observer.scenarios.info(name)`` (None for an unknown scenario)."""
-    import observer.scenarios as scenarios
-
-    info = getattr(scenarios, "info", None)  # scenario metadata (issue 10 item 2)
-    if info is None or name not in SCENARIOS:
-        return None
-    return getattr(info(name), field, None)
+    return info(name).notes if name in SCENARIOS else ""

@@ -1046,3 +1046,20 @@ def test_limitations_and_settings_quote_the_rows_and_the_registries(synthetic_re
     worst = max(MICRO_MEANS.values()) * RESIDUAL_PER_SECOND
     assert settings["largest residual of a timed contact solve"] == fmt(worst)
     assert settings["ratios (baseline / candidate)"].startswith("nojump/jump")
+
+
+def test_context_rows_carry_every_schema_column_and_refuse_unknown_kinds(tmp_path):
+    """ReportContext.rows(kind): the rows of that kind with every column bench.schema declares
+    for it (NaN where missing); an unknown kind is an error naming it."""
+    from bench.schema import ROWS
+    from reports.context import ReportContext
+
+    df = pd.DataFrame([{"kind": "scaling", "N": 5, "status": "ok"}, {"kind": "checks", "status": "n/a"}])
+    ctx = ReportContext(df=df, files=[], micro=pd.DataFrame(), micro_meta={}, suites=["x"],
+                        command="", out_dir=tmp_path)
+    scal = ctx.rows("scaling")
+    assert len(scal) == 1 and set(ROWS["scaling"]) <= set(scal.columns)
+    assert np.isnan(scal["peak_mem_mb"].iloc[0]) and scal["N"].iloc[0] == 5
+    assert ctx.rows("checks", ok_only=True).empty and ctx.rows("observers").empty
+    with pytest.raises(ValueError, match="kind: unknown row kind 'scalling'"):
+        ctx.rows("scalling")
