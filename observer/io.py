@@ -61,10 +61,21 @@ def _check_suffix(path: Path) -> str:
     return suffix
 
 
+def _write_sidecar(side: Path, meta_json: str | None) -> None:
+    """Write the metadata sidecar atomically; no metadata: no sidecar (an old one is removed)."""
+    if meta_json is None:
+        side.unlink(missing_ok=True)
+        return
+    tmp = side.with_name(f".{side.name}.tmp")
+    tmp.write_text(meta_json + "\n", encoding="utf-8")
+    os.replace(tmp, side)
+
+
 def write_frame(df: pd.DataFrame, path: str | Path) -> Path:
     """Write ``df`` by extension, with ``df.attrs`` as the metadata.
 
-    ``.csv``: plain header row, metadata in the sidecar :func:`sidecar_path`; ``.parquet``:
+    ``.csv``: plain header row, metadata in the sidecar :func:`sidecar_path` (none when
+    ``df.attrs`` is empty); ``.parquet``:
     metadata in the schema metadata under :data:`PARQUET_KEY`. Each file is written under a
     temporary name and renamed, so a reader never sees a half-written file.
 
@@ -85,10 +96,7 @@ def write_frame(df: pd.DataFrame, path: str | Path) -> Path:
         plain = df.copy()
         plain.attrs = {}
         plain.to_csv(tmp, index=False, float_format="%.17g")
-        side = sidecar_path(path)
-        side_tmp = side.with_name(f".{side.name}.tmp")
-        side_tmp.write_text(meta_json + "\n", encoding="utf-8")
-        os.replace(side_tmp, side)
+        _write_sidecar(sidecar_path(path), meta_json if df.attrs else None)
     else:
         table = pa.Table.from_pandas(df, preserve_index=False)
         schema_meta = dict(table.schema.metadata or {})

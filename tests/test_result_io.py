@@ -75,7 +75,7 @@ def test_status_is_frozen():
 # events
 # ---------------------------------------------------------------------------------------
 def test_events_default_to_none_and_accept_the_documented_columns(observed_run):
-    assert observed_run.events is None
+    assert _bare(observed_run).events is None
     ev = _events()
     res = _bare(observed_run, events=ev)
     assert list(res.events.columns) == list(EVENT_COLUMNS)
@@ -141,7 +141,8 @@ def test_read_result_returns_frame_and_metadata(observed_run, tmp_path, ext):
     assert list(df.columns) == DM_COLUMNS
     for col in DM_COLUMNS:
         assert np.array_equal(df[col].to_numpy(), expected[col].to_numpy()), col
-    assert meta == expected.attrs
+    events = {} if observed_run.events is None else {"events_file": f"r.events.{ext}"}
+    assert meta == {**expected.attrs, **events}
     assert df["P0"].dtype == np.float64 and df["active0"].dtype.kind == "i"
     assert read_frame(tmp_path / f"r.{ext}").attrs == meta          # the attrs view agrees
 
@@ -195,6 +196,7 @@ def test_events_are_written_beside_the_result(observed_run, tmp_path, ext):
     assert list(back.columns) == list(EVENT_COLUMNS)
     assert np.array_equal(back["time"].to_numpy(), ev["time"].to_numpy())
     assert back["kind"].tolist() == ["impact"] * 3
+    assert not (tmp_path / "ev.events.json").exists()            # no metadata, no sidecar
 
 
 def test_cli_run_files_read_by_plain_pandas(tmp_path):
