@@ -292,6 +292,67 @@ def test_bad_input_names_the_field(double_mass):
         run_observers(master, sc, ("jump",), intervals=[np.array([[1.0, 0.5]])])
     with pytest.raises(InputError, match="observer.observers"):
         run_observers(master, sc, ("nonsense",))
-    late = sc.with_overrides({"observer.coupling": [1.0, 20.0]})
-    with pytest.raises(InputError, match="observer.coupling"):
-        run_observers(master, late, ("jump",))
+    for window in ([0.0, 10.0], [0.005, 20.0]):     # ends before t_end; t_on off the grid
+        with pytest.raises(InputError, match="observer.coupling"):
+            run_observers(master, sc.with_overrides({"observer.coupling": window}), ("jump",))
+
+
+def test_coupling_window_runs_uncoupled_before_t_on():
+    """Before t_on each observer is the model with its own geometric constraints (source
+    "self", as in time-stepping): jump and nojump are the same system there, so identical;
+    the uncoupled state never penetrates (g ≥ 0 recomputed); from t_on on they are driven by χ
+    and the jump observer's gap is 0 at the master's closings (its projections)."""
+    from observer.event.master import run_master
+    sc = observer.load_scenario("double_mass", {"impact.law": "newton", "simulation.h": H_GRID,
+                                                "simulation.t_end": 4.0, "observer.coupling": [2.0, 4.0]})
+    master = run_master(sc)
+    obs = run_observers(master, sc, ("jump", "nojump"))
+    t = obs.t
+    before = t <= 2.0
+    jump, nojump = obs.runs["jump"], obs.runs["nojump"]
+    assert jump.status == nojump.status == "ok"
+    np.testing.assert_array_equal(jump.q[before], nojump.q[before])
+    np.testing.assert_array_equal(jump.u[before], nojump.u[before])
+    assert sc.system.gaps(jump.q[before], t[before]).min() >= -1e-12
+    assert not obs.chi[t < 2.0].any()
+    assert np.abs(jump.q[~before] - nojump.q[~before]).max() > 1e-6
+    proj = jump.events[jump.events.kind == "projection"]
+    assert len(proj) > 0 and proj.time.min() >= 2.0
+
+
+def test_multi_contact_velocity_constraints_and_newton_on_approaching_contacts():
+    """Four contacts (rocking_chain, N = 2, Newton e = 0.9), χ ≡ 1 on all of them, nojump:
+    after the impact at t = 0 every γ_i ≥ 0 (recomputed from the returned states); Newton's law
+    holds on the approaching contacts (0 ≤ γ⁺ + eγ⁻ ⊥ Λ ≥ 0, from the event rows) and the
+    separating ones it pushes are stopped (γ⁺ ≥ 0, e = 0); a contact that stays at γ = 0
+    between samples is carried by its force: the brute-force LCP oracle of the held set
+    (``tests/lcp_enum.py``) gives it γ̇ = 0 with λ ≥ 0."""
+    from lcp_enum import lcp_enum
+    sc = observer.load_scenario("rocking_chain", {"param.N": 2, "impact.law": "newton"})
+    system = sc.system
+    t = np.linspace(0.0, 0.3, 61)
+    u0 = np.random.default_rng(0).standard_normal(system.n) * 0.05
+    run = run_schedule(system, sc.law, t, np.array(sc.observer["q"]), u0,
+                       [np.array([[0.0, np.inf]])] * system.m, None)
+    assert run.status == "ok"
+    imp = run.events[run.events.kind == "impact"]
+    assert set(imp.time) == {0.0} and len(imp) == system.m
+    e = sc.law.restitution[imp.contact.to_numpy()]
+    approach = imp.gamma_minus.to_numpy() < 0
+    slack = (imp.gamma_plus + np.where(approach, e * imp.gamma_minus, 0.0)).to_numpy()
+    assert slack.min() >= -1e-14 and np.all(imp.impulse >= 0)
+    assert np.abs(slack * imp.impulse.to_numpy()).max() <= 1e-14
+    gam = system.contact_velocities(run.u, t)
+    assert gam[1:].min() >= -1e-12
+    held = np.abs(gam) <= 1e-12
+    assert (held[1:-1] & held[2:]).sum() >= 4
+    Minv = np.linalg.inv(system.M)
+    for k in range(1, t.size - 1):
+        B = np.flatnonzero(held[k] & held[k + 1])
+        if B.size == 0:
+            continue
+        WB = system.W[:, B]
+        acc = Minv @ (system.f(t[k]) - system.C @ run.u[k] - system.K @ run.q[k])
+        G, b = WB.T @ Minv @ WB, WB.T @ acc
+        lam = lcp_enum(G, b)
+        np.testing.assert_allclose(G @ lam + b, 0.0, atol=1e-8 * (1 + np.abs(b).max()))

@@ -36,14 +36,20 @@ The error Lyapunov function against the master is ``V = ½vᵀMv + ½eᵀKe`` (p
 Sampling convention: row 0 is the observer's initial state (before any event at t_0, as in
 time-stepping); row k ≥ 1 is the state at t_k *after* the events at t_k (right limit).
 
+Coupling window: before t_on each observer runs uncoupled (the event master of the same model
+from its own state, as ``source = "self"`` in time-stepping); t_off must reach t_end.
+
 API::
 
     from observer.event.master import run_master
-    from observer.event.observers import run_observers
+    from observer.event.observers import run_observers, run_schedule
     master = run_master(scenario)
-    obs = run_observers(master, scenario, observers=("jump", "nojump"))
+    obs = run_observers(master, scenario, observers=("jump", "nojump"))   # names or Slave objects
     obs.frame                 # t, chi0.., jump_q0.., jump_u0.., V_jump, nojump_q0.., ..., V_nojump
-    obs.runs["jump"].events   # time, contact, kind, gamma_minus, gamma_plus, impulse
+    obs.runs["jump"]          # EventObserverRun: q, u, V, P (impacts), sigma (position jumps), events, status
+    obs.runs["jump"].events   # time, contact, kind (projection/impact/stick/liftoff), gamma_minus, gamma_plus, impulse
+    obs.runs["jump"].as_slave()   # -> observer.result.SlaveTrajectory for SimulationResult.slaves
+    run_schedule(system, law, t, q0, u0, intervals, metric="K")   # one observer for any χ (no master)
 """
 
 from __future__ import annotations
@@ -56,7 +62,7 @@ import pandas as pd
 
 from observer.contact import get_solver
 from observer.errors import InputError
-from observer.impact import ImpactLaw, impact
+from observer.impact import NEWTON, ImpactLaw, impact, newton_impact
 from observer.model import LinearSystem
 from observer.observers import OBSERVER_DESIGNS, ObserverConfig, Slave, check_observer_name, lyapunov
 from observer.result import EVENT_COLUMNS
@@ -211,12 +217,14 @@ class Mode:
         self._expm: dict[float, np.ndarray] = {}
 
     def propagator(self, tau: float) -> np.ndarray:
-        """exp(A τ); cached for the grid step (any τ that repeats)."""
-        P = self._expm.get(tau)
+        """exp(A τ), kept in a small LRU cache (the grid steps and their halvings repeat; the
+        partial steps after events do not)."""
+        P = self._expm.pop(tau, None)
         if P is None:
             P = expm(self.A * tau)
-            if len(self._expm) < 256:
-                self._expm[tau] = P
+            if len(self._expm) >= 128:
+                del self._expm[next(iter(self._expm))]
+        self._expm[tau] = P
         return P
 
 
@@ -264,7 +272,8 @@ def _safe_start(mode: Mode, mon: _Monitor, z: np.ndarray, delta: float) -> float
     tiny = [1e3 * np.finfo(float).eps * float(np.linalg.norm(r)) * nz for r in rows]
     if d[0] < -tiny[0]:
         return -1.0
-    growth = np.exp(mode.norm * delta)
+    cap = min(delta, 1.0 / mode.norm) if mode.norm > 0.0 else delta   # e^{‖A‖s} ≤ e on (0, cap]
+    growth = np.exp(mode.norm * cap)
     for k in (1, 2):
         if d[k] < -tiny[k]:
             return -1.0
@@ -272,10 +281,10 @@ def _safe_start(mode: Mode, mon: _Monitor, z: np.ndarray, delta: float) -> float
             continue
         B = float(np.linalg.norm(rows[k + 1])) * growth * nz
         if k == 1:      # φ ≥ d0 + d1 s − B s²/2 ≥ d0 + d1 s/2 for s ≤ d1/B
-            s1 = min(delta, d[1] / B) if B > 0.0 else delta
+            s1 = min(cap, d[1] / B) if B > 0.0 else cap
             val = d[0] + 0.5 * d[1] * s1
         else:           # φ ≥ d0 + d1 s + d2 s²/2 − B s³/6 ≥ d0 + d1 s + d2 s²/4 for s ≤ 1.5 d2/B
-            s1 = min(delta, 1.5 * d[2] / B) if B > 0.0 else delta
+            s1 = min(cap, 1.5 * d[2] / B) if B > 0.0 else cap
             val = d[0] + d[1] * s1 + 0.25 * d[2] * s1 * s1
         if val > 0.0 or s1 >= delta:    # φ' > 0 on [O(round-off), s₁]: no crossing from above
             return s1
@@ -375,6 +384,12 @@ class EventObserverRun:
     events: pd.DataFrame
     status: str = "ok"
 
+    def as_slave(self):
+        """This run as a :class:`observer.result.SlaveTrajectory` (for ``SimulationResult.slaves``;
+        the per-step decrements of V are time-stepping quantities: None)."""
+        from observer.result import SlaveTrajectory
+        return SlaveTrajectory(self.name, self.q, self.u, self.P, self.V, None, None, None, self.sigma)
+
 
 @dataclass
 class EventObserversResult:
@@ -448,6 +463,7 @@ class _ObserverIntegrator:
         self.exo = Exosystem.build(system)
         self.Minv = np.linalg.inv(system.M)
         self._modes: dict[tuple, Mode] = {}
+        self._hold_maps: dict[tuple, tuple] = {}
         self.events: list[tuple] = []
 
     def mode(self, closed: frozenset, active: frozenset) -> Mode:
@@ -475,27 +491,61 @@ class _ObserverIntegrator:
         projection, without recording it: a correction of a few ulps per segment."""
         if not (self.jumps and closed):
             return q
-        idx = sorted(closed)
-        W = self.system.W[:, idx]
-        g = W.T @ q + self.system.nu(t)[idx]
-        NinvW = np.linalg.solve(self.metric, W)
-        return q - NinvW @ np.linalg.solve(W.T @ NinvW, g)
+        idx = tuple(sorted(closed))
+        corr = self._hold_maps.get(idx)
+        if corr is None:
+            W = self.system.W[:, list(idx)]
+            NinvW = np.linalg.solve(self.metric, W)
+            corr = self._hold_maps[idx] = (W, NinvW @ np.linalg.inv(W.T @ NinvW))
+        W, R = corr
+        return q - R @ (W.T @ q + self.system.nu(t)[list(idx)])
 
     def collide(self, t: float, u: np.ndarray, closed: frozenset, new: list, k_row: int) -> np.ndarray:
-        """Impact of eq. (9) on the closed set I if some γ_i⁻ < 0 (the master's impact-law code)."""
+        """Impact of eq. (9) on the closed set I when some γ_i⁻ < 0 (the master's impact-law code).
+
+        Poisson (Glocker's inequality form) acts on all of I: it keeps γ⁺ ≥ 0 by construction.
+        Newton's ``0 ≤ γ⁺ + eγ⁻ ⊥ Λ ≥ 0`` would let a separating contact of I (γ_i⁻ > 0) leave
+        with γ_i⁺ = −eγ_i⁻ < 0, violating its velocity constraint; so it acts on the
+        approaching and resting contacts J = {i ∈ I : γ_i⁻ ≤ 0}, and a separating contact the
+        impulse drives to γ⁺ < 0 joins J with e = 0 (until none does; for one contact: Newton).
+        """
         idx = np.array(sorted(closed))
         gam = self.system.contact_velocities(u, t)[idx]
         if not np.any(gam < 0.0):
             return u
-        W = self.system.W[:, idx]
-        Lam = impact(self.law, W.T @ self.Minv @ W, gam, idx, self.solver.solve)
-        u = u + self.Minv @ W @ Lam
-        gp = self.system.contact_velocities(u, t)[idx]
-        for j, gm, gpl, lam in zip(idx, gam, gp, Lam):
-            if lam > 0.0 or j in new:
-                self.events.append((t, int(j), "impact", float(gm), float(gpl), float(lam)))
+        if self.law.code != NEWTON:
+            J, Lam = idx, impact(self.law, self._delassus(idx), gam, idx, self.solver.solve)
+        else:
+            J, Lam = self._newton_on_approaching(t, u, idx, gam)
+        u = u + self.Minv @ self.system.W[:, J] @ Lam
+        gp = self.system.contact_velocities(u, t)
+        gm = dict(zip(idx.tolist(), gam))
+        for j, lam in zip(J, Lam):
+            if lam > 0.0:
+                self.events.append((t, int(j), "impact", float(gm[int(j)]), float(gp[j]), float(lam)))
             self.P[k_row, j] += lam
         return u
+
+    def _delassus(self, idx) -> np.ndarray:
+        W = self.system.W[:, idx]
+        return W.T @ self.Minv @ W
+
+    def _newton_on_approaching(self, t, u, idx, gam):
+        e_all = dict(zip(idx.tolist(), self.law.restitution[idx]))
+        J = [int(i) for i, g in zip(idx, gam) if g <= 0.0]
+        gm = dict(zip(idx.tolist(), gam))
+        for _ in range(idx.size):
+            e = np.array([e_all[j] for j in J])
+            Lam = newton_impact(self._delassus(J), np.array([gm[j] for j in J]), e, self.solver.solve)
+            gp = self.system.contact_velocities(u + self.Minv @ self.system.W[:, J] @ Lam, t)
+            tol = 1e-13 * max(1.0, float(np.max(np.abs(gam))))
+            pushed = [int(i) for i in idx if int(i) not in J and gp[i] < -tol]
+            if not pushed:
+                break
+            for j in pushed:
+                e_all[j] = 0.0
+            J = sorted(J + pushed)
+        return np.array(J), Lam
 
     def select_active(self, t: float, q: np.ndarray, u: np.ndarray, closed: frozenset) -> frozenset:
         """A = {i ∈ I : γ_i = 0 and λ_i > 0} from ``0 ≤ γ̇_B ⊥ λ_B ≥ 0`` over B = {i ∈ I : γ_i ≤ tol}."""
@@ -553,10 +603,23 @@ class _ObserverIntegrator:
         fills the grid rows with t_k < t_stop (and t_k == t_stop when it is the last sample)."""
         n, N1 = self.system.n, t.shape[0]
         count_here, last_event_t = 0, None
+        z = None                                     # carried between samples (exogenous part exact)
         while now < t_stop:
             md = self.mode(closed, active)
-            z = np.concatenate([q, u, self.exo.x(now)])
+            if z is None:
+                z = np.concatenate([q, u, self.exo.x(now)])
             mons = _monitors(md, closed)
+            if not mons:                             # free of own events: sample to sample
+                while k_next < N1 and t[k_next] < t_stop:
+                    z = md.propagator(float(t[k_next]) - now) @ z
+                    now = float(t[k_next])
+                    z[:n] = self.hold(now, z[:n], closed)
+                    Q[k_next], U[k_next] = z[:n], z[n:2 * n]
+                    k_next += 1
+                z = md.propagator(t_stop - now) @ z
+                now = t_stop
+                q, u = self.hold(now, z[:n], closed), z[n:2 * n].copy()
+                break
             # next stop: next grid sample or t_stop
             nxt = min(t_stop, float(t[k_next])) if k_next < N1 else t_stop
             delta = nxt - now
@@ -575,15 +638,17 @@ class _ObserverIntegrator:
                     if hit is None or tau < hit[0]:
                         hit = (tau, mon)
             if hit is None:
-                zb = md.propagator(delta) @ z
+                z = md.propagator(delta) @ z
                 now = nxt
-                q, u = self.hold(now, zb[:n], closed), zb[n:2 * n]
+                z[:n] = self.hold(now, z[:n], closed)
+                q, u = z[:n].copy(), z[n:2 * n].copy()
                 if k_next < N1 and t[k_next] == now and now < t_stop:
                     Q[k_next], U[k_next] = q, u
                     k_next += 1
                 continue
+            z_event, z = z, None
             tau, mon = hit
-            zb = md.propagator(tau) @ z
+            zb = md.propagator(tau) @ z_event
             now = now + tau
             q, u = self.hold(now, zb[:n], closed), zb[n:2 * n]
             count_here = count_here + 1 if now == last_event_t else 1
@@ -684,30 +749,84 @@ def run_observers(master, scenario, observers: Iterable = ("jump", "nojump"), *,
 
     Notes
     -----
-    The observers are coupled over the whole run (χ from t_0): a scenario coupling window
-    that starts later or ends earlier raises ``InputError("observer.coupling")``.
+    With a coupling window [t_on, t_off] (the scenario's ``observer.coupling``) each observer
+    runs uncoupled before t_on, as in time-stepping: it is then a master of the same model
+    (:func:`~observer.event.master.run_master` from its own state; its state must not penetrate
+    at t_0). t_on must be a grid sample; t_off must reach the end of the run (else
+    ``InputError("observer.coupling")``).
     """
     system = scenario.system
     slaves = _slaves(scenario, observers)
     if any(s.metric == "K" for s in slaves):
         system.require_definite_stiffness("the observer with position jumps")
     t, qm, um = _master_arrays(master, system.n)
-    coupling = scenario.observer.get("coupling")
-    if coupling is not None and (coupling[0] > t[0] or coupling[1] < t[-1]):
-        raise InputError("observer.coupling", f"the event-driven observers are coupled over the whole "
-                         f"run [{t[0]}, {t[-1]}]; got {list(coupling)}")
+    k_on = _coupling_start(scenario, t)
     if intervals is None:
         intervals = [np.asarray(master.intervals(j), dtype=float).reshape(-1, 2) for j in range(system.m)]
     intervals = _check_intervals(intervals, system.m)
-    schedule = switching_schedule(intervals, float(t[0]), float(t[-1]))
-    out = EventObserversResult(t, _grid_chi(t, intervals))
+    schedule = switching_schedule(intervals, float(t[k_on]), float(t[-1]))
+    chi = _grid_chi(t, intervals)
+    chi[:k_on] = False
+    out = EventObserversResult(t, chi)
     for s in slaves:
-        integ = _ObserverIntegrator(system, scenario.law, metric_matrix(system, s.metric), get_solver(solver))
-        Q, U, status = integ.run(t, np.asarray(s.q0, float), np.asarray(s.u0, float), schedule)
-        V = lyapunov(system, Q, U, qm, um)
-        out.runs[s.name] = EventObserverRun(s.name, s.position_jumps, Q, U, V, integ.P, integ.sigma,
-                                            _event_frame(integ.events), status)
+        out.runs[s.name] = _run_one(scenario, s, t, k_on, schedule, solver)
+        out.runs[s.name].V = lyapunov(system, out.runs[s.name].q, out.runs[s.name].u, qm, um)
     return out
+
+
+def _coupling_start(scenario, t: np.ndarray) -> int:
+    """Grid row of t_on: the observers are coupled on [t_on, t_end]; before t_on each runs
+    uncoupled (its own geometric constraints: the event master from its own state)."""
+    coupling = scenario.observer.get("coupling")
+    if coupling is None or coupling[0] <= t[0]:
+        k_on = 0
+    else:
+        k_on = int(np.searchsorted(t, coupling[0]))
+        if k_on >= t.size or t[k_on] != coupling[0]:
+            raise InputError("observer.coupling", f"t_on = {coupling[0]} must be a sample of the output "
+                             f"grid t_k = k·h (h = {t[1] - t[0]:g}) within [{t[0]}, {t[-1]}]")
+    if coupling is not None and coupling[1] < t[-1]:
+        raise InputError("observer.coupling", f"the event-driven observers stay coupled to the end of "
+                         f"the run (t_off ≥ {t[-1]}); got t_off = {coupling[1]}")
+    return k_on
+
+
+def _run_one(scenario, s: Slave, t: np.ndarray, k_on: int, schedule, solver: str) -> EventObserverRun:
+    """One observer: uncoupled on [t_0, t_on] (the event master from its state), coupled after."""
+    system = scenario.system
+    q0, u0 = np.asarray(s.q0, float), np.asarray(s.u0, float)
+    pre = None
+    if k_on > 0:
+        pre = _uncoupled(scenario, q0, u0, t[:k_on + 1])
+        q0, u0 = pre["q"][-1], pre["u"][-1]
+    integ = _ObserverIntegrator(system, scenario.law, metric_matrix(system, s.metric), get_solver(solver))
+    Q, U, status = integ.run(t[k_on:], q0, u0, schedule)
+    P, sigma, events = integ.P, integ.sigma, _event_frame(integ.events)
+    if pre is not None:
+        Q, U = np.vstack([pre["q"][:-1], Q]), np.vstack([pre["u"][:-1], U])
+        P = np.vstack([pre["P"][:-1], P])
+        P[k_on] += pre["P"][-1]
+        sigma = np.vstack([np.zeros((k_on, system.m)), sigma])
+        events = pd.concat([pre["events"], events], ignore_index=True) if len(pre["events"]) else events
+        if pre["status"] != "ok":
+            status = f"uncoupled phase {pre['status']}"
+    return EventObserverRun(s.name, s.position_jumps, Q, U, np.full(t.size, np.nan), P, sigma, events, status)
+
+
+def _uncoupled(scenario, q0: np.ndarray, u0: np.ndarray, t: np.ndarray) -> dict:
+    """The observer before t_on: the exact master of the same model started from its state."""
+    from observer.event.master import run_master
+    sc = scenario.with_overrides({"initial.q": q0.tolist(), "initial.u": u0.tolist(),
+                                  "simulation.t_end": float(t[-1])})
+    res = run_master(sc)
+    df = res.frame
+    n, m = scenario.system.n, scenario.system.m
+    if df.shape[0] < t.size or not np.array_equal(df["t"].to_numpy()[:t.size], t):
+        raise InputError("observer.coupling", "the uncoupled phase's grid does not match the master's")
+    df = df.iloc[:t.size]
+    ev = res.events[list(EVENT_COLUMNS)] if len(res.events) else _event_frame([])
+    return {"q": df[[f"q{j}" for j in range(n)]].to_numpy(), "u": df[[f"u{j}" for j in range(n)]].to_numpy(),
+            "P": df[[f"P{j}" for j in range(m)]].to_numpy(), "events": ev, "status": res.status}
 
 
 def metric_matrix(system: LinearSystem, metric: str | None) -> np.ndarray | None:
