@@ -225,13 +225,15 @@ def test_report_has_every_section_and_a_reproduce_command(smoke_report):
 def test_limitations_state_what_holds_in_discrete_time(smoke_report):
     """The report states the discrete facts as the README does: the identity exact, damping
     and projection ≤ 0 exactly, the impulse term without sign (an O(h) slack)."""
-    index, _ = smoke_report
+    index, out = smoke_report
     html = index.read_text(encoding="utf-8")
     lim = html[html.index('id="limitations"'):]
     lim = lim[:lim.index("</section>")] if "</section>" in lim else lim
     for phrase in ("holds exactly up to round-off", "no sign in discrete time",
                    "vanishes only as h → 0", "−(1−ε)/(2(1+ε))ΔPᵀΔδ"):
         assert phrase in lim, phrase
+    threads = load_rows([results_path("smoke", out)])["blas_threads"].dropna().unique()
+    assert len(threads) == 1 and f"with {fmt(threads[0])} BLAS thread(s)" in lim
 
 
 def test_report_tables_are_titled_and_have_no_nan_cells(smoke_report):
@@ -258,9 +260,9 @@ def test_report_is_self_contained(smoke_report):
 
 
 def test_not_applicable_and_not_reached_are_spelled_out(smoke_report):
-    index, _ = smoke_report
+    index, out = smoke_report
     html = index.read_text(encoding="utf-8")
-    rows = load_rows([results_path("smoke", _)])
+    rows = load_rows([results_path("smoke", out)])
     na = rows[(rows["kind"] == "observers") & (rows["status"] != "ok")]
     assert len(na) and all(f"n/a ({note}" in html for note in na["note"])  # the reason, spelled out
     assert "not reached" in html                         # 1 s runs do not reach 1e-9
@@ -514,7 +516,7 @@ def _micro_json() -> dict:
 @pytest.fixture(scope="module")
 def synthetic_report(tmp_path_factory):
     out = tmp_path_factory.mktemp("synthetic")
-    path = _rows_file(out / "synthetic.jsonl", _synthetic_rows())
+    path = _rows_file(out / "synthetic.cases", _synthetic_rows())
     (out / "synthetic-micro.json").write_text(json.dumps(_micro_json()))
     index = build_report([path], out / "report")
     return _parse(index), load_rows([path])
@@ -783,7 +785,7 @@ def test_peers_section_without_siconos(tmp_path, monkeypatch):
 
     monkeypatch.setattr(peers, "SICONOS_PYTHON", "/nonexistent/bin/python3")
     cases = [c for c in _synthetic_rows() if c[0].startswith("scaling:")]
-    path = _rows_file(tmp_path / "absent.jsonl", cases)
+    path = _rows_file(tmp_path / "absent.cases", cases)
     unavailable_path("absent", tmp_path).write_text(json.dumps(
         {"peers:impact_oscillator:h=0.0001": "Siconos absent: no interpreter at /nonexistent/bin/python3; "
                                               + peers.HOW_TO_GET}))
@@ -975,7 +977,7 @@ def test_a_registered_design_shows_in_every_observer_table(tmp_path, monkeypatch
                              for c, d, st, mg in (("lyapunov_decrease", "toy", "FAIL", -1.0),
                                                   ("proposition1_exact", "toy", "PASS", 0.0),
                                                   ("mass_spd", "", "PASS", 1.0))]))
-    page = _parse(build_report([_rows_file(tmp_path / "toy.jsonl", cases)], tmp_path / "r"))
+    page = _parse(build_report([_rows_file(tmp_path / "toy.cases", cases)], tmp_path / "r"))
     observers = [r for r in page.table("observers", "Observer table").dicts() if r["scenario"] == "dm"]
     assert [r["observer"] for r in observers] == [OBSERVER_DESIGNS[o].label for o in ("jump", "nojump")] \
         + [toy.label]
@@ -1032,6 +1034,7 @@ def test_limitations_and_settings_quote_the_rows_and_the_registries(synthetic_re
     scal = rows[rows["kind"] == "scaling"]
     assert f"from rest over T = {fmt(float(scal['t_end'].iloc[0]))} s;" in lim
     assert "Robustness uses double_mass and" in lim
+    assert "an unrecorded number of BLAS thread(s)" in lim        # the synthetic rows have none
     ball = rows[(rows["name"] == "ball") & (rows["status"] != "ok")].iloc[0]
     assert f"ball: the design {ball['observer']} does not apply ({ball['note']})" in lim
     for design in ("jump_mass", "jump_identity"):

@@ -32,7 +32,7 @@ def metric_item() -> list[str]:
             "observer table and the proof checks measure what it does."]
 TIMINGS = (
     "Timings are CPU seconds of one process (time.process_time) on the machine in the header, "
-    "with BLAS pinned to one thread; the machine may have been shared with other jobs. Compare "
+    "with {blas} BLAS thread(s); the machine may have been shared with other jobs. Compare "
     "timings within one report, not across machines. Runs with the kernel's contact solver use "
     "the compiled engine; the kernel's compile (or cache-load) time is measured once before any "
     "case and is in no row's time. Runs with another contact solver (the cvxpy/OSQP reference) "
@@ -48,7 +48,10 @@ FIXED = (
 
 
 def _uniq(rows, col: str) -> str:
-    return ", ".join(dict.fromkeys(rows[col].dropna().astype(str))) if col in rows else ""
+    """The distinct values of a column, in order of appearance, as text ('' without any)."""
+    if col not in rows:
+        return ""
+    return ", ".join(dict.fromkeys(fmt(v) for v in rows[col].dropna()))
 
 
 def thresholds_item(ctx: ReportContext) -> str:
@@ -112,7 +115,8 @@ def peers_item(ctx: ReportContext) -> list[str]:
 
 def limitations(ctx: ReportContext) -> list[str]:
     """Every limitation line for these results."""
-    return ([DISCRETE_TIME] + metric_item() + [TIMINGS, thresholds_item(ctx)] + work_precision_items(ctx)
+    timings = TIMINGS.format(blas=_uniq(ctx.df, "blas_threads") or "an unrecorded number of")
+    return ([DISCRETE_TIME] + metric_item() + [timings, thresholds_item(ctx)] + work_precision_items(ctx)
             + not_applicable_items(ctx) + robustness_item(ctx) + scaling_item(ctx)
             + peers_item(ctx) + list(FIXED))
 
