@@ -1066,3 +1066,42 @@ def test_context_rows_carry_every_schema_column_and_refuse_unknown_kinds(tmp_pat
     assert ctx.rows("checks", ok_only=True).empty and ctx.rows("observers").empty
     with pytest.raises(ValueError, match="kind: unknown row kind 'scalling'"):
         ctx.rows("scalling")
+
+
+def test_a_registered_contact_solver_shows_in_the_micro_benchmarks(tmp_path, monkeypatch):
+    """A toy contact solver added to CONTACT_SOLVERS (one entry) gets its own columns in the
+    speed-up table, its speed-up recomputed from the benchmark JSON."""
+    from observer.contact import CONTACT_SOLVERS
+
+    monkeypatch.setitem(CONTACT_SOLVERS, "toy", object)
+    data = _micro_json()
+    toy_means = {1: 8.0e-6, 8: 1.0e-4}
+    data["benchmarks"] += [{"group": f"contact solve m={m}", "name": f"test_solve[toy-{m}]",
+                            "stats": {"mean": t, "median": t, "stddev": t / 10, "min": t, "rounds": 5},
+                            "extra_info": {"kind": "contact_solve", "solver": "toy", "m": m, "residual": 0.0}}
+                           for m, t in toy_means.items()]
+    path = _rows_file(tmp_path / "solvers.cases", [c for c in _synthetic_rows() if c[0].startswith("checks")])
+    (tmp_path / "solvers-micro.json").write_text(json.dumps(data))
+    page = _parse(build_report([path], tmp_path / "r"))
+    table = {r["m"]: r for r in page.table("micro", "Speed-up of the fast contact solvers").dicts()}
+    for m, t in toy_means.items():
+        assert _num(table[str(m)]["speed-up toy"]) == pytest.approx(MICRO_MEANS[(m, "reference")] / t, rel=5e-3)
+        assert _num(table[str(m)]["toy (µs)"]) == pytest.approx(t * 1e6, rel=5e-3)
+
+
+def test_a_registered_scenario_brings_its_description_and_notes(tmp_path, monkeypatch):
+    """A toy scenario module in SCENARIOS (one entry): its subsection opens with the module's
+    own description and notes, then the settings of its rows."""
+    import types
+
+    from observer.scenarios import SCENARIOS
+
+    toy = types.ModuleType("toy_scenario")
+    toy.DESCRIPTION, toy.PARAMETERS = "toy oscillator for the report test", {}
+    toy.NOTES = "drawn: the toy coordinate."
+    monkeypatch.setitem(SCENARIOS, "toy_scenario", toy)
+    rows = [{**r, "scenario": "toy_scenario", "name": "toy run"} for r in _observer_rows()[0][1]]
+    page = _parse(build_report([_rows_file(tmp_path / "scn.cases", [("observers:toy", rows)])], tmp_path / "r"))
+    intro = page.sections["scn-toy-run"].paragraphs[0]
+    assert intro.startswith("Toy oscillator for the report test. Drawn: the toy coordinate. Settings: "
+                            f"h = {fmt(rows[0]['h'])} s, T = {fmt(rows[0]['t_end'])} s")
