@@ -24,8 +24,15 @@ solvers that return ``(iterations, status, residual)``.
   status at that step: the caller re-solves that step with the reference solver, records
   it, and resumes (:func:`observer.loop.run`).
 
+* **Health.** After every contact step the complementarity residual is recomputed from the
+  velocity actually applied (:func:`applied_residual`: ``Wᵀ(u_{k+1} − u_free)`` in place of
+  the solver's ``ĜP``); its largest value and step go to ``stats[5:7]``. A step whose applied
+  residual exceeds the tolerance stops the kernel with :data:`RESIDUAL_EXCEEDED` (the caller
+  stops the run there, :mod:`observer.loop`).
+
 Statuses: :data:`OK`, :data:`LCP_FAILED` (the step's contact problem was not solved to
-tolerance), :data:`PROJECTION_FAILED` (L_I not positive definite).
+tolerance), :data:`PROJECTION_FAILED` (L_I not positive definite), :data:`RESIDUAL_EXCEEDED`
+(the applied impulse violates the impact law beyond the tolerance).
 """
 
 from __future__ import annotations
@@ -33,7 +40,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-OK, LCP_FAILED, PROJECTION_FAILED = 0, 1, 2
+OK, LCP_FAILED, PROJECTION_FAILED, RESIDUAL_EXCEEDED = 0, 1, 2, 3
+STATS_SIZE = 8
+"""``stats`` of :func:`advance`: [contact solves, iterations, max LCP residual, min gap of the
+master after a step, its step, max applied residual (:func:`applied_residual`), its step, the
+applied residual of the last contact step]."""
 STRUCTURE_DENSE, STRUCTURE_BANDED = 0, 1
 EPS = float(np.finfo(np.float64).eps)
 ROUNDOFF = 16.0
@@ -284,13 +295,43 @@ def _free_velocity(k, q, u, h, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fba
 
 
 @njit(cache=True, inline="always")
+def applied_residual(Wp, Wi, Wv, act, a, du, bvec, z):
+    """Complementarity residual of the impulse as applied, relative like :func:`lcp_residual`.
+
+    With ``d = W_Aᵀδu`` (``δu = Σ (Â⁻¹W)_j P_j = u_{k+1} − u_free``, the velocity change the
+    step applied, summed apart from u_free so that the round-off of the velocity itself does
+    not enter; ``d`` equals ``ĜP`` up to round-off) and ``bvec`` the LCP's right-hand side (Newton:
+    ``γ_free + e∘γ_k``, so ``bvec + d = γ_{k+1} + e∘γ_k``, Siconos' law ``0 ≤ γ_{k+1} + eγ_k ⊥ P ≥ 0``;
+    Poisson: γ̃, so ``bvec + d = γ̃ + ĜP``, Glocker's expansion condition
+    ``0 ≤ γ̃ + ĜP ⊥ Λ_E − εΛ_C ≥ 0``), ``z`` the complementary unknown (P, or Λ_E − εΛ_C):
+    ``max_r |min(z_r, bvec_r + d_r)| / max(‖bvec‖_∞, ‖d‖_∞)``.
+    """
+    r_ = 0.0
+    sb = 0.0
+    sd = 0.0
+    for r in range(a):
+        j = act[r]
+        d = 0.0
+        for p in range(Wp[j], Wp[j + 1]):
+            d += Wv[p] * du[Wi[p]]
+        v = abs(min(z[r], bvec[r] + d))
+        if v > r_:
+            r_ = v
+        if abs(bvec[r]) > sb:
+            sb = abs(bvec[r])
+        if abs(d) > sd:
+            sd = abs(d)
+    return r_ / max(sb, sd, TINY)
+
+
+@njit(cache=True, inline="always")
 def step_system(k, q, u, act, a, project, slot, law, sch, wk, out):
     """One Moreau–Jean step on the closed set ``act[:a]``.
 
     ``sch`` = (h, θ, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, f̄, ν, ν̇, W (CSC: Wp, Wi,
     Wv), (Â⁻¹W)ᵀ, Ĝ, G₀, (N⁻¹W)ᵀ, WᵀN⁻¹W, e, tol) — the n×m matrices transposed, so that
     a contact's column is contiguous; the projection's (N⁻¹W)ᵀ and WᵀN⁻¹W are stacks over
-    the projection metrics, ``slot`` selects this system's; ``wk`` = work buffers ((n,), (10, m),
+    the projection metrics, ``slot`` selects this system's; ``wk`` = work buffers ((2, n), (10, m),
     (4, m, m), (2, m) bool); ``out`` = (q1, u1, P, Σ, q_pre, stats) with stats = [solves,
     iterations, max residual]. Writes q_{k+1}, u_{k+1}, P[:a], Σ[:a] and the position before
     the projection; returns the status. (Tuples keep the call inlinable: numba inlines
@@ -301,7 +342,8 @@ def step_system(k, q, u, act, a, project, slot, law, sch, wk, out):
     wk_f, wk_m, wk_mm, wk_b = wk
     q1, u1, P, sig, qpre, stats = out
     n = q.shape[0]
-    uf = wk_f
+    uf = wk_f[0]
+    du = wk_f[1]
     _free_velocity(k, q, u, h, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, uf)
     for i in range(n):
         u1[i] = uf[i]
@@ -353,12 +395,20 @@ def step_system(k, q, u, act, a, project, slot, law, sch, wk, out):
             if not _solve_counted(G, le, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
                 return LCP_FAILED
             for r in range(a):                                   # P = Λ_C + (ε∘Λ_C + μ)
+                le[r] = x[r]                                     # μ = Λ_E − ε∘Λ_C, kept
                 x[r] = lc[r] + (e[act[r]] * lc[r] + x[r])
+        for i in range(n):
+            du[i] = 0.0
         for r in range(a):
             P[r] = x[r]
             j = act[r]
             for i in range(n):
                 u1[i] += AinvWT[j, i] * x[r]
+                du[i] += AinvWT[j, i] * x[r]
+        res = applied_residual(Wp, Wi, Wv, act, a, du, bvec, x if (law == 0 or a == 1) else le)
+        stats[7] = res
+        if not res <= tol:
+            return RESIDUAL_EXCEEDED
     for i in range(n):
         q1[i] = q[i] + h * ((1.0 - theta) * u[i] + theta * u1[i])
         qpre[i] = q1[i]
@@ -528,7 +578,8 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
     With ``summary``, every step also updates the streaming summary of each observer
     (:data:`SUMMARY_FIELDS`, coupling window = grid samples k_on..k_off, thresholds ``rhos``),
     records V at the recorded rows (``rec_V``), and counts the master's closings per contact.
-    ``stats`` = [solves, iterations, max residual, min gap after a step, its step].
+    ``stats`` (:data:`STATS_SIZE`) = [solves, iterations, max residual, min gap after a step,
+    its step, max applied residual, its step, last applied residual].
 
     Returns ``(k, s, status)``: ``status == OK`` and k = k1 when done; otherwise the step and
     system that failed (their state untouched).
@@ -545,7 +596,7 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
     wv = np.empty(2 * n + m)
     sch = (h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, nu, nu_dot, Wp, Wi, Wv,
            AinvWT, Ghat, G0, KinvWT, L, e, tol)
-    wk = (np.empty(n), np.empty((10, m)), np.empty((4, m, m)), np.zeros((2, m), np.bool_))
+    wk = (np.empty((2, n)), np.empty((10, m)), np.empty((4, m, m)), np.zeros((2, m), np.bool_))
     out = (q1, u1, P, sig, qpre, stats)
     # step k is recorded (row (k+1)/record_every) when (k+1) % record_every == 0: counted,
     # not divided, per step
@@ -585,6 +636,9 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
                 a = predicted_active(kl, q, u, h, Wp, Wi, Wv, nu, nu_dot, act)
                 project = master_projection
             status = step_system(kl, q, u, act, a, project, slots[s], law, sch, wk, out)
+            if a > 0 and stats[7] > stats[5]:
+                stats[5] = stats[7]
+                stats[6] = k + 1
             if status != OK:
                 return k, s, status
             for i in range(n):

@@ -20,10 +20,22 @@ each system its own metric N (``q⁺ = q⁻ − N⁻¹W_I(W_IᵀN⁻¹W_I)⁻¹g
 projecting in the mass or identity metric), and ``metric=N`` replaces K for every system
 (the proof checks use it to build known-bad integrators). ``record_pre=True`` also keeps the positions
 before the projection (``q_pre``), which the position-jump part of eq. (17) needs.
+
+Every run ends with a :class:`~observer.health.Health` record (:attr:`LoopOutput.health`;
+its warnings also go to stderr). A step whose complementarity residual, recomputed from the
+velocity it applied, exceeds the tolerance stops the run there: the records are truncated
+to the last complete step (no unwritten rows) and :attr:`LoopOutput.stopped_at` /
+``stop_reason`` say where and why. ``on_chunk`` receives the finished rows as they are
+produced (:class:`Chunk`: every window of the compiled engine, every
+:data:`PYTHON_CHUNK` steps of the python one); with it, SIGINT and SIGTERM stop the run
+after the current window instead of killing it (``stop_signal``), so a streamed file
+(:mod:`observer.stream`) keeps every finished step.
 """
 
 from __future__ import annotations
 
+import signal
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -65,6 +77,8 @@ class LoopInput:
         Projection metric of every system without its own (None: K).
     metrics : tuple of (ndarray (n, n) or None), length S, optional
         Per system, its own projection metric (None: ``metric``).
+    names : tuple of str, length S − 1, optional
+        The observers' names (for :class:`Chunk` consumers; default ``obs1``, ``obs2``, ...).
     """
 
     stepper: MoreauJean
@@ -78,6 +92,7 @@ class LoopInput:
     chi: np.ndarray | None = None
     metric: np.ndarray | None = None
     metrics: tuple | None = None
+    names: tuple = ()
 
     def metric_of(self, s: int) -> np.ndarray | None:
         """The projection metric of system s (None: K)."""
@@ -128,6 +143,119 @@ class LoopOutput:
     run_time_s: float = 0.0
     V: np.ndarray | None = None
     summary: dict | None = None
+    stopped_at: int | None = None
+    stop_reason: str = ""
+    stop_signal: str | None = None
+    health: object = None
+
+    def stop_info(self, stepper) -> dict | None:
+        """``{"step", "t", "reason", "signal"}`` of a stopped run (None: it ran to the end)."""
+        if self.stopped_at is None:
+            return None
+        return {"step": int(self.stopped_at), "t": float(stepper.time(self.stopped_at)),
+                "reason": self.stop_reason, "signal": self.stop_signal}
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """Finished rows ``rows`` (grid indices) of a running loop, as views of its records.
+
+    ``q``, ``u``, ``P``, ``sigma`` have system s (0 = master) in the first axis; ``V`` the
+    kernel's V per observer (``store="summary"``; else None); ``system`` and ``names`` (the
+    observers') let a consumer build the result's columns (:mod:`observer.stream`).
+    """
+
+    rows: np.ndarray
+    t: np.ndarray
+    q: np.ndarray
+    u: np.ndarray
+    P: np.ndarray
+    sigma: np.ndarray
+    active: np.ndarray
+    chi: np.ndarray
+    V: np.ndarray | None
+    system: object
+    names: tuple
+
+
+PYTHON_CHUNK = 4096
+"""Steps between two chunks of the python engine."""
+
+
+class _Stopper:
+    """SIGINT/SIGTERM → a flag the loop checks between windows (installed only while a
+    streamed run is in progress, and only in the main thread)."""
+
+    SIGNALS = ("SIGINT", "SIGTERM")
+
+    def __init__(self, active: bool):
+        self.signal: str | None = None
+        self._old: dict = {}
+        self._active = active and threading.current_thread() is threading.main_thread()
+
+    def __enter__(self):
+        if self._active:
+            for name in self.SIGNALS:
+                signum = getattr(signal, name)
+                self._old[signum] = signal.signal(signum, self._handle)
+        return self
+
+    def _handle(self, signum, frame):
+        self.signal = signal.Signals(signum).name
+
+    def __exit__(self, *exc):
+        for signum, old in self._old.items():
+            signal.signal(signum, old)
+        return False
+
+
+def _emitter(inp: LoopInput, rec: dict, rows: np.ndarray, on_chunk, rec_V=None):
+    """``emit(k)``: pass the rows finished up to grid index k (not yet passed) to ``on_chunk``."""
+    state = {"done": 0}
+    names = tuple(inp.names) or tuple(f"obs{i}" for i in range(1, inp.q0.shape[0]))
+
+    def emit(k: int) -> None:
+        if on_chunk is None:
+            return
+        r1 = int(np.searchsorted(rows, k, side="right"))
+        r0 = state["done"]
+        if r1 <= r0:
+            return
+        sl = slice(r0, r1)
+        on_chunk(Chunk(rows[sl], inp.stepper.time(rows[sl]), rec["q"][:, sl], rec["u"][:, sl],
+                       rec["P"][:, sl], rec["sigma"][:, sl], rec["active"][sl], rec["chi"][sl],
+                       None if rec_V is None else rec_V[:, sl], inp.stepper.system, names))
+        state["done"] = r1
+
+    return emit
+
+
+def _finish(inp: LoopInput, out: LoopOutput, stopped_at: int | None, reason: str = "",
+            sig: str | None = None) -> LoopOutput:
+    """Truncate the records of a stopped run to its last complete step, attach the health
+    record and send its warnings to stderr."""
+    from dataclasses import replace
+
+    from observer.health import assess, emit
+
+    if stopped_at is not None:
+        R = int(np.searchsorted(out.rows, stopped_at, side="right"))
+        cut = {k: getattr(out, k)[:, :R] for k in ("q", "u", "P", "sigma")}
+        cut.update(active=out.active[:R], chi=out.chi[:R], rows=out.rows[:R])
+        if out.q_pre is not None:
+            cut["q_pre"] = out.q_pre[:, :R]
+        if out.V is not None:
+            cut["V"] = out.V[:, :R]
+        out = replace(out, stopped_at=int(stopped_at), stop_reason=reason, stop_signal=sig, **cut)
+    slots, _, Ls = projection_slots(inp)
+    health = assess(inp, out.rows, out.q, out.u, out.active, out.chi, out.stats,
+                    lambda s: Ls[slots[s]])
+    emit(health)
+    return replace(out, health=health)
+
+
+def _stop_text(stepper, what: str, k: int) -> str:
+    return f"{what} at t = {float(stepper.time(k)):.9g} (step {k} of {stepper.steps})"
 
 
 def check_engine(engine: str) -> str:
@@ -179,12 +307,17 @@ WINDOW = 1 << 16
 
 
 def run(inp: LoopInput, engine: str = "compiled", record_every: int = 1,
-        record_pre: bool = False, store: str = "full", rhos: tuple | None = None) -> LoopOutput:
+        record_pre: bool = False, store: str = "full", rhos: tuple | None = None,
+        on_chunk=None) -> LoopOutput:
     """Advance the master and the observers of ``inp`` over the stepper's grid.
 
     ``store="summary"`` (compiled engine) also computes, streaming over every step, what the
     synchronization metrics need (:func:`summary_frame`); with it the trajectories are kept
     only every ``record_every`` steps, so memory does not grow with the horizon beyond that.
+
+    ``on_chunk(chunk)`` (optional) is called with each :class:`Chunk` of finished rows, in
+    order, the last one before returning; while it is set, SIGINT and SIGTERM stop the run
+    after the current window (``LoopOutput.stop_signal``) instead of raising.
     """
     check_engine(engine)
     record_every = check_record_every(record_every)
@@ -193,10 +326,12 @@ def run(inp: LoopInput, engine: str = "compiled", record_every: int = 1,
     if engine == "python":
         if store == "summary":
             raise InputError("store", 'store="summary" needs engine="compiled"')
-        return _run_python(inp, record_every, record_pre)
+        with _Stopper(on_chunk is not None) as stopper:
+            return _run_python(inp, record_every, record_pre, on_chunk, stopper)
     from observer.metrics import RHOS
-    return _run_compiled(inp, record_every, record_pre, store == "summary",
-                         tuple(RHOS if rhos is None else rhos))
+    with _Stopper(on_chunk is not None) as stopper:
+        return _run_compiled(inp, record_every, record_pre, store == "summary",
+                             tuple(RHOS if rhos is None else rhos), on_chunk=on_chunk, stopper=stopper)
 
 
 def _allocate(inp: LoopInput, record_every: int, record_pre: bool):
@@ -217,7 +352,8 @@ def _allocate(inp: LoopInput, record_every: int, record_pre: bool):
 # ---------------------------------------------------------------------------------------
 # engine="python": the reference
 # ---------------------------------------------------------------------------------------
-def _run_python(inp: LoopInput, record_every: int, record_pre: bool) -> LoopOutput:
+def _run_python(inp: LoopInput, record_every: int, record_pre: bool, on_chunk=None,
+                stopper: _Stopper | None = None) -> LoopOutput:
     stepper = inp.stepper
     rec, rows = _allocate(inp, record_every, record_pre)
     S = inp.q0.shape[0]
@@ -225,6 +361,11 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool) -> LoopOutp
     states = [(inp.q0[s].copy(), inp.u0[s].copy()) for s in range(S)]
     coupled = inp.coupled(stepper.grid.t)
     chi_log = inp.chi_window(stepper.grid.t, 0)
+    emit = _emitter(inp, rec, rows, on_chunk)
+    health = {"applied_residual": 0.0, "applied_residual_step": -1, "min_gap": np.inf,
+              "min_gap_step": -1, "residual_source": "applied"}
+    tol = float(stepper.residual_tol)
+    stop, reason = None, ""
     t0 = time.perf_counter()
     for k in range(stepper.grid.steps):
         r = (k + 1) // record_every if (k + 1) % record_every == 0 else -1
@@ -233,6 +374,11 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool) -> LoopOutp
             q, u = states[s]
             q1, u1, P, sig, q_pre, act, chi = _python_step(inp, stepper, *proj[s], k, s, q, u, chi,
                                                            coupled[k], None if chi_log is None else chi_log[k])
+            res = _python_health(stepper, k, s, q, u, u1, P, act, q1, health)
+            if not res <= tol:
+                stop, reason = k, _stop_text(stepper, f"complementarity residual {res:.3g} > "
+                                             f"tolerance {tol:.3g} in step {k} (system {s})", k)
+                break
             states[s] = (q1, u1)
             if r >= 0:
                 rec["q"][s, r], rec["u"][s, r] = q1, u1
@@ -245,13 +391,58 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool) -> LoopOutp
                     rec["active"][r, act] = True
                     if S > 1:
                         rec["chi"][r, chi] = True
+        if stop is not None:
+            break
+        if stopper is not None and stopper.signal and k + 1 < stepper.grid.steps:
+            stop, reason = k + 1, _stop_text(stepper, stopper.signal, k + 1)
+            break
+        if (k + 1) % PYTHON_CHUNK == 0:
+            emit(k + 1)
+    emit(stepper.grid.steps if stop is None else stop)
     run_time = time.perf_counter() - t0
     st = stepper.stats
-    return LoopOutput(rows, rec["q"], rec["u"], rec["P"], rec["sigma"], rec["active"], rec["chi"],
-                      rec["q_pre"] if record_pre else None, "python",
-                      {"contact_solves": st.contact_solves, "iterations": st.iterations,
-                       "max_residual": st.max_residual, "fallbacks": st.fallbacks},
-                      [], 0.0, run_time)
+    out = LoopOutput(rows, rec["q"], rec["u"], rec["P"], rec["sigma"], rec["active"], rec["chi"],
+                     rec["q_pre"] if record_pre else None, "python",
+                     {"contact_solves": st.contact_solves, "iterations": st.iterations,
+                      "max_residual": st.max_residual, "fallbacks": st.fallbacks, **health},
+                     [], 0.0, run_time)
+    return _finish(inp, out, stop, reason, stopper.signal if stopper is not None else None)
+
+
+def _python_health(stepper: MoreauJean, k: int, s: int, q, u, u1, P, act, q1, health: dict) -> float:
+    """Fold step k of system s into ``health``; return its recomputed residual (0 without
+    contacts). The master's gaps after the step update the deepest penetration. The residual
+    is that of Newton's discrete law ``0 ≤ γ_{k+1} + e∘γ_k ⊥ P ≥ 0`` with ``ĜP`` replaced by
+    ``W_Aᵀ(u_{k+1} − u_free)`` (the kernel's :func:`observer.kernel.applied_residual`), valid
+    for the Newton law and every one-contact step; Poisson steps on several contacts count
+    the solver's own residual (``residual_source = "applied+solver"``)."""
+    if s == 0:
+        g = stepper.system.gaps(q1, stepper.time(k + 1))
+        j = int(np.argmin(g)) if g.size else -1
+        if g.size and g[j] < health["min_gap"]:
+            health["min_gap"], health["min_gap_step"] = float(g[j]), k + 1
+    if act.size == 0:
+        return 0.0
+    if stepper.law.code == 0 or act.size == 1:
+        res = newton_residual(stepper, k, q, u, u1, P, act)
+    else:
+        res = float(stepper.stats.max_residual)
+        health["residual_source"] = "applied+solver"
+    if res > health["applied_residual"]:
+        health["applied_residual"], health["applied_residual_step"] = res, k + 1
+    return res
+
+
+def newton_residual(stepper: MoreauJean, k: int, q, u, u1, P, act) -> float:
+    """``max|min(P, b + d)| / max(‖b‖_∞, ‖d‖_∞)`` with ``b = γ_free + e∘γ_k`` and
+    ``d = W_Aᵀ(Â⁻¹W_A P)`` (numpy twin of :func:`observer.kernel.applied_residual`)."""
+    W_A = stepper.S.W[:, act]
+    u_free = stepper.free_velocity(k, q, u)
+    nd = stepper.grid.nu_dot
+    b = (u_free @ W_A + nd[k + 1, act]) + stepper.law.restitution[act] * (u @ W_A + nd[k, act])
+    d = (stepper.S.AinvW[:, act] @ P) @ W_A
+    scale = max(float(np.max(np.abs(b))), float(np.max(np.abs(d))), 1e-300)
+    return float(np.max(np.abs(np.minimum(P, b + d)))) / scale
 
 
 def _python_step(inp: LoopInput, stepper: MoreauJean, NinvW, L, k: int, s: int, q, u, chi,
@@ -369,8 +560,10 @@ def coupling_samples(inp: LoopInput) -> tuple[int, int]:
 
 
 def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: bool = False,
-                  rhos: tuple = (1e-3,), warm: bool = False) -> LoopOutput:
-    from observer.kernel import OK, PROJECTION_FAILED, SUMMARY_FIELDS, advance, summary_start
+                  rhos: tuple = (1e-3,), warm: bool = False, on_chunk=None,
+                  stopper: _Stopper | None = None) -> LoopOutput:
+    from observer.kernel import (OK, PROJECTION_FAILED, RESIDUAL_EXCEEDED, STATS_SIZE, SUMMARY_FIELDS,
+                                 advance, summary_start)
 
     stepper = inp.stepper
     steps, n, m = stepper.steps, stepper.system.n, stepper.system.m
@@ -382,7 +575,8 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
     qs, us = inp.q0.astype(float).copy(), inp.u0.astype(float).copy()
     jumps = np.asarray(inp.jumps, dtype=np.bool_)
     chi_now = np.zeros(m, dtype=np.bool_)
-    stats = np.array([0.0, 0.0, 0.0, np.inf, -1.0])
+    stats = np.zeros(STATS_SIZE)
+    stats[3:7] = (np.inf, -1.0, 0.0, -1.0)
     law = int(stepper.law.code)
     Mq, Kq, Cq = quadratic_forms(stepper) if summary else (np.zeros((1, 1)),) * 3
     rho_arr = np.asarray(rhos, dtype=np.float64)
@@ -395,9 +589,14 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
     if summary:
         summary_start(qs, us, head[0], Mq, Kq, head[7], vprev, Vprev, summ, k_on, k_off, rho_arr, rec_V)
     fallbacks: list[dict] = []
+    emit = _emitter(inp, rec, rows, on_chunk, rec_V if summary else None)
+    stop, reason = None, ""
     t0 = time.perf_counter()
     k, s = 0, 0
-    while k < steps:
+    while k < steps and stop is None:
+        if stopper is not None and stopper.signal and not warm:
+            stop, reason = k, _stop_text(stepper, stopper.signal, k)
+            break
         kb = k
         k1 = min(steps, kb + WINDOW)
         grid = Grid.window(stepper.system, stepper.h, stepper.theta, stepper.t0, kb, k1)
@@ -416,6 +615,11 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
                                    *tail, stats)
             if status == OK:
                 break
+            if status == RESIDUAL_EXCEEDED:
+                stop, reason = k, _stop_text(stepper, f"complementarity residual {stats[7]:.3g} > "
+                                             f"tolerance {stepper.residual_tol:.3g} in step {k} "
+                                             f"(system {s})", k)
+                break
             if status == PROJECTION_FAILED:
                 stepper.system.require_definite_stiffness("the position projection (position jumps)")
                 raise InputError("system.W", f"W_IᵀK⁻¹W_I is not positive definite at step {k} "
@@ -431,6 +635,7 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
             s += 1
             if s == S:
                 k, s = k + 1, 0
+        emit(k if stop is None else stop)
     run_time = time.perf_counter() - t0
     ref = getattr(stepper, "_reference_twin", None)
     ref_stats = ref.stats if (ref is not None and fallbacks) else None
@@ -438,14 +643,18 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
     if summary:
         out_summary = {"fields": summ, "closings": closings, "k_on": k_on, "k_off": k_off,
                        "rhos": tuple(rhos)}
-    return LoopOutput(rows, rec["q"], rec["u"], rec["P"], rec["sigma"], rec["active"], rec["chi"],
+    out = LoopOutput(rows, rec["q"], rec["u"], rec["P"], rec["sigma"], rec["active"], rec["chi"],
                       rec["q_pre"] if record_pre else None, "compiled",
                       {"contact_solves": int(stats[0]) + (ref_stats.contact_solves if ref_stats else 0),
                        "iterations": int(stats[1]) + (ref_stats.iterations if ref_stats else 0),
                        "max_residual": max(float(stats[2]), ref_stats.max_residual if ref_stats else 0.0),
                        "fallbacks": len(fallbacks), "min_gap": float(stats[3]),
-                       "min_gap_step": int(stats[4])},
+                       "min_gap_step": int(stats[4]), "applied_residual": float(stats[5]),
+                       "applied_residual_step": int(stats[6]), "residual_source": "applied"},
                       fallbacks, ct, run_time, rec_V if summary else None, out_summary)
+    if warm:
+        return out
+    return _finish(inp, out, stop, reason, stopper.signal if stopper is not None else None)
 
 
 def summary_frame(out: LoopOutput, names: list[str], t0: float, h: float) -> "pd.DataFrame":

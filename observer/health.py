@@ -1,0 +1,235 @@
+"""Health of a run: is it inside the regime where its numbers mean anything?
+
+Every run of :func:`observer.loop.run` gets a :class:`Health` record (issue 12, item 2):
+
+``max_residual``
+    The largest complementarity residual of any contact step, *recomputed from the velocity
+    the step applied* (:func:`observer.kernel.applied_residual`: ``Wᵀ(u_{k+1} − u_free)`` in
+    place of the solver's ``ĜP``), relative like the solver's residual. A step above the
+    run's tolerance stops the run (:class:`~observer.loop.LoopOutput` ``stopped_at``).
+    The python engine recomputes it on Newton steps and single-contact steps (one contact:
+    the Poisson step is the Newton step); a Poisson step on several contacts contributes the
+    solver's own residual there (``residual_source`` says which).
+``penetration``, ``length_scale``, ``penetration_rel``
+    The deepest penetration of the master over every step (``max(0, −min_k g_j(t_k))``) and
+    the same relative to the scenario's length scale ℓ = max(‖q₀‖_∞, ‖ν(t₀)‖_∞, ‖g(t₀)‖_∞)
+    (the size of the initial configuration and clearances: 0.25 m on ``double_mass``); when
+    all three vanish, ℓ = the largest excursion ‖q_k − q₀‖_∞ of the recorded master.
+``min_eig_L``
+    The smallest eigenvalue of ``L_I = W_IᵀN⁻¹W_I`` over the closed sets I the position
+    projections met (eqs. (13)-(14); N = K unless the design has its own metric), from the
+    recorded rows (every step when ``record_every = 1``); None when nothing was projected.
+``h_omega_max``
+    ``h·ω_max`` with ω_max² the largest eigenvalue of ``K v = ω² M v``. The θ = ½ scheme is
+    stable for every h, but the frequency of a mode ω becomes ``(2/h)·atan(hω/2)``: a
+    relative error of 7.3 % at ``hω = 1`` (:data:`H_OMEGA_MAX`).
+``energy_growth``
+    For runs without time-dependent forcing or gap motion (``f`` constant, ``ν`` constant),
+    without master projection and with every restitution ≤ 1: the largest rise of the
+    master's mechanical energy ``E = ½uᵀMu + ½qᵀKq − f_cᵀq`` above its initial value over
+    the recorded rows, relative to the energy scale
+    ``max_k(½uᵀMu + ½qᵀKq + |f_cᵀq|)``. Damping (C ⪰ 0) and impacts (e ≤ 1) only remove
+    energy; the discrete θ = ½ scheme adds at most round-off and the O(h) slack of the impulse
+    term (README, "What holds in discrete time"). Checked: ``energy_growth ≤
+    ENERGY_ROUNDOFF + ENERGY_SLACK·h·ω_ref`` with ω_ref = max(ω_max, 1/T) over the horizon T.
+    None when not applicable.
+
+``warnings`` lists one line per check outside its bound; :func:`emit` sends them to stderr
+(``warnings.warn`` with :class:`RunHealthWarning`).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import scipy.linalg as sla
+
+H_OMEGA_MAX = 1.0
+"""Bound on h·ω_max: above it the stiffest mode's discrete frequency is off by > 7 %."""
+PENETRATION_MAX_REL = 0.01
+"""Bound on the master's deepest penetration relative to the length scale (1 %)."""
+ENERGY_ROUNDOFF = 1e-10
+"""Round-off allowance of the relative energy growth."""
+ENERGY_SLACK = 1.0
+"""Coefficient of the O(h) slack of the relative energy growth (per unit of h·ω_ref)."""
+MAX_SETS = 4096
+"""At most this many distinct projected closed sets get their L_I eigenvalue computed."""
+
+
+class RunHealthWarning(UserWarning):
+    """A run outside the regime where its numbers mean anything (see :class:`Health`)."""
+
+
+@dataclass(frozen=True)
+class Health:
+    """Health metrics of one run (module docstring: definitions and bounds)."""
+
+    max_residual: float = 0.0
+    max_residual_t: float | None = None
+    residual_tol: float = float("nan")
+    residual_source: str = "applied"
+    penetration: float = 0.0
+    penetration_t: float | None = None
+    length_scale: float = float("nan")
+    penetration_rel: float = 0.0
+    min_eig_L: float | None = None
+    h_omega_max: float = float("nan")
+    energy_growth: float | None = None
+    energy_bound: float | None = None
+    warnings: tuple = field(default_factory=tuple)
+
+    def to_dict(self) -> dict:
+        """Plain JSON-ready dict (the run's ``metadata["health"]``)."""
+        d = asdict(self)
+        d["warnings"] = list(self.warnings)
+        return d
+
+
+# ---------------------------------------------------------------------------------------
+# the metrics
+# ---------------------------------------------------------------------------------------
+def length_scale(system, q0: np.ndarray, t0: float, q: np.ndarray | None = None) -> float:
+    """ℓ = max(‖q₀‖_∞, ‖ν(t₀)‖_∞, ‖g(t₀)‖_∞); if 0, the master's largest excursion in ``q``."""
+    q0 = np.asarray(q0, dtype=float)
+    ell = max(float(np.max(np.abs(q0), initial=0.0)),
+              float(np.max(np.abs(system.nu(t0)), initial=0.0)),
+              float(np.max(np.abs(system.gaps(q0, t0)), initial=0.0)))
+    if ell == 0.0 and q is not None and q.size:
+        ell = float(np.max(np.abs(q - q0)))
+    return ell
+
+
+def omega_max(system) -> float:
+    """Largest ω with ``K v = ω² M v`` (0 for K = 0)."""
+    n = system.n
+    lam = sla.eigh(system.K, system.M, eigvals_only=True, subset_by_index=[n - 1, n - 1])[0]
+    return float(np.sqrt(max(lam, 0.0)))
+
+
+def min_eig_projected(L_of, sets: list[tuple[int, np.ndarray]]) -> float | None:
+    """Smallest eigenvalue of ``L_I`` over ``sets`` (pairs (system, closed-set mask));
+    ``L_of(s)`` is system s's ``WᵀN⁻¹W``. Distinct pairs only, at most :data:`MAX_SETS`."""
+    seen, lo = set(), None
+    for s, mask in sets:
+        key = (s, mask.tobytes())
+        if key in seen or not mask.any():
+            continue
+        seen.add(key)
+        if len(seen) > MAX_SETS:
+            break
+        idx = np.flatnonzero(mask)
+        LI = L_of(s)[np.ix_(idx, idx)]
+        lam = float(np.linalg.eigvalsh(0.5 * (LI + LI.T))[0])
+        lo = lam if lo is None else min(lo, lam)
+    return lo
+
+
+def unforced(system, law, master_projection: bool) -> bool:
+    """True when energy can only be removed: forcing and gap without time-dependent terms,
+    no master projection, every restitution ≤ 1."""
+    quiet = all(not np.any(np.asarray(h.amplitude)) for h in (system.forcing, system.gap))
+    return quiet and not master_projection and bool(np.all(np.asarray(law.restitution) <= 1.0))
+
+
+def mechanical_energy(system, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``E = ½uᵀMu + ½qᵀKq − f_cᵀq`` per row and its scale ``½uᵀMu + ½qᵀKq + |f_cᵀq|``."""
+    fc = np.asarray(system.forcing.constant, dtype=float)
+    T = 0.5 * np.einsum("ki,ij,kj->k", u, system.M, u)
+    U = 0.5 * np.einsum("ki,ij,kj->k", q, system.K, q)
+    W = q @ fc
+    return T + U - W, T + U + np.abs(W)
+
+
+def energy_growth(system, q: np.ndarray, u: np.ndarray) -> float:
+    """``max_k (E_k − E_0) / max_k scale_k`` (:func:`mechanical_energy`), ≥ 0."""
+    E, scale = mechanical_energy(system, q, u)
+    top = float(np.max(scale))
+    if top == 0.0:
+        return 0.0
+    return max(0.0, float(np.max(E - E[0])) / top)
+
+
+# ---------------------------------------------------------------------------------------
+# the record
+# ---------------------------------------------------------------------------------------
+def assess(inp, rows: np.ndarray, q: np.ndarray, u: np.ndarray, active: np.ndarray,
+           chi: np.ndarray, stats: dict, L_of) -> Health:
+    """Health of a loop run from its records (system s first axis) and counters.
+
+    ``stats`` holds ``applied_residual`` (and its ``applied_residual_step``), ``min_gap``
+    and ``min_gap_step``; ``L_of(s)`` the projection matrix of system s.
+    """
+    st = inp.stepper
+    sys_ = st.system
+    h = st.h
+    tol = float(st.residual_tol)
+    T = float(st.time(st.steps)) - st.t0
+    res = float(stats.get("applied_residual", 0.0))
+    res_step = stats.get("applied_residual_step", -1)
+    min_gap = stats.get("min_gap", np.inf)
+    gap_step = stats.get("min_gap_step", -1)
+    pen = max(0.0, -float(min_gap)) if np.isfinite(min_gap) else 0.0
+    ell = length_scale(sys_, inp.q0[0], st.t0, q[0])
+    pen_rel = pen / ell if ell > 0 else (np.inf if pen > 0 else 0.0)
+    w = omega_max(sys_)
+    how = h * w
+    lam = min_eig_projected(L_of, projected_sets(inp, rows, active, chi))
+    growth = bound = None
+    if unforced(sys_, st.law, bool(inp.master_projection)) and q.shape[1] > 1:
+        growth = energy_growth(sys_, q[0], u[0])
+        bound = ENERGY_ROUNDOFF + ENERGY_SLACK * h * max(w, 1.0 / T if T > 0 else 0.0)
+    msgs = []
+    if how > H_OMEGA_MAX:
+        msgs.append(f"h·ω_max = {how:.3g} > {H_OMEGA_MAX:g}: the stiffest mode (ω_max = {w:.4g} rad/s) "
+                    f"is not resolved by h = {h:g} (its discrete frequency is off by "
+                    f"{100 * (1 - 2 * np.arctan(how / 2) / how):.0f} %)")
+    if pen_rel > PENETRATION_MAX_REL:
+        msgs.append(f"penetration {pen:.3g} = {100 * pen_rel:.3g} % of the length scale {ell:.3g} "
+                    f"(bound {100 * PENETRATION_MAX_REL:g} %) at t = {float(st.time(gap_step)):.6g}: "
+                    "reduce h")
+    if growth is not None and growth > bound:
+        msgs.append(f"mechanical energy grew by {growth:.3g} of its scale in an unforced run "
+                    f"(allowed {bound:.3g}: round-off + O(h) slack)")
+    return Health(res, float(st.time(res_step)) if res_step >= 0 else None, tol,
+                  stats.get("residual_source", "applied"), pen,
+                  float(st.time(gap_step)) if gap_step >= 0 and pen > 0 else None, ell,
+                  float(pen_rel), lam, how, growth, bound, tuple(msgs))
+
+
+def projected_sets(inp, rows: np.ndarray, active: np.ndarray, chi: np.ndarray) -> list:
+    """(system, closed set) of every recorded projected step: the master's closed sets with
+    ``master_projection``, χ of the coupled steps for observers with position jumps. (An
+    uncoupled observer's own closed sets are not recorded and not included.)"""
+    out = []
+    if rows.size < 2:
+        return out
+    act, ch = active[1:], chi[1:]
+    if inp.master_projection:
+        out += [(0, a) for a in _distinct(act)]
+    jumps = np.flatnonzero(np.asarray(inp.jumps, dtype=bool)[1:]) + 1
+    if jumps.size:
+        tk = inp.stepper.time(rows[1:] - 1)
+        coupled = np.ones(tk.shape, bool) if inp.coupling is None else \
+            (tk >= inp.coupling[0]) & (tk <= inp.coupling[1])
+        if inp.self_driven:
+            coupled[:] = False
+        sets = _distinct(ch[coupled])
+        out += [(int(s), a) for s in jumps for a in sets]
+    return out
+
+
+def _distinct(masks: np.ndarray) -> list[np.ndarray]:
+    """The distinct non-empty rows of a bool matrix."""
+    if masks.size == 0:
+        return []
+    packed = np.unique(np.packbits(masks, axis=1), axis=0)
+    m = masks.shape[1]
+    return [r for r in np.unpackbits(packed, axis=1, count=m).astype(bool) if r.any()]
+
+
+def emit(health: Health, stacklevel: int = 3) -> None:
+    """Each of ``health.warnings`` as a :class:`RunHealthWarning` (stderr by default)."""
+    for msg in health.warnings:
+        warnings.warn(msg, RunHealthWarning, stacklevel=stacklevel)
