@@ -219,6 +219,18 @@ def observer_runs(obs: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=cols)
 
 
+def design_pivot(obs: pd.DataFrame, value: str = "V_end_rel") -> pd.DataFrame:
+    """One row per scenario name, one column per observer design that ran (registry order):
+    ``value`` of that run (NaN where the design does not apply or did not run)."""
+    ok = obs[obs["status"] == "ok"] if len(obs) else obs
+    designs = registry.in_registry_order(obs["observer"]) if len(obs) else []
+    names = list(dict.fromkeys(obs["name"])) if len(obs) else []
+    table = pd.DataFrame(float("nan"), index=pd.Index(names, name="name"), columns=designs)
+    for _, r in ok.iterrows():
+        table.loc[r["name"], r["observer"]] = float(r[value])
+    return table
+
+
 def design_summary(obs: pd.DataFrame) -> pd.DataFrame:
     """Per registered observer design (registry order): scenarios where it ran (``runs``),
     where it applies (``applicable``), and the median over those of the final V/V(t_on)

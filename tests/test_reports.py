@@ -1105,3 +1105,22 @@ def test_a_registered_scenario_brings_its_description_and_notes(tmp_path, monkey
     intro = page.sections["scn-toy-run"].paragraphs[0]
     assert intro.startswith("Toy oscillator for the report test. Drawn: the toy coordinate. Settings: "
                             f"h = {fmt(rows[0]['h'])} s, T = {fmt(rows[0]['t_end'])} s")
+
+
+def test_design_pivot_puts_each_run_in_its_cell(synthetic_report):
+    """The per-scenario × design table: V_end/V(t_on) and the rate of each run, from the rows;
+    n/a where the design does not apply."""
+    from reports.analysis import design_pivot
+
+    page, rows = synthetic_report
+    obs = rows[rows["kind"] == "observers"]
+    piv = design_pivot(obs)
+    ok = obs[obs["status"] == "ok"]
+    assert piv.notna().sum().sum() == len(ok)
+    for _, r in ok.iterrows():
+        assert piv.loc[r["name"], r["observer"]] == r["V_end_rel"]
+    table = {r["scenario"]: r for r in page.table("observers", "V at the end of the window").dicts()}
+    label = OBSERVER_DESIGNS["jump"].label
+    assert table["ball"][label] == "n/a"
+    dm = ok[(ok["name"] == "dm") & (ok["observer"] == "jump")].iloc[0]
+    assert _nums(table["dm"][label])[:2] == pytest.approx([dm["V_end_rel"], dm["rate"]], rel=5e-3)

@@ -174,6 +174,19 @@ def design_table(obs: pd.DataFrame) -> Table:
     return t
 
 
+def pivot_table(obs: pd.DataFrame) -> Table:
+    """Final V / V(t_on) and rate per scenario and design side by side
+    (:func:`reports.analysis.design_pivot`): how V behaves under each projection metric."""
+    end, rate = analysis.design_pivot(obs, "V_end_rel"), analysis.design_pivot(obs, "rate")
+    t = Table("V at the end of the window / V(t_on) and decay rate (1/s), per scenario and design",
+              ["scenario"] + [registry.label(d) for d in end.columns],
+              note="Each cell: V_end / V(t_on); rate in brackets. n/a: the design does not apply.")
+    for name in end.index:
+        t.add([name] + [f"{fmt(end.loc[name, d])} ({fmt(rate.loc[name, d])}/s)"
+                        if pd.notna(end.loc[name, d]) else "n/a" for d in end.columns])
+    return t
+
+
 def excursion_blocks(obs: pd.DataFrame) -> list[Block]:
     """Runs whose V comes back above a threshold after its first passage."""
     exc = analysis.settling_excursions(obs)
@@ -222,6 +235,7 @@ def build(ctx: ReportContext) -> Section:
     ratios = ratio_rows(obs)
     sec.blocks += observer_prose(obs, ratios)
     sec.table(ratio_table(ratios))
+    sec.table(pivot_table(obs))
     sec.table(observer_table(obs))
     sec.table(design_table(obs))
     for rec in ratios:
