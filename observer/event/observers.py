@@ -407,6 +407,7 @@ class EventObserversResult:
     t: np.ndarray
     chi: np.ndarray
     runs: dict = field(default_factory=dict)
+    master_status: str = "ok"
 
     @property
     def frame(self) -> pd.DataFrame:
@@ -425,7 +426,10 @@ class EventObserversResult:
 
     @property
     def status(self) -> str:
-        """``"ok"`` if every observer ran to the end, else the first ``"stopped: …"`` status."""
+        """``"ok"`` if the master and every observer ran to the end, else the first
+        ``"stopped: …"`` status (prefixed ``master:`` or the observer's name)."""
+        if self.master_status != "ok":
+            return f"master: {self.master_status}"
         return next((f"{n}: {r.status}" for n, r in self.runs.items() if r.status != "ok"), "ok")
 
 
@@ -767,7 +771,7 @@ def run_observers(master, scenario, observers: Iterable = ("jump", "nojump"), *,
     schedule = switching_schedule(intervals, float(t[k_on]), float(t[-1]))
     chi = _grid_chi(t, intervals)
     chi[:k_on] = False
-    out = EventObserversResult(t, chi)
+    out = EventObserversResult(t, chi, master_status=str(getattr(master, "status", "ok")))
     for s in slaves:
         out.runs[s.name] = _run_one(scenario, s, t, k_on, schedule, solver)
         out.runs[s.name].V = lyapunov(system, out.runs[s.name].q, out.runs[s.name].u, qm, um)
