@@ -356,3 +356,37 @@ def test_multi_contact_velocity_constraints_and_newton_on_approaching_contacts()
         G, b = WB.T @ Minv @ WB, WB.T @ acc
         lam = lcp_enum(G, b)
         np.testing.assert_allclose(G @ lam + b, 0.0, atol=1e-8 * (1 + np.abs(b).max()))
+
+
+def test_moving_ground_jump_observer_closed_form_and_stick_time():
+    """One mass on a moving ground ν(t) = a sin ωt (M = 1, C = c, K = k, f = −g0, W = 1), χ ≡ 1:
+    the jump observer's gap is held by σ = −L⁻¹γ (eq. (13)), so q(t) = −ν(t) exactly; its velocity
+    is free, u̇ + cu = k a sin ωt − g0 (closed form), until γ = u + ν̇ reaches 0 (the stick time,
+    found here independently by brentq on the closed form: agreement 1e-14 s); afterwards γ = 0
+    is held (its force λ = g0 − ν̈ − cν̇ − kν stays positive, |ν̈| + ... < g0), so u = −ν̇."""
+    from scipy.optimize import brentq
+
+    from observer.impact import ImpactLaw
+    from observer.model import Harmonic, LinearSystem
+    c, k, g0, a, w = 0.1, 4.0, 9.81, 0.3, 2.0
+    system = LinearSystem(np.eye(1), c * np.eye(1), k * np.eye(1), np.eye(1),
+                          Harmonic.build("f", 1, constant=[-g0]),
+                          Harmonic.build("nu", 1, constant=[0.0], kind="sin",
+                                         terms=[{"amplitude": [a], "omega": w, "phase": [0.0]}]))
+    law = ImpactLaw.build("newton", 0.5, 1)
+    t = np.linspace(0.0, 3.0, 301)
+    run = run_schedule(system, law, t, np.array([0.5]), np.array([0.0]), [np.array([[0.0, np.inf]])], "K")
+    assert run.status == "ok"
+    np.testing.assert_allclose(run.q[1:, 0], -a * np.sin(w * t[1:]), rtol=0, atol=1e-14)
+    beta = -k * a / (w + c * c / w)                 # u_p = −g0/c + α sin ωt + β cos ωt
+    alpha = -c * beta / w
+    u_free = lambda s: (-g0 / c + alpha * np.sin(w * s) + beta * np.cos(w * s)
+                        + (0.0 + g0 / c - beta) * np.exp(-c * s))
+    gamma_free = lambda s: u_free(s) + a * w * np.cos(w * s)
+    t_stick = brentq(gamma_free, 1e-3, 1.0, xtol=1e-15, rtol=1e-15)
+    stick = run.events[run.events.kind == "stick"]
+    assert len(stick) == 1 and len(run.events[run.events.kind == "liftoff"]) == 0
+    assert stick.time.iloc[0] == pytest.approx(t_stick, abs=1e-14)
+    before, after = t < t_stick, t > t_stick
+    np.testing.assert_allclose(run.u[before, 0], u_free(t[before]), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(run.u[after, 0], -a * w * np.cos(w * t[after]), rtol=0, atol=1e-12)
