@@ -483,12 +483,12 @@ class _ObserverIntegrator:
         idx = sorted(closed)
         W = self.system.W[:, idx]
         g = W.T @ q + self.system.nu(t)[idx]
-        KinvW = np.linalg.solve(self.metric, W)
-        Sigma = -np.linalg.solve(W.T @ KinvW, g)
+        NinvW = np.linalg.solve(self.metric, W)
+        Sigma = -np.linalg.solve(W.T @ NinvW, g)
         for j, s in zip(idx, Sigma):
             self.events.append((t, j, "projection", np.nan, np.nan, float(s)))
             self.sigma[k_row, j] += s
-        return q + KinvW @ Sigma
+        return q + NinvW @ Sigma
 
     def hold(self, t: float, q: np.ndarray, closed: frozenset) -> np.ndarray:
         """Remove the round-off drift of g_I (exactly 0 along the constrained flow) by the same
@@ -504,7 +504,7 @@ class _ObserverIntegrator:
         W, R = corr
         return q - R @ (W.T @ q + self.system.nu(t)[list(idx)])
 
-    def collide(self, t: float, u: np.ndarray, closed: frozenset, new: list, k_row: int) -> np.ndarray:
+    def collide(self, t: float, u: np.ndarray, closed: frozenset, k_row: int) -> np.ndarray:
         """Impact of eq. (9) on the closed set I when some γ_i⁻ < 0 (the master's impact-law code).
 
         Poisson (Glocker's inequality form) acts on all of I: it keeps γ⁺ ≥ 0 by construction.
@@ -531,10 +531,12 @@ class _ObserverIntegrator:
         return u
 
     def _delassus(self, idx) -> np.ndarray:
+        """G = W_JᵀM⁻¹W_J, the Delassus matrix of the impact laws."""
         W = self.system.W[:, idx]
         return W.T @ self.Minv @ W
 
     def _newton_on_approaching(self, t, u, idx, gam):
+        """Newton's impulse on J = {γ⁻ ≤ 0}, growing J (e = 0) by the separating contacts it pushes below 0."""
         e_all = dict(zip(idx.tolist(), self.law.restitution[idx]))
         J = [int(i) for i, g in zip(idx, gam) if g <= 0.0]
         gm = dict(zip(idx.tolist(), gam))
@@ -591,7 +593,7 @@ class _ObserverIntegrator:
                 closed = closed | frozenset(on)
                 if self.jumps:
                     q = self.project(now, q, closed, row)
-                u = self.collide(now, u, closed, on, row)
+                u = self.collide(now, u, closed, row)
             closed = closed - frozenset(off)
             active = self.select_active(now, q, u, closed)
             if k_next < N1 and t[k_next] == now:     # a grid sample at the event instant: right limit
