@@ -109,6 +109,28 @@ def load_trajectory(row: pd.Series) -> pd.DataFrame | None:
     return pd.read_parquet(path) if path.exists() else None
 
 
+def default_integrator() -> str | None:
+    """The integrator a suite case uses unless it says otherwise (:class:`bench.suites.Case`)."""
+    from dataclasses import fields
+
+    from bench.suites import Case
+
+    return next((f.default for f in fields(Case) if f.name == "integrator"), None)
+
+
+def name_integrator(rows: pd.DataFrame) -> pd.DataFrame:
+    """Rows of another integrator than the default get it in their ``name`` ("double_mass ·
+    event"), so a scenario run by both integrators shows as two runs, not one."""
+    if rows.empty or "integrator" not in rows or "name" not in rows:
+        return rows
+    other = rows["integrator"].notna() & (rows["integrator"] != default_integrator())
+    if not other.any():
+        return rows
+    rows = rows.copy()
+    rows.loc[other, "name"] = rows.loc[other, "name"].astype(str) + " · " + rows.loc[other, "integrator"].astype(str)
+    return rows
+
+
 PEERS_KIND = "peers"
 """Rows of the Siconos comparison (declared by :mod:`bench.peers`, not by the schema)."""
 
@@ -169,7 +191,8 @@ class ReportContext:
         if ok_only and "status" in sel:
             sel = sel[sel["status"] == "ok"]
         missing = [c for c in declared if c not in sel.columns]
-        return sel.assign(**{c: float("nan") for c in missing}) if len(sel) else sel.copy()
+        sel = sel.assign(**{c: float("nan") for c in missing}) if len(sel) else sel.copy()
+        return name_integrator(sel)
 
     def unavailable_notes(self, prefix: str) -> list[str]:
         """Cases the last suite run skipped (``<suite>.unavailable.json``) whose id starts

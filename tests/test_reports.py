@@ -1124,3 +1124,18 @@ def test_design_pivot_puts_each_run_in_its_cell(synthetic_report):
     assert table["ball"][label] == "n/a"
     dm = ok[(ok["name"] == "dm") & (ok["observer"] == "jump")].iloc[0]
     assert _nums(table["dm"][label])[:2] == pytest.approx([dm["V_end_rel"], dm["rate"]], rel=5e-3)
+
+
+def test_runs_of_another_integrator_are_named_apart(tmp_path):
+    """A scenario run by the default integrator and by another one shows as two runs (the
+    other's name carries its integrator), never merged into one row of the ratio table."""
+    from reports.context import ReportContext, default_integrator
+
+    rows = [r for r in _observer_rows()[0][1]]
+    event = [{**r, "integrator": "event", "V_end_rel": 1e-20} for r in rows]
+    df = pd.DataFrame([{**r, "integrator": default_integrator()} for r in rows] + event)
+    ctx = ReportContext(df=df, files=[], micro=pd.DataFrame(), micro_meta={}, suites=["x"],
+                        command="", out_dir=tmp_path)
+    obs = ctx.rows("observers")
+    assert sorted(set(obs["name"])) == ["dm", "dm · event"]
+    assert (obs.loc[obs["name"] == "dm · event", "V_end_rel"] == 1e-20).all()
