@@ -72,6 +72,10 @@ EVENT_KINDS = ("projection", "impact", "stick", "liftoff")
 ``impulse`` column), ``impact`` (impulse Λ_i of eq. (9)), ``stick`` (γ_i reached 0 while
 χ_i = 1: the velocity constraint becomes active), ``liftoff`` (its force λ_i crossed 0)."""
 
+MAX_SUBDIVISIONS = 20_000
+"""Largest number of intervals the certified search examines in one step before it gives up
+(the run stops with a status saying so)."""
+
 MAX_EVENTS_PER_INSTANT = 20
 """More own events than this at one instant stop the run (status says so): a mode cycle."""
 
@@ -312,7 +316,9 @@ def _first_crossing(mode: Mode, row: np.ndarray, za: np.ndarray, delta: float,
     drow = row @ mode.A
     z0 = za if start == 0.0 else mode.propagator(start) @ za
     stack = [(start, delta - start, z0, 0)]
-    while stack:
+    for _ in range(MAX_SUBDIVISIONS):
+        if not stack:
+            return None
         a, w, z, depth = stack.pop()
         phi_a = float(row @ z)
         if phi_a <= 0.0 and a > start:
@@ -328,7 +334,13 @@ def _first_crossing(mode: Mode, row: np.ndarray, za: np.ndarray, delta: float,
         zm = mode.propagator(0.5 * w) @ z
         stack.append((a + 0.5 * w, 0.5 * w, zm, depth + 1))
         stack.append((a, 0.5 * w, z, depth + 1))
-    return None
+    if not stack:
+        return None
+    raise _Stalled(f"root isolation stalled ({MAX_SUBDIVISIONS} subdivisions of one step)")
+
+
+class _Stalled(RuntimeError):
+    """The certified search could not decide (a functional hugging 0 over a whole interval)."""
 
 
 def _refine(mode: Mode, row: np.ndarray, za: np.ndarray, lo: float, hi: float) -> float:
@@ -637,7 +649,11 @@ class _ObserverIntegrator:
                         f"stopped: degenerate {mon.kind} monitor of contact {mon.contact} at t = {now!r}")
                 if s0 >= delta:
                     continue
-                tau = _first_crossing(md, mon.row, z, delta, s0)
+                try:
+                    tau = _first_crossing(md, mon.row, z, delta, s0)
+                except _Stalled as exc:
+                    return q, u, now, closed, active, k_next, (
+                        f"stopped: {exc} for the {mon.kind} monitor of contact {mon.contact} at t = {now!r}")
                 if tau is not None:
                     lo = self._bracket_left(md, mon.row, z, s0, tau)
                     tau = _refine(md, mon.row, z, lo, tau)
