@@ -26,6 +26,7 @@ import os
 import platform
 import subprocess
 import sys
+import time
 import uuid
 from datetime import datetime, timezone
 from pathlib import Path
@@ -134,6 +135,18 @@ class CaseStore:
         import pyarrow.parquet as pq
 
         return {pq.read_table(f, columns=["case_id"]).column(0)[0].as_py() for f in self.files()}
+
+    def remove_orphans(self, max_age_s: float = 3600.0) -> int:
+        """Delete temporary files of writers killed mid-write (older than ``max_age_s``: a case
+        file takes milliseconds to write, so a younger one may belong to a live writer);
+        return how many were deleted."""
+        if not self.folder.is_dir():
+            return 0
+        cutoff = time.time() - max_age_s
+        orphans = [p for p in self.folder.glob(".*.tmp") if p.stat().st_mtime < cutoff]
+        for p in orphans:
+            p.unlink(missing_ok=True)
+        return len(orphans)
 
     def retire(self, case_ids: Iterable[str]) -> int:
         """Move the files of ``case_ids`` to ``FOLDER/stale/`` (they are then rerun); return

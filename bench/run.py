@@ -188,6 +188,7 @@ def run_suite(suite: str | Suite, out_dir: str | Path = RESULTS_DIR, *, progress
     t0 = time.perf_counter()
     store = CaseStore(results_path(suite.name, out_dir))
     summary = RunSummary(suite.name, store.path, len(suite.cases))
+    store.remove_orphans()
     summary.stale_rows = (store.retire_undeclared(c.case_id for c in suite.cases)
                           + store.retire(outdated_ids(store.rows())))
     todo = [c for c in suite.cases if not store.has(c.case_id)]

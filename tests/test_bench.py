@@ -158,6 +158,17 @@ def test_case_store_write_resume_and_retire(tmp_path):
     assert len(df) == 2 and set(df["case_id"]) == {"a"} and (df["results_dir"] == str(tmp_path)).all()
 
 
+def test_orphaned_temporary_files_are_removed_only_when_old(tmp_path):
+    store = CaseStore(tmp_path / "o.cases")
+    store.write_case("o", "a", [{"x": 1.0}])
+    old, young = store.folder / ".abc.1.tmp", store.folder / ".abc.2.tmp"
+    for p in (old, young):
+        p.write_bytes(b"PAR1 torn")
+    os.utime(old, (time.time() - 7200, time.time() - 7200))
+    assert store.remove_orphans(max_age_s=3600) == 1
+    assert not old.exists() and young.exists() and store.done_ids() == {"a"}
+
+
 def test_load_results_concatenates_kinds_and_refuses_other_files(tmp_path):
     store = CaseStore(tmp_path / "k.cases")
     store.write_case("k", "p", [{"kind": "one", "a": 1.0}])
