@@ -5,7 +5,6 @@ No timing assertions: speed is measured by the suites, not tested here.
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import subprocess
