@@ -14,8 +14,11 @@ Each property is checked on at least 200 generated cases under the fixed ``ci`` 
   on random LCPs with SPD G, each passing an independent complementarity check;
 * the compiled (numba) and python engines give the same trajectories to 1e-13 relative.
 
-Systems are tiny (n ≤ 8, 1–8 contacts, a few dozen steps) to keep the whole file well under
-a minute; the numba kernel is loaded from its on-disk cache.
+Systems are tiny (n ≤ 8, 1–8 contacts, 30 steps of h = 5e-3) to keep the whole file within
+about a minute of wall time on 2 busy cores; the numba kernel is loaded from its on-disk
+cache. Of the 200 cases of the V property, about 120 close several contacts at once and
+about 10 have V growing beyond round-off (covered by the slack; see
+:func:`test_the_slack_is_needed`).
 """
 
 from __future__ import annotations
@@ -37,8 +40,12 @@ settings.register_profile("ci", derandomize=True, max_examples=200, deadline=Non
 CI = settings.get_profile("ci")
 """The fixed CI profile of this file (applied per test, so other files keep their settings)."""
 
-H = 1e-2
-STEPS = 24
+pytestmark = pytest.mark.filterwarnings("ignore::observer.health.RunHealthWarning")
+"""The properties are exact discrete identities, true at any accuracy: a generated run that
+penetrates more than the health bound (45 of the ~1000 runs here) is still a valid case."""
+
+H = 5e-3
+STEPS = 30
 """Step size and number of steps of every generated run (t_end = STEPS·H)."""
 
 ENGINE_RTOL = 1e-13
@@ -81,7 +88,7 @@ def systems(draw) -> Scenario:
     K = 50.0 * (B @ B.T / n + 0.2 * np.eye(n))
     C = 0.2 * (F[:, : max(1, n // 2)] @ F[:, : max(1, n // 2)].T) / n
     W = _well_conditioned_columns(rng, n, m)
-    q0 = rng.normal(scale=0.05, size=n)
+    q0 = rng.normal(scale=0.5, size=n)
     offset = rng.uniform(0.0, 0.02, size=m)
     offset[0] = 0.0
     nu = offset - q0 @ W
