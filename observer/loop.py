@@ -368,6 +368,9 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool, on_chunk=No
     stop, reason = None, ""
     t0 = time.perf_counter()
     for k in range(stepper.grid.steps):
+        if stopper is not None and stopper.signal:
+            stop, reason = k, _stop_text(stepper, stopper.signal, k)
+            break
         r = (k + 1) // record_every if (k + 1) % record_every == 0 else -1
         chi = None
         for s in range(S):
@@ -392,9 +395,6 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool, on_chunk=No
                     if S > 1:
                         rec["chi"][r, chi] = True
         if stop is not None:
-            break
-        if stopper is not None and stopper.signal and k + 1 < stepper.grid.steps:
-            stop, reason = k + 1, _stop_text(stepper, stopper.signal, k + 1)
             break
         if (k + 1) % PYTHON_CHUNK == 0:
             emit(k + 1)

@@ -116,7 +116,9 @@ class ChunkWriter:
         if self._writer is None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._schema = table.schema
-            self._writer = pq.ParquetWriter(self.path, self._schema)
+            # store_schema=False: the file's key-value metadata (the observer key added at
+            # close) is then what readers see as the schema metadata
+            self._writer = pq.ParquetWriter(self.path, self._schema, store_schema=False)
         self._writer.write_table(table)
 
     # -- closing --------------------------------------------------------------------------
@@ -132,7 +134,8 @@ class ChunkWriter:
                 import pyarrow as pa
                 import pyarrow.parquet as pq
 
-                self._writer = pq.ParquetWriter(self.path, pa.schema([("t", pa.float64())]))
+                self._writer = pq.ParquetWriter(self.path, pa.schema([("t", pa.float64())]),
+                                                store_schema=False)
             self._writer.add_key_value_metadata({PARQUET_KEY: text.encode("utf-8")})
             self._writer.close()
         else:
