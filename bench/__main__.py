@@ -93,8 +93,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{suite.name}: {n_done}/{len(suite.cases)} cases done "
               f"({results_path(suite.name, args.out)})")
         return 0
-    summary = run_suite(suite, args.out, progress=not args.no_progress, limit=args.limit,
-                        micro=not args.no_micro, workers=args.workers, scheduler=args.scheduler)
+    from observer.errors import InputError
+    try:
+        summary = run_suite(suite, args.out, progress=not args.no_progress, limit=args.limit,
+                            micro=not args.no_micro, workers=args.workers,
+                            scheduler=args.scheduler)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     print(summary.text())
     micro_failed = summary.micro_status.startswith("failed")
     return 1 if summary.failed or micro_failed else 0

@@ -27,6 +27,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from observer.errors import InputError
+
 from bench import RESULTS_DIR
 from bench.results import CASES_SUFFIX, STALE, CaseStore, environment, export_csv
 from bench.suites import Case, Suite, get_suite
@@ -200,14 +202,15 @@ def run_suite(suite: str | Suite, out_dir: str | Path = RESULTS_DIR, *, progress
         # compiled here first (local workers then load it from numba's disk cache); on a
         # remote cluster each worker makes it ready before its first case
         summary.compile_time_s = kernel_ready()
-    with _executor(workers, scheduler, client) as (where, outcomes):
-        summary.where = where
-        bar = _progress(len(todo), suite.name, enabled=progress and bool(todo))
-        for out in outcomes(todo, suite.name, out_dir, env):
-            bar.set_postfix_str(out.case_id[:60])
-            bar.update(1)
-            _record(summary, out)
-        bar.close()
+    if todo:          # a finished suite starts no cluster
+        with _executor(workers, scheduler, client) as (where, outcomes):
+            summary.where = where
+            bar = _progress(len(todo), suite.name, enabled=progress)
+            for out in outcomes(todo, suite.name, out_dir, env):
+                bar.set_postfix_str(out.case_id[:60])
+                bar.update(1)
+                _record(summary, out)
+            bar.close()
     if store.files():
         export_csv(store.path, out_dir / f"{suite.name}.csv")
     _write_unavailable(summary, unavailable_path(suite.name, out_dir))
@@ -276,13 +279,25 @@ def _executor(workers: int | None, scheduler: str | None, client):
     from distributed import Client, LocalCluster
 
     if scheduler:
-        with Client(scheduler) as c:
+        with _connect(scheduler) as c:
             yield f"Dask scheduler {scheduler}", _on_dask(c)
         return
     with LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
                       dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
             Client(cluster) as c:
         yield f"local Dask cluster of {int(workers)} worker(s)", _on_dask(c)
+
+
+def _connect(address: str):
+    """A client of the scheduler at ``address``; an unreachable one is an input error naming
+    ``--scheduler`` (the wait is Dask's ``distributed.comm.timeouts.connect``)."""
+    from distributed import Client
+
+    try:
+        return Client(address)
+    except (OSError, ValueError, TypeError) as exc:
+        raise InputError("--scheduler", f"cannot connect to a Dask scheduler at {address!r} "
+                                        f"({type(exc).__name__}: {exc})") from None
 
 
 class _NoBar:

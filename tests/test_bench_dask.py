@@ -122,3 +122,17 @@ def test_killed_client_loses_no_finished_case(client, tmp_path):
     assert_every_case_exactly_once(store, suite)
     after = _snapshot(store.folder)
     assert {k: after[k] for k in at_kill} == at_kill            # byte for byte
+
+
+def test_unreachable_scheduler_is_an_input_error_naming_the_option(tmp_path, capsys):
+    import dask
+
+    from bench.__main__ import main
+
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+        code = main(["run", "smoke", "--out", str(tmp_path), "--no-progress", "--no-micro",
+                     "--scheduler", "tcp://127.0.0.1:9"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --scheduler: cannot connect") and "Traceback" not in err
+    assert not list(tmp_path.glob("smoke.cases/*.parquet"))
