@@ -315,9 +315,11 @@ def robustness_bands(rob: pd.DataFrame, quantiles: tuple[float, float] = BAND) -
 def wp_orders(wp: pd.DataFrame) -> pd.DataFrame:
     """Per method (scenario · target · law · solver): fitted order p of the mean-norm error
     against h (error ∝ h^p), of the max-norm error, the work slope s (error ∝ CPU^(−s)), the
-    smallest error and its CPU time, and the total CPU time of the sweep."""
+    smallest error and its CPU time, and the total CPU time of the sweep; ``integrator`` (the
+    rows' integrator, "" when they do not say)."""
     rows = []
     for method, g in wp.groupby("method", sort=False):
+        integrator = text(g["integrator"].iloc[0]) if "integrator" in g else ""
         g = g[g["status"] == "ok"].sort_values("h")
         if g.empty:
             continue
@@ -330,7 +332,7 @@ def wp_orders(wp: pd.DataFrame) -> pd.DataFrame:
                      "reference": g["reference"].iloc[0], "points": len(g),
                      "h_min": g["h"].min(), "h_max": g["h"].max(), "order": p_h, "order_max": p_max,
                      "work_slope": -p_c, "best_err": best["err_mean"], "best_cpu": best["cpu_time_s"],
-                     "cpu_total": g["cpu_time_s"].sum()})
+                     "cpu_total": g["cpu_time_s"].sum(), "integrator": integrator})
     return pd.DataFrame(rows)
 
 
@@ -476,6 +478,8 @@ def solver_comparison(orders: pd.DataFrame) -> pd.DataFrame:
     if orders.empty:
         return pd.DataFrame(columns=cols)
     keys = ["scenario", "target", "law"]
+    if "integrator" in orders:                       # contact solvers only matter to time-stepping
+        orders = orders[orders["integrator"].map(registry.is_default_integrator).astype(bool)]
     ref = orders[orders["solver"] == registry.REFERENCE_SOLVER]
     fast = orders[orders["solver"] != registry.REFERENCE_SOLVER]
     both = fast.merge(ref, on=keys, suffixes=("_s", "_r"))

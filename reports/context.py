@@ -13,6 +13,8 @@ from typing import Iterable
 
 import pandas as pd
 
+from reports import registry
+
 
 def load_rows(files: list[Path]) -> pd.DataFrame:
     """The tidy result rows of ``files`` (one DataFrame, a ``results_dir`` column per row), in
@@ -109,21 +111,12 @@ def load_trajectory(row: pd.Series) -> pd.DataFrame | None:
     return pd.read_parquet(path) if path.exists() else None
 
 
-def default_integrator() -> str | None:
-    """The integrator a suite case uses unless it says otherwise (:class:`bench.suites.Case`)."""
-    from dataclasses import fields
-
-    from bench.suites import Case
-
-    return next((f.default for f in fields(Case) if f.name == "integrator"), None)
-
-
 def name_integrator(rows: pd.DataFrame) -> pd.DataFrame:
     """Rows of another integrator than the default get it in their ``name`` ("double_mass ·
     event"), so a scenario run by both integrators shows as two runs, not one."""
     if rows.empty or "integrator" not in rows or "name" not in rows:
         return rows
-    other = rows["integrator"].notna() & (rows["integrator"] != default_integrator())
+    other = ~rows["integrator"].map(registry.is_default_integrator).astype(bool)
     if not other.any():
         return rows
     rows = rows.copy()

@@ -124,3 +124,18 @@ def plot_labels(name: str, dof: int, contact: int) -> tuple[str, str]:
 def scenario_notes(name: str) -> str:
     """The scenario's own notes (what is drawn, what to watch), '' when it has none."""
     return info(name).notes if name in SCENARIOS else ""
+
+
+def default_integrator() -> str | None:
+    """The integrator a suite case uses unless it says otherwise (:class:`bench.suites.Case`)."""
+    from dataclasses import fields
+
+    from bench.suites import Case
+
+    return next((f.default for f in fields(Case) if f.name == "integrator"), None)
+
+
+def is_default_integrator(value) -> bool:
+    """Whether a row's ``integrator`` is the suites' default one (missing counts as default)."""
+    default = default_integrator()
+    return default is None or value is None or value != value or value in ("", default)

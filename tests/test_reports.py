@@ -1129,7 +1129,8 @@ def test_design_pivot_puts_each_run_in_its_cell(synthetic_report):
 def test_runs_of_another_integrator_are_named_apart(tmp_path):
     """A scenario run by the default integrator and by another one shows as two runs (the
     other's name carries its integrator), never merged into one row of the ratio table."""
-    from reports.context import ReportContext, default_integrator
+    from reports.context import ReportContext
+    from reports.registry import default_integrator
 
     rows = [r for r in _observer_rows()[0][1]]
     event = [{**r, "integrator": "event", "V_end_rel": 1e-20} for r in rows]
@@ -1139,3 +1140,19 @@ def test_runs_of_another_integrator_are_named_apart(tmp_path):
     obs = ctx.rows("observers")
     assert sorted(set(obs["name"])) == ["dm", "dm · event"]
     assert (obs.loc[obs["name"] == "dm · event", "V_end_rel"] == 1e-20).all()
+
+
+def test_event_driven_sweeps_are_not_compared_as_contact_solvers():
+    """A work-precision sweep of another integrator keeps its own fitted order and stays out
+    of the contact-solver comparison (which is about the time-stepping LCPs)."""
+    from reports.analysis import solver_comparison, wp_orders
+
+    rows = pd.DataFrame([r for _, rs in _synthetic_rows() for r in rs])
+    wp = rows[rows["kind"] == "work_precision"].assign(integrator="time-stepping")
+    master = wp[(wp["scenario"] == "double_mass") & (wp["target"] == "master") & (wp["solver"] == "pivoting")]
+    event = master.assign(integrator="event", method=master["method"] + " · event-driven",
+                          err_mean=master["err_mean"] * 1e-6)
+    orders = wp_orders(pd.concat([wp, event]))
+    ev = orders[orders["integrator"] == "event"]
+    assert len(ev) == 1 and ev["order"].iloc[0] == pytest.approx(_fitted(event["h"], event["err_mean"]))
+    assert len(solver_comparison(orders)) == len(solver_comparison(wp_orders(wp))) == 1
