@@ -17,13 +17,12 @@ import threading
 import time
 from pathlib import Path
 
+import distributed
 import pytest
 
-distributed = pytest.importorskip("distributed")
-
-from bench.results import CaseStore  # noqa: E402
-from bench.run import kernel_ready, results_path, run_suite  # noqa: E402
-from bench.suites import Case, Suite  # noqa: E402
+from bench.results import CaseStore
+from bench.run import kernel_ready, results_path, run_suite
+from bench.suites import Case, Suite
 
 REPO = Path(__file__).resolve().parent.parent
 STEPS = (4e-4, 3.5e-4, 3e-4, 2.5e-4, 2e-4, 4.5e-4, 5e-4, 5.5e-4)
