@@ -187,6 +187,15 @@ class ReportContext:
         sel = sel.assign(**{c: float("nan") for c in missing}) if len(sel) else sel.copy()
         return name_integrator(sel)
 
+    def rows_or_say(self, sec, kind: str, what: str) -> pd.DataFrame | None:
+        """The rows of ``kind`` (:meth:`rows`), or None after telling ``sec`` there are no
+        ``what`` in these results."""
+        rows = self.rows(kind)
+        if rows.empty:
+            sec.p(f"No {what} in these results.")
+            return None
+        return rows
+
     def unavailable_notes(self, prefix: str) -> list[str]:
         """Cases the last suite run skipped (``<suite>.unavailable.json``) whose id starts
         with ``prefix``: "case id: reason"."""

@@ -228,9 +228,8 @@ def observer_prose(obs: pd.DataFrame, ratios: list[dict]) -> list[Block]:
 def build(ctx: ReportContext) -> Section:
     """The observer section; adds one key-number line per (scenario, pair)."""
     sec = Section("observers", TITLE)
-    obs = ctx.rows("observers")
-    if obs.empty:
-        sec.p("No observer runs in these results.")
+    obs = ctx.rows_or_say(sec, "observers", "observer runs")
+    if obs is None:
         return sec
     ratios = ratio_rows(obs)
     sec.blocks += observer_prose(obs, ratios)

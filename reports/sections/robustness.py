@@ -89,9 +89,8 @@ def summary_items(bands: pd.DataFrame) -> list[str]:
 def build(ctx: ReportContext) -> Section:
     """The robustness section; adds one key-number line."""
     sec = Section("robustness", TITLE)
-    rob = ctx.rows("robustness")
-    if rob.empty:
-        sec.p("No robustness runs in these results.")
+    rob = ctx.rows_or_say(sec, "robustness", "robustness runs")
+    if rob is None:
         return sec
     kinds, labels, units = _perturbations()
     bands = analysis.robustness_bands(rob)

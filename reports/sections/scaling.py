@@ -83,9 +83,8 @@ def _fit(fits: pd.DataFrame, key: str) -> tuple[float, float] | None:
 def build(ctx: ReportContext) -> Section:
     """The scaling section; adds the acceptance exponent to the key numbers."""
     sec = Section("scaling", TITLE)
-    scal = ctx.rows("scaling")
-    if scal.empty:
-        sec.p("No scaling runs in these results.")
+    scal = ctx.rows_or_say(sec, "scaling", "scaling runs")
+    if scal is None:
         return sec
     scal = scal.sort_values("N")
     fits = analysis.scaling_fits(scal).set_index("quantity")

@@ -67,9 +67,8 @@ def scenario_subsection(name: str, g: pd.DataFrame, ratios: list[dict]) -> Secti
 def build(ctx: ReportContext) -> Section:
     """The scenario section: one subsection per scenario name in the observer rows."""
     sec = Section("scenarios", TITLE)
-    obs = ctx.rows("observers")
-    if obs.empty:
-        sec.p("No observer runs in these results.")
+    obs = ctx.rows_or_say(sec, "observers", "observer runs")
+    if obs is None:
         return sec
     designs = registry.in_registry_order(obs["observer"])
     sec.p("Each run couples the observers to the master through the master's own closed set χ "

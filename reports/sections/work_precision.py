@@ -102,9 +102,8 @@ def observer_key_numbers(orders: pd.DataFrame) -> list[str]:
 def build(ctx: ReportContext) -> Section:
     """The work-precision section; adds the master's and each observer's orders to the key numbers."""
     sec = Section("work-precision", TITLE)
-    wp = ctx.rows("work_precision")
-    if wp.empty:
-        sec.p("No work-precision runs in these results.")
+    wp = ctx.rows_or_say(sec, "work_precision", "work-precision runs")
+    if wp is None:
         return sec
     orders = analysis.wp_orders(wp)
     norm = str(wp["norm"].dropna().iloc[0]) if "norm" in wp and wp["norm"].notna().any() else "n/a"
