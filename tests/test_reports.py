@@ -1156,3 +1156,12 @@ def test_event_driven_sweeps_are_not_compared_as_contact_solvers():
     ev = orders[orders["integrator"] == "event"]
     assert len(ev) == 1 and ev["order"].iloc[0] == pytest.approx(_fitted(event["h"], event["err_mean"]))
     assert len(solver_comparison(orders)) == len(solver_comparison(wp_orders(wp))) == 1
+
+
+def test_design_key_number_is_the_median_final_v_of_each_design(synthetic_report):
+    page, rows = synthetic_report
+    obs = rows[(rows["kind"] == "observers") & (rows["status"] == "ok")]
+    key = next(i for i in page.sections["key-numbers"].items if i.startswith("Observer designs, median"))
+    for name, g in obs.groupby("observer"):
+        label = OBSERVER_DESIGNS[name].label
+        assert f"{label} {fmt(float(np.median(g['V_end_rel'])))} ({len(g)} runs)" in key

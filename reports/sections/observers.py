@@ -239,4 +239,14 @@ def build(ctx: ReportContext) -> Section:
     sec.table(design_table(obs))
     for rec in ratios:
         ctx.key_numbers.append(f"{rec['name']}: {rec['headline']}; {rec['pair'][0]} {rec['verdict']}.")
+    ctx.key_numbers.append(designs_key(obs))
     return sec
+
+
+def designs_key(obs: pd.DataFrame) -> str:
+    """Key-number line: per design that ran, the median over its applicable runs of V_end/V(t_on)."""
+    summ = analysis.design_summary(obs)
+    ran = summ[summ["applicable"] > 0]
+    return ("Observer designs, median V_end / V(t_on) over their applicable runs: "
+            + "; ".join(f"{registry.label(r['observer'])} {fmt(r['median_V_end_rel'])} "
+                        f"({fmt_int(r['applicable'])} runs)" for _, r in ran.iterrows()) + ".")
