@@ -295,6 +295,8 @@ def test_bad_input_names_the_field(double_mass):
     for window in ([0.0, 10.0], [0.005, 20.0]):     # ends before t_end; t_on off the grid
         with pytest.raises(InputError, match="observer.coupling"):
             run_observers(master, sc.with_overrides({"observer.coupling": window}), ("jump",))
+    with pytest.raises(InputError, match="observer.coupling"):
+        run_observers(master, sc, ("jump",), coupling=(5.0, 1.0))
 
 
 def test_coupling_window_runs_uncoupled_before_t_on():

@@ -745,7 +745,8 @@ def _slaves(scenario, observers: Iterable) -> list[Slave]:
 
 
 def run_observers(master, scenario, observers: Iterable = ("jump", "nojump"), *,
-                  intervals: list[np.ndarray] | None = None, solver: str = "pivoting") -> EventObserversResult:
+                  intervals: list[np.ndarray] | None = None, coupling="scenario",
+                  solver: str = "pivoting") -> EventObserversResult:
     """Exact event-driven observers driven by the exact χ of an event-driven master run.
 
     Parameters
@@ -760,6 +761,9 @@ def run_observers(master, scenario, observers: Iterable = ("jump", "nojump"), *,
         :class:`~observer.observers.Slave` brings its own name, design and initial state.
     intervals : list of ndarray (k_j, 2), optional
         χ's closed intervals per contact instead of the master's (e.g. a perturbed log).
+    coupling : "scenario", None or (t_on, t_off)
+        Coupling window (as :func:`observer.simulate`): the scenario's ``observer.coupling``
+        (default), None (coupled over the whole run) or an explicit window.
     solver : str
         Contact solver for the impact and force LCPs (default ``"pivoting"``).
 
@@ -782,7 +786,9 @@ def run_observers(master, scenario, observers: Iterable = ("jump", "nojump"), *,
     if any(s.metric == "K" for s in slaves):
         system.require_definite_stiffness("the observer with position jumps")
     t, qm, um = _master_arrays(master, system.n)
-    k_on = _coupling_start(scenario, t)
+    if coupling == "scenario":
+        coupling = scenario.observer.get("coupling")
+    k_on = _coupling_start(coupling, t)
     if intervals is None:
         intervals = [np.asarray(master.intervals(j), dtype=float).reshape(-1, 2) for j in range(system.m)]
     intervals = _check_intervals(intervals, system.m)
@@ -796,10 +802,13 @@ def run_observers(master, scenario, observers: Iterable = ("jump", "nojump"), *,
     return out
 
 
-def _coupling_start(scenario, t: np.ndarray) -> int:
+def _coupling_start(coupling, t: np.ndarray) -> int:
     """Grid row of t_on: the observers are coupled on [t_on, t_end]; before t_on each runs
     uncoupled (its own geometric constraints: the event master from its own state)."""
-    coupling = scenario.observer.get("coupling")
+    if coupling is not None:
+        c = np.asarray(coupling, dtype=float)
+        if c.shape != (2,) or np.any(np.isnan(c)) or c[1] < c[0]:
+            raise InputError("observer.coupling", f"must be [t_on, t_off] with t_on ≤ t_off, got {coupling!r}")
     if coupling is None or coupling[0] <= t[0]:
         k_on = 0
     else:
