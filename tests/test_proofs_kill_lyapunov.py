@@ -860,3 +860,12 @@ def test_set_mismatch_with_a_positive_impulse_goes_through_the_pair_summary():
     for key in ly.SLACKS:
         vals = np.where(np.isnan(ref[key]), -np.inf, ref[key] - ref["roundoff"]) / ref["V"][:-1]
         assert got[key] == pytest.approx(max(float(np.max(vals)), 0.0), rel=1e-6, abs=1e-300)
+
+
+def test_no_cause_when_dV_is_exactly_zero(monkeypatch):
+    """ΔV = 0 exactly (a positive damping part cancelled by the impulse): no increase, so no
+    cause is named, though the damping sign criterion fails."""
+    r = _check_with(monkeypatch, _fake_parts(damping=0.25, impulse_complementarity=-0.25))
+    assert r.witness["test pair: max_dV"] == 0.0
+    assert r.witness["test pair: cause"] == ""
+    assert r.witness["worst_criterion"] == "damping_sign"
