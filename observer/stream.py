@@ -170,7 +170,9 @@ class ChunkWriter:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:
-        if exc_type is not None and not self.closed:
+        if exc_type is not None and self.chunks == 0:
+            self.closed = True                           # failed before any row: no file at all
+        elif exc_type is not None and not self.closed:
             where = f"after t = {self.t_last:.9g}" if self.t_last is not None else "before the first step"
             self.close({"status": {"state": "stopped",
                                    "reason": f"{exc_type.__name__} {where} ({self.rows} rows written)"}})

@@ -194,3 +194,12 @@ def test_sigint_mid_run_leaves_every_finished_step(tmp_path):
     assert ref.rows.size > k
     inp = _loop_input("impact_oscillator", (k + 1) * 1e-4, h=1e-4)
     _assert_prefix(df, _frame_of(ref, inp))
+
+
+def test_writer_leaves_no_file_when_the_run_fails_before_any_row(tmp_path):
+    """Bad input found after the writer was opened: no file (as before streaming)."""
+    path = tmp_path / "x.csv"
+    with pytest.raises(ValueError):
+        with ChunkWriter(path):
+            raise ValueError("bad input")
+    assert not path.exists() and not path.with_suffix(".json").exists()
