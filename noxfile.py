@@ -59,7 +59,27 @@ MUTATION_TARGETS: dict[str, tuple[list[str], list[str]]] = {
                 "tests/test_impact_laws.py"]),
     "contact": (["observer/contact/*"], ["tests/test_contact.py"]),
     "observers": (["observer/observers.py"], ["tests/test_observers.py", "tests/test_stepping_units.py"]),
-    "proofs_checks": (["proofs_checks/*"], ["tests/test_proofs_checks.py"]),
+    # proofs_checks, one entry per group of files, each against the fast tests that reach it
+    # (equivalent mutants: tests/mutants/proofs_checks_*.md; overview tests/mutants/proofs_checks.md)
+    "proofs_checks_lyapunov": (["proofs_checks/lyapunov.py"],
+                               ["tests/test_proofs_checks_mutants.py", "tests/test_proofs_kill_lyapunov.py"]),
+    "proofs_checks_projection": (["proofs_checks/projection.py"],
+                                 ["tests/test_proofs_checks_mutants.py", "tests/test_proofs_kill_projection.py",
+                                  "tests/test_proofs_checks.py::test_projection_psd_exhaustive_and_sampled",
+                                  "tests/test_proofs_checks.py::test_projection_psd_fails_for_indefinite_stiffness",
+                                  "tests/test_proofs_checks.py::test_every_default_tolerance_is_pinned"]),
+    "proofs_checks_switching": (["proofs_checks/switching.py"],
+                                ["tests/test_proofs_checks.py", "tests/test_proofs_checks_mutants.py", "-k",
+                                 "switching or isolated_switch or projected_master_gap or proofs_checks_mutants"]),
+    "proofs_checks_small": (["proofs_checks/assumptions.py", "proofs_checks/forcing.py", "proofs_checks/result.py",
+                             "proofs_checks/context.py", "proofs_checks/asserts.py", "proofs_checks/__init__.py",
+                             "proofs_checks/cli.py"],
+                            ["tests/test_proofs_kill_assumptions.py", "tests/test_proofs_kill_result.py",
+                             "tests/test_proofs_kill_api.py"]),
+    # the simulation-driven rest (slow: tens of seconds per mutant)
+    "proofs_checks_runs": (["proofs_checks/runs.py", "proofs_checks/proposition.py", "proofs_checks/monotonicity.py",
+                            "proofs_checks/designs.py", "proofs_checks/plugin.py"],
+                           ["tests/test_proofs_checks.py", "tests/test_designs.py", "tests/test_proofs_plugin.py"]),
 }
 MUTANTS_DIR = ROOT / "mutants"
 EQUIVALENT_DIR = ROOT / "tests" / "mutants"
