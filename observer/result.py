@@ -167,6 +167,15 @@ class ReadOnlyDict(dict):
         return type(self), (dict(self),)
 
 
+def _read_only(a):
+    """A read-only view of array ``a`` (no copy; the caller's array stays writable); None stays."""
+    if a is None:
+        return None
+    view = np.asarray(a).view()
+    view.flags.writeable = False
+    return view
+
+
 #: Columns of :attr:`SimulationResult.events` (one row per impact/contact event of the
 #: event-driven integrator): event time, contact index, event kind (e.g. ``"impact"``,
 #: ``"release"``), contact velocity before/after and the impulse.
@@ -189,7 +198,7 @@ class SimulationResult:
     """A master run (and optionally observer runs) on the grid ``t``, complete and frozen.
 
     Built once with every field (``dataclasses.replace`` makes a changed copy); ``metadata``
-    and ``slaves`` are read-only mappings, the arrays are not written to after construction.
+    and ``slaves`` are read-only mappings and the arrays read-only views (no copies).
 
     Attributes
     ----------
@@ -241,6 +250,8 @@ class SimulationResult:
                             ("status", status), ("events", check_events(self.events)),
                             ("stats", self.stats or StepStats.from_metadata(meta))):
             object.__setattr__(self, name, value)
+        for name in ("t", "q", "u", "P", "active", "chi", "sigma"):
+            object.__setattr__(self, name, _read_only(getattr(self, name)))
 
     @property
     def g(self) -> np.ndarray:
@@ -282,25 +293,37 @@ class SimulationResult:
         and settling times ``t_settle_ρ`` (after which V stays below ρ·V(t_on) for the rest of
         the window, :func:`observer.metrics.settling_time`), the fitted exponential rate of V
         over the coupling window, V(t_on), the final V and the floor (median of V over the
-        last 10 % of the window). ``inf`` marks a threshold never reached."""
-        from observer.metrics import (decay_rate, floor, settle_column, settling_time, switchings,
-                                      sync_column, sync_time)
+        last 10 % of the window). ``inf`` marks a threshold never reached; NaN every metric of
+        a coupling window that starts after the run ends (nothing to measure)."""
+        from observer.metrics import switchings
 
         coupling = self.metadata.get("coupling") or [float(self.t[0]), float(self.t[-1])]
         t_on, t_off = float(coupling[0]), min(float(coupling[1]), float(self.t[-1]))
         rows = []
         for name, s in self.slaves.items():
-            k_on = int(np.searchsorted(self.t, t_on))
-            row = {"observer": name, "t_on": t_on, "t_off": t_off, "V_on": float(s.V[k_on])}
-            for rho in rhos:
-                row[sync_column(rho)] = sync_time(self.t, s.V, rho, t_on, t_off)
-                row[settle_column(rho)] = settling_time(self.t, s.V, rho, t_on, t_off)
-            row["rate"] = decay_rate(self.t, s.V, t_on, t_off)
-            row["V_end"] = float(s.V[-1])
-            row["floor"] = floor(self.t, s.V, t_off - 0.1 * (t_off - t_on), t_off)
-            row["master_closings"] = switchings(self.active)
+            row = {"observer": name, "t_on": t_on, "t_off": t_off,
+                   **self._window_metrics(s.V, t_on, t_off, rhos),
+                   "V_end": float(s.V[-1]), "master_closings": switchings(self.active)}
             rows.append(row)
         return pd.DataFrame(rows)
+
+    def _window_metrics(self, V: np.ndarray, t_on: float, t_off: float,
+                        rhos: tuple[float, ...]) -> dict:
+        """V(t_on), first-passage and settling times, rate and floor of V over [t_on, t_off]."""
+        from observer.metrics import (decay_rate, floor, settle_column, settling_time,
+                                      sync_column, sync_time)
+
+        names = ["V_on", *(c(rho) for rho in rhos for c in (sync_column, settle_column)),
+                 "rate", "floor"]
+        if t_on > self.t[-1]:                        # the window starts after the run
+            return dict.fromkeys(names, float("nan"))
+        out = {"V_on": float(V[int(np.searchsorted(self.t, t_on))])}
+        for rho in rhos:
+            out[sync_column(rho)] = sync_time(self.t, V, rho, t_on, t_off)
+            out[settle_column(rho)] = settling_time(self.t, V, rho, t_on, t_off)
+        out["rate"] = decay_rate(self.t, V, t_on, t_off)
+        out["floor"] = floor(self.t, V, t_off - 0.1 * (t_off - t_on), t_off)
+        return {k: out[k] for k in names}
 
     def write(self, path: str | Path) -> Path:
         """Write :meth:`to_frame` as ``.csv`` (plain header, metadata in the ``NAME.json``

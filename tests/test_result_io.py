@@ -18,6 +18,7 @@ import pytest
 import observer
 from observer import InputError, simulate
 from observer.io import PARQUET_KEY, read_frame, read_result
+from observer.metrics import RHOS
 from observer.result import EVENT_COLUMNS, RunState, RunStatus, SimulationResult, StepStats
 
 
@@ -229,6 +230,9 @@ def test_result_is_frozen_after_construction(observed_run):
     with pytest.raises(TypeError, match="frozen"):
         res.metadata.update(h=1.0)
     assert res.metadata["h"] == 1e-3 and set(res.slaves) == {"jump", "nojump"}
+    for arr in (res.t, res.q, res.u, res.P, res.active, res.chi, res.sigma):
+        with pytest.raises(ValueError, match="read-only"):
+            arr[0] = arr[0]
 
 
 def test_replace_and_pickle_give_equal_frozen_copies(observed_run):
@@ -247,3 +251,30 @@ def test_the_caller_cannot_change_a_result_through_its_own_dicts(observed_run):
     res = _bare(observed_run, metadata=meta, slaves=slaves)
     meta["h"], slaves["extra"] = 5.0, None
     assert res.metadata["h"] == 1e-3 and "extra" not in res.slaves
+    q = observed_run.q.copy()
+    own = _bare(dataclasses.replace(observed_run, q=q))
+    q[0, 0] = 7.0                                   # the caller's array stays writable ...
+    assert own.q[0, 0] == 7.0                       # ... and the result is a view of it, no copy
+
+
+# ---------------------------------------------------------------------------------------
+# synchronization metrics
+# ---------------------------------------------------------------------------------------
+def test_synchronization_of_a_window_after_the_run_is_nan_not_an_error():
+    """rocking_chain couples from t = 4 s: a 0.05 s run has no window to measure."""
+    res = simulate("double_mass", observers=("jump",), h=1e-3, t_end=0.05, coupling=(1.0, 2.0))
+    row = res.synchronization().iloc[0]
+    assert row["observer"] == "jump" and row["t_on"] == 1.0
+    assert np.isnan(row["V_on"]) and np.isnan(row["rate"]) and np.isnan(row["floor"])
+    times = row.filter(regex="^t_(sync|settle)_").astype(float)
+    assert len(times) == 2 * len(RHOS) and np.isnan(times).all()
+    assert row["V_end"] == res.slaves["jump"].V[-1]
+
+
+def test_synchronization_column_order_and_v_on_from_the_returned_state(observed_run):
+    sync = observed_run.synchronization(rhos=(1e-3,))
+    assert list(sync.columns) == ["observer", "t_on", "t_off", "V_on", "t_sync_0.001",
+                                  "t_settle_0.001", "rate", "floor", "V_end", "master_closings"]
+    k_on = int(np.searchsorted(observed_run.t, sync["t_on"].iloc[0]))
+    for _, row in sync.iterrows():
+        assert row["V_on"] == observed_run.slaves[row["observer"]].V[k_on]
