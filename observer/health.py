@@ -40,6 +40,8 @@ Every run of :func:`observer.loop.run` gets a :class:`Health` record (issue 12, 
 
 from __future__ import annotations
 
+import os
+import sys
 import warnings
 from dataclasses import asdict, dataclass, field
 
@@ -229,7 +231,17 @@ def _distinct(masks: np.ndarray) -> list[np.ndarray]:
     return [r for r in np.unpackbits(packed, axis=1, count=m).astype(bool) if r.any()]
 
 
-def emit(health: Health, stacklevel: int = 3) -> None:
-    """Each of ``health.warnings`` as a :class:`RunHealthWarning` (stderr by default)."""
+def emit(health: Health) -> None:
+    """Each of ``health.warnings`` as a :class:`RunHealthWarning` (stderr by default),
+    attributed to the first caller outside the ``observer`` package (the user's call)."""
     for msg in health.warnings:
-        warnings.warn(msg, RunHealthWarning, stacklevel=stacklevel)
+        warnings.warn(msg, RunHealthWarning, stacklevel=_caller_level())
+
+
+def _caller_level() -> int:
+    """``stacklevel`` (seen from :func:`emit`) of the first frame outside this package."""
+    pkg = os.path.dirname(os.path.abspath(__file__)) + os.sep
+    frame, level = sys._getframe(2), 2
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(pkg):
+        frame, level = frame.f_back, level + 1
+    return level
