@@ -22,6 +22,11 @@ from proofs_checks.context import CheckContext, CheckSettings
 from proofs_checks.result import CheckResult
 
 
+# the replays are deliberately coarse (a few hundred steps): the run-health note about the
+# penetration at this h is expected, and not what these tests are about
+pytestmark = pytest.mark.filterwarnings("ignore:penetration .* reduce h")
+
+
 # ----------------------------------------------------------------------------- select / run_checks
 def test_select_parses_and_validates():
     assert pc.select(None) == list(pc.CHECKS)
