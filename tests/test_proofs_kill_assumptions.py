@@ -241,3 +241,16 @@ def test_generic_forcing_with_a_claimed_bound_and_zero_signals():
     late = lambda t: np.stack([np.where(np.asarray(t, float) > 1.5, 1.0, 0.0)], axis=-1)  # noqa: E731
     r = pc.check_forcing_bounded(late, horizon=1.0, windows=2)
     assert r.witness["growth_last_doubling"] == np.inf and r.passed is False
+
+
+def test_not_definite_reason_relative_floor_and_text():
+    from proofs_checks.assumptions import not_definite_reason
+    assert not_definite_reason(_sym([2.0, 8.0]), "why") is None
+    assert not_definite_reason(np.diag([5.0, 1.0, 1.5e-11]), "why") is None       # 3e-12·λ_max
+    assert not_definite_reason(np.diag([5.0, 1.0, 5e-12]), "x") == "K is not positive definite (λ_min = 5e-12): x"
+    assert not_definite_reason(np.diag([5.0, 1.0, 2e-12]), "x") is not None     # floor from λ_max = 5, not 1
+    assert not_definite_reason(np.diag([0.2, 0.1]), "x") is None                 # λ_max < 1
+    assert not_definite_reason(np.diag([-3.0, -1.0]), "c") == "K is not positive definite (λ_min = -3): c"
+    assert not_definite_reason(np.zeros((2, 2)), "c") == "K is not positive definite (λ_min = 0): c"
+    # the symmetric part decides (a skew part is ignored; 0.5·(K + Kᵀ), not K + Kᵀ, in the text)
+    assert not_definite_reason(np.array([[1.0, 4.0], [-4.0, -2.0]]), "c") == "K is not positive definite (λ_min = -2): c"
