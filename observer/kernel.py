@@ -331,7 +331,7 @@ def step_system(k, q, u, act, a, project, slot, law, sch, wk, out):
     ``sch`` = (h, θ, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, f̄, ν, ν̇, W (CSC: Wp, Wi,
     Wv), (Â⁻¹W)ᵀ, Ĝ, G₀, (N⁻¹W)ᵀ, WᵀN⁻¹W, e, tol) — the n×m matrices transposed, so that
     a contact's column is contiguous; the projection's (N⁻¹W)ᵀ and WᵀN⁻¹W are stacks over
-    the projection metrics, ``slot`` selects this system's; ``wk`` = work buffers ((2, n), (10, m),
+    the projection metrics, ``slot`` selects this system's; ``wk`` = work buffers ((n,) u_free, (n,) δu, (10, m),
     (4, m, m), (2, m) bool); ``out`` = (q1, u1, P, Σ, q_pre, stats) with stats = [solves,
     iterations, max residual]. Writes q_{k+1}, u_{k+1}, P[:a], Σ[:a] and the position before
     the projection; returns the status. (Tuples keep the call inlinable: numba inlines
@@ -339,11 +339,9 @@ def step_system(k, q, u, act, a, project, slot, law, sch, wk, out):
     """
     (h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, nu, nu_dot, Wp, Wi, Wv,
      AinvWT, Ghat, G0, KinvWT, L, e, tol) = sch
-    wk_f, wk_m, wk_mm, wk_b = wk
+    uf, du, wk_m, wk_mm, wk_b = wk
     q1, u1, P, sig, qpre, stats = out
     n = q.shape[0]
-    uf = wk_f[0]
-    du = wk_f[1]
     _free_velocity(k, q, u, h, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, uf)
     for i in range(n):
         u1[i] = uf[i]
@@ -596,7 +594,7 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
     wv = np.empty(2 * n + m)
     sch = (h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, nu, nu_dot, Wp, Wi, Wv,
            AinvWT, Ghat, G0, KinvWT, L, e, tol)
-    wk = (np.empty((2, n)), np.empty((10, m)), np.empty((4, m, m)), np.zeros((2, m), np.bool_))
+    wk = (np.empty(n), np.empty(n), np.empty((10, m)), np.empty((4, m, m)), np.zeros((2, m), np.bool_))
     out = (q1, u1, P, sig, qpre, stats)
     # step k is recorded (row (k+1)/record_every) when (k+1) % record_every == 0: counted,
     # not divided, per step
