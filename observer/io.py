@@ -12,6 +12,9 @@ Layout
 ``run.parquet``
     The same columns; the metadata is the JSON value of the schema metadata key
     :data:`PARQUET_KEY` (``pyarrow.parquet.read_schema(path).metadata[b"observer"]``).
+``run.events.csv`` / ``run.events.parquet``
+    Runs with an events table (:attr:`observer.SimulationResult.events`): one row per event,
+    columns ``time, contact, kind, gamma_minus, gamma_plus, impulse`` (:func:`read_events`).
 
 :func:`read_result` reads either back as ``(DataFrame, metadata)``; CSV files written before
 the sidecar existed (metadata in a leading ``# metadata: {...}`` comment line) are still read.
@@ -52,6 +55,21 @@ def to_json(metadata: dict) -> str:
 def sidecar_path(path: str | Path) -> Path:
     """The metadata sidecar of a CSV result: ``NAME.json`` beside ``NAME.csv``."""
     return Path(path).with_suffix(".json")
+
+
+def events_path(path: str | Path) -> Path:
+    """The events table of a result file: ``NAME.events.csv`` beside ``NAME.csv`` (or
+    ``.parquet``), written when the result has events."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.events{path.suffix}")
+
+
+def read_events(path: str | Path) -> pd.DataFrame | None:
+    """The events table written beside the result file ``path`` (None if there is none)."""
+    ev = events_path(path)
+    if not ev.exists():
+        return None
+    return pd.read_parquet(ev) if ev.suffix.lower() == ".parquet" else pd.read_csv(ev)
 
 
 def _check_suffix(path: Path) -> str:

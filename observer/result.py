@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from observer.errors import InputError
-from observer.io import jsonable, read_frame, read_result, write_frame  # noqa: F401 (re-exported)
+from observer.io import events_path, jsonable, read_frame, read_result, write_frame  # noqa: F401
 from observer.metrics import RHOS
 from observer.model import LinearSystem
 
@@ -328,14 +328,12 @@ class SimulationResult:
     def write(self, path: str | Path) -> Path:
         """Write :meth:`to_frame` as ``.csv`` (plain header, metadata in the ``NAME.json``
         sidecar) or ``.parquet`` (metadata in the schema metadata), see :mod:`observer.io`.
-        With :attr:`events`, they go to ``NAME.events.csv``/``.parquet`` beside it (named in
-        the metadata as ``events_file``)."""
+        With :attr:`events`, they go to :func:`observer.io.events_path` beside it
+        (``NAME.events.csv``/``.parquet``; :func:`observer.io.read_events` reads them)."""
         path = Path(path)
         df = self.to_frame()
         if self.events is not None:
-            events_path = path.with_name(f"{path.stem}.events{path.suffix}")
-            df.attrs["events_file"] = events_path.name
-            write_frame(self.events, events_path)
+            write_frame(self.events, events_path(path))
         return write_frame(df, path)
 
 

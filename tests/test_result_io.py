@@ -17,7 +17,7 @@ import pytest
 
 import observer
 from observer import InputError, simulate
-from observer.io import PARQUET_KEY, read_frame, read_result
+from observer.io import PARQUET_KEY, events_path, read_events, read_frame, read_result
 from observer.metrics import RHOS
 from observer.result import EVENT_COLUMNS, RunState, RunStatus, SimulationResult, StepStats
 
@@ -142,14 +142,18 @@ def test_read_result_returns_frame_and_metadata(observed_run, tmp_path, ext):
     assert list(df.columns) == DM_COLUMNS
     for col in DM_COLUMNS:
         assert np.array_equal(df[col].to_numpy(), expected[col].to_numpy()), col
-    events = {} if observed_run.events is None else {"events_file": f"r.events.{ext}"}
-    assert meta == {**expected.attrs, **events}
+    assert meta == expected.attrs
     assert df["P0"].dtype == np.float64 and df["active0"].dtype.kind == "i"
     assert read_frame(tmp_path / f"r.{ext}").attrs == meta          # the attrs view agrees
 
 
 def test_read_result_is_public_api():
     assert observer.read_result is read_result and "read_result" in observer.__all__
+
+
+def test_a_result_without_events_has_no_events_file(observed_run, tmp_path):
+    path = _bare(observed_run).write(tmp_path / "plain.csv")
+    assert read_events(path) is None and not events_path(path).exists()
 
 
 def test_csv_without_sidecar_reads_with_empty_metadata(observed_run, tmp_path):
@@ -191,10 +195,10 @@ def test_events_are_written_beside_the_result(observed_run, tmp_path, ext):
     ev = _events(3)
     res = _bare(observed_run, metadata=dict(observed_run.metadata), events=ev)
     path = res.write(tmp_path / f"ev.{ext}")
-    _, meta = read_result(path)
-    assert meta["events_file"] == f"ev.events.{ext}"
-    back = (pd.read_csv if ext == "csv" else pd.read_parquet)(tmp_path / meta["events_file"])
+    assert events_path(path) == tmp_path / f"ev.events.{ext}"
+    back = (pd.read_csv if ext == "csv" else pd.read_parquet)(tmp_path / f"ev.events.{ext}")
     assert list(back.columns) == list(EVENT_COLUMNS)
+    assert read_events(path).equals(back)
     assert np.array_equal(back["time"].to_numpy(), ev["time"].to_numpy())
     assert back["kind"].tolist() == ["impact"] * 3
     assert not (tmp_path / "ev.events.json").exists()            # no metadata, no sidecar
