@@ -778,6 +778,7 @@ def test_convergence_reason_uses_the_last_kinetic_and_potential_parts():
     u = np.zeros(n)
     u[0] = 40.0                                   # V0 = 1600 + 1000: less than 3 decades above
     u[-1] = 1.0                                   # T_end = ½·2·1 = 1, U_end = ½·2000·1 = 1000
+    e[-2] = 2.0                                   # U one step before the end: 4000 (not used)
     run = _exact_run(e, u, M=2.0, K=2000.0)
     r = ly.check_convergence(run)
     assert r.passed is False and r.reason.endswith("v has not decayed (a longer horizon may be needed)")
@@ -870,7 +871,7 @@ def test_set_mismatch_with_a_positive_impulse_goes_through_the_pair_summary():
 def test_no_cause_when_dV_is_exactly_zero(monkeypatch):
     """ΔV = 0 exactly (a positive damping part cancelled by the impulse): no increase, so no
     cause is named, though the damping sign criterion fails."""
-    r = _check_with(monkeypatch, _fake_parts(damping=0.25, impulse_complementarity=-0.25))
-    assert r.witness["test pair: max_dV"] == 0.0
+    r = _check_with(monkeypatch, _fake_parts(step=0, damping=0.25, impulse_complementarity=-0.25))
+    assert r.witness["test pair: max_dV"] == 0.0 and r.witness["test pair: worst_step"] == 0
     assert r.witness["test pair: cause"] == ""
     assert r.witness["worst_criterion"] == "damping_sign"
