@@ -778,7 +778,8 @@ def test_convergence_reason_uses_the_last_kinetic_and_potential_parts():
     u = np.zeros(n)
     u[0] = 40.0                                   # V0 = 1600 + 1000: less than 3 decades above
     u[-1] = 1.0                                   # T_end = ½·2·1 = 1, U_end = ½·2000·1 = 1000
-    e[-2] = 2.0                                   # U one step before the end: 4000 (not used)
+    e[:-2] = np.linspace(3.0, 1.2, n - 2)         # decaying (positive fitted rate)
+    e[-2] = 1.5                                   # U one step before the end: 2250 (not used)
     run = _exact_run(e, u, M=2.0, K=2000.0)
     r = ly.check_convergence(run)
     assert r.passed is False and r.reason.endswith("v has not decayed (a longer horizon may be needed)")
