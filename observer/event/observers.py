@@ -20,9 +20,13 @@ contacts whose velocity constraint is active (γ_A = 0 held by a force λ_A ≥ 
   and at every switching-on the position jump of eq. (14), the K-metric projection
   ``q⁺ = q⁻ − K⁻¹W_I L_I⁻¹ g_I⁻`` onto g_I = 0 over the whole closed set I.
 
+The other registered designs with position jumps (``jump_mass``, ``jump_identity``) use the
+metric N = M or 1 in place of K (L_I = W_IᵀN⁻¹W_I); only N = K is covered by Theorem 1.
+
 Both: when χ_i switches on with γ_i⁻ < 0 the observer impacts through the *same* impact-law
-code as the master and the time-stepper (:func:`observer.impact.impact` on the closed set I with
-the Delassus matrix G_I = W_IᵀM⁻¹W_I, eq. (9)); while χ_i = 1 the velocity-level unilateral
+code as the master and the time-stepper (:mod:`observer.impact`, eq. (9), Delassus matrix
+W_IᵀM⁻¹W_I; Poisson on all of I, Newton on the approaching contacts of I, see
+:meth:`_ObserverIntegrator.collide`); while χ_i = 1 the velocity-level unilateral
 constraint γ_i ≥ 0 holds (eq. (8)): a contact whose γ_i reaches 0 from above becomes active
 ("stick": λ from the acceleration-level LCP ``0 ≤ γ̇_B ⊥ λ_B ≥ 0``), an active contact
 releases when its force λ_i — an exact linear function of the state — crosses zero
