@@ -165,6 +165,7 @@ def test_sigint_mid_run_leaves_every_finished_step(tmp_path):
     """1e7 steps; SIGINT once the first windows are on disk: exit 130, and the partial file
     holds every finished step, bitwise the first rows of an uninterrupted run, with a status
     saying where it stopped."""
+    assert _cli_streams(), "observer run writes its file only at the end"   # fail fast until then
     path = tmp_path / "long.parquet"
     env = dict(os.environ)
     env["PYTHONPATH"] = str(REPO) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
