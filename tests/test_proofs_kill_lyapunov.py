@@ -443,6 +443,8 @@ def _check_with(monkeypatch, parts, projected=(True, True), **kw):
 def test_a_positive_dV_is_attributed_to_the_part_that_caused_it(monkeypatch, cause, pieces, phrase):
     r = _check_with(monkeypatch, _fake_parts(**pieces))
     assert r.passed is False and r.witness["test pair: cause"] == cause
+    # a sign criterion failing by the same excess does not displace dV as the worst one
+    assert r.witness["worst_criterion"] == "dV"
     assert r.reason.startswith(phrase), r.reason
     assert r.witness["worst_pair"] == "test pair"
 
@@ -878,3 +880,35 @@ def test_no_cause_when_dV_is_exactly_zero(monkeypatch):
     assert r.witness["test pair: max_dV"] == 0.0 and r.witness["test pair: worst_step"] == 0
     assert r.witness["test pair: cause"] == ""
     assert r.witness["worst_criterion"] == "damping_sign"
+
+
+def test_the_worst_criterion_is_the_largest_excess_over_its_own_tolerance(monkeypatch):
+    """dV exceeds by 0.2 with tolerance 0.1 (excess 0.1); the damping sign by 0.15 with
+    identity_tolerance 0: the damping sign is the worst criterion and sets the margin."""
+    r = _check_with(monkeypatch, _fake_parts(damping=0.3, impulse_slack=0.1), tolerance=0.1)
+    assert r.witness["test pair: max_dV"] == pytest.approx(0.2)
+    assert r.witness["worst_criterion"] == "damping_sign"
+    assert r.margin == pytest.approx(-0.15) and r.tolerance == 0.0
+    assert r.reason.index("the damping part") < r.reason.index("damping term positive")
+
+
+def test_order_fit_only_when_some_impulse_is_positive(monkeypatch):
+    """Impulse parts all negative, the least negative at step 1: no re-run (the value, not
+    the step index, decides)."""
+    parts = _fake_parts()
+    parts["impulse"][:] = [-0.2, -0.1, -0.3]
+    parts["impulse_complementarity"][:] = parts["impulse"]
+    parts["total"][:] = parts["impulse"]
+    monkeypatch.setattr(ly, "slack_order", lambda *a: pytest.fail("no re-run expected"))
+    monkeypatch.setattr(ly, "decrement_parts", lambda run, a, b, examine=None: parts)
+    r = ly.check_lyapunov_decrease(_fake_run(), pairs=[("test pair", "a", "b")])
+    assert r.passed is True and "slack_h" not in r.witness
+    # positive at step 0 only: the re-run happens
+    parts = _fake_parts(step=0, impulse_slack=0.3, impulse_complementarity=-0.1)
+    calls = []
+    monkeypatch.setattr(ly, "slack_order", lambda run, base, factors: calls.append(factors) or {
+        "h": np.array([0.1, 0.2]), "impulse_slack_order": 1.0, "impulse_target_order": float("nan"),
+        "projection_unprojected_gap_order": float("nan")})
+    monkeypatch.setattr(ly, "decrement_parts", lambda run, a, b, examine=None: parts)
+    r = ly.check_lyapunov_decrease(_fake_run(), pairs=[("test pair", "a", "b")])
+    assert calls == [(1.0, 2.0, 4.0)] and r.witness["slack_h"].tolist() == [0.1, 0.2]
