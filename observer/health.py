@@ -104,10 +104,14 @@ def length_scale(system, q0: np.ndarray, t0: float, q: np.ndarray | None = None)
 
 
 def omega_max(system) -> float:
-    """Largest ω with ``K v = ω² M v`` (0 for K = 0)."""
-    n = system.n
-    lam = sla.eigh(system.K, system.M, eigvals_only=True, subset_by_index=[n - 1, n - 1])[0]
-    return float(np.sqrt(max(lam, 0.0)))
+    """Largest ω with ``K v = ω² M v`` (0 for K = 0); computed once per system (cached in
+    its ``__dict__``, as :meth:`LinearSystem.stiffness_eigenvalue_range` does)."""
+    cached = system.__dict__.get("_omega_max")
+    if cached is None:
+        n = system.n
+        lam = sla.eigh(system.K, system.M, eigvals_only=True, subset_by_index=[n - 1, n - 1])[0]
+        cached = system.__dict__["_omega_max"] = float(np.sqrt(max(lam, 0.0)))
+    return cached
 
 
 def min_eig_projected(L_of, sets: list[tuple[int, np.ndarray]]) -> float | None:
