@@ -108,8 +108,11 @@ def _timed(fn, *args, **kwargs):
 
 
 def simulate(sc, case: Case, **kwargs):
-    """:func:`observer.simulate` on the case's engine (:func:`bench.suites.engine_for`),
-    timed: ``(result, cpu seconds, wall seconds)``."""
+    """:func:`observer.simulate` with the case's integrator (time-stepping: on the engine of
+    :func:`bench.suites.engine_for`), timed: ``(result, cpu seconds, wall seconds)``."""
+    if case.integrator == "event":
+        kwargs = {k: v for k, v in kwargs.items() if k not in ("solver", "record_every")}
+        return _timed(observer.simulate, sc, integrator="event", **kwargs)
     kwargs.setdefault("engine", engine_for(kwargs.get("solver") or case.solver))
     return _timed(observer.simulate, sc, **kwargs)
 
@@ -119,7 +122,8 @@ def engine_columns(res) -> dict[str, Any]:
     md = res.metadata
     steps = md.get("steps") or 0
     loop = md.get("wall_time_s", float("nan"))
-    return {"engine": md.get("engine", "python"), "structure": md.get("structure", ""),
+    engine = "event" if md.get("integrator") == "event" else md.get("engine", "python")
+    return {"engine": engine, "structure": md.get("structure", ""),
             "loop_time_s": loop, "loop_per_step_s": loop / steps if steps else float("nan"),
             "run_compile_time_s": md.get("compile_time_s", 0.0),
             "solver_fallbacks": md.get("solver_fallbacks", 0)}
@@ -219,8 +223,8 @@ def run_observers(case: Case, ctx: Context) -> list[dict]:
                      "cpu_time_s": cpu, "wall_time_s": wall, "steps": steps,
                      "steps_per_s": steps / cpu if cpu > 0 else float("nan"),
                      "cpu_scope": "master + this observer",
-                     "contact_solves": res.metadata["contact_solves"],
-                     "plot_dof": dof, "plot_contact": contact})
+                     "contact_solves": res.metadata.get("contact_solves", 0),
+                     "integrator": case.integrator, "plot_dof": dof, "plot_contact": contact})
         frames.append(_plot_frame(res, dof, contact))
     if frames:
         traj = frames[0]
@@ -259,15 +263,17 @@ def record_every(h: float, h_record: float | None) -> int:
     return k
 
 
-def _reference_run(case: Case, ctx: Context):
-    key = ("wp-ref", case.scenario, case.params, case.law, case.t_end, case.h_ref, case.h_record)
+def _event_reference(case: Case, spacing: float, ctx: Context):
+    """The exact event-driven run (master and every applicable observer) of the case's
+    scenario sampled every ``spacing`` seconds, and its CPU time (cached per grid)."""
+    key = ("wp-event", case.scenario, case.params, case.law, case.t_end, round(spacing, 15))
     if key not in ctx.cache:
-        ctx.cache = {k: v for k, v in ctx.cache.items() if not (isinstance(k, tuple) and k[0] == "wp-ref")}
-        sc = observer.load_scenario(case.scenario, {**case.overrides(), "simulation.h": case.h_ref})
+        ctx.cache = {k: v for k, v in ctx.cache.items()
+                     if not (isinstance(k, tuple) and k[0] == "wp-event")}
+        sc = observer.load_scenario(case.scenario, {**case.overrides(), "simulation.h": spacing})
         names = tuple(n for n, d in OBSERVER_DESIGNS.items()
                       if not d.needs_spd_K or sc.system.is_stiffness_definite())
-        res, cpu, _ = _timed(observer.simulate, sc, observers=names, engine=engine_for("pivoting"),
-                             record_every=record_every(case.h_ref, case.h_record))
+        res, cpu, _ = _timed(observer.simulate, sc, observers=names, integrator="event")
         ctx.cache[key] = (res, cpu)
     return ctx.cache[key]
 
@@ -289,8 +295,9 @@ def run_work_precision(case: Case, ctx: Context) -> list[dict]:
     res, cpu, wall = simulate(sc, case, solver=case.solver, observers=case.observers,
                               record_every=record_every(case.h, case.h_record))
     q = res.q if case.target == "master" else res.slaves[case.target].q
-    row = {**base_row(case, sc), "target": case.target,
-           "method": f"{case.scenario} · {case.target} · {sc.law.law} · {case.solver}",
+    method = "event-driven" if case.integrator == "event" else case.solver
+    row = {**base_row(case, sc), "target": case.target, "integrator": case.integrator,
+           "method": f"{case.scenario} · {case.target} · {sc.law.law} · {method}",
            "norm": ERROR_NORM}
     if case.reference == "closed form":
         if case.target != "master":
@@ -299,27 +306,22 @@ def run_work_precision(case: Case, ctx: Context) -> list[dict]:
         if q_ref is None:
             raise InputError("reference", f"no closed form implemented for {case.scenario}")
         ref_text = info(case.scenario).reference_text or "closed form"
-        ref_cpu, h_ref = float("nan"), None
+        ref_cpu = float("nan")
     else:
-        ref, ref_cpu = _reference_run(case, ctx)
-        ratio = case.h / case.h_ref
-        if abs(ratio - round(ratio)) > 1e-9 * ratio or ratio < 2:
-            raise InputError("h_ref", f"h = {case.h} is not an integer multiple of h_ref = {case.h_ref}")
-        spacing = res.t[1] - res.t[0] if res.t.size > 1 else case.h
-        step = int(round(spacing / (ref.t[1] - ref.t[0])))
-        idx = np.arange(res.t.size) * step
-        if idx[-1] >= ref.t.size or np.max(np.abs(ref.t[idx] - res.t)) > 1e-9:
-            raise InputError("h_ref", "reference grid does not contain the grid of h")
-        q_ref = (ref.q if case.target == "master" else ref.slaves[case.target].q)[idx]
-        ref_text = f"h/16 run (h_ref = h_min/16 = {case.h_ref:.4g} s, pivoting, same law, compiled)"
-        h_ref = case.h_ref
+        spacing = float(res.t[1] - res.t[0]) if res.t.size > 1 else case.h
+        ref, ref_cpu = _event_reference(case, spacing, ctx)
+        if ref.t.shape != res.t.shape or np.max(np.abs(ref.t - res.t)) > 1e-9:
+            raise InputError("reference", "the event solution's grid differs from the run's")
+        q_ref = ref.q if case.target == "master" else ref.slaves[case.target].q
+        ref_text = ("event solution (exact event-driven integrator, master and observers, "
+                    "sampled on the run's grid)")
     steps = res.metadata["steps"]
     row.update(trajectory_error(res.t, q, q_ref))
-    row.update(reference=ref_text, h_ref=h_ref, ref_cpu_time_s=ref_cpu, status="ok", note="",
+    row.update(reference=ref_text, h_ref=None, ref_cpu_time_s=ref_cpu, status="ok", note="",
                cpu_time_s=cpu, wall_time_s=wall, steps=steps,
                steps_per_s=steps / cpu if cpu > 0 else float("nan"),
                cpu_scope="master" if case.target == "master" else "master + this observer",
-               contact_solves=res.metadata["contact_solves"], samples=int(res.t.size),
+               contact_solves=res.metadata.get("contact_solves", 0), samples=int(res.t.size),
                error_grid_s=float(res.t[1] - res.t[0]) if res.t.size > 1 else case.h,
                **engine_columns(res))
     return [row]

@@ -50,8 +50,10 @@ SYNC: Columns = {"observer": str, "t_on": float, "t_off": float, "V_on": float, 
 
 ROWS: dict[str, Columns] = {
     "observers": {**CASE, **SYNC, **ENGINE, **TIMING, "steps": int, "steps_per_s": float,
-                  "contact_solves": int, "plot_dof": int, "plot_contact": int, "trajectory": str},
-    "work_precision": {**CASE, **ENGINE, **TIMING, "target": str, "method": str, "norm": str,
+                  "contact_solves": int, "integrator": str, "plot_dof": int, "plot_contact": int,
+                  "trajectory": str},
+    "work_precision": {**CASE, **ENGINE, **TIMING, "target": str, "integrator": str, "method": str,
+                       "norm": str,
                        "err_mean": float, "err_max": float, "err_end": float, "reference": str,
                        "h_ref": (float, type(None)), "ref_cpu_time_s": float, "steps": int,
                        "steps_per_s": float, "contact_solves": int, "samples": int,
@@ -73,11 +75,13 @@ ROWS: dict[str, Columns] = {
 
 OPTIONAL: dict[str, frozenset] = {
     "observers": frozenset(SYNC) | frozenset(ENGINE) | frozenset(
-        {"steps", "steps_per_s", "contact_solves", "plot_dof", "plot_contact", "trajectory",
+        {"steps", "steps_per_s", "contact_solves", "integrator", "plot_dof", "plot_contact", "trajectory",
          "cpu_time_s", "wall_time_s", "cpu_scope"}),
+    "scaling": frozenset({"peak_mem_mb", "trajectory_mb"}),
 }
 """Columns a row of the kind may lack: an observers row of a design that does not apply
-(status "n/a") has no synchronization, engine or timing columns."""
+(status "n/a") has no synchronization, engine or timing columns; a scaling case declared
+with ``memory=False`` has no memory columns."""
 
 
 def _is(value: Any, typ) -> bool:

@@ -63,12 +63,13 @@ class Case:
     slave_offset : tuple or None
         ``((dq...), (du...))``: observer initial state = master initial state + offset, for
         scenarios without an ``[observer]`` table; None uses the scenario's table.
+    integrator : str
+        ``"time-stepping"`` (Moreau–Jean) or ``"event"`` (the exact event-driven integrator).
     target : str
         work_precision: ``"master"`` or an observer name whose trajectory error is measured.
     reference : str
-        work_precision: ``"closed form"`` or ``"h/16 run"``.
-    h_ref : float or None
-        work_precision: step of the reference run (h_min/16 of the sweep).
+        work_precision: ``"closed form"`` or ``"event solution"`` (the exact event-driven
+        run of the same scenario, sampled on the run's grid).
     h_record : float or None
         work_precision: the error is measured on the grid of spacing max(h, h_record) (a
         power-of-two multiple of h: the run and its reference keep every k-th step), so that
@@ -92,9 +93,9 @@ class Case:
     t_end: float | None = None
     seed: int = 0
     slave_offset: tuple | None = None
+    integrator: str = "time-stepping"
     target: str = "master"
     reference: str = ""
-    h_ref: float | None = None
     h_record: float | None = None
     perturbation: str = "none"
     size: float = 0.0
@@ -196,7 +197,9 @@ def _pick(pair, full: bool):
 
 def observer_cases(full: bool) -> list[Case]:
     """Every registered observer design on every scenario's declared observer settings
-    (``SUITE["observers"]`` of its module, :func:`observer.scenarios.info`).
+    (``SUITE["observers"]`` of its module, :func:`observer.scenarios.info`), time-stepped and
+    (unless the scenario declares ``SUITE["exact"] = False``) exact: the "exact" rows have no
+    discretisation floor.
 
     Scenarios without an ``[observer]`` table declare an explicit initial offset of the
     observers; designs whose projection needs K ≻ 0 are skipped where K is singular (the
@@ -205,11 +208,13 @@ def observer_cases(full: bool) -> list[Case]:
     designs = tuple(OBSERVER_DESIGNS)
     cases = []
     for name in SCENARIOS:
+        exact = info(name).suite.get("exact", True)
         for spec in info(name).suite.get("observers") or ():
-            cases.append(Case("observers", name, label=spec.get("label", ""),
-                              params=tuple(spec.get("params", ())), observers=designs,
-                              h=_pick(spec.get("h"), full), t_end=_pick(spec.get("t_end"), full),
-                              slave_offset=spec.get("slave_offset")))
+            for integrator in ("time-stepping", "event") if exact else ("time-stepping",):
+                cases.append(Case("observers", name, label=spec.get("label", ""),
+                                  params=tuple(spec.get("params", ())), observers=designs,
+                                  h=_pick(spec.get("h"), full), t_end=_pick(spec.get("t_end"), full),
+                                  slave_offset=spec.get("slave_offset"), integrator=integrator))
     return cases
 
 
@@ -218,17 +223,17 @@ def _sweep(h_max: float, count: int) -> list[float]:
     return [h_max / 2 ** j for j in range(count)]
 
 
-WP_SIZES = {"quick": {"pivoting": 5, "reference": 3, "h/16 run": 5, "h/16 run reference": 3},
-            "full": {"pivoting": 12, "reference": 7, "h/16 run": 13, "h/16 run reference": 5}}
+WP_SIZES = {"quick": {"pivoting": 5, "reference": 3, "event solution": 5, "event solution reference": 3},
+            "full": {"pivoting": 12, "reference": 7, "event solution": 13, "event solution reference": 5}}
 """Step sizes per sweep (halving). ``full``: the compiled runs go from 2e-3 s (1-DOF) and
 4e-3 s (double_mass) down to 2e-3/2¹¹ = 4e-3/2¹² ≈ 9.8e-7 s; the cvxpy/OSQP reference solver
 (~1 ms per contact solve, and the numpy engine's ≈ 25 µs per step) stops earlier: 7 and 5
 sizes in ``full``, the 3 largest steps in ``quick``."""
 
-H_RECORD = {"closed form": 2e-3 / 2 ** 6, "h/16 run": 4e-3 / 2 ** 9}
+H_RECORD = {"closed form": 2e-3 / 2 ** 6, "event solution": 4e-3 / 2 ** 9}
 """Spacing of the grid the error is measured on (``Case.h_record``) in the ``full`` sweeps:
-3.1e-5 s (1-DOF, closed form; ≤ 3.2·10⁵ samples over 10 s) and 7.8e-6 s (double_mass; the
-h/16 reference at 6.1e-8 s keeps every 128th step)."""
+3.1e-5 s (1-DOF, closed form; ≤ 3.2·10⁵ samples over 10 s) and 7.8e-6 s (double_mass, against
+the event solution sampled on that grid)."""
 
 
 def _wp_targets(spec: dict) -> tuple[str, ...]:
@@ -247,26 +252,28 @@ def _wp_closed_form(name: str, spec: dict, sizes: dict, full: bool) -> list[Case
                 cases.append(Case("work_precision", name, law=law, solver=solver, h=h,
                                   t_end=spec["t_end"], observers=(), reference="closed form",
                                   h_record=h_rec))
+        # the exact integrator against the same closed form: its error and its cost
+        cases.append(Case("work_precision", name, law=law, h=spec["h0"], t_end=spec["t_end"],
+                          observers=(), reference="closed form", integrator="event"))
     return cases
 
 
-def _wp_fine_run(name: str, spec: dict, sizes: dict, full: bool) -> list[Case]:
-    hs = _sweep(spec["h0"], sizes["h/16 run"])
-    h_ref = hs[-1] / 16
-    h_rec = H_RECORD["h/16 run"] if full else None
+def _wp_event_reference(name: str, spec: dict, sizes: dict, full: bool) -> list[Case]:
+    hs = _sweep(spec["h0"], sizes["event solution"])
     targets = _wp_targets(spec)
     cases = []
     for law in IMPACT_LAWS:
         for solver, sweep, tg in (("pivoting", hs, targets),
-                                  ("reference", hs[:sizes["h/16 run reference"]],
+                                  ("reference", hs[:sizes["event solution reference"]],
                                    targets if full else ("master",))):
             for target in tg:
                 for h in sweep:
+                    h_rec = (H_RECORD["event solution"]
+                             if full and h < H_RECORD["event solution"] else None)
                     cases.append(Case("work_precision", name, law=law, solver=solver, h=h,
                                       t_end=spec["t_end"],
                                       observers=() if target == "master" else (target,),
-                                      target=target, reference="h/16 run", h_ref=h_ref,
-                                      h_record=h_rec))
+                                      target=target, reference="event solution", h_record=h_rec))
     return cases
 
 
@@ -277,9 +284,12 @@ def work_precision_cases(full: bool) -> list[Case]:
     declares a sweep (``SUITE["work_precision"]``):
 
     * with a closed form (``reference`` in its module): the master against it;
-    * otherwise the master and each declared target against a run at h_ref = h_min/16
-      (pivoting solver, same law); with the cvxpy/OSQP reference solver ``quick`` runs the
-      master only, ``full`` every target.
+    * otherwise the master and each declared target against the exact event-driven solution
+      of the same scenario (master and observers), sampled on the run's grid; with the
+      cvxpy/OSQP reference solver ``quick`` runs the master only, ``full`` every target.
+
+    Scenarios with a closed form also get one row of the exact event-driven integrator
+    (its error against the closed form, and its cost).
     """
     sizes = WP_SIZES["full" if full else "quick"]
     cases: list[Case] = []
@@ -287,7 +297,7 @@ def work_precision_cases(full: bool) -> list[Case]:
         meta = info(name)
         spec = meta.suite.get("work_precision")
         if spec:
-            build = _wp_closed_form if meta.reference is not None else _wp_fine_run
+            build = _wp_closed_form if meta.reference is not None else _wp_event_reference
             cases += build(name, spec, sizes, full)
     return cases
 
@@ -390,16 +400,17 @@ def _settings(full: bool) -> dict:
         meta = info(name)
         spec = meta.suite.get("work_precision")
         if spec:
-            ref = "closed form" if meta.reference is not None else "h/16 run"
-            count = sz["pivoting" if ref == "closed form" else "h/16 run"]
+            ref = "closed form" if meta.reference is not None else "event solution"
+            count = sz["pivoting" if ref == "closed form" else "event solution"]
             sweeps.append(f"{name}: {count} step sizes halving from {spec['h0']:g} s down to "
                           f"{spec['h0'] / 2 ** (count - 1):.3g} s, T = {spec['t_end']:g} s, "
                           f"against its {ref}")
     sw = ("compiled runs: " + "; ".join(sweeps) + f"; cvxpy/OSQP reference solver (numpy "
-          f"engine): {sz['reference']} sizes (closed form), {sz['h/16 run reference']} (h/16 run)")
+          f"engine): {sz['reference']} sizes (closed form), {sz['event solution reference']} "
+          "(event solution)")
     if full:
         sw += (f"; errors on a grid of spacing max(h, {H_RECORD['closed form']:.3g} s) (1-DOF), "
-               f"max(h, {H_RECORD['h/16 run']:.3g} s) (double_mass)")
+               f"max(h, {H_RECORD['event solution']:.3g} s) (double_mass)")
     nseeds = ROBUSTNESS_SEEDS[key]
     return {
         "engine": "compiled (numba kernel; compile time measured once per run, apart) for every "

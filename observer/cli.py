@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from observer.errors import ContactSolverError, InputError
 from observer.validation import check_output_path
@@ -54,23 +55,22 @@ def cmd_run(args) -> int:
     from observer.scenario import load_scenario
     from observer.simulate import simulate
     check_output_path("--out", args.out, SUFFIXES)
+    if args.events is not None:
+        check_output_path("--events", args.events, SUFFIXES)
     sc = load_scenario(args.scenario, parse_pairs(args.set))
-    observers = [o for o in (args.observers or "").split(",") if o]
-    res = simulate(sc, h=args.h, t_end=args.t_end, solver=args.solver, observers=observers,
-                   source=args.source, log=args.log, engine=args.engine,
-                   record_every=args.record_every, store=args.store)
+    res = simulate(sc, h=args.h, t_end=args.t_end, solver=args.solver,
+                   observers=observer_list(args.observers), source=args.source, log=args.log,
+                   **_integrator_options(args))
     path = res.write(args.out)
+    if args.events is not None:
+        write_events(res, args.events)
     meta = res.metadata
-    msg = (f"{sc.name}: {meta['steps']} steps of h = {meta['h']:g} in {meta['wall_time_s']:.2f} s "
-           f"({meta['steps_per_second']:.0f} steps/s, {meta['engine']} engine"
-           + (f", compiled in {meta['compile_time_s']:.1f} s" if meta['compile_time_s'] > 0.05 else "")
-           + f"), {int(res.active[1:].any(axis=1).sum())} "
-           + ("steps" if meta["record_every"] == 1 else f"of the {res.t.size - 1} kept rows")
-           + f" with closed contacts, max contact residual {meta['max_contact_residual']:.1e}"
-           + (f", {meta['solver_fallbacks']} steps re-solved by the reference solver"
-              if meta['solver_fallbacks'] else "")
-           + (f" ({meta['engine_note']})" if meta.get("engine_note") else ""))
-    print(msg)
+    if args.integrator == "event":
+        print(f"{sc.name}: exact event-driven run, {meta['events']} master events, sampled every "
+              f"h = {meta['h']:g} ({meta['steps']} rows); status {res.status.state.value}"
+              + (f": {res.status.reason}" if res.status.reason else ""))
+    else:
+        print(_stepping_message(sc, res))
     if res.summary is not None:
         print("synchronization over every step (store=summary; times from t_on; inf = not reached):")
         cols = [c for c in res.summary.columns if c.startswith(("observer", "V_on", "V_end", "t_sync", "t_settle"))]
@@ -81,6 +81,55 @@ def cmd_run(args) -> int:
         print(summary.drop(columns=["master_closings"]).to_string(index=False, float_format=lambda x: f"{x:.3g}"))
     print(f"wrote {path}")
     return 0
+
+
+def observer_list(text: str | None):
+    """``--observers``: absent → the scenario's ``[observer] observers``; ``none`` → the master
+    alone; else comma-separated design names."""
+    if text is None:
+        return "scenario"
+    if text.strip().lower() == "none":
+        return []
+    return [o.strip() for o in text.split(",") if o.strip()]
+
+
+def _integrator_options(args) -> dict:
+    """The run's integrator and, for time-stepping, its engine, row and storage options
+    (refused with the event-driven integrator, which samples on the grid t_k = k·h)."""
+    if args.integrator == "event":
+        for flag, value in (("--engine", args.engine), ("--record-every", args.record_every),
+                            ("--store", args.store)):
+            if value is not None:
+                raise InputError(flag, "is a time-stepping option; --integrator event samples "
+                                       "the exact solution on the grid t_k = k·h")
+        return {"integrator": "event"}
+    return {"engine": args.engine or "compiled", "record_every": args.record_every,
+            "store": args.store or "full"}
+
+
+def write_events(res, path: str) -> None:
+    """The result's events table to ``path`` (CSV or Parquet by suffix)."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    if p.suffix.lower() == ".parquet":
+        res.events.to_parquet(p, index=False)
+    else:
+        res.events.to_csv(p, index=False, float_format="%.17g")
+    print(f"wrote {p}: {len(res.events)} events")
+
+
+def _stepping_message(sc, res) -> str:
+    """One line on a time-stepped run: steps, speed, engine, closed steps, residual, fallbacks."""
+    meta = res.metadata
+    return (f"{sc.name}: {meta['steps']} steps of h = {meta['h']:g} in {meta['wall_time_s']:.2f} s "
+            f"({meta['steps_per_second']:.0f} steps/s, {meta['engine']} engine"
+            + (f", compiled in {meta['compile_time_s']:.1f} s" if meta['compile_time_s'] > 0.05 else "")
+            + f"), {int(res.active[1:].any(axis=1).sum())} "
+            + ("steps" if meta["record_every"] == 1 else f"of the {res.t.size - 1} kept rows")
+            + f" with closed contacts, max contact residual {meta['max_contact_residual']:.1e}"
+            + (f", {meta['solver_fallbacks']} steps re-solved by the reference solver"
+               if meta['solver_fallbacks'] else "")
+            + (f" ({meta['engine_note']})" if meta.get("engine_note") else ""))
 
 
 def cmd_plot(args) -> int:
@@ -135,14 +184,19 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--h", type=float, help="step size")
     s.add_argument("--t-end", type=float, help="final time")
     s.add_argument("--solver", help="contact solver (pivoting, lemke, nnls, reference)")
-    s.add_argument("--observers", help="comma-separated observers, e.g. jump,nojump")
+    s.add_argument("--observers", help="comma-separated observer designs, e.g. jump,nojump; "
+                                       "'none' runs the master alone (default: the scenario's "
+                                       "[observer] observers)")
+    s.add_argument("--integrator", choices=["time-stepping", "event"], default="time-stepping",
+                   help="Moreau–Jean time-stepping (default) or the exact event-driven integrator")
+    s.add_argument("--events", metavar="FILE", help="also write the events table (.csv or .parquet)")
     s.add_argument("--source", choices=["master", "log", "self"], help="switching signal source")
     s.add_argument("--log", help="closing log CSV (contact,t_close,t_open) for --source log")
-    s.add_argument("--engine", choices=["compiled", "python"], default="compiled",
+    s.add_argument("--engine", choices=["compiled", "python"], default=None,
                    help="time loop: the numba kernel (default) or the numpy reference")
     s.add_argument("--record-every", type=int, default=None, metavar="K",
                    help="keep every K-th step (default 1; about 10 000 rows with --store summary)")
-    s.add_argument("--store", choices=["full", "summary"], default="full",
+    s.add_argument("--store", choices=["full", "summary"], default=None,
                    help="summary: V, its parts and the synchronization times computed over every "
                         "step in the kernel, trajectories kept only every K-th step")
     s.add_argument("--set", action="append", metavar="KEY=VALUE",

@@ -24,7 +24,7 @@ import numpy as np
 from observer.errors import InputError
 from observer.model import LinearSystem
 from observer.switching import SOURCES
-from observer.validation import as_array, as_scalar
+from observer.validation import as_array
 
 METRICS = ("K", "mass", "identity")
 """Projection metrics of the position jumps: N = K (the paper's, eqs. (13)-(14)), N = M, N = I."""
@@ -141,11 +141,12 @@ class ObserverConfig:
             p = Path(log)
             if not p.is_absolute() and not p.exists() and (Path(base_dir) / p).exists():
                 log = str(Path(base_dir) / p)
-        names = tuple(table.get("observers", DEFAULT_OBSERVERS))
+        names = table.get("observers", DEFAULT_OBSERVERS)
+        if not isinstance(names, (list, tuple)):
+            raise InputError("observer.observers", f"must be an array of design names, got {names!r}")
+        names = tuple(names)
         for name in names:
             check_observer_name(name)
-        if "log_tolerance" in table:
-            as_scalar("observer.log_tolerance", table["log_tolerance"], low=0.0)
         return ObserverConfig(q0, u0, coupling, source, log, names)
 
 
@@ -173,7 +174,8 @@ def lyapunov_decrements(system: LinearSystem, h: float, a: dict, b: dict) -> dic
         V_{k+1} − V_k = −h v̄ᵀCv̄  +  (Wᵀv̄)ᵀ(P_a − P_b)  +  [½‖e⁺‖²_K − ½‖e⁻‖²_K]
 
     with v̄ = (v_k + v_{k+1})/2 and e⁻ the error before the step's position projections
-    (e⁻ = e⁺ − K⁻¹W(Σ_a − Σ_b)). Returns arrays of shape (N+1,) (row k+1 = step k) named
+    (from the dicts' ``q_pre`` when both have it, as for a projection in another metric;
+    else e⁻ = e⁺ − K⁻¹W(Σ_a − Σ_b), the K-metric projection). Returns arrays of shape (N+1,) (row k+1 = step k) named
     ``damping``, ``impulse``, ``projection``, ``total`` (= ΔV) and ``residual``
     (ΔV minus the three parts: round-off for θ = ½).
     """
@@ -184,7 +186,11 @@ def lyapunov_decrements(system: LinearSystem, h: float, a: dict, b: dict) -> dic
     out["damping"][1:] = -h * np.einsum("ki,ij,kj->k", vbar, system.C, vbar)
     out["impulse"][1:] = np.einsum("ki,ki->k", vbar @ system.W, a["P"][1:] - b["P"][1:])
     dsig = _sigma(a, v.shape) - _sigma(b, v.shape)
-    if np.any(dsig):
+    if "q_pre" in a and "q_pre" in b:          # any projection metric: the recorded pre-jump states
+        e_pre = a["q_pre"][1:] - b["q_pre"][1:]
+        out["projection"][1:] = 0.5 * (np.einsum("ki,ij,kj->k", e[1:], system.K, e[1:])
+                                       - np.einsum("ki,ij,kj->k", e_pre, system.K, e_pre))
+    elif np.any(dsig):                         # the K metric: e⁻ = e⁺ − K⁻¹WΔΣ
         de = np.linalg.solve(system.K, system.W @ dsig[1:].T).T
         e_pre = e[1:] - de
         out["projection"][1:] = 0.5 * (np.einsum("ki,ij,kj->k", e[1:], system.K, e[1:])

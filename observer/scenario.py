@@ -49,7 +49,7 @@ SCHEMA: dict = {
     "initial": {"q": None, "u": None},
     "simulation": {"t_end": None, "h": None, "theta": None, "solver": None, "master_projection": None},
     "observer": {"q": None, "u": None, "coupling": None, "source": None, "log": None,
-                 "observers": None, "log_tolerance": None},
+                 "observers": None},
 }
 REQUIRED = ("system.M", "system.C", "system.K", "system.W", "impact.law", "impact.restitution",
             "initial.q", "initial.u", "simulation.t_end", "simulation.h")

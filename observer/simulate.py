@@ -135,7 +135,9 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
                     bool(sc.master_projection), None if coupling == "scenario" else coupling,
                     source == "self", log_frame,
                     metrics=(None,) + tuple(_metric_matrix(s, system) for s in slaves))
-    out = run_loop(inp, engine=engine, record_every=record_every, store=store)
+    other_metric = any(s.position_jumps and s.metric != "K" for s in slaves)
+    out = run_loop(inp, engine=engine, record_every=record_every, store=store,
+                   record_pre=other_metric and store == "full")
 
     meta = run_metadata(sc, stepper, out)
     if engine_note:
@@ -146,6 +148,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
                     coupling=None if coupling in ("scenario", None) else list(coupling),
                     log=str(log) if log else None)
     master = {"q": out.q[0], "u": out.u[0], "P": out.P[0], "sigma": out.sigma[0]}
+    if out.q_pre is not None:
+        master["q_pre"] = out.q_pre[0]
     trajectories = {s.name: _trajectory(system, sc.h, out, i, s.name, master, record_every)
                     for i, s in enumerate(slaves, start=1)}
     summary = None
@@ -262,6 +266,8 @@ def _trajectory(system, h: float, out, i: int, name: str, master: dict,
     """Observer ``i`` of the loop's output as a :class:`SlaveTrajectory` (V and, when every
     step is kept, its per-step damping/impulse/projection parts)."""
     traj = {"q": out.q[i], "u": out.u[i], "P": out.P[i], "sigma": out.sigma[i]}
+    if out.q_pre is not None:
+        traj["q_pre"] = out.q_pre[i]
     V = (out.V[i] if out.V is not None
          else lyapunov(system, traj["q"], traj["u"], master["q"], master["u"]))
     parts = (lyapunov_decrements(system, h, traj, master) if record_every == 1

@@ -68,7 +68,7 @@ from observer.contact.lcp import LCPSolution
 from observer.errors import ContactSolverError, InputError
 from observer.impact import ImpactLaw
 from observer.model import LinearSystem
-from observer.validation import as_scalar
+from observer.validation import as_scalar, check_step_parameters
 
 
 STRUCTURES = ("dense", "banded", "auto")
@@ -256,13 +256,6 @@ class StepStats:
     iterations: int = 0
     fallbacks: int = 0
     max_residual: float = 0.0
-
-
-def check_step_parameters(h: float, theta: float) -> tuple[float, float]:
-    """Validate the step size and θ; return them as floats."""
-    h = as_scalar("simulation.h", h, positive=True)
-    theta = as_scalar("simulation.theta", theta, low=0.5, high=1.0)
-    return h, theta
 
 
 class MoreauJean:

@@ -45,12 +45,14 @@ def smoke_rows_expected() -> int:
 # ----------------------------------------------------------------------------- declarations
 def test_case_ids_are_stable_and_unique():
     a = Case("work_precision", "double_mass", law="newton", h=1e-3, t_end=1.0, target="jump",
-             observers=("jump",), reference="h/16 run", h_ref=1.5625e-5)
+             observers=("jump",), reference="event solution")
     b = Case("work_precision", "double_mass", law="newton", h=1e-3, t_end=1.0, target="jump",
-             observers=("jump",), reference="h/16 run", h_ref=1.5625e-5)
+             observers=("jump",), reference="event solution")
     assert a.case_id == b.case_id
     assert "h=0.001" in a.case_id and "law=newton" in a.case_id
     assert Case("observers", "double_mass").case_id == "observers:double_mass"
+    assert Case("observers", "double_mass", integrator="event").case_id == \
+        "observers:double_mass:integrator=event"
     for suite in SUITES.values():
         ids = [c.case_id for c in suite.cases]
         assert len(ids) == len(set(ids)), suite.name
@@ -69,13 +71,20 @@ def test_quick_and_full_cover_every_kind_and_the_issue_grid(name):
     assert set(kinds) == (expected | {"peers"} if full else expected)
     assert suite.micro is not None
     obs = {c.name for c in suite.of_kind("observers")}
+    exact_obs = {c.scenario for c in suite.of_kind("observers") if c.integrator == "event"}
+    assert {"double_mass", "bouncing_ball", "impact_oscillator", "grazing"} <= exact_obs
     assert {"double_mass", "rocking_chain", "grazing", "bouncing_ball (Zeno)"} <= obs
     assert any("persistent" in n for n in obs)
     chain = [c for c in suite.of_kind("observers") if c.scenario == "rocking_chain"][0]
     assert dict(chain.params)["param.N"] == 10
     # work-precision: ≥ 5 step sizes per compiled method (full: ≥ 8, down to ≈ 1e-6 s), ≥ 3
     # with the cvxpy/OSQP solver (numpy engine; full: ≥ 5), both laws and both contact solvers
-    wp = suite.of_kind("work_precision")
+    wp = [c for c in suite.of_kind("work_precision") if c.integrator == "time-stepping"]
+    exact = [c for c in suite.of_kind("work_precision") if c.integrator == "event"]
+    # the exact integrator: one row per closed-form scenario and law, against the closed form
+    assert {(c.scenario, c.law) for c in exact} == {(s, law) for s in ("bouncing_ball", "impact_oscillator")
+                                                   for law in ("newton", "poisson")}
+    assert all(c.reference == "closed form" for c in exact)
     methods = Counter((c.scenario, c.target, c.law, c.solver) for c in wp)
     assert min(v for k, v in methods.items() if k[3] == "pivoting") >= 5
     assert min(v for k, v in methods.items() if k[3] == "reference") >= (5 if full else 3)
@@ -88,14 +97,12 @@ def test_quick_and_full_cover_every_kind_and_the_issue_grid(name):
     assert {c.law for c in wp} == {"newton", "poisson"}
     assert {c.solver for c in wp} == {"pivoting", "reference"}
     assert {c.target for c in wp} == {"master", "jump", "nojump"}
-    for c in wp:
-        assert c.reference in ("closed form", "h/16 run")
-        if c.reference == "h/16 run":
-            assert c.h / c.h_ref >= 16 - 1e-9
-        if c.h_record is not None:     # the grids of h, h_record and h_ref nest (powers of two)
-            for h in (c.h, c.h_ref or c.h):
-                k = max(h, c.h_record) / min(h, c.h_record)
-                assert abs(k - round(k)) < 1e-9 and (round(k) & (round(k) - 1)) == 0
+    for c in wp:           # closed form where one exists, else the exact event-driven solution
+        assert c.reference == ("closed form" if c.scenario in ("bouncing_ball", "impact_oscillator")
+                               else "event solution")
+        if c.h_record is not None:     # the grids of h and h_record nest (powers of two)
+            k = max(c.h, c.h_record) / min(c.h, c.h_record)
+            assert abs(k - round(k)) < 1e-9 and (round(k) & (round(k) - 1)) == 0
     # robustness: every perturbation kind; full: ≥ 20 seeds per random point
     rob = suite.of_kind("robustness")
     assert {c.perturbation for c in rob} == set(KINDS)

@@ -155,7 +155,9 @@ def test_run_writes_csv_with_one_row_per_grid_point(cli):
     assert_ok(proc)
     assert proc.stdout.rstrip().endswith("wrote bb.csv")
     path = d / "bb.csv"
-    assert path.read_text().startswith("# metadata: {")
+    assert path.read_text().startswith("t,q0,u0,g0,P0,active0\n")     # a plain header row
+    plain = pd.read_csv(path)                                             # any CSV reader
+    assert list(plain.columns) == ["t", "q0", "u0", "g0", "P0", "active0"]
     df = read_frame(path)
     assert len(df) == 50 + 1
     assert list(df.columns) == ["t", "q0", "u0", "g0", "P0", "active0"]
@@ -288,3 +290,48 @@ def test_log_command_feeds_source_log(tmp_path, capsys):
     assert np.array_equal(chi, active)
     assert main(["log", str(log_csv), "--out", str(tmp_path / "x.csv")]) == 2
     assert "error:" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------------------
+# issue 10/11: files any tool reads, the scenario's observers, the event integrator
+# ---------------------------------------------------------------------------------------
+DOCUMENTED = ["t", "q0", "q1", "u0", "u1", "g0", "P0", "active0", "chi0",
+              "jump_q0", "jump_q1", "jump_u0", "jump_u1", "V_jump",
+              "nojump_q0", "nojump_q1", "nojump_u0", "nojump_u1", "V_nojump"]
+
+
+@pytest.mark.parametrize("ext", ["csv", "parquet"])
+def test_run_double_mass_honours_the_scenarios_observers_in_plain_files(tmp_path, ext):
+    from observer.cli import main
+    out = tmp_path / f"run.{ext}"
+    assert main(["run", "double_mass", "--t-end", "0.5", "--h", "1e-3", "--out", str(out)]) == 0
+    df = pd.read_csv(out) if ext == "csv" else pd.read_parquet(out)      # plain readers
+    assert list(df.columns) == DOCUMENTED
+    ref = simulate("double_mass", t_end=0.5, h=1e-3, observers=("jump", "nojump"))
+    assert np.array_equal(df["V_jump"].to_numpy(), ref.slaves["jump"].V)
+    assert np.array_equal(df["V_nojump"].to_numpy(), ref.slaves["nojump"].V)
+    back, meta = __import__("observer").read_result(out)
+    assert meta["observers"] == ["jump", "nojump"] and meta["scenario"] == "double_mass"
+
+
+def test_observers_none_runs_the_master_alone(tmp_path):
+    from observer.cli import main
+    out = tmp_path / "m.csv"
+    assert main(["run", "double_mass", "--t-end", "0.2", "--observers", "none", "--out", str(out)]) == 0
+    assert list(pd.read_csv(out).columns) == ["t", "q0", "q1", "u0", "u1", "g0", "P0", "active0"]
+
+
+def test_event_integrator_and_events_file(tmp_path, capsys):
+    from observer.cli import main
+    out, ev = tmp_path / "ball.csv", tmp_path / "ev.parquet"
+    assert main(["run", "bouncing_ball", "--integrator", "event", "--events", str(ev),
+                 "--out", str(out)]) == 0
+    events = pd.read_parquet(ev)
+    assert list(events.columns) == ["time", "contact", "kind", "gamma_minus", "gamma_plus", "impulse"]
+    assert (events.kind == "accumulation").sum() == 1 and (events.kind == "impact").sum() >= 30
+    assert "exact event-driven run" in capsys.readouterr().out
+    capsys.readouterr()
+    assert main(["run", "bouncing_ball", "--integrator", "event", "--engine", "python",
+                 "--out", str(tmp_path / "x.csv")]) == 2    # a time-stepping option: refused
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--engine" in err and not (tmp_path / "x.csv").exists()

@@ -245,9 +245,9 @@ def _cli_env():
 def _compare_result_csvs(path_a, path_b, name):
     a_lines = Path(path_a).read_text().splitlines()
     b_lines = Path(path_b).read_text().splitlines()
-    assert a_lines[0].startswith("# metadata:") and b_lines[0].startswith("# metadata:")
+    assert a_lines[0].startswith("t,") and b_lines[0].startswith("t,")   # a plain header row
     assert len(a_lines) > 2
-    assert a_lines[1:] == b_lines[1:], name            # header and every data line
+    assert a_lines == b_lines, name                    # header and every data line
     fa, fb = read_frame(path_a), read_frame(path_b)
     assert fa.attrs["scenario"] == fb.attrs["scenario"] == name
     assert len(fa) == int(round(0.05 / fa.attrs["h"])) + 1
@@ -385,7 +385,7 @@ def test_override_unknown_param_names_it():
     assert "param.foo" in str(ei.value) and "unknown parameter" in str(ei.value)
 
 
-@pytest.mark.parametrize("value, hint", [(0, "positive integer"), (2.5, "positive integer"),
+@pytest.mark.parametrize("value, hint", [(0, "positive integer"), (2.5, "must be an integer"),
                                          ("abc", "must be a number"), (True, "must be a number")])
 def test_override_bad_param_value(value, hint):
     with pytest.raises(InputError) as ei:
@@ -469,7 +469,8 @@ def test_result_file_round_trip(observed_run, tmp_path, ext):
     assert path.exists()
     head = path.read_bytes()[:12]
     if ext == "csv":
-        assert head.startswith(b"# metadata:")
+        assert head.startswith(b"t,")                  # plain header; metadata in run.json
+        assert path.with_suffix(".json").exists()
     else:
         assert head.startswith(b"PAR1")
     back = read_frame(path)
@@ -477,6 +478,8 @@ def test_result_file_round_trip(observed_run, tmp_path, ext):
     assert len(back) == len(df)
     for col in df.columns:
         assert np.array_equal(back[col].to_numpy(), df[col].to_numpy()), col
+    events = back.attrs.pop("events_file")           # the run's event table, written beside it
+    assert (path.parent / events).exists()
     assert back.attrs == df.attrs
 
 

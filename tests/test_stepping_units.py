@@ -769,7 +769,7 @@ def test_observer_config_defaults_and_validation(tmp_path):
     assert cfg.coupling is None and cfg.source == "master" and cfg.log is None
     assert cfg.observers == ("jump", "nojump")
     cfg = ObserverConfig.from_table({"q": [3, 4], "u": [5, 6], "coupling": [1.0, 1.0],
-                                     "source": "self", "observers": ["jump"], "log_tolerance": 0.0},
+                                     "source": "self", "observers": ["jump"]},
                                     2, qm, um)
     assert cfg.q0.tolist() == [3.0, 4.0] and cfg.u0.tolist() == [5.0, 6.0]
     assert cfg.coupling == (1.0, 1.0) and isinstance(cfg.coupling[0], float)
@@ -780,7 +780,7 @@ def test_observer_config_defaults_and_validation(tmp_path):
            ({"source": "oracle"}, "observer.source"), ({"source": "log"}, "observer.log"),
            ({"source": "log", "log": ""}, "observer.log"),
            ({"observers": ["jump", "fast"]}, "observer.observers"),
-           ({"log_tolerance": -1e-9}, "observer.log_tolerance")]
+           ({"observers": "jump"}, "observer.observers")]
     for table, field in bad:
         with pytest.raises(InputError) as info:
             ObserverConfig.from_table(table, 2, qm, um)

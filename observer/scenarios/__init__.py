@@ -12,7 +12,8 @@ declare its metadata (read by :func:`info`, with defaults):
 * ``SUITE`` — its default benchmark settings: ``observers`` (a list of case settings:
   ``label``, ``params``, ``h`` and ``t_end`` as (quick, full) pairs, ``slave_offset``),
   ``work_precision`` (``h0``, ``t_end``, ``targets``), ``checks`` (``"quick"``: in every
-  suite, ``"full"``: only in the full one, ``None``: never).
+  suite, ``"full"``: only in the full one, ``None``: never), ``exact`` (False: no observer
+  rows of the exact event-driven integrator, e.g. for dense impact clusters).
 
 :data:`SCENARIOS` maps the stable names to the modules: adding a scenario is one module
 plus one entry there, and every list of scenarios (CLI, proof checks, suites, report)
