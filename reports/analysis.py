@@ -336,6 +336,35 @@ def wp_orders(wp: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def integrator_comparison(wp: pd.DataFrame) -> pd.DataFrame:
+    """Where each integrator wins, per scenario and law with an exact event-driven row: the
+    event integrator's error and CPU time against the closed form, the time-stepping sweep's
+    smallest error (pivoting solver, its step and CPU time), and ``cpu_ratio`` = time-stepping
+    CPU at its smallest error / event CPU (the event run is also the more accurate when
+    ``event_err ≤ ts_err``); ``ts_cpu_at_event_err`` extrapolates the sweep's fitted work
+    curve (CPU ∝ error^p, p < 0; NaN otherwise) to the event integrator's error and
+    ``ratio_at_equal_error`` divides it by the event CPU."""
+    if wp.empty or "integrator" not in wp:
+        return pd.DataFrame()
+    ok = wp[wp["status"] == "ok"]
+    rows = []
+    for (scen, law), g in ok.groupby(["scenario", "law"], sort=False):
+        ev = g[g["integrator"] == "event"]
+        ts = g[(g["integrator"] != "event") & (g["solver"] == "pivoting") & (g["target"] == "master")]
+        if ev.empty or len(ts) < 2:
+            continue
+        e = ev.iloc[0]
+        best = ts.loc[ts["err_mean"].idxmin()]
+        p_c, c_c = fit_power(ts["err_mean"], ts["cpu_time_s"])     # CPU ∝ error^p_c
+        extrap = (float(np.exp(c_c) * max(e["err_mean"], 1e-300) ** p_c) if p_c < 0
+                  else float("nan"))       # no extrapolation without a decreasing work curve
+        rows.append({"scenario": scen, "law": law, "event_err": e["err_mean"],
+                     "event_cpu": e["cpu_time_s"], "ts_h": best["h"], "ts_err": best["err_mean"],
+                     "ts_cpu": best["cpu_time_s"], "cpu_ratio": best["cpu_time_s"] / e["cpu_time_s"],
+                     "ts_cpu_at_event_err": extrap, "ratio_at_equal_error": extrap / e["cpu_time_s"]})
+    return pd.DataFrame(rows)
+
+
 # -------------------------------------------------------------------------------- scaling
 ACCEPTANCE_EXPONENT = 1.1
 """Issue 9: the chain's time per step grows at most like N^1.1 from N = 10 to 1000."""

@@ -13,8 +13,9 @@ from typing import Callable
 
 from reports.blocks import Section
 from reports.context import ReportContext
-from reports.sections import (key_numbers, limitations, micro, observers, peers, proof_checks,
-                              reproduce, robustness, scaling, scenarios, settings, work_precision)
+from reports.sections import (integrators, key_numbers, limitations, micro, observers, peers,
+                              proof_checks, reproduce, robustness, scaling, scenarios, settings,
+                              work_precision)
 
 
 @dataclass(frozen=True)
@@ -31,6 +32,7 @@ SECTIONS: tuple[SectionSpec, ...] = (
     SectionSpec("scenarios", scenarios.build),
     SectionSpec("observers", observers.build),
     SectionSpec("work-precision", work_precision.build),
+    SectionSpec("integrators", integrators.build),
     SectionSpec("robustness", robustness.build),
     SectionSpec("scaling", scaling.build),
     SectionSpec("peers", peers.build),

@@ -14,9 +14,10 @@ from reports.tables import Table, fmt, fmt_int, fmt_ratio
 TITLE = "Work-precision: error against CPU time, fitted orders"
 
 INTRO = ("Every point is one run at one step size h; its error is measured against the reference "
-         "stated in the table (closed form where one exists, otherwise a run of the same scheme at "
-         "a finer step h_ref, stated per point). Error norm: {norm}. Fitted order p: least-squares "
-         "slope of log error against log h; work slope s: error ∝ CPU^(−s).")
+         "stated in the table: the closed form where one exists, otherwise the exact event-driven "
+         "solution of the same scenario (master and observers, sampled on the run's grid). Error "
+         "norm: {norm}. Fitted order p: least-squares slope of log error against log h; work "
+         "slope s: error ∝ CPU^(−s).")
 
 
 def _solver_cell(r: pd.Series) -> str:
