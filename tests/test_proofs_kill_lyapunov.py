@@ -912,3 +912,30 @@ def test_order_fit_only_when_some_impulse_is_positive(monkeypatch):
     monkeypatch.setattr(ly, "decrement_parts", lambda run, a, b, examine=None: parts)
     r = ly.check_lyapunov_decrease(_fake_run(), pairs=[("test pair", "a", "b")])
     assert calls == [(1.0, 2.0, 4.0)] and r.witness["slack_h"].tolist() == [0.1, 0.2]
+
+
+def test_order_notes_for_every_slack_joined_in_order(monkeypatch):
+    """Three positive slacks: orders 0.5 (vanishing), 0 (does not decrease: p > 0 is needed)
+    and 2, one note each, in the order impact law, Poisson target, plain master."""
+    parts = _fake_parts(impulse_slack=0.2, impulse_target=0.1, projection_unprojected_gap=0.1,
+                        impulse_complementarity=-0.5)
+    monkeypatch.setattr(ly, "slack_order", lambda run, base, factors: {
+        "h": np.array([0.01, 0.02, 0.04]), "impulse_slack_order": 0.5, "impulse_target_order": 0.0,
+        "projection_unprojected_gap_order": 2.0})
+    monkeypatch.setattr(ly, "decrement_parts", lambda run, a, b, examine=None: parts)
+    r = ly.check_lyapunov_decrease(_fake_run((True, False)), pairs=[("test pair", "a", "b")])
+    assert r.passed is True
+    assert r.reason == (
+        "dV ≤ 0 holds up to an O(h^0.5) slack from the discrete impact law, vanishing as h → 0; "
+        "the positive slack from the Poisson target does not decrease with h over h ∈ [0.01, 0.04] "
+        "(fitted order 0; not in the asymptotic range?); "
+        "dV ≤ 0 holds up to an O(h^2) slack from the plain master's penetration (master–jump pair, "
+        "not counted), vanishing as h → 0")
+
+
+def test_projection_criterion_text_exact(monkeypatch):
+    p = _fake_parts(impulse_complementarity=-0.3)
+    p["projection_cf"][1] = 0.1
+    r = _check_with(monkeypatch, p)
+    assert r.reason == ("the position jumps are not the K-metric projection: the realized jump part differs "
+                        "from its closed form −½‖Δg⁻‖²_{P L⁻¹ Pᵀ} (+ unprojected gap) (test pair)")
