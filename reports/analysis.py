@@ -339,7 +339,7 @@ def wp_orders(wp: pd.DataFrame) -> pd.DataFrame:
 def integrator_comparison(wp: pd.DataFrame) -> pd.DataFrame:
     """Where each integrator wins, per scenario and law with an exact event-driven row: the
     event integrator's error and CPU time against the closed form, the time-stepping sweep's
-    smallest error (pivoting solver, its step and CPU time), and ``cpu_ratio`` = time-stepping
+    smallest error (fast contact solvers, its step and CPU time), and ``cpu_ratio`` = time-stepping
     CPU at its smallest error / event CPU (the event run is also the more accurate when
     ``event_err ≤ ts_err``); ``ts_cpu_at_event_err`` extrapolates the sweep's fitted work
     curve (CPU ∝ error^p, p < 0; NaN otherwise) to the event integrator's error and
@@ -350,7 +350,8 @@ def integrator_comparison(wp: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for (scen, law), g in ok.groupby(["scenario", "law"], sort=False):
         ev = g[g["integrator"] == "event"]
-        ts = g[(g["integrator"] != "event") & (g["solver"] == "pivoting") & (g["target"] == "master")]
+        ts = g[(g["integrator"] != "event") & (g["solver"] != registry.REFERENCE_SOLVER)
+               & (g["target"] == registry.MASTER)]
         if ev.empty or len(ts) < 2:
             continue
         e = ev.iloc[0]

@@ -20,7 +20,7 @@ INTRO = ("Between impacts every built-in system is linear with harmonic forcing,
 
 def comparison_table(cmp) -> Table:
     """One row per scenario and law (:func:`reports.analysis.integrator_comparison`)."""
-    t = Table("Event-driven against time-stepping (pivoting solver, master, error vs the closed form)",
+    t = Table("Event-driven against time-stepping (fast contact solver, master, error vs the closed form)",
               ["scenario", "law", "event error", "event CPU (s)", "time-stepping smallest error",
                "at h (s)", "its CPU (s)", "CPU ratio (time-stepping / event)",
                "time-stepping CPU extrapolated to the event's error (s)", "ratio at equal error"])
