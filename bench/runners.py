@@ -45,7 +45,7 @@ from observer.switching import log_from_active
 from bench.perturb import perturb_log
 from observer.closed_form import closed_form_position
 from bench.results import now_iso
-from observer.metrics import RHOS, settle_column
+from observer.metrics import RHOS, above_column, settle_column
 
 from bench.schema import check_row
 from bench.suites import Case, engine_for
@@ -171,7 +171,7 @@ def sync_metrics(res, name: str) -> dict[str, Any]:
     t_on, t_off = float(row["t_on"]), float(row["t_off"])
     for rho in RHOS:
         row[settle_column(rho)] = settling_time(res.t, s.V, rho, t_on, t_off)
-        row[f"above_after_{rho:g}"] = excursions_after_passage(res.t, s.V, rho, t_on, t_off)
+        row[above_column(rho)] = excursions_after_passage(res.t, s.V, rho, t_on, t_off)
     V_on = row["V_on"]
     row.update(
         floor_rel=row["floor"] / V_on if V_on > 0 else float("nan"),
@@ -391,7 +391,7 @@ def run_scaling(case: Case, ctx: Context) -> list[dict]:
     if not per_step > 0:                              # a run too short to resolve the setup
         per_step, scope = cpu / steps, "master only, setup included (not resolved)"
     row = {**base_row(case, sc), "status": "ok", "note": "", "steps": steps,
-           "cpu_time_s": cpu, "wall_time_s": wall, "setup_cpu_time_s": cpu_setup,
+           "cpu_time_s": cpu, "wall_time_s": wall, "setup_cpu_time_s": cpu_setup, "setup_steps": SETUP_STEPS,
            "cpu_per_step_s": per_step, "cpu_per_step_total_s": cpu / steps,
            "wall_per_step_s": wall / steps, "steps_per_s": 1.0 / per_step,
            "cpu_scope": scope, "contact_solves": res.metadata["contact_solves"],

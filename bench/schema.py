@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from observer.metrics import RHOS, settle_column, sync_column
+from observer.metrics import RHOS, above_column, settle_column, sync_column
 
 Columns = dict[str, Any]
 
@@ -38,7 +38,7 @@ def sync_columns() -> Columns:
     for rho in RHOS:
         out[sync_column(rho)] = float
         out[settle_column(rho)] = float
-        out[f"above_after_{rho:g}"] = float
+        out[above_column(rho)] = float
     return out
 
 
@@ -61,7 +61,7 @@ ROWS: dict[str, Columns] = {
     "robustness": {**CASE, **SYNC, **ENGINE, **TIMING, "perturbation": str, "size": float,
                    "log_intervals": int, "true_intervals": int, "log_file": str, "steps": int,
                    "steps_per_s": float},
-    "scaling": {**CASE, **ENGINE, **TIMING, "steps": int, "setup_cpu_time_s": float,
+    "scaling": {**CASE, **ENGINE, **TIMING, "steps": int, "setup_steps": int, "setup_cpu_time_s": float,
                 "cpu_per_step_s": float, "cpu_per_step_total_s": float, "wall_per_step_s": float,
                 "steps_per_s": float, "contact_solves": int, "closed_step_fraction": float,
                 "mean_active": float, "max_active": int, "peak_mem_mb": float,

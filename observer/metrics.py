@@ -27,6 +27,12 @@ def settle_column(rho: float) -> str:
     return f"t_settle_{rho:g}"
 
 
+def above_column(rho: float) -> str:
+    """Column of the fraction of window samples after the first passage with V back above
+    ρ·V(t_on) (:func:`excursions_after_passage`): ``above_after_1e-06``."""
+    return f"above_after_{rho:g}"
+
+
 def sync_time(t: np.ndarray, V: np.ndarray, rho: float, t_on: float = 0.0,
               t_off: float | None = None) -> float:
     """First-passage time: first sample after t_on at which V ≤ ρ·V(t_on), measured from

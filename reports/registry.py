@@ -40,9 +40,8 @@ def sync_column(rho: float) -> str:
 
 def above_column(rho: float) -> str:
     """Row column: fraction of the window samples after the first passage with V back above
-    ρ·V(t_on) (named by :mod:`observer.metrics` once it names it; :mod:`bench.schema` spells it
-    out today)."""
-    return metrics.above_column(rho) if hasattr(metrics, "above_column") else f"above_after_{rho:g}"
+    ρ·V(t_on) (named by :mod:`observer.metrics`)."""
+    return metrics.above_column(rho)
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ import pandas as pd
 import pytest
 
 from bench.perturb import KINDS, perturb_log
-from bench.reference import ExactImpactOscillator, ball_position, closed_form_position
+from observer.closed_form import ExactImpactOscillator, ball_position, closed_form_position
 from bench.results import CaseStore, case_key, load_results
 from bench.peers import PROBLEMS
 from bench.run import results_path, run_suite
