@@ -32,9 +32,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.linalg as sla
-from scipy.optimize import brentq
 
 import observer
+from observer.closed_form import ExactImpactOscillator
 from observer.scenario import Scenario
 from observer.loop import ENGINES
 from observer.scenarios import bouncing_ball as bb
@@ -88,58 +88,6 @@ def ball_impact_times(res, g0: float) -> tuple[np.ndarray, np.ndarray]:
 def fit_order(hs, errs) -> float:
     """Least-squares slope of log(err) against log(h)."""
     return float(np.polyfit(np.log(np.asarray(hs)), np.log(np.asarray(errs)), 1)[0])
-
-
-class ExactImpactOscillator:
-    """Event-driven closed-form solution of ``ẍ + x = A cos ωt`` for ``x ≤ σ``, ``ẋ⁺ = −r ẋ⁻``.
-
-    Between impacts x(t) = x_p(t) + c₁cos(t − t_s) + c₂sin(t − t_s) with the particular
-    solution x_p = A cos(ωt)/(1 − ω²). The next impact is the first root of x(t) − σ,
-    bracketed by scanning a grid of spacing ``scan`` and refined by ``brentq``; then
-    ẋ ↦ −rẋ and a new segment starts at x = σ.
-    """
-
-    def __init__(self, A, omega, sigma, r, x0, v0, t_start, t_end, scan=1e-3):
-        self.A, self.omega, self.sigma, self.r = A, omega, sigma, r
-        self.gf = A / (1.0 - omega ** 2)
-        starts, c1s, c2s, impacts = [], [], [], []
-        ts0, x, v = t_start, x0, v0
-        while True:
-            c1, c2 = x - self._xp(ts0), v - self._vp(ts0)
-            starts.append(ts0)
-            c1s.append(c1)
-            c2s.append(c2)
-
-            def gap(t, ts0=ts0, c1=c1, c2=c2):
-                return self._xp(t) + c1 * np.cos(t - ts0) + c2 * np.sin(t - ts0) - sigma
-
-            grid = np.arange(ts0 + scan, t_end + scan, scan)
-            above = np.flatnonzero(gap(grid) >= 0.0)
-            if above.size == 0:
-                break
-            i = above[0]
-            lo = grid[i - 1] if i > 0 else ts0 + 0.5 * scan
-            ti = brentq(gap, lo, grid[i], xtol=1e-14, rtol=1e-15, maxiter=200)
-            vi = self._vp(ti) - c1 * np.sin(ti - ts0) + c2 * np.cos(ti - ts0)
-            impacts.append((ti, vi))
-            ts0, x, v = ti, sigma, -r * vi
-        self.starts, self.c1, self.c2 = np.array(starts), np.array(c1s), np.array(c2s)
-        self.impacts = np.array(impacts).reshape(-1, 2)
-
-    def _xp(self, t):
-        return self.gf * np.cos(self.omega * t)
-
-    def _vp(self, t):
-        return -self.gf * self.omega * np.sin(self.omega * t)
-
-    def __call__(self, t):
-        """(x(t), ẋ(t)); at an impact instant the post-impact segment is used."""
-        t = np.asarray(t, dtype=float)
-        j = np.clip(np.searchsorted(self.starts, t, side="right") - 1, 0, None)
-        dt = t - self.starts[j]
-        x = self._xp(t) + self.c1[j] * np.cos(dt) + self.c2[j] * np.sin(dt)
-        v = self._vp(t) - self.c1[j] * np.sin(dt) + self.c2[j] * np.cos(dt)
-        return x, v
 
 
 def periodic_orbit_11(omega, r, sigma, A=1.0):
@@ -441,7 +389,7 @@ def test_exact_oscillator_reproduces_periodic_orbit():
     assert V == pytest.approx(0.336177, abs=1e-6)
     assert t0 == pytest.approx(1.092635, abs=1e-6)
     assert T == pytest.approx(2.243995, abs=1e-6)
-    ex = ExactImpactOscillator(OSC["A"], OSC["omega"], OSC["sigma"], OSC["r"],
+    ex = ExactImpactOscillator(OSC["A"], OSC["omega"], 0.0, OSC["sigma"], OSC["r"],
                                OSC["sigma"], -OSC["r"] * V, t0, t0 + 4.5 * T)
     assert ex.impacts.shape[0] == 4
     n = np.arange(1, 5)
@@ -466,7 +414,7 @@ def test_impact_oscillator_first_order(law):
     """
     A, om, sig, r = OSC["A"], OSC["omega"], OSC["sigma"], OSC["r"]
     V, t0, T = periodic_orbit_11(om, r, sig)
-    ex = ExactImpactOscillator(A, om, sig, r, sig, -r * V, t0, t0 + 5 * T)
+    ex = ExactImpactOscillator(A, om, 0.0, sig, r, sig, -r * V, t0, t0 + 5 * T)
     phi = 0.3
     Ns = np.array([1000, 2000, 4000, 8000, 16000])
     hs = T / Ns
