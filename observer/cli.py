@@ -54,14 +54,16 @@ def cmd_run(args) -> int:
     from observer.io import SUFFIXES
     from observer.scenario import load_scenario
     from observer.simulate import simulate
+    from observer.stream import ChunkWriter, exit_status
     check_output_path("--out", args.out, SUFFIXES)
     if args.events is not None:
         check_output_path("--events", args.events, SUFFIXES)
     sc = load_scenario(args.scenario, parse_pairs(args.set))
-    res = simulate(sc, h=args.h, t_end=args.t_end, solver=args.solver,
-                   observers=observer_list(args.observers), source=args.source, log=args.log,
-                   **_integrator_options(args))
-    path = res.write(args.out)
+    with ChunkWriter(args.out) as writer:          # rows written as the loop finishes them
+        res = simulate(sc, h=args.h, t_end=args.t_end, solver=args.solver,
+                       observers=observer_list(args.observers), source=args.source, log=args.log,
+                       on_chunk=writer, **_integrator_options(args))
+        path = writer.finish(res)
     if args.events is not None:
         write_events(res, args.events)
     meta = res.metadata
@@ -80,7 +82,9 @@ def cmd_run(args) -> int:
         print("synchronization (times from t_on to V <= rho V(t_on); inf = not reached):")
         print(summary.drop(columns=["master_closings"]).to_string(index=False, float_format=lambda x: f"{x:.3g}"))
     print(f"wrote {path}")
-    return 0
+    if res.metadata.get("stopped"):
+        print(f"error: {res.status.reason}; {path} holds every step up to there", file=sys.stderr)
+    return exit_status(res)
 
 
 def observer_list(text: str | None):
@@ -217,6 +221,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    import warnings
+    warnings.formatwarning = lambda msg, cat, *a, **k: f"warning: {msg}\n"
     args = build_parser().parse_args(argv)
     return guarded(args.func, args)
 

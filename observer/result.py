@@ -83,12 +83,17 @@ class RunStatus:
     state : RunState
     reason : str
         One line a user can act on, e.g. ``"3 steps re-solved by the reference solver"``.
+    warnings : tuple of str
+        The run's health warnings (:mod:`observer.health`): outside the regime where its
+        numbers mean anything (h·ω_max, penetration, energy growth), whatever the state.
     """
 
     state: RunState = RunState.OK
     reason: str = ""
+    warnings: tuple = ()
 
     def __post_init__(self):
+        object.__setattr__(self, "warnings", tuple(self.warnings or ()))
         try:
             object.__setattr__(self, "state", RunState(self.state))
         except ValueError:
@@ -104,15 +109,24 @@ class RunStatus:
 
     @classmethod
     def from_metadata(cls, metadata: dict) -> "RunStatus":
-        """The status a run's metadata implies: ``fallback`` when ``solver_fallbacks > 0``."""
+        """The status a run's metadata implies: ``stopped`` when it has ``stopped`` (the
+        loop's stop: where and why), else ``fallback`` when ``solver_fallbacks > 0``; with
+        the warnings of ``metadata["health"]``."""
+        warnings = tuple((metadata.get("health") or {}).get("warnings") or ())
+        stopped = metadata.get("stopped")
+        if stopped:
+            return cls(RunState.STOPPED, f"stopped: {stopped['reason']}", warnings)
         n = int(metadata.get("solver_fallbacks") or 0)
         if n:
             return cls(RunState.FALLBACK, f"{n} step(s) re-solved by the reference solver "
-                                          "(metadata fallback_steps)")
-        return cls()
+                                          "(metadata fallback_steps)", warnings)
+        return cls(warnings=warnings)
 
     def to_dict(self) -> dict:
-        return {"state": self.state.value, "reason": self.reason}
+        d = {"state": self.state.value, "reason": self.reason}
+        if self.warnings:
+            d["warnings"] = list(self.warnings)
+        return d
 
 
 @dataclass(frozen=True)
@@ -352,6 +366,8 @@ def run_metadata(scenario, stepper, out) -> dict:
                 min_gap=st.get("min_gap"), min_gap_t=(float(stepper.time(st["min_gap_step"]))
                                                       if st.get("min_gap_step", -1) >= 0 else None),
                 compile_time_s=out.compile_time_s,
+                health=out.health.to_dict() if out.health is not None else None,
+                stopped=out.stop_info(stepper),
                 steps_per_second=stepper.steps / out.run_time_s if out.run_time_s > 0 else float("nan"),
                 versions=package_versions(), platform=platform.platform(),
                 argv=" ".join(sys.argv))

@@ -27,7 +27,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
              coupling: tuple[float, float] | None | str = "scenario",
              log: str | Path | None = None, residual_tol: float = 1e-9,
              engine: str = "compiled", record_every: int | None = None,
-             store: str = "full", integrator: str = "time-stepping") -> SimulationResult:
+             store: str = "full", integrator: str = "time-stepping",
+             on_chunk=None) -> SimulationResult:
     """Simulate the master (and the observers) of ``scenario`` with the Moreau–Jean scheme.
 
     Parameters
@@ -64,6 +65,11 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         trajectories only at the recorded rows: memory independent of the horizon beyond
         that (``result.summary``).
 
+    on_chunk : callable, optional
+        Time-stepping: called with each :class:`observer.loop.Chunk` of finished rows as the
+        loop produces them (e.g. an :class:`observer.stream.ChunkWriter`); while it is set,
+        SIGINT/SIGTERM stop the run after the current window and the result's status says
+        where (``metadata["stopped"]``). Ignored by ``integrator="event"``.
     integrator : {"time-stepping", "event"}
         ``"event"``: the exact event-driven integrator (:mod:`observer.event`): exact flow
         between events, impact times to round-off, Zeno resolved into persistent contact; the
@@ -134,10 +140,11 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
                     np.array([False] + [s.position_jumps for s in slaves]),
                     bool(sc.master_projection), None if coupling == "scenario" else coupling,
                     source == "self", log_frame,
-                    metrics=(None,) + tuple(_metric_matrix(s, system) for s in slaves))
+                    metrics=(None,) + tuple(_metric_matrix(s, system) for s in slaves),
+                    names=tuple(s.name for s in slaves))
     other_metric = any(s.position_jumps and s.metric != "K" for s in slaves)
     out = run_loop(inp, engine=engine, record_every=record_every, store=store,
-                   record_pre=other_metric and store == "full")
+                   record_pre=other_metric and store == "full", on_chunk=on_chunk)
 
     meta = run_metadata(sc, stepper, out)
     if engine_note:
