@@ -939,3 +939,35 @@ def test_projection_criterion_text_exact(monkeypatch):
     r = _check_with(monkeypatch, p)
     assert r.reason == ("the position jumps are not the K-metric projection: the realized jump part differs "
                         "from its closed form −½‖Δg⁻‖²_{P L⁻¹ Pᵀ} (+ unprojected gap) (test pair)")
+
+
+def test_projection_cause_prints_the_whole_projection_part(monkeypatch):
+    """Cause projection_jump with an unprojected gap beside it: x is the projection part
+    (jump + gap), the piece printed is the cause only."""
+    r = _check_with(monkeypatch, _fake_parts(projection_jump=0.3, projection_unprojected_gap=0.1),
+                    projected=(True, False))
+    assert r.witness["test pair: cause"] == "projection_jump"
+    assert r.reason.startswith("position-jump part positive: +0.2·V at step 1 (t = 0.25) in the test pair")
+
+
+def test_zero_V_prints_inf_for_the_part_and_the_piece(monkeypatch):
+    """V_k = 0 at the worst step: the part and the piece print as +inf, whatever their sign."""
+    p = _fake_parts(impulse_slack=0.5, impulse_complementarity=-0.6, numerical=0.3)
+    p["V"][1] = 0.0
+    with np.errstate(divide="ignore"):
+        r = _check_with(monkeypatch, p)
+    assert r.witness["test pair: cause"] == "impulse_slack"
+    assert r.reason.startswith("impulse term of the discrete impact law positive: +inf·V at step 1")
+
+
+def test_each_pair_cause_is_reported_once(monkeypatch):
+    """Two pairs failing dV for different causes: both texts; the same cause twice: once."""
+    by_pair = {"b": _fake_parts(damping=0.2), "c": _fake_parts(numerical=0.2), "d": _fake_parts(damping=0.2)}
+    monkeypatch.setattr(ly, "decrement_parts", lambda run, a, b, examine=None: by_pair[b])
+    run = _fake_run()
+    run.slaves.update(c=SimpleNamespace(projected=True), d=SimpleNamespace(projected=True))
+    r = ly.check_lyapunov_decrease(run, pairs=[("p1", "a", "b"), ("p2", "a", "c"), ("p3", "a", "d")],
+                                   order_factors=())
+    assert "damping term positive: +0.1·V at step 1 (t = 0.25) in the p1" in r.reason
+    assert "θ-numerical term positive: +0.1·V at step 1 (t = 0.25) in the p2" in r.reason
+    assert r.reason.count("damping term positive") == 1 and "in the p3" not in r.reason
