@@ -227,9 +227,9 @@ def _simulate_event(sc: Scenario, observers, source, coupling, log, engine, reco
         cfg = ObserverConfig.from_table(sc.observer, n, sc.q0, sc.u0, base_dir)
         specs = _slaves(cfg, observers)
         source = source or cfg.source
-        intervals = _event_intervals(sc, master, source, log or cfg.log,
-                                     cfg.coupling if coupling == "scenario" else coupling)
-        obs = run_observers(master, sc, specs, intervals=intervals)
+        intervals = _event_intervals(sc, master, source, log or cfg.log)
+        obs = run_observers(master, sc, specs, intervals=intervals,
+                            coupling=cfg.coupling if coupling == "scenario" else coupling)
         chi = obs.chi
         for name, r in obs.runs.items():
             slaves[name] = SlaveTrajectory(name, r.q, r.u, r.P, r.V, None, None, None, r.sigma)
@@ -242,30 +242,19 @@ def _simulate_event(sc: Scenario, observers, source, coupling, log, engine, reco
                             status=status)
 
 
-def _event_intervals(sc: Scenario, master, source: str, log, coupling) -> list[np.ndarray]:
-    """χ's closed intervals per contact: the master's exact ones, or a closing log's, clipped
-    to the coupling window."""
-    m = sc.system.m
-    if source == "log":
-        if log is None:
-            raise InputError("observer.log", "source = \"log\" needs a log file")
-        frame = read_log(log, m)
-        ivs = [frame.loc[frame.contact == j, ["t_close", "t_open"]].to_numpy(float) for j in range(m)]
-    elif source == "master":
-        ivs = [np.asarray(master.intervals(j), float).reshape(-1, 2) for j in range(m)]
-    else:
+def _event_intervals(sc: Scenario, master, source: str, log) -> list[np.ndarray] | None:
+    """χ's closed intervals per contact: None for the master's exact ones (the observers
+    take them from the master run), a closing log's for ``source="log"``."""
+    if source == "master":
+        return None
+    if source != "log":
         raise InputError("observer.source", f"the event-driven integrator drives observers by "
                          f"the master or a log, not {source!r}")
-    if coupling in (None, "scenario"):
-        return ivs
-    t_on, t_off = coupling
-    out = []
-    for iv in ivs:
-        iv = iv[(iv[:, 1] >= t_on) & (iv[:, 0] <= t_off)].copy()
-        iv[:, 0] = np.maximum(iv[:, 0], t_on)
-        iv[:, 1] = np.minimum(iv[:, 1], t_off)
-        out.append(iv)
-    return out
+    if log is None:
+        raise InputError("observer.log", "source = \"log\" needs a log file")
+    frame = read_log(log, sc.system.m)
+    return [frame.loc[frame.contact == j, ["t_close", "t_open"]].to_numpy(float)
+            for j in range(sc.system.m)]
 
 
 def _trajectory(system, h: float, out, i: int, name: str, master: dict,

@@ -82,3 +82,27 @@ def test_event_integrator_refuses_time_stepping_options(option):
 def test_unknown_integrator_is_named():
     with pytest.raises(observer.InputError, match="integrator"):
         observer.simulate("bouncing_ball", t_end=0.1, integrator="rk4")
+
+
+def test_event_observers_driven_by_a_log_of_the_masters_exact_intervals(tmp_path):
+    """source="log" with the master's exact closed intervals written to a CSV gives the same
+    observers as source="master" (to round-off: the times pass through a %.17g text file)."""
+    import pandas as pd
+    from observer.event.master import run_master
+
+    sc = observer.load_scenario("double_mass", {"simulation.t_end": 3.0, "impact.law": "newton",
+                                                "simulation.h": 1e-3})
+    master = run_master(sc)
+    rows = [(j, a, b) for j in range(sc.system.m) for a, b in master.intervals(j) if np.isfinite(b)]
+    rows += [(j, a, sc.t_end) for j in range(sc.system.m) for a, b in master.intervals(j) if not np.isfinite(b)]
+    log = tmp_path / "exact.csv"
+    pd.DataFrame(rows, columns=["contact", "t_close", "t_open"]).sort_values(["contact", "t_close"]) \
+        .to_csv(log, index=False, float_format="%.17g")
+    by_master = observer.simulate(sc, integrator="event", observers=("jump", "nojump"))
+    by_log = observer.simulate(sc, integrator="event", observers=("jump", "nojump"), source="log", log=log)
+    assert by_log.metadata["source"] == "log"
+    for name in ("jump", "nojump"):
+        np.testing.assert_allclose(by_log.slaves[name].V, by_master.slaves[name].V, rtol=1e-9, atol=1e-15)
+    with pytest.raises(observer.InputError) as info:
+        observer.simulate(sc, integrator="event", observers=("jump",), source="self")
+    assert info.value.field == "observer.source"
