@@ -119,7 +119,7 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     if observers:
         base_dir = str(Path(sc.source).parent) if sc.source.endswith(".toml") else None
         cfg = ObserverConfig.from_table(sc.observer, system.n, sc.q0, sc.u0, base_dir)
-        slaves = _slaves(cfg, observers)
+        slaves = make_slaves(cfg, observers)
         source = source or cfg.source
         if coupling == "scenario":
             coupling = cfg.coupling
@@ -225,7 +225,7 @@ def _simulate_event(sc: Scenario, observers, source, coupling, log, engine, reco
     if observers:
         base_dir = str(Path(sc.source).parent) if sc.source.endswith(".toml") else None
         cfg = ObserverConfig.from_table(sc.observer, n, sc.q0, sc.u0, base_dir)
-        specs = _slaves(cfg, observers)
+        specs = make_slaves(cfg, observers)
         source = source or cfg.source
         intervals = _event_intervals(sc, master, source, log or cfg.log)
         obs = run_observers(master, sc, specs, intervals=intervals,
@@ -272,7 +272,7 @@ def _trajectory(system, h: float, out, i: int, name: str, master: dict,
                            parts["impulse"], parts["projection"], traj["sigma"])
 
 
-def _slaves(cfg: ObserverConfig, observers: list[str | Slave]) -> list[Slave]:
+def make_slaves(cfg: ObserverConfig, observers: list[str | Slave]) -> list[Slave]:
     """Observer names become slaves started from the ``[observer]`` state; Slave objects pass."""
     out: list[Slave] = []
     for ob in observers:

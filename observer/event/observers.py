@@ -68,7 +68,7 @@ from observer.contact import get_solver
 from observer.errors import InputError
 from observer.impact import NEWTON, ImpactLaw, impact, newton_impact
 from observer.model import LinearSystem
-from observer.observers import OBSERVER_DESIGNS, ObserverConfig, Slave, check_observer_name, lyapunov
+from observer.observers import ObserverConfig, Slave, lyapunov
 from observer.result import EVENT_COLUMNS
 
 EVENT_KINDS = ("projection", "impact", "stick", "liftoff")
@@ -733,19 +733,11 @@ def _master_arrays(master, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _slaves(scenario, observers: Iterable) -> list[Slave]:
+    """Observer names (from the scenario's ``[observer]`` state) or Slave objects, as
+    :func:`observer.simulate` builds them."""
+    from observer.simulate import make_slaves
     cfg = ObserverConfig.from_table(scenario.observer, scenario.system.n, scenario.q0, scenario.u0)
-    out: list[Slave] = []
-    for ob in observers:
-        if isinstance(ob, Slave):
-            out.append(ob)
-            continue
-        check_observer_name(ob)
-        design = OBSERVER_DESIGNS[ob]
-        out.append(Slave(ob, design.position_jumps, cfg.q0, cfg.u0, design))
-    names = [s.name for s in out]
-    if len(set(names)) != len(names):
-        raise InputError("observer.observers", f"observer names must be unique, got {names}")
-    return out
+    return make_slaves(cfg, list(observers))
 
 
 def run_observers(master, scenario, observers: Iterable = ("jump", "nojump"), *,
