@@ -337,7 +337,9 @@ def test_check_fails_on_the_impulse_slack_with_its_exact_reason(runs):
     # each (criterion, cause) once: the master–jump pair has the same cause and adds no text
     assert r.reason.count("impulse term of the discrete impact law") == 1
     assert r.reason == text
-    assert r.summary_keys[:3] == ("worst_pair", "worst_criterion", "max_dV_beyond_roundoff")
+    assert r.summary_keys == ("worst_pair", "worst_criterion", "max_dV_beyond_roundoff", "max_impulse_slack/V",
+                              "slack_order_impulse_slack", "max_impulse_target/V", "slack_order_impulse_target",
+                              "max_projection_unprojected_gap/V")
     # near miss on the tolerance
     assert ly.check_lyapunov_decrease(run, tolerance=0.999 * val, order_factors=()).passed is False
     r2 = ly.check_lyapunov_decrease(run, tolerance=1.001 * val, order_factors=())
@@ -971,3 +973,10 @@ def test_each_pair_cause_is_reported_once(monkeypatch):
     assert "damping term positive: +0.1·V at step 1 (t = 0.25) in the p1" in r.reason
     assert "θ-numerical term positive: +0.1·V at step 1 (t = 0.25) in the p2" in r.reason
     assert r.reason.count("damping term positive") == 1 and "in the p3" not in r.reason
+
+
+def test_no_jump_note_follows_a_failure(monkeypatch):
+    r = _check_with(monkeypatch, _fake_parts(damping=0.2), projected=(False, False))
+    assert r.reason == ("damping term positive: +0.1·V at step 1 (t = 0.25) in the test pair: C̄ is not positive "
+                        "semi-definite; the damping part −h v_θᵀC̄v_θ is positive: C̄ is not positive semi-definite "
+                        "(test pair); observers without position jumps (K not ≻ 0): no jump part")
