@@ -44,6 +44,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from observer.errors import InputError
+from observer.impact import NEWTON, POISSON
 from observer.stepping import Grid, MoreauJean
 
 if TYPE_CHECKING:
@@ -414,8 +415,9 @@ def _python_health(stepper: MoreauJean, k: int, s: int, q, u, u1, P, act, q1, he
     contacts). The master's gaps after the step update the deepest penetration. The residual
     is that of Newton's discrete law ``0 ≤ γ_{k+1} + e∘γ_k ⊥ P ≥ 0`` with ``ĜP`` replaced by
     ``W_Aᵀ(u_{k+1} − u_free)`` (the kernel's :func:`observer.kernel.applied_residual`), valid
-    for the Newton law and every one-contact step; Poisson steps on several contacts count
-    the solver's own residual (``residual_source = "applied+solver"``)."""
+    for the Newton law and every one-contact Poisson step; Poisson steps on several contacts
+    and registered laws without kernel code count the solver's own residual
+    (``residual_source = "applied+solver"``)."""
     if s == 0:
         g = stepper.system.gaps(q1, stepper.time(k + 1))
         j = int(np.argmin(g)) if g.size else -1
@@ -423,7 +425,8 @@ def _python_health(stepper: MoreauJean, k: int, s: int, q, u, u1, P, act, q1, he
             health["min_gap"], health["min_gap_step"] = float(g[j]), k + 1
     if act.size == 0:
         return 0.0
-    if stepper.law.code == 0 or act.size == 1:
+    code = stepper.law.code
+    if code == NEWTON or (code == POISSON and act.size == 1):
         res = newton_residual(stepper, k, q, u, u1, P, act)
     else:
         res = float(stepper.stats.max_residual)
