@@ -356,7 +356,8 @@ def run_metadata(scenario, stepper, out) -> dict:
     fallback to the reference solver), versions, timing (compile time apart)."""
     meta = dict(scenario.parameters())
     st = out.stats
-    meta.update(h=stepper.h, theta=stepper.theta, steps=stepper.steps,
+    done = stepper.steps if out.stopped_at is None else int(out.stopped_at)   # steps actually taken
+    meta.update(h=stepper.h, theta=stepper.theta, steps=done, planned_steps=stepper.steps,
                 engine=out.engine, structure="dense" if stepper.S.band is None else "banded",
                 record_every=int(out.rows[1] - out.rows[0]) if out.rows.size > 1 else 1,
                 solver=stepper.solver.name, contact_solves=st["contact_solves"],
@@ -368,7 +369,7 @@ def run_metadata(scenario, stepper, out) -> dict:
                 compile_time_s=out.compile_time_s,
                 health=out.health.to_dict() if out.health is not None else None,
                 stopped=out.stop_info(stepper),
-                steps_per_second=stepper.steps / out.run_time_s if out.run_time_s > 0 else float("nan"),
+                steps_per_second=done / out.run_time_s if out.run_time_s > 0 else float("nan"),
                 versions=package_versions(), platform=platform.platform(),
                 argv=" ".join(sys.argv))
     return meta
