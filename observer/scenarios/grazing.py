@@ -26,6 +26,7 @@ def steady_state(zeta: float, F: float, omega: float) -> tuple[float, float]:
 NOTES = "the steady amplitude just touches the wall: grazing contacts every period."
 SUITE = {
     "observers": [dict(h=(1e-3, 1e-4), t_end=(40.0, 40.0), slave_offset=((0.1,), (0.0,)))],
+    "work_precision": dict(h0=4e-3, t_end=20.0, targets=("master",)),
     "checks": "quick",
 }
 
