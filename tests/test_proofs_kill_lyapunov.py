@@ -980,3 +980,27 @@ def test_no_jump_note_follows_a_failure(monkeypatch):
     assert r.reason == ("damping term positive: +0.1·V at step 1 (t = 0.25) in the test pair: C̄ is not positive "
                         "semi-definite; the damping part −h v_θᵀC̄v_θ is positive: C̄ is not positive semi-definite "
                         "(test pair); observers without position jumps (K not ≻ 0): no jump part")
+
+
+def test_projection_parts_reversed_pair_and_set_mismatch(runs):
+    """The plain master as the first member (e = q_master − q_jump), and a projected pair
+    whose closed sets differ at one step: the projection pieces use the intersection of the
+    closed sets, step by step, as the loop recomputation."""
+    import copy
+    run = runs["chain_poisson"]
+    for a, b in (("master", "jump_a"), ("jump_b", "master")):
+        p, ref = ly.decrement_parts(run, a, b), _ref_parts(run, a, b)
+        scale = ref["V"][:-1] + ref["roundoff"] + 1e-300
+        assert np.max(ref["projection_unprojected_gap"]) > 0
+        for key in ("projection_jump", "projection_unprojected_gap"):
+            _close(p[key], ref[key], scale)
+    run2 = copy.copy(run)
+    tr = copy.copy(run.slaves["jump_b"])
+    tr.active = tr.active.copy()
+    k = int(np.flatnonzero(tr.active[1:].any(axis=1))[0])
+    tr.active[k + 1] = False                            # jump_b open at the first closing
+    run2.slaves = dict(run.slaves, jump_b=tr)
+    p, ref = ly.decrement_parts(run2, "jump_a", "jump_b"), _ref_parts(run2, "jump_a", "jump_b")
+    scale = ref["V"][:-1] + ref["roundoff"] + 1e-300
+    assert ref["projection_jump"][k] == 0.0 and np.count_nonzero(ref["projection_jump"][k + 1:]) > 0
+    _close(p["projection_jump"], ref["projection_jump"], scale)
