@@ -29,8 +29,9 @@ def test_comparison_recomputed_from_the_rows():
     assert np.isclose(r["ratio_at_equal_error"], 5e9 / 0.02, rtol=1e-9)
     assert len(comparison_table(cmp).rows) == 1
     msg = key_sentence(cmp)
-    assert "20.0× cheaper or better" in msg and "1.00e−14 vs 1.25e−4" in msg
-    assert "at least 250000000000× cheaper" in msg
+    assert msg.startswith("Event-driven integrator (osc): error 1.00e−14 against time-stepping's "
+                          "1.25e−4 at its finest step, for 0.05× its CPU time")
+    assert msg.endswith("250000000000× cheaper")
 
 
 def test_no_extrapolation_without_a_decreasing_work_curve():
