@@ -65,6 +65,7 @@ import numpy as np
 import pandas as pd
 
 from observer.contact import get_solver
+from observer.event.flow import expm_pade13
 from observer.errors import InputError
 from observer.impact import NEWTON, ImpactLaw, impact, newton_impact
 from observer.model import LinearSystem
@@ -84,33 +85,9 @@ MAX_EVENTS_PER_INSTANT = 20
 """More own events than this at one instant stop the run (status says so): a mode cycle."""
 
 
-_PADE13 = (64764752532480000.0, 32382376266240000.0, 7771770303897600.0, 1187353796428800.0,
-           129060195264000.0, 10559470521600.0, 670442572800.0, 33522128640.0, 1323241920.0,
-           40840800.0, 960960.0, 16380.0, 182.0, 1.0)
-_THETA13 = 5.371920351148152
-
-
-def expm(A: np.ndarray) -> np.ndarray:
-    """Matrix exponential: scaling and squaring with the [13/13] Padé approximant (Higham 2005).
-
-    Written with numpy (rather than ``scipy.linalg.expm``) because scipy's bundled BLAS
-    threads make one small-matrix call cost milliseconds on a loaded machine; the observer
-    calls it thousands of times. Backward error below the unit round-off for every ``A``.
-    """
-    norm1 = float(np.max(np.sum(np.abs(A), axis=0))) if A.size else 0.0
-    s = max(0, int(np.ceil(np.log2(norm1 / _THETA13)))) if norm1 > _THETA13 else 0
-    X = A / (2.0 ** s)
-    b = _PADE13
-    ident = np.eye(A.shape[0])
-    X2 = X @ X
-    X4 = X2 @ X2
-    X6 = X4 @ X2
-    U = X @ (X6 @ (b[13] * X6 + b[11] * X4 + b[9] * X2) + b[7] * X6 + b[5] * X4 + b[3] * X2 + b[1] * ident)
-    V = X6 @ (b[12] * X6 + b[10] * X4 + b[8] * X2) + b[6] * X6 + b[4] * X4 + b[2] * X2 + b[0] * ident
-    R = np.linalg.solve(V - U, V + U)
-    for _ in range(s):
-        R = R @ R
-    return R
+expm = expm_pade13
+"""Matrix exponential (:func:`observer.event.flow.expm_pade13`: numpy scaling and squaring with
+the [13/13] Padé approximant; scipy's threaded BLAS made one small call cost milliseconds)."""
 
 
 # ------------------------------------------------------------------------------------------
