@@ -327,6 +327,7 @@ def test_check_fails_on_the_impulse_slack_with_its_exact_reason(runs):
     p, crit, _ = _expected_summary(run, label, "jump_a", "jump_b")
     val, k = crit["dV"]
     assert r.passed is False and r.tolerance == 0.0 and r.margin == pytest.approx(-val, rel=1e-6)
+    assert r.name == "lyapunov_decrease"
     assert r.witness["worst_pair"] == label and r.witness["worst_criterion"] == "dV"
     V = p["V"][k]
     text = (f"impulse term of the discrete impact law positive: {p['impulse'][k] / V:+.2g}·V at step {k} "
