@@ -115,6 +115,7 @@ def _assert_witness(run, r, names):
         assert w["eq13_time"] == run.t[w13["step"] + 1] and w["eq13_active_set"] == w13["I"]
         assert np.allclose(w["eq13_sigma_applied"], w13["sa"], rtol=1e-8, atol=1e-12)
         assert np.allclose(w["eq13_sigma_closed_form"], w13["sc"], rtol=1e-8, atol=1e-12)
+    assert "eq14_value" not in w and "eq13_value" not in w
     assert r.summary_keys == ("max_jump_error_eq14", "max_force_error_eq13", "eq14_time", "eq14_active_set",
                               "eq14_Sigma_applied", "eq14_Sigma_closed_form", "metric")
     assert r.name == "projection_closed_form" and r.equation == "eqs. (13)-(14), proof of Proposition 1"
@@ -155,6 +156,7 @@ def test_only_the_named_observers_are_examined(runs):
     # a named observer without position jumps contributes no step
     r = check_projection_closed_form(run, slaves=("nojump_a",))
     assert r.passed is None and r.reason == "no step with a closed contact in the run"
+    assert r.name == "projection_closed_form" and r.equation == "eqs. (13)-(14), proof of Proposition 1"
     r = check_projection_closed_form(run, slaves=("nojump_a", "jump_a"))
     assert r.witness["projected_steps"] == _reference(run, ("jump_a",))[2]
 
@@ -191,3 +193,22 @@ def test_corrupted_velocity_fails_only_eq13(runs):
     assert r.reason == "the continuous constraint force differs from σ = −P_I L_I⁻¹ P_Iᵀ γ (eq. (13))"
     assert check_projection_closed_form(run, force_tolerance=1.001 * w13b["err"]).passed is True
     assert check_projection_closed_form(run, force_tolerance=0.999 * w13b["err"]).passed is False
+
+
+def test_tolerance_edges_exact_and_no_persistent_step():
+    """tolerance equal to the worst error: satisfied, no reason (strict >); a run whose
+    closings never persist two steps: no eq. (13) record, its error NaN."""
+    sc = pc.load("rocking_chain", {"param.N": 1, "initial.u": [-0.5, 0.3]})
+    specs = pc.CheckContext(sc, pc.CheckSettings(h=4e-3, t_end=0.6)).slave_specs()
+    run = replay(sc, h=4e-3, t_end=0.6, slaves=specs, engine="python")
+    r = check_projection_closed_form(run)
+    w14, w13, n14, n13 = _reference(run, ("jump_a", "jump_b"))
+    assert n14 > 0 and n13 == 0 and w13 is None
+    assert math.isnan(r.witness["max_force_error_eq13"]) and r.witness["persistent_steps"] == 0
+    exact = r.witness["max_jump_error_eq14"]
+    r = check_projection_closed_form(run, tolerance=exact)
+    assert r.passed is True and r.reason == ""
+    dm = _replay("dm")
+    w13 = _reference(dm, ("jump_a", "jump_b"))[1]
+    r = check_projection_closed_form(dm, force_tolerance=check_projection_closed_form(dm).witness["max_force_error_eq13"])
+    assert r.reason == "" and w13 is not None
