@@ -307,3 +307,30 @@ def test_shared_run_and_visited_sets():
     got = ctx.visited_sets()
     assert {tuple(x) for x in got} == expected and len(got) == len(expected) >= 2
     assert all(x.dtype.kind == "i" for x in got)
+
+
+def test_cli_help_text(capsys):
+    """The --help page: every option with its metavar and help (the user's documentation)."""
+    with pytest.raises(SystemExit) as info:
+        cli.main(["--help"])
+    assert info.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())
+    for piece in (
+            "usage: python -m proofs_checks [-h] [--set KEY=VALUE] [--only NAME] [--option CHECK.KEY=VALUE] "
+            "[--seed SEED] [--h H] [--t-end T_END] [--json FILE] [--list] [SCENARIO ...]",
+            "Numerically verify the steps of Proposition 1 and Theorem 1 on a scenario. Checks: mass_spd,",
+            "SCENARIO built-in name, .toml path, or 'all' (every built-in scenario)",
+            "--set KEY=VALUE scenario override (param.NAME for builder parameters, else dotted TOML key)",
+            "--only NAME run only these checks (repeat or comma-separate)",
+            "--option CHECK.KEY=VALUE keyword option of one check, e.g. impact_monotone.samples=200",
+            "--seed SEED seed of all random sampling (default 0)",
+            "--h H step of the run-based checks (default: the scenario's)",
+            "--t-end T_END horizon of the run-based checks (default: min(t_end, 40000 h))",
+            "--json FILE write all results (with full witnesses) as JSON",
+            "--list list the checks and exit"):
+        assert piece in text, piece
+    args = cli.build_parser().parse_args(["a", "b", "--only", "x", "--only", "y", "--set", "k=v", "--h", "0.5",
+                                          "--t-end", "2", "--seed", "3", "--json", "f", "--option", "c.k=1"])
+    assert (args.scenarios, args.only, args.set, args.h, args.t_end, args.seed, args.json, args.option,
+            args.list) == (["a", "b"], ["x", "y"], ["k=v"], 0.5, 2.0, 3, "f", ["c.k=1"], False)
+    assert cli.build_parser().parse_args([]).scenarios == []
