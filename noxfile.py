@@ -199,7 +199,7 @@ def mutants(session: nox.Session) -> None:
             shutil.copytree(ROOT / name, work / name, ignore=ignore)
         (work / "pyproject.toml").write_text(_mutmut_pyproject(module, tests), encoding="utf-8")
         with session.chdir(work):
-            session.run("mutmut", "run", *max_children, env=env)
+            session.run("mutmut", "run", *max_children, env={**env, **SINGLE_THREAD_BLAS})
             summaries.append(_mutation_summary(session, module, work))
     (MUTANTS_DIR / "summary.json").write_text(json.dumps(summaries, indent=2))
 
