@@ -174,17 +174,18 @@ def results_frame(results: Iterable[CheckResult]) -> pd.DataFrame:
 from proofs_checks.asserts import (assert_checks, assert_constraints_independent,  # noqa: E402
                                    assert_convergence, assert_damping_pd, assert_forcing_bounded,
                                    assert_impact_monotone, assert_lyapunov_decrease, assert_mass_spd,
-                                   assert_projection_closed_form, assert_projection_psd,
-                                   assert_proposition1_exact, assert_proposition1_h_scaling, assert_result,
+                                   assert_projection_closed_form, assert_projection_energy,
+                                   assert_projection_psd, assert_proposition1_exact, assert_proposition1_h_scaling, assert_result,
                                    assert_stiffness_spd, assert_switching_generated)
 
 __all__ = ["CHECKS", "CheckContext", "CheckResult", "CheckSettings", "Run", "SlaveSpec",
            "assert_checks", "assert_constraints_independent", "assert_convergence", "assert_damping_pd",
            "assert_forcing_bounded", "assert_impact_monotone", "assert_lyapunov_decrease", "assert_mass_spd",
-           "assert_projection_closed_form", "assert_projection_psd", "assert_proposition1_exact",
+           "assert_projection_closed_form", "assert_projection_energy", "assert_projection_psd",
+           "assert_proposition1_exact",
            "assert_proposition1_h_scaling", "assert_result", "assert_stiffness_spd", "assert_switching_generated",
            "check_constraints_independent", "check_convergence", "check_damping_pd", "check_forcing_bounded",
            "check_impact_monotone", "check_lyapunov_decrease", "check_mass_spd", "check_projection_closed_form",
-           "check_projection_psd", "check_proposition1_exact", "check_proposition1_h_scaling",
+           "check_projection_energy", "check_projection_psd", "check_proposition1_exact", "check_proposition1_h_scaling",
            "check_stiffness_spd", "check_switching_generated", "decrement_parts", "load", "replay",
            "results_frame", "run_checks", "select"]

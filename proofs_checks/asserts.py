@@ -31,6 +31,7 @@ from typing import Any, Callable
 from observer.scenario import Scenario
 from proofs_checks.assumptions import (check_constraints_independent, check_damping_pd, check_mass_spd,
                                        check_stiffness_spd)
+from proofs_checks.designs import check_projection_energy
 from proofs_checks.forcing import check_forcing_bounded
 from proofs_checks.lyapunov import check_convergence, check_lyapunov_decrease
 from proofs_checks.monotonicity import check_impact_monotone
@@ -100,6 +101,7 @@ assert_forcing_bounded = _helper("forcing_bounded", check_forcing_bounded)
 assert_impact_monotone = _helper("impact_monotone", check_impact_monotone)
 assert_projection_closed_form = _helper("projection_closed_form", check_projection_closed_form)
 assert_projection_psd = _helper("projection_psd", check_projection_psd)
+assert_projection_energy = _helper("projection_energy", check_projection_energy)
 assert_proposition1_exact = _helper("proposition1_exact", check_proposition1_exact)
 assert_proposition1_h_scaling = _helper("proposition1_h_scaling", check_proposition1_h_scaling)
 assert_lyapunov_decrease = _helper("lyapunov_decrease", check_lyapunov_decrease)
@@ -108,5 +110,6 @@ assert_convergence = _helper("convergence", check_convergence)
 __all__ = ["assert_checks", "assert_result", "assert_mass_spd", "assert_stiffness_spd", "assert_damping_pd",
            "assert_constraints_independent", "assert_switching_generated", "assert_forcing_bounded",
            "assert_impact_monotone", "assert_projection_closed_form", "assert_projection_psd",
+           "assert_projection_energy",
            "assert_proposition1_exact", "assert_proposition1_h_scaling", "assert_lyapunov_decrease",
            "assert_convergence"]
