@@ -55,6 +55,7 @@ def test_toys_in_the_proof_checks(toys):
     law = {r.name: r for r in pc.run_checks("toy", only="impact_monotone",
                                             overrides={"impact.law": "toy_plastic"})}
     assert law["impact_monotone"].passed is True
+    assert law["impact_monotone"].witness["law"] == "toy_plastic"     # the toy law was checked
 
 
 def test_toys_in_the_quick_suite_rows(toys, tmp_path):
