@@ -113,6 +113,9 @@ def _integrator_options(args) -> dict:
 
 def write_events(res, path: str) -> None:
     """The result's events table to ``path`` (CSV or Parquet by suffix)."""
+    if res.events is None:
+        raise InputError("--events", "this run kept no event table (time-stepping builds it "
+                                     "from every step: drop --record-every / --store summary)")
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     if p.suffix.lower() == ".parquet":
