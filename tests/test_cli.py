@@ -335,3 +335,12 @@ def test_event_integrator_and_events_file(tmp_path, capsys):
                  "--out", str(tmp_path / "x.csv")]) == 2    # a time-stepping option: refused
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--engine" in err and not (tmp_path / "x.csv").exists()
+
+
+def test_events_without_an_event_table_is_one_line(tmp_path, capsys):
+    from observer.cli import main
+    assert main(["run", "bouncing_ball", "--t-end", "0.1", "--record-every", "2", "--events",
+                 str(tmp_path / "e.csv"), "--out", str(tmp_path / "r.csv")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("error: --events:")
+    assert not (tmp_path / "e.csv").exists()
