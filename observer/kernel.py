@@ -397,12 +397,13 @@ def step_system(k, q, u, act, a, project, slot, law, sch, wk, out):
                 x[r] = lc[r] + (e[act[r]] * lc[r] + x[r])
         for i in range(n):
             du[i] = 0.0
-        for r in range(a):
+        for r in range(a):                                       # δu = Σ_j (Â⁻¹W)_j P_j, once
             P[r] = x[r]
             j = act[r]
             for i in range(n):
-                u1[i] += AinvWT[j, i] * x[r]
                 du[i] += AinvWT[j, i] * x[r]
+        for i in range(n):
+            u1[i] = uf[i] + du[i]
         res = applied_residual(Wp, Wi, Wv, act, a, du, bvec, x if (law == 0 or a == 1) else le)
         stats[7] = res
         if not res <= tol:
