@@ -45,7 +45,7 @@ def test_toys_simulate_and_the_toy_law_is_plastic(toys):
     assert np.max(np.abs(gamma[hits, 0])) <= 1e-12
     newton = observer.simulate(observer.load_scenario("toy", {"simulation.theta": 1.0}))
     hits_n = np.flatnonzero(newton.P[1:, 0] > 0) + 1
-    assert np.max(gamma[hits_n, 0] if hits_n.size else [0]) >= 0.0
+    assert hits_n.size > 0
     assert np.max(np.abs((newton.u @ sc.system.W)[hits_n, 0])) > 1e-3    # Newton rebounds
 
 
