@@ -287,7 +287,11 @@ def projection_matrices(stepper: MoreauJean, metric: np.ndarray | None) -> tuple
 
 def projection_slots(inp: LoopInput) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per system its slot in the stacks of the distinct projection metrics, and the stacks
-    ``(N⁻¹W)ᵀ`` (P, m, n) and ``WᵀN⁻¹W`` (P, m, m) (contiguous, in the kernel's layout)."""
+    ``(N⁻¹W)ᵀ`` (P, m, n) and ``WᵀN⁻¹W`` (P, m, m) (contiguous, in the kernel's layout);
+    computed once per input (the kernel's data, the run and its health all ask for them)."""
+    cached = inp.__dict__.get("_projection_slots")
+    if cached is not None:
+        return cached
     S = inp.q0.shape[0]
     slots, keys, NinvWT, L = np.zeros(S, np.int64), [], [], []
     for s in range(S):
@@ -299,7 +303,9 @@ def projection_slots(inp: LoopInput) -> tuple[np.ndarray, np.ndarray, np.ndarray
             NinvWT.append(a.T)
             L.append(b)
         slots[s] = keys.index(key)
-    return slots, np.ascontiguousarray(np.stack(NinvWT)), np.ascontiguousarray(np.stack(L))
+    out = slots, np.ascontiguousarray(np.stack(NinvWT)), np.ascontiguousarray(np.stack(L))
+    object.__setattr__(inp, "_projection_slots", out)      # LoopInput is frozen: a private memo
+    return out
 
 
 STORES = ("full", "summary")
