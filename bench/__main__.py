@@ -3,6 +3,7 @@
     python -m bench list
     python -m bench show quick
     python -m bench run quick [--out bench/results] [--limit K] [--no-progress] [--no-micro]
+    python -m bench run full                              # a local Dask cluster, one worker per core (≤ 4)
     python -m bench run full --workers 2                  # a local Dask cluster of 2 workers
     python -m bench run full --scheduler tcp://host:8786  # an existing Dask scheduler
     python -m bench run quick --workers 0                 # in this process, no Dask
@@ -60,9 +61,9 @@ def main(argv: list[str] | None = None) -> int:
                            help="run at most K of the remaining cases")
             s.add_argument("--no-progress", action="store_true", help="no progress bar")
             s.add_argument("--no-micro", action="store_true", help="skip the micro-benchmarks")
-            s.add_argument("--workers", type=_workers, default=1,
-                           help="worker processes of the local Dask cluster (default %(default)s; "
-                                "0: run in this process without Dask)")
+            s.add_argument("--workers", type=_workers, default=None,
+                           help="worker processes of the local Dask cluster (default: one per "
+                                "core, at most 4; 0: run in this process without Dask)")
             s.add_argument("--scheduler", default=None, metavar="ADDRESS",
                            help="run on an existing Dask scheduler (e.g. tcp://host:8786) "
                                 "instead of a local cluster")
@@ -94,9 +95,11 @@ def main(argv: list[str] | None = None) -> int:
               f"({results_path(suite.name, args.out)})")
         return 0
     from observer.errors import InputError
+    from bench.run import default_workers
+    workers = default_workers() if args.workers is None and args.scheduler is None else args.workers
     try:
         summary = run_suite(suite, args.out, progress=not args.no_progress, limit=args.limit,
-                            micro=not args.no_micro, workers=args.workers,
+                            micro=not args.no_micro, workers=workers,
                             scheduler=args.scheduler)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)

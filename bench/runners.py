@@ -67,14 +67,26 @@ class Unavailable(RuntimeError):
     are not written, so a later run retries it."""
 
 
+PROCESS_CACHE: dict = {}
+"""What the cases run in one process share (the master's closing log of the robustness
+cases, the event-driven references of the work-precision sweeps): a suite run, or a Dask
+worker, computes each once, whatever the case it first serves."""
+
+
 @dataclass
 class Context:
-    """What the cases of one suite run share: output folders, environment, caches."""
+    """What the cases of one suite run share: output folders, environment, caches.
+
+    ``reference_grids`` maps a work-precision reference group (:func:`reference_group`) to
+    the finest error grid of its cases in the run (:func:`reference_grids`): the group's
+    event-driven reference is computed once on that grid and subsampled for the others.
+    """
 
     suite: str
     out_dir: Path
     env: dict
-    cache: dict = field(default_factory=dict)
+    cache: dict = field(default_factory=lambda: PROCESS_CACHE)
+    reference_grids: dict = field(default_factory=dict)
 
     @property
     def artefacts(self) -> Path:
@@ -263,19 +275,89 @@ def record_every(h: float, h_record: float | None) -> int:
     return k
 
 
-def _event_reference(case: Case, spacing: float, ctx: Context):
-    """The exact event-driven run (master and every applicable observer) of the case's
-    scenario sampled every ``spacing`` seconds, and its CPU time (cached per grid)."""
-    key = ("wp-event", case.scenario, case.params, case.law, case.t_end, round(spacing, 15))
-    if key not in ctx.cache:
-        ctx.cache = {k: v for k, v in ctx.cache.items()
-                     if not (isinstance(k, tuple) and k[0] == "wp-event")}
-        sc = observer.load_scenario(case.scenario, {**case.overrides(), "simulation.h": spacing})
-        names = tuple(n for n, d in OBSERVER_DESIGNS.items()
-                      if not d.needs_spd_K or sc.system.is_stiffness_definite())
-        res, cpu, _ = _timed(observer.simulate, sc, observers=names, integrator="event")
-        ctx.cache[key] = (res, cpu)
-    return ctx.cache[key]
+def error_grid(case: Case) -> float:
+    """Spacing of the grid a work-precision case's error is measured on:
+    h · :func:`record_every` (h, h_record)."""
+    return case.h * record_every(case.h, case.h_record)
+
+
+def reference_group(case: Case) -> tuple:
+    """Work-precision cases sharing one event-driven reference: same scenario, parameters,
+    law and horizon, and the same measured trajectory (the master alone, or the master and
+    the target observer: the reference runs no observer that nobody measures)."""
+    observers = () if case.target == "master" else (case.target,)
+    return (case.scenario, case.params, case.law, case.t_end, observers)
+
+
+def reference_grids(cases) -> dict[tuple, float]:
+    """Per reference group (:func:`reference_group`) of the ``event solution`` cases among
+    ``cases``: the finest error grid (:func:`error_grid`). The sweeps halve h, so every
+    coarser grid of the group is a power-of-two multiple of it."""
+    grids: dict[tuple, float] = {}
+    for c in cases:
+        if c.kind == "work_precision" and c.reference == "event solution" and c.h is not None:
+            g = reference_group(c)
+            grids[g] = min(grids.get(g, np.inf), error_grid(c))
+    return grids
+
+
+REFERENCE_CACHE_SIZE = 6
+"""Event-driven references kept per process (the sweeps of one scenario and law visit at
+most master + 2 observer targets, twice: fast and reference contact solver)."""
+
+
+@dataclass(frozen=True)
+class EventReference:
+    """An event-driven reference run, reduced to what the errors need: the grid ``t``, the
+    master's positions ``q``, the observers' positions ``slaves`` (name → q), its ``spacing``
+    and the CPU time of the run."""
+
+    t: np.ndarray
+    q: np.ndarray
+    slaves: dict
+    spacing: float
+    cpu: float
+
+    def every(self, k: int) -> "EventReference":
+        """Every ``k``-th sample (the grid of spacing k·spacing)."""
+        if k == 1:
+            return self
+        return EventReference(self.t[::k], self.q[::k], {n: q[::k] for n, q in self.slaves.items()},
+                              self.spacing * k, self.cpu)
+
+
+def _stride(spacing: float, fine: float) -> int | None:
+    """``spacing / fine`` when it is a whole number ≥ 1 (to 1e-9 relative), else None."""
+    k = round(spacing / fine)
+    return k if k >= 1 and abs(spacing / fine - k) <= 1e-9 * k else None
+
+
+def _event_reference(case: Case, spacing: float, ctx: Context) -> EventReference:
+    """The exact event-driven run of the case's scenario (the master, and the target
+    observer if the case measures one) sampled every ``spacing`` seconds.
+
+    Computed once per process on the finest grid of the case's reference group in this run
+    (``ctx.reference_grids``, when ``spacing`` is a whole multiple of it) and subsampled: the
+    event integrator's samples are the exact flow at t_k = k·h, so the subsampled reference
+    equals a run on the coarser grid to round-off (``tests/test_bench.py``).
+    """
+    group = reference_group(case)
+    fine = ctx.reference_grids.get(group, spacing)
+    k = _stride(spacing, fine)
+    if k is None:
+        fine, k = spacing, 1
+    key = ("wp-event", group, round(fine, 15))
+    cache = ctx.cache
+    if key not in cache:
+        cached = [x for x in cache if isinstance(x, tuple) and x[0] == "wp-event"]
+        for old in cached[:max(0, len(cached) - REFERENCE_CACHE_SIZE + 1)]:
+            del cache[old]
+        sc = observer.load_scenario(case.scenario, {**case.overrides(), "simulation.h": fine})
+        observers = group[-1]
+        res, cpu, _ = _timed(observer.simulate, sc, observers=observers, integrator="event")
+        cache[key] = EventReference(res.t, res.q, {n: res.slaves[n].q for n in observers},
+                                    fine, cpu)
+    return cache[key].every(k)
 
 
 def trajectory_error(t: np.ndarray, q: np.ndarray, q_ref: np.ndarray) -> dict[str, float]:
@@ -306,18 +388,19 @@ def run_work_precision(case: Case, ctx: Context) -> list[dict]:
         if q_ref is None:
             raise InputError("reference", f"no closed form implemented for {case.scenario}")
         ref_text = info(case.scenario).reference_text or "closed form"
-        ref_cpu = float("nan")
+        ref_cpu, h_ref = float("nan"), None
     else:
         spacing = float(res.t[1] - res.t[0]) if res.t.size > 1 else case.h
-        ref, ref_cpu = _event_reference(case, spacing, ctx)
+        ref = _event_reference(case, spacing, ctx)
         if ref.t.shape != res.t.shape or np.max(np.abs(ref.t - res.t)) > 1e-9:
             raise InputError("reference", "the event solution's grid differs from the run's")
-        q_ref = ref.q if case.target == "master" else ref.slaves[case.target].q
-        ref_text = ("event solution (exact event-driven integrator, master and observers, "
-                    "sampled on the run's grid)")
+        q_ref = ref.q if case.target == "master" else ref.slaves[case.target]
+        ref_cpu, h_ref = ref.cpu, ref.spacing
+        ref_text = ("event solution (exact event-driven integrator, the master and the "
+                    "measured observer, sampled on the run's grid)")
     steps = res.metadata["steps"]
     row.update(trajectory_error(res.t, q, q_ref))
-    row.update(reference=ref_text, h_ref=None, ref_cpu_time_s=ref_cpu, status="ok", note="",
+    row.update(reference=ref_text, h_ref=h_ref, ref_cpu_time_s=ref_cpu, status="ok", note="",
                cpu_time_s=cpu, wall_time_s=wall, steps=steps,
                steps_per_s=steps / cpu if cpu > 0 else float("nan"),
                cpu_scope="master" if case.target == "master" else "master + this observer",

@@ -11,18 +11,20 @@ import subprocess
 import sys
 import time
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
+import observer
 from bench.perturb import KINDS, perturb_log
 from observer.closed_form import ExactImpactOscillator, ball_position, closed_form_position
 from bench.results import CaseStore, case_key, load_results
 from bench.peers import PROBLEMS
 from bench.run import results_path, run_suite
-from bench.runners import record_every
+from bench.runners import Context, _event_reference, record_every, reference_group, reference_grids
 from bench.suites import RANDOM_KINDS, SUITES, Case, Suite, check_scenarios, engine_for, get_suite
 from observer.errors import InputError
 from observer.scenarios import bouncing_ball as bb
@@ -313,6 +315,45 @@ def test_reference_solver_runs_on_the_numpy_engine(tmp_path):
     assert rows.loc["pivoting", "engine"] == "compiled" and rows.loc["reference", "engine"] == "python"
     assert rows.loc["reference", "contact_solves"] > 0
     assert rows.loc["reference", "err_mean"] == pytest.approx(rows.loc["pivoting", "err_mean"], rel=1e-6)
+
+
+def _dm_sweep(hs, target="jump", t_end=0.5):
+    """double_mass work-precision cases of one sweep against the event solution."""
+    return [Case("work_precision", "double_mass", law="newton", h=h, t_end=t_end,
+                 observers=() if target == "master" else (target,), target=target,
+                 reference="event solution") for h in hs]
+
+
+def test_a_sweep_shares_one_event_reference_on_its_finest_grid(tmp_path):
+    """The cases of one sweep (scenario, law, horizon, measured trajectory) are one reference
+    group whose grid is the finest error grid among them (h, or h_record when coarser); the
+    reference is computed once per process on it, and every k-th sample of it equals the
+    event-driven run made directly on the coarser grid to round-off (the event integrator
+    samples the exact flow at t_k = k·h)."""
+    jump = _dm_sweep((4e-3, 2e-3, 1e-3))
+    fine = _dm_sweep((4e-3 / 2 ** 4,))[0]
+    recorded = replace(fine, h_record=4e-3 / 2 ** 2)          # error grid 1e-3, not h
+    master = _dm_sweep((4e-3, 2e-3), target="master")
+    grids = reference_grids(jump + [recorded] + master)
+    assert grids == {reference_group(jump[0]): pytest.approx(1e-3),
+                     reference_group(master[0]): pytest.approx(2e-3)}
+    assert reference_group(recorded) == reference_group(jump[0]) != reference_group(master[0])
+    assert reference_group(master[0])[-1] == () and reference_group(jump[0])[-1] == ("jump",)
+
+    ctx = Context("t", tmp_path, {}, cache={}, reference_grids=grids)
+    coarse = _event_reference(jump[0], 4e-3, ctx)
+    assert len(ctx.cache) == 1 and coarse.spacing == pytest.approx(4e-3)
+    assert _event_reference(jump[1], 2e-3, ctx).t.size == 251 and len(ctx.cache) == 1  # no new run
+    sc = observer.load_scenario("double_mass", {"impact.law": "newton", "simulation.h": 4e-3,
+                                                "simulation.t_end": 0.5})
+    direct = observer.simulate(sc, observers=("jump",), integrator="event")
+    assert coarse.t.shape == direct.t.shape and np.max(np.abs(coarse.t - direct.t)) <= 1e-15
+    scale = np.max(np.abs(direct.q))
+    assert np.max(np.abs(coarse.q - direct.q)) <= 1e-12 * scale
+    assert np.max(np.abs(coarse.slaves["jump"] - direct.slaves["jump"].q)) <= 1e-12 * scale
+    # a grid the group's finest one does not divide gets its own run
+    odd = _event_reference(replace(jump[0], h=2.5e-3), 2.5e-3, ctx)
+    assert odd.spacing == pytest.approx(2.5e-3) and len(ctx.cache) == 2
 
 
 def test_failed_case_is_reported_and_retried(tmp_path):
