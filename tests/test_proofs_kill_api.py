@@ -334,3 +334,138 @@ def test_cli_help_text(capsys):
     assert (args.scenarios, args.only, args.set, args.h, args.t_end, args.seed, args.json, args.option,
             args.list) == (["a", "b"], ["x", "y"], ["k=v"], 0.5, 2.0, 3, "f", ["c.k=1"], False)
     assert cli.build_parser().parse_args([]).scenarios == []
+
+
+# ----------------------------------------------------------------------------- near misses (mutation review)
+def test_cli_malformed_pairs_name_their_flag(capsys):
+    with pytest.raises(InputError) as info:
+        cli._options(["mass_spd.rcond_min"])
+    assert (info.value.field, info.value.problem) == ("--option", "expected KEY=VALUE, got 'mass_spd.rcond_min'")
+    # the keyword is everything after the first dot (passed to the check as given)
+    assert cli._options(["mass_spd.a.b=1"]) == {"mass_spd": {"a.b": 1}}
+    assert cli.main(["double_mass", "--set", "param.m1"]) == 2
+    assert capsys.readouterr().err.strip() == "error: --set: expected KEY=VALUE, got 'param.m1'"
+
+
+def test_cli_t_end_bounds_json_of_several_scenarios_and_times(tmp_path, capsys):
+    import time
+    assert cli.main(["double_mass", "--only", "mass_spd", "--t-end", "0"]) == 2
+    assert capsys.readouterr().err.strip() == "error: --t-end: must be > 0, got 0.0"
+    out = tmp_path / "a" / "b" / "c.json"                      # parents created
+    t0 = time.perf_counter()
+    code = cli.main(["double_mass", "bouncing_ball", "--only", "mass_spd", "--t-end", "0.5",
+                     "--json", str(out)])
+    wall = time.perf_counter() - t0
+    text = capsys.readouterr().out
+    assert code == 0
+    doc = json.loads(out.read_text())
+    assert [(r["scenario"], r["name"]) for r in doc["results"]] == [("double_mass", "mass_spd"),
+                                                                     ("bouncing_ball", "mass_spd")]
+    assert doc["settings"]["t_end"] == 0.5 and 0 < doc["wall_time_s"] <= wall
+    times = [float(line.rsplit(" in ", 1)[1].split()[0]) for line in text.splitlines() if line.startswith("  -> ")]
+    assert len(times) == 2 and all(0 <= x <= wall + 0.05 for x in times)
+    # an existing directory is fine
+    assert cli.main(["double_mass", "--only", "mass_spd", "--json", str(tmp_path / "d.json")]) == 0
+    assert json.loads((tmp_path / "d.json").read_text())["results"][0]["name"] == "mass_spd"
+
+
+def test_format_table_cuts_the_witness_at_140_characters():
+    r = CheckResult.from_margin("c", 1.0, 0.0, {}, "e", (), "w" * 200)
+    line = cli.format_table([r]).splitlines()[1]
+    assert line.endswith("  " + "w" * 137 + "...")
+    r = CheckResult.from_margin("c", 1.0, 0.0, {}, "e", (), "w" * 140)
+    assert cli.format_table([r]).splitlines()[1].endswith("  " + "w" * 140)
+
+
+def test_assert_result_hides_its_frame_and_cuts_the_summary_at_200():
+    bad = CheckResult.from_margin("chk", -1.0, 0.0, {}, "eq", (), "y" * 300)
+    with pytest.raises(AssertionError) as info:
+        pc.assert_result(bad)
+    first = str(info.value).splitlines()[0]
+    assert first == "proof check chk failed: margin -1 (tolerance 0); " + "y" * 197 + "..."
+    # pytest's report leaves out the helper's own frame (__tracebackhide__)
+    shown = [entry.frame.code.path for entry in info.traceback.filter(info)]
+    assert not any(str(p).endswith("asserts.py") for p in shown)
+    assert any(str(p).endswith("asserts.py") for p in (e.frame.code.path for e in info.traceback))
+
+
+def test_assert_checks_forwards_keywords_and_formats_the_table(monkeypatch):
+    with pytest.raises(AssertionError, match=r"^1 of 1 proof checks failed on double_mass: mass_spd\n"):
+        pc.assert_checks("double_mass", "mass_spd", options={"mass_spd": {"rcond_min": 2.0}})
+    # one failing check only: the scenario is the first result's
+    with pytest.raises(AssertionError, match=r"^1 of 1 proof checks failed on bouncing_ball: stiffness_spd\n"):
+        pc.assert_checks("bouncing_ball", "stiffness_spd", allow_not_applicable=False)
+    a = CheckResult.from_margin("first", -0.123456, 0.0, {}, "e", (), "z" * 100)
+    b = CheckResult.from_margin("second", -2.0, 0.0, {}, "e", (), "why")
+    for r in (a, b):
+        r.scenario = "sc"
+    monkeypatch.setattr(pc, "run_checks", lambda *args, **kw: [a, b])
+    with pytest.raises(AssertionError) as info:
+        pc.assert_checks("sc")
+    text = str(info.value)
+    lines = text.splitlines()
+    assert lines[0] == "2 of 2 proof checks failed on sc: first, second"
+    assert lines[1].split() == ["check", "status", "margin", "tolerance", "witness"]      # no index column
+    assert lines[2].split()[:4] == ["first", "FAIL", "-0.123", "0"]                      # 3 significant digits
+    assert lines[2].rstrip().endswith(" " + "z" * 67 + "...")                            # witness cut at 70
+    assert lines[3].split()[:4] == ["second", "FAIL", "-2", "0"]
+    assert text.endswith("\n\n" + a.message() + "\n\n" + b.message())
+
+
+def test_run_checks_builds_its_settings_from_the_keywords(monkeypatch):
+    seen = []
+
+    def spy(ctx):
+        seen.append(ctx.settings)
+        return CheckResult.from_margin("mass_spd", 1.0, 0.0, {}, "eq")
+    monkeypatch.setitem(pc.CHECKS, "mass_spd", spy)
+    pc.run_checks("double_mass", "mass_spd")
+    assert seen[-1] == CheckSettings(seed=0, h=None, t_end=None, options={})
+    pc.run_checks("double_mass", "mass_spd", seed=5, h=2e-3, t_end=0.5, options={"mass_spd": {"x": 1}})
+    assert seen[-1] == CheckSettings(seed=5, h=2e-3, t_end=0.5, options={"mass_spd": {"x": 1}})
+    with pytest.raises(InputError) as info:
+        pc.run_checks("double_mass", "mass_spd", options={"nope": {}})
+    assert info.value.problem == f"unknown check(s) ['nope']; choose from {', '.join(pc.CHECKS)}"
+
+
+@pytest.mark.parametrize("name,ov", [
+    ("grazing", {}),                                                     # |ν(0)| > |q0| sets the scale
+    ("rocking_chain", {"param.N": 1, "initial.q": [0.0, 0.0]}),         # time-varying ν, M ≠ I
+    ("impact_oscillator", {"initial.q": [0.0]}),                        # q0 = ν = 0: the 1e-3 floor
+    ("double_mass", {"param.m1": 0.05}),                               # generalized ω_min > 1 from (K, M)
+])
+def test_slave_specs_scales(name, ov):
+    sc = pc.load(name, ov)
+    specs = CheckContext(sc, CheckSettings(seed=2)).slave_specs()
+    jumps, (qa, ua), (qb, ub) = _specs_by_hand(sc, seed=2)
+    assert not np.array_equal(qb, sc.q0)
+    _by_hand_matches_seed(sc, specs, 2)
+
+
+def _by_hand_matches_seed(sc, specs, seed):
+    jumps, (qa, ua), (qb, ub) = _specs_by_hand(sc, seed=seed)
+    assert [s.name for s in specs] == (["jump_a", "jump_b"] if jumps else []) + ["nojump_a", "nojump_b"]
+    for s in specs:
+        q, u = (qa, ua) if s.name.endswith("_a") else (qb, ub)
+        assert s.q0.dtype == np.float64 and s.u0.dtype == np.float64
+        assert np.allclose(s.q0, q, rtol=1e-14, atol=1e-15) and np.allclose(s.u0, u, rtol=1e-14, atol=1e-15)
+
+
+def test_slave_specs_keep_a_partly_different_observer_state_as_floats():
+    sc = pc.load("bouncing_ball")
+    # the observer's position equals the master's, its velocity does not: state a is kept
+    sc2 = pc.load("bouncing_ball", {"observer.q": [1], "observer.u": [3]})
+    assert np.array_equal(np.asarray(sc2.observer["q"], float), sc.q0)
+    specs = CheckContext(sc2).slave_specs()
+    a = [s for s in specs if s.name == "nojump_a"][0]
+    assert a.q0.dtype == np.float64 and a.u0.dtype == np.float64
+    assert a.q0.tolist() == [1.0] and a.u0.tolist() == [3.0]
+
+
+def test_visited_sets_include_the_first_step():
+    """The ball starts on the ground moving down: its only contact is at step 1."""
+    sc = pc.load("bouncing_ball", {"initial.q": [0.0], "initial.u": [-1.0]})
+    ctx = CheckContext(sc, CheckSettings(h=1e-3, t_end=0.05))
+    act = ctx.run.master.active
+    assert act[1, 0] and not act[2:].any()
+    assert [x.tolist() for x in ctx.visited_sets()] == [[0]]

@@ -254,3 +254,106 @@ def test_not_definite_reason_relative_floor_and_text():
     assert not_definite_reason(np.zeros((2, 2)), "c") == "K is not positive definite (λ_min = 0): c"
     # the symmetric part decides (a skew part is ignored; 0.5·(K + Kᵀ), not K + Kᵀ, in the text)
     assert not_definite_reason(np.array([[1.0, 4.0], [-4.0, -2.0]]), "c") == "K is not positive definite (λ_min = -2): c"
+
+
+def test_not_definite_reason_one_degree_of_freedom():
+    """n = 1: the spectrum has a single entry (no eig[1] or eig[-2] to look at)."""
+    from proofs_checks.assumptions import not_definite_reason
+    assert not_definite_reason(np.array([[2.0]]), "x") is None
+    assert not_definite_reason(np.array([[0.0]]), "x") == "K is not positive definite (λ_min = 0): x"
+
+
+def test_constraints_square_and_dependent_without_warnings():
+    """m = n independent columns pass with their condition number; a rank-deficient W gives
+    cond = inf without a division-by-zero warning."""
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = pc.check_constraints_independent(np.diag([2.0, 0.5]))
+        assert r.passed is True and r.witness["sigma_min"] == 0.5 and r.witness["condition_number"] == 4.0
+        assert r.margin == pytest.approx(6.0 - math.log10(4.0), rel=1e-14)
+        r = pc.check_constraints_independent(np.array([[1.0, 1.0], [0.0, 0.0]]))
+        assert r.witness["condition_number"] == np.inf and r.margin == -np.inf
+
+
+def test_symmetry_tolerance_edges_and_input_types():
+    """max|A − Aᵀ|/max|A| = SYMMETRY_RTOL exactly is still symmetric; the ratio is relative
+    (a small matrix is judged by its own scale); the failure keeps its witness; boolean
+    matrices are read as numbers."""
+    from proofs_checks.assumptions import SYMMETRY_RTOL
+    edge = np.array([[1.0, SYMMETRY_RTOL], [0.0, 1.0]])
+    r = pc.check_mass_spd(edge)
+    assert r.witness["asymmetry"] == SYMMETRY_RTOL and r.passed is True
+    small = 1e-3 * np.array([[1.0, 1e-9], [0.0, 1.0]])              # relative asymmetry 1e-9
+    r = pc.check_mass_spd(small)
+    assert r.passed is False and r.witness["asymmetry"] == pytest.approx(1e-9, rel=1e-12)
+    assert r.witness["lambda_max"] == pytest.approx(1e-3, rel=1e-6) and r.margin == -r.witness["asymmetry"]
+    assert pc.check_mass_spd(np.eye(2, dtype=bool)).passed is True
+
+
+# ----------------------------------------------------------------------------- A2 near misses
+def test_common_period_tolerance_is_relative_and_slow_period_scales():
+    # ratio 50 + 1e-11: relative error 2e-13 < 1e-12, commensurate (absolute error 1e-11)
+    T, ok = fo.common_period(np.array([1.0, 50.0 + 1e-11]))
+    assert ok is True and T == pytest.approx(2 * math.pi, rel=1e-15)
+    # incommensurate: 200 periods of the slowest term, 2π/ω_min each
+    T, ok = fo.common_period(np.array([2.0, 2.0 * math.sqrt(2.0)]))
+    assert ok is False and T == pytest.approx(200 * math.pi, rel=1e-15)
+
+
+def test_sup_norm_window_not_starting_at_zero():
+    """On [−1, 1] with 8 samples the bump at t = 0.1 lies between samples: the refinement
+    around the best samples (spacing (t1 − t0)/samples) finds it."""
+    f = lambda t: np.stack([1.0 - (np.asarray(t, float) - 0.1) ** 2], axis=-1)    # noqa: E731
+    S, ts = fo._sup_norm(f, -1.0, 1.0, 8)
+    assert S == pytest.approx(1.0, abs=1e-12) and ts == pytest.approx(0.1, abs=1e-5)
+
+
+def test_forcing_defaults_small_bounds_and_texts():
+    from proofs_checks.forcing import EQUATION
+    # the default windows: horizon 10, five doublings, 4096 samples per horizon (a spike on
+    # the first grid point after 0 is seen on every window)
+    spike = lambda t: (np.abs(np.asarray(t, float) - 10.0 / 4096) < 1e-12).astype(float)[..., None]  # noqa: E731
+    r = pc.check_forcing_bounded(spike)
+    assert r.witness["window_lengths"] == [10.0, 20.0, 40.0, 80.0, 160.0]
+    assert r.witness["window_sups"] == [1.0] * 5 and r.passed is True
+    # an analytic bound below 1 is still a relative margin
+    half = Harmonic.build("f", 1, constant=[0.5])
+    r = pc.check_forcing_bounded(half)
+    assert r.witness["analytic_bound"] == 0.5 and r.margin == 0.0 and r.passed is True
+    # the claimed-bound and growth results carry their name and equation; the claimed bound
+    # is compared with the sup over the longest window
+    ramp = lambda t: np.asarray(t, float)[..., None]                               # noqa: E731
+    r = pc.check_forcing_bounded(ramp, f_max=100.0, horizon=1.0, windows=5, samples_per_period=4)
+    assert (r.name, r.equation) == ("forcing_bounded", EQUATION)
+    assert r.witness["window_sups"] == pytest.approx([1, 2, 4, 8, 16]) and r.margin == pytest.approx(0.84)
+    r = pc.check_forcing_bounded(ramp, horizon=1.0, windows=2, samples_per_period=4)
+    assert (r.name, r.equation) == ("forcing_bounded", EQUATION)
+    # zero on the first three windows, then nonzero: infinite growth
+    late = lambda t: np.where(np.asarray(t, float) > 50.0, 1.0, 0.0)[..., None]   # noqa: E731
+    r = pc.check_forcing_bounded(late, horizon=10.0, windows=4, samples_per_period=64)
+    assert r.witness["window_sups"] == [0.0, 0.0, 0.0, 1.0] and r.witness["growth_last_doubling"] == np.inf
+    assert r.passed is False
+    # growth exactly at growth_tol passes, with the plain reason
+    step = lambda t: np.where(np.asarray(t, float) > 1.0, 1.5, 1.0)[..., None]    # noqa: E731
+    r = pc.check_forcing_bounded(step, horizon=1.0, windows=2, samples_per_period=8, growth_tol=0.5)
+    assert r.witness["growth_last_doubling"] == 0.5 and r.passed is True
+    assert r.reason == "no analytic bound: sup sampled over doubling windows"
+
+
+def test_nonfinite_amplitude_result_keeps_witness_and_equation():
+    from proofs_checks.forcing import EQUATION
+    f = Harmonic.build("f", 1, constant=[1.0])
+    f = Harmonic(np.array([np.inf]), f.amplitude, f.omega, f.phase)
+    r = pc.check_forcing_bounded(f)
+    assert r.equation == EQUATION and r.witness["analytic_bound"] == np.inf
+    assert r.witness["commensurate"] is True
+
+
+def test_sup_norm_locates_the_sup_to_the_optimizer_precision():
+    """The bounded refinement runs to xatol = 1e-12·max(1, t): the time of the sup of sin on
+    [0, 3] is found to 1e-8 (the default xatol 1e-5 leaves it ~6e-8 off)."""
+    f = lambda t: np.stack([np.sin(np.asarray(t, float))], axis=-1)       # noqa: E731
+    for samples in (5, 7):
+        S, ts = fo._sup_norm(f, 0.0, 3.0, samples)
+        assert abs(ts - math.pi / 2) < 1e-8 and S == pytest.approx(1.0, abs=1e-15)

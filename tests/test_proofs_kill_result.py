@@ -118,3 +118,23 @@ def test_jsonable_and_fmt():
     assert _fmt(np.array([1 + 1j])) == "[1.+1.j]"
     assert _fmt(None) == "None" and _fmt(["a"]) == "['a']"
     assert _fmt(np.array(0.123456)) == "[0.1235]"
+
+
+def test_texts_near_their_width_limits():
+    """The message prints whole arrays up to 64 entries (the long form); a row keeps a summary
+    of exactly 10 000 characters and cuts one of 10 001; the truth-value error says what to use."""
+    r = CheckResult.from_margin("c", 1.0, 0.0, {"v": np.arange(20)}, "e")
+    assert r.message().splitlines()[-1] == "    v = [" + ", ".join(map(str, range(20))) + "]"
+    fits = CheckResult.from_margin("c", 1.0, 0.0, {}, "e", (), "r" * 10_000)
+    assert fits.to_row()["witness"] == "r" * 10_000
+    cut = CheckResult.from_margin("c", 1.0, 0.0, {}, "e", (), "r" * 10_001)
+    assert cut.to_row()["witness"] == "r" * 9_997 + "..."
+    with pytest.raises(TypeError, match=r"^use CheckResult\.passed \(True/False/None\), not the result's "
+                                        r"truth value$"):
+        bool(r)
+
+
+def test_fmt_prints_other_iterables_with_str():
+    """Only lists, tuples and arrays print as numbers; any other value with its str()."""
+    assert _fmt(range(3)) == "range(0, 3)"
+    assert _fmt({"a": 1}) == "{'a': 1}"
