@@ -80,7 +80,7 @@ MUTATION_TARGETS: dict[str, tuple[list[str], list[str]]] = {
                              "proofs_checks/context.py", "proofs_checks/asserts.py", "proofs_checks/__init__.py",
                              "proofs_checks/cli.py"],
                             ["tests/test_proofs_kill_assumptions.py", "tests/test_proofs_kill_result.py",
-                             "tests/test_proofs_kill_api.py"]),
+                             "tests/test_proofs_kill_api.py", "tests/test_proofs_kill_asserts.py"]),
     # the simulation-driven rest (slow: tens of seconds per mutant)
     "proofs_checks_runs": (["proofs_checks/runs.py", "proofs_checks/proposition.py", "proofs_checks/monotonicity.py",
                             "proofs_checks/designs.py", "proofs_checks/plugin.py"],
