@@ -13,9 +13,9 @@ from typing import Callable
 
 from reports.blocks import Section
 from reports.context import ReportContext
-from reports.sections import (integrators, key_numbers, limitations, micro, observers, peers,
-                              proof_checks, reproduce, robustness, scaling, scenarios, settings,
-                              work_precision)
+from reports.sections import (hard_cases, integrators, key_numbers, limitations, micro, observers,
+                              peers, proof_checks, reproduce, robustness, scaling, scenarios,
+                              settings, work_precision)
 
 
 @dataclass(frozen=True)
@@ -34,6 +34,7 @@ SECTIONS: tuple[SectionSpec, ...] = (
     SectionSpec("work-precision", work_precision.build),
     SectionSpec("integrators", integrators.build),
     SectionSpec("robustness", robustness.build),
+    SectionSpec("hard-cases", hard_cases.build),
     SectionSpec("scaling", scaling.build),
     SectionSpec("peers", peers.build),
     SectionSpec("micro", micro.build),
