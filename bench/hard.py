@@ -40,6 +40,7 @@ import numpy as np
 import observer
 from observer.closed_form import closed_form_position
 from observer.errors import InputError
+from observer.result import RunState
 from observer.scenario import Scenario
 from observer.scenarios import SCENARIOS
 
@@ -56,7 +57,7 @@ NO_REFERENCE = "none: "
 
 ERROR_NORM = "max over samples / time average of max_i |q_i − q_ref,i|"
 
-STATES = ("ok", "fallback", "stopped", "refused")
+STATES = (*(s.value for s in RunState), "refused")
 """Values of a row's ``status``: the run's :class:`observer.result.RunState`, or ``refused``
 (an :class:`~observer.errors.InputError` before the first step)."""
 
@@ -245,22 +246,6 @@ HARD_CASES: tuple[HardCase, ...] = (
 def hard_cases(full: bool = True) -> list[HardCase]:
     """The hard cases of a suite: all of them (``full``) or the quick ones."""
     return [hc for hc in HARD_CASES if full or hc.quick]
-
-
-def hard_suite(full: bool = True):
-    """The hard cases as a :class:`bench.suites.Suite` named ``hard`` (``full``) or
-    ``hard-quick``."""
-    from bench.suites import Suite
-
-    return Suite("hard" if full else "hard-quick", "hard cases (issue 12 item 5): status, NaN, "
-                 "health and error against the reference", tuple(hard_cases(full)), None,
-                 settings(full))
-
-
-def settings(full: bool = True) -> dict[str, str]:
-    """The suite's settings as the report's settings table shows them."""
-    return {"hard cases": "; ".join(f"{hc.label}: h = {hc.h:g} s, T = {hc.t_end:g} s"
-                                    for hc in hard_cases(full))}
 
 
 # --------------------------------------------------------------------------------- running
