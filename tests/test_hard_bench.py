@@ -79,7 +79,7 @@ def test_every_quick_case_ends_clearly_without_nan(quick_rows):
 
 def test_cond_W_1e10_is_refused_naming_the_field(quick_rows):
     r = _row(quick_rows, "cond(W) 1e10")
-    assert r["status"] == "refused" and r["steps"] == 0
+    assert r["status"] == "refused" and r["steps"] == 0 and r["residual_held"] is None
     assert r["stop_reason"].startswith("InputError: system.W:")
     assert (r["n"], r["m"]) == (2, 2)
 

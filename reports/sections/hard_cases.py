@@ -95,9 +95,10 @@ def _error(row, col: str) -> str:
 def cases_table(rows: pd.DataFrame) -> Table:
     """One row per hard case."""
     t = Table("Hard cases: outcome, health and error against the reference",
-              ["case", "what makes it hard", "status", "stop reason / warnings", "NaN", "steps",
-               "CPU (s)", "max residual", "tolerance", "residual held", "penetration / ℓ",
-               "h·ω_max", "reference", "error max", "error mean"])
+              ["case", "what makes it hard (and how to read its error)", "status",
+               "stop reason / warnings", "NaN", "steps", "CPU (s)", "max residual", "tolerance",
+               "residual held", "penetration / ℓ", "h·ω_max", "reference", "error max",
+               "error mean"])
     for _, r in rows.iterrows():
         ran = text(r.get("status")) != "refused"
         ref = text(r.get("reference")) or "none"
