@@ -81,9 +81,10 @@ MUTATION_TARGETS: dict[str, tuple[list[str], list[str]]] = {
                              "proofs_checks/cli.py"],
                             ["tests/test_proofs_kill_assumptions.py", "tests/test_proofs_kill_result.py",
                              "tests/test_proofs_kill_api.py", "tests/test_proofs_kill_asserts.py"]),
+    "proofs_checks_designs": (["proofs_checks/designs.py"], ["tests/test_proofs_kill_designs.py"]),
     # the simulation-driven rest (slow: tens of seconds per mutant)
     "proofs_checks_runs": (["proofs_checks/runs.py", "proofs_checks/proposition.py", "proofs_checks/monotonicity.py",
-                            "proofs_checks/designs.py", "proofs_checks/plugin.py"],
+                            "proofs_checks/plugin.py"],
                            ["tests/test_proofs_checks.py", "tests/test_designs.py", "tests/test_proofs_plugin.py"]),
 }
 MUTANTS_DIR = ROOT / "mutants"

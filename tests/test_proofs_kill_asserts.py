@@ -11,6 +11,7 @@ recorder where only the routing is at stake.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -114,3 +115,17 @@ def test_helper_raises_on_failure_and_on_not_applicable_when_asked():
     spy = _Spy(_ok())
     _helper("mass_spd", spy)(np.eye(2), allow_not_applicable=False)
     assert spy.calls[-1][1] == {}
+
+
+def test_helper_frames_are_hidden_in_pytest_reports():
+    """A failing helper points at the user's test line: pytest's filtered traceback holds no
+    frame of proofs_checks/asserts.py (``__tracebackhide__`` in the helper and in assert_result)."""
+    bad = CheckResult.from_margin("mass_spd", -0.5, 0.0, {}, "eq")
+    h = _helper("mass_spd", _Spy(bad))
+    with pytest.raises(AssertionError) as info:
+        h(np.eye(2))
+    every = [str(e.frame.code.path) for e in info.traceback]
+    shown = [str(e.frame.code.path) for e in info.traceback.filter(info)]
+    mine = os.path.join("proofs_checks", "asserts.py")
+    assert sum(p.endswith(mine) for p in every) == 2                  # the helper, then assert_result
+    assert not any(p.endswith(mine) for p in shown)
