@@ -251,10 +251,22 @@ def _wp_targets(spec: dict) -> tuple[str, ...]:
     return tuple(targets)
 
 
+def _reference_laws(full: bool) -> tuple[str, ...]:
+    """Impact laws of the cvxpy/OSQP reference-solver sweeps (numpy engine: the costly runs of
+    the sweeps). ``full``: every registered law. ``quick``: the first (Newton) alone — on
+    every sweep the suites declare, Poisson's runs repeat Newton's to round-off (one contact:
+    Poisson's compression/expansion split of one impulse is Newton's law; the chain N = 4 of
+    its sweep, e = 0.9 on every contact, at most two impulses per step: measured equal to
+    1e-16, ``tests/test_bench.py``)."""
+    laws = tuple(IMPACT_LAWS)
+    return laws if full else laws[:1]
+
+
 def _wp_closed_form(name: str, spec: dict, sizes: dict, full: bool) -> list[Case]:
     cases = []
+    ref_laws = _reference_laws(full)
     for law in IMPACT_LAWS:
-        for solver in ("pivoting", "reference"):
+        for solver in ("pivoting", "reference") if law in ref_laws else ("pivoting",):
             for h in _sweep(spec["h0"], sizes[solver]):
                 h_rec = _h_record(h, "closed form")
                 cases.append(Case("work_precision", name, law=law, solver=solver, h=h,
@@ -280,11 +292,14 @@ def _wp_event_reference(name: str, spec: dict, sizes: dict, full: bool) -> list[
     params = tuple(spec.get("params", ()))
     hs = _sweep(spec["h0"], sizes["event solution"])
     targets = _wp_targets(spec)
+    ref_laws = _reference_laws(full)
     cases = []
     for law in IMPACT_LAWS:
-        for solver, sweep, tg in (("pivoting", hs, targets),
-                                  ("reference", hs[:sizes["event solution reference"]],
-                                   targets if full else ("master",))):
+        sweeps = [("pivoting", hs, targets)]
+        if law in ref_laws:
+            sweeps.append(("reference", hs[:sizes["event solution reference"]],
+                           targets if full else ("master",)))
+        for solver, sweep, tg in sweeps:
             for target in tg:
                 for h in sweep:
                     h_rec = _h_record(h, "event solution")
@@ -426,7 +441,8 @@ def _settings(full: bool) -> dict:
                           f"against its {ref}")
     sw = ("compiled runs: " + "; ".join(sweeps) + f"; cvxpy/OSQP reference solver (numpy "
           f"engine): {sz['reference']} sizes (closed form), {sz['event solution reference']} "
-          "(event solution)")
+          "(event solution)" + ("" if full else ", Newton's law only (Poisson's runs repeat "
+                                "Newton's to round-off on these sweeps; full runs both)"))
     sw += (f"; errors on a grid of spacing max(h, {H_RECORD['closed form']:.3g} s) against a "
            f"closed form, max(h, {H_RECORD['event solution']:.3g} s) against the event solution")
     nseeds = ROBUSTNESS_SEEDS[key]

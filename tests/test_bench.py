@@ -97,6 +97,10 @@ def test_quick_and_full_cover_every_kind_and_the_issue_grid(name):
             hs = [c.h for c in wp if (c.scenario, c.target, c.law, c.solver) == key]
             assert min(hs) <= 1e-6 < 2 * min(hs)
     assert {c.law for c in wp} == {"newton", "poisson"}
+    # the costly reference-solver sweeps: every law in full, Newton's alone in quick
+    ref_laws = {(c.scenario, c.law) for c in wp if c.solver == "reference"}
+    assert ref_laws == {(s, law) for s in {c.scenario for c in wp}
+                        for law in (("newton", "poisson") if full else ("newton",))}
     assert {c.solver for c in wp} == {"pivoting", "reference"}
     assert {c.target for c in wp} == {"master", "jump", "nojump"}
     for c in wp:           # closed form where one exists, else the exact event-driven solution
@@ -116,6 +120,22 @@ def test_quick_and_full_cover_every_kind_and_the_issue_grid(name):
     if full:
         assert [c.scenario for c in suite.of_kind("peers")] == list(PROBLEMS)
         assert {c.scenario for c in suite.of_kind("checks")} == set(check_scenarios())
+
+
+def test_quick_skips_poisson_reference_runs_where_they_repeat_newtons():
+    """Why quick's reference-solver sweeps run Newton's law alone: on its sweeps Poisson's
+    trajectory is Newton's to round-off — one contact (double_mass with its impacts) and the
+    sweep's chain (N = 4, 1.5 s: several contacts, e = 0.9 on each). Should a law or a
+    scenario change this, quick must run both laws again."""
+    def run(name, law, **over):
+        sc = observer.load_scenario(name, {"impact.law": law, "simulation.h": 1e-3, **over})
+        return observer.simulate(sc, observers=(), engine="python", solver="reference")
+
+    for name, over in (("double_mass", {"simulation.t_end": 1.0}),
+                       ("rocking_chain", {"param.N": 4, "simulation.t_end": 1.5})):
+        a, b = (run(name, law, **over) for law in ("newton", "poisson"))
+        assert np.count_nonzero(a.P) > 10
+        assert np.max(np.abs(a.q - b.q)) <= 1e-14 * np.max(np.abs(a.q)), name
 
 
 def test_engine_follows_the_contact_solver():
@@ -354,6 +374,24 @@ def test_a_sweep_shares_one_event_reference_on_its_finest_grid(tmp_path):
     # a grid the group's finest one does not divide gets its own run
     odd = _event_reference(replace(jump[0], h=2.5e-3), 2.5e-3, ctx)
     assert odd.spacing == pytest.approx(2.5e-3) and len(ctx.cache) == 2
+
+
+def test_peer_row_says_what_the_trajectory_difference_is_compared_with():
+    """The peer row's difference is only meaningful next to the size of the motion and the
+    number of impulse steps (both recomputed here from the toolkit's own run, which the row
+    says equals Siconos' to max_abs_diff)."""
+    from bench import peers
+
+    ok, why = peers.siconos_available()
+    if not ok:
+        pytest.skip(f"Siconos absent: {why}")
+    problem = peers.peer_problem("impact_oscillator", h=1e-3)
+    row = peers.run_peer(problem, steps=3000, repeats=1).iloc[0]
+    res = observer.simulate(observer.load_scenario("impact_oscillator", {
+        **problem["overrides"], "simulation.t_end": 3000 * 1e-3}))
+    tol = row["max_abs_diff_q"] + 1e-15
+    assert row["max_abs_q"] == pytest.approx(np.max(np.abs(res.q)), abs=tol) and row["max_abs_q"] > 0.1
+    assert row["impulse_steps"] == np.count_nonzero(np.any(res.P != 0.0, axis=1)) > 0
 
 
 def test_failed_case_is_reported_and_retried(tmp_path):
