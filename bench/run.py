@@ -205,19 +205,30 @@ def run_suite(suite: str | Suite, out_dir: str | Path = RESULTS_DIR, *, progress
 
     env = environment()
     grids = reference_grids(todo)
-    if todo and client is None and scheduler is None:
+    alone = [c for c in todo if c.kind in RUN_ALONE]
+    shared = [c for c in todo if c.kind not in RUN_ALONE]
+    if alone or (shared and client is None and scheduler is None):
         # compiled here first (local workers then load it from numba's disk cache); on a
         # remote cluster each worker makes it ready before its first case
         summary.compile_time_s = kernel_ready()
-    if todo:          # a finished suite starts no cluster
+    bar = _progress(len(todo), suite.name, enabled=progress) if todo else _NoBar()
+
+    def record(outs) -> None:
+        for out in outs:
+            bar.set_postfix_str(out.case_id[:60])
+            bar.update(1)
+            _record(summary, out)
+
+    if shared:        # a finished suite starts no cluster
         with _executor(workers, scheduler, client) as (where, outcomes):
             summary.where = where
-            bar = _progress(len(todo), suite.name, enabled=progress)
-            for out in outcomes(todo, suite.name, out_dir, env, grids):
-                bar.set_postfix_str(out.case_id[:60])
-                bar.update(1)
-                _record(summary, out)
-            bar.close()
+            record(outcomes(shared, suite.name, out_dir, env, grids))
+    if alone:         # after the cluster is gone: nothing else runs beside them
+        record(_in_process(alone, suite.name, out_dir, env, grids))
+        summary.where = (f"{summary.where if shared else ''}"
+                         f"{'; ' if shared else ''}{', '.join(sorted({c.kind for c in alone}))} "
+                         f"cases alone in this process")
+    bar.close()
     if store.files():
         export_csv(store.path, out_dir / f"{suite.name}.csv")
     _write_unavailable(summary, unavailable_path(suite.name, out_dir))
@@ -227,6 +238,11 @@ def run_suite(suite: str | Suite, out_dir: str | Path = RESULTS_DIR, *, progress
     summary.seconds = time.perf_counter() - t0
     return summary
 
+
+RUN_ALONE = ("peers",)
+"""Kinds run last, in the client process, with no other case running: their rows compare
+wall times per step (Siconos and the toolkit), which a neighbouring case on a shared core
+would inflate."""
 
 RUN_ORDER = ("observers", "checks", "peers", "scaling", "work_precision", "robustness")
 """Kinds in the order their cases are handed out, the longest first, so that no worker of a
@@ -257,7 +273,6 @@ def default_workers() -> int:
     except AttributeError:                      # not on Linux
         cores = os.cpu_count() or 1
     return max(1, min(cores, MAX_DEFAULT_WORKERS))
-
 
 
 def _record(summary: RunSummary, out: Outcome) -> None:

@@ -135,3 +135,24 @@ def test_unreachable_scheduler_is_an_input_error_naming_the_option(tmp_path, cap
     err = capsys.readouterr().err
     assert err.startswith("error: --scheduler: cannot connect") and "Traceback" not in err
     assert not list(tmp_path.glob("smoke.cases/*.parquet"))
+
+
+def test_timing_sensitive_cases_run_alone_in_the_client_after_the_cluster(client, tmp_path,
+                                                                         monkeypatch):
+    """Cases of the kinds in RUN_ALONE (the peers' wall-time comparisons) run in this process
+    once the cluster's cases are all done, so nothing runs beside them; the others on the
+    cluster. (A tiny work-precision kind stands in for peers, which needs Siconos.)"""
+    import bench.run
+
+    closed = Case("work_precision", "bouncing_ball", law="newton", solver="lemke", h=5e-4,
+                  t_end=0.6, observers=(), reference="closed form")
+    alone = Case("scaling", "rocking_chain", params=(("param.N", 2),), observers=(), h=1e-3,
+                 t_end=0.05, memory=False)
+    monkeypatch.setattr(bench.run, "RUN_ALONE", ("scaling",))
+    summary = run_suite(Suite("alone", "", (alone, closed)), tmp_path, client=client,
+                        progress=False, micro=False)
+    assert summary.failed == [] and summary.ran == 2 and "scaling cases alone" in summary.where
+    rows = {r["kind"]: r for r in CaseStore(results_path("alone", tmp_path)).rows()}
+    assert rows["scaling"]["pid"] == os.getpid()
+    assert rows["work_precision"]["pid"] in client.run(os.getpid).values()
+    assert rows["scaling"]["date"] >= rows["work_precision"]["date"]
