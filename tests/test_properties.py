@@ -16,9 +16,9 @@ Each property is checked on at least 200 generated cases under the fixed ``ci`` 
 * time-stepping converges to the exact event-driven solution (``integrator="event"``) on
   random impacting systems (1–3 DOF, 1–2 contacts): first order through impacts with a
   stated constant, second order before the first event. Killed on copies of the kernel:
-  the impulse dropped from u_{k+1} (the first-order bound fails at H0/16) and θ = 1 in the
-  position update (the second-order check fails); θ and 1 − θ swapped is the same scheme at
-  θ = ½.
+  the impulse dropped from u_{k+1} and Newton's restitution halved (the first-order bound
+  fails at H0/16), θ = 1 in the position update (the second-order check fails); θ and 1 − θ
+  swapped is the same scheme at θ = ½.
 
 Systems are tiny (n ≤ 8, 1–8 contacts, 30 steps of h = 5e-3; the convergence property: 16 to
 256 steps of 1–3 DOF) to keep the whole file within about a minute and a half of wall time on
