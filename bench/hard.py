@@ -155,7 +155,10 @@ class HardCase:
     quick : bool
         In the ``quick`` suite (the quick cases together take < 2 s of CPU).
     description : str
-        What makes the case hard.
+        What makes the case hard (and how to read its error).
+    kind, solver, seed, observers, law, integrator
+        Fixed: the fields of :class:`bench.suites.Case` that :mod:`bench.run` and
+        :mod:`bench.runners` read of any case (the master alone, pivoting, time-stepping).
     """
 
     label: str
@@ -184,10 +187,12 @@ class HardCase:
     @property
     def case_id(self) -> str:
         """Stable identifier: kind, name and every setting that defines the run (not
-        ``quick`` nor ``description``), so that a changed declaration is a new case."""
+        ``quick``, ``description`` nor the wording of a missing reference's reason), so that
+        a changed run is a new case."""
         params = ",".join(f"{k}={v!r}" for k, v in self.params)
+        reference = "none" if self.reference.startswith(NO_REFERENCE) else self.reference
         return (f"{self.kind}:{self.label}:{self.scenario}:params=({params}):h={self.h!r}:"
-                f"t_end={self.t_end!r}:reference={self.reference}")
+                f"t_end={self.t_end!r}:reference={reference}")
 
     def overrides(self) -> dict[str, Any]:
         """``params`` plus h and t_end as ``simulation.*`` keys."""
