@@ -508,7 +508,8 @@ def run_peers(case: Case, ctx: Context) -> list[dict]:
     """
     from bench import peers
 
-    ok, info = ctx.cache.get("siconos") or ctx.cache.setdefault("siconos", peers.siconos_available())
+    key = ("siconos", peers.SICONOS_PYTHON)          # per interpreter: the cache outlives a run
+    ok, info = ctx.cache.get(key) or ctx.cache.setdefault(key, peers.siconos_available())
     if not ok:
         raise Unavailable(f"Siconos absent: {info}")
     N = int(dict(case.params).get("param.N", 10))
