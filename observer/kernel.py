@@ -30,6 +30,16 @@ solvers that return ``(iterations, status, residual)``.
   residual exceeds the tolerance stops the kernel with :data:`RESIDUAL_EXCEEDED` (the caller
   stops the run there, :mod:`observer.loop`).
 
+* **Cost.** The step loop of :func:`advance` creates no array value per step (no views, no
+  tuples, no inlined calls with array arguments: each would be an atomic reference-count
+  increment and decrement): systems are rows of the 2-D state arrays, indexed in place, the
+  work buffers are allocated once per call, and the steps without contacts (the common case)
+  run without a function call. The contact impulse, the banded solve, the projection and the
+  summary are plain compiled calls. Every function uses numba's ``error_model="numpy"``
+  (IEEE division, no ``ZeroDivisionError`` branch: every denominator here is positive or
+  guarded), whose raise branches would otherwise keep numba's reference-count pruning from
+  removing the increments.
+
 Statuses: :data:`OK`, :data:`LCP_FAILED` (the step's contact problem was not solved to
 tolerance), :data:`PROJECTION_FAILED` (L_I not positive definite), :data:`RESIDUAL_EXCEEDED`
 (the applied impulse violates the impact law beyond the tolerance).
@@ -49,12 +59,14 @@ STRUCTURE_DENSE, STRUCTURE_BANDED = 0, 1
 EPS = float(np.finfo(np.float64).eps)
 ROUNDOFF = 16.0
 TINY = 1e-300
+JIT = {"cache": True, "error_model": "numpy"}
+"""Options of every kernel function (:func:`numba.njit`)."""
 
 
 # ---------------------------------------------------------------------------------------
 # small dense linear algebra on work buffers
 # ---------------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(**JIT)
 def _cholesky(G, a, Lf):
     """Lower Cholesky factor of G[:a, :a] into Lf[:a, :a]; False if not positive definite."""
     for j in range(a):
@@ -73,7 +85,7 @@ def _cholesky(G, a, Lf):
     return True
 
 
-@njit(cache=True)
+@njit(**JIT)
 def _cho_solve(Lf, a, rhs, out):
     """Solve (Lf Lfᵀ) out = rhs on the first a entries."""
     for i in range(a):
@@ -91,7 +103,7 @@ def _cho_solve(Lf, a, rhs, out):
 # ---------------------------------------------------------------------------------------
 # LCP 0 ≤ Gx + b ⊥ x ≥ 0 with SPD G (the first a rows/columns of the buffers)
 # ---------------------------------------------------------------------------------------
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def lcp_residual(G, b, x, a):
     """Relative natural residual ‖min(x, Gx + b)‖_∞ / max(‖b‖_∞, ‖Gx‖_∞)."""
     r = 0.0
@@ -112,7 +124,7 @@ def lcp_residual(G, b, x, a):
     return r / max(sb, sg, TINY)
 
 
-@njit(cache=True)
+@njit(**JIT)
 def solve_lcp(G, b, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter):
     """Exact LCP solve; returns ``(iterations, status, residual)`` and x in ``x[:a]``.
 
@@ -191,7 +203,7 @@ def solve_lcp(G, b, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter):
     return max_iter, LCP_FAILED, np.inf
 
 
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def _solve_counted(G, b, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
     """:func:`solve_lcp`, counted in ``stats`` ([solves, iterations, max residual]); False
     when the solve failed or its residual exceeds ``tol``."""
@@ -208,22 +220,22 @@ def _solve_counted(G, b, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, s
 # ---------------------------------------------------------------------------------------
 # banded symmetric matrices (lower band storage: ab[d, j] = A[j + d, j])
 # ---------------------------------------------------------------------------------------
-@njit(cache=True, inline="always")
-def _band_matvec_add(ab, bw, x, out):
-    """out += A x for symmetric A in lower band storage."""
-    n = x.shape[0]
+@njit(**JIT)
+def _band_matvec_add(ab, bw, X, s, out):
+    """out += A X[s] for symmetric A in lower band storage."""
+    n = X.shape[1]
     for j in range(n):
-        out[j] += ab[0, j] * x[j]
+        out[j] += ab[0, j] * X[s, j]
         for d in range(1, bw + 1):
             i = j + d
             if i >= n:
                 break
             a = ab[d, j]
-            out[i] += a * x[j]
-            out[j] += a * x[i]
+            out[i] += a * X[s, j]
+            out[j] += a * X[s, i]
 
 
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def _band_cho_solve(cb, bw, x):
     """Solve (L Lᵀ) y = x in place, L lower Cholesky factor in band storage."""
     n = x.shape[0]
@@ -245,10 +257,10 @@ def _band_cho_solve(cb, bw, x):
 
 
 # ---------------------------------------------------------------------------------------
-# one step of one system
+# one step of one system: the pieces (row s of the 2-D states qs, us is the system)
 # ---------------------------------------------------------------------------------------
-@njit(cache=True, inline="always")
-def _contact_rows(Wp, Wi, Wv, x, j):
+@njit(**JIT)
+def _wt(Wp, Wi, Wv, x, j):
     """(Wᵀx)_j from the CSC storage of W."""
     s = 0.0
     for p in range(Wp[j], Wp[j + 1]):
@@ -256,45 +268,27 @@ def _contact_rows(Wp, Wi, Wv, x, j):
     return s
 
 
-@njit(cache=True, inline="always")
-def predicted_active(k, q, u, h, Wp, Wi, Wv, nu, nu_dot, act):
-    """Siconos' predictor ``g_k + (h/2)γ_k ≤ 0`` into the index buffer; returns |A|."""
-    m = Wp.shape[0] - 1
-    a = 0
-    for j in range(m):
-        s = 0.0
-        for p in range(Wp[j], Wp[j + 1]):
-            s += Wv[p] * (q[Wi[p]] + 0.5 * h * u[Wi[p]])
-        if s + nu[k, j] + 0.5 * h * nu_dot[k, j] <= 0.0:
-            act[a] = j
-            a += 1
-    return a
+@njit(**JIT)
+def _wt_row(Wp, Wi, Wv, X, s, j):
+    """(Wᵀ X[s])_j from the CSC storage of W."""
+    acc = 0.0
+    for p in range(Wp[j], Wp[j + 1]):
+        acc += Wv[p] * X[s, Wi[p]]
+    return acc
 
 
-@njit(cache=True, inline="always")
-def _free_velocity(k, q, u, h, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, uf):
-    n = q.shape[0]
-    if structure == STRUCTURE_DENSE:
-        for i in range(n):
-            s1 = 0.0
-            s2 = 0.0
-            s3 = 0.0
-            for j in range(n):
-                s1 += Bu[i, j] * u[j]
-            for j in range(n):
-                s2 += Bq[i, j] * q[j]
-            for j in range(n):
-                s3 += Bf[i, j] * fbar[k, j]
-            uf[i] = s1 + s2 + s3
-    else:
-        for i in range(n):
-            uf[i] = h * fbar[k, i]
-        _band_matvec_add(Ru_b, bw, u, uf)
-        _band_matvec_add(Rq_b, bw, q, uf)
-        _band_cho_solve(Ach_b, bw, uf)
+@njit(**JIT)
+def banded_free_velocity(k, s, qs, us, h, Ru_b, Rq_b, Ach_b, bw, fbar, uf):
+    """``u_free`` of system s on the banded path: ``Â u_free = R_u u + R_q q + h f̄_k``."""
+    n = qs.shape[1]
+    for i in range(n):
+        uf[i] = h * fbar[k, i]
+    _band_matvec_add(Ru_b, bw, us, s, uf)
+    _band_matvec_add(Rq_b, bw, qs, s, uf)
+    _band_cho_solve(Ach_b, bw, uf)
 
 
-@njit(cache=True, inline="always")
+@njit(**JIT)
 def applied_residual(Wp, Wi, Wv, act, a, du, bvec, z):
     """Complementarity residual of the impulse as applied, relative like :func:`lcp_residual`.
 
@@ -311,9 +305,7 @@ def applied_residual(Wp, Wi, Wv, act, a, du, bvec, z):
     sd = 0.0
     for r in range(a):
         j = act[r]
-        d = 0.0
-        for p in range(Wp[j], Wp[j + 1]):
-            d += Wv[p] * du[Wi[p]]
+        d = _wt(Wp, Wi, Wv, du, j)
         v = abs(min(z[r], bvec[r] + d))
         if v > r_:
             r_ = v
@@ -324,117 +316,116 @@ def applied_residual(Wp, Wi, Wv, act, a, du, bvec, z):
     return r_ / max(sb, sd, TINY)
 
 
-@njit(cache=True, inline="always")
-def step_system(k, q, u, act, a, project, slot, law, sch, wk, out):
-    """One Moreau–Jean step on the closed set ``act[:a]``.
+@njit(**JIT)
+def contact_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats,
+                    wk_m, wk_mm, wk_b, du, u1, P):
+    """The impulse of system s's step on the closed set ``act[:a]`` (a ≥ 1) and its velocity.
 
-    ``sch`` = (h, θ, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, f̄, ν, ν̇, W (CSC: Wp, Wi,
-    Wv), (Â⁻¹W)ᵀ, Ĝ, G₀, (N⁻¹W)ᵀ, WᵀN⁻¹W, e, tol) — the n×m matrices transposed, so that
-    a contact's column is contiguous; the projection's (N⁻¹W)ᵀ and WᵀN⁻¹W are stacks over
-    the projection metrics, ``slot`` selects this system's; ``wk`` = work buffers ((n,) u_free, (n,) δu, (10, m),
-    (4, m, m), (2, m) bool); ``out`` = (q1, u1, P, Σ, q_pre, stats) with stats = [solves,
-    iterations, max residual]. Writes q_{k+1}, u_{k+1}, P[:a], Σ[:a] and the position before
-    the projection; returns the status. (Tuples keep the call inlinable: numba inlines
-    functions of at most 32 arguments, and an inlined call costs no reference counting.)
+    Newton (``law == 0``), and Poisson on one contact (the same map): ``LCP(Ĝ, γ_free + e∘γ_k)``;
+    Poisson on several: Glocker's compression and expansion phases. Writes ``P[:a]``,
+    ``u1 = u_free + δu`` with ``δu = Σ_j (Â⁻¹W)_j P_j`` summed once, and the applied residual
+    (:func:`applied_residual`) in ``stats[7]``; returns the status. ``wk_m`` (10, m),
+    ``wk_mm`` (4, m, m), ``wk_b`` (2, m) are work buffers.
     """
-    (h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, nu, nu_dot, Wp, Wi, Wv,
-     AinvWT, Ghat, G0, KinvWT, L, e, tol) = sch
-    uf, du, wk_m, wk_mm, wk_b = wk
-    q1, u1, P, sig, qpre, stats = out
-    n = q.shape[0]
-    _free_velocity(k, q, u, h, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, uf)
-    for i in range(n):
-        u1[i] = uf[i]
-    if a > 0:
-        gk = wk_m[0]
-        bvec = wk_m[1]
-        x = wk_m[2]
-        lc = wk_m[3]
-        le = wk_m[4]
-        gc = wk_m[5]
-        rhs = wk_m[6]
-        sol = wk_m[7]
-        G = wk_mm[0]
-        Gs = wk_mm[1]
-        Lf = wk_mm[2]
-        basic = wk_b[0]
-        infeas = wk_b[1]
-        max_iter = max(200, 20 * a)
+    n = uf.shape[0]
+    gk = wk_m[0]
+    bvec = wk_m[1]
+    x = wk_m[2]
+    lc = wk_m[3]
+    le = wk_m[4]
+    gc = wk_m[5]
+    rhs = wk_m[6]
+    sol = wk_m[7]
+    G = wk_mm[0]
+    Gs = wk_mm[1]
+    Lf = wk_mm[2]
+    basic = wk_b[0]
+    infeas = wk_b[1]
+    max_iter = max(200, 20 * a)
+    for r in range(a):
+        j = act[r]
+        gk[r] = _wt_row(Wp, Wi, Wv, us, s, j) + nu_dot[k, j]
+        gc[r] = _wt(Wp, Wi, Wv, uf, j) + nu_dot[k + 1, j]                   # γ_free
+    for r in range(a):
+        for c in range(a):
+            G[r, c] = Ghat[act[r], act[c]]
+    newton = law == 0 or a == 1
+    if newton:
         for r in range(a):
-            j = act[r]
-            gk[r] = _contact_rows(Wp, Wi, Wv, u, j) + nu_dot[k, j]
-            gc[r] = _contact_rows(Wp, Wi, Wv, uf, j) + nu_dot[k + 1, j]          # γ_free
+            bvec[r] = gc[r] + e[act[r]] * gk[r]
+        if not _solve_counted(G, bvec, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
+            return LCP_FAILED
+    else:
+        # Poisson: Glocker's phases with Ĝ on γ̃ = (γ_free + ε∘γ_k)/(1+ε)
+        for r in range(a):
+            er = e[act[r]]
+            bvec[r] = (gc[r] + er * gk[r]) / (1.0 + er)
+        if not _solve_counted(G, bvec, a, lc, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
+            return LCP_FAILED
+        for r in range(a):                                   # γ_C = γ̃ + ĜΛ_C
+            acc = 0.0
+            for c in range(a):
+                acc += G[r, c] * lc[c]
+            gc[r] = bvec[r] + acc
+        for r in range(a):                                   # γ_C + Ĝ(ε∘Λ_C)
+            acc = 0.0
+            for c in range(a):
+                acc += G[r, c] * (e[act[c]] * lc[c])
+            le[r] = gc[r] + acc
+        if not _solve_counted(G, le, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
+            return LCP_FAILED
+        for r in range(a):                                   # P = Λ_C + (ε∘Λ_C + μ)
+            le[r] = x[r]                                     # μ = Λ_E − ε∘Λ_C, kept
+            x[r] = lc[r] + (e[act[r]] * lc[r] + x[r])
+    for i in range(n):
+        du[i] = 0.0
+    for r in range(a):                                       # δu = Σ_j (Â⁻¹W)_j P_j, once
+        P[r] = x[r]
+        j = act[r]
+        for i in range(n):
+            du[i] += AinvWT[j, i] * x[r]
+    for i in range(n):
+        u1[i] = uf[i] + du[i]
+    res = applied_residual(Wp, Wi, Wv, act, a, du, bvec, x if newton else le)
+    stats[7] = res
+    if not res <= tol:
+        return RESIDUAL_EXCEEDED
+    return OK
+
+
+@njit(**JIT)
+def project_positions(k, act, a, slot, Wp, Wi, Wv, nu, KinvWT, L, q1, sig, wk_m, wk_mm):
+    """The position jump of eqs. (13)-(14) on the closed set ``act[:a]`` (a ≥ 1), in the
+    metric of projection slot ``slot``: ``q1 ← q1 + (N⁻¹W_A)Σ`` with
+    ``(W_AᵀN⁻¹W_A)Σ = −g_A(q1)``; Σ into ``sig[:a]``. Returns the status
+    (:data:`PROJECTION_FAILED` when ``W_AᵀN⁻¹W_A`` is not positive definite)."""
+    n = q1.shape[0]
+    g = wk_m[8]
+    s_ = wk_m[9]
+    Gp = wk_mm[3]
+    Lf = wk_mm[2]
+    for r in range(a):
+        j = act[r]
+        g[r] = _wt(Wp, Wi, Wv, q1, j) + nu[k, j]
+    if a == 1:
+        l00 = L[slot, act[0], act[0]]
+        if not l00 > 0.0:
+            return PROJECTION_FAILED
+        s_[0] = -g[0] / l00
+    else:
         for r in range(a):
             for c in range(a):
-                G[r, c] = Ghat[act[r], act[c]]
-        if law == 0 or a == 1:
-            # Newton, and Poisson on one contact (the same map): LCP(Ĝ, γ_free + e∘γ_k)
-            for r in range(a):
-                bvec[r] = gc[r] + e[act[r]] * gk[r]
-            if not _solve_counted(G, bvec, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
-                return LCP_FAILED
-        else:
-            # Poisson: Glocker's phases with Ĝ on γ̃ = (γ_free + ε∘γ_k)/(1+ε)
-            for r in range(a):
-                er = e[act[r]]
-                bvec[r] = (gc[r] + er * gk[r]) / (1.0 + er)
-            if not _solve_counted(G, bvec, a, lc, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
-                return LCP_FAILED
-            for r in range(a):                                   # γ_C = γ̃ + ĜΛ_C
-                acc = 0.0
-                for c in range(a):
-                    acc += G[r, c] * lc[c]
-                gc[r] = bvec[r] + acc
-            for r in range(a):                                   # γ_C + Ĝ(ε∘Λ_C)
-                acc = 0.0
-                for c in range(a):
-                    acc += G[r, c] * (e[act[c]] * lc[c])
-                le[r] = gc[r] + acc
-            if not _solve_counted(G, le, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
-                return LCP_FAILED
-            for r in range(a):                                   # P = Λ_C + (ε∘Λ_C + μ)
-                le[r] = x[r]                                     # μ = Λ_E − ε∘Λ_C, kept
-                x[r] = lc[r] + (e[act[r]] * lc[r] + x[r])
-        for i in range(n):
-            du[i] = 0.0
-        for r in range(a):                                       # δu = Σ_j (Â⁻¹W)_j P_j, once
-            P[r] = x[r]
-            j = act[r]
-            for i in range(n):
-                du[i] += AinvWT[j, i] * x[r]
-        for i in range(n):
-            u1[i] = uf[i] + du[i]
-        res = applied_residual(Wp, Wi, Wv, act, a, du, bvec, x if (law == 0 or a == 1) else le)
-        stats[7] = res
-        if not res <= tol:
-            return RESIDUAL_EXCEEDED
-    for i in range(n):
-        q1[i] = q[i] + h * ((1.0 - theta) * u[i] + theta * u1[i])
-        qpre[i] = q1[i]
-    if project and a > 0:
-        g = wk_m[8]
-        s_ = wk_m[9]
-        Gp = wk_mm[3]
-        Lf = wk_mm[2]
+                Gp[r, c] = L[slot, act[r], act[c]]
+        if not _cholesky(Gp, a, Lf):
+            return PROJECTION_FAILED
+        _cho_solve(Lf, a, g, s_)
         for r in range(a):
-            j = act[r]
-            g[r] = _contact_rows(Wp, Wi, Wv, q1, j) + nu[k + 1, j]
-        if a == 1:
-            s_[0] = -g[0] / L[slot, act[0], act[0]]
-        else:
-            for r in range(a):
-                for c in range(a):
-                    Gp[r, c] = L[slot, act[r], act[c]]
-            if not _cholesky(Gp, a, Lf):
-                return PROJECTION_FAILED
-            _cho_solve(Lf, a, g, s_)
-            for r in range(a):
-                s_[r] = -s_[r]
-        for r in range(a):
-            sig[r] = s_[r]
-            j = act[r]
-            for i in range(n):
-                q1[i] += KinvWT[slot, j, i] * s_[r]
+            s_[r] = -s_[r]
+    for r in range(a):
+        sig[r] = s_[r]
+        j = act[r]
+        for i in range(n):
+            q1[i] += KinvWT[slot, j, i] * s_[r]
     return OK
 
 
@@ -450,29 +441,28 @@ sample; then, per threshold ρ, the first window sample with V ≤ ρV(t_on) and
 with V > ρV(t_on) (−1: none)."""
 
 
-@njit(cache=True, inline="always")
-def _quad(structure, A, x, bw):
-    """xᵀAx for dense A or symmetric A in lower band storage."""
-    n = x.shape[0]
+@njit(**JIT)
+def _quad(structure, A, x, o, n, bw):
+    """yᵀAy with ``y = x[o:o + n]``, for dense A or symmetric A in lower band storage."""
     acc = 0.0
     if structure == STRUCTURE_DENSE:
         for i in range(n):
             r = 0.0
             for j in range(n):
-                r += A[i, j] * x[j]
-            acc += x[i] * r
+                r += A[i, j] * x[o + j]
+            acc += x[o + i] * r
     else:
         for j in range(n):
-            acc += A[0, j] * x[j] * x[j]
+            acc += A[0, j] * x[o + j] * x[o + j]
             for d in range(1, bw + 1):
                 i = j + d
                 if i >= n:
                     break
-                acc += 2.0 * A[d, j] * x[i] * x[j]
+                acc += 2.0 * A[d, j] * x[o + i] * x[o + j]
     return acc
 
 
-@njit(cache=True)
+@njit(**JIT)
 def _summary_sample(kg, V, s, summ, k_on, k_off, rhos):
     """Fold the sample V(t_kg) of observer s into its summary row."""
     nr = rhos.shape[0]
@@ -494,22 +484,22 @@ def _summary_sample(kg, V, s, summ, k_on, k_off, rhos):
             summ[s, SUMMARY_FIELDS + nr + i] = kg
 
 
-@njit(cache=True)
-def _summary_step(kg, s, qs, us, qprev_m, uprev_m, vprev, Vprev, Pfull_m, P, act, a,
-                  structure, Mq, Kq, Cq, bw, h, Wp, Wi, Wv, summ, k_on, k_off, rhos, wv):
+@njit(**JIT)
+def _summary_step(kg, s, qs, us, vprev, Vprev, Pfull_m, P, act, a, structure, Mq, Kq, Cq, bw, h,
+                  Wp, Wi, Wv, summ, k_on, k_off, rhos, wv):
     """After observer s made step kg−1 → kg: V, its damping and impulse parts, the rest."""
     n = qs.shape[1]
     m = Wp.shape[0] - 1
     for i in range(n):
         wv[i] = us[s, i] - us[0, i]
-    V = 0.5 * _quad(structure, Mq, wv[:n], bw)
+    V = 0.5 * _quad(structure, Mq, wv, 0, n, bw)
     for i in range(n):
         wv[n + i] = 0.5 * (wv[i] + vprev[s, i])            # v̄
         vprev[s, i] = wv[i]
-    damping = -h * _quad(structure, Cq, wv[n:2 * n], bw)
+    damping = -h * _quad(structure, Cq, wv, n, n, bw)
     for i in range(n):
         wv[i] = qs[s, i] - qs[0, i]
-    V += 0.5 * _quad(structure, Kq, wv[:n], bw)
+    V += 0.5 * _quad(structure, Kq, wv, 0, n, bw)
     impulse = 0.0                                         # (Wᵀv̄)ᵀ(P_s − P_m)
     for j in range(m):
         wv[2 * n + j] = -Pfull_m[j]
@@ -538,7 +528,7 @@ def _summary_step(kg, s, qs, us, qprev_m, uprev_m, vprev, Vprev, Pfull_m, P, act
     return V
 
 
-@njit(cache=True)
+@njit(**JIT)
 def summary_start(qs, us, structure, Mq, Kq, bw, vprev, Vprev, summ, k_on, k_off, rhos, rec_V):
     """The summary's first sample: V(t_0) of every observer, and v_0 for the damping part."""
     S, n = qs.shape
@@ -547,10 +537,10 @@ def summary_start(qs, us, structure, Mq, Kq, bw, vprev, Vprev, summ, k_on, k_off
         for i in range(n):
             wv[i] = us[s, i] - us[0, i]
             vprev[s, i] = wv[i]
-        V = 0.5 * _quad(structure, Mq, wv, bw)
+        V = 0.5 * _quad(structure, Mq, wv, 0, n, bw)
         for i in range(n):
             wv[i] = qs[s, i] - qs[0, i]
-        V += 0.5 * _quad(structure, Kq, wv, bw)
+        V += 0.5 * _quad(structure, Kq, wv, 0, n, bw)
         Vprev[s] = V
         rec_V[s, 0] = V
         _summary_sample(0, V, s, summ, k_on, k_off, rhos)
@@ -559,7 +549,7 @@ def summary_start(qs, us, structure, Mq, Kq, bw, vprev, Vprev, summ, k_on, k_off
 # ---------------------------------------------------------------------------------------
 # the loop: master (system 0) and observers (1..S-1)
 # ---------------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(**JIT)
 def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, chi_log, use_log, chi_now,
             record_every, rec_q, rec_u, rec_P, rec_sig, rec_act, rec_chi, rec_qpre, record_pre,
             summary, k_on, k_off, rhos, summ, vprev, Vprev, rec_V, closings, prev_act, Mq, Kq, Cq,
@@ -567,12 +557,23 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
             Wp, Wi, Wv, AinvWT, Ghat, G0, KinvWT, L, e, tol, stats):
     """Advance every system from step k0 (starting with system s0) up to step k1.
 
+    One Moreau–Jean step of system s (row s of ``qs``, ``us``) on its closed set A: the
+    master's from Siconos' predictor ``g_k + (h/2)γ_k ≤ 0`` (projected when
+    ``master_projection``), an observer's χ_k while coupled (projected when ``jumps[s]``),
+    else its own predicted set; ``u_free`` (dense ``Bu u + Bq q + Bf f̄``, or the banded
+    solve), the impulse of the impact law on A (:func:`contact_impulse`),
+    ``q_{k+1} = q_k + h((1−θ)u_k + θu_{k+1})`` and the position jump
+    (:func:`project_positions`). The n×m matrices come transposed (a contact's column
+    contiguous); ``KinvWT`` (N⁻¹W)ᵀ and ``L`` WᵀN⁻¹W are stacks over the projection
+    metrics, ``slots[s]`` selects system s's.
+
     The signals (``fbar``, ``nu``, ``nu_dot``, ``coupled``, ``chi_log``) are a window of the
     grid starting at step ``kb`` (row k − kb holds step k). ``qs``, ``us`` (S, n) hold the
     current states and are updated in place; ``chi_now`` (m,) the closed set fed to the
     observers at the current step (the master's, or the log's). Row r of the records holds
     step ``r·record_every`` (row 0: the initial state, written by the caller); impulses and
-    multipliers are those of the step ending at the row.
+    multipliers are those of the step ending at the row. ``rec_P``, ``rec_sig`` and ``rec_act``
+    come zero-filled (each row is written once: only the closed contacts' entries are set).
 
     With ``summary``, every step also updates the streaming summary of each observer
     (:data:`SUMMARY_FIELDS`, coupling window = grid samples k_on..k_off, thresholds ``rhos``),
@@ -586,6 +587,8 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
     S, n = qs.shape
     m = Wp.shape[0] - 1
     act = np.empty(m, np.int64)
+    uf = np.empty(n)
+    du = np.empty(n)
     q1 = np.empty(n)
     qpre = np.empty(n)
     u1 = np.empty(n)
@@ -593,10 +596,10 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
     sig = np.zeros(m)
     Pfull_m = np.zeros(m)
     wv = np.empty(2 * n + m)
-    sch = (h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, nu, nu_dot, Wp, Wi, Wv,
-           AinvWT, Ghat, G0, KinvWT, L, e, tol)
-    wk = (np.empty(n), np.empty(n), np.empty((10, m)), np.empty((4, m, m)), np.zeros((2, m), np.bool_))
-    out = (q1, u1, P, sig, qpre, stats)
+    wk_m = np.empty((10, m))
+    wk_mm = np.empty((4, m, m))
+    wk_b = np.zeros((2, m), np.bool_)
+    dense = structure == STRUCTURE_DENSE
     # step k is recorded (row (k+1)/record_every) when (k+1) % record_every == 0: counted,
     # not divided, per step
     d = (record_every - (k0 + 1) % record_every) % record_every   # k0 + d: the next recorded step
@@ -611,20 +614,8 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
             until = record_every
         first = s0 if k == k0 else 0
         for s in range(first, S):
-            q = qs[s]
-            u = us[s]
-            if s == 0:
-                a = predicted_active(kl, q, u, h, Wp, Wi, Wv, nu, nu_dot, act)
-                project = master_projection
-                if use_log:
-                    for j in range(m):
-                        chi_now[j] = chi_log[kl, j]
-                else:
-                    for j in range(m):
-                        chi_now[j] = False
-                    for i in range(a):
-                        chi_now[act[i]] = True
-            elif coupled[kl]:
+            # --- the closed set A = act[:a] and whether the step projects
+            if s > 0 and coupled[kl]:
                 a = 0
                 for j in range(m):
                     if chi_now[j]:
@@ -632,19 +623,82 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
                         a += 1
                 project = jumps[s]
             else:
-                a = predicted_active(kl, q, u, h, Wp, Wi, Wv, nu, nu_dot, act)
+                a = 0                                       # Siconos' predictor
+                for j in range(m):
+                    g = 0.0
+                    for p in range(Wp[j], Wp[j + 1]):
+                        g += Wv[p] * (qs[s, Wi[p]] + 0.5 * h * us[s, Wi[p]])
+                    if g + nu[kl, j] + 0.5 * h * nu_dot[kl, j] <= 0.0:
+                        act[a] = j
+                        a += 1
                 project = master_projection
-            status = step_system(kl, q, u, act, a, project, slots[s], law, sch, wk, out)
-            if a > 0 and stats[7] > stats[5]:
-                stats[5] = stats[7]
-                stats[6] = k + 1
-            if status != OK:
-                return k, s, status
+                if s == 0:
+                    if use_log:
+                        for j in range(m):
+                            chi_now[j] = chi_log[kl, j]
+                    else:
+                        for j in range(m):
+                            chi_now[j] = False
+                        for i in range(a):
+                            chi_now[act[i]] = True
+            # --- u_free, the impulse, the positions
+            status = OK
+            if dense and a == 0:                            # the common step: one pass
+                for i in range(n):
+                    s1 = 0.0
+                    s2 = 0.0
+                    s3 = 0.0
+                    for j in range(n):
+                        s1 += Bu[i, j] * us[s, j]
+                    for j in range(n):
+                        s2 += Bq[i, j] * qs[s, j]
+                    for j in range(n):
+                        s3 += Bf[i, j] * fbar[kl, j]
+                    ufi = s1 + s2 + s3
+                    u1[i] = ufi
+                    q1[i] = qs[s, i] + h * ((1.0 - theta) * us[s, i] + theta * ufi)
+            else:
+                if dense:
+                    for i in range(n):
+                        s1 = 0.0
+                        s2 = 0.0
+                        s3 = 0.0
+                        for j in range(n):
+                            s1 += Bu[i, j] * us[s, j]
+                        for j in range(n):
+                            s2 += Bq[i, j] * qs[s, j]
+                        for j in range(n):
+                            s3 += Bf[i, j] * fbar[kl, j]
+                        uf[i] = s1 + s2 + s3
+                else:
+                    banded_free_velocity(kl, s, qs, us, h, Ru_b, Rq_b, Ach_b, bw, fbar, uf)
+                if a > 0:
+                    status = contact_impulse(kl, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, AinvWT, Ghat,
+                                             e, tol, stats, wk_m, wk_mm, wk_b, du, u1, P)
+                    if stats[7] > stats[5]:
+                        stats[5] = stats[7]
+                        stats[6] = k + 1
+                    if status != OK:
+                        return k, s, status
+                else:
+                    for i in range(n):
+                        u1[i] = uf[i]
+                for i in range(n):
+                    q1[i] = qs[s, i] + h * ((1.0 - theta) * us[s, i] + theta * u1[i])
+            projected = project and a > 0
+            if projected:
+                for i in range(n):
+                    qpre[i] = q1[i]
+                status = project_positions(kl + 1, act, a, slots[s], Wp, Wi, Wv, nu, KinvWT, L, q1, sig,
+                                           wk_m, wk_mm)
+                if status != OK:
+                    return k, s, status
             for i in range(n):
-                q[i] = q1[i]
-                u[i] = u1[i]
+                qs[s, i] = q1[i]
+                us[s, i] = u1[i]
+            # --- bookkeeping: the master's closings and penetration, the observers' summary
             if s == 0:
-                for j in range(m):                                  # closings and penetration
+                for j in range(m):
                     Pfull_m[j] = 0.0
                 for i in range(a):
                     Pfull_m[act[i]] = P[i]
@@ -656,32 +710,28 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
                 for i in range(a):
                     prev_act[act[i]] = True
                 for j in range(m):
-                    g = _contact_rows(Wp, Wi, Wv, q1, j) + nu[kl + 1, j]
+                    g = _wt(Wp, Wi, Wv, q1, j) + nu[kl + 1, j]
                     if g < stats[3]:
                         stats[3] = g
                         stats[4] = k + 1
             elif summary:
-                V = _summary_step(k + 1, s, qs, us, qs[0], us[0], vprev, Vprev, Pfull_m, P, act, a,
-                                  structure, Mq, Kq, Cq, bw, h, Wp, Wi, Wv, summ, k_on, k_off, rhos, wv)
+                V = _summary_step(k + 1, s, qs, us, vprev, Vprev, Pfull_m, P, act, a, structure, Mq, Kq,
+                                  Cq, bw, h, Wp, Wi, Wv, summ, k_on, k_off, rhos, wv)
                 if rec:
                     rec_V[s, r] = V
+            # --- the records
             if rec:
                 for i in range(n):
                     rec_q[s, r, i] = q1[i]
                     rec_u[s, r, i] = u1[i]
                 if record_pre:
                     for i in range(n):
-                        rec_qpre[s, r, i] = qpre[i]
-                for j in range(m):
-                    rec_P[s, r, j] = 0.0
-                    rec_sig[s, r, j] = 0.0
-                for i in range(a):
+                        rec_qpre[s, r, i] = qpre[i] if projected else q1[i]
+                for i in range(a):                          # rows are zero-filled (caller)
                     rec_P[s, r, act[i]] = P[i]
-                    if project:
+                    if projected:
                         rec_sig[s, r, act[i]] = sig[i]
                 if s == 0:
-                    for j in range(m):
-                        rec_act[r, j] = False
                     for i in range(a):
                         rec_act[r, act[i]] = True
                     if S > 1:
