@@ -68,11 +68,14 @@ PLOT = dict(dof=1, contact=1, labels=("φ₁ (rad)", "corner gap (m)"))
 NOTES = "the paper's Example 2: dense clusters of simultaneous impacts on many contacts."
 SUITE = {
     "observers": [dict(params=(("param.N", 10),), h=(2e-4, 1e-4), t_end=(8.0, 8.0))],
-    # event reference: N = 4 blocks over 1.5 s, 37 impacts on 5 of its 8 contacts (a cluster of 23
-    # at t ≈ 0.82–0.91 s). Longer or larger chains are sensitive to the order of the impacts
-    # in a cluster (N = 5 past t ≈ 0.55 s: error ≈ 1e-3 for every h from 1e-3 to 3e-5, and
-    # runs at h and h/2 differ as much); N = 10 meets a multi-contact accumulation that the
-    # event integrator does not extrapolate (observer/event/master.py). The error jumps with
+    # event reference: N = 4 blocks over 1.5 s, 37 impacts on 5 of its 8 contacts (a cluster
+    # of 23 at t ≈ 0.82–0.91 s), no two impacts closer than 4.4e-4 s. Time-stepping treats
+    # impacts less than a step or two apart as one multi-contact impact (or swaps them), an
+    # O(1) change of the outcome, so it converges only once h is below about half the
+    # smallest interval between impacts:
+    # N = 5 over 2 s (intervals down to 2.6e-6 s) has error ≈ 1e-3 for every h from 1e-3 to
+    # 2e-6, then 4.9e-7 at 1e-6 and 1.0e-7 at 2.5e-7; N = 10 over 2 s (down to 1.5e-8 s) is
+    # out of reach (its event run: 8 s of motion in ≈ 32 s of CPU). The error jumps with
     # where the impacts fall on the grid, so the order is fitted over 11 halvings
     # (4e-3 … 3.9e-6 s; full: 13, to 9.8e-7 s)
     "work_precision": dict(h0=4e-3, t_end=1.5, params=(("param.N", 4),), targets=("master",),
