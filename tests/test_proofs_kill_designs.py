@@ -7,6 +7,8 @@ mutation run of ``designs.py`` (``tests/mutants/proofs_checks_runs.md``). About 
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -49,7 +51,9 @@ def _pair_by_hand(sc, design, specs):
 def test_witness_and_margin_recomputed_from_the_pairs(case):
     sc, specs = case
     designs = {n: d for n, d in OBSERVER_DESIGNS.items() if n in ("jump", "jump_identity", "nojump")}
-    r = de.check_projection_energy(sc, specs, h=H, t_end=T_END, designs=designs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DeprecationWarning)                 # nothing deprecated on the way
+        r = de.check_projection_energy(sc, specs, h=H, t_end=T_END, designs=designs)
     assert set(r.witness["designs"]) == {"jump", "jump_identity"}          # no-jump designs skipped
     assert r.witness["metrics"] == {"jump": "K", "jump_identity": "identity"}
     for name in ("jump", "jump_identity"):
@@ -102,6 +106,7 @@ def test_not_applicable_cases(case):
     r = de.check_projection_energy(sc, specs, h=H, t_end=T_END, designs={"jump_identity": OBSERVER_DESIGNS["jump_identity"]})
     assert r.passed is None and np.isnan(r.margin) and r.tolerance == 0.0
     assert r.reason == "no registered design projects in the K metric" and r.equation == de.EQUATION
+    assert r.name == "projection_energy"
     assert set(r.witness["designs"]) == {"jump_identity"} and r.summary_keys == ("designs",)
     ball = pc.load("bouncing_ball")
     r = de.check_projection_energy(ball, specs, h=H, t_end=T_END, tolerance=0.25)
@@ -116,3 +121,25 @@ def test_jump_parts_by_hand(case):
     Jm, allow_m = de.jump_parts(run, "jump_a", "jump_b")
     assert Jm.shape == J.shape and np.allclose(Jm, J, rtol=1e-12, atol=1e-12 * np.max(V))
     assert np.array_equal(allow_m, allow)
+
+
+def test_default_registry_and_a_projected_master():
+    """designs=None measures every registered design with position jumps; the pairs follow
+    the scenario's master (here projected on its own closed set, which changes χ)."""
+    sc = pc.load("double_mass", {"impact.law": "newton", "impact.restitution": 0.3,
+                                 "simulation.master_projection": True})
+    assert sc.master_projection is True
+    specs = pc.CheckContext(sc, pc.CheckSettings(h=H, t_end=T_END)).slave_specs()
+    r = de.check_projection_energy(sc, specs, h=H, t_end=T_END)
+    jumping = {n for n, d in OBSERVER_DESIGNS.items() if d.position_jumps}
+    assert set(r.witness["designs"]) == jumping
+    J, allow, V, run = _pair_by_hand(sc, OBSERVER_DESIGNS["jump"], specs)
+    plain = replay(pc.load("double_mass", {"impact.law": "newton", "impact.restitution": 0.3}), h=H, t_end=T_END)
+    assert not np.array_equal(run.master.active, plain.master.active)      # the projection matters here
+    excess = (J - allow) / V
+    assert r.witness["step"] == int(np.argmax(excess)) and r.margin == pytest.approx(-np.max(excess), rel=1e-9)
+    assert r.witness["designs"]["jump"] == pytest.approx(np.max(J / V), rel=1e-9, abs=1e-13)
+    # an oblique design's largest J/V follows the projected master's χ (0.028 here; 0.096
+    # with the plain master's)
+    Ji, _, Vi, _ = _pair_by_hand(sc, OBSERVER_DESIGNS["jump_identity"], specs)
+    assert r.witness["designs"]["jump_identity"] == pytest.approx(np.max(Ji / Vi), rel=1e-9)
