@@ -200,7 +200,7 @@ class _Run:
                 self.P[k:k + count, forced] += prev @ (flow.force_rows @ flow.phi(self.h)).T
             z_cur, t_cur, k = Z[-1], tg[k + count - 1], k + count
         if forced and k < tg.size and t_b > t_cur:
-            self.P[k, forced] += flow.force_rows @ (flow.phi(t_b - t_cur) @ z_cur)
+            self.P[k, forced] += flow.force_rows @ flow.integral(t_b - t_cur, z_cur)
         self.k_next = k
 
     def _sample(self, flow: Flow, k: int, dt: float, z: np.ndarray, forced: list) -> np.ndarray:
@@ -209,7 +209,7 @@ class _Run:
         z_new[-1] = 1.0
         self.X[k] = z_new[:2 * self.n]
         if forced:
-            self.P[k, forced] += flow.force_rows @ (flow.phi(dt) @ z)
+            self.P[k, forced] += flow.force_rows @ flow.integral(dt, z)
         return z_new
 
     def add_impulse(self, t: float, contacts, impulse) -> None:
