@@ -5,6 +5,7 @@ No timing assertions: speed is measured by the suites, not tested here.
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -392,6 +393,34 @@ def test_peer_row_says_what_the_trajectory_difference_is_compared_with():
     tol = row["max_abs_diff_q"] + 1e-15
     assert row["max_abs_q"] == pytest.approx(np.max(np.abs(res.q)), abs=tol) and row["max_abs_q"] > 0.1
     assert row["impulse_steps"] == np.count_nonzero(np.any(res.P != 0.0, axis=1)) > 0
+
+
+def test_kernel_ready_leaves_nothing_to_compile_for_the_suites_runs():
+    """After :func:`bench.run.kernel_ready` no run of a built-in scenario (master alone, with
+    its observers, another horizon) adds a compiled signature to any kernel function, so no
+    timed case pays numba's compile time. Checked in a fresh process (numba loads from its
+    disk cache there; in this process other tests may have compiled everything already)."""
+    script = """
+import json, observer, observer.kernel as K
+from bench.run import kernel_ready
+from observer.scenarios import SCENARIOS
+kernel_ready()
+count = lambda: {n: len(f.signatures) for n, f in vars(K).items() if hasattr(f, "signatures")}
+before = count()
+for name in SCENARIOS:
+    sc = observer.load_scenario(name)
+    sc = sc.with_overrides({"simulation.t_end": 37 * sc.h})
+    observer.simulate(sc, observers=())
+    observer.simulate(sc, observers=(), record_every=4)
+    if sc.observer:
+        observer.simulate(sc)
+print(json.dumps([before, count()]))
+"""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    out = subprocess.run([sys.executable, "-c", script], cwd=REPO, env=env, capture_output=True,
+                         text=True, check=True).stdout
+    before, after = json.loads(out.strip().splitlines()[-1])
+    assert sum(before.values()) > 0 and after == before
 
 
 def test_failed_case_is_reported_and_retried(tmp_path):
