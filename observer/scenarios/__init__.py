@@ -11,7 +11,8 @@ declare its metadata (read by :func:`info`, with defaults):
 * ``NOTES`` — what the scenario shows, for the report;
 * ``SUITE`` — its default benchmark settings: ``observers`` (a list of case settings:
   ``label``, ``params``, ``h`` and ``t_end`` as (quick, full) pairs, ``slave_offset``),
-  ``work_precision`` (``h0``, ``t_end``, ``targets``), ``checks`` (``"quick"``: in every
+  ``work_precision`` (``h0``, ``t_end``, ``targets``, and optionally ``params``: builder
+  overrides of the sweep, ``sizes``: ``dict(quick=…, full=…)`` step sizes), ``checks`` (``"quick"``: in every
   suite, ``"full"``: only in the full one, ``None``: never), ``exact`` (False: no observer
   rows of the exact event-driven integrator, e.g. for dense impact clusters).
 
