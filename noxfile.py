@@ -61,7 +61,7 @@ MUTATION_TARGETS: dict[str, tuple[list[str], list[str]]] = {
                  ["tests/test_step_physics.py", "tests/test_timestepping.py", "tests/test_stepping_units.py"]),
     "impact": (["observer/impact.py"],
                ["tests/test_step_physics.py", "tests/test_contact.py", "tests/test_timestepping.py",
-                "tests/test_impact_laws.py"]),
+                "tests/test_impact_laws.py", "tests/test_mutants_impact.py"]),
     "contact": (["observer/contact/*"], ["tests/test_contact.py"]),
     "observers": (["observer/observers.py"], ["tests/test_observers.py", "tests/test_stepping_units.py"]),
     # proofs_checks, one entry per group of files, each against the fast tests that reach it
@@ -82,9 +82,9 @@ MUTATION_TARGETS: dict[str, tuple[list[str], list[str]]] = {
                             ["tests/test_proofs_kill_assumptions.py", "tests/test_proofs_kill_result.py",
                              "tests/test_proofs_kill_api.py", "tests/test_proofs_kill_asserts.py"]),
     "proofs_checks_designs": (["proofs_checks/designs.py"], ["tests/test_proofs_kill_designs.py"]),
+    "proofs_checks_proposition": (["proofs_checks/proposition.py"], ["tests/test_proofs_kill_proposition.py"]),
     # the simulation-driven rest (slow: tens of seconds per mutant)
-    "proofs_checks_runs": (["proofs_checks/runs.py", "proofs_checks/proposition.py", "proofs_checks/monotonicity.py",
-                            "proofs_checks/plugin.py"],
+    "proofs_checks_runs": (["proofs_checks/runs.py", "proofs_checks/monotonicity.py", "proofs_checks/plugin.py"],
                            ["tests/test_proofs_checks.py", "tests/test_designs.py", "tests/test_proofs_plugin.py"]),
 }
 MUTANTS_DIR = ROOT / "mutants"
