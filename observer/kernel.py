@@ -60,7 +60,10 @@ EPS = float(np.finfo(np.float64).eps)
 ROUNDOFF = 16.0
 TINY = 1e-300
 JIT = {"cache": True, "error_model": "numpy"}
-"""Options of every kernel function (:func:`numba.njit`)."""
+"""Options of every kernel function (:func:`numba.njit`). The small helpers are also inlined
+(``inline="always"``) into the functions that call them, never into the step loop of
+:func:`advance`: there an inlined array argument is a reference count per step, while a
+function that calls nothing (a leaf) has its reference counts pruned by numba."""
 
 
 # ---------------------------------------------------------------------------------------
@@ -103,7 +106,7 @@ def _cho_solve(Lf, a, rhs, out):
 # ---------------------------------------------------------------------------------------
 # LCP 0 ≤ Gx + b ⊥ x ≥ 0 with SPD G (the first a rows/columns of the buffers)
 # ---------------------------------------------------------------------------------------
-@njit(**JIT)
+@njit(**JIT, inline="always")
 def lcp_residual(G, b, x, a):
     """Relative natural residual ‖min(x, Gx + b)‖_∞ / max(‖b‖_∞, ‖Gx‖_∞)."""
     r = 0.0
@@ -220,7 +223,7 @@ def _solve_counted(G, b, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, s
 # ---------------------------------------------------------------------------------------
 # banded symmetric matrices (lower band storage: ab[d, j] = A[j + d, j])
 # ---------------------------------------------------------------------------------------
-@njit(**JIT)
+@njit(**JIT, inline="always")
 def _band_matvec_add(ab, bw, X, s, out):
     """out += A X[s] for symmetric A in lower band storage."""
     n = X.shape[1]
@@ -235,7 +238,7 @@ def _band_matvec_add(ab, bw, X, s, out):
             out[j] += a * X[s, i]
 
 
-@njit(**JIT)
+@njit(**JIT, inline="always")
 def _band_cho_solve(cb, bw, x):
     """Solve (L Lᵀ) y = x in place, L lower Cholesky factor in band storage."""
     n = x.shape[0]
@@ -259,7 +262,7 @@ def _band_cho_solve(cb, bw, x):
 # ---------------------------------------------------------------------------------------
 # one step of one system: the pieces (row s of the 2-D states qs, us is the system)
 # ---------------------------------------------------------------------------------------
-@njit(**JIT)
+@njit(**JIT, inline="always")
 def _wt(Wp, Wi, Wv, x, j):
     """(Wᵀx)_j from the CSC storage of W."""
     s = 0.0
@@ -268,7 +271,7 @@ def _wt(Wp, Wi, Wv, x, j):
     return s
 
 
-@njit(**JIT)
+@njit(**JIT, inline="always")
 def _wt_row(Wp, Wi, Wv, X, s, j):
     """(Wᵀ X[s])_j from the CSC storage of W."""
     acc = 0.0
@@ -288,7 +291,7 @@ def banded_free_velocity(k, s, qs, us, h, Ru_b, Rq_b, Ach_b, bw, fbar, uf):
     _band_cho_solve(Ach_b, bw, uf)
 
 
-@njit(**JIT)
+@njit(**JIT, inline="always")
 def applied_residual(Wp, Wi, Wv, act, a, du, bvec, z):
     """Complementarity residual of the impulse as applied, relative like :func:`lcp_residual`.
 
@@ -317,30 +320,77 @@ def applied_residual(Wp, Wi, Wv, act, a, du, bvec, z):
 
 
 @njit(**JIT)
+def impulse_one(k, s, us, uf, j, Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats, du, u1, P):
+    """:func:`contact_impulse` on the one closed contact j, in closed form.
+
+    Newton's and Poisson's maps agree on one contact: ``P = max(0, −b/Ĝ_jj)`` with
+    ``b = γ_free + e_j γ_k``; the same operations as the general path, bit for bit. Written
+    without a branch around any array access (the status is decided on scalars, the work
+    buffers are written whatever it is): each array argument is then last used in the one
+    exit block, and numba prunes its reference counts.
+    """
+    n = uf.shape[0]
+    gk = _wt_row(Wp, Wi, Wv, us, s, j) + nu_dot[k, j]
+    gc = _wt(Wp, Wi, Wv, uf, j) + nu_dot[k + 1, j]                          # γ_free
+    g = Ghat[j, j]
+    b = gc + e[j] * gk
+    x = -b / g if b < 0.0 else 0.0
+    gx = 0.0 + g * x                                                        # lcp_residual, a = 1
+    r = 0.0
+    v = abs(min(x, gx + b))
+    if v > r:
+        r = v
+    res = r / max(abs(b) if abs(b) > 0.0 else 0.0, abs(gx) if abs(gx) > 0.0 else 0.0, TINY)
+    for i in range(n):
+        du[i] = 0.0 + AinvWT[j, i] * x
+    for i in range(n):
+        u1[i] = uf[i] + du[i]
+    P[0] = x
+    d = _wt(Wp, Wi, Wv, du, j)                                              # applied_residual
+    r = 0.0
+    v = abs(min(x, b + d))
+    if v > r:
+        r = v
+    applied = r / max(abs(b) if abs(b) > 0.0 else 0.0, abs(d) if abs(d) > 0.0 else 0.0, TINY)
+    solved = res <= tol
+    worst, last = stats[2], stats[7]
+    if solved:
+        last = applied
+        if res > worst:
+            worst = res
+    stats[0] += 1
+    stats[2] = worst
+    stats[7] = last
+    return OK if solved and applied <= tol else (LCP_FAILED if not solved else RESIDUAL_EXCEEDED)
+
+
+@njit(**JIT)
+def project_one(k, j, slot, Wp, Wi, Wv, nu, KinvWT, L, q1, sig):
+    """:func:`project_positions` on the one closed contact j (no branch around an array
+    access, like :func:`impulse_one`)."""
+    n = q1.shape[0]
+    g = _wt(Wp, Wi, Wv, q1, j) + nu[k, j]
+    l00 = L[slot, j, j]
+    ok = l00 > 0.0
+    s_ = -g / l00 if ok else 0.0
+    sig[0] = s_
+    for i in range(n):
+        q1[i] += KinvWT[slot, j, i] * s_
+    return OK if ok else PROJECTION_FAILED
+
+
+@njit(**JIT)
 def contact_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats,
-                    wk_m, wk_mm, wk_b, du, u1, P):
+                    gk, bvec, x, lc, le, gc, rhs, sol, G, Gs, Lf, basic, infeas, du, u1, P):
     """The impulse of system s's step on the closed set ``act[:a]`` (a ≥ 1) and its velocity.
 
     Newton (``law == 0``), and Poisson on one contact (the same map): ``LCP(Ĝ, γ_free + e∘γ_k)``;
     Poisson on several: Glocker's compression and expansion phases. Writes ``P[:a]``,
     ``u1 = u_free + δu`` with ``δu = Σ_j (Â⁻¹W)_j P_j`` summed once, and the applied residual
-    (:func:`applied_residual`) in ``stats[7]``; returns the status. ``wk_m`` (10, m),
-    ``wk_mm`` (4, m, m), ``wk_b`` (2, m) are work buffers.
+    (:func:`applied_residual`) in ``stats[7]``; returns the status. ``gk`` … ``infeas`` are
+    work buffers ((m,) and (m, m); separate arrays, not views: a view costs a reference count).
     """
     n = uf.shape[0]
-    gk = wk_m[0]
-    bvec = wk_m[1]
-    x = wk_m[2]
-    lc = wk_m[3]
-    le = wk_m[4]
-    gc = wk_m[5]
-    rhs = wk_m[6]
-    sol = wk_m[7]
-    G = wk_mm[0]
-    Gs = wk_mm[1]
-    Lf = wk_mm[2]
-    basic = wk_b[0]
-    infeas = wk_b[1]
     max_iter = max(200, 20 * a)
     for r in range(a):
         j = act[r]
@@ -394,16 +444,13 @@ def contact_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, AinvWT, Ghat,
 
 
 @njit(**JIT)
-def project_positions(k, act, a, slot, Wp, Wi, Wv, nu, KinvWT, L, q1, sig, wk_m, wk_mm):
+def project_positions(k, act, a, slot, Wp, Wi, Wv, nu, KinvWT, L, q1, sig, g, s_, Gp, Lf):
     """The position jump of eqs. (13)-(14) on the closed set ``act[:a]`` (a ≥ 1), in the
     metric of projection slot ``slot``: ``q1 ← q1 + (N⁻¹W_A)Σ`` with
-    ``(W_AᵀN⁻¹W_A)Σ = −g_A(q1)``; Σ into ``sig[:a]``. Returns the status
+    ``(W_AᵀN⁻¹W_A)Σ = −g_A(q1)``; Σ into ``sig[:a]`` (``g``, ``s_`` (m,), ``Gp``, ``Lf`` (m, m):
+    work buffers). Returns the status
     (:data:`PROJECTION_FAILED` when ``W_AᵀN⁻¹W_A`` is not positive definite)."""
     n = q1.shape[0]
-    g = wk_m[8]
-    s_ = wk_m[9]
-    Gp = wk_mm[3]
-    Lf = wk_mm[2]
     for r in range(a):
         j = act[r]
         g[r] = _wt(Wp, Wi, Wv, q1, j) + nu[k, j]
@@ -441,7 +488,7 @@ sample; then, per threshold ρ, the first window sample with V ≤ ρV(t_on) and
 with V > ρV(t_on) (−1: none)."""
 
 
-@njit(**JIT)
+@njit(**JIT, inline="always")
 def _quad(structure, A, x, o, n, bw):
     """yᵀAy with ``y = x[o:o + n]``, for dense A or symmetric A in lower band storage."""
     acc = 0.0
@@ -462,7 +509,7 @@ def _quad(structure, A, x, o, n, bw):
     return acc
 
 
-@njit(**JIT)
+@njit(**JIT, inline="always")
 def _summary_sample(kg, V, s, summ, k_on, k_off, rhos):
     """Fold the sample V(t_kg) of observer s into its summary row."""
     nr = rhos.shape[0]
@@ -596,9 +643,10 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
     sig = np.zeros(m)
     Pfull_m = np.zeros(m)
     wv = np.empty(2 * n + m)
-    wk_m = np.empty((10, m))
-    wk_mm = np.empty((4, m, m))
-    wk_b = np.zeros((2, m), np.bool_)
+    gk, bvec, x, lc, le = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+    gc, rhs, sol, gp, sp_ = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+    G, Gs, Lf, Gp = np.empty((m, m)), np.empty((m, m)), np.empty((m, m)), np.empty((m, m))
+    basic, infeas = np.zeros(m, np.bool_), np.zeros(m, np.bool_)
     dense = structure == STRUCTURE_DENSE
     # step k is recorded (row (k+1)/record_every) when (k+1) % record_every == 0: counted,
     # not divided, per step
@@ -672,9 +720,14 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
                         uf[i] = s1 + s2 + s3
                 else:
                     banded_free_velocity(kl, s, qs, us, h, Ru_b, Rq_b, Ach_b, bw, fbar, uf)
-                if a > 0:
+                if a == 1:
+                    status = impulse_one(kl, s, us, uf, act[0], Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol,
+                                         stats, du, u1, P)
+                elif a > 1:
                     status = contact_impulse(kl, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, AinvWT, Ghat,
-                                             e, tol, stats, wk_m, wk_mm, wk_b, du, u1, P)
+                                             e, tol, stats, gk, bvec, x, lc, le, gc, rhs, sol, G, Gs, Lf,
+                                             basic, infeas, du, u1, P)
+                if a > 0:
                     if stats[7] > stats[5]:
                         stats[5] = stats[7]
                         stats[6] = k + 1
@@ -689,8 +742,11 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
             if projected:
                 for i in range(n):
                     qpre[i] = q1[i]
-                status = project_positions(kl + 1, act, a, slots[s], Wp, Wi, Wv, nu, KinvWT, L, q1, sig,
-                                           wk_m, wk_mm)
+                if a == 1:
+                    status = project_one(kl + 1, act[0], slots[s], Wp, Wi, Wv, nu, KinvWT, L, q1, sig)
+                else:
+                    status = project_positions(kl + 1, act, a, slots[s], Wp, Wi, Wv, nu, KinvWT, L, q1,
+                                               sig, gp, sp_, Gp, Lf)
                 if status != OK:
                     return k, s, status
             for i in range(n):
@@ -710,7 +766,10 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
                 for i in range(a):
                     prev_act[act[i]] = True
                 for j in range(m):
-                    g = _wt(Wp, Wi, Wv, q1, j) + nu[kl + 1, j]
+                    g = 0.0
+                    for p in range(Wp[j], Wp[j + 1]):
+                        g += Wv[p] * q1[Wi[p]]
+                    g += nu[kl + 1, j]
                     if g < stats[3]:
                         stats[3] = g
                         stats[4] = k + 1
