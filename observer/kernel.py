@@ -680,7 +680,7 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
                         act[a] = j
                         a += 1
                 project = master_projection
-                if s == 0:
+                if s == 0 and S > 1:                        # χ_k, for the observers
                     if use_log:
                         for j in range(m):
                             chi_now[j] = chi_log[kl, j]
@@ -754,17 +754,18 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
                 us[s, i] = u1[i]
             # --- bookkeeping: the master's closings and penetration, the observers' summary
             if s == 0:
-                for j in range(m):
-                    Pfull_m[j] = 0.0
-                for i in range(a):
-                    Pfull_m[act[i]] = P[i]
-                for i in range(a):
-                    if not prev_act[act[i]]:
-                        closings[act[i]] += 1
-                for j in range(m):
-                    prev_act[j] = False
-                for i in range(a):
-                    prev_act[act[i]] = True
+                if summary:                                 # the master's impulse and closings
+                    for j in range(m):
+                        Pfull_m[j] = 0.0
+                    for i in range(a):
+                        Pfull_m[act[i]] = P[i]
+                    for i in range(a):
+                        if not prev_act[act[i]]:
+                            closings[act[i]] += 1
+                    for j in range(m):
+                        prev_act[j] = False
+                    for i in range(a):
+                        prev_act[act[i]] = True
                 for j in range(m):
                     g = 0.0
                     for p in range(Wp[j], Wp[j + 1]):
