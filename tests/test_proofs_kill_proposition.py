@@ -141,12 +141,75 @@ def test_h_scaling_without_contact_and_without_K():
     assert r.witness["plain_master__jump_slave_order"] == math.inf
     assert r.witness["plain_master__jump_slave_rms"] == [0.0, 0.0]
     assert r.name == "proposition1_h_scaling" and r.equation == "Proposition 1 (continuous limit h → 0)"
+    assert r.summary_keys == ("plain_master__jump_slave_order", "projected_master__nojump_slave_order",
+                              "plain_master__jump_slave_rms", "projected_master__nojump_slave_rms", "h")
     na = pr.check_proposition1_h_scaling(pc.load("bouncing_ball"))
     assert na.passed is None and na.reason == ("K is not positive definite: both mismatched pairs need "
                                                "the K-metric projection")
     assert na.name == "proposition1_h_scaling" and na.equation == "Proposition 1 (continuous limit h → 0)"
 
 
-def test_h_scaling_default_step_and_factors(dm):
+def test_h_scaling_default_step_factors_and_order(dm):
     r = pr.check_proposition1_h_scaling(dm, t_end=0.2)
     assert np.allclose(r.witness["h"], [16 * H, 4 * H, H], rtol=1e-15)
+    assert r.witness["horizon"] == pytest.approx(0.2)
+    worst = min(r.witness["plain_master__jump_slave_order"], r.witness["projected_master__nojump_slave_order"])
+    assert r.margin == pytest.approx(worst - 0.5, rel=1e-12)             # min_order 0.5
+
+
+def test_the_check_ignores_the_scenarios_coupling_window():
+    """The proposition's slave is driven by the master's χ over the whole run, whatever the
+    scenario's [observer] coupling window says."""
+    for ov in ({"observer.coupling": [0.3, 20.0]},):
+        sc = pc.load("double_mass", {"simulation.t_end": T_END, "simulation.h": H, **ov})
+        r = pr.check_proposition1_exact(sc)
+        assert r.passed is True and r.margin == 0.0, ov
+        assert r.witness["plain_master__nojump_slave_closed_steps"] > 0
+
+
+def _detector_pair(sc, h, t_end, projection, jumps, tol):
+    """The known-bad detector χ_i = [g_pred,i ≤ δ] of the projected/plain master, by hand."""
+    from proofs_checks.runs import SlaveSpec, replay
+    master = replay(sc, h=h, t_end=t_end, master_projection=projection)
+    chi = np.zeros(master.chi.shape, dtype=bool)
+    for k in range(1, chi.shape[0]):
+        chi[k] = master.g_pred[k] <= tol
+    r = replay(sc, h=h, t_end=t_end, master_projection=projection, chi=chi,
+               slaves=[SlaveSpec("s", jumps, sc.q0.copy(), sc.u0.copy())])
+    return r, r.slaves["s"], r.master, chi
+
+
+def test_detector_with_a_tolerance_by_hand(dm):
+    tol, h, t_end = 1e-3, 4e-3, 0.5                      # not the scenario's grid
+    r = pr.check_proposition1_exact(dm, h=h, t_end=t_end, chi_tolerance=tol)
+    assert r.witness["h"] == pytest.approx(h, rel=1e-12) and r.witness["horizon"] == pytest.approx(t_end)
+    for label, projection, jumps in (("plain_master__nojump_slave", False, False),
+                                     ("projected_master__jump_slave", True, True)):
+        run, s, m, chi = _detector_pair(dm, h, t_end, projection, jumps, tol)
+        assert chi.any()
+        d = np.max(np.hstack([np.abs(s.q - m.q), np.abs(s.u - m.u), np.abs(s.P - m.P)]), axis=1)
+        bad = np.flatnonzero(d > 0)
+        assert bad.size and bad[0] > 1                    # identical at first, then apart
+        assert r.witness[f"{label}_max_diff"] == float(d.max())
+        assert r.witness[f"{label}_first_diff_time"] == float(run.t[bad[0]])
+        if projection:
+            assert r.witness["projected_master_max_multiplier"] == float(np.max(np.abs(m.sigma))) > 0
+    # the h-scaling through the detector: V of the detector pairs, by hand
+    hs = pr.check_proposition1_h_scaling(dm, h=h, t_end=t_end, factors=(2.0, 1.0), chi_tolerance=tol)
+    clean = pr.check_proposition1_h_scaling(dm, h=h, t_end=t_end, factors=(2.0, 1.0))
+    run, s, m, _ = _detector_pair(dm, h, t_end, False, True, tol)
+    e, v = s.q - m.q, s.u - m.u
+    V = 0.5 * np.einsum("ki,ij,kj->k", v, dm.system.M, v) + 0.5 * np.einsum("ki,ij,kj->k", e, dm.system.K, e)
+    rms = math.sqrt(float(np.mean(2.0 * np.maximum(V, 0.0))))
+    assert hs.witness["plain_master__jump_slave_rms"][1] == pytest.approx(rms, rel=1e-9)
+    assert hs.witness["plain_master__jump_slave_rms"] != clean.witness["plain_master__jump_slave_rms"]
+
+
+def test_worst_pair_is_the_one_with_the_lower_order():
+    """restitution 0.2: the projected pair converges more slowly (order ≈ 1.06 against 2.2)."""
+    sc = pc.load("double_mass", {"impact.restitution": 0.2, "simulation.t_end": T_END})
+    r = pr.check_proposition1_h_scaling(sc, h=H, factors=(4.0, 2.0, 1.0), min_order=1.5)
+    po, pp = r.witness["plain_master__jump_slave_order"], r.witness["projected_master__nojump_slave_order"]
+    assert pp < 1.5 < po
+    assert r.margin == pytest.approx(pp - 1.5, rel=1e-12) and r.passed is False
+    assert r.reason.startswith("projected_master__nojump_slave: the difference does not shrink")
