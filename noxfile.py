@@ -63,7 +63,8 @@ MUTATION_TARGETS: dict[str, tuple[list[str], list[str]]] = {
                ["tests/test_step_physics.py", "tests/test_contact.py", "tests/test_timestepping.py",
                 "tests/test_impact_laws.py", "tests/test_mutants_impact.py"]),
     "contact": (["observer/contact/*"], ["tests/test_contact.py"]),
-    "observers": (["observer/observers.py"], ["tests/test_observers.py", "tests/test_stepping_units.py"]),
+    "observers": (["observer/observers.py"], ["tests/test_observers.py", "tests/test_stepping_units.py",
+                                              "tests/test_mutants_observers.py"]),
     # proofs_checks, one entry per group of files, each against the fast tests that reach it
     # (equivalent mutants: tests/mutants/proofs_checks_*.md; overview tests/mutants/proofs_checks.md)
     "proofs_checks_lyapunov": (["proofs_checks/lyapunov.py"],
