@@ -40,3 +40,29 @@ def test_observer_list_must_be_an_array():
         ObserverConfig.from_table({"observers": "jump"}, 1, np.zeros(1), np.zeros(1))
     assert info.value.field == "observer.observers"
     assert info.value.problem == "must be an array of design names, got 'jump'"
+
+
+def test_projection_part_uses_recorded_pre_jump_states_only_when_both_have_them():
+    """ΔV's projection part: ½‖e⁺‖²_K − ½‖e⁻‖²_K with e⁻ from the recorded ``q_pre`` of both
+    trajectories (any metric); with one of them missing, from the K-metric multipliers Σ."""
+    from observer.observers import lyapunov_decrements
+    s = observer.load_scenario("double_mass").system
+    rng = np.random.default_rng(3)
+    a = {k: rng.standard_normal((3, 2)) for k in ("q", "u", "q_pre")}
+    b = {k: rng.standard_normal((3, 2)) for k in ("q", "u", "q_pre")}
+    a["P"], b["P"] = rng.standard_normal((3, 1)), rng.standard_normal((3, 1))
+    K = s.K
+    e, e_pre = a["q"] - b["q"], a["q_pre"] - b["q_pre"]
+    expected = [0.5 * (e[k] @ K @ e[k] - e_pre[k] @ K @ e_pre[k]) for k in (1, 2)]
+    out = lyapunov_decrements(s, 0.01, a, b)
+    assert out["projection"][0] == 0.0 and np.allclose(out["projection"][1:], expected, rtol=1e-12, atol=0)
+    # b without q_pre: the K-metric form from Σ (none given: no jump, part 0)
+    b_plain = {k: v for k, v in b.items() if k != "q_pre"}
+    for x, y in ((a, b_plain), (b_plain, a)):
+        out = lyapunov_decrements(s, 0.01, x, y)
+        assert np.array_equal(out["projection"], np.zeros(3))
+    sig = {**b_plain, "sigma": np.array([[0.0], [0.5], [0.0]])}
+    out = lyapunov_decrements(s, 0.01, a, sig)
+    ee = a["q"][1] - b["q"][1]
+    em = ee + np.linalg.solve(K, s.W @ np.array([0.5]))          # e⁻ = e⁺ − K⁻¹W(Σ_a − Σ_b), Σ_a = 0
+    assert out["projection"][1] == pytest.approx(0.5 * (ee @ K @ ee - em @ K @ em), rel=1e-12)
