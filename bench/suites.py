@@ -13,9 +13,10 @@ Running the suite is :func:`bench.run.run_suite`; the kinds of cases are
 ``peers``           one problem in Siconos and in the toolkit (:mod:`bench.peers`): time per
                     step of both, their ratio, the largest trajectory difference.
 
-``quick`` is a first look (≤ 30 s on 2 cores once the kernel is compiled), ``full`` the real
-numbers (≤ 10 minutes), ``peers`` the Siconos comparison alone, ``smoke`` a seconds-long grid
-for the tests. Suites also say whether and how to run the pytest-benchmark micro-benchmarks
+``quick`` is a first look (measured: 36 s of CPU in one process once the kernel is compiled,
+156 cases), ``full`` the real numbers (measured: 11 min of CPU, Siconos peers and the
+micro-benchmarks included), ``peers`` the Siconos comparison alone, ``smoke`` a seconds-long
+grid for the tests. Suites also say whether and how to run the pytest-benchmark micro-benchmarks
 of ``bench/micro``. Every time loop runs on the compiled engine (the default of
 :func:`observer.simulate`) except where a case asks for a contact solver the kernel does not
 have (``solver`` other than ``"pivoting"``: the numpy engine, :func:`engine_for`).
@@ -512,10 +513,10 @@ _SUITE_BUILDERS: dict[str, Callable[[], Suite]] = {
                             ("peers",), False),
     "micro": lambda: Suite("micro", "pytest-benchmark: time loops on both engines, contact "
                            "solves", (), MICRO_FULL, {"micro-benchmarks": " ".join(MICRO_FULL)}),
-    "quick": lambda: _suite("quick", "first look: small version of every suite (≤ 30 s on 2 "
-                            "cores, kernel compiled)", False, KINDS[:-1], True),
+    "quick": lambda: _suite("quick", "first look: small version of every suite (≈ 36 s of "
+                            "CPU once the kernel is compiled)", False, KINDS[:-1], True),
     "full": lambda: _suite("full", "every suite with the real numbers, Siconos peers included "
-                           "(≤ 10 minutes on 2 cores)", True, KINDS, True),
+                           "(≈ 11 min of CPU)", True, KINDS, True),
     "smoke": smoke_suite,
 }
 
