@@ -152,7 +152,7 @@ def run_case(case: Case, ctx: Context) -> list[dict]:
     """Run one case; return its rows (environment and date included)."""
     runner = {"observers": run_observers, "work_precision": run_work_precision,
               "robustness": run_robustness, "scaling": run_scaling, "checks": run_checks,
-              "peers": run_peers}[case.kind]
+              "peers": run_peers, "hard": run_hard}[case.kind]
     return _finish(runner(case, ctx), ctx)
 
 
@@ -521,6 +521,14 @@ def run_peers(case: Case, ctx: Context) -> list[dict]:
            "N": N if case.scenario == "rocking_chain" else None,
            "cpu_scope": "median wall time per step of the repeats (both sides)"}
     return [out]
+
+
+# ------------------------------------------------------------------------------------- hard
+def run_hard(case, ctx: Context) -> list[dict]:
+    """One hard case (:func:`bench.hard.run_hard`): one row."""
+    from bench import hard
+
+    return hard.run_hard(case, ctx)
 
 
 # ----------------------------------------------------------------------------------- checks

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.hard import METRICS as HARD_METRICS
 from observer.metrics import RHOS, above_column, settle_column, sync_column
 
 Columns = dict[str, Any]
@@ -69,6 +70,7 @@ ROWS: dict[str, Columns] = {
     "checks": {**CASE, **TIMING, "check": str, "equation": str, "check_status": str,
                "passed": (bool, type(None)), "margin": float, "tolerance": float, "witness": str,
                "reason": str, "check_elapsed_s": float},
+    "hard": {**CASE, **TIMING, **HARD_METRICS},
 }
 """Kind → the columns of its rows and their types (``peers`` rows are declared by
 :mod:`bench.peers`, whose columns depend on the peer's run)."""

@@ -33,7 +33,7 @@ from observer.metrics import RHOS  # noqa: F401  (the one threshold list; rows h
 from observer.observers import OBSERVER_DESIGNS
 from observer.scenarios import SCENARIOS, info
 
-KINDS = ("observers", "work_precision", "robustness", "scaling", "checks", "peers")
+KINDS = ("observers", "work_precision", "robustness", "scaling", "checks", "hard", "peers")
 
 
 @dataclass(frozen=True)
@@ -409,6 +409,13 @@ def check_scenarios(full: bool = True) -> tuple[str, ...]:
     return tuple(n for n in SCENARIOS if info(n).suite.get("checks") in levels)
 
 
+def hard_cases(full: bool = True) -> list:
+    """The hard cases of :mod:`bench.hard` (``quick``: those taking < 2 s together)."""
+    from bench import hard
+
+    return hard.hard_cases(full)
+
+
 def check_cases(full: bool = True) -> list[Case]:
     """One :func:`proofs_checks.run_checks` call per scenario of :func:`check_scenarios` (seed 0)."""
     return [Case("checks", s, observers=()) for s in check_scenarios(full)]
@@ -463,13 +470,14 @@ def _settings(full: bool) -> dict:
         "peers": ("; ".join(f"{p}: h = {h:g} s, {int(round(T / h))} steps" for p, h, T, _ in PEER_CASES)
                   if full else "not in this suite (python -m bench run peers)"),
         "micro-benchmarks": " ".join(MICRO_FULL if full else MICRO_QUICK),
+        "hard cases": "; ".join(f"{c.name}: h = {c.h:g} s, T = {c.t_end:g} s" for c in hard_cases(full)),
     }
 
 
 def _suite(name: str, description: str, full: bool, kinds: tuple[str, ...], micro: bool) -> Suite:
     builders = {"observers": observer_cases, "work_precision": work_precision_cases,
                 "robustness": robustness_cases, "scaling": scaling_cases,
-                "checks": check_cases, "peers": lambda full: peer_cases()}
+                "checks": check_cases, "hard": hard_cases, "peers": lambda full: peer_cases()}
     cases: list[Case] = []
     for k in kinds:
         cases += builders[k](full)
@@ -494,6 +502,7 @@ def smoke_suite() -> Suite:
         Case("scaling", "rocking_chain", params=(("param.N", 2),), observers=(), h=1e-3, t_end=0.2),
         Case("scaling", "rocking_chain", params=(("param.N", 4),), observers=(), h=1e-3, t_end=0.2),
         Case("checks", "bouncing_ball", observers=()),
+        *[c for c in hard_cases(False) if c.name == "Zeno e = 0.01"],
     )
     return Suite("smoke", "tiny grid of every kind, for tests (seconds)", cases, None,
                  {"note": "smoke test settings; numbers are not meaningful"})
@@ -517,6 +526,8 @@ _SUITE_BUILDERS: dict[str, Callable[[], Suite]] = {
                             "CPU once the kernel is compiled)", False, KINDS[:-1], True),
     "full": lambda: _suite("full", "every suite with the real numbers, Siconos peers included "
                            "(≈ 11 min of CPU)", True, KINDS, True),
+    "hard": lambda: _suite("hard", "hard cases: status, NaN, residual and error against the "
+                           "reference (issue 12 item 5)", True, ("hard",), False),
     "smoke": smoke_suite,
 }
 

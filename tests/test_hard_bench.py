@@ -122,7 +122,7 @@ def test_section_states_each_case(quick_rows, tmp_path):
     for cells, (_, r) in zip(table.rows, quick_rows.iterrows()):
         assert "nan" not in " ".join(cells).lower()
         assert cells[col["status"]] == r["status"]
-        assert cells[col["NaN"]] == "no"
+        assert cells[col["NaN in result"]] == "no"
         if r["reference"] == "none":
             assert cells[col["error max"]] == "n/a (no reference)"
             assert cells[col["reference"]] == "none: " + r["reference_note"]

@@ -31,7 +31,7 @@ from reports.tables import fmt, fmt_ratio, fmt_rho, fmt_time
 
 REPO = Path(__file__).resolve().parent.parent
 SECTIONS = ["Key numbers", "Scenarios: trajectories", "Observer table", "Work-precision",
-            "Robustness", "Scaling", "Peers: Siconos", "Micro-benchmarks", "Proof-step checks",
+            "Robustness", "Hard cases", "Scaling", "Peers: Siconos", "Micro-benchmarks", "Proof-step checks",
             "Settings and tolerances", "Limitations", "How to reproduce"]
 
 

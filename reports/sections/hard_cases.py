@@ -96,7 +96,7 @@ def cases_table(rows: pd.DataFrame) -> Table:
     """One row per hard case."""
     t = Table("Hard cases: outcome, health and error against the reference",
               ["case", "what makes it hard (and how to read its error)", "status",
-               "stop reason / warnings", "NaN", "steps", "CPU (s)", "max residual", "tolerance",
+               "stop reason / warnings", "NaN in result", "steps", "CPU (s)", "max residual", "tolerance",
                "residual held", "penetration / ℓ", "h·ω_max", "reference", "error max",
                "error mean"])
     for _, r in rows.iterrows():
