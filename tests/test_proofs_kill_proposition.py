@@ -180,7 +180,9 @@ def _detector_pair(sc, h, t_end, projection, jumps, tol):
 
 
 def test_detector_with_a_tolerance_by_hand(dm):
-    tol, h, t_end = 1e-3, 4e-3, 0.5                      # not the scenario's grid
+    # δ = 1e-4 on a grid other than the scenario's: the plain and the projected master's
+    # detectors differ here, and so does the jump pair's largest difference (1e-4 vs 1e-3)
+    tol, h, t_end = 1e-4, 4e-3, 0.5
     r = pr.check_proposition1_exact(dm, h=h, t_end=t_end, chi_tolerance=tol)
     assert r.witness["h"] == pytest.approx(h, rel=1e-12) and r.witness["horizon"] == pytest.approx(t_end)
     for label, projection, jumps in (("plain_master__nojump_slave", False, False),
@@ -189,10 +191,10 @@ def test_detector_with_a_tolerance_by_hand(dm):
         assert chi.any()
         d = np.max(np.hstack([np.abs(s.q - m.q), np.abs(s.u - m.u), np.abs(s.P - m.P)]), axis=1)
         bad = np.flatnonzero(d > 0)
-        assert bad.size and bad[0] > 1                    # identical at first, then apart
         assert r.witness[f"{label}_max_diff"] == float(d.max())
-        assert r.witness[f"{label}_first_diff_time"] == float(run.t[bad[0]])
+        assert r.witness[f"{label}_first_diff_time"] == (float(run.t[bad[0]]) if bad.size else None)
         if projection:
+            assert bad.size and bad[0] > 1                # identical at first, then apart
             assert r.witness["projected_master_max_multiplier"] == float(np.max(np.abs(m.sigma))) > 0
     # the h-scaling through the detector: V of the detector pairs, by hand
     hs = pr.check_proposition1_h_scaling(dm, h=h, t_end=t_end, factors=(2.0, 1.0), chi_tolerance=tol)

@@ -16,8 +16,9 @@ TITLE = "Work-precision: error against CPU time, fitted orders"
 INTRO = ("Every point is one run at one step size h; its error is measured against the reference "
          "stated in the table: the closed form where one exists, otherwise the exact event-driven "
          "solution of the same scenario (the master and the measured observer, computed once "
-         "per sweep on its finest grid and sampled on each run's grid). Error norm: {norm}. Fitted order p: least-squares slope of log error against log h; work "
-         "slope s: error ∝ CPU^(−s).")
+         "per sweep on its finest grid and sampled on each run's grid). Error norm: {norm}. "
+         "Fitted order p: least-squares slope of log error against log h; work slope s: "
+         "error ∝ CPU^(−s).")
 
 
 def _solver_cell(r: pd.Series) -> str:
