@@ -157,14 +157,20 @@ def test_h_scaling_default_step_factors_and_order(dm):
     assert r.margin == pytest.approx(worst - 0.5, rel=1e-12)             # min_order 0.5
 
 
-def test_the_check_ignores_the_scenarios_coupling_window():
+def test_the_check_ignores_the_scenarios_observer_source_and_coupling_window(dm):
     """The proposition's slave is driven by the master's χ over the whole run, whatever the
-    scenario's [observer] coupling window says."""
-    for ov in ({"observer.coupling": [0.3, 20.0]},):
+    scenario's [observer] table says (a coupling window; the slave's own χ as source, which
+    would make the mismatched pairs' V vanish)."""
+    ref = pr.check_proposition1_h_scaling(dm, h=H, t_end=0.3, factors=(2.0, 1.0))
+    assert min(ref.witness["plain_master__jump_slave_rms"]) > 0
+    for ov in ({"observer.coupling": [0.3, 20.0]}, {"observer.source": "self"}):
         sc = pc.load("double_mass", {"simulation.t_end": T_END, "simulation.h": H, **ov})
         r = pr.check_proposition1_exact(sc)
         assert r.passed is True and r.margin == 0.0, ov
         assert r.witness["plain_master__nojump_slave_closed_steps"] > 0
+        r = pr.check_proposition1_h_scaling(sc, h=H, t_end=0.3, factors=(2.0, 1.0))
+        for label in ("plain_master__jump_slave_rms", "projected_master__nojump_slave_rms"):
+            assert r.witness[label] == pytest.approx(ref.witness[label], rel=1e-6), (ov, label)
 
 
 def _detector_pair(sc, h, t_end, projection, jumps, tol):
