@@ -227,9 +227,14 @@ def projected_sets(inp, rows: np.ndarray, active: np.ndarray, chi: np.ndarray) -
 
 
 def _distinct(masks: np.ndarray) -> list[np.ndarray]:
-    """The distinct non-empty rows of a bool matrix."""
+    """The distinct non-empty rows of a bool matrix (runs of equal rows collapsed first: the
+    closed sets of a run change rarely, and sorting every recorded row cost more than the
+    kernel's steps)."""
     if masks.size == 0:
         return []
+    keep = np.ones(masks.shape[0], dtype=bool)
+    keep[1:] = np.any(masks[1:] != masks[:-1], axis=1)
+    masks = masks[keep]
     packed = np.unique(np.packbits(masks, axis=1), axis=0)
     m = masks.shape[1]
     return [r for r in np.unpackbits(packed, axis=1, count=m).astype(bool) if r.any()]

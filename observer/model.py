@@ -61,21 +61,38 @@ class Harmonic:
         return self.constant.shape[0]
 
     def __call__(self, t: Any) -> np.ndarray:
-        """Evaluate at scalar ``t`` (shape (d,)) or a time array (shape (len(t), d))."""
+        """Evaluate at scalar ``t`` (shape (d,)) or a time array (shape (len(t), d)).
+
+        A term whose amplitude is nonzero in only some columns evaluates its trigonometric
+        function once per distinct phase among those columns (a zero column adds ±0 and is
+        skipped): every entry is the same ``a_j·trig(ω t + p_j)`` as column by column. (The
+        rocking chain's ground motion has one phase and 2 nonzero columns out of 2N.)
+        """
         t_arr = np.asarray(t, dtype=float)
         out = np.broadcast_to(self.constant, t_arr.shape + (self.dim,)).copy()
         trig = np.cos if self.kind == "cos" else np.sin
         for a, w, p in zip(self.amplitude, self.omega, self.phase):
-            out += a * trig(w * t_arr[..., None] + p)
+            cols = np.flatnonzero(a)
+            if cols.size == self.dim:
+                out += a * trig(w * t_arr[..., None] + p)
+            elif cols.size:
+                ph, inv = np.unique(p[cols], return_inverse=True)
+                out[..., cols] += a[cols] * trig(w * t_arr[..., None] + ph)[..., inv]
         return out
 
     def derivative(self, t: Any) -> np.ndarray:
-        """Exact time derivative, same shapes as :meth:`__call__`."""
+        """Exact time derivative, same shapes (and the same per-phase evaluation) as
+        :meth:`__call__`."""
         t_arr = np.asarray(t, dtype=float)
         out = np.zeros(t_arr.shape + (self.dim,))
+        dtrig = (lambda x: -np.sin(x)) if self.kind == "cos" else np.cos
         for a, w, p in zip(self.amplitude, self.omega, self.phase):
-            arg = w * t_arr[..., None] + p
-            out += a * w * (-np.sin(arg) if self.kind == "cos" else np.cos(arg))
+            cols = np.flatnonzero(a)
+            if cols.size == self.dim:
+                out += a * w * dtrig(w * t_arr[..., None] + p)
+            elif cols.size:
+                ph, inv = np.unique(p[cols], return_inverse=True)
+                out[..., cols] += a[cols] * w * dtrig(w * t_arr[..., None] + ph)[..., inv]
         return out
 
     def bound(self) -> np.ndarray:
