@@ -88,7 +88,7 @@ def _helper(name: str, fn: Callable[..., CheckResult]) -> Callable[..., CheckRes
                       f"Call it with that function's arguments, or with a scenario (name, TOML path\n"
                       f"or Scenario) and keyword options; raises AssertionError with the margin and\n"
                       f"the witness. See :mod:`proofs_checks.asserts`.\n\n"
-                      f"Checked: {(fn.__doc__ or '').strip().splitlines()[0]}")
+                      f"Checked: {next(iter((fn.__doc__ or '').strip().splitlines()), '')}")
     return helper
 
 

@@ -54,6 +54,7 @@ def not_definite_reason(K: np.ndarray, consequence: str) -> str | None:
 
 def _definite(name: str, label: str, A: np.ndarray, equation: str, *, symmetric: bool,
               semidefinite_ok_reason: str | None, rcond_min: float) -> CheckResult:
+    A = np.asarray(A, dtype=float)
     eig, scale, asym = _spectrum(A)
     evec = np.linalg.eigh(0.5 * (A + A.T))[1][:, 0]
     rel = float(eig[0] / scale) if scale > 0 else 0.0
@@ -118,11 +119,13 @@ def check_constraints_independent(W: np.ndarray, *, cond_max: float = 1e6) -> Ch
 
     ``margin = log10(cond_max) − log10(σ_max/σ_min)`` (decades to spare); the witness holds
     the singular values, the condition number and the right singular vector of σ_min
-    (the combination of columns that nearly vanishes).
+    (the combination of columns that nearly vanishes; for m > n a unit vector c with
+    W c = 0, from the full SVD).
     """
     W = np.asarray(W, dtype=float)
     n, m = W.shape
-    U, s, Vt = np.linalg.svd(W, full_matrices=False)
+    # full V: for m > n the last row of Vt spans part of the null space of W (σ = 0)
+    U, s, Vt = np.linalg.svd(W, full_matrices=True)
     smin = float(s[-1]) if m <= n else 0.0
     cond = float(s[0] / smin) if smin > 0 else float("inf")
     witness = {"n": n, "m": m, "sigma_min": smin, "sigma_max": float(s[0]), "condition_number": cond,

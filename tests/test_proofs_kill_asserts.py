@@ -129,3 +129,29 @@ def test_helper_frames_are_hidden_in_pytest_reports():
     mine = os.path.join("proofs_checks", "asserts.py")
     assert sum(p.endswith(mine) for p in every) == 2                  # the helper, then assert_result
     assert not any(p.endswith(mine) for p in shown)
+
+
+def test_helper_docstring_from_undocumented_and_indented_checks():
+    """A check function without a docstring gets a helper whose docstring ends in an empty
+    "Checked: " (it used to raise IndexError at import); a docstring that starts with a
+    blank line contributes its first non-blank line, stripped."""
+    def bare(*args, **kwargs):
+        return _ok()
+    bare.__doc__ = None
+
+    def blank(*args, **kwargs):
+        return _ok()
+    blank.__doc__ = "   \n  "
+
+    def indented(*args, **kwargs):
+        """
+        First line of the check.
+
+        More text.
+        """
+        return _ok()
+    for fn, last in ((bare, "Checked: "), (blank, "Checked: "), (indented, "Checked: First line of the check.")):
+        h = _helper("mass_spd", fn)
+        assert h.__doc__.endswith("See :mod:`proofs_checks.asserts`.\n\n" + last)
+        assert h.__doc__.splitlines()[0] == f"Assert that :func:`{__name__}.{fn.__name__}` passes."
+        assert h().passed is True

@@ -357,3 +357,51 @@ def test_sup_norm_locates_the_sup_to_the_optimizer_precision():
     for samples in (5, 7):
         S, ts = fo._sup_norm(f, 0.0, 3.0, samples)
         assert abs(ts - math.pi / 2) < 1e-8 and S == pytest.approx(1.0, abs=1e-15)
+
+
+# ----------------------------------------------------------------------------- defects found by mutmut
+def test_more_contacts_than_dofs_witness_is_a_vanishing_combination():
+    """m > n: the witness ``null_combination`` is a unit vector c with W c = 0 (the columns'
+    dependence the docstring promises), not the right singular vector of the smallest
+    *nonzero* σ that the reduced SVD ends with. Checked from W itself: ‖W c‖ against
+    round-off of ‖W‖, and for rank n = 2 against the one null direction (1, 1, −1)/√3."""
+    W = np.array([[1.0, 0.0, 1.0], [0.0, 1.0, 1.0]])                 # n = 2, m = 3, rank 2
+    c = pc.check_constraints_independent(W).witness["null_combination"]
+    assert c.shape == (3,) and abs(np.linalg.norm(c) - 1.0) < 1e-15
+    assert np.linalg.norm(W @ c) <= 1e-14 * np.linalg.norm(W, 2)
+    assert abs(abs(c @ np.array([1.0, 1.0, -1.0])) / math.sqrt(3.0) - 1.0) < 1e-14
+    # rank 1, a two-dimensional null space: any unit c in it will do
+    W1 = np.array([[1.0, 2.0, 0.5]])
+    c = pc.check_constraints_independent(W1).witness["null_combination"]
+    assert abs(np.linalg.norm(c) - 1.0) < 1e-15 and abs(W1 @ c).max() <= 1e-14 * np.linalg.norm(W1)
+
+
+@pytest.mark.parametrize("check", [pc.check_mass_spd, pc.check_stiffness_spd, pc.check_damping_pd])
+def test_nested_lists_and_booleans_read_like_float_arrays(check):
+    """A nested list is the matrix it spells (it used to raise AttributeError on ``.T``);
+    a boolean matrix is read as 0/1 numbers in the witness eigenvector too (with ``A + Aᵀ``
+    taken on booleans it is a logical or: the symmetric part of [[1, 1], [0, 0]] would be
+    [[½, ½], [½, 0]] instead of [[1, ½], [½, 0]])."""
+    cases = ([[2.0, 1.0], [1.0, 3.0]],                                # SPD
+             [[1, 0], [0, 1]],                                          # integers
+             [[1.0, 0.3], [0.0, 2.0]],                                  # not symmetric
+             [[1.0, 2.0], [2.0, 1.0]],                                  # indefinite (−1, 3)
+             [[True, True], [False, False]])                            # boolean, not symmetric
+    for A in cases:
+        got, ref = check(A), check(np.array(A, dtype=float))
+        assert (got.passed, got.reason, got.margin) == (ref.passed, ref.reason, ref.margin)
+        for key in ("lambda_min", "lambda_max", "relative_lambda_min", "asymmetry"):
+            assert got.witness.get(key) == ref.witness.get(key)
+        v, u = got.witness["eigenvector_min"], ref.witness["eigenvector_min"]
+        assert abs(abs(v @ u) - 1.0) < 1e-14
+    # the verdicts themselves, from the spectra: SPD passes, indefinite fails everywhere
+    assert check([[2.0, 1.0], [1.0, 3.0]]).passed is True
+    r = check([[1.0, 2.0], [2.0, 1.0]])
+    assert r.passed is False and r.witness["lambda_min"] == pytest.approx(-1.0, rel=1e-14)
+    # the symmetric part of the boolean [[1, 1], [0, 0]] is [[1, ½], [½, 0]]: λ_min = (1 − √2)/2
+    lam = (1.0 - math.sqrt(2.0)) / 2.0
+    v = check([[True, True], [False, False]]).witness["eigenvector_min"]
+    S = np.array([[1.0, 0.5], [0.5, 0.0]])
+    assert np.linalg.norm(S @ v - lam * v) < 1e-14
+    if check is not pc.check_damping_pd:                               # required symmetric
+        assert check([[1.0, 0.3], [0.0, 2.0]]).passed is False
