@@ -498,13 +498,18 @@ def robustness_summary(bands: pd.DataFrame, floor: float = ROBUST_FLOOR) -> pd.D
 
 
 # ------------------------------------------------------------------- work-precision solvers
-def solver_comparison(orders: pd.DataFrame) -> pd.DataFrame:
+def solver_comparison(orders: pd.DataFrame, wp: pd.DataFrame | None = None) -> pd.DataFrame:
     """The same method (scenario · target · law) with each fast contact solver and with the
     reference solver: total CPU time of the sweep, its ratio reference / solver and the
     smallest errors. Columns ``scenario, target, law, solver, cpu_solver, cpu_reference,
-    ratio, best_err_solver, best_err_reference``."""
+    ratio, best_err_solver, best_err_reference, steps``.
+
+    With the points ``wp`` (the rows :func:`wp_orders` fitted), the CPU times and smallest
+    errors are taken over the step sizes both sweeps ran (``steps``: how many), so that a
+    fast solver's longer sweep is not compared with the reference's shorter one; without
+    them, over each whole sweep (``steps`` NaN)."""
     cols = ["scenario", "target", "law", "solver", "cpu_solver", "cpu_reference", "ratio",
-            "best_err_solver", "best_err_reference"]
+            "best_err_solver", "best_err_reference", "steps"]
     if orders.empty:
         return pd.DataFrame(columns=cols)
     keys = ["scenario", "target", "law"]
@@ -513,10 +518,23 @@ def solver_comparison(orders: pd.DataFrame) -> pd.DataFrame:
     ref = orders[orders["solver"] == registry.REFERENCE_SOLVER]
     fast = orders[orders["solver"] != registry.REFERENCE_SOLVER]
     both = fast.merge(ref, on=keys, suffixes=("_s", "_r"))
-    rows = [{"scenario": r["scenario"], "target": r["target"], "law": r["law"],
-             "solver": r["solver_s"], "cpu_solver": r["cpu_total_s"], "cpu_reference": r["cpu_total_r"],
-             "ratio": r["cpu_total_r"] / r["cpu_total_s"], "best_err_solver": r["best_err_s"],
-             "best_err_reference": r["best_err_r"]} for _, r in both.iterrows()]
+    rows = []
+    for _, r in both.iterrows():
+        cpu_s, cpu_r, err_s, err_r, steps = (r["cpu_total_s"], r["cpu_total_r"], r["best_err_s"],
+                                             r["best_err_r"], float("nan"))
+        if wp is not None:
+            ok = wp[wp["status"] == "ok"]
+            a, b = ok[ok["method"] == r["method_s"]], ok[ok["method"] == r["method_r"]]
+            common = np.intersect1d(a["h"].to_numpy(float), b["h"].to_numpy(float))
+            if common.size == 0:
+                continue
+            a, b = a[a["h"].isin(common)], b[b["h"].isin(common)]
+            cpu_s, cpu_r = a["cpu_time_s"].sum(), b["cpu_time_s"].sum()
+            err_s, err_r, steps = a["err_mean"].min(), b["err_mean"].min(), int(common.size)
+        rows.append({"scenario": r["scenario"], "target": r["target"], "law": r["law"],
+                     "solver": r["solver_s"], "cpu_solver": cpu_s, "cpu_reference": cpu_r,
+                     "ratio": cpu_r / cpu_s, "best_err_solver": err_s, "best_err_reference": err_r,
+                     "steps": steps})
     return pd.DataFrame(rows, columns=cols)
 
 

@@ -937,6 +937,28 @@ def test_analysis_solver_comparison_and_check_counts():
     assert counts.loc["nojump", ["PASS", "FAIL", "n/a"]].sum() == 0
 
 
+def test_solver_comparison_uses_only_the_step_sizes_both_sweeps_ran():
+    """A fast solver's sweep that goes to smaller h than the reference's is compared with it
+    on the shared step sizes only: CPU sums and smallest errors over those h (the whole-sweep
+    comparison would credit the fast solver with its extra, smaller steps)."""
+    from reports.analysis import solver_comparison, wp_orders
+
+    rows = pd.DataFrame([r for _, rs in _synthetic_rows() for r in rs])
+    wp = rows[(rows["kind"] == "work_precision") & (rows["scenario"] == "double_mass")
+              & (rows["target"] == "master")]
+    h_ref = sorted(set(wp["h"]))[-3:]                      # the reference ran the 3 largest h
+    wp = wp[(wp["solver"] != "reference") | wp["h"].isin(h_ref)]
+    comp = solver_comparison(wp_orders(wp), wp).iloc[0]
+    piv = wp[(wp["solver"] == "pivoting") & wp["h"].isin(h_ref)]
+    ref = wp[wp["solver"] == "reference"]
+    assert comp["steps"] == 3
+    assert comp["cpu_solver"] == pytest.approx(piv["cpu_time_s"].sum())
+    assert comp["cpu_reference"] == pytest.approx(ref["cpu_time_s"].sum())
+    assert comp["best_err_solver"] == pytest.approx(piv["err_mean"].min())
+    whole = solver_comparison(wp_orders(wp)).iloc[0]
+    assert whole["best_err_solver"] < comp["best_err_solver"]     # the extra small steps
+
+
 def test_analysis_robustness_summary_breaks_from_the_first_size_above_the_floor():
     from reports.analysis import ROBUST_FLOOR, robustness_bands, robustness_summary
 
