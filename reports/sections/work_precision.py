@@ -79,8 +79,8 @@ def solver_sentence(comp: pd.DataFrame) -> str:
             f"(relative) on the same method and step sizes; the CPU time differs by a factor "
             f"{fmt_ratio(comp['ratio'].min())} … {fmt_ratio(comp['ratio'].max())}. The reference "
             f"solver's sweeps cover only the largest step sizes (at most "
-            f"{fmt_int(comp['steps'].max())}), so its fitted orders in the table above are "
-            f"pre-asymptotic where the fast solver's longer sweep is needed (grazing, the chain).")
+            f"{fmt_int(comp['steps'].max())}), so its fitted orders in the table above can be "
+            f"pre-asymptotic: the fast solver's longer sweep of the same method gives the order.")
 
 
 def points_table(wp: pd.DataFrame) -> Table:
