@@ -10,7 +10,9 @@ definitions. Written against the mutation run of ``monotonicity.py``
 
 from __future__ import annotations
 
+import inspect
 import itertools
+import warnings
 
 import numpy as np
 import pytest
@@ -98,7 +100,8 @@ def test_add_set_sorts_and_deduplicates():
     mo.add_set(sets, np.array([0, 2]))
     mo.add_set(sets, [])
     mo.add_set(sets, [1])
-    assert [s.tolist() for s in sets.values()] == [[0, 2], [1]]
+    mo.add_set(sets, np.array([3.0, 1.0]))            # indices read back as floats (e.g. from JSON)
+    assert [s.tolist() for s in sets.values()] == [[0, 2], [1], [1, 3]]
     assert all(s.dtype == np.int64 for s in sets.values())
 
 
@@ -108,6 +111,8 @@ def test_candidate_sets_exhaustive_in_order():
     # the bound is inclusive; visited sets come after, once
     got = [s.tolist() for s in mo.candidate_sets(3, rng(), exhaustive_up_to=3, visited=[[2, 1], [0, 2, 1]])]
     assert len(got) == 7 and got[-1] == [0, 1, 2]
+    assert len(mo.candidate_sets(4, rng(), exhaustive_up_to=4, random_sets=0)) == 15
+    assert len(mo.candidate_sets(4, rng(), exhaustive_up_to=3, random_sets=0)) == 4 + 6 + 1
 
 
 def test_candidate_sets_beyond_the_exhaustive_bound():
@@ -191,9 +196,26 @@ def test_sample_distributions(pair):
     np.testing.assert_allclose(np.cov(z.T), delassus_ref(pair, [0, 1]), rtol=0.15, atol=0.03)
 
 
+def test_sample_distributions_of_one_contact(pair):
+    """One contact, G = g: nearby pairs start half the time from an approaching velocity
+    (−|z|), half from z ~ N(0, g); the pair against rest is −|z₁| + 0.3 z₂, of mean
+    −√(2g/π) and variance g(1 − 2/π + 0.09)."""
+    prob = problem(pair, [0], E_BAD)
+    g = float(delassus_ref(pair, [0])[0, 0])
+    pairs = mo._samples(prob, rng(11), 8000)
+    near = np.array([a[0] for a, _ in pairs[2::4]])
+    assert np.mean(near <= 0) == pytest.approx(0.75, abs=0.04)
+    rest = np.array([a[0] for a, _ in pairs[3::4]])
+    assert np.mean(rest) == pytest.approx(-np.sqrt(2 * g / np.pi), rel=0.05)
+    assert np.var(rest) == pytest.approx(g * (1 - 2 / np.pi + 0.09), rel=0.1)
+
+
 def test_local_pairs_follow_the_worst_direction(pair):
     prob = problem(pair, [0, 1], E_BAD)
     assert mo._local_pairs(prob, rng(), 0) == []
+    one = mo._local_pairs(prob, rng(), 1)
+    assert len(one) == 1 and np.linalg.norm(one[0][0] - one[0][1]) == pytest.approx(2e-4, rel=1e-9)
+    prob.evals = 0
     assert mo._local_pairs(problem(pair, [1], E_BAD), rng(), 5) == []
     count = 16
     out = mo._local_pairs(prob, rng(5), count)
@@ -236,6 +258,10 @@ def test_global_restitution_passes(pair, law):
     assert r.witness["max_rho_impacting_pairs"] <= 1e-9
     assert r.witness["sets_checked"] == 3 and r.witness["largest_set"] == 2
     assert r.witness["law"] == law and r.reason == ""
+    # impacting pairs of a strictly dissipative map (e < 1) have ρ < 0: the sup 0 is only
+    # attained by separating pairs
+    assert -1.0 < r.witness["max_rho_impacting_pairs"] < 0.0
+    assert all(k in r.witness for k in r.summary_keys)
     assert "max_rho_per_law" not in r.witness
 
 
@@ -259,8 +285,9 @@ def test_per_contact_counterexample_witness(pair, law, fn):
     assert w["max_rho_impacting_pairs"] == w["max_rho"]
     assert w["found_by"] in ("random sample", "adversarial search")
     assert w["sets_checked"] == 3
-    for k in ("max_rho", "law", "active_set", "gamma1_minus", "inner_product", "found_by"):
-        assert k in r.summary_keys
+    assert r.summary_keys == ("max_rho", "law", "active_set", "restitution", "gamma1_minus", "gamma2_minus",
+                              "inner_product", "found_by", "max_rho_impacting_pairs", "sets_checked")
+    assert all(k in w for k in r.summary_keys)
 
 
 def test_per_contact_near_miss(pair):
@@ -273,6 +300,64 @@ def test_per_contact_near_miss(pair):
         assert r.tolerance == factor * rho_star
         assert (r.reason != "") is (not ok)
         assert r.witness["found_by"] == "random sample" and r.witness["sets_checked"] == 1
+
+
+def test_adversarial_search_goes_to_the_most_promising_set(pair):
+    """Of the three sets, the search goes to the one with the largest sampled ρ (the coupled
+    pair, sampled at 0.014 here) and climbs to ρ*; no optimizer warning (options all known)."""
+    law = ImpactLaw.build("newton", E_BAD, 2)
+    rho_star = analytic_rho(delassus_ref(pair, [0, 1]), E_BAD)
+    kw = dict(active_sets=[[0], [1], [0, 1]], samples=4, local_samples=0)
+    r0 = pc.check_impact_monotone(pair, law, rng=rng(3), adversarial_sets=0, **kw)
+    assert 0.0 < r0.witness["max_rho"] < 0.7 * rho_star and r0.witness["active_set"] == [0, 1]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r1 = pc.check_impact_monotone(pair, law, rng=rng(3), adversarial_sets=1, starts=1, maxiter=400, **kw)
+    assert r1.witness["max_rho"] == pytest.approx(rho_star, rel=1e-6)
+    assert r1.witness["found_by"] == "adversarial search" and r1.witness["active_set"] == [0, 1]
+
+
+def test_a_search_without_pairs_finds_nothing(pair):
+    r = pc.check_impact_monotone(pair, ImpactLaw.build("newton", E_BAD, 2), rng=rng(), laws=("poisson", "newton"),
+                                 samples=0, local_samples=0, adversarial_sets=2)
+    w = r.witness
+    assert w["max_rho"] == -np.inf and r.margin == np.inf and r.passed is True
+    assert w["law"] == "poisson" and w["found_by"] == "" and w["evaluations"] == 0
+    assert w["max_rho_impacting_pairs"] == -np.inf and "active_set" not in w
+
+
+def test_documented_defaults():
+    """The defaults the reports rely on (the search budget of the check and of the sets)."""
+    sig = inspect.signature(pc.check_impact_monotone).parameters
+    assert {k: sig[k].default for k in ("samples", "local_samples", "adversarial_sets", "starts", "maxiter",
+                                        "exhaustive_up_to", "tolerance", "solver", "laws")} == \
+        {"samples": 24, "local_samples": 48, "adversarial_sets": 6, "starts": 3, "maxiter": 300,
+         "exhaustive_up_to": 10, "tolerance": 1e-9, "solver": "pivoting", "laws": None}
+    # candidate sets: exhaustive up to 10 contacts inclusive, then 32 random sets
+    assert len(mo.candidate_sets(10, rng())) == 2 ** 10 - 1
+    assert len(mo.candidate_sets(11, rng(), random_sets=0)) == 11 + 55 + 1
+    a, b = mo.candidate_sets(12, rng(1)), mo.candidate_sets(12, rng(1), random_sets=32)
+    assert len(a) == len(b) and all(np.array_equal(x, y) for x, y in zip(a, b))
+    c = mo.candidate_sets(12, rng(1), random_sets=33)
+    assert len(c) == len(a) + 1
+
+
+def test_random_sets_of_the_check_with_visited_sets():
+    """Five contacts, exhaustive only up to 2: singletons, pairs, the full set, random sets
+    of 3-5 contacts (from the check's rng) and the visited sets."""
+    W = np.eye(5) + 0.2 * np.eye(5, k=1)
+    sys5 = linear_system(np.diag([1.0, 2.0, 3.0, 1.5, 2.5]), W)
+    law = ImpactLaw.build("newton", 0.5, 5)
+    kw = dict(samples=1, local_samples=0, adversarial_sets=0, exhaustive_up_to=2)
+    r = pc.check_impact_monotone(sys5, law, rng=rng(2), **kw)
+    n = r.witness["sets_checked"]
+    expected = mo.candidate_sets(5, rng(2), exhaustive_up_to=2)
+    assert n == len(expected) < 31 and r.witness["largest_set"] == 5
+    missing = next(s for s in itertools.combinations(range(5), 3)
+                   if not any(e.tolist() == list(s) for e in expected))
+    r = pc.check_impact_monotone(sys5, law, rng=rng(2), visited=[np.array(missing[::-1])], **kw)
+    assert r.witness["sets_checked"] == n + 1
+    assert pc.check_impact_monotone(sys5, law, rng=rng(2), **dict(kw, exhaustive_up_to=5)).witness["sets_checked"] == 31
 
 
 def test_adversarial_search_improves_a_poor_sample(pair):
@@ -326,20 +411,24 @@ def test_evaluation_count_three_contacts():
 def test_several_laws_and_visited_sets(pair):
     law = ImpactLaw.build("newton", E_BAD, 2)
     rho_star = analytic_rho(delassus_ref(pair, [0, 1]), E_BAD)
-    r = pc.check_impact_monotone(pair, law, rng=rng(), laws=("poisson", "newton"), samples=4,
-                                 local_samples=16, adversarial_sets=0, visited=[np.array([1, 0])])
+    kw = dict(samples=4, local_samples=16, adversarial_sets=0)
+    r = pc.check_impact_monotone(pair, law, rng=rng(1), laws=("poisson", "newton"), visited=[np.array([1, 0])], **kw)
     per = r.witness["max_rho_per_law"]
     assert set(per) == {"newton", "poisson"}
-    assert r.witness["max_rho"] == max(per.values())
-    assert r.witness["law"] == max(per, key=per.get)
-    for v in per.values():
-        assert v == pytest.approx(rho_star, rel=1e-3)
+    assert r.witness["max_rho"] == max(per.values()) == per["newton"]
+    assert per["newton"] == pytest.approx(rho_star, rel=1e-3) and per["poisson"] < per["newton"]
+    assert r.witness["law"] == "newton"                     # the worse law, though listed second
     assert r.witness["sets_checked"] == 3
+    # the evaluations of both laws add up (each law alone: the plan of the evaluation-count test)
+    one = 2 * 2 * 4 + 2 * 4 + 16 * (2 * 2 + 2)
+    assert r.witness["evaluations"] == 2 * one
     # active_sets replaces the candidate and visited sets
     r = pc.check_impact_monotone(pair, law, rng=rng(), active_sets=[[1]], samples=4, adversarial_sets=0,
                                  visited=[np.array([0, 1])])
     assert r.witness["sets_checked"] == 1 and r.witness["largest_set"] == 1 and r.passed is True
     assert r.witness["active_set"] == [1] and r.witness["restitution"] == [0.95]
+    f = pc.check_impact_monotone(pair, law, rng=rng(), active_sets=[np.array([1.0])], samples=4, adversarial_sets=0)
+    assert f.witness["active_set"] == [1] and f.witness["max_rho"] == r.witness["max_rho"]
 
 
 def test_solver_choice_and_unknown_solver(pair):

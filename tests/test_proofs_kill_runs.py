@@ -10,6 +10,8 @@ loops. Written against the mutation run of ``runs.py``
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -36,8 +38,9 @@ def specs(sc):
             SlaveSpec("c", False, np.array([-0.24, -0.17]), np.array([0.0, 0.05]), np.eye(2))]
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def run(sc, specs):
+    """Function scope: the mutation run maps each test to the code it calls itself."""
     return replay(sc, h=H, t_end=T_END, slaves=specs)
 
 
@@ -60,6 +63,12 @@ def test_projector_kinds_and_descriptions(block):
     def mine(k, q, active):
         return q, np.zeros(active.size)
     assert ru.make_projector(st, mine) == (mine, "mine")
+
+    class Projector:
+        def __call__(self, k, q, active):
+            return q, np.zeros(active.size)
+    obj = Projector()
+    assert ru.make_projector(st, obj) == (obj, "custom projector")
     assert ru.make_projector(st, K.copy())[1] == "K (explicit matrix)"
     assert ru.make_projector(st, K.tolist())[1] == "K (explicit matrix)"
     assert ru.make_projector(st, np.eye(2))[1] == "identity (Euclidean)"
@@ -188,10 +197,12 @@ def test_replay_with_an_explicit_switching_signal(sc, specs, run):
     assert no_obs.chi is chi or np.array_equal(no_obs.chi, chi)
     with pytest.raises(ValueError, match=r"chi has shape \(50, 1\), expected \(51, 1\)"):
         replay(sc, h=H, t_end=T_END, slaves=specs[:1], chi=chi[1:])
-    with pytest.raises(ValueError, match="not a callable"):
+    with pytest.raises(ValueError, match=r"^replay takes a metric matrix N \(or None for K\), not a callable$"):
         replay(sc, h=H, t_end=T_END, metric=lambda k, q, a: (q, a))
-    with pytest.raises(ValueError, match="cannot be repeated"):
+    with pytest.raises(ValueError, match=r"^the run cannot be repeated at another step \(no scenario, or an explicit χ\)$"):
         ru.rerun(r, H / 2)
+    ints = replay(sc, h=H, t_end=T_END, chi=chi.astype(int))
+    assert ints.chi.dtype == bool and np.array_equal(ints.chi, chi)
 
 
 def test_replay_with_a_metric_and_master_projection(sc, specs):
@@ -248,3 +259,66 @@ def test_lyapunov_pair_recomputed(run, sc):
         np.testing.assert_allclose(V, ref, rtol=1e-12)
     assert not np.allclose(ru.lyapunov_pair(s, a, b), ru.lyapunov_pair(s, a, b, pre=True))
     assert np.array_equal(ru.lyapunov_pair(s, a, b), ru.lyapunov_pair(s, a, b, False))
+
+
+def test_replay_of_a_moving_gap_theta_and_solver(sc):
+    """A gap ν(t) = 0.25 + 0.02 sin 5t (so ν̇ ≠ 0), θ = 0.7 and the Lemke solver: the predicted
+    gaps and q_pre follow them."""
+    from observer.model import Harmonic
+    moving = dataclasses.replace(sc.system, gap=Harmonic.build("gap", 1, constant=[0.25], kind="sin",
+                                                               terms=[{"amplitude": [0.02], "omega": 5.0}]))
+    sc7 = pc.load("double_mass", {"impact.law": "newton", "impact.restitution": 0.3,
+                                  "simulation.theta": 0.7, "simulation.solver": "lemke"})
+    r = replay(sc7, h=H, t_end=T_END, system=moving, slaves=[SlaveSpec("a", True, sc.q0 + 0.01, sc.u0)])
+    assert r.theta == 0.7 and r.stepper.solver.name == "lemke" and r.system is moving
+    nu = 0.25 + 0.02 * np.sin(5 * r.t[:-1])
+    nu_dot = 0.1 * np.cos(5 * r.t[:-1])
+    g = r.master.q[:-1, 0] + nu
+    gamma = r.master.u[:-1, 0] + nu_dot
+    np.testing.assert_allclose(r.g_pred[1:, 0], g + 0.5 * H * gamma, rtol=1e-12, atol=1e-14)
+    np.testing.assert_array_equal(r.master.active[1:], r.g_pred[1:] <= 0.0)
+    a = r.slaves["a"]
+    np.testing.assert_allclose(a.q_pre[1:], a.q[:-1] + H * (0.3 * a.u[:-1] + 0.7 * a.u[1:]), rtol=1e-12, atol=1e-15)
+    jumped = np.flatnonzero(np.any(a.q[1:] != a.q_pre[1:], axis=1))
+    assert jumped.size
+    for k in jumped:                                  # the K-metric jump meets the moving gap
+        if r.chi[k + 1, 0]:
+            assert a.q[k + 1, 0] + 0.25 + 0.02 * np.sin(5 * r.t[k + 1]) == pytest.approx(0.0, abs=1e-12)
+    # rerun keeps the replaced system
+    again = ru.rerun(r, H)
+    assert again.system is moving
+    np.testing.assert_array_equal(again.master.q, r.master.q)
+
+
+def test_an_observer_with_its_own_metric(sc):
+    """An observer's own metric N = I (replay metric K): its jumps are Euclidean, along W."""
+    r = replay(sc, h=H, t_end=T_END, slaves=[SlaveSpec("e", True, sc.q0 + 0.01, sc.u0, np.eye(2)),
+                                             SlaveSpec("k", True, sc.q0 + 0.01, sc.u0)])
+    e, k = r.slaves["e"], r.slaves["k"]
+    assert r.metric == "K (library projection)" and r.slave_metrics.keys() == {"e"}
+    jumped = np.flatnonzero(np.any(e.q[1:] != e.q_pre[1:], axis=1))
+    assert jumped.size
+    for i in jumped:
+        d = e.q[i + 1] - e.q_pre[i + 1]
+        assert abs(d[1]) <= 1e-14 * abs(d[0])
+    dk = k.q[1:] - k.q_pre[1:]
+    assert np.any(np.abs(dk[:, 1]) > 1e-6)            # the K-metric jump moves both masses
+
+
+def test_engine_choice_reaches_the_loop(sc, monkeypatch):
+    from observer import impact as im
+    seen = []
+    real = ru.run_loop
+
+    def spy(inp, **kw):
+        seen.append(kw.get("engine"))
+        return real(inp, **kw)
+    monkeypatch.setattr(ru, "run_loop", spy)
+    assert replay(sc, h=H, t_end=0.1, engine="python").settings["engine"] == "python"
+    assert replay(sc, h=H, t_end=0.1).settings["engine"] == "compiled"
+    # a registered law without a compiled code runs on the python engine
+    monkeypatch.setitem(im.IMPACT_LAWS, "newton_py",
+                        im.ImpactLawDefinition("newton_py", im.newton_impact, im.newton_step, None, "test law"))
+    py = dataclasses.replace(sc, law=im.ImpactLaw.build("newton_py", 0.3, 1))
+    assert replay(py, h=H, t_end=0.1).settings["engine"] == "python"
+    assert seen == ["python", "compiled", "python"]
