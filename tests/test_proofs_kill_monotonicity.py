@@ -342,6 +342,27 @@ def test_documented_defaults():
     assert len(c) == len(a) + 1
 
 
+def test_default_search_budget(pair):
+    """Called with its defaults the check runs the documented budget: the same search, pair
+    for pair (same evaluation count), as with the values spelled out."""
+    law = ImpactLaw.build("newton", 0.7, 2)
+    a = pc.check_impact_monotone(pair, law, rng=rng())
+    b = pc.check_impact_monotone(pair, law, rng=rng(), samples=24, local_samples=48, adversarial_sets=6, starts=3,
+                                 maxiter=300, exhaustive_up_to=10, tolerance=1e-9, solver="pivoting",
+                                 laws=("newton",))
+    assert a.witness["evaluations"] == b.witness["evaluations"] > 1000
+    assert a.witness["max_rho"] == b.witness["max_rho"] and a.tolerance == 1e-9
+
+
+def test_only_impacting_pairs_count_as_impacting(pair):
+    """Monotone map, sampling only: sup ρ = 0 comes from separating pairs (Λ₁ = Λ₂ = 0); the
+    impacting pairs stay strictly below."""
+    r = pc.check_impact_monotone(pair, ImpactLaw.build("newton", 0.7, 2), rng=rng(0), samples=12, local_samples=4,
+                                 adversarial_sets=0)
+    assert r.witness["max_rho"] == 0.0 and r.witness["inner_product"] == 0.0
+    assert -1.0 < r.witness["max_rho_impacting_pairs"] < -1e-3
+
+
 def test_random_sets_of_the_check_with_visited_sets():
     """Five contacts, exhaustive only up to 2: singletons, pairs, the full set, random sets
     of 3-5 contacts (from the check's rng) and the visited sets."""
