@@ -315,6 +315,12 @@ def test_adversarial_search_goes_to_the_most_promising_set(pair):
         r1 = pc.check_impact_monotone(pair, law, rng=rng(3), adversarial_sets=1, starts=1, maxiter=400, **kw)
     assert r1.witness["max_rho"] == pytest.approx(rho_star, rel=1e-6)
     assert r1.witness["found_by"] == "adversarial search" and r1.witness["active_set"] == [0, 1]
+    # ranked by sampled ρ first, coupling second: here the contact-1 singleton sampled the
+    # largest ρ (< 0), so the search goes there (not to the more strongly coupled pair)
+    r2 = pc.check_impact_monotone(pair, law, rng=rng(0), active_sets=[[0], [1], [0, 1]], samples=2,
+                                  local_samples=0, adversarial_sets=1, starts=1, maxiter=400)
+    assert r2.witness["active_set"] == [1] and r2.witness["found_by"] == "adversarial search"
+    assert r2.witness["max_rho"] < 0.0
 
 
 def test_a_search_without_pairs_finds_nothing(pair):
