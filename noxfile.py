@@ -86,8 +86,11 @@ MUTATION_TARGETS: dict[str, tuple[list[str], list[str]]] = {
     "proofs_checks_proposition": (["proofs_checks/proposition.py"], ["tests/test_proofs_kill_proposition.py"]),
     "proofs_checks_monotonicity": (["proofs_checks/monotonicity.py"], ["tests/test_proofs_kill_monotonicity.py"]),
     "proofs_checks_runs": (["proofs_checks/runs.py"], ["tests/test_proofs_kill_runs.py"]),
-    # the pytest plugin (not measured yet; slow: tens of seconds per mutant)
-    "proofs_checks_plugin": (["proofs_checks/plugin.py"], ["tests/test_proofs_plugin.py"]),
+    # the pytest plugin, loaded from the work copy (not the installed entry point) so that its
+    # mutants are the ones pytest sees
+    "proofs_checks_plugin": (["proofs_checks/plugin.py"],
+                             ["-p", "no:proofs_checks", "-p", "proofs_checks.plugin",
+                              "tests/test_proofs_kill_plugin.py"]),
 }
 MUTANTS_DIR = ROOT / "mutants"
 EQUIVALENT_DIR = ROOT / "tests" / "mutants"
