@@ -691,7 +691,7 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
                             chi_now[act[i]] = True
             # --- u_free, the impulse, the positions
             status = OK
-            if dense and a == 0:                            # the common step: one pass
+            if dense:
                 for i in range(n):
                     s1 = 0.0
                     s2 = 0.0
@@ -703,23 +703,13 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
                     for j in range(n):
                         s3 += Bf[i, j] * fbar[kl, j]
                     ufi = s1 + s2 + s3
-                    u1[i] = ufi
-                    q1[i] = qs[s, i] + h * ((1.0 - theta) * us[s, i] + theta * ufi)
+                    uf[i] = ufi
+                    if a == 0:                              # the common step: done in this pass
+                        u1[i] = ufi
+                        q1[i] = qs[s, i] + h * ((1.0 - theta) * us[s, i] + theta * ufi)
             else:
-                if dense:
-                    for i in range(n):
-                        s1 = 0.0
-                        s2 = 0.0
-                        s3 = 0.0
-                        for j in range(n):
-                            s1 += Bu[i, j] * us[s, j]
-                        for j in range(n):
-                            s2 += Bq[i, j] * qs[s, j]
-                        for j in range(n):
-                            s3 += Bf[i, j] * fbar[kl, j]
-                        uf[i] = s1 + s2 + s3
-                else:
-                    banded_free_velocity(kl, s, qs, us, h, Ru_b, Rq_b, Ach_b, bw, fbar, uf)
+                banded_free_velocity(kl, s, qs, us, h, Ru_b, Rq_b, Ach_b, bw, fbar, uf)
+            if a > 0 or not dense:
                 if a == 1:
                     status = impulse_one(kl, s, us, uf, act[0], Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol,
                                          stats, du, u1, P)
