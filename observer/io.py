@@ -25,11 +25,14 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from observer.errors import InputError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 #: Schema-metadata key of a Parquet result file holding the metadata (JSON).
 PARQUET_KEY = b"observer"
@@ -66,6 +69,8 @@ def events_path(path: str | Path) -> Path:
 
 def read_events(path: str | Path) -> pd.DataFrame | None:
     """The events table written beside the result file ``path`` (None if there is none)."""
+    import pandas as pd
+
     ev = events_path(path)
     if not ev.exists():
         return None
@@ -125,6 +130,8 @@ def write_frame(df: pd.DataFrame, path: str | Path) -> Path:
 
 
 def _read_csv(path: Path) -> tuple[pd.DataFrame, dict]:
+    import pandas as pd
+
     with path.open(encoding="utf-8") as fh:
         first = fh.readline()
     if first.startswith(_LEGACY_PREFIX):                      # files of earlier versions
@@ -167,6 +174,8 @@ def read_result(path: str | Path) -> tuple[pd.DataFrame, dict]:
     InputError
         Missing file, unsupported extension, or not a result file (no column ``t``).
     """
+    import pandas as pd
+
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:

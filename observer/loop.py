@@ -669,14 +669,15 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
     return _finish(inp, out, stop, reason, stopper.signal if stopper is not None else None)
 
 
-def summary_frame(out: LoopOutput, names: list[str], t0: float, h: float) -> "pd.DataFrame":
+def summary_frame(out: LoopOutput, names: list[str], t0: float, h: float, *,
+                  frame: bool = True) -> "pd.DataFrame | list[dict]":
     """One row per observer from the kernel's streaming summary: V(t_on), max V, V(end), the
     count and largest relative size of the rises of V, the sums of the damping, impulse and
     remaining parts of ΔV, the largest impulse part relative to V, and per threshold ρ the
     first-passage time ``t_sync_ρ`` and the settling time ``t_settle_ρ`` (definitions of
-    :mod:`observer.metrics`, evaluated at every step, not only at the recorded rows)."""
-    import pandas as pd
-
+    :mod:`observer.metrics`, evaluated at every step, not only at the recorded rows).
+    ``frame=False`` returns the rows as dicts (``pandas.DataFrame(rows)`` is the frame)
+    without importing pandas."""
     from observer.kernel import (F_DAMP, F_IMP, F_MAXIMP, F_MAXINC, F_NINC, F_PROJ, F_VEND, F_VMAX,
                                  F_VON, SUMMARY_FIELDS)
     from observer.metrics import settle_column, sync_column
@@ -696,6 +697,10 @@ def summary_frame(out: LoopOutput, names: list[str], t0: float, h: float) -> "pd
             row[settle_column(rho)] = (0.0 if last < 0 else float("inf") if last >= k_off
                                         else (last + 1 - k_on) * h)
         rows.append(row)
+    if not frame:
+        return rows
+    import pandas as pd
+
     return pd.DataFrame(rows)
 
 

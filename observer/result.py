@@ -3,6 +3,11 @@
 Array layout (everywhere in the toolkit): time-major, ``shape (N+1, n)`` for N steps.
 Row 0 is the initial state; row k+1 of ``P`` and ``active`` belongs to the step
 t_k → t_{k+1} (the impulse of that step and the closed set it used).
+
+pandas is imported only when a DataFrame is first needed: the tables of a result
+(:attr:`SimulationResult.summary`, :attr:`SimulationResult.events`) may be given as a
+:class:`LazyFrame` and are built on first read, so that a run whose tables nobody reads
+(e.g. a long ``store="summary"`` run) does not load pandas and pyarrow.
 """
 
 from __future__ import annotations
@@ -14,14 +19,17 @@ import platform
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
-import pandas as pd
 
 from observer.errors import InputError
 from observer.io import events_path, jsonable, read_frame, read_result, write_frame  # noqa: F401
 from observer.metrics import RHOS
 from observer.model import LinearSystem
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 @functools.lru_cache(maxsize=None)
@@ -200,11 +208,80 @@ def check_events(events: pd.DataFrame | None) -> pd.DataFrame | None:
     """``events`` must be None or a DataFrame with exactly :data:`EVENT_COLUMNS`."""
     if events is None:
         return None
+    import pandas as pd
+
     if not isinstance(events, pd.DataFrame):
         raise InputError("events", f"must be a pandas DataFrame or None, got {type(events).__name__}")
     if tuple(events.columns) != EVENT_COLUMNS:
         raise InputError("events", f"columns must be {list(EVENT_COLUMNS)}, got {list(events.columns)}")
     return events
+
+
+def records_frame(rows: list[dict]) -> pd.DataFrame:
+    """A DataFrame with one row per dict of ``rows`` (``pandas.DataFrame(rows)``)."""
+    import pandas as pd
+
+    return pd.DataFrame(rows)
+
+
+@dataclass(frozen=True, eq=False)
+class LazyFrame:
+    """A DataFrame not built yet: :meth:`frame` returns ``build(*args)`` (``of_result``:
+    ``build(result, *args)``, ``result`` the :class:`SimulationResult` holding it) with
+    ``attrs`` added to its ``DataFrame.attrs``.
+
+    :class:`SimulationResult` takes one for ``summary`` or ``events`` and builds it on the
+    first read of that attribute (then keeps the DataFrame), so that pandas is imported only
+    by a run whose tables are read. ``of_result`` lets a table computed from the result's
+    own arrays hold no second reference to them. ``build`` and ``args`` must be picklable
+    for the result to be (a module-level function and plain data).
+    """
+
+    build: Callable[..., pd.DataFrame]
+    args: tuple = ()
+    attrs: dict = field(default_factory=dict)
+    of_result: bool = False
+
+    def frame(self, result: SimulationResult | None = None) -> pd.DataFrame:
+        """The DataFrame (built anew at each call); ``result`` is passed to ``build`` first
+        when ``of_result``."""
+        if self.of_result:
+            if result is None:
+                raise InputError("result", "this table is built from a SimulationResult: pass it")
+            df = self.build(result, *self.args)
+        else:
+            df = self.build(*self.args)
+        df.attrs.update(self.attrs)
+        return df
+
+
+class _FrameField:
+    """A DataFrame-or-None field of a frozen dataclass that also accepts a :class:`LazyFrame`:
+    a value given as a DataFrame is checked at once, a lazy one is built and checked on the
+    first read and then kept (the instance's ``__dict__``, as the cached properties of
+    :class:`~observer.model.LinearSystem`). Reading it on the class gives the default, None."""
+
+    def __init__(self, check: Callable | None = None):
+        self.check = check
+
+    def __set_name__(self, owner, name: str) -> None:
+        self.key = f"_{name}_frame"
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return None                                  # the dataclass default
+        value = obj.__dict__[self.key]
+        if isinstance(value, LazyFrame):
+            value = value.frame(obj)
+            if self.check is not None:
+                value = self.check(value)
+            obj.__dict__[self.key] = value
+        return value
+
+    def __set__(self, obj, value) -> None:
+        if self.check is not None and not isinstance(value, LazyFrame):
+            value = self.check(value)
+        obj.__dict__[self.key] = value
 
 
 @dataclass(frozen=True)
@@ -230,14 +307,17 @@ class SimulationResult:
     slaves : dict[str, SlaveTrajectory]
     summary : DataFrame or None
         ``store="summary"`` runs: the kernel's per-observer metrics over every step
-        (:func:`observer.loop.summary_frame`).
+        (:func:`observer.loop.summary_frame`). May be given as a :class:`LazyFrame`: it is
+        built on first read (pandas is imported then).
     status : RunStatus
         How the run ended (ok / fallback / stopped, with the reason); by default derived
         from ``metadata`` (:meth:`RunStatus.from_metadata`).
     stats : StepStats
         Step statistics; by default read from ``metadata``.
     events : DataFrame or None
-        Event-driven runs: one row per event, columns :data:`EVENT_COLUMNS`.
+        One row per event, columns :data:`EVENT_COLUMNS` (event-driven runs: the exact
+        events; time-stepped runs keeping every step: the closing and opening steps). May be
+        given as a :class:`LazyFrame`: it is built (and its columns checked) on first read.
     """
 
     t: np.ndarray
@@ -250,10 +330,10 @@ class SimulationResult:
     chi: np.ndarray | None = None
     slaves: dict = field(default_factory=dict)
     sigma: np.ndarray | None = None
-    summary: pd.DataFrame | None = None
+    summary: pd.DataFrame | None = _FrameField()
     status: RunStatus | None = None
     stats: StepStats | None = None
-    events: pd.DataFrame | None = None
+    events: pd.DataFrame | None = _FrameField(check_events)
 
     def __post_init__(self):
         meta = ReadOnlyDict(self.metadata)
@@ -261,8 +341,7 @@ class SimulationResult:
         if not isinstance(status, RunStatus):
             raise InputError("status", f"must be a RunStatus, got {type(status).__name__}")
         for name, value in (("metadata", meta), ("slaves", ReadOnlyDict(self.slaves)),
-                            ("status", status), ("events", check_events(self.events)),
-                            ("stats", self.stats or StepStats.from_metadata(meta))):
+                            ("status", status), ("stats", self.stats or StepStats.from_metadata(meta))):
             object.__setattr__(self, name, value)
         for name in ("t", "q", "u", "P", "active", "chi", "sigma"):
             object.__setattr__(self, name, _read_only(getattr(self, name)))
@@ -281,6 +360,8 @@ class SimulationResult:
         """Tidy DataFrame: ``t, q0.., u0.., g0.., P0.., active0..`` plus, with observers,
         ``chi0..`` and per observer NAME ``NAME_q0.., NAME_u0.., V_NAME``. The metadata is in
         ``DataFrame.attrs``."""
+        import pandas as pd
+
         n, m = self.system.n, self.system.m
         cols: dict[str, np.ndarray] = {"t": self.t}
         for name, arr, width in (("q", self.q, n), ("u", self.u, n), ("g", self.g, m), ("P", self.P, m)):
@@ -309,6 +390,8 @@ class SimulationResult:
         over the coupling window, V(t_on), the final V and the floor (median of V over the
         last 10 % of the window). ``inf`` marks a threshold never reached; NaN every metric of
         a coupling window that starts after the run ends (nothing to measure)."""
+        import pandas as pd
+
         from observer.metrics import switchings
 
         coupling = self.metadata.get("coupling") or [float(self.t[0]), float(self.t[-1])]

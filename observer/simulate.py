@@ -3,21 +3,23 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Iterable
+from typing import TYPE_CHECKING, Iterable
 
 import numpy as np
-import pandas as pd
 
 from observer.errors import InputError
 from observer.loop import LoopInput, check_engine, check_record_every, summary_frame
 from observer.loop import run as run_loop
 from observer.observers import OBSERVER_DESIGNS, ObserverConfig, Slave, check_observer_name, \
     lyapunov, lyapunov_decrements
-from observer.result import (EVENT_COLUMNS, RunStatus, SimulationResult, SlaveTrajectory,
-                             package_versions, run_metadata)
+from observer.result import (EVENT_COLUMNS, LazyFrame, RunStatus, SimulationResult, SlaveTrajectory,
+                             package_versions, records_frame, run_metadata)
 from observer.scenario import Scenario, load_scenario  # noqa: F401  (re-exported: observer.load_scenario)
 from observer.stepping import MoreauJean
 from observer.switching import SOURCES, read_log
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: float | None = None, *,
@@ -63,7 +65,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         V of each observer, its damping/impulse/remaining parts, first-passage and settling
         times, the master's closings per contact and its deepest penetration, and keeps the
         trajectories only at the recorded rows: memory independent of the horizon beyond
-        that (``result.summary``).
+        that (``result.summary``, a DataFrame built on first read: the run itself does not
+        import pandas).
 
     on_chunk : callable, optional
         Time-stepping: called with each :class:`observer.loop.Chunk` of finished rows as the
@@ -160,12 +163,11 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     trajectories = {s.name: _trajectory(system, sc.h, out, i, s.name, master, record_every)
                     for i, s in enumerate(slaves, start=1)}
     summary = None
-    if out.summary is not None:
-        summary = summary_frame(out, names, stepper.t0, stepper.h)
-        summary.attrs["master_closings"] = out.summary["closings"].tolist()
+    if out.summary is not None:                     # the tables: DataFrames built on first read
+        rows = summary_frame(out, names, stepper.t0, stepper.h, frame=False)
+        summary = LazyFrame(records_frame, (rows,), {"master_closings": out.summary["closings"].tolist()})
     t = stepper.time(out.rows)
-    events = stepping_events(t, out.q[0], out.u[0], out.P[0], out.active, system) \
-        if record_every == 1 else None
+    events = LazyFrame(result_events, of_result=True) if record_every == 1 else None
     return SimulationResult(t, out.q[0], out.u[0], out.P[0], out.active,
                             system, meta, chi=out.chi if slaves else None, slaves=trajectories,
                             sigma=out.sigma[0], summary=summary, events=events)
@@ -174,10 +176,18 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
 INTEGRATORS = ("time-stepping", "event")
 
 
+def result_events(res: SimulationResult) -> pd.DataFrame:
+    """:func:`stepping_events` of a time-stepped result keeping every step (its
+    :attr:`~observer.result.SimulationResult.events`, built on first read)."""
+    return stepping_events(res.t, res.q, res.u, res.P, res.active, res.system)
+
+
 def stepping_events(t, q, u, P, active, system) -> pd.DataFrame:
     """The event table of a time-stepped master, approximately: a closing step with an
     impulse is an ``impact`` (γ⁻ = γ_k, γ⁺ = γ_{k+1}, the step's impulse; time t_k), a
     closing step without one a ``stick``, an opening step a ``liftoff``."""
+    import pandas as pd
+
     gamma = u @ system.W + system.nu_dot(t)
     rows = []
     closing = active[1:] & ~active[:-1]

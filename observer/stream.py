@@ -30,12 +30,13 @@ from __future__ import annotations
 import json
 import signal
 from pathlib import Path
-
-import numpy as np
-import pandas as pd
+from typing import TYPE_CHECKING
 
 from observer.io import PARQUET_KEY, SUFFIXES, sidecar_path, to_json
 from observer.errors import InputError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 #: Exit status of ``observer run`` for a run stopped by each signal (128 + signal number).
 SIGNAL_EXIT = {"SIGINT": 128 + int(signal.SIGINT), "SIGTERM": 128 + int(signal.SIGTERM)}

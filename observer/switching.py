@@ -17,11 +17,14 @@ outside it.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from observer.errors import InputError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 SOURCES = ("master", "log", "self")
 LOG_COLUMNS = ("contact", "t_close", "t_open")
@@ -33,6 +36,8 @@ def read_log(path: str | Path, m: int) -> pd.DataFrame:
     Errors name the file, the row and the problem: unknown contact index, NaN,
     ``t_open < t_close``, intervals of one contact not sorted or overlapping.
     """
+    import pandas as pd
+
     if not isinstance(path, (str, Path)) or not str(path).strip():
         raise InputError("observer.log", f"must be a file path, got {path!r}")
     path = Path(path)
@@ -48,6 +53,8 @@ def read_log(path: str | Path, m: int) -> pd.DataFrame:
 
 def validate_log(df: pd.DataFrame, m: int, where: str = "log") -> pd.DataFrame:
     """Check a closing log DataFrame; return it with columns (contact:int, t_close, t_open)."""
+    import pandas as pd
+
     missing = [c for c in LOG_COLUMNS if c not in df.columns]
     if missing:
         raise InputError("observer.log", f"{where}: missing column(s) {missing}; expected {list(LOG_COLUMNS)}")
@@ -101,6 +108,8 @@ def log_from_active(t: np.ndarray, active: np.ndarray) -> pd.DataFrame:
     ``active`` has shape (N+1, m) with row k+1 for step k (as in :class:`SimulationResult`).
     Sampling the log back onto the same grid returns ``active`` exactly.
     """
+    import pandas as pd
+
     steps_active = active[1:]
     mid = 0.5 * (t[:-1] + t[1:])
     rows = []

@@ -41,15 +41,18 @@ acceleration LCP decides whether it stays closed.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from observer.contact import get_solver
 from observer.event.flow import Flow, flow_for
 from observer.event.roots import RootIsolationError, first_zero, tolerance
 from observer.impact import ImpactLaw, impact
 from observer.scenario import Scenario
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 CONTACT_TOL = 1e3
 """A contact counts as closed (simultaneous impact, persistent contact) when |g| and the
@@ -607,6 +610,8 @@ def _liftoff(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int):
 
 
 def _result(run: _Run, scenario: Scenario, status: str) -> MasterEventResult:
+    import pandas as pd
+
     n, m = run.n, run.m
     t_grid = run.t_grid
     for j, since in list(run.closed_since.items()):

@@ -59,10 +59,9 @@ API::
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Iterable
+from typing import TYPE_CHECKING, Iterable
 
 import numpy as np
-import pandas as pd
 
 from observer.contact import get_solver
 from observer.event.flow import expm_pade13
@@ -71,6 +70,9 @@ from observer.impact import NEWTON, ImpactLaw, impact, newton_impact
 from observer.model import LinearSystem
 from observer.observers import ObserverConfig, Slave, lyapunov
 from observer.result import EVENT_COLUMNS
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 EVENT_KINDS = ("projection", "impact", "stick", "liftoff")
 """Kinds of an observer's own events: ``projection`` (position jump Σ_i of eq. (14), in the
@@ -406,6 +408,8 @@ class EventObserversResult:
     def frame(self) -> pd.DataFrame:
         """``t, chi0.., NAME_q0.., NAME_u0.., V_NAME`` per observer (the naming of
         :meth:`observer.result.SimulationResult.to_frame`)."""
+        import pandas as pd
+
         cols: dict[str, np.ndarray] = {"t": self.t}
         for j in range(self.chi.shape[1]):
             cols[f"chi{j}"] = self.chi[:, j].astype(np.int8)
@@ -683,6 +687,8 @@ class _ObserverIntegrator:
 
 
 def _event_frame(rows: list[tuple]) -> pd.DataFrame:
+    import pandas as pd
+
     df = pd.DataFrame(rows, columns=list(EVENT_COLUMNS))
     return df.astype({"time": float, "contact": int, "kind": str, "gamma_minus": float,
                       "gamma_plus": float, "impulse": float})
@@ -797,6 +803,8 @@ def _coupling_start(coupling, t: np.ndarray) -> int:
 
 def _run_one(scenario, s: Slave, t: np.ndarray, k_on: int, schedule, solver: str) -> EventObserverRun:
     """One observer: uncoupled on [t_0, t_on] (the event master from its state), coupled after."""
+    import pandas as pd
+
     system = scenario.system
     q0, u0 = np.asarray(s.q0, float), np.asarray(s.u0, float)
     pre = None
