@@ -24,6 +24,12 @@ solvers that return ``(iterations, status, residual)``.
   status at that step: the caller re-solves that step with the reference solver, records
   it, and resumes (:func:`observer.loop.run`).
 
+* **Signals.** f(t), ν(t), ν̇(t) are evaluated in the loop from tables of their harmonic
+  terms (:func:`observer.loop.signal_tables`), only in the columns that vary, the
+  trigonometric values of each window computed beforehand by numpy
+  (:func:`observer.loop.wave_table`): no n-wide signal arrays, the same values bit for bit
+  as the python engine's grid.
+
 * **Health.** After every contact step the complementarity residual is recomputed from the
   velocity actually applied (:func:`applied_residual`: ``Wᵀ(u_{k+1} − u_free)`` in place of
   the solver's ``ĜP``); its largest value and step go to ``stats[5:7]``. A step whose applied
@@ -35,9 +41,11 @@ solvers that return ``(iterations, status, residual)``.
   increment and decrement): systems are rows of the 2-D state arrays, indexed in place, the
   work buffers are allocated once per call, and the steps without contacts (the common case)
   run without a function call. The contact impulse, the banded solve, the projection and the
-  summary are plain compiled calls. Every function uses numba's ``error_model="numpy"``
-  (IEEE division, no ``ZeroDivisionError`` branch: every denominator here is positive or
-  guarded), whose raise branches would otherwise keep numba's reference-count pruning from
+  summary are plain compiled calls. The common case (the master alone, dense, plain records)
+  is a second compiled specialization of the same function (``general=None``), in which numba
+  prunes the observers', summary's and projection's branches at compile time. Every
+  function uses numba's ``error_model="numpy"`` (IEEE division, no ``ZeroDivisionError``
+  branch: every denominator here is positive or guarded), whose raise branches would otherwise keep numba's reference-count pruning from
   removing the increments.
 
 Statuses: :data:`OK`, :data:`LCP_FAILED` (the step's contact problem was not solved to
@@ -56,6 +64,8 @@ STATS_SIZE = 8
 master after a step, its step, max applied residual (:func:`applied_residual`), its step, the
 applied residual of the last contact step]."""
 STRUCTURE_DENSE, STRUCTURE_BANDED = 0, 1
+WAVE_COS, WAVE_SIN, WAVE_MINUS_SIN = 0, 1, 2
+"""Functions of the signal waves (:func:`observer.loop.signal_tables`)."""
 EPS = float(np.finfo(np.float64).eps)
 ROUNDOFF = 16.0
 TINY = 1e-300
@@ -600,8 +610,9 @@ def summary_start(qs, us, structure, Mq, Kq, bw, vprev, Vprev, summ, k_on, k_off
 def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, chi_log, use_log, chi_now,
             record_every, rec_q, rec_u, rec_P, rec_sig, rec_act, rec_chi, rec_qpre, record_pre,
             summary, k_on, k_off, rhos, summ, vprev, Vprev, rec_V, closings, prev_act, Mq, Kq, Cq,
-            law, h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, fbar, nu, nu_dot,
-            Wp, Wi, Wv, AinvWT, Ghat, G0, KinvWT, L, e, tol, stats):
+            law, h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, waves,
+            e_ptr, e_col, e_coef, e_wave, v_ptr, v_col, f_c, nu_c, Wp, Wi, Wv, AinvWT, Ghat, G0,
+            KinvWT, L, e, tol, stats, general):
     """Advance every system from step k0 (starting with system s0) up to step k1.
 
     One Moreau–Jean step of system s (row s of ``qs``, ``us``) on its closed set A: the
@@ -614,9 +625,16 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
     contiguous); ``KinvWT`` (N⁻¹W)ᵀ and ``L`` WᵀN⁻¹W are stacks over the projection
     metrics, ``slots[s]`` selects system s's.
 
-    The signals (``fbar``, ``nu``, ``nu_dot``, ``coupled``, ``chi_log``) are a window of the
-    grid starting at step ``kb`` (row k − kb holds step k). ``qs``, ``us`` (S, n) hold the
-    current states and are updated in place; ``chi_now`` (m,) the closed set fed to the
+    The signals f, ν and ν̇ are evaluated here at every grid point t_k = t0 + k·h from their
+    tables (:func:`observer.loop.signal_tables`): ``waves`` holds the distinct waves
+    ``function(ω t_k + phase)`` of the window (column k − kb, :func:`observer.loop.wave_table`:
+    the trigonometric calls stay out of the step loop); per signal, its entries ``(column,
+    coefficient, wave)`` in the summation order of :class:`observer.model.Harmonic` (so the
+    values are those of :meth:`observer.stepping.Grid.window` bit for bit) and its varying
+    columns; f̄_k = (1−θ)f(t_k) + θf(t_{k+1}). Only the varying columns are evaluated per step
+    (the others keep their constant): O(columns with a harmonic term + entries) per step.
+    ``coupled`` and ``chi_log`` are a window of the grid starting at step ``kb`` (row k − kb
+    holds step k). ``qs``, ``us`` (S, n) hold the current states and are updated in place; ``chi_now`` (m,) the closed set fed to the
     observers at the current step (the master's, or the log's). Row r of the records holds
     step ``r·record_every`` (row 0: the initial state, written by the caller); impulses and
     multipliers are those of the step ending at the row. ``rec_P``, ``rec_sig`` and ``rec_act``
@@ -628,10 +646,21 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
     ``stats`` (:data:`STATS_SIZE`) = [solves, iterations, max residual, min gap after a step,
     its step, max applied residual, its step, last applied residual].
 
+    ``general`` selects the compiled specialization: ``True`` the loop as described; ``None``
+    the lean loop of the common case — the master alone (S = 1), dense structure, no summary,
+    no pre-projection records, no master projection — where numba prunes every other branch
+    at compile time (the same operations on the same values: bitwise the same trajectory, a
+    shorter step). The caller passes ``None`` only in that case (:func:`observer.loop.lean`).
+
     Returns ``(k, s, status)``: ``status == OK`` and k = k1 when done; otherwise the step and
     system that failed (their state untouched).
     """
     S, n = qs.shape
+    if general is None:             # the lean specialization (see above): pruned at compile time
+        S = 1
+        summary = False
+        record_pre = False
+        master_projection = False
     m = Wp.shape[0] - 1
     act = np.empty(m, np.int64)
     uf = np.empty(n)
@@ -647,14 +676,50 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
     gc, rhs, sol, gp, sp_ = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
     G, Gs, Lf, Gp = np.empty((m, m)), np.empty((m, m)), np.empty((m, m)), np.empty((m, m))
     basic, infeas = np.zeros(m, np.bool_), np.zeros(m, np.bool_)
+    # the signals at t_k (row 0) and t_{k+1} (row 1); f̄_k in row 0 of fbar
+    fsig, nu, nu_dot, fbar = np.zeros((2, n)), np.zeros((2, m)), np.zeros((2, m)), np.zeros((1, n))
+    for j in range(n):
+        fsig[0, j] = f_c[j]
+        fsig[1, j] = f_c[j]
+        fbar[0, j] = (1.0 - theta) * f_c[j] + theta * f_c[j]
+    for j in range(m):
+        nu[0, j] = nu_c[j]
+        nu[1, j] = nu_c[j]
     dense = structure == STRUCTURE_DENSE
+    if general is None:
+        dense = True
     # step k is recorded (row (k+1)/record_every) when (k+1) % record_every == 0: counted,
     # not divided, per step
     d = (record_every - (k0 + 1) % record_every) % record_every   # k0 + d: the next recorded step
     until = d + 1
     r = (k0 + 1 + d) // record_every - 1
     for k in range(k0, k1):
-        kl = k - kb
+        kw = k - kb
+        nrep = 2 if k == k0 else 1                          # the first step also needs t_k
+        for rep in range(nrep):
+            kt = kw + 1 + rep - (nrep - 1)                  # column of the grid point in waves
+            for c in range(v_ptr[0], v_ptr[1]):             # the varying columns restart
+                j = v_col[c]
+                fsig[0, j] = fsig[1, j]
+                fsig[1, j] = f_c[j]
+            for c in range(v_ptr[1], v_ptr[2]):
+                j = v_col[c]
+                nu[0, j] = nu[1, j]
+                nu[1, j] = nu_c[j]
+            for c in range(v_ptr[2], v_ptr[3]):
+                j = v_col[c]
+                nu_dot[0, j] = nu_dot[1, j]
+                nu_dot[1, j] = 0.0
+            for i in range(e_ptr[0], e_ptr[1]):             # entries in summation order
+                fsig[1, e_col[i]] += e_coef[i] * waves[e_wave[i], kt]
+            for i in range(e_ptr[1], e_ptr[2]):
+                nu[1, e_col[i]] += e_coef[i] * waves[e_wave[i], kt]
+            for i in range(e_ptr[2], e_ptr[3]):
+                nu_dot[1, e_col[i]] += e_coef[i] * waves[e_wave[i], kt]
+        for c in range(v_ptr[0], v_ptr[1]):
+            j = v_col[c]
+            fbar[0, j] = (1.0 - theta) * fsig[0, j] + theta * fsig[1, j]
+        kl = 0                                              # row of t_k in the signal buffers
         until -= 1
         rec = until == 0
         if rec:
@@ -663,7 +728,7 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
         first = s0 if k == k0 else 0
         for s in range(first, S):
             # --- the closed set A = act[:a] and whether the step projects
-            if s > 0 and coupled[kl]:
+            if s > 0 and coupled[kw]:
                 a = 0
                 for j in range(m):
                     if chi_now[j]:
@@ -683,7 +748,7 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
                 if s == 0 and S > 1:                        # χ_k, for the observers
                     if use_log:
                         for j in range(m):
-                            chi_now[j] = chi_log[kl, j]
+                            chi_now[j] = chi_log[kw, j]
                     else:
                         for j in range(m):
                             chi_now[j] = False

@@ -45,7 +45,7 @@ import scipy.sparse as sp
 
 from observer.errors import InputError
 from observer.impact import NEWTON, POISSON
-from observer.stepping import Grid, MoreauJean
+from observer.stepping import MoreauJean
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -356,7 +356,7 @@ def _allocate(inp: LoopInput, record_every: int, record_pre: bool):
     rec["q"][:, 0], rec["u"][:, 0] = inp.q0, inp.u0
     if record_pre:
         rec["q_pre"][:, 0] = inp.q0
-    return rec, np.arange(R) * record_every
+    return rec, np.arange(0, R * record_every, record_every)
 
 
 # ---------------------------------------------------------------------------------------
@@ -511,7 +511,9 @@ def compile_time() -> float:
         st = MoreauJean(sc.system, sc.law, sc.h, sc.t_end, sc.theta)
         inp = LoopInput(st, np.stack([sc.q0, sc.q0]), np.stack([sc.u0, sc.u0]), np.array([False, True]),
                         False)
-        _run_compiled(inp, 1, True, True, (1e-3,), warm=True)
+        _run_compiled(inp, 1, True, True, (1e-3,), warm=True)             # the general loop
+        _run_compiled(LoopInput(st, sc.q0[None], sc.u0[None], np.array([False]), False), 1, False,
+                      warm=True)                                            # and the lean one
         _COMPILED = True
     return time.perf_counter() - t0
 
@@ -537,6 +539,70 @@ def kernel_data(inp: LoopInput) -> tuple:
     tail = (c(Wc.indptr, np.int64), c(Wc.indices, np.int64), c(Wc.data), c(S.AinvW.T), c(S.Ghat),
             c(S.G0), NinvWT, L, c(stepper.law.restitution), float(stepper.residual_tol))
     return head, tail
+
+
+def signal_tables(system) -> tuple:
+    """The kernel's tables of the signals f(t), ν(t), ν̇(t) (:func:`observer.kernel.advance`
+    evaluates them at every grid point).
+
+    Returns ``(ω, phase, function)`` of the distinct waves (function codes
+    :data:`~observer.kernel.WAVE_COS`, ``WAVE_SIN``, ``WAVE_MINUS_SIN``); the entries
+    ``(column, coefficient, wave)`` of f, then ν, then ν̇, each signal's in the summation
+    order of :meth:`observer.model.Harmonic.entries` (``e_ptr`` (4,): signal i's entries are
+    ``e_ptr[i]:e_ptr[i+1]``); the varying columns (those with an entry) of the three signals
+    (``v_ptr``, ``v_col`` likewise); and the constants of f and ν. A wave shared by several
+    entries (the same ω, phase and function) is evaluated once per grid point.
+    """
+    from observer.kernel import WAVE_COS, WAVE_MINUS_SIN, WAVE_SIN
+
+    codes = {"cos": WAVE_COS, "sin": WAVE_SIN, "-sin": WAVE_MINUS_SIN}
+    waves: dict[tuple, int] = {}
+    cols, coefs, wave, e_ptr, v_col, v_ptr = [], [], [], [0], [], [0]
+    for entries in (system.forcing.entries(), system.gap.entries(), system.gap.entries(derivative=True)):
+        for col, coef, w, ph, fn in entries:
+            cols.append(col)
+            coefs.append(coef)
+            wave.append(waves.setdefault((w, ph, codes[fn]), len(waves)))
+        varying = sorted({col for col, *_ in entries})
+        v_col += varying
+        e_ptr.append(len(cols))
+        v_ptr.append(len(v_col))
+    wv = np.array(list(waves), dtype=float).reshape(-1, 3)
+    i64 = lambda x: np.array(x, dtype=np.int64)  # noqa: E731
+    return (np.ascontiguousarray(wv[:, 0]), np.ascontiguousarray(wv[:, 1]), wv[:, 2].astype(np.int64),
+            i64(e_ptr), i64(cols), np.array(coefs, dtype=float), i64(wave), i64(v_ptr), i64(v_col),
+            np.ascontiguousarray(system.forcing.constant, dtype=float),
+            np.ascontiguousarray(system.gap.constant, dtype=float))
+
+
+def lean(S: int, structure: int, summary: bool, record_pre: bool, master_projection: bool) -> bool:
+    """Whether a compiled run takes the kernel's lean specialization (``general=None`` in
+    :func:`observer.kernel.advance`): the master alone, dense structure, no summary, no
+    pre-projection records and no master projection."""
+    from observer.kernel import STRUCTURE_DENSE
+
+    return (S == 1 and structure == STRUCTURE_DENSE and not summary and not record_pre
+            and not master_projection)
+
+
+def wave_table(t: np.ndarray, omega: np.ndarray, phase: np.ndarray, function: np.ndarray) -> np.ndarray:
+    """The waves of :func:`signal_tables` on the grid points ``t``: shape (waves, len(t)), entry
+    ``[p, k] = function_p(ω_p t_k + phase_p)`` (the same numpy operations as
+    :class:`observer.model.Harmonic`, hence the same values)."""
+    from observer.kernel import WAVE_COS, WAVE_SIN
+
+    out = np.empty((omega.size, t.size))
+    for p, (w, ph, fn) in enumerate(zip(omega, phase, function)):
+        x = out[p]                                      # in place: x = w·t + ph, then its function
+        np.multiply(t, w, out=x)
+        x += ph
+        if fn == WAVE_COS:
+            np.cos(x, out=x)
+        else:
+            np.sin(x, out=x)
+            if fn != WAVE_SIN:
+                np.negative(x, out=x)
+    return out
 
 
 def quadratic_forms(stepper: MoreauJean) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -583,6 +649,9 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
     ct = 0.0 if (warm or _COMPILED) else compile_time()
     rec, rows = _allocate(inp, record_every, record_pre)
     head, tail = kernel_data(inp)
+    signals = signal_tables(stepper.system)
+    general = None if lean(S, head[0], summary, record_pre, inp.master_projection) else True
+    no_coupling, no_log = np.zeros(1, np.bool_), np.zeros((1, 1), np.bool_)
     slots = projection_slots(inp)[0]
     qs, us = inp.q0.astype(float).copy(), inp.u0.astype(float).copy()
     jumps = np.asarray(inp.jumps, dtype=np.bool_)
@@ -611,20 +680,22 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
             break
         kb = k
         k1 = min(steps, kb + WINDOW)
-        grid = Grid.window(stepper.system, stepper.h, stepper.theta, stepper.t0, kb, k1)
-        coupled = np.ascontiguousarray(inp.coupled(grid.t), dtype=np.bool_)
-        chi_w = inp.chi_window(grid.t, kb)
+        tw = stepper.time(np.arange(kb, k1 + 1))
+        waves = wave_table(tw, *signals[:3])
+        if S > 1:                                   # the observers' coupling and χ of the window
+            coupled = np.ascontiguousarray(inp.coupled(tw), dtype=np.bool_)
+            chi_w = inp.chi_window(tw, kb)
+        else:
+            coupled, chi_w = no_coupling, None
         use_log = chi_w is not None
-        chi_log = np.ascontiguousarray(chi_w, dtype=np.bool_) if use_log else np.zeros((1, 1), np.bool_)
-        signals = (np.ascontiguousarray(grid.fbar), np.ascontiguousarray(grid.nu),
-                   np.ascontiguousarray(grid.nu_dot))
+        chi_log = np.ascontiguousarray(chi_w, dtype=np.bool_) if use_log else no_log
         while k < k1:
             k, s, status = advance(k, k1, s, kb, qs, us, jumps, slots, bool(inp.master_projection), coupled,
                                    chi_log, use_log, chi_now, record_every, rec["q"], rec["u"], rec["P"],
                                    rec["sigma"], rec["active"], rec["chi"], rec["q_pre"], record_pre,
                                    summary, k_on, k_off, rho_arr, summ, vprev, Vprev, rec_V, closings,
-                                   prev_act, Mq, Kq, Cq, law, stepper.h, stepper.theta, *head, *signals,
-                                   *tail, stats)
+                                   prev_act, Mq, Kq, Cq, law, stepper.h, stepper.theta, *head, waves,
+                                   *signals[3:], *tail, stats, general)
             if status == OK:
                 break
             if status == RESIDUAL_EXCEEDED:
@@ -642,7 +713,7 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
                                  f"problem of step {k} (t = {float(stepper.time(k)):.6g}); run with "
                                  'store="full", which re-solves such steps with the reference solver')
             _fallback_step(inp, stepper, k, s, qs, us, chi_now, record_every, record_pre, rec,
-                           coupled[k - kb], None if chi_w is None else chi_w[k - kb])
+                           S > 1 and bool(coupled[k - kb]), None if chi_w is None else chi_w[k - kb])
             fallbacks.append({"step": int(k), "t": float(stepper.time(k)), "system": int(s)})
             s += 1
             if s == S:

@@ -63,36 +63,57 @@ class Harmonic:
     def __call__(self, t: Any) -> np.ndarray:
         """Evaluate at scalar ``t`` (shape (d,)) or a time array (shape (len(t), d)).
 
-        A term whose amplitude is nonzero in only some columns evaluates its trigonometric
-        function once per distinct phase among those columns (a zero column adds ±0 and is
-        skipped): every entry is the same ``a_j·trig(ω t + p_j)`` as column by column. (The
-        rocking chain's ground motion has one phase and 2 nonzero columns out of 2N.)
+        Each term evaluates its trigonometric function once per distinct phase among its
+        nonzero columns (a zero column adds ±0 and is skipped) and adds ``a_j·trig(ω t + p_j)``
+        to each such column: every entry is ``c_j + Σ_terms a_j·trig(ω t + p_j)``, summed in
+        the order of the terms. (The rocking chain's ground motion has one phase and 2
+        nonzero columns out of 2N.)
         """
-        t_arr = np.asarray(t, dtype=float)
-        out = np.broadcast_to(self.constant, t_arr.shape + (self.dim,)).copy()
-        trig = np.cos if self.kind == "cos" else np.sin
-        for a, w, p in zip(self.amplitude, self.omega, self.phase):
-            cols = np.flatnonzero(a)
-            if cols.size == self.dim:
-                out += a * trig(w * t_arr[..., None] + p)
-            elif cols.size:
-                ph, inv = np.unique(p[cols], return_inverse=True)
-                out[..., cols] += a[cols] * trig(w * t_arr[..., None] + ph)[..., inv]
-        return out
+        return self._evaluate(t, derivative=False)
 
     def derivative(self, t: Any) -> np.ndarray:
-        """Exact time derivative, same shapes (and the same per-phase evaluation) as
-        :meth:`__call__`."""
-        t_arr = np.asarray(t, dtype=float)
-        out = np.zeros(t_arr.shape + (self.dim,))
-        dtrig = (lambda x: -np.sin(x)) if self.kind == "cos" else np.cos
+        """Exact time derivative ``Σ_terms a_j·ω·trig'(ω t + p_j)``, same shapes (and the same
+        per-phase evaluation) as :meth:`__call__`."""
+        return self._evaluate(t, derivative=True)
+
+    def entries(self, derivative: bool = False) -> list[tuple[int, float, float, float, str]]:
+        """The evaluation of :meth:`__call__` (or :meth:`derivative`) as a list of
+        ``(column, coefficient, ω, phase, function)`` in summation order, ``function`` one of
+        ``"cos"``, ``"sin"``, ``"-sin"``: the value is the constant (zero for the derivative)
+        plus, entry by entry, ``coefficient·function(ω t + phase)`` added to its column (the
+        compiled kernel evaluates the signals from these, :func:`observer.loop.signal_tables`)."""
+        if derivative:
+            func = "-sin" if self.kind == "cos" else "cos"
+        else:
+            func = self.kind
+        out = []
         for a, w, p in zip(self.amplitude, self.omega, self.phase):
             cols = np.flatnonzero(a)
-            if cols.size == self.dim:
-                out += a * w * dtrig(w * t_arr[..., None] + p)
-            elif cols.size:
-                ph, inv = np.unique(p[cols], return_inverse=True)
-                out[..., cols] += a[cols] * w * dtrig(w * t_arr[..., None] + ph)[..., inv]
+            coef = a * w if derivative else a
+            for ph in np.unique(p[cols]):
+                out += [(int(j), float(coef[j]), float(w), float(ph), func)
+                        for j in cols[p[cols] == ph]]
+        return out
+
+    def _evaluate(self, t: Any, derivative: bool) -> np.ndarray:
+        t_arr = np.asarray(t, dtype=float)
+        out = np.empty(t_arr.shape + (self.dim,))
+        out[...] = 0.0 if derivative else self.constant
+        if derivative:
+            trig = (lambda x: -np.sin(x)) if self.kind == "cos" else np.cos
+        else:
+            trig = np.cos if self.kind == "cos" else np.sin
+        for a, w, p in zip(self.amplitude, self.omega, self.phase):
+            cols = np.flatnonzero(a)
+            coef = a * w if derivative else a
+            for ph in np.unique(p[cols]):
+                v = trig(w * t_arr + ph)
+                same = cols[p[cols] == ph]
+                if same.size == self.dim:
+                    out += coef * v[..., None]
+                else:
+                    for j in same:
+                        out[..., j] += coef[j] * v
         return out
 
     def bound(self) -> np.ndarray:

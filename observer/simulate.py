@@ -188,13 +188,17 @@ def stepping_events(t, q, u, P, active, system) -> pd.DataFrame:
     closing step without one a ``stick``, an opening step a ``liftoff``."""
     import pandas as pd
 
-    gamma = u @ system.W + system.nu_dot(t)
     rows = []
     closing = active[1:] & ~active[:-1]
     opening = ~active[1:] & active[:-1]
-    for k, j in zip(*np.nonzero(closing | opening)):
+    ks, js = np.nonzero(closing | opening)
+    if ks.size:                                     # γ = Wᵀu + ν̇ at the event rows only
+        both = np.concatenate([ks, ks + 1])
+        gamma = u[both] @ system.W + system.nu_dot(t[both])
+        g_minus, g_plus = gamma[:ks.size], gamma[ks.size:]
+    for i, (k, j) in enumerate(zip(ks, js)):
         kind = "liftoff" if opening[k, j] else ("impact" if P[k + 1, j] > 0 else "stick")
-        rows.append((float(t[k]), int(j), kind, float(gamma[k, j]), float(gamma[k + 1, j]),
+        rows.append((float(t[k]), int(j), kind, float(g_minus[i, j]), float(g_plus[i, j]),
                      float(P[k + 1, j])))
     return pd.DataFrame(rows, columns=list(EVENT_COLUMNS)).astype(
         {"time": float, "contact": int, "kind": str, "gamma_minus": float, "gamma_plus": float,

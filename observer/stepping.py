@@ -334,7 +334,12 @@ class MoreauJean:
 
     def time(self, k) -> np.ndarray | float:
         """t_k = t0 + k h (the grid's value, without building the grid)."""
-        return self.t0 + np.asarray(k) * self.S.h
+        k = np.asarray(k)
+        if k.ndim == 0:
+            return self.t0 + k * self.S.h
+        t = np.multiply(k, self.S.h, dtype=float)          # one array, the same values
+        t += self.t0
+        return t
 
     @property
     def h(self) -> float:

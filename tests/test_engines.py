@@ -246,3 +246,38 @@ def test_other_solvers_run_on_the_python_engine_and_say_so():
     ref = observer.simulate("bouncing_ball", t_end=0.6)
     assert ref.metadata["engine"] == "compiled" and "engine_note" not in ref.metadata
     np.testing.assert_allclose(res.q, ref.q, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", list(SCENARIOS))
+def test_lean_kernel_is_the_general_kernel_bitwise(name):
+    """The kernel's lean specialization (the master alone: :func:`observer.loop.lean`) prunes
+    branches, not operations: the master's trajectory of a master-only run equals, bit for bit,
+    the master's rows of a run of the general loop (here: the same run with an observer)."""
+    from observer.loop import lean
+    from observer.kernel import STRUCTURE_BANDED, STRUCTURE_DENSE
+
+    sc = observer.load_scenario(name)
+    T = min(sc.t_end, 4000 * sc.h)
+    alone = observer.simulate(sc, t_end=T, observers=[])
+    coupled = observer.simulate(sc, t_end=T, observers=["nojump"])
+    stepper = observer.MoreauJean(sc.system, sc.law, sc.h, T, sc.theta)
+    structure = STRUCTURE_DENSE if stepper.S.band is None else STRUCTURE_BANDED
+    assert lean(1, structure, False, False, sc.master_projection) == (
+        stepper.S.band is None and not sc.master_projection)
+    assert not lean(2, structure, False, False, sc.master_projection)
+    assert alone.metadata["engine"] == coupled.metadata["engine"] == "compiled"
+    for x, y in ((alone.q, coupled.q), (alone.u, coupled.u), (alone.P, coupled.P),
+                 (alone.active, coupled.active)):
+        assert np.array_equal(x, y)
+    assert alone.active.any()                            # contacts did close in the window
+
+
+def test_lean_selection():
+    from observer.kernel import STRUCTURE_BANDED, STRUCTURE_DENSE
+    from observer.loop import lean
+
+    assert lean(1, STRUCTURE_DENSE, False, False, False)
+    for args in ((2, STRUCTURE_DENSE, False, False, False), (1, STRUCTURE_BANDED, False, False, False),
+                 (1, STRUCTURE_DENSE, True, False, False), (1, STRUCTURE_DENSE, False, True, False),
+                 (1, STRUCTURE_DENSE, False, False, True)):
+        assert not lean(*args)

@@ -381,8 +381,12 @@ def test_double_mass_runs_twenty_seconds_with_liftoff_zeno_and_rest():
 
 def test_zeno_extrapolation_does_not_depend_on_where_the_impact_run_is_cut(monkeypatch):
     """double_mass's first landing: cutting the resolved impacts earlier (hops 1e4 round-offs
-    of g) or later (1e2) changes the extrapolated t_∞ by less than 1e-9 (the tail model is
-    second order in the last interval, ~1e-5 s here)."""
+    of g) or later (1e2) changes the extrapolated t_∞ by less than 5e-9, while the tails
+    themselves last 8.6e-5 s and 7.4e-6 s: a tail model that dropped or misjudged the tail
+    would move t_∞ by about the tail's duration. What remains is round-off in the timing of
+    the resolved sub-round-off hops: t_∞ drifts monotonically with the number of resolved
+    impacts (measured, numpy 2.4.6 / scipy 1.17.1: cuts 1e5, 1e4, 1e3, 1e2, 1e1 give
+    t_∞ = 2.904291771587, …1777, …2197, …3035, …4695; 1.26e-9 between 1e4 and 1e2)."""
     import observer.event.master as master
     sc = observer.load_scenario("double_mass")
     t_inf = []
@@ -393,7 +397,7 @@ def test_zeno_extrapolation_does_not_depend_on_where_the_impact_run_is_cut(monke
         resolved = res.zeno[0]["impacts_resolved"]
         assert res.zeno[0]["tail_time"] < 1e-3
     assert resolved > 40
-    assert abs(t_inf[0] - t_inf[1]) <= 1e-9
+    assert abs(t_inf[0] - t_inf[1]) <= 5e-9
 
 
 def test_event_cap_stops_with_a_clear_status():

@@ -686,3 +686,26 @@ def test_moreau_jean_step_matches_simulate():
         assert res.active[k + 1, 0] == (idx.size == 1)
         if idx.size:
             assert P[0] == res.P[k + 1, 0]
+
+
+def test_stepping_events_table_matches_the_trajectory():
+    """The time-stepped master's event table, recomputed from the returned trajectory: one row
+    per change of a contact's closed state, γ⁻/γ⁺ the contact velocities Wᵀu + ν̇ of the rows
+    before and after the step, the step's impulse, and the kind from the change and the
+    impulse."""
+    sc = observer.load_scenario("impact_oscillator")
+    res = observer.simulate(sc)
+    ev = res.events
+    act = res.active
+    changes = np.argwhere(act[1:] != act[:-1])
+    assert len(ev) == len(changes) > 4
+    gamma = res.u @ sc.system.W + sc.system.nu_dot(res.t)
+    for (k, j), row in zip(changes, ev.itertuples()):
+        assert row.time == res.t[k] and row.contact == j
+        kind = "liftoff" if act[k, j] else ("impact" if res.P[k + 1, j] > 0 else "stick")
+        assert row.kind == kind
+        scale = max(abs(gamma[k, j]), abs(gamma[k + 1, j]), 1e-300)
+        assert abs(row.gamma_minus - gamma[k, j]) <= 1e-14 * scale
+        assert abs(row.gamma_plus - gamma[k + 1, j]) <= 1e-14 * scale
+        assert row.impulse == res.P[k + 1, j]
+    assert set(ev["kind"]) >= {"impact", "liftoff"}
