@@ -127,7 +127,8 @@ def _to_band(S: np.ndarray, bw: int) -> np.ndarray:
     return band
 
 
-W_SV_RTOL = float(np.sqrt(np.finfo(float).eps))
+EPS = float(np.finfo(float).eps)
+W_SV_RTOL = float(np.sqrt(EPS))
 """Smallest accepted σ_min(W)/σ_max(W) (√ε ≈ 1.5e-8). The contact problems work with Delassus
 matrices ``W_AᵀÂ⁻¹W_A``, which square W's conditioning: below √ε they are numerically singular
 (cond ≥ 1/ε) and the complementarity residual cannot be held (measured: σ_min/σ_max = 1e-9 on
@@ -157,10 +158,13 @@ def singular_value_range(W: np.ndarray) -> tuple[float, float]:
 def check_independent_columns(field: str, W: np.ndarray) -> tuple[float, float]:
     """Raise unless the columns of W are independent with σ_min/σ_max > :data:`W_SV_RTOL`.
 
-    Returns (σ_min, σ_max).
+    "Not linearly independent" when W has more columns than rows or its numerical rank is
+    below m (σ_min ≤ max(n, m)·ε·σ_max, the tolerance of ``numpy.linalg.matrix_rank``: an
+    exactly dependent W computes σ_min at round-off level, not 0); "nearly dependent" when
+    σ_min/σ_max ≤ √ε. Returns (σ_min, σ_max).
     """
     sv_min, sv_max = singular_value_range(W)
-    if W.shape[1] > W.shape[0] or sv_min <= 0.0:
+    if W.shape[1] > W.shape[0] or sv_min <= max(W.shape) * EPS * sv_max:   # numerical rank < m
         raise InputError(field, f"columns are not linearly independent (smallest singular value "
                          f"{sv_min:.3g}, {W.shape[1]} columns in dimension {W.shape[0]})")
     if sv_min <= W_SV_RTOL * sv_max:

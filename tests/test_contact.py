@@ -922,12 +922,18 @@ def test_fclib_fast_solvers_match_reference_velocities(fclib_problems, fclib_ref
     """Pivoting and Lemke solve the frictionless FCLIB LCPs to residual <= 1e-9 (recomputed
     here), pass the independent complementarity check, and their post-solve velocities
     w = Mz + q_n agree with the reference's to 1e-9 relative (z itself is not unique: M is
-    rank deficient). M is singular, outside block pivoting's claim: the pivoting solver
-    reports its Lemke fallback (method "lemke", fallbacks 1)."""
+    rank deficient). M is singular, outside block pivoting's claim: whether its final basis
+    factors in round-off depends on the machine's LAPACK kernels (PerioBox: Lemke fallback on
+    one machine, block pivoting to tolerance on another), so the pivoting solver either
+    answers by block pivoting or reports its Lemke fallback — and the answer is checked
+    either way."""
     M, q, _ = fclib_problems[name]
     sol = get_solver(solver).solve(M, q)
     assert natural_residual(M, q, sol.x) <= RES_TOL
-    assert sol.method == "lemke" and sol.fallbacks == (1 if solver == "pivoting" else 0)
+    if solver == "pivoting":
+        assert (sol.method, sol.fallbacks) in {("lemke", 1), ("block-pivoting", 0)}
+    else:
+        assert sol.method == "lemke" and sol.fallbacks == 0
     check_complementarity(M, q, sol.x)
     w = M @ sol.x + q
     w_ref = M @ fclib_reference[name].x + q

@@ -282,6 +282,8 @@ def nnls_cholesky(G: np.ndarray, b: np.ndarray) -> LCPSolution:
 
     d = jacobi_scaling(G)
     L = np.linalg.cholesky(G * np.outer(d, d))
+    if np.all(b >= 0.0):        # x = 0 is the solution (unique for SPD G): no approaching contact
+        return solution(G, b, np.zeros_like(b, dtype=float), 0, "nnls")
     c = solve_triangular(L, d * b, lower=True)
     y, _ = nnls(L.T, -c)
     return solution(G, b, _polish(G, b, d * y), 0, "nnls")
