@@ -282,13 +282,15 @@ def simulate_kwargs(engine: str | None = "compiled") -> tuple[dict[str, Any], st
 def run_toolkit(sc: observer.Scenario, repeats: int, engine: str | None = "compiled"):
     """Time :func:`observer.simulate` on ``sc`` (master only) ``repeats`` times.
 
-    One warm-up call on a 10-step horizon first (compilation, caches). Returns
+    One warm-up call on a 10-step horizon first (compilation, caches); each timed call starts
+    with the previous call's result freed (not two 10⁶-step results in memory at once). Returns
     ``(result of the last call, wall times of the calls, engine name)``.
     """
     kwargs, name = simulate_kwargs(engine)
     observer.simulate(sc, t_end=10 * sc.h, **kwargs)
     times, res = [], None
     for _ in range(max(1, repeats)):
+        res = None                 # the previous result freed first: each call starts alike
         t0 = time.perf_counter()
         res = observer.simulate(sc, **kwargs)
         times.append(time.perf_counter() - t0)

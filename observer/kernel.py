@@ -688,6 +688,9 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
     dense = structure == STRUCTURE_DENSE
     if general is None:
         dense = True
+    vp0, vp1, vp2, vp3 = v_ptr[0], v_ptr[1], v_ptr[2], v_ptr[3]     # loop bounds as scalars
+    ep0, ep1, ep2, ep3 = e_ptr[0], e_ptr[1], e_ptr[2], e_ptr[3]
+    gmin, gstep = stats[3], stats[4]           # the master's smallest gap, kept in registers
     # step k is recorded (row (k+1)/record_every) when (k+1) % record_every == 0: counted,
     # not divided, per step
     d = (record_every - (k0 + 1) % record_every) % record_every   # k0 + d: the next recorded step
@@ -698,25 +701,25 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
         nrep = 2 if k == k0 else 1                          # the first step also needs t_k
         for rep in range(nrep):
             kt = kw + 1 + rep - (nrep - 1)                  # column of the grid point in waves
-            for c in range(v_ptr[0], v_ptr[1]):             # the varying columns restart
+            for c in range(vp0, vp1):                       # the varying columns restart
                 j = v_col[c]
                 fsig[0, j] = fsig[1, j]
                 fsig[1, j] = f_c[j]
-            for c in range(v_ptr[1], v_ptr[2]):
+            for c in range(vp1, vp2):
                 j = v_col[c]
                 nu[0, j] = nu[1, j]
                 nu[1, j] = nu_c[j]
-            for c in range(v_ptr[2], v_ptr[3]):
+            for c in range(vp2, vp3):
                 j = v_col[c]
                 nu_dot[0, j] = nu_dot[1, j]
                 nu_dot[1, j] = 0.0
-            for i in range(e_ptr[0], e_ptr[1]):             # entries in summation order
+            for i in range(ep0, ep1):                       # entries in summation order
                 fsig[1, e_col[i]] += e_coef[i] * waves[e_wave[i], kt]
-            for i in range(e_ptr[1], e_ptr[2]):
+            for i in range(ep1, ep2):
                 nu[1, e_col[i]] += e_coef[i] * waves[e_wave[i], kt]
-            for i in range(e_ptr[2], e_ptr[3]):
+            for i in range(ep2, ep3):
                 nu_dot[1, e_col[i]] += e_coef[i] * waves[e_wave[i], kt]
-        for c in range(v_ptr[0], v_ptr[1]):
+        for c in range(vp0, vp1):
             j = v_col[c]
             fbar[0, j] = (1.0 - theta) * fsig[0, j] + theta * fsig[1, j]
         kl = 0                                              # row of t_k in the signal buffers
@@ -787,6 +790,7 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
                         stats[5] = stats[7]
                         stats[6] = k + 1
                     if status != OK:
+                        stats[3], stats[4] = gmin, gstep
                         return k, s, status
                 else:
                     for i in range(n):
@@ -803,6 +807,7 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
                     status = project_positions(kl + 1, act, a, slots[s], Wp, Wi, Wv, nu, KinvWT, L, q1,
                                                sig, gp, sp_, Gp, Lf)
                 if status != OK:
+                    stats[3], stats[4] = gmin, gstep
                     return k, s, status
             for i in range(n):
                 qs[s, i] = q1[i]
@@ -826,9 +831,9 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
                     for p in range(Wp[j], Wp[j + 1]):
                         g += Wv[p] * q1[Wi[p]]
                     g += nu[kl + 1, j]
-                    if g < stats[3]:
-                        stats[3] = g
-                        stats[4] = k + 1
+                    if g < gmin:
+                        gmin = g
+                        gstep = k + 1
             elif summary:
                 V = _summary_step(k + 1, s, qs, us, vprev, Vprev, Pfull_m, P, act, a, structure, Mq, Kq,
                                   Cq, bw, h, Wp, Wi, Wv, summ, k_on, k_off, rhos, wv)
@@ -852,4 +857,5 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
                     if S > 1:
                         for j in range(m):
                             rec_chi[r, j] = chi_now[j]
+    stats[3], stats[4] = gmin, gstep
     return k1, 0, OK

@@ -126,7 +126,9 @@ class LoopOutput:
     ``rows`` are the step indices recorded (row r holds the state after step rows[r]−1, row 0
     the initial state); ``P`` and ``sigma`` the impulse and projection multiplier of the step
     ending at the row; ``active`` the master's closed set and ``chi`` the observers' signal
-    of that step; ``q_pre`` (or None) the positions before the step's projection.
+    of that step; ``q_pre`` (or None) the positions before the step's projection; ``t`` (or
+    None) the rows' times t0 + rows·h when the loop computed them anyway (compiled engine,
+    every step recorded): the values of ``stepper.time(rows)``.
     """
 
     rows: np.ndarray
@@ -148,6 +150,7 @@ class LoopOutput:
     stop_reason: str = ""
     stop_signal: str | None = None
     health: object = None
+    t: np.ndarray | None = None
 
     def stop_info(self, stepper) -> dict | None:
         """``{"step", "t", "reason", "signal"}`` of a stopped run (None: it ran to the end)."""
@@ -243,6 +246,8 @@ def _finish(inp: LoopInput, out: LoopOutput, stopped_at: int | None, reason: str
         R = int(np.searchsorted(out.rows, stopped_at, side="right"))
         cut = {k: getattr(out, k)[:, :R] for k in ("q", "u", "P", "sigma")}
         cut.update(active=out.active[:R], chi=out.chi[:R], rows=out.rows[:R])
+        if out.t is not None:
+            cut["t"] = out.t[:R]
         if out.q_pre is not None:
             cut["q_pre"] = out.q_pre[:, :R]
         if out.V is not None:
@@ -650,6 +655,7 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
     rec, rows = _allocate(inp, record_every, record_pre)
     head, tail = kernel_data(inp)
     signals = signal_tables(stepper.system)
+    t_rec = np.empty(rows.size) if record_every == 1 else None
     general = None if lean(S, head[0], summary, record_pre, inp.master_projection) else True
     no_coupling, no_log = np.zeros(1, np.bool_), np.zeros((1, 1), np.bool_)
     slots = projection_slots(inp)[0]
@@ -681,6 +687,8 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
         kb = k
         k1 = min(steps, kb + WINDOW)
         tw = stepper.time(np.arange(kb, k1 + 1))
+        if t_rec is not None:                       # every step recorded: the rows' times
+            t_rec[kb:k1 + 1] = tw
         waves = wave_table(tw, *signals[:3])
         if S > 1:                                   # the observers' coupling and χ of the window
             coupled = np.ascontiguousarray(inp.coupled(tw), dtype=np.bool_)
@@ -734,7 +742,7 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
                        "fallbacks": len(fallbacks), "min_gap": float(stats[3]),
                        "min_gap_step": int(stats[4]), "applied_residual": float(stats[5]),
                        "applied_residual_step": int(stats[6]), "residual_source": "applied"},
-                      fallbacks, ct, run_time, rec_V if summary else None, out_summary)
+                      fallbacks, ct, run_time, rec_V if summary else None, out_summary, t=t_rec)
     if warm:
         return out
     return _finish(inp, out, stop, reason, stopper.signal if stopper is not None else None)

@@ -166,7 +166,7 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     if out.summary is not None:                     # the tables: DataFrames built on first read
         rows = summary_frame(out, names, stepper.t0, stepper.h, frame=False)
         summary = LazyFrame(records_frame, (rows,), {"master_closings": out.summary["closings"].tolist()})
-    t = stepper.time(out.rows)
+    t = out.t if out.t is not None else stepper.time(out.rows)
     events = LazyFrame(result_events, of_result=True) if record_every == 1 else None
     return SimulationResult(t, out.q[0], out.u[0], out.P[0], out.active,
                             system, meta, chi=out.chi if slaves else None, slaves=trajectories,

@@ -281,3 +281,21 @@ def test_lean_selection():
                  (1, STRUCTURE_DENSE, True, False, False), (1, STRUCTURE_DENSE, False, True, False),
                  (1, STRUCTURE_DENSE, False, False, True)):
         assert not lean(*args)
+
+
+def test_loop_times_are_the_grid():
+    """The compiled loop's row times (every step recorded) are ``stepper.time(rows)`` bit for
+    bit, over several windows and after a start time; the result's ``t`` is the grid."""
+    import observer.loop as loop
+
+    sc = observer.load_scenario("impact_oscillator")
+    steps = 2 * loop.WINDOW + 5
+    st = observer.MoreauJean(sc.system, sc.law, sc.h, 0.5 + steps * sc.h, sc.theta, t0=0.5)
+    inp = loop.LoopInput(st, sc.q0[None], sc.u0[None], np.array([False]), False)
+    out = loop.run(inp, engine="compiled")
+    assert out.t is not None and out.t.shape == (steps + 1,)
+    assert np.array_equal(out.t, st.time(out.rows))
+    assert np.array_equal(out.t, 0.5 + np.arange(steps + 1) * sc.h)
+    assert loop.run(inp, engine="compiled", record_every=3).t is None
+    res = observer.simulate(sc, t_end=steps * sc.h)
+    assert np.array_equal(res.t, np.arange(steps + 1) * sc.h)
