@@ -65,6 +65,10 @@ MUTATION_TARGETS: dict[str, tuple[list[str], list[str]]] = {
     "contact": (["observer/contact/*"], ["tests/test_contact.py"]),
     "observers": (["observer/observers.py"], ["tests/test_observers.py", "tests/test_stepping_units.py",
                                               "tests/test_mutants_observers.py"]),
+    "model": (["observer/model.py"], ["tests/test_signals.py", "tests/test_stepping_units.py",
+                                      "tests/test_validation.py", "tests/test_scenarios.py",
+                                      "tests/test_timestepping.py", "tests/test_engines.py",
+                                      "-k", "not subprocess"]),
     # proofs_checks, one entry per group of files, each against the fast tests that reach it
     # (equivalent mutants: tests/mutants/proofs_checks_*.md; overview tests/mutants/proofs_checks.md)
     "proofs_checks_lyapunov": (["proofs_checks/lyapunov.py"],
