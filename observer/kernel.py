@@ -45,8 +45,8 @@ solvers that return ``(iterations, status, residual)``.
   is a second compiled specialization of the same function (``general=None``), in which numba
   prunes the observers', summary's and projection's branches at compile time. Every
   function uses numba's ``error_model="numpy"`` (IEEE division, no ``ZeroDivisionError``
-  branch: every denominator here is positive or guarded), whose raise branches would otherwise keep numba's reference-count pruning from
-  removing the increments.
+  branch: every denominator here is positive or guarded), whose raise branches would
+  otherwise keep numba's reference-count pruning from removing the increments.
 
 Statuses: :data:`OK`, :data:`LCP_FAILED` (the step's contact problem was not solved to
 tolerance), :data:`PROJECTION_FAILED` (L_I not positive definite), :data:`RESIDUAL_EXCEEDED`
@@ -634,8 +634,8 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
     columns; f̄_k = (1−θ)f(t_k) + θf(t_{k+1}). Only the varying columns are evaluated per step
     (the others keep their constant): O(columns with a harmonic term + entries) per step.
     ``coupled`` and ``chi_log`` are a window of the grid starting at step ``kb`` (row k − kb
-    holds step k). ``qs``, ``us`` (S, n) hold the current states and are updated in place; ``chi_now`` (m,) the closed set fed to the
-    observers at the current step (the master's, or the log's). Row r of the records holds
+    holds step k). ``qs``, ``us`` (S, n) hold the current states and are updated in place;
+    ``chi_now`` (m,) the closed set fed to the observers at the current step (the master's, or the log's). Row r of the records holds
     step ``r·record_every`` (row 0: the initial state, written by the caller); impulses and
     multipliers are those of the step ending at the row. ``rec_P``, ``rec_sig`` and ``rec_act``
     come zero-filled (each row is written once: only the closed contacts' entries are set).

@@ -21,6 +21,10 @@ from observer.validation import (PROJECTION_COND_MAX, as_array, as_scalar, broad
                                  extreme_eigenvalues, projection_condition)
 
 
+TRIG = {"cos": np.cos, "sin": np.sin, "-sin": lambda x: -np.sin(x)}
+"""The functions of :class:`Harmonic`'s terms and their derivatives, by name."""
+
+
 @dataclass(frozen=True)
 class Harmonic:
     """A vector signal ``x(t) = constant + Σ_j amplitude_j ∘ trig(omega_j t + phase_j)``.
@@ -76,44 +80,41 @@ class Harmonic:
         per-phase evaluation) as :meth:`__call__`."""
         return self._evaluate(t, derivative=True)
 
+    def _groups(self, derivative: bool):
+        """Per term, per distinct phase among its nonzero columns: ``(ω, phase, function,
+        columns, coefficients of those columns)``, in summation order (a zero column adds ±0
+        and is skipped). ``function`` is ``"cos"``, ``"sin"`` or ``"-sin"``."""
+        if derivative:
+            func = "-sin" if self.kind == "cos" else "cos"
+        else:
+            func = self.kind
+        for a, w, p in zip(self.amplitude, self.omega, self.phase):
+            cols = np.flatnonzero(a)
+            coef = a * w if derivative else a
+            for ph in np.unique(p[cols]):
+                same = cols[p[cols] == ph]
+                yield w, ph, func, same, coef[same]
+
     def entries(self, derivative: bool = False) -> list[tuple[int, float, float, float, str]]:
         """The evaluation of :meth:`__call__` (or :meth:`derivative`) as a list of
         ``(column, coefficient, ω, phase, function)`` in summation order, ``function`` one of
         ``"cos"``, ``"sin"``, ``"-sin"``: the value is the constant (zero for the derivative)
         plus, entry by entry, ``coefficient·function(ω t + phase)`` added to its column (the
         compiled kernel evaluates the signals from these, :func:`observer.loop.signal_tables`)."""
-        if derivative:
-            func = "-sin" if self.kind == "cos" else "cos"
-        else:
-            func = self.kind
-        out = []
-        for a, w, p in zip(self.amplitude, self.omega, self.phase):
-            cols = np.flatnonzero(a)
-            coef = a * w if derivative else a
-            for ph in np.unique(p[cols]):
-                out += [(int(j), float(coef[j]), float(w), float(ph), func)
-                        for j in cols[p[cols] == ph]]
-        return out
+        return [(int(j), float(c), float(w), float(ph), func)
+                for w, ph, func, cols, coefs in self._groups(derivative) for j, c in zip(cols, coefs)]
 
     def _evaluate(self, t: Any, derivative: bool) -> np.ndarray:
         t_arr = np.asarray(t, dtype=float)
         out = np.empty(t_arr.shape + (self.dim,))
         out[...] = 0.0 if derivative else self.constant
-        if derivative:
-            trig = (lambda x: -np.sin(x)) if self.kind == "cos" else np.cos
-        else:
-            trig = np.cos if self.kind == "cos" else np.sin
-        for a, w, p in zip(self.amplitude, self.omega, self.phase):
-            cols = np.flatnonzero(a)
-            coef = a * w if derivative else a
-            for ph in np.unique(p[cols]):
-                v = trig(w * t_arr + ph)
-                same = cols[p[cols] == ph]
-                if same.size == self.dim:
-                    out += coef * v[..., None]
-                else:
-                    for j in same:
-                        out[..., j] += coef[j] * v
+        for w, ph, func, cols, coefs in self._groups(derivative):
+            v = TRIG[func](w * t_arr + ph)
+            if cols.size == self.dim:
+                out += coefs * v[..., None]
+            else:
+                for j, c in zip(cols, coefs):
+                    out[..., j] += c * v
         return out
 
     def bound(self) -> np.ndarray:
