@@ -249,21 +249,29 @@ def test_other_solvers_run_on_the_python_engine_and_say_so():
 
 
 @pytest.mark.parametrize("name", list(SCENARIOS))
-def test_lean_kernel_is_the_general_kernel_bitwise(name):
+def test_lean_kernel_is_the_general_kernel_bitwise(name, monkeypatch):
     """The kernel's lean specialization (the master alone: :func:`observer.loop.lean`) prunes
     branches, not operations: the master's trajectory of a master-only run equals, bit for bit,
     the master's rows of a run of the general loop (here: the same run with an observer)."""
     from observer.loop import lean
     from observer.kernel import STRUCTURE_BANDED, STRUCTURE_DENSE
 
+    import observer.kernel as kernel
+
+    calls = []                          # the specialization each kernel call asked for
+    advance = kernel.advance
+    monkeypatch.setattr(kernel, "advance", lambda *a: calls.append(a[-1]) or advance(*a))
     sc = observer.load_scenario(name)
     T = min(sc.t_end, 4000 * sc.h)
     alone = observer.simulate(sc, t_end=T, observers=[])
+    alone_calls, calls[:] = set(calls), []
     coupled = observer.simulate(sc, t_end=T, observers=["nojump"])
+    assert set(calls) == {True}
     stepper = observer.MoreauJean(sc.system, sc.law, sc.h, T, sc.theta)
     structure = STRUCTURE_DENSE if stepper.S.band is None else STRUCTURE_BANDED
     assert lean(1, structure, False, False, sc.master_projection) == (
         stepper.S.band is None and not sc.master_projection)
+    assert alone_calls == ({None} if lean(1, structure, False, False, sc.master_projection) else {True})
     assert not lean(2, structure, False, False, sc.master_projection)
     assert alone.metadata["engine"] == coupled.metadata["engine"] == "compiled"
     for x, y in ((alone.q, coupled.q), (alone.u, coupled.u), (alone.P, coupled.P),
