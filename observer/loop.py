@@ -518,7 +518,14 @@ def compile_time() -> float:
                         False)
         _run_compiled(inp, 1, True, True, (1e-3,), warm=True)             # the general loop
         _run_compiled(LoopInput(st, sc.q0[None], sc.u0[None], np.array([False]), False), 1, False,
-                      warm=True)                                            # and the lean one
+                      warm=True)                                            # the lean one
+        one = Scenario.from_dict({
+            "system": {"M": [[1.0]], "C": [[0.1]], "K": [[1.0]], "W": [[1.0]], "gap": {"offset": [0.0]}},
+            "impact": {"law": "newton", "restitution": 0.5}, "initial": {"q": [0.0], "u": [-1.0]},
+            "simulation": {"t_end": 0.02, "h": 0.01}}, "warm-up")
+        st = MoreauJean(one.system, one.law, one.h, one.t_end, one.theta)
+        _run_compiled(LoopInput(st, one.q0[None], one.u0[None], np.array([False]), False), 1, False,
+                      warm=True)                                            # and the scalar one
         _COMPILED = True
     return time.perf_counter() - t0
 
@@ -580,14 +587,26 @@ def signal_tables(system) -> tuple:
             np.ascontiguousarray(system.gap.constant, dtype=float))
 
 
-def lean(S: int, structure: int, summary: bool, record_pre: bool, master_projection: bool) -> bool:
-    """Whether a compiled run takes the kernel's lean specialization (``general=None`` in
-    :func:`observer.kernel.advance`): the master alone, dense structure, no summary, no
-    pre-projection records and no master projection."""
+SPECIALIZATIONS = ("general", "lean", "scalar")
+"""The compiled loop's specializations, from the most general (:func:`specialization`)."""
+
+
+def specialization(S: int, structure: int, summary: bool, record_pre: bool, master_projection: bool,
+                   n: int, m: int) -> str:
+    """Which compiled loop a run takes (each the same operations as the general one on what
+    it runs: bitwise the same trajectory).
+
+    ``"lean"``: the master alone, dense structure, no summary, no pre-projection records and
+    no master projection (:func:`observer.kernel.advance` with ``general=None``); ``"scalar"``:
+    that case with one degree of freedom and one contact (:func:`observer.kernel.advance_scalar`,
+    the state in registers); ``"general"`` otherwise.
+    """
     from observer.kernel import STRUCTURE_DENSE
 
-    return (S == 1 and structure == STRUCTURE_DENSE and not summary and not record_pre
-            and not master_projection)
+    if not (S == 1 and structure == STRUCTURE_DENSE and not summary and not record_pre
+            and not master_projection):
+        return "general"
+    return "scalar" if n == 1 and m == 1 else "lean"
 
 
 def wave_table(t: np.ndarray, omega: np.ndarray, phase: np.ndarray, function: np.ndarray) -> np.ndarray:
@@ -646,7 +665,7 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
                   rhos: tuple = (1e-3,), warm: bool = False, on_chunk=None,
                   stopper: _Stopper | None = None) -> LoopOutput:
     from observer.kernel import (OK, PROJECTION_FAILED, RESIDUAL_EXCEEDED, STATS_SIZE, SUMMARY_FIELDS,
-                                 advance, summary_start)
+                                 advance, advance_scalar, summary_start)
 
     stepper = inp.stepper
     steps, n, m = stepper.steps, stepper.system.n, stepper.system.m
@@ -656,7 +675,8 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
     head, tail = kernel_data(inp)
     signals = signal_tables(stepper.system)
     t_rec = np.empty(rows.size) if record_every == 1 else None
-    general = None if lean(S, head[0], summary, record_pre, inp.master_projection) else True
+    spec = specialization(S, head[0], summary, record_pre, inp.master_projection, n, m)
+    general = None if spec == "lean" else True
     no_coupling, no_log = np.zeros(1, np.bool_), np.zeros((1, 1), np.bool_)
     slots = projection_slots(inp)[0]
     qs, us = inp.q0.astype(float).copy(), inp.u0.astype(float).copy()
@@ -686,9 +706,8 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
             break
         kb = k
         k1 = min(steps, kb + WINDOW)
-        tw = stepper.time(np.arange(kb, k1 + 1))
-        if t_rec is not None:                       # every step recorded: the rows' times
-            t_rec[kb:k1 + 1] = tw
+        # the window's grid points; every step recorded: written in place as the rows' times
+        tw = stepper.time(np.arange(kb, k1 + 1), out=None if t_rec is None else t_rec[kb:k1 + 1])
         waves = wave_table(tw, *signals[:3])
         if S > 1:                                   # the observers' coupling and χ of the window
             coupled = np.ascontiguousarray(inp.coupled(tw), dtype=np.bool_)
@@ -698,12 +717,17 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
         use_log = chi_w is not None
         chi_log = np.ascontiguousarray(chi_w, dtype=np.bool_) if use_log else no_log
         while k < k1:
-            k, s, status = advance(k, k1, s, kb, qs, us, jumps, slots, bool(inp.master_projection), coupled,
-                                   chi_log, use_log, chi_now, record_every, rec["q"], rec["u"], rec["P"],
-                                   rec["sigma"], rec["active"], rec["chi"], rec["q_pre"], record_pre,
-                                   summary, k_on, k_off, rho_arr, summ, vprev, Vprev, rec_V, closings,
-                                   prev_act, Mq, Kq, Cq, law, stepper.h, stepper.theta, *head, waves,
-                                   *signals[3:], *tail, stats, general)
+            if spec == "scalar":
+                k, s, status = advance_scalar(k, k1, kb, qs, us, record_every, rec["q"], rec["u"], rec["P"],
+                                              rec["active"], stepper.h, stepper.theta, *head[1:4], waves,
+                                              *signals[3:8], *signals[9:], *tail[:5], *tail[8:], stats)
+            else:
+                k, s, status = advance(k, k1, s, kb, qs, us, jumps, slots, bool(inp.master_projection), coupled,
+                                       chi_log, use_log, chi_now, record_every, rec["q"], rec["u"], rec["P"],
+                                       rec["sigma"], rec["active"], rec["chi"], rec["q_pre"], record_pre,
+                                       summary, k_on, k_off, rho_arr, summ, vprev, Vprev, rec_V, closings,
+                                       prev_act, Mq, Kq, Cq, law, stepper.h, stepper.theta, *head, waves,
+                                       *signals[3:], *tail, stats, general)
             if status == OK:
                 break
             if status == RESIDUAL_EXCEEDED:

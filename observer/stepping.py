@@ -332,12 +332,13 @@ class MoreauJean:
             self._grid = Grid.build(self.system, self.S.h, self._t_end, self.S.theta, self.t0)
         return self._grid
 
-    def time(self, k) -> np.ndarray | float:
-        """t_k = t0 + k h (the grid's value, without building the grid)."""
+    def time(self, k, out: np.ndarray | None = None) -> np.ndarray | float:
+        """t_k = t0 + k h (the grid's value, without building the grid); written into ``out``
+        when given (an array of k's shape)."""
         k = np.asarray(k)
         if k.ndim == 0:
             return self.t0 + k * self.S.h
-        t = np.multiply(k, self.S.h, dtype=float)          # one array, the same values
+        t = np.multiply(k, self.S.h, dtype=float, out=out)  # one array, the same values
         t += self.t0
         return t
 

@@ -249,30 +249,36 @@ def test_other_solvers_run_on_the_python_engine_and_say_so():
 
 
 @pytest.mark.parametrize("name", list(SCENARIOS))
-def test_lean_kernel_is_the_general_kernel_bitwise(name, monkeypatch):
-    """The kernel's lean specialization (the master alone: :func:`observer.loop.lean`) prunes
-    branches, not operations: the master's trajectory of a master-only run equals, bit for bit,
-    the master's rows of a run of the general loop (here: the same run with an observer)."""
-    from observer.loop import lean
+def test_lean_kernels_are_the_general_kernel_bitwise(name, monkeypatch):
+    """The kernel's specializations for the master alone (:func:`observer.loop.specialization`:
+    the lean loop, and the scalar loop when n = m = 1) prune branches and hold values in
+    registers, not change operations: the master's trajectory of a master-only run equals, bit
+    for bit, the master's rows of a run of the general loop (here: the same run with an
+    observer)."""
+    from observer.loop import specialization
     from observer.kernel import STRUCTURE_BANDED, STRUCTURE_DENSE
 
     import observer.kernel as kernel
 
-    calls = []                          # the specialization each kernel call asked for
-    advance = kernel.advance
-    monkeypatch.setattr(kernel, "advance", lambda *a: calls.append(a[-1]) or advance(*a))
+    calls = []                          # the loop each kernel call took
+    advance, advance_scalar = kernel.advance, kernel.advance_scalar
+    monkeypatch.setattr(kernel, "advance",
+                        lambda *a: calls.append("lean" if a[-1] is None else "general") or advance(*a))
+    monkeypatch.setattr(kernel, "advance_scalar", lambda *a: calls.append("scalar") or advance_scalar(*a))
     sc = observer.load_scenario(name)
     T = min(sc.t_end, 4000 * sc.h)
     alone = observer.simulate(sc, t_end=T, observers=[])
     alone_calls, calls[:] = set(calls), []
     coupled = observer.simulate(sc, t_end=T, observers=["nojump"])
-    assert set(calls) == {True}
+    assert set(calls) == {"general"}
     stepper = observer.MoreauJean(sc.system, sc.law, sc.h, T, sc.theta)
     structure = STRUCTURE_DENSE if stepper.S.band is None else STRUCTURE_BANDED
-    assert lean(1, structure, False, False, sc.master_projection) == (
-        stepper.S.band is None and not sc.master_projection)
-    assert alone_calls == ({None} if lean(1, structure, False, False, sc.master_projection) else {True})
-    assert not lean(2, structure, False, False, sc.master_projection)
+    n, m = sc.system.n, sc.system.m
+    expected = ("general" if stepper.S.band is not None or sc.master_projection
+                else "scalar" if n == m == 1 else "lean")
+    assert specialization(1, structure, False, False, sc.master_projection, n, m) == expected
+    assert alone_calls == {expected}
+    assert specialization(2, structure, False, False, sc.master_projection, n, m) == "general"
     assert alone.metadata["engine"] == coupled.metadata["engine"] == "compiled"
     for x, y in ((alone.q, coupled.q), (alone.u, coupled.u), (alone.P, coupled.P),
                  (alone.active, coupled.active)):
@@ -280,15 +286,34 @@ def test_lean_kernel_is_the_general_kernel_bitwise(name, monkeypatch):
     assert alone.active.any()                            # contacts did close in the window
 
 
-def test_lean_selection():
+def test_every_specialization_is_exercised():
+    """The built-in scenarios' master-only runs take each specialized loop (the test above then
+    compares each with the general loop)."""
     from observer.kernel import STRUCTURE_BANDED, STRUCTURE_DENSE
-    from observer.loop import lean
+    from observer.loop import SPECIALIZATIONS, specialization
 
-    assert lean(1, STRUCTURE_DENSE, False, False, False)
+    seen = set()
+    for name in SCENARIOS:
+        sc = observer.load_scenario(name)
+        stepper = observer.MoreauJean(sc.system, sc.law, sc.h, 10 * sc.h, sc.theta)
+        structure = STRUCTURE_DENSE if stepper.S.band is None else STRUCTURE_BANDED
+        seen.add(specialization(1, structure, False, False, sc.master_projection, sc.system.n, sc.system.m))
+    assert seen >= set(SPECIALIZATIONS) - {"general"}
+
+
+def test_specialization_selection():
+    from observer.kernel import STRUCTURE_BANDED, STRUCTURE_DENSE
+    from observer.loop import specialization
+
+    assert specialization(1, STRUCTURE_DENSE, False, False, False, 2, 2) == "lean"
+    assert specialization(1, STRUCTURE_DENSE, False, False, False, 1, 1) == "scalar"
+    for n, m in ((1, 2), (2, 1)):
+        assert specialization(1, STRUCTURE_DENSE, False, False, False, n, m) == "lean"
     for args in ((2, STRUCTURE_DENSE, False, False, False), (1, STRUCTURE_BANDED, False, False, False),
                  (1, STRUCTURE_DENSE, True, False, False), (1, STRUCTURE_DENSE, False, True, False),
                  (1, STRUCTURE_DENSE, False, False, True)):
-        assert not lean(*args)
+        for n, m in ((1, 1), (2, 2)):
+            assert specialization(*args, n, m) == "general"
 
 
 def test_loop_times_are_the_grid():
