@@ -160,9 +160,10 @@ def energy_growth(system, q: np.ndarray, u: np.ndarray) -> float:
 # ---------------------------------------------------------------------------------------
 # the record
 # ---------------------------------------------------------------------------------------
-def assess(inp, rows: np.ndarray, q: np.ndarray, u: np.ndarray, active: np.ndarray,
+def assess(inp, record_every: int, q: np.ndarray, u: np.ndarray, active: np.ndarray,
            chi: np.ndarray, stats: dict, L_of) -> Health:
-    """Health of a loop run from its records (system s first axis) and counters.
+    """Health of a loop run from its records (system s first axis; row r holds step
+    r·record_every) and counters.
 
     ``stats`` holds ``applied_residual`` (and its ``applied_residual_step``), ``min_gap``
     and ``min_gap_step``; ``L_of(s)`` the projection matrix of system s.
@@ -181,7 +182,7 @@ def assess(inp, rows: np.ndarray, q: np.ndarray, u: np.ndarray, active: np.ndarr
     pen_rel = pen / ell if ell > 0 else (np.inf if pen > 0 else 0.0)
     w = omega_max(sys_)
     how = h * w
-    lam = min_eig_projected(L_of, projected_sets(inp, rows, active, chi))
+    lam = min_eig_projected(L_of, projected_sets(inp, record_every, active, chi))
     growth = bound = None
     if unforced(sys_, st.law, bool(inp.master_projection)) and q.shape[1] > 1:
         growth = energy_growth(sys_, q[0], u[0])
@@ -204,19 +205,21 @@ def assess(inp, rows: np.ndarray, q: np.ndarray, u: np.ndarray, active: np.ndarr
                   float(pen_rel), lam, how, growth, bound, tuple(msgs))
 
 
-def projected_sets(inp, rows: np.ndarray, active: np.ndarray, chi: np.ndarray) -> list:
-    """(system, closed set) of every recorded projected step: the master's closed sets with
-    ``master_projection``, χ of the coupled steps for observers with position jumps. (An
-    uncoupled observer's own closed sets are not recorded and not included.)"""
+def projected_sets(inp, record_every: int, active: np.ndarray, chi: np.ndarray) -> list:
+    """(system, closed set) of every recorded projected step (row r: step r·record_every): the
+    master's closed sets with ``master_projection``, χ of the coupled steps for observers with
+    position jumps. (An uncoupled observer's own closed sets are not recorded and not
+    included.)"""
     out = []
-    if rows.size < 2:
+    R = active.shape[0]
+    if R < 2:
         return out
     act, ch = active[1:], chi[1:]
     if inp.master_projection:
         out += [(0, a) for a in _distinct(act)]
     jumps = np.flatnonzero(np.asarray(inp.jumps, dtype=bool)[1:]) + 1
     if jumps.size:
-        tk = inp.stepper.time(rows[1:] - 1)
+        tk = inp.stepper.time(np.arange(1, R) * record_every - 1)     # the steps ending at rows 1..
         coupled = np.ones(tk.shape, bool) if inp.coupling is None else \
             (tk >= inp.coupling[0]) & (tk <= inp.coupling[1])
         if inp.self_driven:

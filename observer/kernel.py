@@ -25,10 +25,10 @@ solvers that return ``(iterations, status, residual)``.
   it, and resumes (:func:`observer.loop.run`).
 
 * **Signals.** f(t), ν(t), ν̇(t) are evaluated in the loop from tables of their harmonic
-  terms (:func:`observer.loop.signal_tables`), only in the columns that vary, the
-  trigonometric values of each window computed beforehand by numpy
-  (:func:`observer.loop.wave_table`): no n-wide signal arrays, the same values bit for bit
-  as the python engine's grid.
+  terms (:func:`observer.loop.signal_tables`), only in the columns that vary, the waves of
+  each window computed beforehand by numpy (:func:`observer.loop.wave_table`, by anchored
+  angle addition, :func:`observer.model.grid_wave`): no n-wide signal arrays, the same values
+  bit for bit as the python engine's grid.
 
 * **Health.** After every contact step the complementarity residual is recomputed from the
   velocity actually applied (:func:`applied_residual`: ``Wᵀ(u_{k+1} − u_free)`` in place of
@@ -868,8 +868,8 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
 # the scalar loop: one degree of freedom, one contact, the master alone
 # ---------------------------------------------------------------------------------------
 @njit(**JIT)
-def advance_scalar(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, rec_act, h, theta, Bu, Bq,
-                   Bf, waves, e_ptr, e_col, e_coef, e_wave, v_ptr, f_c, nu_c, Wp, Wi, Wv, AinvWT, Ghat,
+def advance_scalar(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, rec_act, rec_t, t0, h, theta,
+                   Bu, Bq, Bf, waves, e_ptr, e_col, e_coef, e_wave, v_ptr, f_c, nu_c, Wp, Wi, Wv, AinvWT, Ghat,
                    e, tol, stats):
     """:func:`advance`'s lean loop for n = m = 1 (the master alone, dense): the same
     operations on the same values, with the state, the signals and the scheme's 1×1 matrices
@@ -877,7 +877,9 @@ def advance_scalar(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, rec_ac
     change an array it reads, and reloads every array value after each store; scalars stay in
     registers). Bitwise the same trajectory as :func:`advance`; the same arguments' meanings
     and the same return value ``(k, 0, status)``. A contact step calls :func:`impulse_one`
-    on one-element buffers.
+    on one-element buffers. When ``rec_t`` has a row per record (else it is empty), each
+    recorded row's time ``t0 + k·h`` is written there too, computed as
+    :meth:`observer.stepping.MoreauJean.time` computes it (bitwise its values).
     """
     q, u = qs[0, 0], us[0, 0]
     bu, bq, bf = Bu[0, 0], Bq[0, 0], Bf[0, 0]
@@ -892,6 +894,7 @@ def advance_scalar(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, rec_ac
     ufa, du, u1a, P = np.empty(1), np.empty(1), np.empty(1), np.zeros(1)
     nu_dot = np.zeros((2, 1))
     gmin, gstep = stats[3], stats[4]
+    times = rec_t.shape[0] > 0
     d = (record_every - (k0 + 1) % record_every) % record_every
     until = d + 1
     r = (k0 + 1 + d) // record_every - 1
@@ -954,6 +957,8 @@ def advance_scalar(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, rec_ac
         if rec:
             rec_q[0, r, 0] = q1
             rec_u[0, r, 0] = u1
+            if times:
+                rec_t[r] = float(r * record_every) * h + t0
             if closed:
                 rec_P[0, r, 0] = P[0]
                 rec_act[r, 0] = True

@@ -38,6 +38,7 @@ import signal
 import threading
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -123,15 +124,16 @@ class LoopInput:
 class LoopOutput:
     """Records of one loop run; system s (0 = master) in the first axis.
 
-    ``rows`` are the step indices recorded (row r holds the state after step rows[r]−1, row 0
-    the initial state); ``P`` and ``sigma`` the impulse and projection multiplier of the step
-    ending at the row; ``active`` the master's closed set and ``chi`` the observers' signal
-    of that step; ``q_pre`` (or None) the positions before the step's projection; ``t`` (or
-    None) the rows' times t0 + rows·h when the loop computed them anyway (compiled engine,
-    every step recorded): the values of ``stepper.time(rows)``.
+    Row r holds step r·``record_every`` (the state after step r·record_every − 1, row 0 the
+    initial state; ``rows``, built on first read, lists these step indices); ``P`` and
+    ``sigma`` the impulse and projection multiplier of the step ending at the row; ``active``
+    the master's closed set and ``chi`` the observers' signal of that step; ``q_pre`` (or
+    None) the positions before the step's projection; ``t`` (or None) the rows' times
+    t0 + rows·h when the loop computed them anyway (compiled engine, every step recorded): the
+    values of ``stepper.time(rows)``.
     """
 
-    rows: np.ndarray
+    record_every: int
     q: np.ndarray
     u: np.ndarray
     P: np.ndarray
@@ -151,6 +153,11 @@ class LoopOutput:
     stop_signal: str | None = None
     health: object = None
     t: np.ndarray | None = None
+
+    @cached_property
+    def rows(self) -> np.ndarray:
+        """The recorded step indices ``0, k, 2k, …`` (k = ``record_every``), one per row."""
+        return np.arange(0, self.q.shape[1] * self.record_every, self.record_every)
 
     def stop_info(self, stepper) -> dict | None:
         """``{"step", "t", "reason", "signal"}`` of a stopped run (None: it ran to the end)."""
@@ -213,7 +220,7 @@ class _Stopper:
         return False
 
 
-def _emitter(inp: LoopInput, rec: dict, rows: np.ndarray, on_chunk, rec_V=None):
+def _emitter(inp: LoopInput, rec: dict, record_every: int, on_chunk, rec_V=None):
     """``emit(k)``: pass the rows finished up to grid index k (not yet passed) to ``on_chunk``."""
     state = {"done": 0}
     names = tuple(inp.names) or tuple(f"obs{i}" for i in range(1, inp.q0.shape[0]))
@@ -221,12 +228,13 @@ def _emitter(inp: LoopInput, rec: dict, rows: np.ndarray, on_chunk, rec_V=None):
     def emit(k: int) -> None:
         if on_chunk is None:
             return
-        r1 = int(np.searchsorted(rows, k, side="right"))
+        r1 = min(rec["q"].shape[1], k // record_every + 1)     # rows r with r·record_every ≤ k
         r0 = state["done"]
         if r1 <= r0:
             return
         sl = slice(r0, r1)
-        on_chunk(Chunk(rows[sl], inp.stepper.time(rows[sl]), rec["q"][:, sl], rec["u"][:, sl],
+        rows = np.arange(r0, r1) * record_every
+        on_chunk(Chunk(rows, inp.stepper.time(rows), rec["q"][:, sl], rec["u"][:, sl],
                        rec["P"][:, sl], rec["sigma"][:, sl], rec["active"][sl], rec["chi"][sl],
                        None if rec_V is None else rec_V[:, sl], inp.stepper.system, names))
         state["done"] = r1
@@ -243,9 +251,9 @@ def _finish(inp: LoopInput, out: LoopOutput, stopped_at: int | None, reason: str
     from observer.health import assess, emit
 
     if stopped_at is not None:
-        R = int(np.searchsorted(out.rows, stopped_at, side="right"))
+        R = min(out.q.shape[1], stopped_at // out.record_every + 1)   # the rows of steps ≤ stopped_at
         cut = {k: getattr(out, k)[:, :R] for k in ("q", "u", "P", "sigma")}
-        cut.update(active=out.active[:R], chi=out.chi[:R], rows=out.rows[:R])
+        cut.update(active=out.active[:R], chi=out.chi[:R])
         if out.t is not None:
             cut["t"] = out.t[:R]
         if out.q_pre is not None:
@@ -254,7 +262,7 @@ def _finish(inp: LoopInput, out: LoopOutput, stopped_at: int | None, reason: str
             cut["V"] = out.V[:, :R]
         out = replace(out, stopped_at=int(stopped_at), stop_reason=reason, stop_signal=sig, **cut)
     slots, _, Ls = projection_slots(inp)
-    health = assess(inp, out.rows, out.q, out.u, out.active, out.chi, out.stats,
+    health = assess(inp, out.record_every, out.q, out.u, out.active, out.chi, out.stats,
                     lambda s: Ls[slots[s]])
     emit(health)
     return replace(out, health=health)
@@ -361,7 +369,7 @@ def _allocate(inp: LoopInput, record_every: int, record_pre: bool):
     rec["q"][:, 0], rec["u"][:, 0] = inp.q0, inp.u0
     if record_pre:
         rec["q_pre"][:, 0] = inp.q0
-    return rec, np.arange(0, R * record_every, record_every)
+    return rec, R
 
 
 # ---------------------------------------------------------------------------------------
@@ -370,13 +378,13 @@ def _allocate(inp: LoopInput, record_every: int, record_pre: bool):
 def _run_python(inp: LoopInput, record_every: int, record_pre: bool, on_chunk=None,
                 stopper: _Stopper | None = None) -> LoopOutput:
     stepper = inp.stepper
-    rec, rows = _allocate(inp, record_every, record_pre)
+    rec, _ = _allocate(inp, record_every, record_pre)
     S = inp.q0.shape[0]
     proj = [projection_matrices(stepper, inp.metric_of(s)) for s in range(S)]
     states = [(inp.q0[s].copy(), inp.u0[s].copy()) for s in range(S)]
     coupled = inp.coupled(stepper.grid.t)
     chi_log = inp.chi_window(stepper.grid.t, 0)
-    emit = _emitter(inp, rec, rows, on_chunk)
+    emit = _emitter(inp, rec, record_every, on_chunk)
     health = {"applied_residual": 0.0, "applied_residual_step": -1, "min_gap": np.inf,
               "min_gap_step": -1, "residual_source": "applied"}
     tol = float(stepper.residual_tol)
@@ -416,7 +424,7 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool, on_chunk=No
     emit(stepper.grid.steps if stop is None else stop)
     run_time = time.perf_counter() - t0
     st = stepper.stats
-    out = LoopOutput(rows, rec["q"], rec["u"], rec["P"], rec["sigma"], rec["active"], rec["chi"],
+    out = LoopOutput(record_every, rec["q"], rec["u"], rec["P"], rec["sigma"], rec["active"], rec["chi"],
                      rec["q_pre"] if record_pre else None, "python",
                      {"contact_solves": st.contact_solves, "iterations": st.iterations,
                       "max_residual": st.max_residual, "fallbacks": st.fallbacks, **health},
@@ -609,23 +617,18 @@ def specialization(S: int, structure: int, summary: bool, record_pre: bool, mast
     return "scalar" if n == 1 and m == 1 else "lean"
 
 
-def wave_table(t: np.ndarray, omega: np.ndarray, phase: np.ndarray, function: np.ndarray) -> np.ndarray:
-    """The waves of :func:`signal_tables` on the grid points ``t``: shape (waves, len(t)), entry
-    ``[p, k] = function_p(ω_p t_k + phase_p)`` (the same numpy operations as
-    :class:`observer.model.Harmonic`, hence the same values)."""
-    from observer.kernel import WAVE_COS, WAVE_SIN
+def wave_table(t0: float, h: float, k0: int, k1: int, omega: np.ndarray, phase: np.ndarray,
+               function: np.ndarray) -> np.ndarray:
+    """The waves of :func:`signal_tables` at the grid points k0..k1: shape (waves, k1 − k0 + 1),
+    entry ``[p, k − k0] = function_p(ω_p t_k + phase_p)`` from :func:`observer.model.grid_wave`
+    (the values of :meth:`observer.model.Harmonic.on_grid`, bit for bit)."""
+    from observer.kernel import WAVE_COS, WAVE_MINUS_SIN, WAVE_SIN
+    from observer.model import grid_wave
 
-    out = np.empty((omega.size, t.size))
+    names = {WAVE_COS: "cos", WAVE_SIN: "sin", WAVE_MINUS_SIN: "-sin"}
+    out = np.empty((omega.size, k1 - k0 + 1))
     for p, (w, ph, fn) in enumerate(zip(omega, phase, function)):
-        x = out[p]                                      # in place: x = w·t + ph, then its function
-        np.multiply(t, w, out=x)
-        x += ph
-        if fn == WAVE_COS:
-            np.cos(x, out=x)
-        else:
-            np.sin(x, out=x)
-            if fn != WAVE_SIN:
-                np.negative(x, out=x)
+        out[p] = grid_wave(t0, h, k0, k1, w, ph, names[int(fn)])
     return out
 
 
@@ -671,10 +674,13 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
     steps, n, m = stepper.steps, stepper.system.n, stepper.system.m
     S = inp.q0.shape[0]
     ct = 0.0 if (warm or _COMPILED) else compile_time()
-    rec, rows = _allocate(inp, record_every, record_pre)
+    rec, R = _allocate(inp, record_every, record_pre)
     head, tail = kernel_data(inp)
     signals = signal_tables(stepper.system)
-    t_rec = np.empty(rows.size) if record_every == 1 else None
+    t_rec = np.empty(R) if record_every == 1 else None
+    if t_rec is not None:
+        t_rec[0] = stepper.time(np.zeros(1, np.int64))[0]     # row 0; the loop writes the others
+    no_times = np.empty(0)
     spec = specialization(S, head[0], summary, record_pre, inp.master_projection, n, m)
     general = None if spec == "lean" else True
     no_coupling, no_log = np.zeros(1, np.bool_), np.zeros((1, 1), np.bool_)
@@ -691,12 +697,12 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
     summ = np.zeros((S, SUMMARY_FIELDS + 2 * rho_arr.size))
     summ[:, SUMMARY_FIELDS:] = -1.0
     vprev, Vprev = np.zeros((S, n)), np.zeros(S)
-    rec_V = np.zeros((S, rows.size if summary else 0))
+    rec_V = np.zeros((S, R if summary else 0))
     closings, prev_act = np.zeros(m, np.int64), np.zeros(m, np.bool_)
     if summary:
         summary_start(qs, us, head[0], Mq, Kq, head[7], vprev, Vprev, summ, k_on, k_off, rho_arr, rec_V)
     fallbacks: list[dict] = []
-    emit = _emitter(inp, rec, rows, on_chunk, rec_V if summary else None)
+    emit = _emitter(inp, rec, record_every, on_chunk, rec_V if summary else None)
     stop, reason = None, ""
     t0 = time.perf_counter()
     k, s = 0, 0
@@ -707,8 +713,10 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
         kb = k
         k1 = min(steps, kb + WINDOW)
         # the window's grid points; every step recorded: written in place as the rows' times
-        tw = stepper.time(np.arange(kb, k1 + 1), out=None if t_rec is None else t_rec[kb:k1 + 1])
-        waves = wave_table(tw, *signals[:3])
+        # (the scalar loop writes them itself)
+        if (t_rec is not None and spec != "scalar") or S > 1:
+            tw = stepper.time(np.arange(kb, k1 + 1), out=None if t_rec is None else t_rec[kb:k1 + 1])
+        waves = wave_table(stepper.t0, stepper.h, kb, k1, *signals[:3])
         if S > 1:                                   # the observers' coupling and χ of the window
             coupled = np.ascontiguousarray(inp.coupled(tw), dtype=np.bool_)
             chi_w = inp.chi_window(tw, kb)
@@ -719,7 +727,8 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
         while k < k1:
             if spec == "scalar":
                 k, s, status = advance_scalar(k, k1, kb, qs, us, record_every, rec["q"], rec["u"], rec["P"],
-                                              rec["active"], stepper.h, stepper.theta, *head[1:4], waves,
+                                              rec["active"], no_times if t_rec is None else t_rec,
+                                              stepper.t0, stepper.h, stepper.theta, *head[1:4], waves,
                                               *signals[3:8], *signals[9:], *tail[:5], *tail[8:], stats)
             else:
                 k, s, status = advance(k, k1, s, kb, qs, us, jumps, slots, bool(inp.master_projection), coupled,
@@ -758,7 +767,7 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
     if summary:
         out_summary = {"fields": summ, "closings": closings, "k_on": k_on, "k_off": k_off,
                        "rhos": tuple(rhos)}
-    out = LoopOutput(rows, rec["q"], rec["u"], rec["P"], rec["sigma"], rec["active"], rec["chi"],
+    out = LoopOutput(record_every, rec["q"], rec["u"], rec["P"], rec["sigma"], rec["active"], rec["chi"],
                       rec["q_pre"] if record_pre else None, "compiled",
                       {"contact_solves": int(stats[0]) + (ref_stats.contact_solves if ref_stats else 0),
                        "iterations": int(stats[1]) + (ref_stats.iterations if ref_stats else 0),

@@ -442,7 +442,7 @@ def run_metadata(scenario, stepper, out) -> dict:
     done = stepper.steps if out.stopped_at is None else int(out.stopped_at)   # steps actually taken
     meta.update(h=stepper.h, theta=stepper.theta, steps=done, planned_steps=stepper.steps,
                 engine=out.engine, structure="dense" if stepper.S.band is None else "banded",
-                record_every=int(out.rows[1] - out.rows[0]) if out.rows.size > 1 else 1,
+                record_every=int(out.record_every),
                 solver=stepper.solver.name, contact_solves=st["contact_solves"],
                 solver_iterations=st["iterations"], solver_fallbacks=st["fallbacks"],
                 fallback_steps=list(out.fallbacks),

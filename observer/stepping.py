@@ -223,8 +223,9 @@ class Grid:
 
     ``fbar[i] = (1−θ)f(t_{k0+i}) + θf(t_{k0+i+1})`` (shape (k1−k0, n)); ``nu``, ``nu_dot``
     shape (k1−k0+1, m). :meth:`build` makes the whole grid (k0 = 0); :meth:`window` a part of
-    it with bitwise the same values (every entry is computed from its own t_k = t0 + k h), so
-    that a long run can be advanced window by window in bounded memory.
+    it with bitwise the same values (the signals come from :meth:`observer.model.Harmonic.on_grid`,
+    whose anchors sit at absolute grid indices), so that a long run can be advanced window by
+    window in bounded memory.
     """
 
     t: np.ndarray
@@ -241,9 +242,9 @@ class Grid:
     def window(system: LinearSystem, h: float, theta: float, t0: float, k0: int, k1: int) -> "Grid":
         """Steps k0..k1−1 (grid points k0..k1)."""
         t = t0 + np.arange(k0, k1 + 1) * h
-        f = system.f(t)
+        f = system.forcing.on_grid(t0, h, k0, k1)
         fbar = (1.0 - theta) * f[:-1] + theta * f[1:]
-        return Grid(t, fbar, system.nu(t), system.nu_dot(t), k0)
+        return Grid(t, fbar, system.gap.on_grid(t0, h, k0, k1), system.gap.on_grid(t0, h, k0, k1, True), k0)
 
     @property
     def steps(self) -> int:

@@ -316,19 +316,21 @@ def test_specialization_selection():
             assert specialization(*args, n, m) == "general"
 
 
-def test_loop_times_are_the_grid():
+@pytest.mark.parametrize("name,S", [("impact_oscillator", 1), ("double_mass", 1), ("double_mass", 2)])
+def test_loop_times_are_the_grid(name, S):
     """The compiled loop's row times (every step recorded) are ``stepper.time(rows)`` bit for
-    bit, over several windows and after a start time; the result's ``t`` is the grid."""
+    bit, over several windows and after a start time, in each specialization (scalar, lean,
+    general); the result's ``t`` is the grid."""
     import observer.loop as loop
 
-    sc = observer.load_scenario("impact_oscillator")
+    sc = observer.load_scenario(name)
     steps = 2 * loop.WINDOW + 5
     st = observer.MoreauJean(sc.system, sc.law, sc.h, 0.5 + steps * sc.h, sc.theta, t0=0.5)
-    inp = loop.LoopInput(st, sc.q0[None], sc.u0[None], np.array([False]), False)
+    inp = loop.LoopInput(st, np.stack([sc.q0] * S), np.stack([sc.u0] * S), np.array([False] * S), False)
     out = loop.run(inp, engine="compiled")
     assert out.t is not None and out.t.shape == (steps + 1,)
     assert np.array_equal(out.t, st.time(out.rows))
     assert np.array_equal(out.t, 0.5 + np.arange(steps + 1) * sc.h)
     assert loop.run(inp, engine="compiled", record_every=3).t is None
-    res = observer.simulate(sc, t_end=steps * sc.h)
+    res = observer.simulate(sc, t_end=steps * sc.h, observers=[])
     assert np.array_equal(res.t, np.arange(steps + 1) * sc.h)
