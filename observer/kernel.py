@@ -68,7 +68,9 @@ master after a step, its step, max applied residual (:func:`applied_residual`), 
 applied residual of the last contact step]."""
 STRUCTURE_DENSE, STRUCTURE_BANDED = 0, 1
 WAVE_COS, WAVE_SIN, WAVE_MINUS_SIN = 0, 1, 2
-"""Functions of the signal waves (:func:`observer.loop.signal_tables`)."""
+WAVE_NAMES = ("cos", "sin", "-sin")
+"""Functions of the signal waves, by code: code c is ``WAVE_NAMES[c]``
+(:func:`observer.loop.signal_tables`, :func:`observer.loop.wave_table`)."""
 EPS = float(np.finfo(np.float64).eps)
 ROUNDOFF = 16.0
 TINY = 1e-300

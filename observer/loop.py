@@ -573,9 +573,9 @@ def signal_tables(system) -> tuple:
     (``v_ptr``, ``v_col`` likewise); and the constants of f and ν. A wave shared by several
     entries (the same ω, phase and function) is evaluated once per grid point.
     """
-    from observer.kernel import WAVE_COS, WAVE_MINUS_SIN, WAVE_SIN
+    from observer.kernel import WAVE_NAMES
 
-    codes = {"cos": WAVE_COS, "sin": WAVE_SIN, "-sin": WAVE_MINUS_SIN}
+    codes = {name: code for code, name in enumerate(WAVE_NAMES)}
     waves: dict[tuple, int] = {}
     cols, coefs, wave, e_ptr, v_col, v_ptr = [], [], [], [0], [], [0]
     for entries in (system.forcing.entries(), system.gap.entries(), system.gap.entries(derivative=True)):
@@ -622,13 +622,12 @@ def wave_table(t0: float, h: float, k0: int, k1: int, omega: np.ndarray, phase: 
     """The waves of :func:`signal_tables` at the grid points k0..k1: shape (waves, k1 − k0 + 1),
     entry ``[p, k − k0] = function_p(ω_p t_k + phase_p)`` from :func:`observer.model.grid_wave`
     (the values of :meth:`observer.model.Harmonic.on_grid`, bit for bit)."""
-    from observer.kernel import WAVE_COS, WAVE_MINUS_SIN, WAVE_SIN
+    from observer.kernel import WAVE_NAMES
     from observer.model import grid_wave
 
-    names = {WAVE_COS: "cos", WAVE_SIN: "sin", WAVE_MINUS_SIN: "-sin"}
     out = np.empty((omega.size, k1 - k0 + 1))
     for p, (w, ph, fn) in enumerate(zip(omega, phase, function)):
-        out[p] = grid_wave(t0, h, k0, k1, w, ph, names[int(fn)])
+        out[p] = grid_wave(t0, h, k0, k1, w, ph, WAVE_NAMES[fn])
     return out
 
 
@@ -679,7 +678,7 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
     signals = signal_tables(stepper.system)
     t_rec = np.empty(R) if record_every == 1 else None
     if t_rec is not None:
-        t_rec[0] = stepper.time(np.zeros(1, np.int64))[0]     # row 0; the loop writes the others
+        t_rec[0] = stepper.time(np.zeros(1, np.int64))[0]     # row 0; rows 1.. by the loop (scalar) or tw
     no_times = np.empty(0)
     spec = specialization(S, head[0], summary, record_pre, inp.master_projection, n, m)
     general = None if spec == "lean" else True
