@@ -96,7 +96,7 @@ def test_results_frame_columns_and_rows():
     assert list(df.columns) == ["scenario", "check", "equation", "status", "evidence", "passed", "margin",
                                 "tolerance", "verdict", "witness", "reason", "elapsed"]
     assert df.check.tolist() == ["mass_spd", "stiffness_spd"] and df.status.tolist() == ["PASS", "n/a"]
-    assert df.evidence.tolist() == ["sampled", "n/a"]
+    assert df.evidence.tolist() == ["proved", "n/a"]
     assert pc.results_frame([]).shape == (0, 12)
 
 
