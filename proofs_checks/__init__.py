@@ -1,9 +1,13 @@
 """proofs_checks: numerical verification of every step of the paper's Proposition 1 and Theorem 1.
 
 Each check returns a :class:`CheckResult` with ``passed`` (True, False, or None when not
-applicable), a signed ``margin`` (satisfied when ``margin ≥ −tolerance``), the
-``tolerance`` and a ``witness`` (where the margin is worst). Every check is shown in the
-tests to fail on a known-bad case.
+applicable), an ``evidence`` level (:data:`EVIDENCE_LEVELS`: ``proved`` in exact rational
+or verified ball arithmetic, ``bounded``, ``sampled``, ``violated`` with a counterexample
+re-checked exactly; ``n/a``), a one-line ``verdict``, a signed ``margin`` (satisfied when
+``margin ≥ −tolerance``), the ``tolerance`` and a ``witness`` (where the margin is worst).
+Every check is shown in the tests to fail on a known-bad case. The exact decisions (model
+assumptions, projection PSD, A3 by piece enumeration) are in :mod:`proofs_checks.exact`
+and :mod:`proofs_checks.pieces`.
 
 Registry :data:`CHECKS` (name → function of a :class:`CheckContext`), in proof order:
 
