@@ -30,9 +30,9 @@ Search, for every active set:
 
 **Decided, not sampled, where possible** (:mod:`proofs_checks.pieces`): before the search,
 A3 is decided in exact rational arithmetic by enumerating the linear pieces of the impact
-map (Newton: one exact LDLᵀ of ``N_A = FG_A + G_AF − G_A`` per maximal set, any m; Poisson:
-all 4^|A| (compression, expansion) support pairs while 4^|A| ≤ ``exact_max_pairs``), for
-m ≤ ``exact_up_to``. The theorem used and its proof are in :mod:`proofs_checks.pieces`. The
+map per connected component A of the maximal sets' Delassus graphs (Newton: one exact
+LDLᵀ of ``N_A = FG_A + G_AF − G_A``; Poisson: all 4^|A| (compression, expansion) support
+pairs while 4^|A| ≤ ``exact_max_pairs``), for m ≤ ``exact_up_to``. The theorem used and its proof are in :mod:`proofs_checks.pieces`. The
 result is ``proved``, or ``violated`` with an exact counterexample (``exact_*`` witness
 entries: rational γ₁⁻, γ₂⁻ printed as floats, exact impulses and ΔΛᵀΔγ̄ > 0, re-checked by an
 independent exact LCP solve). Otherwise (larger m, or a Poisson set too large to enumerate)

@@ -3,10 +3,16 @@
 For a closed set A with Delassus matrix G = W_AᵀM⁻¹W_A (SPD, formed exactly from the float
 M and W), the Newton map γ⁻ ↦ Λ = LCP(G, (1+e)∘γ⁻) and Glocker's Poisson map (compression
 LCP(G, γ⁻), expansion LCP(G, γ_C + G(ε∘Λ_C))) are continuous and piecewise linear: the
-solution of an LCP with a P-matrix G is x = −P_J G_JJ⁻¹ P_Jᵀ b on the complementary cone of
-its support J (Cottle, Pang & Stone, *The Linear Complementarity Problem*, 1992, §3.3 and
-Thm. 3.3.7), so the pieces are indexed by one support J (Newton) or a pair (J₁, J₂)
-(Poisson), and each piece is a polyhedral cone on which Λ = Jγ⁻ for a matrix J.
+solution of an LCP with a P-matrix G is unique for every right-hand side b, and equals
+x = −P_J G_JJ⁻¹ P_Jᵀ b on the complementary cone of its support J (Cottle, Pang & Stone,
+*The Linear Complementarity Problem*, 1992, ch. 3), so the pieces are indexed by one support
+J (Newton) or a pair (J₁, J₂) (Poisson), and each piece is a polyhedral cone on which
+Λ = Jγ⁻ for a matrix J.
+
+Uncoupled contacts: when G_A is block diagonal (after a permutation; the exact zero pattern
+of G over Q), both laws act block by block and q is the sum of the blocks' q, so A3 on A
+holds iff it holds on every connected component of G_A's graph; the pieces are enumerated
+per component.
 
 A3 (eq. (6)) asks ``q(γ₁⁻, γ₂⁻) = ΔΛᵀΔγ̄ = ΔΛᵀΔγ⁻ + ½ ΔΛᵀGΔΛ ≤ 0`` for all pairs.
 
@@ -120,6 +126,25 @@ def _maximal(sets: list) -> list:
         if not any(set(s) <= set(t) for t in out):
             out.append(s)
     return out
+
+
+def _components(G: flint.fmpq_mat, sets: list) -> list:
+    """The connected components of the graph of G (edge i–j when G_ij ≠ 0 exactly)
+    restricted to each set, each once, largest first."""
+    out: dict = {}
+    for A in sets:
+        left = set(A)
+        while left:
+            stack, comp = [min(left)], set()
+            while stack:
+                i = stack.pop()
+                if i in comp:
+                    continue
+                comp.add(i)
+                stack.extend(j for j in left if j not in comp and G[i, j] != 0)
+            left -= comp
+            out.setdefault(tuple(sorted(comp)), None)
+    return _maximal(list(out))
 
 
 def _piece_matrix(law: str, G: flint.fmpq_mat, D: list, J1: tuple, J2: tuple = ()) -> flint.fmpq_mat:
@@ -250,7 +275,7 @@ def decide_a3(law: str, M: np.ndarray, W: np.ndarray, restitution, sets: list, *
     e_all = [exact.to_fmpq(v) for v in np.asarray(restitution, float)]
     pieces = 0
     cache: dict = {}
-    for A in _maximal(sets):
+    for A in _components(Gf, _maximal(sets)):
         G = _sub(Gf, A, A)
         e = [e_all[i] for i in A]
         D = [1 + ei for ei in e]

@@ -258,3 +258,21 @@ def test_cli_acceptance(capsys):
                      "--only", "impact_monotone", "--option", "impact_monotone.adversarial_sets=0"])
     text = capsys.readouterr()
     assert code == 1 and "impact_monotone  FAIL    violated" in text.out
+
+
+def test_a3_uncoupled_components_decided_separately(pair):
+    """G block diagonal: A3 holds iff it holds on each component. Ten independent contacts
+    with alternating restitution are monotone (products of scalar maps; 10·4 Poisson
+    pieces, not 4¹⁰); a rocking block plus a free contact is monotone when the block's two
+    coefficients agree, whatever the third, and violated on the block otherwise."""
+    M, W = np.diag([2.0, 4.0, 3.0, 5.0, 1.0, 2.0, 7.0, 3.0, 2.0, 1.0]), np.eye(10)
+    d = pieces.decide_a3("poisson", M, W, [0.1, 0.95] * 5, [list(range(10))])
+    assert d["status"] == "proved" and d["pieces"] == 40
+    n, m = pair.M.shape[0], pair.m
+    M3 = np.zeros((n + 1, n + 1))
+    M3[:n, :n], M3[n, n] = pair.M, 2.0
+    W3 = np.zeros((n + 1, m + 1))
+    W3[:n, :m], W3[n, m] = pair.W, 1.0
+    assert pieces.decide_a3("poisson", M3, W3, [0.7, 0.7, 0.2], [[0, 1, 2]])["status"] == "proved"
+    bad = pieces.decide_a3("newton", M3, W3, [0.1, 0.95, 0.2], [[0, 1, 2]])
+    assert bad["status"] == "violated" and bad["active_set"] == [0, 1] and bad["inner"] > 0
