@@ -86,11 +86,14 @@ def _definite(name: str, label: str, A: np.ndarray, equation: str, *, symmetric:
         witness["exact_xAx"] = exact.to_float(cert.value)
     if cert.status == "definite":
         margin = rel - rcond_min
+        note = ""
         if rcond_min <= 0.0 and not margin > 0:      # float round-off has the wrong sign
             pmin = witness.get("min_pivot", 0.0)
             margin = pmin / diag if diag > 0 and pmin > 0 else float(np.finfo(float).tiny)
+            note = (f"float eigvalsh gives λ_min = {eig[0]:.3g} ≤ 0: round-off, the exact LDLᵀ proves "
+                    f"{label} ≻ 0")
         if margin >= 0:
-            return CheckResult(name, True, margin, 0.0, witness, "", equation, keys, evidence="proved",
+            return CheckResult(name, True, margin, 0.0, witness, note, equation, keys, evidence="proved",
                                verdict=f"{label} ≻ 0 (" + ("exact" if "exact" in cert.method else "ball arithmetic") + ")")
         # exactly definite, but worse conditioned than the requested rcond_min
         text = (f"{label} is positive definite (exact) but λ_min/λ_max = {rel:.3g} < rcond_min = "

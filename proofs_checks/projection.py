@@ -322,8 +322,10 @@ def check_projection_psd(K: np.ndarray, W: np.ndarray, *, rng: np.random.Generat
     witness.update({f"exact_{k}": v for k, v in ex.items() if k != "holds"})
     margin = worst[0]
     if ex["holds"]:
+        note = ("" if margin >= -tolerance else f"float relative eigenvalue {margin:.3g} < 0: round-off, "
+                "the exact LDLᵀ proves every L_I ≻ 0")
         margin = max(margin, 0.0)                     # float round-off cannot flip an exact PSD
-        return CheckResult(name, True, margin, tolerance, witness, "", eq, keys, evidence="proved",
+        return CheckResult(name, True, margin, tolerance, witness, note, eq, keys, evidence="proved",
                            verdict=f"P_I L_I⁻¹ P_Iᵀ ⪰ 0 for all {ex['sets_proved']} active sets (exact)")
     reason = ("L_I is indefinite: P_I L_I⁻¹ P_Iᵀ has a negative eigenvalue" if ex["failing_class"] == "indefinite"
               else "L_I is singular: L_I⁻¹ does not exist")

@@ -86,6 +86,8 @@ def test_near_miss_stiffness_classified_exactly(name):
     r = pc.check_stiffness_spd(K)
     if spd:
         assert r.passed is True and r.evidence == "proved" and r.margin > 0
+        if r.witness["lambda_min"] <= 0:                     # numpy has the wrong sign: said so
+            assert "round-off" in r.reason
     else:
         assert r.passed is False and r.evidence == "violated" and r.margin < 0
         x = [Fraction(v) for v in r.witness["exact_vector_rational"]]
@@ -244,6 +246,10 @@ def test_sampled_counterexample_rechecked_exactly(pair):
                                     samples=4, local_samples=4, adversarial_sets=0, exact=False, tolerance=-1.0)
     assert good.passed is True and good.evidence == "sampled" and "round-off" in good.reason
     assert good.witness["exact_inner_product"] <= 0
+    # the same float 'failure' with the exact decision on: proved, the sampled ρ called round-off
+    proved = pc.check_impact_monotone(pair, ImpactLaw.build("newton", 0.7, 2), rng=np.random.default_rng(0),
+                                      samples=4, local_samples=4, adversarial_sets=0, tolerance=-1.0)
+    assert proved.passed is True and proved.evidence == "proved" and "round-off" in proved.reason
 
 
 # ----------------------------------------------------------------------------- command line
