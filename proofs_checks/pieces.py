@@ -149,24 +149,10 @@ def _components(G: flint.fmpq_mat, sets: list) -> list:
 
 def _piece_matrix(law: str, G: flint.fmpq_mat, D: list, J1: tuple, J2: tuple = ()) -> flint.fmpq_mat:
     """The matrix J of Λ = Jγ⁻ on the piece (k×k, k = size of G)."""
-    k = G.nrows()
-
-    def S(J):
-        out = flint.fmpq_mat(k, k)
-        if J:
-            H = _sub(G, J, J).inv()
-            for a, i in enumerate(J):
-                for c, j in enumerate(J):
-                    out[i, j] = H[a, c]
-        return out
-
-    Dm = flint.fmpq_mat(k, k)
-    for i in range(k):
-        Dm[i, i] = D[i]
-    S1 = S(J1)
+    Dm, S1 = _diag(D), _sref(G, J1)
     if law == "newton":
         return -(S1 * Dm)
-    S2 = S(J2)
+    S2 = _sref(G, J2)
     return -(Dm * S1) - S2 + S2 * G * Dm * S1
 
 
@@ -196,16 +182,15 @@ def _cone_rows(G: flint.fmpq_mat, J: tuple) -> flint.fmpq_mat:
     return T
 
 
-def _interior_pair(law: str, G: flint.fmpq_mat, D: list, J1: tuple, J2: tuple, d: list):
-    """An exact pair (γ₀ + εd, γ₀ − εd) strictly inside the piece, or None if none is found."""
+def _interior_pair(G: flint.fmpq_mat, D: list, J1: tuple, J2: tuple, d: list):
+    """An exact pair (γ₀ + εd, γ₀ − εd) strictly inside the Poisson piece (J₁, J₂): γ₀ from a
+    float LP (max t with every cone coordinate ≥ t), kept only if its coordinates are > 0
+    over Q; ε halves the distance to the nearest face. None if no such point is found."""
     from scipy.optimize import linprog
     k = G.nrows()
-    if law == "newton":
-        rows = _cone_rows(G, J1) * _diag(D)                  # b = Dγ
-    else:
-        T1 = _cone_rows(G, J1)
-        B = _identity(k) - G * _diag(D) * _sref(G, J1)
-        rows = _stack(T1, _cone_rows(G, J2) * B)
+    T1 = _cone_rows(G, J1)                                   # compression: γ in cone(J₁)
+    B = _identity(k) - G * _diag(D) * _sref(G, J1)           # b₂ = (I − G D S₁) γ
+    rows = _stack(T1, _cone_rows(G, J2) * B)                 # expansion: b₂ in cone(J₂)
     R = exact.to_array(rows)
     n_r = R.shape[0]
     A_ub = np.hstack([-R, np.ones((n_r, 1))])
@@ -236,6 +221,7 @@ def _identity(k):
 
 
 def _sref(G, J):
+    """S_J = P_J G_JJ⁻¹ P_Jᵀ (k×k, zero outside J)."""
     k = G.nrows()
     out = flint.fmpq_mat(k, k)
     if J:
@@ -316,7 +302,7 @@ def decide_a3(law: str, M: np.ndarray, W: np.ndarray, restitution, sets: list, *
                     cache[ukey] = cert.status
                     if cert.status != "indefinite":
                         continue
-                    cand = _interior_pair(law, G, D, J1, J2, cert.vector)
+                    cand = _interior_pair(G, D, J1, J2, cert.vector)
                     if cand is None:
                         undecided = key
                         continue

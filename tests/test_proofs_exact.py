@@ -282,3 +282,14 @@ def test_a3_uncoupled_components_decided_separately(pair):
     assert pieces.decide_a3("poisson", M3, W3, [0.7, 0.7, 0.2], [[0, 1, 2]])["status"] == "proved"
     bad = pieces.decide_a3("newton", M3, W3, [0.1, 0.95, 0.2], [[0, 1, 2]])
     assert bad["status"] == "violated" and bad["active_set"] == [0, 1] and bad["inner"] > 0
+
+
+def test_a3_beyond_the_enumeration_budget_is_sampled(pair):
+    """A Poisson set with more pieces than exact_max_pairs is not decided exactly: the check
+    says so and falls back to the search, labelled 'sampled'."""
+    d = pieces.decide_a3("poisson", pair.M, pair.W, [0.7, 0.7], [[0, 1]], max_pairs=15)
+    assert d["status"] == "undecided" and "16 Poisson pieces" in d["reason"]
+    r = pc.check_impact_monotone(pair, ImpactLaw.build("poisson", 0.7, 2), rng=np.random.default_rng(0),
+                                 samples=4, local_samples=4, adversarial_sets=0, exact_max_pairs=15)
+    assert r.passed is True and r.evidence == "sampled" and "exact_pieces" not in r.witness
+    assert "exceed max_pairs = 15" in r.witness["exact_undecided"]
