@@ -552,6 +552,8 @@ def run_checks(case: Case, ctx: Context) -> list[dict]:
                      "witness": str(rec.get("witness", "") or ""),
                      "reason": str(rec.get("reason", "") or ""),
                      "check_elapsed_s": _float(rec.get("elapsed")),
+                     "evidence": str(rec.get("evidence", "") or ""),
+                     "verdict": str(rec.get("verdict", "") or ""),
                      "status": "ok", "note": "", "cpu_time_s": cpu, "wall_time_s": wall,
                      "cpu_scope": "all checks of the scenario"})
     return rows
