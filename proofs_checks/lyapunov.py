@@ -216,23 +216,27 @@ def roundoff_allowance(run: Run, A: Trajectory, B: Trajectory) -> np.ndarray:
 
 
 def _projection_parts(run: Run, A: Trajectory, B: Trajectory, out: dict) -> None:
-    """Closed-form projection part (jump part and unprojected gap), in the K metric."""
+    """Closed-form projection part (jump part and unprojected gap), in the K metric (the steps
+    grouped by their closed set I = closed(a) ∩ closed(b), one factorization of L_I each)."""
     s = run.system
     K, W = s.K, s.W
     L = W.T @ np.linalg.solve(K, W)
     L = 0.5 * (L + L.T)
     nu = s.nu(run.t)
-    for k in np.flatnonzero((A.active[1:] | B.active[1:]).any(axis=1)):
-        I = np.flatnonzero(A.active[k + 1] & B.active[k + 1])
-        if I.size == 0:
-            continue
-        gA = A.q_pre[k + 1] @ W[:, I] + nu[k + 1, I]
-        gB = B.q_pre[k + 1] @ W[:, I] + nu[k + 1, I]
+    both = A.active[1:] & B.active[1:]
+    groups: dict[bytes, list[int]] = {}
+    for k in np.flatnonzero(both.any(axis=1)):
+        groups.setdefault(both[k].tobytes(), []).append(int(k))
+    for ks in groups.values():
+        ks = np.asarray(ks)
+        I = np.flatnonzero(both[ks[0]])
+        gA = A.q_pre[ks + 1] @ W[:, I] + nu[ks + 1][:, I]
+        gB = B.q_pre[ks + 1] @ W[:, I] + nu[ks + 1][:, I]
         dg = gA - gB
-        dr = (0.0 if A.projected else gA) - (0.0 if B.projected else gB)
+        dr = (0.0 * gA if A.projected else gA) - (0.0 * gB if B.projected else gB)
         LI = L[np.ix_(I, I)]
-        out["projection_jump"][k] = -0.5 * dg @ np.linalg.solve(LI, dg)
-        out["projection_unprojected_gap"][k] = 0.5 * dr @ np.linalg.solve(LI, dr) if np.any(dr) else 0.0
+        out["projection_jump"][ks] = -0.5 * np.einsum("ki,ki->k", dg, np.linalg.solve(LI, dg.T).T)
+        out["projection_unprojected_gap"][ks] = 0.5 * np.einsum("ki,ki->k", dr, np.linalg.solve(LI, dr.T).T)
     out["projection_cf"] = out["projection_jump"] + out["projection_unprojected_gap"]
 
 
