@@ -32,10 +32,11 @@ Search, for every active set:
 A3 is decided in exact rational arithmetic by enumerating the linear pieces of the impact
 map per connected component A of the maximal sets' Delassus graphs (Newton: one exact
 LDLᵀ of ``N_A = FG_A + G_AF − G_A``; Poisson: all 4^|A| (compression, expansion) support
-pairs while 4^|A| ≤ ``exact_max_pairs``), for m ≤ ``exact_up_to``. The theorem used and its proof are in :mod:`proofs_checks.pieces`. The
-result is ``proved``, or ``violated`` with an exact counterexample (``exact_*`` witness
-entries: rational γ₁⁻, γ₂⁻ printed as floats, exact impulses and ΔΛᵀΔγ̄ > 0, re-checked by an
-independent exact LCP solve). Otherwise (larger m, or a Poisson set too large to enumerate)
+pairs while 4^|A| ≤ ``exact_max_pairs``, default 1024: five coupled contacts), for
+m ≤ ``exact_up_to``. The theorem used and its proof are in :mod:`proofs_checks.pieces`.
+The result is ``proved``, or ``violated`` with an exact counterexample (``exact_*`` witness
+entries: rational γ₁⁻, γ₂⁻ printed as floats and exactly as strings, exact impulses and
+ΔΛᵀΔγ̄ > 0, re-checked by an independent exact LCP solve). Otherwise (larger m, or a Poisson set too large to enumerate)
 the search below decides, with evidence ``sampled``; a counterexample it finds is re-checked
 in exact arithmetic, and one that vanishes there is reported as round-off, not as a
 violation.
@@ -228,7 +229,7 @@ def check_impact_monotone(system: LinearSystem, law: ImpactLaw, *, rng: np.rando
                           exhaustive_up_to: int = 10, tolerance: float = 1e-9,
                           solver: str = "pivoting", laws: tuple[str, ...] | None = None,
                           exact: bool = True, exact_up_to: int = 10,
-                          exact_max_pairs: int = 4096) -> CheckResult:
+                          exact_max_pairs: int = 1024) -> CheckResult:
     """Assumption A3 (eq. (6)): the impact map of every reachable active set is monotone.
 
     Parameters

@@ -161,6 +161,31 @@ def _quad_form(J: flint.fmpq_mat, G: flint.fmpq_mat) -> flint.fmpq_mat:
     return exact.sym_part(J) + J.transpose() * G * J / 2
 
 
+def _quad_form_on(G: flint.fmpq_mat, D: list, J1: tuple, J2: tuple, inv_cache: dict):
+    """Q of the Poisson piece (J₁, J₂) on U = J₁ ∪ J₂, where all its nonzero entries lie
+    (J has rows and columns in U only), with the inverses G_JJ⁻¹ taken from ``inv_cache``."""
+    U = sorted(set(J1) | set(J2))
+    if not U:
+        return None, U
+    pos = {i: t for t, i in enumerate(U)}
+    u = len(U)
+
+    def S(J):
+        out = flint.fmpq_mat(u, u)
+        if J:
+            H = inv_cache[J]
+            for a, i in enumerate(J):
+                for c, j in enumerate(J):
+                    out[pos[i], pos[j]] = H[a, c]
+        return out
+
+    GU, DU = _sub(G, U, U), _diag([D[i] for i in U])
+    S1, S2 = S(J1), S(J2)
+    DS1 = DU * S1
+    Jm = -DS1 - S2 + S2 * GU * DS1
+    return _quad_form(Jm, GU), U
+
+
 def _cone_rows(G: flint.fmpq_mat, J: tuple) -> flint.fmpq_mat:
     """T with z = T b ≥ 0 ⇔ b in the complementary cone of support J (x_J and w_rest)."""
     k = G.nrows()
@@ -245,7 +270,7 @@ def delassus_exact(M: np.ndarray, W: np.ndarray) -> flint.fmpq_mat:
 
 
 def decide_a3(law: str, M: np.ndarray, W: np.ndarray, restitution, sets: list, *,
-              max_pairs: int = 4096) -> dict:
+              max_pairs: int = 1024) -> dict:
     """Decide A3 for ``law`` on the given active sets (their maximal ones suffice).
 
     Returns
@@ -286,25 +311,24 @@ def decide_a3(law: str, M: np.ndarray, W: np.ndarray, restitution, sets: list, *
                 return {"status": "undecided", "pieces": pieces, "method": "piece enumeration",
                         "reason": f"{4 ** k} Poisson pieces on a set of {k} contacts exceed max_pairs = {max_pairs}"}
             subsets = [c for r in range(k + 1) for c in itertools.combinations(range(k), r)]
+            inv_cache = {J: _sub(G, J, J).inv() for J in subsets if J}
             pair = None
             undecided = None
             for J1 in subsets:
                 for J2 in subsets:
                     pieces += 1
-                    key = (tuple(A[i] for i in J1), tuple(A[i] for i in J2))
-                    U = sorted(set(J1) | set(J2))
-                    ukey = (tuple(A[i] for i in U), key)
-                    if ukey in cache:
+                    Qm, U = _quad_form_on(G, D, J1, J2, inv_cache)
+                    if not U:
                         continue
-                    Jm = _piece_matrix(law, G, D, J1, J2)
-                    Qm = _quad_form(Jm, G)
                     cert = exact.classify_symmetric(-Qm)
-                    cache[ukey] = cert.status
                     if cert.status != "indefinite":
                         continue
-                    cand = _interior_pair(G, D, J1, J2, cert.vector)
+                    d = [Q0] * k
+                    for t, i in enumerate(U):
+                        d[i] = cert.vector[t]
+                    cand = _interior_pair(G, D, J1, J2, d)
                     if cand is None:
-                        undecided = key
+                        undecided = (tuple(A[i] for i in J1), tuple(A[i] for i in J2))
                         continue
                     pair, piece = cand, {"compression_support": [A[i] for i in J1],
                                          "expansion_support": [A[i] for i in J2]}
