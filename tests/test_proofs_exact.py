@@ -110,6 +110,15 @@ def test_classify_semidefinite_and_indefinite_certificates():
             assert (value < 0) if status == "indefinite" else (value == 0 and matvec(frac(A), x) == [0, 0])
     zero = exact.classify_symmetric(exact.to_fmpq_mat(np.zeros((2, 2))))
     assert zero.status == "semidefinite"
+    # the LDLᵀ pivots are the ratios of consecutive leading principal minors (reference: Laplace)
+    rng = np.random.default_rng(7)
+    X = rng.standard_normal((5, 5))
+    Y = X @ X.T + 0.1 * np.eye(5)
+    for A in (TWINS["spd3"], 0.5 * (Y + Y.T)):
+        cert = exact.classify_symmetric(exact.to_fmpq_mat(A))
+        prods = list(itertools.accumulate((Fraction(int(p.p), int(p.q)) for p in cert.pivots),
+                                          lambda a, b: a * b))
+        assert cert.status == "definite" and prods == leading_minors(A)
 
 
 def test_ball_arithmetic_path_for_large_matrices():
