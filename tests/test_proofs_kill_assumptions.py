@@ -189,10 +189,14 @@ def test_harmonic_witness_and_margin():
     assert np.allclose(w["f_at_t_star"], f(w["t_star"]), rtol=1e-15)
     assert r.margin == pytest.approx(1 - w["sup_norm"] / U, abs=1e-15) and r.tolerance == 1e-9
     assert r.passed is True and r.reason == "" and r.name == "forcing_bounded"
+    assert r.evidence == "proved"                              # the analytic bound U proves A2
     assert r.equation == "A2: sup‖f(t)‖ ≤ f_max < ∞"
     assert r.summary_keys == ("sup_norm", "analytic_bound", "f_max", "t_star", "period")
     r = pc.check_forcing_bounded(f, f_max=2 * U, tolerance=0.0)
     assert r.witness["f_max"] == 2 * U and r.margin == pytest.approx(0.5, rel=1e-9) and r.tolerance == 0.0
+    assert r.evidence == "proved"                              # f_max ≥ U
+    r = pc.check_forcing_bounded(f, f_max=0.999 * U)             # below U: only the sampled sup decides
+    assert r.passed is False and r.evidence == "sampled"
 
 
 def test_harmonic_zero_bound_and_incommensurate():
@@ -254,6 +258,7 @@ def test_generic_forcing_with_a_claimed_bound_and_zero_signals():
     r = pc.check_forcing_bounded(f, f_max=2.0, horizon=1.0, windows=2)
     assert r.margin == pytest.approx(0.5, rel=1e-12) and r.passed is True and r.tolerance == 1e-9
     assert r.reason == "no analytic bound: sup sampled over a window" and r.witness["f_max"] == 2.0
+    assert r.evidence == "sampled"
     assert r.summary_keys == ("sup_norm", "analytic_bound", "f_max", "t_star", "period")
     z = lambda t: np.zeros((np.asarray(t).size, 1))                    # noqa: E731
     r = pc.check_forcing_bounded(z, horizon=1.0, windows=2)
