@@ -33,7 +33,8 @@ A3 is decided in exact rational arithmetic by enumerating the linear pieces of t
 map per connected component A of the maximal sets' Delassus graphs (Newton: one exact
 LDLᵀ of ``N_A = FG_A + G_AF − G_A``; Poisson: all 4^|A| (compression, expansion) support
 pairs while 4^|A| ≤ ``exact_max_pairs``, default 1024: five coupled contacts), for
-m ≤ ``exact_up_to``. The theorem used and its proof are in :mod:`proofs_checks.pieces`.
+m ≤ ``exact_up_to`` (Newton: any m; the default sets include the full set, whose N
+covers every subset). The theorem used and its proof are in :mod:`proofs_checks.pieces`.
 The result is ``proved``, or ``violated`` with an exact counterexample (``exact_*`` witness
 entries: rational γ₁⁻, γ₂⁻ printed as floats and exactly as strings, exact impulses and
 ΔΛᵀΔγ̄ > 0, re-checked by an independent exact LCP solve). Otherwise (larger m, or a Poisson set too large to enumerate)
@@ -259,7 +260,8 @@ def check_impact_monotone(system: LinearSystem, law: ImpactLaw, *, rng: np.rando
         Check these laws with the same restitution (default: ``(law.law,)``).
     exact, exact_up_to, exact_max_pairs
         Decide A3 exactly by piece enumeration (:mod:`proofs_checks.pieces`) when
-        ``exact`` and m ≤ ``exact_up_to`` (Poisson: sets with 4^|A| ≤ ``exact_max_pairs``).
+        ``exact`` and m ≤ ``exact_up_to`` (Poisson: sets with 4^|A| ≤ ``exact_max_pairs``);
+        Newton (one matrix per maximal set) for any m.
         The exact decision does not use ``tolerance`` (there is no round-off to allow for):
         the result then has ``tolerance = 0``.
 
@@ -281,7 +283,7 @@ def check_impact_monotone(system: LinearSystem, law: ImpactLaw, *, rng: np.rando
     res = _sampled(system, law, laws, sets, solve, rng, samples, local_samples, adversarial_sets, starts,
                    maxiter, tolerance)
     decisions = {}
-    if exact and m <= exact_up_to:
+    if exact and (m <= exact_up_to or all(lname == "newton" for lname in laws)):   # Newton: any m
         for lname in laws:
             decisions[lname] = pieces.decide_a3(lname, system.M, system.W, law.restitution, sets,
                                                 max_pairs=exact_max_pairs)

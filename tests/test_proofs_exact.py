@@ -302,3 +302,16 @@ def test_a3_beyond_the_enumeration_budget_is_sampled(pair):
                                  samples=4, local_samples=4, adversarial_sets=0, exact_max_pairs=15)
     assert r.passed is True and r.evidence == "sampled" and "exact_pieces" not in r.witness
     assert "exceed max_pairs = 15" in r.witness["exact_undecided"]
+
+
+def test_a3_newton_decided_beyond_ten_contacts():
+    """Six blocks, twelve contacts: Newton is decided for any m by N = FG + GF − G on the full
+    set (covering all 2¹² − 1 supports); one differing coefficient makes it violated."""
+    s = pc.load("rocking_chain", {"param.N": 6}).system
+    kw = dict(rng=np.random.default_rng(0), samples=2, local_samples=2, adversarial_sets=0)
+    r = pc.check_impact_monotone(s, ImpactLaw.build("newton", 0.9, 12), **kw)
+    assert r.passed is True and r.evidence == "proved" and r.witness["exact_pieces"] == {"newton": 4095}
+    r = pc.check_impact_monotone(s, ImpactLaw.build("newton", [0.9] * 11 + [0.5], 12), **kw)
+    assert r.passed is False and r.evidence == "violated" and r.witness["exact_inner_product"] > 0
+    r = pc.check_impact_monotone(s, ImpactLaw.build("poisson", 0.9, 12), **kw)
+    assert r.evidence == "sampled"                                     # Poisson beyond m = 10
