@@ -29,7 +29,10 @@ members' complementarity, non-positive by construction), ``delassus = −½ΔP�
 and ``R_impulse`` the remainder (each member's own complementarity products P_iy_i, its
 negative y or P, and the residual of γ_{k+1} = γ_free + ĜP: round-off). For Poisson on
 several contacts the monotonicity term is Glocker's ``ΔPᵀΔγ̄_G`` (γ̄_G = γ̃ + ĜP/2), kept
-whole as a sign part (≤ 0 when the impact map is monotone, A3). The projection part splits
+whole as a sign part (≤ 0 when the impact map is monotone, A3; its own round-off is not
+separated, since the replay keeps only the total impulse, not Glocker's two phases: a rise
+on such a step whose Glocker term is positive by round-off alone would read as violated;
+none occurs on the built-ins). The projection part splits
 into ``projection_jump = −½‖Δg⁻‖²_{L_I⁻¹}`` (≤ 0), the plain master's unprojected gap
 ``½‖Δr‖²_{L_I⁻¹}`` (not counted: Proposition 1's mismatched pair) and ``R_projection`` (the
 float projection's round-off). So, exactly::

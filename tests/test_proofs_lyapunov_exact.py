@@ -100,6 +100,25 @@ def test_exact_identity_holds_with_the_scheme_residual(newton):
         assert p["compl_sign"] <= 0 and p["delassus"] <= 0 and p["projection_jump"] <= 0
 
 
+def test_exact_identity_on_two_coupled_poisson_contacts():
+    """One rocking block (two coupled contacts, Glocker's Poisson step): the same exact identity;
+    the impulse part is Glocker's term (kept whole) plus the slack plus the exact remainder."""
+    sc = pc.load("rocking_chain", {"param.N": 1, "initial.u": [-0.5, 0.3]})
+    specs = pc.CheckContext(sc, pc.CheckSettings(h=2e-3, t_end=0.6)).slave_specs()
+    run = replay(sc, h=2e-3, t_end=0.6, slaves=specs, engine="python")
+    ex = ExactSteps(run)
+    A, B = run.slaves["nojump_a"], run.slaves["nojump_b"]
+    two = np.flatnonzero(A.active[1:].sum(axis=1) == 2)
+    assert two.size >= 1
+    for k in list(two[:6]) + [0]:
+        p = ex.parts(A, B, int(k))
+        dV, R = _reference(run, "nojump_a", "nojump_b", int(k))
+        assert p["total"] == fmpq(dV.numerator, dV.denominator)
+        assert p["R_scheme"] == fmpq(R.numerator, R.denominator) and p["identity_defect"] == 0
+        assert p["delassus"] == 0 and p["compl_sign"] == 0 or k == 0
+        assert p["impulse"] == p["impulse_unsplit"] + p["slack"] + p["R_impulse"]
+
+
 def _parts(rise, roundoff, slack, **signs):
     """Exact parts with the given rise = total − gap, round-off and slack (signs fill the rest)."""
     z = fmpq(0)
