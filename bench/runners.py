@@ -552,9 +552,16 @@ def run_checks(case: Case, ctx: Context) -> list[dict]:
                      "witness": str(rec.get("witness", "") or ""),
                      "reason": str(rec.get("reason", "") or ""),
                      "check_elapsed_s": _float(rec.get("elapsed")),
+                     "evidence": _text(rec.get("evidence")),
+                     "verdict": _text(rec.get("verdict")),
                      "status": "ok", "note": "", "cpu_time_s": cpu, "wall_time_s": wall,
                      "cpu_scope": "all checks of the scenario"})
     return rows
+
+
+def _text(x) -> str:
+    """A text column of a results-frame row: "" for None or NaN (a frame's missing value)."""
+    return "" if x is None or (isinstance(x, float) and np.isnan(x)) else str(x)
 
 
 def _float(x) -> float:

@@ -69,7 +69,7 @@ ROWS: dict[str, Columns] = {
                 "trajectory_mb": float},
     "checks": {**CASE, **TIMING, "check": str, "equation": str, "check_status": str,
                "passed": (bool, type(None)), "margin": float, "tolerance": float, "witness": str,
-               "reason": str, "check_elapsed_s": float},
+               "reason": str, "check_elapsed_s": float, "evidence": str, "verdict": str},
     "hard": {**CASE, **TIMING, **HARD_METRICS},
 }
 """Kind → the columns of its rows and their types (``peers`` rows are declared by
@@ -80,10 +80,12 @@ OPTIONAL: dict[str, frozenset] = {
         {"steps", "steps_per_s", "contact_solves", "integrator", "plot_dof", "plot_contact", "trajectory",
          "cpu_time_s", "wall_time_s", "cpu_scope"}),
     "scaling": frozenset({"peak_mem_mb", "trajectory_mb"}),
+    "checks": frozenset({"evidence", "verdict"}),
 }
 """Columns a row of the kind may lack: an observers row of a design that does not apply
 (status "n/a") has no synchronization, engine or timing columns; a scaling case declared
-with ``memory=False`` has no memory columns."""
+with ``memory=False`` has no memory columns; a checks row written before the evidence levels
+has no ``evidence`` and ``verdict``."""
 
 
 def _is(value: Any, typ) -> bool:

@@ -1,9 +1,13 @@
 """proofs_checks: numerical verification of every step of the paper's Proposition 1 and Theorem 1.
 
 Each check returns a :class:`CheckResult` with ``passed`` (True, False, or None when not
-applicable), a signed ``margin`` (satisfied when ``margin ≥ −tolerance``), the
-``tolerance`` and a ``witness`` (where the margin is worst). Every check is shown in the
-tests to fail on a known-bad case.
+applicable), an ``evidence`` level (:data:`EVIDENCE_LEVELS`: ``proved`` in exact rational
+or verified ball arithmetic, ``bounded``, ``sampled``, ``violated`` with a counterexample
+re-checked exactly; ``n/a``), a one-line ``verdict``, a signed ``margin`` (satisfied when
+``margin ≥ −tolerance``), the ``tolerance`` and a ``witness`` (where the margin is worst).
+Every check is shown in the tests to fail on a known-bad case. The exact decisions (model
+assumptions, projection PSD, A3 by piece enumeration) are in :mod:`proofs_checks.exact`
+and :mod:`proofs_checks.pieces`.
 
 Registry :data:`CHECKS` (name → function of a :class:`CheckContext`), in proof order:
 
@@ -61,7 +65,7 @@ from proofs_checks.lyapunov import check_convergence, check_lyapunov_decrease, d
 from proofs_checks.monotonicity import check_impact_monotone
 from proofs_checks.projection import check_projection_closed_form, check_projection_psd
 from proofs_checks.proposition import check_proposition1_exact, check_proposition1_h_scaling
-from proofs_checks.result import CheckResult
+from proofs_checks.result import EVIDENCE_LEVELS, CheckResult
 from proofs_checks.runs import Run, SlaveSpec, replay
 from proofs_checks.switching import check_switching_generated
 
@@ -153,7 +157,8 @@ def run_checks(scenario: str | Path | Scenario, only: str | Iterable[str] | None
             raise
         except Exception as exc:  # a crashing check is a failed check, with the error as witness
             res = CheckResult(name, False, float("nan"), float("nan"), {"exception": type(exc).__name__},
-                              f"raised {type(exc).__name__}: {exc}")
+                              f"raised {type(exc).__name__}: {exc}", evidence="sampled",
+                              verdict="the check raised; nothing decided")
         res.scenario = sc.name
         res.elapsed = time.perf_counter() - t0
         out.append(res)
@@ -163,11 +168,11 @@ def run_checks(scenario: str | Path | Scenario, only: str | Iterable[str] | None
 
 
 def results_frame(results: Iterable[CheckResult]) -> pd.DataFrame:
-    """One row per result: scenario, check, equation, status, passed, margin, tolerance,
-    witness (one-line summary), reason, elapsed (s)."""
+    """One row per result: scenario, check, equation, status, evidence, passed, margin,
+    tolerance, verdict, witness (one-line summary), reason, elapsed (s)."""
     rows = [r.to_row() for r in results]
-    cols = ["scenario", "check", "equation", "status", "passed", "margin", "tolerance", "witness", "reason",
-            "elapsed"]
+    cols = ["scenario", "check", "equation", "status", "evidence", "passed", "margin", "tolerance", "verdict",
+            "witness", "reason", "elapsed"]
     return pd.DataFrame(rows, columns=cols)
 
 
@@ -178,7 +183,7 @@ from proofs_checks.asserts import (assert_checks, assert_constraints_independent
                                    assert_projection_psd, assert_proposition1_exact, assert_proposition1_h_scaling, assert_result,
                                    assert_stiffness_spd, assert_switching_generated)
 
-__all__ = ["CHECKS", "CheckContext", "CheckResult", "CheckSettings", "Run", "SlaveSpec",
+__all__ = ["CHECKS", "EVIDENCE_LEVELS", "CheckContext", "CheckResult", "CheckSettings", "Run", "SlaveSpec",
            "assert_checks", "assert_constraints_independent", "assert_convergence", "assert_damping_pd",
            "assert_forcing_bounded", "assert_impact_monotone", "assert_lyapunov_decrease", "assert_mass_spd",
            "assert_projection_closed_form", "assert_projection_energy", "assert_projection_psd",

@@ -1,7 +1,8 @@
 """Command line: ``python -m proofs_checks SCENARIO [SCENARIO ...] [options]``.
 
 Runs the proof checks on built-in or TOML scenarios (``all`` = every built-in), prints one
-table per scenario (check, status, margin, tolerance, time, witness summary) and exits
+table per scenario (check, status, evidence level, margin, tolerance, time, verdict and
+witness summary) and exits
 with status 0 when no check failed (not-applicable checks do not fail), 1 when a check
 failed, and 2 with one line ``error: ...`` on stderr for bad input.
 """
@@ -19,6 +20,7 @@ from observer.cli import guarded, parse_pairs
 from observer.errors import InputError
 
 STATUS_WIDTH = 6
+EVIDENCE_WIDTH = 8
 
 
 def _options(items: list[str] | None) -> dict:
@@ -43,10 +45,13 @@ def _fmt(x: float) -> str:
 def format_table(results) -> str:
     """The per-scenario table printed by the CLI."""
     w = max(len(r.name) for r in results)
-    lines = [f"  {'check':<{w}}  {'status':<{STATUS_WIDTH}}  {'margin':>10}  {'tol':>8}  {'time':>6}  witness"]
+    lines = [f"  {'check':<{w}}  {'status':<{STATUS_WIDTH}}  {'evidence':<{EVIDENCE_WIDTH}}  {'margin':>10}  "
+             f"{'tol':>8}  {'time':>6}  verdict | witness"]
     for r in results:
-        lines.append(f"  {r.name:<{w}}  {r.status:<{STATUS_WIDTH}}  {_fmt(r.margin):>10}  {_fmt(r.tolerance):>8}  "
-                     f"{r.elapsed:5.1f}s  {r.summary(140)}")
+        text = r.summary(140) if not r.verdict else (r.verdict + " | " + r.summary(10_000))
+        text = text if len(text) <= 140 else text[:137] + "..."
+        lines.append(f"  {r.name:<{w}}  {r.status:<{STATUS_WIDTH}}  {r.evidence:<{EVIDENCE_WIDTH}}  "
+                     f"{_fmt(r.margin):>10}  {_fmt(r.tolerance):>8}  {r.elapsed:5.1f}s  {text}")
     return "\n".join(lines)
 
 
@@ -80,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
 def _main(args) -> int:
     import proofs_checks
     from observer.scenarios import SCENARIOS
-    from proofs_checks import CHECKS, CheckSettings, run_checks, select
+    from proofs_checks import CHECKS, EVIDENCE_LEVELS, CheckSettings, run_checks, select
 
     if args.list:
         for name, fn in CHECKS.items():
@@ -109,8 +114,9 @@ def _main(args) -> int:
         print(format_table(results))
         nfail = sum(r.passed is False for r in results)
         nna = sum(r.passed is None for r in results)
+        levels = ", ".join(f"{sum(r.evidence == lv for r in results)} {lv}" for lv in EVIDENCE_LEVELS)
         print(f"  -> {len(results) - nfail - nna} passed, {nfail} failed, {nna} not applicable "
-              f"in {time.perf_counter() - t0:.1f} s\n")
+              f"in {time.perf_counter() - t0:.1f} s ({levels})\n")
         failed += nfail
         all_results += results
     if args.json:

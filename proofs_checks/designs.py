@@ -104,4 +104,4 @@ def check_projection_energy(scenario, specs: list[SlaveSpec], *, h: float, t_end
     reason = "" if passed else (f"a K-metric position jump raised V by {-margin:.3g}·V beyond "
                                 f"round-off at step {worst['step']}")
     return CheckResult("projection_energy", passed, margin, tolerance, witness, reason, EQUATION,
-                       ("designs",))
+                       ("designs",), evidence="sampled")

@@ -28,6 +28,20 @@ Search, for every active set:
    (γ₁⁻, γ₂⁻) ∈ R^{2|A|}, started from the worst pairs of 1.-2., on the sets where they
    came closest to a violation.
 
+**Decided, not sampled, where possible** (:mod:`proofs_checks.pieces`): before the search,
+A3 is decided in exact rational arithmetic by enumerating the linear pieces of the impact
+map per connected component A of the maximal sets' Delassus graphs (Newton: one exact
+LDLᵀ of ``N_A = FG_A + G_AF − G_A``; Poisson: all 4^|A| (compression, expansion) support
+pairs while 4^|A| ≤ ``exact_max_pairs``, default 1024: five coupled contacts), for
+m ≤ ``exact_up_to`` (Newton: any m; the default sets include the full set, whose N
+covers every subset). The theorem used and its proof are in :mod:`proofs_checks.pieces`.
+The result is ``proved``, or ``violated`` with an exact counterexample (``exact_*`` witness
+entries: rational γ₁⁻, γ₂⁻ printed as floats and exactly as strings, exact impulses and
+ΔΛᵀΔγ̄ > 0, re-checked by an independent exact LCP solve). Otherwise (larger m, or a Poisson set too large to enumerate)
+the search below decides, with evidence ``sampled``; a counterexample it finds is re-checked
+in exact arithmetic, and one that vanishes there is reported as round-off, not as a
+violation.
+
 This is the *continuous* impact map of eqs. (5)/(9). Its discrete twin, the impulse term
 of the Moreau–Jean step, is checked along runs by :func:`proofs_checks.lyapunov.check_lyapunov_decrease`.
 
@@ -48,6 +62,7 @@ from scipy.optimize import minimize
 from observer.contact import get_solver
 from observer.impact import ImpactLaw, impact
 from observer.model import LinearSystem
+from proofs_checks import exact, pieces
 from proofs_checks.result import CheckResult
 
 EPS = float(np.finfo(float).eps)
@@ -213,7 +228,9 @@ def check_impact_monotone(system: LinearSystem, law: ImpactLaw, *, rng: np.rando
                           samples: int = 24, local_samples: int = 48, adversarial_sets: int = 6,
                           starts: int = 3, maxiter: int = 300,
                           exhaustive_up_to: int = 10, tolerance: float = 1e-9,
-                          solver: str = "pivoting", laws: tuple[str, ...] | None = None) -> CheckResult:
+                          solver: str = "pivoting", laws: tuple[str, ...] | None = None,
+                          exact: bool = True, exact_up_to: int = 10,
+                          exact_max_pairs: int = 1024) -> CheckResult:
     """Assumption A3 (eq. (6)): the impact map of every reachable active set is monotone.
 
     Parameters
@@ -241,11 +258,19 @@ def check_impact_monotone(system: LinearSystem, law: ImpactLaw, *, rng: np.rando
         Accepted ``max ρ`` (round-off of the LCP solutions).
     laws : tuple of str, optional
         Check these laws with the same restitution (default: ``(law.law,)``).
+    exact, exact_up_to, exact_max_pairs
+        Decide A3 exactly by piece enumeration (:mod:`proofs_checks.pieces`) when
+        ``exact`` and m ≤ ``exact_up_to`` (Poisson: sets with 4^|A| ≤ ``exact_max_pairs``);
+        Newton (one matrix per maximal set) for any m.
+        The exact decision does not use ``tolerance`` (there is no round-off to allow for):
+        the result then has ``tolerance = 0``.
 
     Returns
     -------
     CheckResult
-        ``margin = −max ρ``; the witness holds the worst pair: active set, e_A, G_A,
+        Evidence ``proved``/``violated`` (exact decision) or ``sampled``.
+        ``margin = −max ρ`` (for an exact decision: made ≥ 0 when proved, and
+        −max(ρ sampled, ρ of the exact counterexample) when violated); the witness holds the worst pair: active set, e_A, G_A,
         γ₁⁻, γ₂⁻, Λ₁, Λ₂, γ̄₁, γ̄₂ and the inner product of eq. (6). A monotone map has
         max ρ = 0 (attained by pairs of separating velocities, Λ₁ = Λ₂ = 0);
         ``max_rho_impacting_pairs`` is the largest ρ over pairs with different impulses.
@@ -255,6 +280,90 @@ def check_impact_monotone(system: LinearSystem, law: ImpactLaw, *, rng: np.rando
     sets = [np.asarray(a, dtype=np.int64) for a in active_sets] if active_sets is not None else \
         candidate_sets(m, rng, exhaustive_up_to=exhaustive_up_to, visited=visited)
     laws = tuple(laws or (law.law,))
+    res = _sampled(system, law, laws, sets, solve, rng, samples, local_samples, adversarial_sets, starts,
+                   maxiter, tolerance)
+    decisions = {}
+    if exact and (m <= exact_up_to or all(lname == "newton" for lname in laws)):   # Newton: any m
+        for lname in laws:
+            decisions[lname] = pieces.decide_a3(lname, system.M, system.W, law.restitution, sets,
+                                                max_pairs=exact_max_pairs)
+    if decisions and all(d["status"] != "undecided" for d in decisions.values()):
+        return _exact_result(res, decisions, law)
+    if decisions:
+        res.witness["exact_undecided"] = "; ".join(f"{k}: {d.get('reason', '')}" for k, d in decisions.items()
+                                                   if d["status"] == "undecided")
+    return _recheck_sampled(res, system, law)
+
+
+def _fl(v) -> np.ndarray:
+    return np.array([exact.to_float(x) for x in v])
+
+
+def _exact_result(res: CheckResult, decisions: dict, law: ImpactLaw) -> CheckResult:
+    """The sampled result ``res`` with passed/evidence/margin from the exact decisions."""
+    w = res.witness
+    w["exact_pieces"] = {k: d["pieces"] for k, d in decisions.items()}
+    w["exact_method"] = {k: d["method"] for k, d in decisions.items()}
+    bad = next(((k, d) for k, d in decisions.items() if d["status"] == "violated"), None)
+    if bad is None:
+        note = ""
+        if res.passed is False:
+            note = (f"the sampled ρ = {w['max_rho']:.3g} > tolerance vanished in exact arithmetic "
+                    "(round-off): every piece is proved monotone")
+        n = sum(d["pieces"] for d in decisions.values())
+        return CheckResult(res.name, True, max(res.margin, 0.0), 0.0, w, note, res.equation, res.summary_keys,
+                           evidence="proved", verdict=f"A3 holds: {n} pieces of the impact map checked (exact)")
+    lname, d = bad
+    rho = exact.to_float(d["rho"])
+    w.update(exact_law=lname, exact_active_set=d["active_set"], exact_piece=d["piece"],
+             exact_gamma1_minus=_fl(d["gamma1_minus"]), exact_gamma2_minus=_fl(d["gamma2_minus"]),
+             exact_gamma1_minus_rational=[str(x) for x in d["gamma1_minus"]],
+             exact_gamma2_minus_rational=[str(x) for x in d["gamma2_minus"]],
+             exact_Lambda1=_fl(d["Lambda1"]), exact_Lambda2=_fl(d["Lambda2"]),
+             exact_inner_product=exact.to_float(d["inner"]), exact_inner_product_rational=str(d["inner"]),
+             exact_rho=rho)
+    reason = res.reason or ("per-contact restitution: the impact map is not monotone on coupled contacts"
+                            if not law.is_global else "the impact map is not monotone")
+    margin = -max(rho, w.get("max_rho", -np.inf))
+    keys = res.summary_keys[:1] + ("exact_active_set", "exact_gamma1_minus", "exact_gamma2_minus",
+                                   "exact_inner_product") + res.summary_keys[1:]
+    return CheckResult(res.name, False, margin, 0.0, w, reason, res.equation, keys, evidence="violated",
+                       verdict=f"A3 violated ({lname}): exact counterexample on set {d['active_set']}")
+
+
+def _recheck_sampled(res: CheckResult, system: LinearSystem, law: ImpactLaw) -> CheckResult:
+    """Evidence ``sampled`` for a pass; a sampled counterexample is re-checked exactly:
+    ``violated`` if ΔΛᵀΔγ̄ > 0 holds over Q, else round-off (passed, ``sampled``)."""
+    w = res.witness
+    if res.passed is not False:
+        res.evidence = "sampled"
+        res.verdict = f"no counterexample in {w.get('evaluations', 0)} impact-map evaluations (sampled)"
+        return res
+    A = w.get("active_set")
+    lname = w.get("law", law.law)
+    if A is None or lname not in ("newton", "poisson"):
+        res.evidence = "sampled"
+        res.verdict = "float counterexample, not re-checked exactly"
+        return res
+    G = pieces.delassus_exact(system.M, system.W[:, A])
+    e = [exact.to_fmpq(v) for v in np.asarray(law.restitution, float)[A]]
+    g1 = [exact.to_fmpq(v) for v in np.asarray(w["gamma1_minus"], float)]
+    g2 = [exact.to_fmpq(v) for v in np.asarray(w["gamma2_minus"], float)]
+    chk = pieces.exact_pair(lname, G, e, g1, g2)
+    w.update(exact_inner_product=exact.to_float(chk["inner"]), exact_rho=exact.to_float(chk["rho"]))
+    if chk["inner"] > 0:
+        res.evidence = "violated"
+        res.verdict = f"A3 violated: the sampled pair re-checked exactly (ΔΛᵀΔγ̄ = {w['exact_inner_product']:.3g} > 0)"
+        return res
+    return CheckResult(res.name, True, 0.0, res.tolerance, w,
+                       f"the sampled counterexample (ρ = {w['max_rho']:.3g}) vanishes in exact arithmetic: "
+                       "round-off", res.equation, res.summary_keys, evidence="sampled",
+                       verdict="round-off, not a counterexample (re-checked exactly); otherwise sampled")
+
+
+def _sampled(system, law, laws, sets, solve, rng, samples, local_samples, adversarial_sets, starts, maxiter,
+             tolerance) -> CheckResult:
+    """The random + local + adversarial search of the module docstring (float)."""
     worst = {"rho": -np.inf}
     worst_impacting = -np.inf
     evals = 0

@@ -18,9 +18,19 @@ integrator applied (q⁺ − q⁻ from the run) with these closed forms, always 
 K metric (independently of the stepper's cached matrices). A run made with a wrong
 projection metric (``replay(..., metric=np.eye(n))``) fails.
 
-:func:`check_projection_psd` checks ``P_I L_I⁻¹ P_Iᵀ ⪰ 0`` (built with linear solves, never
-an explicit inverse) exhaustively over all nonempty I for m ≤ 16, and for larger m over
-all singletons and pairs, random subsets, the full set and a greedy chain of
+:func:`check_projection_psd` *decides* ``P_I L_I⁻¹ P_Iᵀ ⪰ 0`` for every nonempty I in exact
+rational arithmetic (:mod:`proofs_checks.exact`): ``L = WᵀK⁻¹W`` is formed exactly from the
+float K and W, and ``P_I L_I⁻¹ P_Iᵀ ⪰ 0`` holds iff L_I ≻ 0 (L_I⁻¹ then exists and is ≻ 0;
+the padding rows are zero), proved by an exact LDLᵀ of L_I — exhaustively over all
+2^m − 1 sets for m ≤ 10, and beyond by one exact LDLᵀ of L: every L_I is a principal
+submatrix of L, and a principal submatrix of a positive definite matrix is positive
+definite (xᵀL_I x = (P_I x)ᵀ L (P_I x) > 0; Horn & Johnson, *Matrix Analysis*, Obs. 7.1.2).
+A failure is an exact witness: for an indefinite L_I a vector y with yᵀL_I y < 0, so that
+z = L_I y gives zᵀL_I⁻¹z = yᵀL_I y < 0; for a singular L_I an exact kernel vector.
+
+The margin is still measured in floats (built with linear solves, never an explicit
+inverse), exhaustively over all nonempty I for m ≤ 16, and for larger m over all
+singletons and pairs, random subsets, the full set and a greedy chain of
 worst-conditioned subsets. By Cauchy interlacing, for symmetric L the full set has the
 largest condition number and the extreme eigenvalues, so for SPD L the sampled search
 cannot miss the worst case.
@@ -30,9 +40,11 @@ from __future__ import annotations
 
 import itertools
 
+import flint
 import numpy as np
 import scipy.linalg as sla
 
+from proofs_checks import exact
 from proofs_checks.assumptions import not_definite_reason
 from proofs_checks.monotonicity import add_set, candidate_sets
 from proofs_checks.result import CheckResult
@@ -156,8 +168,9 @@ def check_projection_closed_form(run: Run, *, slaves: tuple[str, ...] | None = N
         reasons.append("the continuous constraint force differs from σ = −P_I L_I⁻¹ P_Iᵀ γ (eq. (13))")
     if fail13 and not fail14:
         return CheckResult.from_margin(name, -worst13["value"], force_tolerance, witness, eq, keys,
-                                       "; ".join(reasons))
-    return CheckResult.from_margin(name, -worst14["value"], tolerance, witness, eq, keys, "; ".join(reasons))
+                                       "; ".join(reasons), evidence="sampled")
+    return CheckResult.from_margin(name, -worst14["value"], tolerance, witness, eq, keys, "; ".join(reasons),
+                                   evidence="sampled")
 
 
 def _subsets(m: int, rng: np.random.Generator, exhaustive_up_to: int, samples: int,
@@ -183,9 +196,58 @@ def _subsets(m: int, rng: np.random.Generator, exhaustive_up_to: int, samples: i
     return list(sets.values()), False
 
 
+EXACT_EXHAUSTIVE_UP_TO = 10
+"""Largest m for which every active set's L_I is factored exactly (2^m − 1 sets)."""
+
+
+def exact_projection_psd(K: np.ndarray, W: np.ndarray, *,
+                         exhaustive_up_to: int = EXACT_EXHAUSTIVE_UP_TO) -> dict:
+    """Exact decision of ``P_I L_I⁻¹ P_Iᵀ ⪰ 0`` for every nonempty I (module docstring).
+
+    Returns
+    -------
+    dict
+        ``holds`` (bool), ``method``, ``sets_proved`` (number of active sets covered),
+        and for a failure ``failing_set``, ``failing_class`` ("indefinite"/"semidefinite"
+        for L_I) and ``exact_vector`` z (floats of the exact vector, padded to m) with
+        ``exact_zPz`` = zᵀ P_I L_I⁻¹ P_Iᵀ z < 0 (indefinite) or the kernel vector of L_I.
+    """
+    Kq, Wq = exact.to_fmpq_mat(K), exact.to_fmpq_mat(W)
+    L = exact.sym_part(Wq.transpose() * Kq.solve(Wq))
+    m = L.nrows()
+    if m <= exhaustive_up_to:
+        sets = [list(c) for k in range(1, m + 1) for c in itertools.combinations(range(m), k)]
+        method = f"exact LDLᵀ of L_I over Q for each of the {len(sets)} active sets"
+    else:
+        sets = [list(range(m))]
+        method = ("exact LDLᵀ of L = WᵀK⁻¹W over Q; every L_I is a principal submatrix of L ≻ 0 "
+                  f"(covers all {2**m - 1} active sets)")
+    for I in sets:
+        LI = flint.fmpq_mat(len(I), len(I), [L[i, j] for i in I for j in I])
+        cert = exact.classify_symmetric(LI)
+        if cert.status == "definite":
+            continue
+        z = [flint.fmpq(0)] * m
+        if cert.status == "indefinite":
+            y = flint.fmpq_mat(len(I), 1, cert.vector)
+            zy = LI * y                                       # z = L_I y:  zᵀL_I⁻¹z = yᵀL_I y
+            value = (zy.transpose() * LI.solve(zy))[0, 0]
+            assert value < 0                                 # exact re-check
+        else:
+            zy = flint.fmpq_mat(len(I), 1, cert.vector)       # L_I zy = 0: L_I⁻¹ does not exist
+            value = flint.fmpq(0)
+        for t, i in enumerate(I):
+            z[i] = zy[t, 0]
+        return {"holds": False, "method": method, "sets_proved": 0, "failing_set": I,
+                "failing_class": cert.status, "vector": np.array([exact.to_float(v) for v in z]),
+                "vector_rational": [str(v) for v in z], "zPz": exact.to_float(value)}
+    return {"holds": True, "method": method, "sets_proved": 2**m - 1}
+
+
 def check_projection_psd(K: np.ndarray, W: np.ndarray, *, rng: np.random.Generator,
                          exhaustive_up_to: int = 16, samples: int = 2000,
-                         tolerance: float = 1e-12) -> CheckResult:
+                         tolerance: float = 1e-12,
+                         exact_exhaustive_up_to: int = EXACT_EXHAUSTIVE_UP_TO) -> CheckResult:
     """``P_I L_I⁻¹ P_Iᵀ ⪰ 0`` for every active set I (proof of Proposition 1, after eq. (14); eq. (17)).
 
     ``L = WᵀK⁻¹W`` is formed with a solve of K; for every examined I the m×m matrix
@@ -193,13 +255,19 @@ def check_projection_psd(K: np.ndarray, W: np.ndarray, *, rng: np.random.Generat
     Its eigenvalues are those of the I block plus exact zeros for the rows not in I, so
     the margin is taken on the block.
 
+    ``passed`` and the evidence come from :func:`exact_projection_psd` (``proved`` for all
+    2^m − 1 sets, or ``violated`` with an exact witness); ``exact_exhaustive_up_to`` is its
+    limit for set-by-set factorization.
+
     Returns
     -------
     CheckResult
         ``margin = min_I λ_min(L_I⁻¹)/λ_max(L_I⁻¹)`` (relative smallest eigenvalue, ≥ 0 for
-        PSD); the witness has the worst set, its eigenvalues, the largest condition
-        number of L_I and its set, and how many sets were examined (exhaustively or not).
-        Not applicable when K is singular.
+        PSD; its sign is the exact one); the witness has the worst set, its eigenvalues, the
+        largest condition number of L_I and its set, how many sets were examined in floats
+        (exhaustively or not), and the exact decision (``exact_method``,
+        ``exact_sets_proved`` or the failing set and exact vector). Not applicable when K
+        is singular.
     """
     name, eq = "projection_psd", "P_I L_I⁻¹ P_Iᵀ ⪰ 0, after eq. (14); eq. (17)"
     K = np.asarray(K, dtype=float)
@@ -246,5 +314,24 @@ def check_projection_psd(K: np.ndarray, W: np.ndarray, *, rng: np.random.Generat
                "sets_examined": len(sets), "exhaustive": exhaustive, "m": m,
                "K_lambda_min": float(eigK[0])}
     keys = ("min_relative_eigenvalue", "worst_set", "max_condition_L_I", "sets_examined", "exhaustive")
-    reason = "" if worst[0] >= -tolerance else "L_I is indefinite: P_I L_I⁻¹ P_Iᵀ has a negative eigenvalue"
-    return CheckResult.from_margin(name, worst[0], tolerance, witness, eq, keys, reason)
+    try:
+        ex = exact_projection_psd(K, W, exhaustive_up_to=exact_exhaustive_up_to)
+    except ZeroDivisionError:                        # K exactly singular
+        return CheckResult.not_applicable(name, "K is exactly singular: L_I = W_IᵀK⁻¹W_I does not exist "
+                                          "(needs K ≻ 0)", eq)
+    witness.update({f"exact_{k}": v for k, v in ex.items() if k != "holds"})
+    margin = worst[0]
+    if ex["holds"]:
+        note = ("" if margin >= -tolerance else f"float relative eigenvalue {margin:.3g} < 0: round-off, "
+                "the exact LDLᵀ proves every L_I ≻ 0")
+        margin = max(margin, 0.0)                     # float round-off cannot flip an exact PSD
+        return CheckResult(name, True, margin, tolerance, witness, note, eq, keys, evidence="proved",
+                           verdict=f"P_I L_I⁻¹ P_Iᵀ ⪰ 0 for all {ex['sets_proved']} active sets (exact)")
+    reason = ("L_I is indefinite: P_I L_I⁻¹ P_Iᵀ has a negative eigenvalue" if ex["failing_class"] == "indefinite"
+              else "L_I is singular: L_I⁻¹ does not exist")
+    if not margin < -tolerance:
+        margin = min(margin, ex["zPz"]) if ex["zPz"] < 0 else -np.inf
+    if not margin < -tolerance:
+        margin = -np.inf
+    return CheckResult(name, False, margin, tolerance, witness, reason, eq, keys + ("exact_failing_set",),
+                       evidence="violated", verdict=f"L_I {ex['failing_class']} for I = {ex['failing_set']} (exact)")

@@ -128,7 +128,9 @@ def check_proposition1_exact(scenario: Scenario, *, h: float | None = None,
     reason = f"{first_bad}: the slave leaves the master's trajectory" if first_bad else ""
     if not _k_definite(scenario):
         reason = (reason + "; " if reason else "") + "jump pair not applicable (K not ≻ 0)"
-    return CheckResult.from_margin(name, -worst, 0.0, witness, eq, keys, reason)
+    # bitwise equality of the computed pairs is an exact statement about this run
+    return CheckResult.from_margin(name, -worst, 0.0, witness, eq, keys, reason, evidence="proved",
+                                   verdict="matched pairs bitwise identical on this run" if worst == 0 else None)
 
 
 def check_proposition1_h_scaling(scenario: Scenario, *, h: float | None = None, t_end: float | None = None,
@@ -189,8 +191,9 @@ def check_proposition1_h_scaling(scenario: Scenario, *, h: float | None = None, 
             "plain_master__jump_slave_rms", "projected_master__nojump_slave_rms", "h")
     if all_zero:
         return CheckResult(name, True, float("inf"), 0.0, witness,
-                           "no contact event in the horizon: both pairs identical at every h", eq, keys)
+                           "no contact event in the horizon: both pairs identical at every h", eq, keys,
+                           evidence="sampled")
     worst = min(orders, key=orders.get)
     margin = orders[worst] - min_order
     reason = "" if margin >= 0 else f"{worst}: the difference does not shrink with h (order {orders[worst]:.2f})"
-    return CheckResult.from_margin(name, margin, 0.0, witness, eq, keys, reason)
+    return CheckResult.from_margin(name, margin, 0.0, witness, eq, keys, reason, evidence="sampled")

@@ -18,6 +18,23 @@ import numpy as np
 #: Values of :attr:`CheckResult.passed` and how the table prints them.
 STATUS_TEXT = {True: "PASS", False: "FAIL", None: "n/a"}
 
+#: Evidence levels of an applicable result, strongest first:
+#:
+#: ``"proved"``
+#:     decided in exact rational arithmetic on the given float data, or by verified
+#:     interval (ball) enclosures; the witness names the method.
+#: ``"bounded"``
+#:     floating point with a rigorous round-off bound.
+#: ``"sampled"``
+#:     random or adversarial search (the witness gives the number of samples); no
+#:     counterexample found, nothing proved.
+#: ``"violated"``
+#:     a counterexample, re-checked in exact arithmetic (``passed`` is False).
+#:
+#: A not-applicable result (``passed is None``) has evidence :data:`NOT_APPLICABLE`.
+EVIDENCE_LEVELS = ("proved", "bounded", "sampled", "violated")
+NOT_APPLICABLE = "n/a"
+
 
 @dataclass
 class CheckResult:
@@ -48,6 +65,14 @@ class CheckResult:
         Scenario name (set by :func:`proofs_checks.run_checks`).
     elapsed : float
         Wall time of the check in seconds (including any shared run it triggered).
+    evidence : str
+        One of :data:`EVIDENCE_LEVELS` for an applicable check, ``"n/a"`` when
+        ``passed is None``. Left empty by a constructor, it defaults to ``"n/a"``
+        (not applicable), ``"violated"`` (failed) or ``"sampled"`` (passed): the weakest
+        claim; every check states its level explicitly.
+    verdict : str or None
+        Optional one-line human verdict, e.g. ``"holds up to the discrete slack
+        (order ≈ 1.0)"``.
     """
 
     name: str
@@ -60,21 +85,44 @@ class CheckResult:
     summary_keys: tuple = ()
     scenario: str = ""
     elapsed: float = 0.0
+    evidence: str = ""
+    verdict: str | None = None
+
+    def __post_init__(self) -> None:
+        if not self.evidence:
+            self.evidence = (NOT_APPLICABLE if self.passed is None
+                             else "violated" if self.passed is False else "sampled")
+        if self.evidence not in EVIDENCE_LEVELS + (NOT_APPLICABLE,):
+            raise ValueError(f"evidence must be one of {EVIDENCE_LEVELS + (NOT_APPLICABLE,)}, "
+                             f"got {self.evidence!r}")
+        if (self.evidence == NOT_APPLICABLE) != (self.passed is None):
+            raise ValueError(f"evidence {self.evidence!r} does not fit passed={self.passed!r}: "
+                             "'n/a' exactly when the check is not applicable")
+        if self.evidence == "violated" and self.passed is not False:
+            raise ValueError("evidence 'violated' requires passed=False")
 
     # -- construction helpers ------------------------------------------------------------------
     @staticmethod
     def not_applicable(name: str, reason: str, equation: str = "", **witness: Any) -> "CheckResult":
         """A result for a check whose hypotheses do not hold (``passed=None``)."""
-        return CheckResult(name, None, float("nan"), float("nan"), dict(witness), reason, equation)
+        return CheckResult(name, None, float("nan"), float("nan"), dict(witness), reason, equation,
+                           evidence=NOT_APPLICABLE)
 
     @staticmethod
     def from_margin(name: str, margin: float, tolerance: float, witness: dict, equation: str,
-                    summary_keys: tuple = (), reason: str = "") -> "CheckResult":
-        """``passed = margin >= -tolerance`` (NaN margins fail)."""
+                    summary_keys: tuple = (), reason: str = "", *, evidence: str = "",
+                    verdict: str | None = None) -> "CheckResult":
+        """``passed = margin >= -tolerance`` (NaN margins fail).
+
+        ``evidence`` is the level of a pass; a failure gets ``"violated"`` unless
+        ``evidence`` is given and is not ``"proved"`` (e.g. a float failure that was not
+        re-checked exactly keeps ``"sampled"`` or ``"bounded"``)."""
         margin = float(margin) + 0.0          # no negative zero in tables
         passed = bool(margin >= -tolerance) if not math.isnan(margin) else False
+        if not passed and evidence in ("", "proved"):
+            evidence = "violated"
         return CheckResult(name, passed, margin, float(tolerance), witness, reason, equation,
-                           tuple(summary_keys))
+                           tuple(summary_keys), evidence=evidence, verdict=verdict)
 
     # -- views ---------------------------------------------------------------------------------
     @property
@@ -102,6 +150,7 @@ class CheckResult:
         status = "NOT APPLICABLE" if self.passed is None else self.status
         lines = [f"{self.name} [{self.equation}] {status}" + (f" on {self.scenario}" if self.scenario else "")]
         if self.passed is not None:
+            lines.append(f"  evidence  = {self.evidence}" + (f": {self.verdict}" if self.verdict else ""))
             lines.append(f"  margin    = {self.margin:.6g} (tolerance {self.tolerance:.3g}; "
                          "satisfied when margin >= -tolerance)")
         if self.reason:
@@ -113,12 +162,12 @@ class CheckResult:
         return "\n".join(lines)
 
     def to_row(self) -> dict:
-        """Flat dict for a DataFrame row: scenario, check, equation, status, passed, margin,
-        tolerance, witness (one-line summary), reason, elapsed."""
+        """Flat dict for a DataFrame row: scenario, check, equation, status, evidence, passed,
+        margin, tolerance, verdict, witness (one-line summary), reason, elapsed."""
         return {"scenario": self.scenario, "check": self.name, "equation": self.equation,
-                "status": self.status, "passed": self.passed, "margin": self.margin,
-                "tolerance": self.tolerance, "witness": self.summary(10_000), "reason": self.reason,
-                "elapsed": self.elapsed}
+                "status": self.status, "evidence": self.evidence, "passed": self.passed,
+                "margin": self.margin, "tolerance": self.tolerance, "verdict": self.verdict,
+                "witness": self.summary(10_000), "reason": self.reason, "elapsed": self.elapsed}
 
     def to_dict(self) -> dict:
         """JSON-ready dict (arrays as lists, non-finite floats as strings)."""

@@ -128,9 +128,11 @@ def check_switching_generated(run: Run, *, chi: np.ndarray | None = None,
                    "χ = 0 where the gap is closed" if not chi_s[k, i] else "χ = 1 where the gap is open"))
         keys = ("mismatched_steps", "first_mismatch_contact", "first_mismatch_time", "chi_there",
                 "predicted_gap_there", "chi_neighbours", "master_closed_neighbours")
-        return CheckResult.from_margin(NAME, -n_bad / chi_s.size, 0.0, witness, EQUATION, keys, reason)
+        return CheckResult.from_margin(NAME, -n_bad / chi_s.size, 0.0, witness, EQUATION, keys, reason,
+                                       evidence="sampled")
     keys = ("mismatched_steps", "max_gap_jump", "switch_off_intervals_in_closed_phases", "one_step_switch_offs",
             "min_open_gap_of_one_step_switch_offs", "closed_steps")
     margin = -float(jumps[kj, ij])
     reason = "" if margin >= -jump_tolerance else "the master's gap jumps (not absolutely continuous)"
-    return CheckResult.from_margin(NAME, margin, jump_tolerance, witness, EQUATION, keys, reason)
+    return CheckResult.from_margin(NAME, margin, jump_tolerance, witness, EQUATION, keys, reason,
+                                   evidence="sampled")

@@ -559,3 +559,25 @@ def check_counts(ch: pd.DataFrame) -> pd.DataFrame:
         rec.update({s: int((status == s).sum()) for s in CHECK_STATUSES})
         rows.append(rec)
     return pd.DataFrame(rows, columns=["design", "scenarios", *CHECK_STATUSES])
+
+
+EVIDENCE_ORDER = ("proved", "bounded", "sampled", "violated", "n/a")
+"""Evidence levels of a check row (:data:`proofs_checks.result.EVIDENCE_LEVELS` and "n/a"), strongest first."""
+
+
+def check_evidence(r: pd.Series) -> str:
+    """The evidence level of a check row: its ``evidence`` column, or, for rows written before
+    the levels existed, "n/a" when not applicable and "" (unknown) otherwise."""
+    ev = r.get("evidence")
+    if isinstance(ev, str) and ev:
+        return ev
+    return "n/a" if str(r.get("check_status")) == "n/a" else ""
+
+
+def check_matrix(ch: pd.DataFrame) -> tuple[list[str], list[str], dict]:
+    """Scenarios (rows, in first-seen order), checks (columns, in first-seen order) and, per
+    (scenario, check), the last row of that pair (a later run replaces an earlier one)."""
+    scenarios = list(dict.fromkeys(ch["scenario"].astype(str)))
+    checks = list(dict.fromkeys(ch["check"].astype(str)))
+    cells = {(str(r["scenario"]), str(r["check"])): r for _, r in ch.iterrows()}
+    return scenarios, checks, cells

@@ -25,11 +25,25 @@ class Table:
     columns: list[str]
     rows: list[list[str]] = field(default_factory=list)
     note: str = ""
+    classes: list[list[str]] = field(default_factory=list)
+    """Per cell CSS class ("" for none), only when some row was added with ``classes``."""
+    titles: list[list[str]] = field(default_factory=list)
+    """Per cell hover text (``title`` attribute, "" for none), likewise."""
 
-    def add(self, cells: Iterable[Any]) -> None:
+    def add(self, cells: Iterable[Any], classes: Iterable[str] | None = None,
+            titles: Iterable[str] | None = None) -> None:
         cells = [c if isinstance(c, str) else fmt(c) for c in cells]
         if len(cells) != len(self.columns):
             raise ValueError(f"table {self.title!r}: {len(cells)} cells for {len(self.columns)} columns")
+        for attr, given in (("classes", classes), ("titles", titles)):
+            extra = getattr(self, attr)
+            if given is not None or extra:
+                vals = [""] * len(cells) if given is None else [str(x) for x in given]
+                if len(vals) != len(cells):
+                    raise ValueError(f"table {self.title!r}: {len(vals)} {attr} for {len(cells)} cells")
+                if not extra and self.rows:
+                    extra.extend([[""] * len(cells) for _ in self.rows])
+                extra.append(vals)
         self.rows.append(cells)
 
 

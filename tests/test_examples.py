@@ -39,18 +39,20 @@ def _run(script: str, out: Path, *extra: str) -> subprocess.CompletedProcess:
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory) -> dict:
     """name -> (CompletedProcess, output directory) for the three scripts, plus ``my_system.py``
-    on the built-in double_mass exported as TOML (``failing``: ``lyapunov_decrease`` fails
-    there, the honest discrete failure documented in the README) and on a file with a
+    on one rocking block with per-contact Newton restitution [0.1, 0.95] exported as TOML
+    (``failing``: A3 is violated there, the impact map is not monotone on the coupled
+    contacts) and on a file with a
     missing key (``bad_input``)."""
     out = {}
     for script in ("paper_figures.py", "my_system.py", "measured_log.py"):
         d = tmp_path_factory.mktemp(script.removesuffix(".py"))
         out[script] = (_run(script, d), d)
     d = tmp_path_factory.mktemp("failing")
-    toml = subprocess.run([sys.executable, "-m", "observer", "show", "double_mass"], cwd=REPO,
+    toml = subprocess.run([sys.executable, "-m", "observer", "show", "rocking_chain", "--set", "param.N=1",
+                           "--set", "impact.law=newton", "--set", "impact.restitution=[0.1,0.95]"], cwd=REPO,
                           capture_output=True, text=True, timeout=300, check=True).stdout
-    (d / "double_mass.toml").write_text(toml)
-    out["failing"] = (_run("my_system.py", d, str(d / "double_mass.toml")), d)
+    (d / "rocking_chain.toml").write_text(toml)
+    out["failing"] = (_run("my_system.py", d, str(d / "rocking_chain.toml")), d)
     d = tmp_path_factory.mktemp("bad_input")
     (d / "bad.toml").write_text("[system]\nM = [[1.0]]\nK = [[1.0]]\nW = [[1.0]]\n")
     out["bad_input"] = (_run("my_system.py", d, str(d / "bad.toml")), d)
@@ -147,13 +149,13 @@ def test_my_system_exits_1_and_explains_a_failed_check(runs):
     table = table[table["status"].isin(["PASS", "FAIL", "n/a"])]
     assert list(table["check"]) == list(CHECKS)
     failed = list(table.loc[table["status"] == "FAIL", "check"])
-    assert failed, ("double_mass (quick: h = 1e-3) is expected to fail lyapunov_decrease, the O(h) "
-                    f"impulse slack of the README; no check failed:\n{proc.stdout}")
+    assert failed, ("per-contact restitution on two coupled contacts is expected to violate A3 "
+                    f"(impact_monotone); no check failed:\n{proc.stdout}")
     assert proc.returncode == 1, proc.stderr[-3000:]
     for name in failed:                          # each failure printed with its witness
         assert any(line.startswith(f"FAIL {name}: ") and len(line) > 40 for line in proc.stdout.splitlines())
     assert proc.stdout.rstrip().splitlines()[-1].endswith(f"failed: {failed}")
-    assert (out / "double_mass.png").is_file()
+    assert (out / "rocking_chain.png").is_file()
 
 
 def test_my_system_bad_input_exits_2_naming_the_field(runs):

@@ -430,26 +430,31 @@ def newton_dm():
 
 def test_lyapunov_names_the_impulse_slack_and_fits_its_order(newton_dm):
     """Newton e = 0.3, h = 1e-2: V rises (≈ 4.1e-4·V in the jump pair) because of the impulse
-    slack of the discrete impact law, not A3; the slack's fitted order in h is ≈ 1."""
+    slack of the discrete impact law, not A3: every rise is explained exactly by round-off plus
+    the slack, whose fitted order in h is ≈ 1, so dV ≤ 0 "holds up to the discrete slack"."""
     ctx = newton_dm(0.3)
     r = pc.check_lyapunov_decrease(ctx.run)
-    assert r.passed is False and r.tolerance == 0.0
-    assert "impulse term of the discrete impact law positive" in r.reason and "A3" not in r.reason
-    assert r.reason.index("impulse term") < r.reason.index("O(h^")
+    assert r.passed is True and r.tolerance == 0.0 and r.evidence == "bounded"
+    p = r.witness["slack_order_impulse_slack"]
+    assert 0.8 <= p <= 1.4
+    assert r.verdict == f"holds up to the discrete slack (order ≈ {p:.2g})"
+    assert r.reason.startswith("V rises on ") and "A3" not in r.reason
+    assert r.reason.index("V rises on") < r.reason.index("O(h^")
     assert r.witness["jump pair: cause"] == "impulse_slack"
     assert r.witness["jump pair: max_dV"] == pytest.approx(4.1e-4, rel=0.05)
-    assert 0.8 <= r.witness["slack_order_impulse_slack"] <= 1.4
+    assert r.witness["steps_slack"] > 0 and r.witness["steps_violated"] == 0
     assert "vanishing as h → 0" in r.reason
     # the order is the slope of the reported slacks (recomputed from the witness rows)
     hs, sl = r.witness["slack_h"], r.witness["slack_impulse_slack_slack"]
     assert np.allclose(hs, [1e-2, 2e-2, 4e-2]) and np.all(np.diff(sl) > 0)
-    assert np.polyfit(np.log(hs), np.log(sl), 1)[0] == pytest.approx(r.witness["slack_order_impulse_slack"])
+    assert np.polyfit(np.log(hs), np.log(sl), 1)[0] == pytest.approx(p)
     # A3 itself holds for this law: the attribution is not the continuous impact map
     assert pc.check_impact_monotone(ctx.system, ctx.law, rng=rng()).passed is True
-    # near miss on the tolerance (margin ≥ −tolerance): just below / just above the excess
-    excess = -r.margin
-    assert pc.check_lyapunov_decrease(ctx.run, tolerance=0.99 * excess, order_factors=()).passed is False
-    assert pc.check_lyapunov_decrease(ctx.run, tolerance=1.01 * excess, order_factors=()).passed is True
+    # near miss on the tolerance (margin ≥ −tolerance): just below / just above the margin
+    m = r.margin
+    assert m > 0
+    assert pc.check_lyapunov_decrease(ctx.run, tolerance=-1.01 * m, order_factors=()).passed is False
+    assert pc.check_lyapunov_decrease(ctx.run, tolerance=-0.99 * m, order_factors=()).passed is True
 
 
 def test_lyapunov_passes_with_e1_where_the_slack_vanishes(newton_dm):
@@ -461,8 +466,9 @@ def test_lyapunov_passes_with_e1_where_the_slack_vanishes(newton_dm):
         assert r.witness[f"{lab}: max_impulse_slack/V"] <= 0.0
         assert r.witness[f"{lab}: max_dV"] <= 0.0
     # V_jump (report) rises only by the plain master's penetration term, which is reported
+    # (not counted: no rise, no order fit)
     assert r.witness["max_projection_unprojected_gap/V"] > 0
-    assert "plain master's penetration" in r.reason
+    assert r.verdict == "holds exactly: no rise of V beyond round-off" and "slack_h" not in r.witness
 
 
 def test_lyapunov_identity_near_miss_pins_the_roundoff_allowance(newton_dm):
@@ -487,15 +493,15 @@ def test_lyapunov_identity_near_miss_pins_the_roundoff_allowance(newton_dm):
 
 
 def test_lyapunov_stiff_case_has_no_roundoff_false_positives():
-    """cond(K) = 4e8, h = 1e-4: the raw identity residual exceeds the old fixed 1e-9·V, the
-    round-off allowance (which scales with cond(K)) does not flag it."""
+    """cond(K) = 4e8, h = 1e-4: the raw identity residual is 10⁴ eps·V and more, the round-off
+    allowance (which scales with cond(K)) does not flag it."""
     sc = pc.load("double_mass", {"param.k1": 1e10, "simulation.t_end": 1.0, "initial.u": [-2.0, -2.0],
                                  "impact.law": "newton", "impact.restitution": 0.0, "param.F": 50})
     assert np.linalg.cond(sc.system.K) == pytest.approx(4e8, rel=1e-3)
     run = pc.CheckContext(sc).run
     assert run.master.active[1:].any(axis=1).sum() > 10
     r = pc.check_lyapunov_decrease(run, order_factors=())
-    assert max(r.witness[f"{lab}: max_residual/V"] for lab in r.witness["pairs"]) > 1e-9
+    assert max(r.witness[f"{lab}: max_residual/V"] for lab in r.witness["pairs"]) > 1e4 * np.finfo(float).eps
     for lab in r.witness["pairs"]:
         assert r.witness[f"{lab}: max_identity"] <= 0, lab
         assert r.witness[f"{lab}: max_projection"] <= 0, lab
@@ -737,7 +743,7 @@ def test_cli_in_process(tmp_path, capsys):
                      "--set", "impact.restitution=[0.1, 0.95]", "--only", "impact_monotone",
                      "--option", "impact_monotone.samples=8", "--seed", "2"])
     captured = capsys.readouterr()
-    assert code == 1 and "FAIL" in captured.out and "max_rho" in captured.out
+    assert code == 1 and "FAIL" in captured.out and "exact counterexample" in captured.out
     assert "FAILED" in captured.err
     assert cli_main(["--list"]) == 0 and "convergence" in capsys.readouterr().out
 
@@ -774,8 +780,8 @@ def test_every_default_tolerance_is_pinned():
     from proofs_checks import assumptions, lyapunov
     from proofs_checks.switching import check_switching_generated
     expected = {
-        pc.check_mass_spd: {"rcond_min": 1e-12}, pc.check_stiffness_spd: {"rcond_min": 1e-12},
-        pc.check_damping_pd: {"rcond_min": 1e-12}, pc.check_constraints_independent: {"cond_max": 1e6},
+        pc.check_mass_spd: {"rcond_min": 0.0}, pc.check_stiffness_spd: {"rcond_min": 0.0},
+        pc.check_damping_pd: {"rcond_min": 0.0}, pc.check_constraints_independent: {"cond_max": 1e6},
         check_switching_generated: {"jump_tolerance": 1e-9},
         pc.check_forcing_bounded: {"tolerance": 1e-9, "growth_tol": 0.05},
         pc.check_impact_monotone: {"tolerance": 1e-9},
@@ -790,7 +796,7 @@ def test_every_default_tolerance_is_pinned():
         sig = inspect.signature(fn)
         for k, v in tols.items():
             assert sig.parameters[k].default == v, (fn.__name__, k)
-    assert (assumptions.RCOND_MIN, assumptions.SYMMETRY_RTOL, assumptions.PSD_RTOL) == (1e-12, 1e-10, 1e-10)
+    assert (assumptions.RCOND_MIN, assumptions.SYMMETRY_RTOL) == (0.0, 1e-10)       # definiteness: exact
     assert lyapunov.ROUNDOFF_FACTOR == 4.0
 
 
@@ -802,13 +808,15 @@ def _with_relative_lambda_min(rel: float) -> np.ndarray:
 
 @pytest.mark.parametrize("check", [pc.check_mass_spd, pc.check_stiffness_spd, pc.check_damping_pd])
 def test_definiteness_near_misses(check):
-    """λ_min/λ_max just below / above rcond_min = 1e-12; asymmetry just above / below 1e-10."""
-    assert check(_with_relative_lambda_min(2e-12)).passed is True
-    below = check(_with_relative_lambda_min(0.5e-12))
+    """λ_min/λ_max just below / above a requested rcond_min = 1e-12; decided exactly by default
+    (any positive λ_min is definite, any negative one fails); asymmetry just above / below 1e-10."""
+    assert check(_with_relative_lambda_min(2e-12), rcond_min=1e-12).passed is True
+    below = check(_with_relative_lambda_min(0.5e-12), rcond_min=1e-12)
     assert below.passed is (False if check is pc.check_mass_spd else None)
-    if check is not pc.check_mass_spd:        # semi-definite is n/a; beyond −PSD_RTOL it fails
-        assert check(_with_relative_lambda_min(-2e-10)).passed is False
-        assert check(_with_relative_lambda_min(-0.5e-10)).passed is None
+    assert check(_with_relative_lambda_min(0.5e-12)).evidence == "proved"
+    for rel in (-2e-10, -0.5e-10):
+        r = check(_with_relative_lambda_min(rel))
+        assert r.passed is False and r.evidence == "violated"
     if check is not pc.check_damping_pd:      # C need not be symmetric
         A = np.eye(2)
         for asym, ok in ((2e-10, False), (0.5e-10, True)):
@@ -836,5 +844,5 @@ def test_impact_monotone_near_miss(coupled_pair):
     rho_star = 0.025713421385889428
     for factor, ok in ((0.999, False), (1.001, True)):
         r = pc.check_impact_monotone(coupled_pair.system, law, rng=rng(), active_sets=[np.array([0, 1])],
-                                     tolerance=factor * rho_star)
+                                     tolerance=factor * rho_star, exact=False)      # the sampled search
         assert r.passed is ok, (factor, r.witness["max_rho"])

@@ -93,10 +93,11 @@ def test_registry_passes_each_checks_ingredients(monkeypatch):
 def test_results_frame_columns_and_rows():
     res = pc.run_checks("bouncing_ball", "mass_spd,stiffness_spd")
     df = pc.results_frame(res)
-    assert list(df.columns) == ["scenario", "check", "equation", "status", "passed", "margin", "tolerance",
-                                "witness", "reason", "elapsed"]
+    assert list(df.columns) == ["scenario", "check", "equation", "status", "evidence", "passed", "margin",
+                                "tolerance", "verdict", "witness", "reason", "elapsed"]
     assert df.check.tolist() == ["mass_spd", "stiffness_spd"] and df.status.tolist() == ["PASS", "n/a"]
-    assert pc.results_frame([]).shape == (0, 10)
+    assert df.evidence.tolist() == ["proved", "n/a"]
+    assert pc.results_frame([]).shape == (0, 12)
 
 
 # ----------------------------------------------------------------------------- assertion helpers
@@ -160,14 +161,16 @@ def test_format_table_exact():
     a.elapsed = 0.04
     b = CheckResult.not_applicable("k", "why")
     b.elapsed = 12.0
-    lines = cli.format_table([a, b]).splitlines()
+    c = CheckResult.from_margin("c", -1.0, 0.0, {"y": 2.0}, "eq", ("y",), evidence="sampled", verdict="v")
+    lines = cli.format_table([a, b, c]).splitlines()
     assert lines == [
-        "  check     status      margin       tol    time  witness",
-        "  mass_spd  PASS          0.25         0    0.0s  x=1",
-        "  k         n/a              -         -   12.0s  not applicable: why",
+        "  check     status  evidence      margin       tol    time  verdict | witness",
+        "  mass_spd  PASS    sampled         0.25         0    0.0s  x=1",
+        "  k         n/a     n/a                -         -   12.0s  not applicable: why",
+        "  c         FAIL    sampled           -1         0    0.0s  v | y=2",
     ]
     assert cli._fmt(float("nan")) == "-" and cli._fmt(1234.5) == "1.23e+03"
-    assert cli.STATUS_WIDTH == 6
+    assert cli.STATUS_WIDTH == 6 and cli.EVIDENCE_WIDTH == len("violated")
 
 
 def test_cli_options_parsing():

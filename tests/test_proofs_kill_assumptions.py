@@ -34,8 +34,9 @@ def test_spd_witness_margin_and_texts(check, name, label, equation):
     w = r.witness
     assert r.name == name and r.equation == equation and r.passed is True and r.tolerance == 0.0
     assert w["lambda_min"] == pytest.approx(2.0, rel=1e-14) and w["lambda_max"] == pytest.approx(8.0, rel=1e-14)
-    assert w["relative_lambda_min"] == pytest.approx(0.25, rel=1e-14) and w["required"] == 1e-12
-    assert r.margin == pytest.approx(0.25 - 1e-12, rel=1e-14)
+    assert w["relative_lambda_min"] == pytest.approx(0.25, rel=1e-14) and w["required"] == 0.0
+    assert r.margin == pytest.approx(0.25, rel=1e-14) and r.evidence == "proved"
+    assert w["exact_class"] == "definite" and w["min_pivot"] > 0
     v = w["eigenvector_min"]
     assert abs(abs(v @ ROT[:, 0]) - 1.0) < 1e-12                  # the eigenvector of λ = 2
     assert w["asymmetry"] == pytest.approx(np.max(np.abs(A - A.T)) / 8.0, abs=1e-17)
@@ -43,6 +44,7 @@ def test_spd_witness_margin_and_texts(check, name, label, equation):
     if name == "mass_spd":                   # below rcond_min: fails (K: semi-definite, n/a)
         assert check(A, rcond_min=0.3).passed is False
         assert check(A, rcond_min=0.3).margin == pytest.approx(0.25 - 0.3)
+        assert check(A, rcond_min=0.3).evidence == "bounded"          # exactly SPD, a float judgement
     else:
         assert check(A, rcond_min=0.3).passed is None
     assert check(A, rcond_min=0.2).passed is True
@@ -50,29 +52,38 @@ def test_spd_witness_margin_and_texts(check, name, label, equation):
     B = np.array([[1.0, 0.3], [0.0, 2.0]])
     r = check(B)
     assert r.passed is False and r.margin == pytest.approx(-0.15) and r.tolerance == 1e-10
+    assert r.evidence == "violated"
     assert r.reason == f"{label} is not symmetric (max|A − Aᵀ|/max|A| = 0.15)"
     assert r.summary_keys[0] == "asymmetry" and r.equation == equation and r.name == name
     # negative definite scale: λ_max < 0, relative λ_min = λ_min/max|λ|
     r = check(-_sym([2.0, 8.0]))
     assert r.witness["relative_lambda_min"] == pytest.approx(-1.0) and r.passed is False
+    assert r.evidence == "violated" and r.witness["exact_class"] == "indefinite" and r.witness["exact_xAx"] < 0
 
 
 def test_stiffness_semidefinite_reason_and_witness():
-    r = pc.check_stiffness_spd(_sym([0.0, 4.0]))
+    # ROT diag(0, 4) ROTᵀ rounded to floats is exactly definite (λ_min ≈ 5.6e-17 over Q)
+    assert pc.check_stiffness_spd(_sym([0.0, 4.0])).evidence == "proved"
+    r = pc.check_stiffness_spd(np.array([[1.0, 2.0], [2.0, 4.0]]))      # exactly singular, λ = 0, 5
     assert r.passed is None and math.isnan(r.margin) and math.isnan(r.tolerance)
-    assert r.reason.startswith("K is only positive semi-definite (λ_min = ")
+    assert r.reason.startswith("K is only positive semi-definite (λ_min = ") and r.evidence == "n/a"
     assert r.reason.endswith("): free rigid-body mode; the position jumps (K-metric), eqs. (13)-(14) and "
                              "Theorem 1 need K ≻ 0 (THEORY §2 erratum 6)")
-    assert r.witness["lambda_max"] == pytest.approx(4.0) and r.equation == "section 2: K = Kᵀ ≻ 0; eq. (7)"
+    assert r.witness["lambda_max"] == pytest.approx(5.0) and r.equation == "section 2: K = Kᵀ ≻ 0; eq. (7)"
+    x = r.witness["exact_vector"]
+    assert np.all(np.array([[1.0, 2.0], [2.0, 4.0]]) @ x == 0) and np.any(x != 0) and r.witness["exact_xAx"] == 0
     assert r.summary_keys == ("lambda_min", "lambda_max", "relative_lambda_min", "asymmetry")
     # the zero matrix: scale 0 → relative λ_min 0 → semi-definite
     r = pc.check_stiffness_spd(np.zeros((2, 2)))
     assert r.passed is None and r.witness["relative_lambda_min"] == 0.0 and r.witness["asymmetry"] == 0.0
-    # exactly −PSD_RTOL is still semi-definite; exactly rcond_min is definite
+    # decided exactly: a tiny negative eigenvalue is indefinite, a tiny positive one definite,
+    # an exactly singular PSD matrix semi-definite; rcond_min (default 0) is the edge on top
     r = pc.check_stiffness_spd(np.diag([-1e-10, 1.0]))
-    assert r.passed is None
+    assert r.passed is False and r.evidence == "violated"
     r = pc.check_stiffness_spd(np.diag([1e-12, 1.0]))
-    assert r.passed is True and r.margin == 0.0
+    assert r.passed is True and r.margin == 1e-12 and r.evidence == "proved"
+    assert pc.check_stiffness_spd(np.diag([1e-12, 1.0]), rcond_min=1e-12).margin == 0.0
+    assert pc.check_stiffness_spd(np.diag([1e-12, 1.0]), rcond_min=2e-12).passed is None
     # the mass matrix has no semi-definite exception
     assert pc.check_mass_spd(np.diag([0.0, 1.0])).passed is False
 
@@ -103,15 +114,24 @@ def test_constraints_independent_witness():
     assert r.margin == pytest.approx(6.0 - math.log10(6.0), rel=1e-14) and r.tolerance == 0.0
     assert r.reason == "" and r.name == "constraints_independent"
     assert r.equation == "section 2: w_i linearly independent; eq. (21)"
-    assert r.summary_keys == ("condition_number", "sigma_min", "sigma_max", "null_combination")
+    assert r.summary_keys == ("exact_rank", "condition_number", "sigma_min", "sigma_max", "null_combination")
+    assert w["exact_rank"] == 2 and r.evidence == "proved"
     assert pc.check_constraints_independent(W, cond_max=6.0).margin == 0.0
     # m > n: σ_min = 0, cond = inf, margin −inf, with the reason
     r = pc.check_constraints_independent([[1.0, 2.0, 0.5]])
     assert r.passed is False and r.margin == -np.inf and r.witness["condition_number"] == np.inf
     assert r.witness["sigma_min"] == 0.0 and r.reason == "more contacts than degrees of freedom (m > n)"
     # exactly dependent columns (m ≤ n): σ_min = 0 → inf, no m > n reason
-    r = pc.check_constraints_independent(np.array([[1.0, 1.0], [0.0, 0.0]]))
-    assert r.witness["condition_number"] == np.inf and r.passed is False and r.reason == ""
+    W = np.array([[1.0, 1.0], [0.0, 0.0]])
+    r = pc.check_constraints_independent(W)
+    assert r.witness["condition_number"] == np.inf and r.passed is False
+    assert r.reason == "the columns of W are exactly dependent" and r.evidence == "violated"
+    assert r.witness["exact_rank"] == 1 and np.all(W @ r.witness["exact_null_combination"] == 0)
+    assert np.any(r.witness["exact_null_combination"] != 0)
+    # numerically but not exactly dependent: exact rank 2, condition number above cond_max
+    near = np.array([[1.0, 1.0], [0.0, 2.0 ** -40]])
+    r = pc.check_constraints_independent(near)
+    assert r.witness["exact_rank"] == 2 and r.passed is False and r.evidence == "bounded"
 
 
 # ----------------------------------------------------------------------------- A2: common period
@@ -169,10 +189,14 @@ def test_harmonic_witness_and_margin():
     assert np.allclose(w["f_at_t_star"], f(w["t_star"]), rtol=1e-15)
     assert r.margin == pytest.approx(1 - w["sup_norm"] / U, abs=1e-15) and r.tolerance == 1e-9
     assert r.passed is True and r.reason == "" and r.name == "forcing_bounded"
+    assert r.evidence == "proved"                              # the analytic bound U proves A2
     assert r.equation == "A2: sup‖f(t)‖ ≤ f_max < ∞"
     assert r.summary_keys == ("sup_norm", "analytic_bound", "f_max", "t_star", "period")
     r = pc.check_forcing_bounded(f, f_max=2 * U, tolerance=0.0)
     assert r.witness["f_max"] == 2 * U and r.margin == pytest.approx(0.5, rel=1e-9) and r.tolerance == 0.0
+    assert r.evidence == "proved"                              # f_max ≥ U
+    r = pc.check_forcing_bounded(f, f_max=0.999 * U)             # below U: only the sampled sup decides
+    assert r.passed is False and r.evidence == "sampled"
 
 
 def test_harmonic_zero_bound_and_incommensurate():
@@ -234,6 +258,7 @@ def test_generic_forcing_with_a_claimed_bound_and_zero_signals():
     r = pc.check_forcing_bounded(f, f_max=2.0, horizon=1.0, windows=2)
     assert r.margin == pytest.approx(0.5, rel=1e-12) and r.passed is True and r.tolerance == 1e-9
     assert r.reason == "no analytic bound: sup sampled over a window" and r.witness["f_max"] == 2.0
+    assert r.evidence == "sampled"
     assert r.summary_keys == ("sup_norm", "analytic_bound", "f_max", "t_star", "period")
     z = lambda t: np.zeros((np.asarray(t).size, 1))                    # noqa: E731
     r = pc.check_forcing_bounded(z, horizon=1.0, windows=2)

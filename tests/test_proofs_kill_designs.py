@@ -71,6 +71,7 @@ def test_witness_and_margin_recomputed_from_the_pairs(case):
             assert r.witness["V"] == pytest.approx(V[k], rel=1e-9)
     assert r.witness["designs"]["jump_identity"] > 0 and r.margin > 0
     assert r.passed is True and r.tolerance == 0.0 and r.reason == "" and r.name == "projection_energy"
+    assert r.evidence == "sampled"                                       # measured along one run
     assert r.equation == de.EQUATION and r.summary_keys == ("designs",)
 
 

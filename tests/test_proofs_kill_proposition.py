@@ -44,6 +44,7 @@ def _diff(r, s):
 def test_exact_witness_by_hand(dm):
     r = pr.check_proposition1_exact(dm)
     assert r.passed is True and r.margin == 0.0 and r.tolerance == 0.0 and r.reason == ""
+    assert r.evidence == "proved" and r.verdict == "matched pairs bitwise identical on this run"
     assert r.name == "proposition1_exact" and r.equation == "Proposition 1 (discrete, exact); eqs. (12)-(14)"
     w = r.witness
     for label, projection, jumps in (("plain_master__nojump_slave", False, False),
@@ -127,6 +128,7 @@ def test_h_scaling_witness_by_hand(dm):
     # the verdict's edge and the failure text: min_order just above the worst order
     high = pr.check_proposition1_h_scaling(dm, h=H, t_end=T_END, factors=factors, min_order=orders[worst] + 0.01)
     assert high.passed is False and high.margin == pytest.approx(-0.01, abs=1e-9)
+    assert r.evidence == "sampled" and high.evidence == "sampled"         # a fitted order proves nothing
     assert high.reason == (f"{worst}: the difference does not shrink with h (order {orders[worst]:.2f})")
     edge = pr.check_proposition1_h_scaling(dm, h=H, t_end=T_END, factors=factors, min_order=r.witness[f"{worst}_order"])
     assert edge.passed is True and edge.margin == 0.0 and edge.reason == ""

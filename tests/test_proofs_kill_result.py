@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from proofs_checks.result import STATUS_TEXT, CheckResult, _fmt, _jsonable
+from proofs_checks.result import EVIDENCE_LEVELS, STATUS_TEXT, CheckResult, _fmt, _jsonable
 
 
 def test_from_margin_verdict_edge_and_negative_zero():
@@ -66,6 +66,7 @@ def test_message_lines():
     r.scenario = "sc"
     assert r.message().splitlines() == [
         "chk [eq. (0)] FAIL on sc",
+        "  evidence  = violated",
         "  margin    = -0.5 (tolerance 0.125; satisfied when margin >= -tolerance)",
         "  reason    = it broke",
         "  witness:",
@@ -75,7 +76,10 @@ def test_message_lines():
     na = CheckResult.not_applicable("chk", "no K", "A1")
     assert na.message().splitlines() == ["chk [A1] NOT APPLICABLE", "  reason    = no K"]
     ok = CheckResult.from_margin("chk", 2.0, 0.0, {}, "E")
-    assert ok.message() == "chk [E] PASS\n  margin    = 2 (tolerance 0; satisfied when margin >= -tolerance)"
+    assert ok.message() == ("chk [E] PASS\n  evidence  = sampled\n"
+                            "  margin    = 2 (tolerance 0; satisfied when margin >= -tolerance)")
+    proved = CheckResult.from_margin("chk", 2.0, 0.0, {}, "E", evidence="proved", verdict="exact LDLᵀ")
+    assert proved.message().splitlines()[1] == "  evidence  = proved: exact LDLᵀ"
 
 
 def test_rows_dicts_and_truth_value():
@@ -83,9 +87,9 @@ def test_rows_dicts_and_truth_value():
                                                    "s": {1}, "o": object}, "eq", ("v",), "why")
     r.scenario, r.elapsed = "sc", 1.5
     row = r.to_row()
-    assert row == {"scenario": "sc", "check": "chk", "equation": "eq", "status": "FAIL", "passed": False,
-                   "margin": -0.5, "tolerance": 0.1, "witness": "why | v=[0, 1]", "reason": "why",
-                   "elapsed": 1.5}
+    assert row == {"scenario": "sc", "check": "chk", "equation": "eq", "status": "FAIL", "evidence": "violated",
+                   "passed": False, "margin": -0.5, "tolerance": 0.1, "verdict": None,
+                   "witness": "why | v=[0, 1]", "reason": "why", "elapsed": 1.5}
     long = CheckResult.from_margin("c", 1.0, 0.0, {"a": "q" * 300}, "e", ("a",))
     assert long.to_row()["witness"] == "a=" + "q" * 300                   # the row is not cut
     d = r.to_dict()
@@ -93,6 +97,7 @@ def test_rows_dicts_and_truth_value():
     assert d["witness"]["v"] == [0, 1] and d["witness"]["x"] == "Infinity"
     assert d["witness"]["s"] == [1] and d["witness"]["o"] == str(object)
     assert d["margin"] == -0.5 and d["name"] == "chk" and d["passed"] is False
+    assert d["evidence"] == "violated" and d["verdict"] is None
     json.dumps(d)
     assert CheckResult.not_applicable("y", "r").to_dict()["margin"] == "NaN"
     with pytest.raises(TypeError, match="use CheckResult.passed"):
@@ -138,3 +143,21 @@ def test_fmt_prints_other_iterables_with_str():
     """Only lists, tuples and arrays print as numbers; any other value with its str()."""
     assert _fmt(range(3)) == "range(0, 3)"
     assert _fmt({"a": 1}) == "{'a': 1}"
+
+
+def test_evidence_levels_defaults_and_consistency():
+    """Every result carries an evidence level; 'n/a' exactly when not applicable; a failure
+    is never 'proved'; unknown levels and inconsistent pairs are refused."""
+    assert EVIDENCE_LEVELS == ("proved", "bounded", "sampled", "violated")
+    assert CheckResult("c", True, 1.0, 0.0).evidence == "sampled"             # the weakest claim
+    assert CheckResult("c", False, -1.0, 0.0).evidence == "violated"
+    assert CheckResult("c", None, math.nan, math.nan).evidence == "n/a"
+    assert CheckResult.not_applicable("c", "r").evidence == "n/a"
+    assert CheckResult.from_margin("c", 1.0, 0.0, {}, "e", evidence="proved").evidence == "proved"
+    assert CheckResult.from_margin("c", -1.0, 0.0, {}, "e", evidence="proved").evidence == "violated"
+    assert CheckResult.from_margin("c", -1.0, 0.0, {}, "e", evidence="sampled").evidence == "sampled"
+    assert CheckResult.from_margin("c", 1.0, 0.0, {}, "e", verdict="ok").verdict == "ok"
+    for bad in ({"passed": True, "evidence": "maybe"}, {"passed": True, "evidence": "n/a"},
+                {"passed": None, "evidence": "proved"}, {"passed": True, "evidence": "violated"}):
+        with pytest.raises(ValueError, match="evidence"):
+            CheckResult("c", margin=0.0, tolerance=0.0, **bad)

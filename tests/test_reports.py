@@ -415,6 +415,10 @@ CHECKS = [("double_mass", "mass_spd", "section 2: M ≻ 0", "PASS", 0.999, 0.0, 
           ("double_mass", "lyapunov_decrease", "(16)", "FAIL", -4.1e-4, 1e-9, "step 12: dV > 0", ""),
           ("ball", "projection_defined", "(10)", "n/a", float("nan"), float("nan"), "",
            "K = 0: the projection is undefined")]
+CHECK_EVIDENCE = {"mass_spd": ("proved", "M ≻ 0 (exact)"),
+                  "lyapunov_decrease": ("violated", "violated: V rises at step 12 <exactly>"),
+                  "projection_defined": ("n/a", "")}
+"""Evidence level and verdict of the synthetic check rows (by check)."""
 MICRO_MEANS = {(1, "reference"): 2.0e-3, (1, "pivoting"): 4.0e-6, (1, "lemke"): 1.6e-5,
                (1, "nnls"): 5.0e-5, (8, "reference"): 3.0e-3, (8, "pivoting"): 6.0e-5,
                (8, "lemke"): 2.5e-4, (8, "nnls"): 3.0e-4}
@@ -487,7 +491,8 @@ def _synthetic_rows() -> list[tuple[str, list[dict]]]:
             "note": "a note" if prob == "double_mass" else ""}]))
     cases.append(("checks", [{"kind": "checks", "scenario": s, "name": s, "check": c, "equation": e,
                               "check_status": st, "margin": mg, "tolerance": tol, "witness": w,
-                              "reason": why, "status": "ok"}
+                              "reason": why, "status": "ok",
+                              "evidence": CHECK_EVIDENCE[c][0], "verdict": CHECK_EVIDENCE[c][1]}
                              for s, c, e, st, mg, tol, w, why in CHECKS]))
     return cases
 
@@ -831,6 +836,50 @@ def test_micro_speedups_are_recomputed(synthetic_report):
             assert _num(r[f"{solver} (µs)"]) == pytest.approx(MICRO_MEANS[(m, solver)] * 1e6, rel=5e-3)
     key = next(i for i in page.sections["key-numbers"].items if i.startswith("Fast contact solver"))
     assert _nums(key)[:2] == pytest.approx([MICRO_MEANS[(1, "reference")] / MICRO_MEANS[(1, "pivoting")], 1])
+
+
+def test_proof_check_matrix_is_coloured_by_evidence_with_the_witness_on_hover(synthetic_report, tmp_path):
+    """Scenario × check: each cell is the row's evidence level with its class and a hover text
+    naming check, scenario, status, verdict and witness (HTML-escaped); "—" where a scenario has
+    no row for a check; the full table sits in a <details> block."""
+    page, _ = synthetic_report
+    m = page.table("proof-checks", "Proof-check matrix").dicts()
+    checks = list(dict.fromkeys(c[1] for c in CHECKS))
+    assert [r["scenario"] for r in m] == list(dict.fromkeys(c[0] for c in CHECKS))
+    rows = {r["scenario"]: r for r in m}
+    for scen, check, _, status, *_ in CHECKS:
+        assert rows[scen][check] == CHECK_EVIDENCE[check][0]
+    for scen in rows:
+        assert sum(rows[scen][c] == "—" for c in checks) == len(checks) - sum(c[0] == scen for c in CHECKS)
+    doc = next(tmp_path.parent.glob("synthetic*/report/index.html")).read_text(encoding="utf-8")
+    for scen, check, _, status, _, _, witness, reason in CHECKS:
+        level, verdict = CHECK_EVIDENCE[check]
+        cls = "evidence-na" if level == "n/a" else f"evidence-{level}"
+        hover = f"{check} on {scen}: {status} — " + (reason if status == "n/a" else f"{verdict} | {witness}")
+        hover = hover.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+        assert f'<td class="{cls}" title="{hover}">{level}</td>' in doc, hover
+    sec = doc[doc.index('<section id="proof-checks">'):]
+    assert sec.index("<details><summary>Witnesses: all 3 check rows") < sec.index("Proof-check table")
+    table = page.table("proof-checks", "Proof-check table").dicts()
+    assert [(r["evidence"], r["verdict"]) for r in table] == [
+        (CHECK_EVIDENCE[c][0], CHECK_EVIDENCE[c][1] or "—") for _, c, *_ in CHECKS]
+    assert "Proof-step evidence: 1 proved, 0 bounded, 0 sampled, 1 violated, 1 n/a." in \
+        "\n".join(page.sections["key-numbers"].items)
+
+
+@pytest.mark.parametrize("status,evidence,cell,cls", [
+    ("PASS", "bounded", "bounded", "evidence-bounded"), ("FAIL", "violated", "violated", "evidence-violated"),
+    ("FAIL", "sampled", "FAIL (sampled)", "evidence-violated"), ("n/a", "n/a", "n/a", "evidence-na"),
+    ("PASS", "", "PASS", "evidence-unknown"), ("n/a", None, "n/a", "evidence-na")])
+def test_matrix_cell_of_a_row(status, evidence, cell, cls):
+    import pandas as pd
+    from reports.sections.proof_checks import matrix_cell
+    r = pd.Series({"scenario": "s", "check": "c", "check_status": status, "evidence": evidence,
+                   "verdict": "v" if evidence else None, "witness": "w", "reason": "why"})
+    got = matrix_cell(r)
+    assert got[:2] == (cell, cls)
+    assert got[2] == ("c on s: n/a — why" if status == "n/a" else f"c on s: {status} — " +
+                      ("v | w" if evidence else "w"))
 
 
 def test_proof_check_table_lists_every_check_row(synthetic_report):

@@ -1,12 +1,14 @@
-"""Proof-step checks (:mod:`proofs_checks`): counts per status, per registered observer design,
-and every check row with its margin, tolerance and witness."""
+"""Proof-step checks (:mod:`proofs_checks`): a matrix scenario × check coloured by the
+evidence level (proved, bounded, sampled, violated, n/a; the verdict and witness on hover),
+counts per status and per registered observer design, and every check row with its margin,
+tolerance and witness (on demand)."""
 
 from __future__ import annotations
 
 import pandas as pd
 
 from reports import analysis, registry
-from reports.analysis import CHECK_STATUSES
+from reports.analysis import CHECK_STATUSES, EVIDENCE_ORDER, check_evidence, check_matrix
 from reports.blocks import Section
 from reports.context import ReportContext
 from reports.tables import Table, fmt, fmt_int, text
@@ -14,6 +16,14 @@ from reports.tables import Table, fmt, fmt_int, text
 TITLE = "Proof-step checks (proofs_checks)"
 WITNESS_CHARS = 220
 """Longest witness / reason shown in a cell (longer ones end with "…")."""
+HOVER_CHARS = 600
+"""Longest hover text of a matrix cell."""
+MATRIX_TITLE = "Proof-check matrix: evidence level per scenario and check"
+EVIDENCE_TEXT = ("proved: decided in exact rational arithmetic (or verified enclosures) on the given matrices; "
+                 "bounded: floating point with a rigorous round-off bound (exact where recomputed); "
+                 "sampled: random/adversarial search, no counterexample; violated: a counterexample "
+                 "re-checked exactly; n/a: the check's hypotheses do not hold. A failure that was not "
+                 "re-checked exactly reads \"FAIL (level)\". Hover a cell for its verdict and witness.")
 
 
 def _why_missing() -> str:
@@ -30,10 +40,51 @@ def _design_of(r: pd.Series) -> str:
     return registry.label(d) if isinstance(d, str) and d else "—"
 
 
+def _cut(s: str, n: int) -> str:
+    return s if len(s) <= n else s[:n - 1] + "…"
+
+
+def matrix_cell(r: pd.Series) -> tuple[str, str, str]:
+    """(text, CSS class, hover text) of one check in the matrix: the evidence level (a failure
+    that is not an exact counterexample: "FAIL (level)"; a row without a level: its status)."""
+    st = str(r["check_status"])
+    ev = check_evidence(r)
+    if ev == "n/a":
+        cell, cls = "n/a", "evidence-na"
+    elif not ev:
+        cell, cls = st, "evidence-unknown"
+    elif st == "FAIL" and ev != "violated":
+        cell, cls = f"FAIL ({ev})", "evidence-violated"
+    else:
+        cell, cls = ev, f"evidence-{ev}"
+    verdict, reason, wit = text(r.get("verdict")), text(r.get("reason")), text(r.get("witness"))
+    body = reason if st == "n/a" else " | ".join(x for x in (verdict, wit or reason) if x)
+    hover = f"{r['check']} on {r['scenario']}: {st}" + (f" — {body}" if body else "")
+    return cell, cls, _cut(hover, HOVER_CHARS)
+
+
+def matrix_table(ch: pd.DataFrame) -> Table:
+    """Scenario × check, each cell the evidence level, coloured, with its verdict and witness
+    as hover text; "—" where a scenario has no row for a check."""
+    scenarios, checks, cells = check_matrix(ch)
+    t = Table(MATRIX_TITLE, ["scenario", *checks])
+    for sc in scenarios:
+        row, cls, hov = [sc], [""], [""]
+        for c in checks:
+            r = cells.get((sc, c))
+            if r is None:
+                row.append("—"), cls.append(""), hov.append("")
+                continue
+            cell, k, h = matrix_cell(r)
+            row.append(cell), cls.append(k), hov.append(h)
+        t.add(row, classes=cls, titles=hov)
+    return t
+
+
 def checks_table(ch: pd.DataFrame) -> Table:
     """Every check row."""
-    t = Table("Proof-check table: status, margin, tolerance and witness per scenario and check",
-              ["scenario", "check", "design", "equation", "status", "margin", "tolerance",
+    t = Table("Proof-check table: status, evidence, verdict, margin, tolerance and witness per scenario and check",
+              ["scenario", "check", "design", "equation", "status", "evidence", "verdict", "margin", "tolerance",
                "witness / reason"])
     for _, r in ch.iterrows():
         st = str(r["check_status"])
@@ -43,6 +94,7 @@ def checks_table(ch: pd.DataFrame) -> Table:
         if len(detail) > WITNESS_CHARS:
             detail = detail[:WITNESS_CHARS - 3] + "…"
         t.add([r["scenario"], r["check"], _design_of(r), text(r.get("equation")) or "—", st,
+               check_evidence(r) or "not recorded", text(r.get("verdict")) or "—",
                "n/a" if na else fmt(r["margin"]), "n/a" if na else fmt(r["tolerance"]), detail])
     return t
 
@@ -85,7 +137,14 @@ def build(ctx: ReportContext) -> Section:
           "n/a: the check's hypotheses do not hold for that system (reason given).")
     ctx.key_numbers.append(f"Proof-step checks: {total['PASS']} PASS, {total['FAIL']} FAIL, "
                            f"{total['n/a']} not applicable, over {total['scenarios']} scenarios.")
+    levels = ch.apply(check_evidence, axis=1) if len(ch) else pd.Series(dtype=str)
+    if levels.astype(bool).any():
+        ctx.key_numbers.append("Proof-step evidence: " + ", ".join(
+            f"{int((levels == lv).sum())} {lv}" for lv in EVIDENCE_ORDER) + ".")
+    sec.p(EVIDENCE_TEXT)
+    sec.table(matrix_table(ch))
     named = "design" in ch and ch["design"].map(text).astype(bool).any()
     sec.table(design_counts_table(counts, named))
-    sec.table(checks_table(ch))
+    sec.details(f"Witnesses: all {len(ch)} check rows (status, evidence, margin, tolerance, verdict and witness)",
+                checks_table(ch))
     return sec
