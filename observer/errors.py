@@ -19,9 +19,20 @@ class InputError(ValueError):
     """
 
     def __init__(self, field: str, problem: str):
-        self.field = field
-        self.problem = problem
-        super().__init__(f"{field}: {problem}")
+        self.field = one_line(str(field))
+        self.problem = one_line(str(problem))
+        super().__init__(f"{self.field}: {self.problem}")
+
+
+LINE_BREAKS = {c: repr(chr(c))[1:-1] for c in (0x0A, 0x0B, 0x0C, 0x0D, 0x1C, 0x1D, 0x1E, 0x85,
+                                                0x2028, 0x2029)}
+"""The characters :meth:`str.splitlines` breaks at, mapped to their escapes (``\\n``, ...)."""
+
+
+def one_line(text: str) -> str:
+    """``text`` with every line break escaped (``\\n``, ``\\r``, ``\\x0b``...), so that an error
+    message stays on one line even when it quotes a path or a value containing one."""
+    return text.translate(LINE_BREAKS)
 
 
 class ContactSolverError(RuntimeError):

@@ -35,7 +35,7 @@ import numpy as np
 from observer.errors import InputError
 from observer.impact import ImpactLaw
 from observer.model import Harmonic, LinearSystem
-from observer.validation import as_array, as_scalar, check_step_count, check_step_parameters
+from observer.validation import MAX_DEPTH, as_array, as_scalar, check_step_count, check_step_parameters
 
 _HARMONIC = {"amplitude": None, "omega": None, "phase": None}
 SCHEMA: dict = {
@@ -95,6 +95,23 @@ def parse_value(text: str) -> Any:
         return tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         return text
+    except RecursionError:
+        raise InputError("--set", f"value {text[:40]!r}... nested deeper than {MAX_DEPTH} levels") from None
+
+
+def check_overrides(overrides: Any) -> dict[str, Any]:
+    """``overrides`` as a dict of dotted string keys (``{"simulation.h": 1e-3}``), or raise
+    :class:`InputError` naming ``overrides``."""
+    if overrides is None:
+        return {}
+    if not isinstance(overrides, dict):
+        raise InputError("overrides", f"must be a dict of dotted keys to values, such as "
+                         f"{{'simulation.h': 1e-3}}, got {type(overrides).__name__}")
+    for key in overrides:
+        if not isinstance(key, str):
+            raise InputError("overrides", f"keys must be dotted strings such as 'simulation.h', "
+                             f"got {key!r}")
+    return dict(overrides)
 
 
 def apply_overrides(doc: dict, overrides: dict[str, Any]) -> dict:
@@ -104,7 +121,7 @@ def apply_overrides(doc: dict, overrides: dict[str, Any]) -> dict:
     the values, matrices included, are shared, so the cost does not grow with their size.
     """
     doc = dict(doc)
-    for key, value in overrides.items():
+    for key, value in check_overrides(overrides).items():
         parts = key.split(".")
         if not all(part.strip() for part in parts):
             raise InputError(key or "--set", f"empty key component in {key!r} (expected a dotted "
@@ -192,6 +209,8 @@ class Scenario:
         simd = doc["simulation"]
         h, theta = check_step_parameters(simd["h"], simd.get("theta", 0.5))
         t_end = as_scalar("simulation.t_end", simd["t_end"], positive=True)
+        if t_end < h:
+            raise InputError("simulation.t_end", f"must be at least one step h = {h!r}, got {t_end!r}")
         check_step_count(h, t_end)
         solver = simd.get("solver", "pivoting")
         from observer.contact import get_solver
@@ -345,7 +364,7 @@ def load_scenario(name_or_path: "str | Path | Scenario",
     """
     from observer.scenarios import SCENARIOS
     from observer.tomlio import read_toml
-    overrides = dict(overrides or {})
+    overrides = check_overrides(overrides)
     if isinstance(name_or_path, Scenario):
         return name_or_path.with_overrides(overrides) if overrides else name_or_path
     params = {k[len("param."):]: (parse_value(v) if isinstance(v, str) else v)
