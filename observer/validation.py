@@ -90,10 +90,9 @@ def as_array(field: str, value: Any, shape: tuple[int | None, ...]) -> np.ndarra
     bad = non_numeric_entry(field, value)
     if bad is not None:
         index, why = bad
-        what = "a numeric array" if shape else "a numeric value"
         if index:
-            raise InputError(field, f"not {what}: entry {index} is {why}")
-        raise InputError(field, f"not {what}: got {why}")
+            raise InputError(field, f"not a numeric array: entry {index} is {why}")
+        raise InputError(field, f"not a numeric array or number: got {why}")
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError, OverflowError) as exc:
