@@ -93,6 +93,9 @@ def main(argv: list[str] | None = None) -> int:
         n_done = sum(store.has(c.case_id) for c in suite.cases)
         print(f"{suite.name}: {n_done}/{len(suite.cases)} cases done "
               f"({results_path(suite.name, args.out)})")
+        for path, reason in store.damaged():
+            print(f"damaged case file {path.name} {reason} (not counted; the next run moves it "
+                  "aside and computes its case again)")
         return 0
     from observer.errors import InputError
     from bench.run import default_workers
@@ -103,6 +106,11 @@ def main(argv: list[str] | None = None) -> int:
                             scheduler=args.scheduler)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:            # e.g. a full disk: one line naming the file, no traceback
+        from observer.errors import one_line
+        print(f"error: {one_line(str(exc.filename or args.out))}: "
+              f"{one_line(exc.strerror or str(exc))}", file=sys.stderr)
         return 2
     print(summary.text())
     micro_failed = summary.micro_status.startswith("failed")

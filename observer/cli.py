@@ -10,7 +10,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from observer.errors import ContactSolverError, InputError
+import numpy as np
+
+from observer.errors import ContactSolverError, InputError, one_line
 from observer.validation import check_output_path
 
 IMAGE_SUFFIXES = (".png", ".svg", ".pdf")
@@ -230,6 +232,22 @@ def main(argv: list[str] | None = None) -> int:
     return guarded(args.func, args)
 
 
+NUMERICAL_FAILURES = (ArithmeticError, RecursionError, np.linalg.LinAlgError)
+"""Failures of the numerical libraries that :func:`guarded` still turns into one line, should
+an input pass validation and break a computation: a user sees ``error: SCENARIO: ...``, never
+a traceback."""
+
+
+def _os_error_file(exc: OSError, args: tuple) -> str:
+    """The file an :class:`OSError` is about: its own ``filename``, else the command's output
+    file(s) (a failed ``write`` on an open file, "No space left on device", names none)."""
+    if exc.filename is not None:
+        return str(exc.filename)
+    ns = args[0] if args else None
+    outs = [str(v) for k in ("out", "events", "json") if (v := getattr(ns, k, None))]
+    return " or ".join(outs) or "output file"
+
+
 def guarded(func, *args) -> int:
     """Call ``func(*args)``; turn input, solver, file and out-of-memory errors into one
     ``error:`` line on stderr and exit status 2 (130 on Ctrl-C). Shared by every command line
@@ -237,10 +255,17 @@ def guarded(func, *args) -> int:
     try:
         return func(*args)
     except (InputError, ContactSolverError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {one_line(str(exc))}", file=sys.stderr)
         return 2
     except OSError as exc:
-        print(f"error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        print(f"error: {one_line(_os_error_file(exc, args))}: {one_line(exc.strerror or str(exc))}",
+              file=sys.stderr)
+        return 2
+    except NUMERICAL_FAILURES as exc:
+        where = getattr(args[0], "scenario", None) if args else None
+        print(f"error: {one_line(str(where or 'input'))}: the computation failed "
+              f"({type(exc).__name__}: {one_line(str(exc))}); please report this input",
+              file=sys.stderr)
         return 2
     except MemoryError:
         print("error: --store: the run does not fit in memory; keep fewer rows (--record-every K, "
