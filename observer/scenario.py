@@ -187,6 +187,9 @@ class Scenario:
     @staticmethod
     def from_dict(doc: dict, source: str = "") -> "Scenario":
         """Validate a scenario document (see module docstring) and build the scenario."""
+        if not isinstance(doc, dict):
+            raise InputError("scenario", f"the document must be a table (a dict), got "
+                             f"{type(doc).__name__}")
         check_keys(doc, SCHEMA)
         for key in REQUIRED:
             _get(doc, key)

@@ -90,6 +90,9 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     """
     coupling, residual_tol, observers = check_arguments(integrator, coupling, residual_tol,
                                                         record_every, observers, on_chunk)
+    for name, value in (("h", h), ("t_end", t_end), ("theta", theta)):
+        if value is not None:       # a number, as in the TOML document (a string is refused)
+            as_scalar(f"simulation.{name}", value)
     sc = load_scenario(scenario)
     overrides = {k: v for k, v in (("simulation.h", h), ("simulation.t_end", t_end),
                                    ("simulation.solver", solver), ("simulation.theta", theta),
@@ -125,7 +128,7 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         cfg = ObserverConfig.from_table(sc.observer, system.n, sc.q0, sc.u0, base_dir)
         slaves = make_slaves(cfg, observers)
         for s in slaves:
-            check_finite_energy(f"observer {s.name!r}", system, s.q0, s.u0)
+            check_finite_energy("observer", system, s.q0, s.u0)
         source = source or cfg.source
         if coupling == "scenario":
             coupling = cfg.coupling
@@ -281,7 +284,7 @@ def _simulate_event(sc: Scenario, observers, source, coupling, log, engine, reco
         cfg = ObserverConfig.from_table(sc.observer, n, sc.q0, sc.u0, base_dir)
         specs = make_slaves(cfg, observers)
         for s in specs:
-            check_finite_energy(f"observer {s.name!r}", system, s.q0, s.u0)
+            check_finite_energy("observer", system, s.q0, s.u0)
         source = source or cfg.source
         intervals = _event_intervals(sc, master, source, log or cfg.log)
         obs = run_observers(master, sc, specs, intervals=intervals,
