@@ -324,11 +324,11 @@ class FiniteGuard:
         self.limit = lim if np.isfinite(lim) else 0.0
 
     def _within(self, *arrays) -> bool:
-        a = 0.0
+        """Every entry of ``arrays`` within :attr:`limit` (False for a NaN)."""
         for x in arrays:
-            if x.size:
-                a = max(a, float(np.max(np.abs(x))))
-        return a <= self.limit                                  # False for a NaN
+            if x.size and not float(np.max(np.abs(x))) <= self.limit:
+                return False
+        return True
 
     def state_ok(self, qs: np.ndarray, us: np.ndarray, summ: np.ndarray | None = None) -> bool:
         """Every state within :attr:`limit` (and the kernel's summary finite)."""
@@ -342,7 +342,7 @@ class FiniteGuard:
         from observer.observers import lyapunov
 
         for s in range(self.S):
-            for name, x in (("q", qs[s]), ("u", us[s])):
+            for name, x in (("u", us[s]), ("q", qs[s])):    # in the step's order: u_{k+1}, then q_{k+1}
                 bad = np.flatnonzero(~np.isfinite(x))
                 if bad.size:
                     return f"{name}{bad[0]} of {self.names[s]} ({x[bad[0]]})"
@@ -363,7 +363,7 @@ class FiniteGuard:
         (the name of the quantity; None: finite)."""
         from observer.stepping import Grid
 
-        for name, x in (("q", q), ("u", u)):
+        for name, x in (("u", u), ("q", q)):
             bad = np.flatnonzero(~np.isfinite(x))
             if bad.size:
                 return f"{name}{bad[0]} of {self.names[s]} ({x[bad[0]]})"
@@ -509,53 +509,54 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool, on_chunk=No
     stop, reason = None, ""
     t0 = time.perf_counter()
     guard = FiniteGuard(inp)
-    for k in range(stepper.grid.steps):
-        if stopper is not None and stopper.signal:
-            stop, reason = k, _stop_text(stepper, stopper.signal, k)
-            break
-        r = (k + 1) // record_every if (k + 1) % record_every == 0 else -1
-        chi = None
-        within = True
-        for s in range(S):
-            q, u = states[s]
-            try:
-                q1, u1, P, sig, q_pre, act, chi = _python_step(inp, stepper, *proj[s], k, s, q, u, chi, coupled[k],
-                                                               None if chi_log is None else chi_log[k])
-            except NonFiniteState:                  # the step's free velocity is not finite
-                stop, reason = k, guard.stop_text(guard.free_velocity(k, s, q, u) or "free velocity", k)
+    with np.errstate(over="ignore", invalid="ignore"):     # overflow: the guard's to stop
+        for k in range(stepper.grid.steps):
+            if stopper is not None and stopper.signal:
+                stop, reason = k, _stop_text(stepper, stopper.signal, k)
                 break
-            if not guard._within(q1, u1):
-                within = False
-                bad = guard.free_velocity(k + 1, s, q1, u1) if not (np.all(np.isfinite(q1))
-                                                                     and np.all(np.isfinite(u1))) else None
-                if bad is not None:                 # (names the first non-finite entry of the state)
-                    stop, reason = k, guard.stop_text(bad, k)
+            r = (k + 1) // record_every if (k + 1) % record_every == 0 else -1
+            chi = None
+            within = True
+            for s in range(S):
+                q, u = states[s]
+                try:
+                    q1, u1, P, sig, q_pre, act, chi = _python_step(inp, stepper, *proj[s], k, s, q, u, chi, coupled[k],
+                                                                   None if chi_log is None else chi_log[k])
+                except NonFiniteState:                  # the step's free velocity is not finite
+                    stop, reason = k, guard.stop_text(guard.free_velocity(k, s, q, u) or "free velocity", k)
                     break
-            res = _python_health(stepper, k, s, q, u, u1, P, act, q1, health)
-            if not res <= tol:
-                stop, reason = k, _stop_text(stepper, f"complementarity residual {res:.3g} > "
-                                             f"tolerance {tol:.3g} in step {k} (system {s})", k)
+                if not guard._within(q1, u1):
+                    within = False
+                    bad = guard.free_velocity(k + 1, s, q1, u1) if not (np.all(np.isfinite(q1))
+                                                                         and np.all(np.isfinite(u1))) else None
+                    if bad is not None:                 # (names the first non-finite entry of the state)
+                        stop, reason = k, guard.stop_text(bad, k)
+                        break
+                res = _python_health(stepper, k, s, q, u, u1, P, act, q1, health)
+                if not res <= tol:
+                    stop, reason = k, _stop_text(stepper, f"complementarity residual {res:.3g} > "
+                                                 f"tolerance {tol:.3g} in step {k} (system {s})", k)
+                    break
+                states[s] = (q1, u1)
+                if r >= 0:
+                    rec["q"][s, r], rec["u"][s, r] = q1, u1
+                    rec["P"][s, r, act] = P
+                    if sig is not None:
+                        rec["sigma"][s, r, act] = sig
+                    if record_pre:
+                        rec["q_pre"][s, r] = q_pre
+                    if s == 0:
+                        rec["active"][r, act] = True
+                        if S > 1:
+                            rec["chi"][r, chi] = True
+            if stop is None and not within:             # the new states, their gaps and V finite?
+                bad = guard.first_problem(k + 1, np.stack([q for q, _ in states]), np.stack([u for _, u in states]))
+                if bad is not None:
+                    stop, reason = k, guard.stop_text(bad, k)
+            if stop is not None:
                 break
-            states[s] = (q1, u1)
-            if r >= 0:
-                rec["q"][s, r], rec["u"][s, r] = q1, u1
-                rec["P"][s, r, act] = P
-                if sig is not None:
-                    rec["sigma"][s, r, act] = sig
-                if record_pre:
-                    rec["q_pre"][s, r] = q_pre
-                if s == 0:
-                    rec["active"][r, act] = True
-                    if S > 1:
-                        rec["chi"][r, chi] = True
-        if stop is None and not within:             # the new states, their gaps and V finite?
-            bad = guard.first_problem(k + 1, np.stack([q for q, _ in states]), np.stack([u for _, u in states]))
-            if bad is not None:
-                stop, reason = k, guard.stop_text(bad, k)
-        if stop is not None:
-            break
-        if (k + 1) % PYTHON_CHUNK == 0:
-            emit(k + 1)
+            if (k + 1) % PYTHON_CHUNK == 0:
+                emit(k + 1)
     emit(stepper.grid.steps if stop is None else stop)
     run_time = time.perf_counter() - t0
     st = stepper.stats
