@@ -345,7 +345,7 @@ def _read_parquet(path: Path, partial: bool) -> tuple[pd.DataFrame, dict, str | 
         problem = "the metadata checksum does not match: the metadata was altered"
     if problem is not None and not (partial and integ is None):
         return None, meta, problem                  # a damaged Parquet file: no row is known whole
-    df = table.to_pandas()
+    df = table.to_pandas(ignore_metadata=True)     # the columns as checked (no index was written)
     df.attrs = {}
     return df, meta, problem
 
@@ -358,9 +358,11 @@ def _read_checked(path: Path, partial: bool) -> tuple[pd.DataFrame, dict]:
         raise InputError(str(path), f"unsupported extension {path.suffix!r}; use .csv or .parquet")
     if not path.exists() and not (suffix == ".parquet" and running_path(path).exists()):
         raise InputError(str(path), "file not found")
+    from pyarrow import ArrowException
+
     try:
         df, meta, problem = (_read_parquet if suffix == ".parquet" else _read_csv)(path, partial)
-    except (UnicodeDecodeError, ValueError, OSError) as exc:
+    except (UnicodeDecodeError, ValueError, OSError, ArrowException) as exc:
         if isinstance(exc, InputError):
             raise
         text = " ".join(str(exc).split())

@@ -108,6 +108,7 @@ class ChunkWriter:
         self._old_handlers: dict = {}
         self._masked: list[int] = []
         self._closing = False
+        self._opened = False
 
     # -- the on_chunk callback ----------------------------------------------------------
     def __call__(self, chunk) -> None:
@@ -139,6 +140,7 @@ class ChunkWriter:
             else:
                 data = df.to_csv(None, header=self.chunks == 0, index=False, float_format="%.17g",
                                  lineterminator="\n").encode("utf-8")
+                self._opened = True
                 with open(self.path, "wb" if self.chunks == 0 else "ab") as fh:
                     fh.write(data)
                 self._content.add_bytes(data, len(df))
@@ -207,11 +209,14 @@ class ChunkWriter:
         """A Parquet file that cannot be closed is unreadable: its partial file is removed
         (the ``running`` sidecar stays, saying the run did not finish)."""
         if self.suffix == ".parquet":
+            from pyarrow import ArrowException
+
             try:
                 if self._writer is not None:
                     self._writer.close()
-            except (OSError, ValueError):
+            except (OSError, ValueError, ArrowException):
                 pass
+            self._writer = None
             part_path(self.path).unlink(missing_ok=True)
 
     def finish(self, result) -> Path:
@@ -268,6 +273,9 @@ class ChunkWriter:
         try:
             if exc_type is not None and self.chunks == 0 and not self.closed:
                 self.closed = True                       # failed before any row: no file at all
+                self._discard()
+                if self._opened and self.suffix == ".csv":
+                    self.path.unlink(missing_ok=True)    # a first chunk cut short
                 running_path(self.path).unlink(missing_ok=True)
             elif exc_type is not None and not self.closed and not issubclass(exc_type, OSError):
                 where = f"after t = {self.t_last:.9g}" if self.t_last is not None else "before the first step"
