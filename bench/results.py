@@ -14,14 +14,15 @@ Layout of a suite's output folder ``OUT`` (default ``bench/results``)::
 A case file is written under a temporary name in the same folder and renamed: it appears
 complete or not at all, whatever kills the writer. Its Parquet schema metadata carries a
 SHA-256 checksum of its rows (:func:`content_digest`). A case is *done* when its file opens,
-holds ``case_rows`` rows and its checksum matches (:meth:`CaseStore.verify`); a damaged file
+holds ``case_rows`` rows and its checksum matches (:meth:`CaseStore.has`); a damaged file
 (cut short, altered, written without a checksum) is reported, moved aside to
 ``<key>.parquet.damaged`` by the next ``bench run`` (:meth:`CaseStore.quarantine`) and its
 case computed again. A killed process (client or worker) loses at most the cases it was
 running, and a rerun computes none twice; concurrent clients on one folder take a lock per
-case (:meth:`CaseStore.lock`, ``filelock``), so each case is computed once. Every row carries ``suite``, ``case_id``, ``case_rows`` (rows of the
-case) and ``row`` (0-based index within the case); the kinds of runs have different metric
-columns, so :func:`load_results` concatenates with NaN for a kind's missing columns.
+case (:meth:`CaseStore.lock`, ``filelock``), so each case is computed once. Every row
+carries ``suite``, ``case_id``, ``case_rows`` (rows of the case) and ``row`` (0-based index
+within the case); the kinds of runs have different metric columns, so :func:`load_results`
+concatenates with NaN for a kind's missing columns.
 """
 
 from __future__ import annotations

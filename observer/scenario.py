@@ -215,6 +215,8 @@ class Scenario:
         if t_end < h:
             raise InputError("simulation.t_end", f"must be at least one step h = {h!r}, got {t_end!r}")
         check_step_count(h, t_end)
+        check_angles("system.forcing", sysd.get("forcing", {}), forcing, t_end)
+        check_angles("system.gap", sysd.get("gap", {}), gap, t_end)
         solver = simd.get("solver", "pivoting")
         from observer.contact import get_solver
         get_solver(solver, field="simulation.solver")
@@ -285,6 +287,19 @@ def check_finite_energy(prefix: str, system: LinearSystem, q: np.ndarray, u: np.
     if not (np.isfinite(elastic) and np.all(np.isfinite(gaps))):
         raise InputError(f"{prefix}.q", f"elastic energy ½qᵀKq or the gaps overflow ({elastic}): "
                          "the state is too large")
+
+
+def check_angles(field_name: str, d: dict, signal: Harmonic, t_end: float) -> None:
+    """Raise unless every term's angle ω·t + phase stays finite up to ``t_end`` (an overflowing
+    angle makes cos and sin NaN); the error names the term's ``omega``."""
+    names = ([field_name] if any(k in d for k in ("amplitude", "omega", "phase")) else []) + \
+        [f"{field_name}.harmonics[{j}]" for j in range(len(d.get("harmonics", [])))]
+    with np.errstate(over="ignore"):
+        for name, w, p in zip(names, signal.omega, signal.phase):
+            angle = abs(w) * t_end + float(np.max(np.abs(p), initial=0.0))
+            if not np.isfinite(angle):
+                raise InputError(f"{name}.omega", f"the angle omega·t + phase overflows by t_end = "
+                                 f"{t_end!r} (omega = {float(w)!r})")
 
 
 def check_initial_gap(field_name: str, system: LinearSystem, q0: np.ndarray, t0: float = 0.0) -> None:

@@ -14,7 +14,8 @@ from observer.observers import OBSERVER_DESIGNS, ObserverConfig, Slave, check_co
     check_observer_name, lyapunov, lyapunov_decrements
 from observer.result import (EVENT_COLUMNS, LazyFrame, RunStatus, SimulationResult, SlaveTrajectory,
                              package_versions, records_frame, run_metadata)
-from observer.scenario import Scenario, check_finite_energy, load_scenario  # noqa: F401  (re-exported: observer.load_scenario)
+from observer.scenario import (Scenario, check_finite_energy,  # noqa: F401  (re-exported:
+                               load_scenario)                  # observer.load_scenario)
 from observer.stepping import MoreauJean
 from observer.switching import SOURCES, read_log
 from observer.validation import MAX_STEPS, as_scalar
