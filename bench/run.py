@@ -166,8 +166,9 @@ def execute_case(case: Case, suite: str, out_dir: str | Path, env: dict,
     finished by an earlier sweep or by a concurrent client): the case's lock
     (:meth:`~bench.results.CaseStore.lock`) is held while it is checked, computed and written.
     The kernel is made ready in this process first, so no case pays its compile time;
-    ``compile_time_s`` and ``pid`` in the rows are this process's. ``reference_grids`` (:func:`bench.runners.reference_grids` of the run's cases)
-    lets the work-precision cases of one sweep share one event-driven reference per process.
+    ``compile_time_s`` and ``pid`` in the rows are this process's. ``reference_grids``
+    (:func:`bench.runners.reference_grids` of the run's cases) lets the work-precision cases of
+    one sweep share one event-driven reference per process.
     """
     from bench.runners import Context, Unavailable, run_case
 
