@@ -183,3 +183,23 @@ def test_two_concurrent_clients_compute_each_case_once(tmp_path):
     rows = store.rows()
     assert len(rows) == 4 and len({r["case_id"] for r in rows}) == 4
     assert store.damaged() == []
+
+
+def test_bench_run_on_a_real_full_disk(tmp_path, tiny_suite, capsys):
+    """``bench run`` into an 8 KiB tmpfs (root may mount one; elsewhere the ENOSPC test above
+    stands in): exit 2, one line naming the case file, no temporary file left behind."""
+    mnt = tmp_path / "small"
+    mnt.mkdir()
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=8k", "tmpfs",
+                                            str(mnt)], capture_output=True).returncode != 0:
+        pytest.skip("cannot mount a tmpfs here")
+    try:
+        code = bench_cli.main(["run", "tiny", "--out", str(mnt), "--workers", "0", "--no-micro",
+                               "--no-progress"])
+        out, err = capsys.readouterr()
+        store = CaseStore(results_path("tiny", mnt))
+        assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
+        assert err.startswith(f"error: {store.folder}/") and "No space left on device" in err
+        assert list(store.folder.glob(".*.tmp")) == [] and store.files() == []
+    finally:
+        subprocess.run(["umount", str(mnt)], check=True)
