@@ -326,7 +326,7 @@ class FiniteGuard:
     def _within(self, *arrays) -> bool:
         """Every entry of ``arrays`` within :attr:`limit` (False for a NaN)."""
         for x in arrays:
-            if x.size and not float(np.max(np.abs(x))) <= self.limit:
+            if x.size and not abs(x).max() <= self.limit:
                 return False
         return True
 
@@ -909,7 +909,7 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
 
         snap = _snapshot(state, fallbacks, stepper)
         k, s, stop, reason, finite = to(k, s, k1)
-        if not warm and not (finite and guard.state_ok(qs, us, summ)):
+        if not warm and not (finite and guard.state_ok(qs, us, summ if summary else None)):
             # a non-finite (or overflowing) quantity in this window: again from its start, one
             # step at a time, to stop before the first step that makes one
             _restore(state, snap, fallbacks, stepper)
