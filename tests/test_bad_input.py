@@ -617,8 +617,8 @@ class _exit_code:
         return False
 
 
-SUBPROCESS_CASES = ["h-option-nan", "log-overlapping", "out-unwritable", "file-dev-zero",
-                    "file-nested-100000-deep", "record-every-2-to-the-70", "bench-limit-negative"]
+SUBPROCESS_CASES = ["h-option-nan", "out-unwritable", "file-dev-zero", "file-nested-100000-deep",
+                    "record-every-2-to-the-70", "bench-limit-negative"]
 
 
 def test_subprocess_prints_one_line_and_no_traceback(tmp_path):
@@ -728,25 +728,20 @@ def _tmpfs(path: Path, size: str) -> bool:
                           capture_output=True).returncode == 0
 
 
-def test_a_full_disk_is_one_line_naming_the_file(tmp_path):
+def test_a_full_disk_is_one_line_naming_the_file(tmp_path, capsys):
     """``observer run`` writing to a 64 KiB tmpfs (a real full disk: root may mount one,
     else a write to /dev/full through a symlink, which fails with the same ENOSPC)."""
     mnt = tmp_path / "small"
     mounted = _tmpfs(mnt, "64k")
     try:
-        if mounted:
-            out = mnt / "out.csv"
-        else:
+        if not mounted:
             mnt.mkdir()
-            out = mnt / "out.csv"
-            out.symlink_to("/dev/full")
-        env = {**os.environ, "PYTHONPATH": str(ROOT)}
-        res = subprocess.run([sys.executable, "-m", "observer", "run", "double_mass", "--t-end", "0.5",
-                              "--out", str(out)], cwd=tmp_path, env=env, capture_output=True,
-                             text=True, timeout=300)
-        lines = res.stderr.splitlines()
-        assert res.returncode == 2, res.stderr
-        assert len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+            (mnt / "out.csv").symlink_to("/dev/full")
+        code = cli.main(["run", "double_mass", "--t-end", "0.5", "--out", str(mnt / "out.csv")])
+        err = capsys.readouterr().err
+        lines = err.splitlines()
+        assert code == 2, err
+        assert len(lines) == 1 and "Traceback" not in err, err
         assert lines[0].startswith(f"error: {mnt}/") and lines[0].endswith("No space left on device")
     finally:
         if mounted:
