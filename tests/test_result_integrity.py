@@ -23,6 +23,7 @@ import pytest
 
 from observer.errors import InputError
 from observer.io import part_path, read_result, running_path, sidecar_path
+from observer.result import RunState, RunStatus
 from observer.simulate import simulate
 from observer.stream import ChunkWriter
 
@@ -164,6 +165,7 @@ def test_an_unfinished_csv_is_refused_or_read_as_its_whole_rows(small_run, tmp_p
         read_result(path)
     df, meta = read_result(path, partial=True)
     assert meta["status"]["state"] == "partial" and len(df) == 6
+    assert RunStatus(meta["status"]["state"], meta["status"]["reason"]).state is RunState.PARTIAL
     _assert_rows_are_the_written_ones(df, small_run.to_frame())
 
 
