@@ -25,7 +25,10 @@ Every run ends with a :class:`~observer.health.Health` record (:attr:`LoopOutput
 its warnings also go to stderr). A step whose complementarity residual, recomputed from the
 velocity it applied, exceeds the tolerance stops the run there: the records are truncated
 to the last complete step (no unwritten rows) and :attr:`LoopOutput.stopped_at` /
-``stop_reason`` say where and why. ``on_chunk`` receives the finished rows as they are
+``stop_reason`` say where and why. So does a non-finite quantity (:class:`FiniteGuard`: a
+state entry, a gap of the master or an observer's V): the run stops at the last step whose
+every quantity is finite — the compiled engine checks once per window and re-runs a window
+that fails one step at a time (the kernel is untouched), the python engine checks every step. ``on_chunk`` receives the finished rows as they are
 produced (:class:`Chunk`: every window of the compiled engine, every
 :data:`PYTHON_CHUNK` steps of the python one); with it, SIGINT and SIGTERM stop the run
 after the current window instead of killing it (``stop_signal``), so a streamed file
