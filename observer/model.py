@@ -17,8 +17,7 @@ import numpy as np
 
 from observer.errors import InputError
 from observer.validation import (PROJECTION_COND_MAX, as_array, as_scalar, broadcast_vector,
-                                 check_entry_range, check_independent_columns, check_psd,
-                                 check_spd, check_symmetric,
+                                 check_independent_columns, check_psd, check_spd, check_symmetric,
                                  extreme_eigenvalues, projection_condition)
 
 
@@ -223,8 +222,6 @@ class LinearSystem:
         if self.gap.dim != m:
             raise InputError("system.gap", f"has dimension {self.gap.dim}, expected m = {m}")
         if self.check:
-            for name, arr in (("M", M), ("C", C), ("K", K), ("W", W)):
-                check_entry_range(f"system.{name}", arr)
             check_spd("system.M", M)
             check_symmetric("system.C", C)
             check_psd("system.C", C)

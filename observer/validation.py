@@ -149,7 +149,9 @@ def broadcast_vector(field: str, value: Any, length: int) -> np.ndarray:
 
 
 def check_symmetric(field: str, A: np.ndarray) -> None:
-    """Raise unless ``A`` is symmetric to :data:`SYMMETRY_RTOL`."""
+    """Raise unless ``A``'s entries are in range (:func:`check_entry_range`) and ``A`` is
+    symmetric to :data:`SYMMETRY_RTOL`."""
+    check_entry_range(field, A)
     scale = max(float(np.max(np.abs(A))), np.finfo(float).tiny)
     asym = float(np.max(np.abs(A - A.T)))
     if asym > SYMMETRY_RTOL * scale:
@@ -246,8 +248,10 @@ def check_independent_columns(field: str, W: np.ndarray) -> tuple[float, float]:
     "Not linearly independent" when W has more columns than rows or its numerical rank is
     below m (σ_min ≤ max(n, m)·ε·σ_max, the tolerance of ``numpy.linalg.matrix_rank``: an
     exactly dependent W computes σ_min at round-off level, not 0); "nearly dependent" when
-    σ_min/σ_max ≤ √ε. Returns (σ_min, σ_max).
+    σ_min/σ_max ≤ √ε; first, entries out of range (:func:`check_entry_range`). Returns
+    (σ_min, σ_max).
     """
+    check_entry_range(field, W)
     sv_min, sv_max = singular_value_range(W)
     if W.shape[1] > W.shape[0] or sv_min <= max(W.shape) * EPS * sv_max:   # numerical rank < m
         raise InputError(field, f"columns are not linearly independent (smallest singular value "

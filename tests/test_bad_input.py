@@ -746,29 +746,3 @@ def test_a_full_disk_is_one_line_naming_the_file(tmp_path, capsys):
     finally:
         if mounted:
             subprocess.run(["umount", str(mnt)], check=True)
-
-
-@pytest.mark.parametrize("argv, line", [
-    (["--h", "1e-320"], "error: --h: must be finite with a finite inverse, got 1e-320"),
-    (["--t-end", "inf"], "error: --t-end: must be finite with a finite inverse, got inf"),
-    (["--h", "0"], "error: --h: must be > 0, got 0.0"),
-    (["--t-end", "nan"], "error: --t-end: must be > 0, got nan"),
-    (["--h", "fast"], "error: argument --h: invalid float value: 'fast' (see --help)"),
-])
-def test_proofs_checks_run_options_are_refused_in_one_line(argv, line, capsys):
-    from proofs_checks.cli import main as proofs_main
-
-    with _exit_code() as code:                    # argparse errors exit through SystemExit
-        code.value = proofs_main(["double_mass", "--only", "mass_spd", *argv])
-    out, err = capsys.readouterr()
-    assert code.value == 2 and err.splitlines() == [line] and out == ""
-
-
-def test_proofs_checks_accepts_the_extreme_finite_run_options(capsys):
-    """The boundaries: the smallest h whose inverse is finite, the largest finite t_end."""
-    from proofs_checks.cli import main as proofs_main
-    from observer.validation import INV_MIN
-
-    assert proofs_main(["double_mass", "--only", "mass_spd", "--h", repr(INV_MIN),
-                        "--t-end", repr(float(np.finfo(float).max))]) == 0
-    assert "mass_spd" in capsys.readouterr().out
