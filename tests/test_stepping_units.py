@@ -380,7 +380,10 @@ def test_grid_theta_averaged_forcing_and_gap_signals(theta):
 
 def test_step_parameters_are_validated():
     assert check_step_parameters(1e-3, 0.5) == (1e-3, 0.5)
-    assert check_step_parameters("0.01", 1) == (0.01, 1.0)
+    assert check_step_parameters(np.float32(0.5), 1) == (0.5, 1.0)
+    with pytest.raises(InputError, match="the string '0.01'") as info:   # a number, not text (issue 20)
+        check_step_parameters("0.01", 1)
+    assert info.value.field == "simulation.h"
     assert isinstance(check_step_parameters(1, 1)[1], float)
     for h in (0.0, -1e-3):
         with pytest.raises(InputError) as info:
