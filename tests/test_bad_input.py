@@ -746,3 +746,18 @@ def test_a_full_disk_is_one_line_naming_the_file(tmp_path, capsys):
     finally:
         if mounted:
             subprocess.run(["umount", str(mnt)], check=True)
+
+
+def test_a_numerical_library_failure_is_one_line_naming_the_scenario(monkeypatch, capsys, tmp_path):
+    """Should an input pass validation and still break a computation, the command line prints
+    one line naming the scenario (never a LinAlgError traceback)."""
+    def breaks(*args, **kwargs):
+        raise np.linalg.LinAlgError("Singular matrix")
+
+    monkeypatch.setattr(sys.modules["observer.simulate"], "simulate", breaks)
+    code = cli.main(["run", "double_mass", "--out", str(tmp_path / "out.csv")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.splitlines() == [
+        "error: double_mass: the computation failed (LinAlgError: Singular matrix); please report "
+        "this input"]
+    assert not (tmp_path / "out.csv").exists()
