@@ -37,3 +37,20 @@ def one_line(text: str) -> str:
 
 class ContactSolverError(RuntimeError):
     """A contact problem could not be solved to the required complementarity residual."""
+
+
+NUMERICAL_MODULES = ("numpy", "scipy", "numba", "llvmlite", "tomllib")
+"""Libraries whose own exceptions (``numpy.linalg.LinAlgError``, a numba ``TypingError``...)
+never reach a user: :func:`is_numerical_failure` picks them out."""
+
+
+def is_numerical_failure(exc: BaseException) -> bool:
+    """Whether ``exc`` is an arithmetic failure (overflow, division by zero, recursion too
+    deep) or an exception raised by one of :data:`NUMERICAL_MODULES` rather than by the
+    toolkit: the command line and :func:`observer.simulate` turn it into one error naming
+    the scenario."""
+    if isinstance(exc, MemoryError):    # NumPy's too: a run too large, said as such elsewhere
+        return False
+    if isinstance(exc, (ArithmeticError, RecursionError)):
+        return True
+    return any(type(exc).__module__.split(".")[0] == m for m in NUMERICAL_MODULES)

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterable
 
 import numpy as np
 
-from observer.errors import InputError
+from observer.errors import InputError, is_numerical_failure
 from observer.loop import LoopInput, check_engine, check_record_every, summary_frame
 from observer.loop import run as run_loop
 from observer.observers import OBSERVER_DESIGNS, ObserverConfig, Slave, check_coupling, \
@@ -24,6 +25,27 @@ if TYPE_CHECKING:
     import pandas as pd
 
 
+def _numerical_failures_refused(func):
+    """``func`` (:func:`simulate`) with a numerical library's own exception
+    (:func:`~observer.errors.is_numerical_failure`: a ``LinAlgError``, a numba error, an
+    overflow) raised as an :class:`InputError` naming ``scenario`` (the library's exception
+    chained as its cause), so that no NumPy, SciPy or numba exception reaches an API user."""
+    @functools.wraps(func)
+    def wrapper(scenario, *args, **kwargs):
+        try:
+            return func(scenario, *args, **kwargs)
+        except InputError:
+            raise
+        except Exception as exc:        # noqa: BLE001  (re-raised unless a library's failure)
+            if not is_numerical_failure(exc):
+                raise
+            name = scenario.name if isinstance(scenario, Scenario) else str(scenario)
+            raise InputError("scenario", f"{name}: the computation failed ({type(exc).__name__}: "
+                             f"{exc}); please report this input") from exc
+    return wrapper
+
+
+@_numerical_failures_refused
 def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: float | None = None, *,
              solver: str | None = None, theta: float | None = None,
              master_projection: bool | None = None,

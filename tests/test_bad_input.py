@@ -761,3 +761,33 @@ def test_a_numerical_library_failure_is_one_line_naming_the_scenario(monkeypatch
         "error: double_mass: the computation failed (LinAlgError: Singular matrix); please report "
         "this input"]
     assert not (tmp_path / "out.csv").exists()
+
+
+def test_a_numerical_library_failure_in_the_api_is_an_input_error_naming_the_scenario(monkeypatch):
+    """The same through :func:`observer.simulate`: an :class:`InputError` naming ``scenario``
+    with the library's exception as its cause; a toolkit error or a NumPy MemoryError passes
+    unchanged."""
+    def singular():
+        raise np.linalg.LinAlgError("Singular matrix")
+
+    def too_large():
+        return np.empty(2 ** 50)        # 8 PiB, beyond any address space: NumPy's MemoryError
+
+    def toolkit_bug():
+        raise KeyError("not a library's")
+
+    failures = iter([singular, too_large, toolkit_bug])
+
+    def breaks(*args, **kwargs):
+        return next(failures)()
+
+    monkeypatch.setattr(sys.modules["observer.simulate"], "run_loop", breaks)
+    with pytest.raises(InputError) as info:
+        observer.simulate("double_mass", t_end=0.01)
+    assert str(info.value) == ("scenario: double_mass: the computation failed (LinAlgError: Singular "
+                               "matrix); please report this input")
+    assert isinstance(info.value.__cause__, np.linalg.LinAlgError)
+    with pytest.raises(MemoryError):
+        observer.simulate("double_mass", t_end=0.01)
+    with pytest.raises(KeyError):
+        observer.simulate("double_mass", t_end=0.01)
