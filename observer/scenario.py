@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import copy
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -104,7 +105,7 @@ def check_overrides(overrides: Any) -> dict[str, Any]:
     :class:`InputError` naming ``overrides``."""
     if overrides is None:
         return {}
-    if not isinstance(overrides, dict):
+    if not isinstance(overrides, Mapping):
         raise InputError("overrides", f"must be a dict of dotted keys to values, such as "
                          f"{{'simulation.h': 1e-3}}, got {type(overrides).__name__}")
     for key in overrides:
