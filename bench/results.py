@@ -173,12 +173,13 @@ class CaseStore:
         """Move every damaged case file to ``<name>.damaged`` (its case is then computed
         again); return ``(moved-to path, reason)`` of each."""
         moved = []
-        for f, reason in self.damaged():
-            dest = f.with_name(f.name + DAMAGED_SUFFIX)
-            try:
+        for f, _ in self.damaged():
+            with self._lock(f.stem):          # a concurrent client may be rewriting the case
+                reason = self.problem(f)
+                if reason is None or reason == "is missing":
+                    continue                  # rewritten whole, or moved by another client
+                dest = f.with_name(f.name + DAMAGED_SUFFIX)
                 os.replace(f, dest)
-            except FileNotFoundError:         # another client moved it first
-                continue
             moved.append((dest, reason))
         return moved
 
@@ -191,11 +192,14 @@ class CaseStore:
         """An inter-process lock of one case (``filelock.FileLock`` on
         ``FOLDER/.locks/<key>.lock``): hold it to check, compute and write the case, so that
         concurrent clients on one folder compute it once."""
+        return self._lock(case_key(case_id))
+
+    def _lock(self, key: str):
         from filelock import FileLock
 
         locks = self.folder / LOCKS
         locks.mkdir(parents=True, exist_ok=True)
-        return FileLock(locks / f"{case_key(case_id)}.lock")
+        return FileLock(locks / f"{key}.lock")
 
     def write_case(self, suite: str, case_id: str, rows: list[dict]) -> Path:
         """Write the rows of one finished case with their checksum: a temporary file, then an
