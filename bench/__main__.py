@@ -28,6 +28,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import sys  # noqa: E402
 from collections import Counter  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 from bench import RESULTS_DIR  # noqa: E402
 
@@ -44,10 +45,12 @@ def _workers(text: str) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from bench.suites import SUITES, get_suite
+    """Parse ``argv`` and run the command; bad input (an unknown suite, an unusable ``--out``,
+    a full disk) is one ``error: ...`` line on stderr and exit status 2, never a traceback."""
+    from observer.cli import _Parser, guarded
 
-    p = argparse.ArgumentParser(prog="python -m bench", description=__doc__.split("\n\n")[0])
-    sub = p.add_subparsers(dest="cmd", required=True)
+    p = _Parser(prog="python -m bench", description=__doc__.split("\n\n")[0])
+    sub = p.add_subparsers(dest="cmd", required=True, parser_class=_Parser)
     sub.add_parser("list", help="list the suites")
     s = sub.add_parser("show", help="list the cases of a suite")
     s.add_argument("suite")
@@ -68,6 +71,24 @@ def main(argv: list[str] | None = None) -> int:
                            help="run on an existing Dask scheduler (e.g. tcp://host:8786) "
                                 "instead of a local cluster")
     args = p.parse_args(argv)
+    return guarded(_main, args)
+
+
+def _out_folder(out: str) -> str:
+    """``--out``: a results folder (created if missing), not a file."""
+    from observer.errors import InputError
+
+    path = Path(out)
+    if not str(out).strip():
+        raise InputError("--out", "expected a results folder, got ''")
+    if path.exists() and not path.is_dir():
+        raise InputError("--out", f"{out!r} is not a directory")
+    return out
+
+
+def _main(args) -> int:
+    from bench.suites import SUITES, get_suite
+    from observer.errors import InputError
 
     if args.cmd == "list":
         for name, suite in SUITES.items():
@@ -80,30 +101,29 @@ def main(argv: list[str] | None = None) -> int:
     try:
         suite = get_suite(args.suite)
     except KeyError as exc:
-        print(f"error: {exc.args[0]}", file=sys.stderr)
-        return 2
+        raise InputError("suite", exc.args[0]) from None
     if args.cmd == "show":
         for c in suite.cases:
             print(c.case_id)
         return 0
     from bench.results import CaseStore
     from bench.run import results_path, run_suite
+    _out_folder(args.out)
     if args.cmd == "status":
         store = CaseStore(results_path(suite.name, args.out))
         n_done = sum(store.has(c.case_id) for c in suite.cases)
         print(f"{suite.name}: {n_done}/{len(suite.cases)} cases done "
               f"({results_path(suite.name, args.out)})")
+        for path, reason in store.damaged():
+            print(f"damaged case file {path.name} {reason} (not counted; the next run moves it "
+                  "aside and computes its case again)")
         return 0
-    from observer.errors import InputError
     from bench.run import default_workers
+    if args.limit is not None and args.limit < 0:
+        raise InputError("--limit", f"must be >= 0, got {args.limit}")
     workers = default_workers() if args.workers is None and args.scheduler is None else args.workers
-    try:
-        summary = run_suite(suite, args.out, progress=not args.no_progress, limit=args.limit,
-                            micro=not args.no_micro, workers=workers,
-                            scheduler=args.scheduler)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    summary = run_suite(suite, args.out, progress=not args.no_progress, limit=args.limit,
+                        micro=not args.no_micro, workers=workers, scheduler=args.scheduler)
     print(summary.text())
     micro_failed = summary.micro_status.startswith("failed")
     return 1 if summary.failed or micro_failed else 0

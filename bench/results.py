@@ -12,11 +12,17 @@ Layout of a suite's output folder ``OUT`` (default ``bench/results``)::
     OUT/<suite>/logs/<case>.csv       perturbed closing logs of the robustness suite
 
 A case file is written under a temporary name in the same folder and renamed: it appears
-complete or not at all, whatever kills the writer. A case is *done* when its file exists, so
-a killed process (client or worker) loses at most the cases it was running, and a rerun
-computes none twice. Every row carries ``suite``, ``case_id``, ``case_rows`` (rows of the
-case) and ``row`` (0-based index within the case); the kinds of runs have different metric
-columns, so :func:`load_results` concatenates with NaN for a kind's missing columns.
+complete or not at all, whatever kills the writer. Its Parquet schema metadata carries a
+SHA-256 checksum of its rows (:func:`content_digest`). A case is *done* when its file opens,
+holds ``case_rows`` rows and its checksum matches (:meth:`CaseStore.has`); a damaged file
+(cut short, altered, written without a checksum) is reported, moved aside to
+``<key>.parquet.damaged`` by the next ``bench run`` (:meth:`CaseStore.quarantine`) and its
+case computed again. A killed process (client or worker) loses at most the cases it was
+running, and a rerun computes none twice; concurrent clients on one folder take a lock per
+case (:meth:`CaseStore.lock`, ``filelock``), so each case is computed once. Every row
+carries ``suite``, ``case_id``, ``case_rows`` (rows of the case) and ``row`` (0-based index
+within the case); the kinds of runs have different metric columns, so :func:`load_results`
+concatenates with NaN for a kind's missing columns.
 """
 
 from __future__ import annotations
@@ -35,6 +41,12 @@ from typing import Any, Iterable
 from observer.result import package_versions
 
 RESERVED = ("suite", "case_id", "case_rows", "row")
+#: Key of the rows' checksum in a case file's Parquet schema metadata.
+CHECKSUM_KEY = b"bench.rows_sha256"
+#: Suffix appended to a damaged case file when it is moved aside.
+DAMAGED_SUFFIX = ".damaged"
+#: Subfolder of the per-case lock files.
+LOCKS = ".locks"
 #: Suffix of a suite's folder of case files (``OUT/<suite>.cases``).
 CASES_SUFFIX = ".cases"
 STALE = "stale"
@@ -62,6 +74,47 @@ def _table(rows: list[dict]):
     return pa.table(columns)
 
 
+def content_digest(table) -> str:
+    """SHA-256 of a table's column names and values (JSON of its rows; floats by their
+    shortest round-trip repr, NaN included): the same for the table written and the table
+    read back from Parquet, different as soon as one value, row or column differs."""
+    import json
+
+    text = json.dumps({"columns": table.column_names, "rows": table.to_pylist()},
+                      allow_nan=True, default=repr)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def _read_case(path: Path):
+    """Read one case file; raise :class:`DamagedCase` if it does not open, has no checksum,
+    a checksum that does not match its rows, or fewer/more rows than ``case_rows`` says."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        table = pq.read_table(path)
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise DamagedCase(path, f"does not open ({type(exc).__name__}: {exc})") from None
+    stored = (table.schema.metadata or {}).get(CHECKSUM_KEY)
+    if stored is None:
+        raise DamagedCase(path, "has no checksum (written before checksums, or not by bench)")
+    table = table.replace_schema_metadata(None)
+    if content_digest(table) != stored.decode("ascii", "replace"):
+        raise DamagedCase(path, "checksum does not match its rows (altered)")
+    if "case_rows" not in table.column_names or table.num_rows == 0 \
+            or table.column("case_rows")[0].as_py() != table.num_rows:
+        raise DamagedCase(path, f"holds {table.num_rows} rows, not the case_rows it was written with")
+    return table
+
+
+class DamagedCase(Exception):
+    """A case file that cannot count as done (see :func:`_read_case`)."""
+
+    def __init__(self, path: Path, reason: str):
+        self.path, self.reason = Path(path), reason
+        super().__init__(f"{path}: {reason}")
+
+
 class CaseStore:
     """The folder of one suite's case files.
 
@@ -74,6 +127,7 @@ class CaseStore:
 
     def __init__(self, folder: str | Path):
         self.folder = Path(folder)
+        self._verified: dict[Path, tuple] = {}     # path -> (mtime_ns, size, reason or None)
 
     @property
     def path(self) -> Path:
@@ -85,15 +139,72 @@ class CaseStore:
         return self.folder / f"{case_key(case_id)}.parquet"
 
     def files(self) -> list[Path]:
-        """The case files, sorted by name (stale ones excluded)."""
+        """The case files, sorted by name (stale and damaged ones excluded), unverified."""
         return sorted(self.folder.glob("*.parquet")) if self.folder.is_dir() else []
 
+    def problem(self, path: Path) -> str | None:
+        """Why the case file ``path`` is damaged (:func:`_read_case`), or None when it is
+        whole; remembered until the file changes (its mtime or size)."""
+        try:
+            st = path.stat()
+        except FileNotFoundError:
+            return "is missing"
+        stamp = (st.st_mtime_ns, st.st_size)
+        cached = self._verified.get(path)
+        if cached is not None and cached[:2] == stamp:
+            return cached[2]
+        try:
+            _read_case(path)
+            reason = None
+        except DamagedCase as exc:
+            reason = exc.reason
+        self._verified[path] = (*stamp, reason)
+        return reason
+
+    def good_files(self) -> list[Path]:
+        """The case files that are whole (they open, their checksum matches)."""
+        return [f for f in self.files() if self.problem(f) is None]
+
+    def damaged(self) -> list[tuple[Path, str]]:
+        """``(path, reason)`` of every damaged case file."""
+        return [(f, r) for f in self.files() if (r := self.problem(f)) is not None]
+
+    def quarantine(self) -> list[tuple[Path, str]]:
+        """Move every damaged case file to ``<name>.damaged`` (its case is then computed
+        again); return ``(moved-to path, reason)`` of each."""
+        moved = []
+        for f, _ in self.damaged():
+            with self._lock(f.stem):          # a concurrent client may be rewriting the case
+                reason = self.problem(f)
+                if reason is None or reason == "is missing":
+                    continue                  # rewritten whole, or moved by another client
+                dest = f.with_name(f.name + DAMAGED_SUFFIX)
+                os.replace(f, dest)
+            moved.append((dest, reason))
+        return moved
+
     def has(self, case_id: str) -> bool:
-        """Whether the case is done (its file exists)."""
-        return self.case_path(case_id).exists()
+        """Whether the case is done: its file exists, opens and its checksum matches."""
+        path = self.case_path(case_id)
+        return path.exists() and self.problem(path) is None
+
+    def lock(self, case_id: str):
+        """An inter-process lock of one case (``filelock.FileLock`` on
+        ``FOLDER/.locks/<key>.lock``): hold it to check, compute and write the case, so that
+        concurrent clients on one folder compute it once."""
+        return self._lock(case_key(case_id))
+
+    def _lock(self, key: str):
+        from filelock import FileLock
+
+        locks = self.folder / LOCKS
+        locks.mkdir(parents=True, exist_ok=True)
+        return FileLock(locks / f"{key}.lock")
 
     def write_case(self, suite: str, case_id: str, rows: list[dict]) -> Path:
-        """Write the rows of one finished case: a temporary file, then an atomic rename."""
+        """Write the rows of one finished case with their checksum: a temporary file, then an
+        atomic rename. A failed write (disk full) leaves no temporary file and raises the
+        :class:`OSError` naming the case file."""
         if not rows:
             raise ValueError(f"case {case_id!r} produced no rows")
         clash = sorted({k for r in rows for k in RESERVED if k in r})
@@ -103,11 +214,18 @@ class CaseStore:
 
         table = _table([{"suite": suite, "case_id": case_id, "case_rows": len(rows), "row": i, **r}
                         for i, r in enumerate(rows)])
-        self.folder.mkdir(parents=True, exist_ok=True)
+        table = table.replace_schema_metadata({CHECKSUM_KEY: content_digest(table).encode("ascii")})
         final = self.case_path(case_id)
         tmp = self.folder / f".{final.stem}.{uuid.uuid4().hex}.tmp"
-        pq.write_table(table, tmp)
-        os.replace(tmp, final)
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            pq.write_table(table, tmp)
+            os.replace(tmp, final)
+        except OSError as exc:
+            tmp.unlink(missing_ok=True)
+            if exc.filename is None or Path(exc.filename) == tmp:
+                exc.filename = str(final)
+            raise
         return final
 
     append_case = write_case
@@ -116,7 +234,7 @@ class CaseStore:
         """All rows of the done cases, one DataFrame (cases in file-name order)."""
         import pandas as pd
 
-        frames = [pd.read_parquet(f) for f in self.files()]
+        frames = [pd.read_parquet(f) for f in self.good_files()]
         frames = [f for f in frames if len(f)]
         if not frames:
             return pd.DataFrame()
@@ -128,13 +246,13 @@ class CaseStore:
         import pyarrow.parquet as pq
 
         return [{k: v for k, v in r.items() if v is not None}
-                for f in self.files() for r in pq.read_table(f).to_pylist()]
+                for f in self.good_files() for r in pq.read_table(f).to_pylist()]
 
     def done_ids(self) -> set[str]:
         """``case_id`` of every done case."""
         import pyarrow.parquet as pq
 
-        return {pq.read_table(f, columns=["case_id"]).column(0)[0].as_py() for f in self.files()}
+        return {pq.read_table(f, columns=["case_id"]).column(0)[0].as_py() for f in self.good_files()}
 
     def remove_orphans(self, max_age_s: float = 3600.0) -> int:
         """Delete temporary files of writers killed mid-write (older than ``max_age_s``: a case
@@ -165,7 +283,7 @@ class CaseStore:
     def retire_undeclared(self, keep_ids: Iterable[str]) -> int:
         """Retire the files whose case is not in ``keep_ids`` (the grid changed)."""
         keys = {case_key(c) for c in keep_ids}
-        stray = [f for f in self.files() if f.stem not in keys]
+        stray = [f for f in self.good_files() if f.stem not in keys]
         import pyarrow.parquet as pq
 
         ids = [pq.read_table(f, columns=["case_id"]).column(0)[0].as_py() for f in stray]

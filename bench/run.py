@@ -30,7 +30,7 @@ from pathlib import Path
 from observer.errors import InputError
 
 from bench import RESULTS_DIR
-from bench.results import CASES_SUFFIX, STALE, CaseStore, environment, export_csv
+from bench.results import CASES_SUFFIX, DAMAGED_SUFFIX, STALE, CaseStore, environment, export_csv
 from bench.suites import Case, Suite, get_suite
 
 REPO = Path(__file__).resolve().parent.parent
@@ -48,6 +48,7 @@ class RunSummary:
     failed: list = field(default_factory=list)
     unavailable: list = field(default_factory=list)
     stale_rows: int = 0
+    damaged: list = field(default_factory=list)
     micro: Path | None = None
     micro_status: str = "not requested"
     seconds: float = 0.0
@@ -65,6 +66,9 @@ class RunSummary:
             lines.append(f"moved {self.stale_rows} row(s) of cases no longer in the suite (or "
                          f"written without a column the report now needs) to "
                          f"{self.results / STALE}")
+        for path, reason in self.damaged:
+            lines.append(f"damaged case file {path.name[:-len(DAMAGED_SUFFIX)]} {reason}: moved "
+                         f"aside to {path.name}, its case computed again")
         for cid, msg in self.failed:
             lines.append(f"FAILED {cid}: {msg}")
         for cid, msg in self.unavailable:
@@ -158,30 +162,35 @@ def execute_case(case: Case, suite: str, out_dir: str | Path, env: dict,
                  reference_grids: dict | None = None) -> Outcome:
     """Run one case in this process (the client or a Dask worker) and write its file.
 
-    Nothing is computed when the case's file exists (a worker that died after writing it, or
-    a case finished by an earlier sweep). The kernel is made ready in this process first, so
-    no case pays its compile time; ``compile_time_s`` and ``pid`` in the rows are this
-    process's. ``reference_grids`` (:func:`bench.runners.reference_grids` of the run's cases)
-    lets the work-precision cases of one sweep share one event-driven reference per process.
+    Nothing is computed when the case is done (a worker that died after writing it, a case
+    finished by an earlier sweep or by a concurrent client): the case's lock
+    (:meth:`~bench.results.CaseStore.lock`) is held while it is checked, computed and written.
+    The kernel is made ready in this process first, so no case pays its compile time;
+    ``compile_time_s`` and ``pid`` in the rows are this process's. ``reference_grids``
+    (:func:`bench.runners.reference_grids` of the run's cases) lets the work-precision cases of
+    one sweep share one event-driven reference per process.
     """
     from bench.runners import Context, Unavailable, run_case
 
     store = CaseStore(results_path(suite, out_dir))
     if store.has(case.case_id):
         return Outcome(case.case_id, "done")
-    env = {**env, "compile_time_s": kernel_ready(), "pid": os.getpid()}
-    try:
-        rows = run_case(case, Context(suite, Path(out_dir), env,
-                                      reference_grids=dict(reference_grids or {})))
-    except Unavailable as exc:
-        return Outcome(case.case_id, "unavailable", str(exc))
-    except KeyboardInterrupt:
-        raise
-    except Exception as exc:  # record and go on; the case is retried next time
-        if os.environ.get("BENCH_TRACEBACK"):
-            traceback.print_exc()
-        return Outcome(case.case_id, "failed", f"{type(exc).__name__}: {exc}")
-    store.write_case(suite, case.case_id, rows)
+    with store.lock(case.case_id):       # another client may be computing it: wait, then look again
+        if store.has(case.case_id):
+            return Outcome(case.case_id, "done")
+        env = {**env, "compile_time_s": kernel_ready(), "pid": os.getpid()}
+        try:
+            rows = run_case(case, Context(suite, Path(out_dir), env,
+                                          reference_grids=dict(reference_grids or {})))
+        except Unavailable as exc:
+            return Outcome(case.case_id, "unavailable", str(exc))
+        except KeyboardInterrupt:
+            raise
+        except Exception as exc:  # record and go on; the case is retried next time
+            if os.environ.get("BENCH_TRACEBACK"):
+                traceback.print_exc()
+            return Outcome(case.case_id, "failed", f"{type(exc).__name__}: {exc}")
+        store.write_case(suite, case.case_id, rows)
     return Outcome(case.case_id, "ran")
 
 
@@ -220,6 +229,7 @@ def run_suite(suite: str | Suite, out_dir: str | Path = RESULTS_DIR, *, progress
     store = CaseStore(results_path(suite.name, out_dir))
     summary = RunSummary(suite.name, store.path, len(suite.cases))
     store.remove_orphans()
+    summary.damaged = store.quarantine()
     summary.stale_rows = (store.retire_undeclared(c.case_id for c in suite.cases)
                           + store.retire(outdated_ids(store.rows())))
     todo = [c for c in suite.cases if not store.has(c.case_id)]

@@ -10,7 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from observer.errors import ContactSolverError, InputError
+from observer.errors import ContactSolverError, InputError, is_numerical_failure, one_line
 from observer.validation import check_output_path
 
 IMAGE_SUFFIXES = (".png", ".svg", ".pdf")
@@ -230,17 +230,29 @@ def main(argv: list[str] | None = None) -> int:
     return guarded(args.func, args)
 
 
+def _os_error_file(exc: OSError, args: tuple) -> str:
+    """The file an :class:`OSError` is about: its own ``filename``, else the command's output
+    file(s) (a failed ``write`` on an open file, "No space left on device", names none)."""
+    if exc.filename is not None:
+        return str(exc.filename)
+    ns = args[0] if args else None
+    outs = [str(v) for k in ("out", "events", "json") if (v := getattr(ns, k, None))]
+    return " or ".join(outs) or "output file"
+
+
 def guarded(func, *args) -> int:
-    """Call ``func(*args)``; turn input, solver, file and out-of-memory errors into one
+    """Call ``func(*args)``; turn input, solver, file and out-of-memory errors, and a numerical
+    library's own exception (:func:`~observer.errors.is_numerical_failure`), into one
     ``error:`` line on stderr and exit status 2 (130 on Ctrl-C). Shared by every command line
     of the toolkit."""
     try:
         return func(*args)
     except (InputError, ContactSolverError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {one_line(str(exc))}", file=sys.stderr)
         return 2
     except OSError as exc:
-        print(f"error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        print(f"error: {one_line(_os_error_file(exc, args))}: {one_line(exc.strerror or str(exc))}",
+              file=sys.stderr)
         return 2
     except MemoryError:
         print("error: --store: the run does not fit in memory; keep fewer rows (--record-every K, "
@@ -249,3 +261,11 @@ def guarded(func, *args) -> int:
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:            # noqa: BLE001  (re-raised unless a library's failure)
+        if not is_numerical_failure(exc):
+            raise
+        where = getattr(args[0], "scenario", None) if args else None
+        print(f"error: {one_line(str(where or 'input'))}: the computation failed "
+              f"({type(exc).__name__}: {one_line(str(exc))}); please report this input",
+              file=sys.stderr)
+        return 2

@@ -19,10 +19,38 @@ class InputError(ValueError):
     """
 
     def __init__(self, field: str, problem: str):
-        self.field = field
-        self.problem = problem
-        super().__init__(f"{field}: {problem}")
+        self.field = one_line(str(field))
+        self.problem = one_line(str(problem))
+        super().__init__(f"{self.field}: {self.problem}")
+
+
+LINE_BREAKS = {c: repr(chr(c))[1:-1] for c in (0x0A, 0x0B, 0x0C, 0x0D, 0x1C, 0x1D, 0x1E, 0x85,
+                                                0x2028, 0x2029)}
+"""The characters :meth:`str.splitlines` breaks at, mapped to their escapes (``\\n``, ...)."""
+
+
+def one_line(text: str) -> str:
+    """``text`` with every line break escaped (``\\n``, ``\\r``, ``\\x0b``...), so that an error
+    message stays on one line even when it quotes a path or a value containing one."""
+    return text.translate(LINE_BREAKS)
 
 
 class ContactSolverError(RuntimeError):
     """A contact problem could not be solved to the required complementarity residual."""
+
+
+NUMERICAL_MODULES = ("numpy", "scipy", "numba", "llvmlite", "tomllib")
+"""Libraries whose own exceptions (``numpy.linalg.LinAlgError``, a numba ``TypingError``...)
+never reach a user: :func:`is_numerical_failure` picks them out."""
+
+
+def is_numerical_failure(exc: BaseException) -> bool:
+    """Whether ``exc`` is an arithmetic failure (overflow, division by zero, recursion too
+    deep) or an exception raised by one of :data:`NUMERICAL_MODULES` rather than by the
+    toolkit: the command line and :func:`observer.simulate` turn it into one error naming
+    the scenario."""
+    if isinstance(exc, MemoryError):    # NumPy's too: a run too large, said as such elsewhere
+        return False
+    if isinstance(exc, (ArithmeticError, RecursionError)):
+        return True
+    return any(type(exc).__module__.split(".")[0] == m for m in NUMERICAL_MODULES)

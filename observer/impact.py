@@ -82,7 +82,7 @@ class ImpactLaw:
     @staticmethod
     def build(law: Any, restitution: Any, m: int) -> "ImpactLaw":
         """Validate the law name and broadcast/validate the restitution to m contacts."""
-        if law not in IMPACT_LAWS:
+        if not isinstance(law, str) or law not in IMPACT_LAWS:
             raise InputError("impact.law", f"must be one of {list(IMPACT_LAWS)}, got {law!r}")
         e = broadcast_vector("impact.restitution", restitution, m)
         if np.any(e < 0.0) or np.any(e > 1.0):

@@ -25,7 +25,10 @@ Every run ends with a :class:`~observer.health.Health` record (:attr:`LoopOutput
 its warnings also go to stderr). A step whose complementarity residual, recomputed from the
 velocity it applied, exceeds the tolerance stops the run there: the records are truncated
 to the last complete step (no unwritten rows) and :attr:`LoopOutput.stopped_at` /
-``stop_reason`` say where and why. ``on_chunk`` receives the finished rows as they are
+``stop_reason`` say where and why. So does a non-finite quantity (:class:`FiniteGuard`: a
+state entry, a gap of the master or an observer's V): the run stops at the last step whose
+every quantity is finite — the compiled engine checks once per window and re-runs a window
+that fails one step at a time (the kernel is untouched), the python engine checks every step. ``on_chunk`` receives the finished rows as they are
 produced (:class:`Chunk`: every window of the compiled engine, every
 :data:`PYTHON_CHUNK` steps of the python one); with it, SIGINT and SIGTERM stop the run
 after the current window instead of killing it (``stop_signal``), so a streamed file
@@ -46,7 +49,7 @@ import scipy.sparse as sp
 
 from observer.errors import InputError
 from observer.impact import NEWTON, POISSON
-from observer.stepping import MoreauJean
+from observer.stepping import MoreauJean, NonFiniteState
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -268,6 +271,124 @@ def _finish(inp: LoopInput, out: LoopOutput, stopped_at: int | None, reason: str
     return replace(out, health=health)
 
 
+def _snapshot(state: tuple, fallbacks: list, stepper) -> tuple:
+    """Copies of the loop's mutable arrays (and the fallbacks' count and reference statistics)."""
+    from dataclasses import replace
+
+    ref = getattr(stepper, "_reference_twin", None)
+    return [a.copy() for a in state], len(fallbacks), None if ref is None else replace(ref.stats)
+
+
+def _restore(state: tuple, snap: tuple, fallbacks: list, stepper) -> None:
+    """Put back what :func:`_snapshot` copied (the records are rewritten by the re-run)."""
+    from observer.stepping import StepStats
+
+    arrays, nfb, ref_stats = snap
+    for a, b in zip(state, arrays):
+        a[...] = b
+    del fallbacks[nfb:]
+    ref = getattr(stepper, "_reference_twin", None)
+    if ref is not None:
+        ref.stats = StepStats() if ref_stats is None else ref_stats
+
+
+OVERFLOW = 1e300
+"""Bound on the result's derived quantities below which they are certainly finite (the
+largest double is 1.8·10³⁰⁸): :class:`FiniteGuard` checks states against the magnitude that
+keeps V and the gaps under it."""
+
+
+class FiniteGuard:
+    """Non-finite quantities are a stop, never a row.
+
+    The result's columns are the states q, u of every system, the master's gaps
+    ``g = Wᵀq + ν(t)`` and, per observer, ``V = ½vᵀMv + ½eᵀKe`` (v, e its differences to the
+    master). With ``A = max |q_i|, |u_i|`` over the systems, ``|g_j| ≤ Σ|W|·A + |ν_j|`` and
+    ``V ≤ 2A²(Σ|M| + Σ|K|)`` (|v_i|, |e_i| ≤ 2A), so every one of them is finite while
+    ``A ≤`` :attr:`limit` (the bounds kept under :data:`OVERFLOW`). The loop compares A with
+    the limit once per window (compiled engine; a NaN fails the comparison) or per step
+    (python engine); past it, :meth:`first_problem` evaluates the quantities themselves and
+    names the first that is not finite.
+    """
+
+    def __init__(self, inp: LoopInput):
+        sys_ = inp.stepper.system
+        self.inp = inp
+        self.stepper = inp.stepper
+        self.system = sys_
+        self.S = inp.q0.shape[0]
+        self.names = ("the master",) + tuple(
+            f"observer {n!r}" for n in (tuple(inp.names) or tuple(f"obs{i}" for i in range(1, self.S))))
+        with np.errstate(over="ignore", invalid="ignore"):
+            lim = OVERFLOW / (float(np.sum(np.abs(sys_.W))) + 1.0)
+            if self.S > 1:
+                quad = 2.0 * (float(np.sum(np.abs(sys_.M))) + float(np.sum(np.abs(sys_.K))))
+                lim = min(lim, float(np.sqrt(OVERFLOW / quad)) if quad > 0.0 else lim)
+        self.limit = lim if np.isfinite(lim) else 0.0
+
+    def _within(self, *arrays) -> bool:
+        """Every entry of ``arrays`` within :attr:`limit` (False for a NaN)."""
+        for x in arrays:
+            if x.size and not abs(x).max() <= self.limit:
+                return False
+        return True
+
+    def state_ok(self, qs: np.ndarray, us: np.ndarray, summ: np.ndarray | None = None) -> bool:
+        """Every state within :attr:`limit` (and the kernel's summary finite)."""
+        return self._within(qs, us) and (summ is None or bool(np.all(np.isfinite(summ))))
+
+    def first_problem(self, k: int, qs: np.ndarray, us: np.ndarray) -> str | None:
+        """The first non-finite quantity of the states ``qs``, ``us`` (S, n) at grid index k:
+        a state entry, a gap of the master, an observer's V (None: every one finite)."""
+        if self._within(qs, us):
+            return None
+        from observer.observers import lyapunov
+
+        for s in range(self.S):
+            for name, x in (("u", us[s]), ("q", qs[s])):    # in the step's order: u_{k+1}, then q_{k+1}
+                bad = np.flatnonzero(~np.isfinite(x))
+                if bad.size:
+                    return f"{name}{bad[0]} of {self.names[s]} ({x[bad[0]]})"
+        t = float(self.stepper.time(k))
+        with np.errstate(all="ignore"):
+            g = self.system.gaps(qs[0], t)
+            bad = np.flatnonzero(~np.isfinite(g))
+            if bad.size:
+                return f"gap g{bad[0]} of the master ({g[bad[0]]})"
+            for s in range(1, self.S):
+                V = float(lyapunov(self.system, qs[s][None], us[s][None], qs[0][None], us[0][None])[0])
+                if not np.isfinite(V):
+                    return f"V of {self.names[s]} ({V})"
+        return None
+
+    def free_velocity(self, k: int, s: int, q: np.ndarray, u: np.ndarray) -> str | None:
+        """Whether step k of system s (state q, u) has a non-finite state or free velocity
+        (the name of the quantity; None: finite)."""
+        from observer.stepping import Grid
+
+        for name, x in (("u", u), ("q", q)):
+            bad = np.flatnonzero(~np.isfinite(x))
+            if bad.size:
+                return f"{name}{bad[0]} of {self.names[s]} ({x[bad[0]]})"
+        st = self.stepper
+        with np.errstate(all="ignore"):
+            fbar = Grid.window(self.system, st.h, st.theta, st.t0, k, k + 1).fbar[0]
+            if st.S.band is None:
+                uf = st.S.Bu @ u + st.S.Bq @ q + st.S.Bf @ fbar
+            else:
+                uf = st.S.band.free_velocity(st.h, q, u, fbar)
+        bad = np.flatnonzero(~np.isfinite(uf))
+        if bad.size:
+            return f"free velocity u{bad[0]} of {self.names[s]} ({uf[bad[0]]})"
+        return None
+
+    def stop_text(self, what: str, k: int) -> str:
+        """The stop reason: ``what`` became non-finite in step k; the output ends at t_k."""
+        st = self.stepper
+        return (f"non-finite {what} at t = {float(st.time(k + 1)):.9g} (step {k} of {st.steps}); "
+                f"the output ends at t = {float(st.time(k)):.9g}, the last finite state")
+
+
 def _stop_text(stepper, what: str, k: int) -> str:
     return f"{what} at t = {float(stepper.time(k)):.9g} (step {k} of {stepper.steps})"
 
@@ -390,37 +511,55 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool, on_chunk=No
     tol = float(stepper.residual_tol)
     stop, reason = None, ""
     t0 = time.perf_counter()
-    for k in range(stepper.grid.steps):
-        if stopper is not None and stopper.signal:
-            stop, reason = k, _stop_text(stepper, stopper.signal, k)
-            break
-        r = (k + 1) // record_every if (k + 1) % record_every == 0 else -1
-        chi = None
-        for s in range(S):
-            q, u = states[s]
-            q1, u1, P, sig, q_pre, act, chi = _python_step(inp, stepper, *proj[s], k, s, q, u, chi,
-                                                           coupled[k], None if chi_log is None else chi_log[k])
-            res = _python_health(stepper, k, s, q, u, u1, P, act, q1, health)
-            if not res <= tol:
-                stop, reason = k, _stop_text(stepper, f"complementarity residual {res:.3g} > "
-                                             f"tolerance {tol:.3g} in step {k} (system {s})", k)
+    guard = FiniteGuard(inp)
+    with np.errstate(over="ignore", invalid="ignore"):     # overflow: the guard's to stop
+        for k in range(stepper.grid.steps):
+            if stopper is not None and stopper.signal:
+                stop, reason = k, _stop_text(stepper, stopper.signal, k)
                 break
-            states[s] = (q1, u1)
-            if r >= 0:
-                rec["q"][s, r], rec["u"][s, r] = q1, u1
-                rec["P"][s, r, act] = P
-                if sig is not None:
-                    rec["sigma"][s, r, act] = sig
-                if record_pre:
-                    rec["q_pre"][s, r] = q_pre
-                if s == 0:
-                    rec["active"][r, act] = True
-                    if S > 1:
-                        rec["chi"][r, chi] = True
-        if stop is not None:
-            break
-        if (k + 1) % PYTHON_CHUNK == 0:
-            emit(k + 1)
+            r = (k + 1) // record_every if (k + 1) % record_every == 0 else -1
+            chi = None
+            within = True
+            for s in range(S):
+                q, u = states[s]
+                try:
+                    q1, u1, P, sig, q_pre, act, chi = _python_step(inp, stepper, *proj[s], k, s, q, u, chi, coupled[k],
+                                                                   None if chi_log is None else chi_log[k])
+                except NonFiniteState:                  # the step's free velocity is not finite
+                    stop, reason = k, guard.stop_text(guard.free_velocity(k, s, q, u) or "free velocity", k)
+                    break
+                if not guard._within(q1, u1):
+                    within = False
+                    bad = guard.free_velocity(k + 1, s, q1, u1) if not (np.all(np.isfinite(q1))
+                                                                         and np.all(np.isfinite(u1))) else None
+                    if bad is not None:                 # (names the first non-finite entry of the state)
+                        stop, reason = k, guard.stop_text(bad, k)
+                        break
+                res = _python_health(stepper, k, s, q, u, u1, P, act, q1, health)
+                if not res <= tol:
+                    stop, reason = k, _stop_text(stepper, f"complementarity residual {res:.3g} > "
+                                                 f"tolerance {tol:.3g} in step {k} (system {s})", k)
+                    break
+                states[s] = (q1, u1)
+                if r >= 0:
+                    rec["q"][s, r], rec["u"][s, r] = q1, u1
+                    rec["P"][s, r, act] = P
+                    if sig is not None:
+                        rec["sigma"][s, r, act] = sig
+                    if record_pre:
+                        rec["q_pre"][s, r] = q_pre
+                    if s == 0:
+                        rec["active"][r, act] = True
+                        if S > 1:
+                            rec["chi"][r, chi] = True
+            if stop is None and not within:             # the new states, their gaps and V finite?
+                bad = guard.first_problem(k + 1, np.stack([q for q, _ in states]), np.stack([u for _, u in states]))
+                if bad is not None:
+                    stop, reason = k, guard.stop_text(bad, k)
+            if stop is not None:
+                break
+            if (k + 1) % PYTHON_CHUNK == 0:
+                emit(k + 1)
     emit(stepper.grid.steps if stop is None else stop)
     run_time = time.perf_counter() - t0
     st = stepper.stats
@@ -702,6 +841,8 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
         summary_start(qs, us, head[0], Mq, Kq, head[7], vprev, Vprev, summ, k_on, k_off, rho_arr, rec_V)
     fallbacks: list[dict] = []
     emit = _emitter(inp, rec, record_every, on_chunk, rec_V if summary else None)
+    guard = FiniteGuard(inp)
+    state = (qs, us, chi_now, stats, summ, vprev, Vprev, closings, prev_act)
     stop, reason = None, ""
     t0 = time.perf_counter()
     k, s = 0, 0
@@ -723,41 +864,68 @@ def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: 
             coupled, chi_w = no_coupling, None
         use_log = chi_w is not None
         chi_log = np.ascontiguousarray(chi_w, dtype=np.bool_) if use_log else no_log
-        while k < k1:
+
+        def kernel(k, k_end, s):
             if spec == "scalar":
-                k, s, status = advance_scalar(k, k1, kb, qs, us, record_every, rec["q"], rec["u"], rec["P"],
-                                              rec["active"], no_times if t_rec is None else t_rec,
-                                              stepper.t0, stepper.h, stepper.theta, *head[1:4], waves,
-                                              *signals[3:8], *signals[9:], *tail[:5], *tail[8:], stats)
-            else:
-                k, s, status = advance(k, k1, s, kb, qs, us, jumps, slots, bool(inp.master_projection), coupled,
-                                       chi_log, use_log, chi_now, record_every, rec["q"], rec["u"], rec["P"],
-                                       rec["sigma"], rec["active"], rec["chi"], rec["q_pre"], record_pre,
-                                       summary, k_on, k_off, rho_arr, summ, vprev, Vprev, rec_V, closings,
-                                       prev_act, Mq, Kq, Cq, law, stepper.h, stepper.theta, *head, waves,
-                                       *signals[3:], *tail, stats, general)
-            if status == OK:
-                break
-            if status == RESIDUAL_EXCEEDED:
-                stop, reason = k, _stop_text(stepper, f"complementarity residual {stats[7]:.3g} > "
-                                             f"tolerance {stepper.residual_tol:.3g} in step {k} "
-                                             f"(system {s})", k)
-                break
-            if status == PROJECTION_FAILED:
-                stepper.system.require_definite_stiffness("the position projection (position jumps)")
-                raise InputError("system.W", f"W_IᵀK⁻¹W_I is not positive definite at step {k} "
-                                 f"(t = {float(stepper.time(k)):.6g}): the closed contacts' columns "
-                                 "of W are dependent in the K metric")
-            if summary:
-                raise InputError("store", f'store="summary": the kernel could not solve the contact '
-                                 f"problem of step {k} (t = {float(stepper.time(k)):.6g}); run with "
-                                 'store="full", which re-solves such steps with the reference solver')
-            _fallback_step(inp, stepper, k, s, qs, us, chi_now, record_every, record_pre, rec,
-                           S > 1 and bool(coupled[k - kb]), None if chi_w is None else chi_w[k - kb])
-            fallbacks.append({"step": int(k), "t": float(stepper.time(k)), "system": int(s)})
-            s += 1
-            if s == S:
-                k, s = k + 1, 0
+                return advance_scalar(k, k_end, kb, qs, us, record_every, rec["q"], rec["u"], rec["P"],
+                                      rec["active"], no_times if t_rec is None else t_rec,
+                                      stepper.t0, stepper.h, stepper.theta, *head[1:4], waves,
+                                      *signals[3:8], *signals[9:], *tail[:5], *tail[8:], stats)
+            return advance(k, k_end, s, kb, qs, us, jumps, slots, bool(inp.master_projection), coupled,
+                           chi_log, use_log, chi_now, record_every, rec["q"], rec["u"], rec["P"],
+                           rec["sigma"], rec["active"], rec["chi"], rec["q_pre"], record_pre,
+                           summary, k_on, k_off, rho_arr, summ, vprev, Vprev, rec_V, closings,
+                           prev_act, Mq, Kq, Cq, law, stepper.h, stepper.theta, *head, waves,
+                           *signals[3:], *tail, stats, general)
+
+        def to(k, s, k_end):
+            """Advance from (k, s) up to step k_end; the kernel's statuses handled (the
+            reference solver for a failed contact step). Returns (k, s, stop, reason, finite):
+            ``finite`` False when the stop is a non-finite free velocity."""
+            while k < k_end:
+                k, s, status = kernel(k, k_end, s)
+                if status == OK:
+                    break
+                bad = guard.free_velocity(k, s, qs[s], us[s])
+                if bad is not None:                 # the failed step's input is not finite
+                    return k, s, k, guard.stop_text(bad, k), False
+                if status == RESIDUAL_EXCEEDED:
+                    return k, s, k, _stop_text(stepper, f"complementarity residual {stats[7]:.3g} > "
+                                               f"tolerance {stepper.residual_tol:.3g} in step {k} "
+                                               f"(system {s})", k), True
+                if status == PROJECTION_FAILED:
+                    stepper.system.require_definite_stiffness("the position projection (position jumps)")
+                    raise InputError("system.W", f"W_IᵀK⁻¹W_I is not positive definite at step {k} "
+                                     f"(t = {float(stepper.time(k)):.6g}): the closed contacts' columns "
+                                     "of W are dependent in the K metric")
+                if summary:
+                    raise InputError("store", f'store="summary": the kernel could not solve the contact '
+                                     f"problem of step {k} (t = {float(stepper.time(k)):.6g}); run with "
+                                     'store="full", which re-solves such steps with the reference solver')
+                _fallback_step(inp, stepper, k, s, qs, us, chi_now, record_every, record_pre, rec,
+                               S > 1 and bool(coupled[k - kb]), None if chi_w is None else chi_w[k - kb])
+                fallbacks.append({"step": int(k), "t": float(stepper.time(k)), "system": int(s)})
+                s += 1
+                if s == S:
+                    k, s = k + 1, 0
+            return k, s, None, "", True
+
+        snap = _snapshot(state, fallbacks, stepper)
+        k, s, stop, reason, finite = to(k, s, k1)
+        if not warm and not (finite and guard.state_ok(qs, us, summ if summary else None)):
+            # a non-finite (or overflowing) quantity in this window: again from its start, one
+            # step at a time, to stop before the first step that makes one
+            _restore(state, snap, fallbacks, stepper)
+            k, s, stop, reason = kb, 0, None, ""
+            while k < k1 and stop is None:
+                one = _snapshot(state, fallbacks, stepper)
+                k_before = k
+                k, s, stop, reason, _ = to(k, s, k + 1)
+                if stop is None:
+                    bad = guard.first_problem(k, qs, us)
+                    if bad is not None:
+                        _restore(state, one, fallbacks, stepper)
+                        stop, reason = k_before, guard.stop_text(bad, k_before)
         emit(k if stop is None else stop)
     run_time = time.perf_counter() - t0
     ref = getattr(stepper, "_reference_twin", None)

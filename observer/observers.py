@@ -126,10 +126,7 @@ class ObserverConfig:
         u0 = as_array("observer.u", table["u"], (n,)) if "u" in table else u_master.copy()
         coupling = None
         if "coupling" in table:
-            c = as_array("observer.coupling", table["coupling"], (2,))
-            if c[1] < c[0]:
-                raise InputError("observer.coupling", f"t_off = {c[1]} < t_on = {c[0]}")
-            coupling = (float(c[0]), float(c[1]))
+            coupling = check_coupling(table["coupling"])
         source = table.get("source", "master")
         if source not in SOURCES:
             raise InputError("observer.source", f"must be one of {list(SOURCES)}, got {source!r}")
@@ -150,9 +147,18 @@ class ObserverConfig:
         return ObserverConfig(q0, u0, coupling, source, log, names)
 
 
+def check_coupling(value: Any) -> tuple[float, float]:
+    """The coupling window ``[t_on, t_off]`` (finite numbers, t_on ≤ t_off) as a tuple, or
+    :class:`InputError` naming ``observer.coupling`` (the same for the TOML table and the API)."""
+    c = as_array("observer.coupling", value, (2,))
+    if c[1] < c[0]:
+        raise InputError("observer.coupling", f"t_off = {c[1]} < t_on = {c[0]}")
+    return float(c[0]), float(c[1])
+
+
 def check_observer_name(name: Any) -> None:
     """Raise unless ``name`` is a registered observer."""
-    if name not in OBSERVER_DESIGNS:
+    if not isinstance(name, str) or name not in OBSERVER_DESIGNS:
         raise InputError("observer.observers",
                          f"unknown observer {name!r}; choose from {sorted(OBSERVER_DESIGNS)}")
 

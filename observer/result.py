@@ -75,11 +75,14 @@ class SlaveTrajectory:
 
 class RunState(str, enum.Enum):
     """How a run ended: ``ok``, ``fallback`` (some contact problems were re-solved by the
-    reference solver) or ``stopped`` (the run ended before ``t_end``)."""
+    reference solver) or ``stopped`` (the run ended before ``t_end``: a signal, a residual
+    above tolerance, a non-finite quantity); ``partial`` is the state of a file read with
+    ``read_result(path, partial=True)`` that could not be proven whole (:mod:`observer.io`)."""
 
     OK = "ok"
     FALLBACK = "fallback"
     STOPPED = "stopped"
+    PARTIAL = "partial"
 
 
 @dataclass(frozen=True)

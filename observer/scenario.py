@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import copy
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -35,7 +36,7 @@ import numpy as np
 from observer.errors import InputError
 from observer.impact import ImpactLaw
 from observer.model import Harmonic, LinearSystem
-from observer.validation import as_array, as_scalar, check_step_count, check_step_parameters
+from observer.validation import MAX_DEPTH, as_array, as_scalar, check_step_count, check_step_parameters
 
 _HARMONIC = {"amplitude": None, "omega": None, "phase": None}
 SCHEMA: dict = {
@@ -95,6 +96,23 @@ def parse_value(text: str) -> Any:
         return tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         return text
+    except RecursionError:
+        raise InputError("--set", f"value {text[:40]!r}... nested deeper than {MAX_DEPTH} levels") from None
+
+
+def check_overrides(overrides: Any) -> dict[str, Any]:
+    """``overrides`` as a dict of dotted string keys (``{"simulation.h": 1e-3}``), or raise
+    :class:`InputError` naming ``overrides``."""
+    if overrides is None:
+        return {}
+    if not isinstance(overrides, Mapping):
+        raise InputError("overrides", f"must be a dict of dotted keys to values, such as "
+                         f"{{'simulation.h': 1e-3}}, got {type(overrides).__name__}")
+    for key in overrides:
+        if not isinstance(key, str):
+            raise InputError("overrides", f"keys must be dotted strings such as 'simulation.h', "
+                             f"got {key!r}")
+    return dict(overrides)
 
 
 def apply_overrides(doc: dict, overrides: dict[str, Any]) -> dict:
@@ -104,7 +122,7 @@ def apply_overrides(doc: dict, overrides: dict[str, Any]) -> dict:
     the values, matrices included, are shared, so the cost does not grow with their size.
     """
     doc = dict(doc)
-    for key, value in overrides.items():
+    for key, value in check_overrides(overrides).items():
         parts = key.split(".")
         if not all(part.strip() for part in parts):
             raise InputError(key or "--set", f"empty key component in {key!r} (expected a dotted "
@@ -170,6 +188,9 @@ class Scenario:
     @staticmethod
     def from_dict(doc: dict, source: str = "") -> "Scenario":
         """Validate a scenario document (see module docstring) and build the scenario."""
+        if not isinstance(doc, dict):
+            raise InputError("scenario", f"the document must be a table (a dict), got "
+                             f"{type(doc).__name__}")
         check_keys(doc, SCHEMA)
         for key in REQUIRED:
             _get(doc, key)
@@ -192,7 +213,11 @@ class Scenario:
         simd = doc["simulation"]
         h, theta = check_step_parameters(simd["h"], simd.get("theta", 0.5))
         t_end = as_scalar("simulation.t_end", simd["t_end"], positive=True)
+        if t_end < h:
+            raise InputError("simulation.t_end", f"must be at least one step h = {h!r}, got {t_end!r}")
         check_step_count(h, t_end)
+        check_angles("system.forcing", sysd.get("forcing", {}), forcing, t_end)
+        check_angles("system.gap", sysd.get("gap", {}), gap, t_end)
         solver = simd.get("solver", "pivoting")
         from observer.contact import get_solver
         get_solver(solver, field="simulation.solver")
@@ -263,6 +288,19 @@ def check_finite_energy(prefix: str, system: LinearSystem, q: np.ndarray, u: np.
     if not (np.isfinite(elastic) and np.all(np.isfinite(gaps))):
         raise InputError(f"{prefix}.q", f"elastic energy ½qᵀKq or the gaps overflow ({elastic}): "
                          "the state is too large")
+
+
+def check_angles(field_name: str, d: dict, signal: Harmonic, t_end: float) -> None:
+    """Raise unless every term's angle ω·t + phase stays finite up to ``t_end`` (an overflowing
+    angle makes cos and sin NaN); the error names the term's ``omega``."""
+    names = ([field_name] if any(k in d for k in ("amplitude", "omega", "phase")) else []) + \
+        [f"{field_name}.harmonics[{j}]" for j in range(len(d.get("harmonics", [])))]
+    with np.errstate(over="ignore"):
+        for name, w, p in zip(names, signal.omega, signal.phase):
+            angle = abs(w) * t_end + float(np.max(np.abs(p), initial=0.0))
+            if not np.isfinite(angle):
+                raise InputError(f"{name}.omega", f"the angle omega·t + phase overflows by t_end = "
+                                 f"{t_end!r} (omega = {float(w)!r})")
 
 
 def check_initial_gap(field_name: str, system: LinearSystem, q0: np.ndarray, t0: float = 0.0) -> None:
@@ -345,7 +383,7 @@ def load_scenario(name_or_path: "str | Path | Scenario",
     """
     from observer.scenarios import SCENARIOS
     from observer.tomlio import read_toml
-    overrides = dict(overrides or {})
+    overrides = check_overrides(overrides)
     if isinstance(name_or_path, Scenario):
         return name_or_path.with_overrides(overrides) if overrides else name_or_path
     params = {k[len("param."):]: (parse_value(v) if isinstance(v, str) else v)

@@ -2,26 +2,50 @@
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterable
 
 import numpy as np
 
-from observer.errors import InputError
+from observer.errors import InputError, is_numerical_failure
 from observer.loop import LoopInput, check_engine, check_record_every, summary_frame
 from observer.loop import run as run_loop
-from observer.observers import OBSERVER_DESIGNS, ObserverConfig, Slave, check_observer_name, \
-    lyapunov, lyapunov_decrements
+from observer.observers import OBSERVER_DESIGNS, ObserverConfig, Slave, check_coupling, \
+    check_observer_name, lyapunov, lyapunov_decrements
 from observer.result import (EVENT_COLUMNS, LazyFrame, RunStatus, SimulationResult, SlaveTrajectory,
                              package_versions, records_frame, run_metadata)
-from observer.scenario import Scenario, load_scenario  # noqa: F401  (re-exported: observer.load_scenario)
+from observer.scenario import (Scenario, check_finite_energy,  # noqa: F401  (re-exported:
+                               load_scenario)                  # observer.load_scenario)
 from observer.stepping import MoreauJean
 from observer.switching import SOURCES, read_log
+from observer.validation import MAX_STEPS, as_scalar
 
 if TYPE_CHECKING:
     import pandas as pd
 
 
+def _numerical_failures_refused(func):
+    """``func`` (:func:`simulate`) with a numerical library's own exception
+    (:func:`~observer.errors.is_numerical_failure`: a ``LinAlgError``, a numba error, an
+    overflow) raised as an :class:`InputError` naming ``scenario`` (the library's exception
+    chained as its cause), so that no NumPy, SciPy or numba exception reaches an API user."""
+    @functools.wraps(func)
+    def wrapper(scenario, *args, **kwargs):
+        try:
+            return func(scenario, *args, **kwargs)
+        except InputError:
+            raise
+        except Exception as exc:        # noqa: BLE001  (re-raised unless a library's failure)
+            if not is_numerical_failure(exc):
+                raise
+            name = scenario.name if isinstance(scenario, Scenario) else str(scenario)
+            raise InputError("scenario", f"{name}: the computation failed ({type(exc).__name__}: "
+                             f"{exc}); please report this input") from exc
+    return wrapper
+
+
+@_numerical_failures_refused
 def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: float | None = None, *,
              solver: str | None = None, theta: float | None = None,
              master_projection: bool | None = None,
@@ -87,8 +111,11 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         master), the switching signal ``chi`` and ``events`` (time-stepping: the master's
         closing and opening steps, an approximation of the event table).
     """
-    if integrator not in INTEGRATORS:
-        raise InputError("integrator", f"must be one of {list(INTEGRATORS)}, got {integrator!r}")
+    coupling, residual_tol, observers = check_arguments(integrator, coupling, residual_tol,
+                                                        record_every, observers, on_chunk)
+    for name, value in (("h", h), ("t_end", t_end), ("theta", theta)):
+        if value is not None:       # a number, as in the TOML document (a string is refused)
+            as_scalar(f"simulation.{name}", value)
     sc = load_scenario(scenario)
     overrides = {k: v for k, v in (("simulation.h", h), ("simulation.t_end", t_end),
                                    ("simulation.solver", solver), ("simulation.theta", theta),
@@ -123,6 +150,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         base_dir = str(Path(sc.source).parent) if sc.source.endswith(".toml") else None
         cfg = ObserverConfig.from_table(sc.observer, system.n, sc.q0, sc.u0, base_dir)
         slaves = make_slaves(cfg, observers)
+        for s in slaves:
+            check_finite_energy("observer", system, s.q0, s.u0)
         source = source or cfg.source
         if coupling == "scenario":
             coupling = cfg.coupling
@@ -174,6 +203,43 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
 
 
 INTEGRATORS = ("time-stepping", "event")
+
+
+def check_arguments(integrator, coupling, residual_tol, record_every, observers,
+                    on_chunk) -> tuple:
+    """Validate the keywords of :func:`simulate` that do not come from the scenario document
+    (the others are validated with the document, with the TOML path's messages); return
+    ``(coupling, residual_tol, observers)`` normalized (a window as a tuple of floats,
+    an iterable of observers as a list).
+
+    Raises
+    ------
+    InputError
+        Naming the keyword (``observer.coupling`` for the window, as the TOML path does).
+    """
+    if not isinstance(integrator, str) or integrator not in INTEGRATORS:
+        raise InputError("integrator", f"must be one of {list(INTEGRATORS)}, got {integrator!r}")
+    if coupling not in ("scenario", None):
+        coupling = check_coupling(coupling)
+    residual_tol = as_scalar("residual_tol", residual_tol, positive=True)
+    if record_every is not None:
+        check_record_every(record_every)
+        if record_every > MAX_STEPS:
+            raise InputError("record_every", f"must be at most 2^53 (a grid counts no more steps), "
+                             f"got {record_every!r}")
+    if not isinstance(observers, str):
+        try:
+            observers = list(observers)
+        except TypeError:
+            raise InputError("observer.observers", f"must be design names or Slave objects, got "
+                             f"{observers!r}") from None
+        for ob in observers:
+            if not isinstance(ob, (str, Slave)):
+                raise InputError("observer.observers", f"must be design names or Slave objects, "
+                                 f"got {ob!r}")
+    if on_chunk is not None and not callable(on_chunk):
+        raise InputError("on_chunk", f"must be callable (or None), got {on_chunk!r}")
+    return coupling, residual_tol, observers
 
 
 def result_events(res: SimulationResult) -> pd.DataFrame:
@@ -240,6 +306,8 @@ def _simulate_event(sc: Scenario, observers, source, coupling, log, engine, reco
         base_dir = str(Path(sc.source).parent) if sc.source.endswith(".toml") else None
         cfg = ObserverConfig.from_table(sc.observer, n, sc.q0, sc.u0, base_dir)
         specs = make_slaves(cfg, observers)
+        for s in specs:
+            check_finite_energy("observer", system, s.q0, s.u0)
         source = source or cfg.source
         intervals = _event_intervals(sc, master, source, log or cfg.log)
         obs = run_observers(master, sc, specs, intervals=intervals,

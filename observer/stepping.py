@@ -209,9 +209,16 @@ class SchemeMatrices:
                               0.5 * (Ghat + Ghat.T), 0.5 * (G0 + G0.T), KinvW, L, band)
 
 
+class NonFiniteState(ArithmeticError):
+    """A step met a non-finite value (its free velocity): the loop stops before it
+    (:class:`observer.loop.FiniteGuard`), never writing a non-finite row."""
+
+
 def grid_steps(h: float, t_end: float, t0: float = 0.0) -> int:
-    """Number of steps N of the grid t_k = t0 + k h reaching t_end (at least one)."""
-    steps = int(np.ceil((t_end - t0) / h - 1e-9))
+    """Number of steps N of the grid t_k = t0 + k h up to t_end: the largest N with
+    t_N ≤ t_end (to a relative 10⁻⁹ of h, so that t_end = N·h in floating point counts N),
+    at least one; the grid never steps past t_end."""
+    steps = int(np.floor((t_end - t0) / h + 1e-9))
     if steps < 1:
         raise InputError("simulation.t_end", f"must exceed t0 = {t0} by at least one step h = {h}")
     return steps
@@ -429,6 +436,8 @@ class MoreauJean:
         self._k = k
         h, theta = self.S.h, self.S.theta
         u_free = self.free_velocity(k, q, u)
+        if active.size and not np.all(np.isfinite(u_free)):
+            raise NonFiniteState(f"free velocity of step {k} is not finite")
         if active.size == 0:
             u1 = u_free
             P = np.zeros(0)

@@ -71,6 +71,10 @@ def validate_log(df: pd.DataFrame, m: int, where: str = "log") -> pd.DataFrame:
         raise InputError("observer.log", f"{where}: row {bad[0] + 1}: unknown contact index "
                          f"{df['contact'].iloc[bad[0]]!r} (the system has contacts 0..{m - 1})")
     df["contact"] = df["contact"].astype(int)
+    bad = np.flatnonzero(df["t_close"].to_numpy() < 0.0)
+    if bad.size:
+        raise InputError("observer.log", f"{where}: row {bad[0] + 1}: t_close = "
+                         f"{df['t_close'].iloc[bad[0]]!r} < 0 (runs start at t = 0)")
     bad = np.flatnonzero(df["t_open"].to_numpy() < df["t_close"].to_numpy())
     if bad.size:
         raise InputError("observer.log", f"{where}: row {bad[0] + 1}: t_open < t_close")

@@ -14,22 +14,68 @@ from pathlib import Path
 from typing import Any
 
 from observer.errors import InputError
+from observer.validation import MAX_DEPTH
+
+
+MAX_BYTES = 16 * 1024 * 1024
+"""Largest scenario file read (16 MiB: the 200-body chain's document is ≈ 2 MiB); a larger
+file, or an endless one such as ``/dev/zero``, is refused after reading at most this much."""
 
 
 def read_toml(path: str | Path) -> dict:
-    """Parse a TOML file; a syntax error becomes an :class:`InputError` naming the file."""
+    """Parse a TOML scenario file; every failure becomes an :class:`InputError` naming the file.
+
+    At most :data:`MAX_BYTES` are read; the text must be UTF-8 and valid TOML, and its arrays
+    and tables nested at most :data:`~observer.validation.MAX_DEPTH` deep.
+    """
     path = Path(path)
     try:
         with path.open("rb") as fh:
-            return tomllib.load(fh)
+            data = fh.read(MAX_BYTES + 1)
     except FileNotFoundError:
         raise InputError(str(path), "file not found") from None
     except IsADirectoryError:
         raise InputError(str(path), "is a directory, not a TOML file") from None
+    except OSError as exc:
+        raise InputError(str(path), f"cannot read ({exc.strerror or exc})") from None
+    if len(data) > MAX_BYTES:
+        raise InputError(str(path), f"larger than the {MAX_BYTES // 2**20} MiB a scenario file "
+                         "may have (is it a scenario?)")
+    try:
+        text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise InputError(str(path), f"invalid TOML (not UTF-8 text: {exc.reason})") from None
+    return loads(text, str(path))
+
+
+def loads(text: str, where: str) -> dict:
+    """Parse TOML ``text``; errors (syntax, arrays or tables nested deeper than
+    :data:`~observer.validation.MAX_DEPTH`) are :class:`InputError` naming ``where``."""
+    too_deep = InputError(where, f"invalid TOML (arrays or tables nested deeper than {MAX_DEPTH} "
+                                 "levels)")
+    try:
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise InputError(str(path), f"invalid TOML ({exc})") from None
+        raise InputError(where, f"invalid TOML ({exc})") from None
+    except RecursionError:          # tomllib recurses once per level: far beyond MAX_DEPTH
+        raise too_deep from None
+    if nesting_depth(doc) > MAX_DEPTH:
+        raise too_deep
+    return doc
+
+
+def nesting_depth(value: Any) -> int:
+    """Depth of nested lists, tuples and dicts in ``value`` (a scalar is 0), without recursion."""
+    deepest = 0
+    stack = [(value, 0)]
+    while stack:
+        node, depth = stack.pop()
+        if isinstance(node, dict):
+            node = list(node.values())
+        if isinstance(node, (list, tuple)):
+            deepest = max(deepest, depth + 1)
+            stack.extend((x, depth + 1) for x in node if isinstance(x, (list, tuple, dict)))
+    return deepest
 
 
 def _scalar(x: Any) -> str:

@@ -23,11 +23,79 @@ PSD_RTOL = 1e-10
 """Smallest eigenvalue allowed for a PSD matrix, relative to its largest absolute eigenvalue."""
 
 
+MAX_DEPTH = 64
+"""Deepest nesting of arrays and tables accepted in a scenario document or a value (a matrix
+is 2 deep; the reader refuses a deeper document before any recursion can overflow)."""
+
+SQRT_MAX = float(np.sqrt(np.finfo(float).max))
+"""Largest accepted magnitude of a system matrix entry (≈ 1.34e154): beyond, its square overflows."""
+
+INV_MIN = float(1.0 / np.finfo(float).max)
+"""Smallest accepted nonzero magnitude of a system matrix entry (≈ 5.56e-309): below, its
+inverse overflows."""
+
+_NUMERIC_KINDS = "fiu"
+
+
+def _describe(leaf: Any) -> str | None:
+    """Why ``leaf`` is not a number (None: it is one, or a type ``np.array`` refuses itself)."""
+    if isinstance(leaf, (bool, np.bool_)):
+        return f"a boolean ({str(bool(leaf)).lower()})"
+    if isinstance(leaf, (str, bytes)):
+        return f"the string {leaf!r}"
+    if isinstance(leaf, (complex, np.complexfloating)):
+        return f"the complex number {leaf!r}"
+    return None
+
+
+def non_numeric_entry(field: str, value: Any) -> tuple[tuple[int, ...], str] | None:
+    """The index and description of the first entry of ``value`` (a number or nested lists of
+    numbers) that is a string, a boolean or a complex number, or None.
+
+    TOML strings (``"1.0"``) and booleans are not numbers, although NumPy would convert them.
+    Walks the nesting without recursion; nesting deeper than :data:`MAX_DEPTH` is an error.
+    """
+    if isinstance(value, np.ndarray):
+        kind = value.dtype.kind
+        if kind in _NUMERIC_KINDS or value.size == 0:
+            return None
+        items = value.reshape(-1).tolist() if kind in "bUSc" else value.reshape(-1)
+        for i, leaf in enumerate(items):
+            why = _describe(leaf)
+            if why is not None:
+                return tuple(int(k) for k in np.unravel_index(i, value.shape)), why
+        return None
+    stack: list[tuple[tuple[int, ...], Any]] = [((), value)]
+    while stack:
+        index, node = stack.pop()
+        if isinstance(node, (list, tuple)):
+            if len(index) >= MAX_DEPTH:
+                raise InputError(field, f"nested deeper than {MAX_DEPTH} levels")
+            if all(type(x) is float or type(x) is int for x in node):
+                continue
+            stack.extend((index + (i,), x) for i, x in reversed(list(enumerate(node))))
+        else:
+            why = _describe(node)
+            if why is not None:
+                return index, why
+    return None
+
+
 def as_array(field: str, value: Any, shape: tuple[int | None, ...]) -> np.ndarray:
-    """Convert ``value`` to a finite float64 array of the given shape (``None`` = any length)."""
+    """Convert ``value`` to a finite float64 array of the given shape (``None`` = any length).
+
+    Entries must be numbers: strings (``"1.0"``), booleans and complex numbers are refused
+    rather than converted.
+    """
+    bad = non_numeric_entry(field, value)
+    if bad is not None:
+        index, why = bad
+        if index:
+            raise InputError(field, f"not a numeric array: entry {index} is {why}")
+        raise InputError(field, f"not a numeric array or number: got {why}")
     try:
         arr = np.array(value, dtype=float)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise InputError(field, f"not a numeric array ({exc})") from None
     if arr.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, arr.shape)):
         want = "x".join("*" if s is None else str(s) for s in shape) or "scalar"
@@ -39,6 +107,23 @@ def as_array(field: str, value: Any, shape: tuple[int | None, ...]) -> np.ndarra
         bad = np.argwhere(~np.isfinite(arr))[0]
         raise InputError(field, f"contains NaN or infinity (first at index {tuple(int(i) for i in bad)})")
     return arr
+
+
+def check_entry_range(field: str, A: np.ndarray) -> None:
+    """Raise unless every entry's square and every nonzero entry's inverse are finite:
+    :data:`INV_MIN` ≤ |a| ≤ :data:`SQRT_MAX` or a = 0 (the system matrices enter quadratic
+    forms, products and inverses; a 1e308 stiffness or a 1e-310 mass would overflow them)."""
+    mag = np.abs(A)
+    big = np.argwhere(mag > SQRT_MAX)
+    if big.size:
+        i = tuple(int(k) for k in big[0])
+        raise InputError(field, f"entry {float(A[i])!r} at index {i} is too large: its square overflows "
+                         f"(|entry| must be <= {SQRT_MAX:.3g})")
+    tiny = np.argwhere((mag > 0.0) & (mag < INV_MIN))
+    if tiny.size:
+        i = tuple(int(k) for k in tiny[0])
+        raise InputError(field, f"entry {float(A[i])!r} at index {i} is too small: its inverse overflows "
+                         f"(a nonzero |entry| must be >= {INV_MIN:.3g})")
 
 
 def as_scalar(field: str, value: Any, *, positive: bool = False, low: float | None = None,
@@ -64,7 +149,9 @@ def broadcast_vector(field: str, value: Any, length: int) -> np.ndarray:
 
 
 def check_symmetric(field: str, A: np.ndarray) -> None:
-    """Raise unless ``A`` is symmetric to :data:`SYMMETRY_RTOL`."""
+    """Raise unless ``A``'s entries are in range (:func:`check_entry_range`) and ``A`` is
+    symmetric to :data:`SYMMETRY_RTOL`."""
+    check_entry_range(field, A)
     scale = max(float(np.max(np.abs(A))), np.finfo(float).tiny)
     asym = float(np.max(np.abs(A - A.T)))
     if asym > SYMMETRY_RTOL * scale:
@@ -161,8 +248,10 @@ def check_independent_columns(field: str, W: np.ndarray) -> tuple[float, float]:
     "Not linearly independent" when W has more columns than rows or its numerical rank is
     below m (σ_min ≤ max(n, m)·ε·σ_max, the tolerance of ``numpy.linalg.matrix_rank``: an
     exactly dependent W computes σ_min at round-off level, not 0); "nearly dependent" when
-    σ_min/σ_max ≤ √ε. Returns (σ_min, σ_max).
+    σ_min/σ_max ≤ √ε; first, entries out of range (:func:`check_entry_range`). Returns
+    (σ_min, σ_max).
     """
+    check_entry_range(field, W)
     sv_min, sv_max = singular_value_range(W)
     if W.shape[1] > W.shape[0] or sv_min <= max(W.shape) * EPS * sv_max:   # numerical rank < m
         raise InputError(field, f"columns are not linearly independent (smallest singular value "

@@ -16,7 +16,7 @@ import sys
 import time
 from pathlib import Path
 
-from observer.cli import guarded, parse_pairs
+from observer.cli import _Parser, guarded, parse_pairs
 from observer.errors import InputError
 
 STATUS_WIDTH = 6
@@ -57,7 +57,7 @@ def format_table(results) -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     from proofs_checks import CHECKS
-    p = argparse.ArgumentParser(
+    p = _Parser(                           # one-line argparse errors, as observer's CLI
         prog="python -m proofs_checks",
         description="Numerically verify the steps of Proposition 1 and Theorem 1 on a scenario. "
                     f"Checks: {', '.join(CHECKS)}.")
@@ -97,10 +97,8 @@ def _main(args) -> int:
     only = select(args.only) if args.only else None
     overrides = parse_pairs(args.set, "--set")
     settings = CheckSettings(seed=args.seed, h=args.h, t_end=args.t_end, options=_options(args.option))
-    if settings.h is not None and not settings.h > 0:
-        raise InputError("--h", f"must be > 0, got {settings.h!r}")
-    if settings.t_end is not None and not settings.t_end > 0:
-        raise InputError("--t-end", f"must be > 0, got {settings.t_end!r}")
+    _check_run_option("--h", settings.h)
+    _check_run_option("--t-end", settings.t_end)
     scenarios = [proofs_checks.load(n, overrides) for n in names]   # validate all inputs first
     all_results = []
     failed = 0
@@ -132,6 +130,16 @@ def _main(args) -> int:
     if failed:
         print(f"{failed} check(s) FAILED", file=sys.stderr)
     return 1 if failed else 0
+
+
+def _check_run_option(flag: str, value: float | None) -> None:
+    """``--h`` / ``--t-end``: a finite number > 0 whose inverse is finite (as observer's
+    ranges: 1e-320 would overflow 1/h)."""
+    from observer.validation import INV_MIN
+    if value is not None and not value > 0:
+        raise InputError(flag, f"must be > 0, got {value!r}")
+    if value is not None and not INV_MIN <= value < float("inf"):
+        raise InputError(flag, f"must be finite with a finite inverse, got {value!r}")
 
 
 def _restitution(sc) -> str:

@@ -1,14 +1,15 @@
-"""The bad-input matrix (issue 12, item 1): every malformed input is refused cleanly.
+"""The bad-input matrix (issues 12 and 20): every malformed or hostile input is refused cleanly.
 
 Each row of :data:`CASES` is one malformed input: a scenario document edit, a builder
 parameter (``param.*``), a call of the Python API, a command-line option, an output path or
-a closing log (χ) CSV. For every row
+a closing log (χ) CSV, a scenario file (oversized, endless, too deeply nested, a path with
+a line break) or a ``bench`` command. For every row
 
 * the Python route raises :class:`observer.errors.InputError` whose ``field`` is the
   offending field and whose message says what is wrong (a ``hint``);
 * the command-line route (where there is one) returns exit status 2 with exactly one line
   on stderr, ``error: FIELD: ...``, no traceback, and writes no result file (so no result,
-  and no NaN in one, ever reaches the user).
+  and no NaN in one, ever reaches the user); ``bench`` rows write no case file.
 
 The command line runs in-process through :func:`observer.cli.main` (fast); a few rows run
 in a real subprocess to show that the interpreter prints no traceback either.
@@ -27,6 +28,7 @@ import numpy as np
 import pytest
 
 import observer
+from bench.__main__ import main as bench_main
 from observer import cli
 from observer.errors import InputError
 from observer.model import Harmonic, LinearSystem
@@ -61,7 +63,8 @@ class Bad:
     argv: list[str] | None = None
     cli_field: str | None = None     # the field the CLI names when it differs (argparse errors)
     files: dict[str, str | bytes] = field(default_factory=dict)   # written to tmp first
-    kind: str = "api"                # doc, param, api, cli, log, out: where the input comes from
+    kind: str = "api"                # doc, param, api, cli, log, out, file, bench: its source
+    prog: str = "observer"           # the command line: observer or bench
 
 
 def _set_args(overrides: dict[str, str]) -> list[str]:
@@ -357,6 +360,189 @@ CASES: list[Bad] = [
              "unsupported file type", files={"r.csv": "t,q0\n0,1\n"}),
 ]
 
+# --- issue 20: ranges, numbers that are strings, bounded files, the API's own arguments -------
+HUGE_K = {"system.K": "[[1e308, 0.0], [0.0, 1e308]]"}
+TINY_M = {"system.M": "[[1e-310, 0.0], [0.0, 1e-310]]"}
+DEEP = "[" * 100 + "1.0" + "]" * 100
+"""A value nested 100 deep: parsed by tomllib, refused by the document's validation."""
+DEEPER = "[" * 5000 + "]" * 5000
+"""A ``--set`` value nested 5000 deep: tomllib would recurse past Python's limit."""
+
+
+def api_case(id: str, call: Callable[[Path], Any], fld: str, hint: str) -> Bad:
+    """A call of the Python API with no command-line counterpart."""
+    return Bad(id, fld, hint, call, kind="api")
+
+
+def file_case(id: str, content: str | bytes | None, fld: str, hint: str, name: str = "case.toml",
+              path: str | None = None) -> Bad:
+    """A scenario file given by path (written to tmp from ``content`` unless ``path`` is given)."""
+    where = path or "{tmp}/" + name
+    return Bad(id, fld, hint, lambda tmp: load_scenario(_fill(where, tmp)),
+               ["run", where, "--out", OUT], files={} if content is None else {name: content},
+               kind="file")
+
+
+def bench_case(id: str, argv: list[str], fld: str, hint: str, files: dict | None = None) -> Bad:
+    """``python -m bench ARGV`` (the smoke suite, results under tmp)."""
+    return Bad(id, fld, hint, None, argv, files=files or {}, kind="bench", prog="bench")
+
+
+def _dm_doc(edit: Callable[[dict], None] | None = None) -> str:
+    doc = builtin_document("double_mass")
+    if edit:
+        edit(doc)
+    return dumps(doc)
+
+
+CASES += [
+    doc_case("K-entries-square-overflows", HUGE_K, "system.K", "square overflows"),
+    doc_case("M-entries-inverse-overflows", TINY_M, "system.M", "inverse overflows"),
+    doc_case("C-entry-square-overflows", {"system.C": "[[1e200, 0.0], [0.0, 1.0]]"}, "system.C",
+             "square overflows"),
+    doc_case("W-entry-square-overflows", {"system.W": "[[1e300], [0.0]]"}, "system.W",
+             "square overflows"),
+    doc_case("W-entry-inverse-overflows", {"system.W": "[[1.0], [1e-320]]"}, "system.W",
+             "inverse overflows"),
+    doc_case("K-huge-with-jump", HUGE_K, "system.K", "square overflows", observers="jump"),
+    doc_case("t-end-string", {"simulation.t_end": '"20"'}, "simulation.t_end", "the string '20'"),
+    doc_case("h-string-number", {"simulation.h": '"1e-3"'}, "simulation.h", "the string '1e-3'"),
+    doc_case("theta-string", {"simulation.theta": '"0.5"'}, "simulation.theta", "string"),
+    doc_case("M-entry-string", {"system.M": '[["1.0", 0.0], [0.0, 1.0]]'}, "system.M",
+             "entry (0, 0) is the string '1.0'"),
+    doc_case("K-entry-boolean", {"system.K": "[[true, 0.0], [0.0, 1.0]]"}, "system.K",
+             "entry (0, 0) is a boolean"),
+    doc_case("W-entry-string", {"system.W": '[["1"], [0.0]]'}, "system.W", "string"),
+    doc_case("initial-q-string-entry", {"initial.q": '["0.1", 0.0]'}, "initial.q", "string"),
+    doc_case("initial-u-boolean-entry", {"initial.u": "[false, 0.0]"}, "initial.u", "boolean"),
+    doc_case("restitution-string", {"impact.restitution": '"0.5"'}, "impact.restitution", "string"),
+    doc_case("forcing-omega-string", {"system.forcing.omega": '"6.0"'}, "system.forcing.omega",
+             "string"),
+    doc_case("gap-offset-boolean-entry", {"system.gap.offset": "[true]"}, "system.gap.offset",
+             "boolean"),
+    doc_case("forcing-phase-string", {"system.forcing.phase": '"0"'}, "system.forcing.phase",
+             "string"),
+    doc_case("coupling-string-entry", {"observer.coupling": '["0", 1.0]'}, "observer.coupling",
+             "string", observers="jump"),
+    doc_case("observer-q-string-entry", {"observer.q": '["0.0", 0.0]'}, "observer.q", "string",
+             observers="jump"),
+    doc_case("observer-u-overflowing-energy", {"observer.u": "[1e200, 0.0]"}, "observer.u",
+             "overflows", observers="jump"),
+    doc_case("forcing-angle-overflows", {"system.forcing.omega": "1e308"}, "system.forcing.omega",
+             "angle omega·t + phase overflows"),
+    doc_case("gap-harmonic-angle-overflows",
+             {"system.gap.harmonics": "[{amplitude = [0.1], omega = 1e308}]"},
+             "system.gap.harmonics[0].omega", "overflows"),
+    doc_case("t-end-below-h", {"simulation.t_end": "1e-5"}, "simulation.t_end",
+             "at least one step"),
+    doc_case("law-array", {"impact.law": "[1]"}, "impact.law", "must be one of"),
+    doc_case("law-table", {"impact.law": "{a = 1}"}, "impact.law", "must be one of"),
+    doc_case("solver-array", {"simulation.solver": "[1]"}, "simulation.solver", "unknown contact solver"),
+    doc_case("observers-nested", {"observer.observers": "[[1]]"}, "observer.observers",
+             "unknown observer", observers="jump"),
+    doc_case("observers-table-entry", {"observer.observers": "[{a = 1}]"}, "observer.observers",
+             "unknown observer", observers="jump"),
+    doc_case("M-nested-100-deep", {"system.M": DEEP}, "system.M", "nested deeper than 64"),
+    doc_case("M-huge-integer", {"system.M": "[[1" + "0" * 400 + ", 0], [0, 1]]"}, "system.M",
+             "not a numeric array"),
+    Bad("set-value-nested-5000-deep", "--set", "nested deeper", lambda tmp: load_scenario(
+        "double_mass", {"system.M": DEEPER}), ["run", "double_mass", "--set", f"system.M={DEEPER}",
+                                              "--out", OUT], kind="cli"),
+    # --- the API's own arguments -------------------------------------------------------------
+    run_case("residual-tol-nan", {"residual_tol": float("nan")}, "residual_tol", "NaN"),
+    run_case("residual-tol-negative", {"residual_tol": -1.0}, "residual_tol", "> 0"),
+    run_case("residual-tol-zero", {"residual_tol": 0.0}, "residual_tol", "> 0"),
+    run_case("residual-tol-string", {"residual_tol": "1e-9"}, "residual_tol", "string"),
+    run_case("coupling-reversed-api", {"observers": ["jump"], "coupling": (5.0, 1.0)},
+             "observer.coupling", "t_off = 1.0 < t_on = 5.0"),
+    run_case("coupling-nan-api", {"observers": ["jump"], "coupling": (float("nan"), 1.0)},
+             "observer.coupling", "NaN"),
+    run_case("coupling-length-api", {"observers": ["jump"], "coupling": (1.0, 2.0, 3.0)},
+             "observer.coupling", "wrong shape"),
+    run_case("coupling-string-api", {"observers": ["jump"], "coupling": "soon"},
+             "observer.coupling", "string"),
+    run_case("record-every-2-to-the-70", {"record_every": 2 ** 70}, "record_every", "2^53",
+             ["--record-every", str(2 ** 70)]),
+    run_case("record-every-fraction", {"record_every": 2.5}, "record_every", "positive integer"),
+    run_case("record-every-boolean", {"record_every": True}, "record_every", "positive integer"),
+    run_case("observers-not-iterable", {"observers": 3}, "observer.observers", "design names"),
+    run_case("observers-entry-number", {"observers": [3]}, "observer.observers", "design names"),
+    run_case("observers-entry-list", {"observers": [["jump"]]}, "observer.observers", "design names"),
+    run_case("on-chunk-not-callable", {"on_chunk": 3}, "on_chunk", "callable"),
+    run_case("integrator-unknown", {"integrator": "rk4"}, "integrator", "rk4"),
+    run_case("integrator-list", {"integrator": ["event"]}, "integrator", "must be one of"),
+    run_case("h-keyword-string", {"h": "1e-3"}, "simulation.h", "string"),
+    run_case("t-end-keyword-string", {"t_end": "20"}, "simulation.t_end", "string"),
+    run_case("t-end-keyword-below-h", {"t_end": 1e-6}, "simulation.t_end", "at least one step",
+             ["--t-end", "1e-6"]),
+    run_case("theta-keyword-boolean", {"theta": True}, "simulation.theta", "boolean"),
+    run_case("event-record-every", {"integrator": "event", "record_every": 5}, "record_every",
+             "time-stepping option"),
+    api_case("load-scenario-integer-key", lambda tmp: observer.load_scenario("double_mass", {1: 2}),
+             "overrides", "dotted strings"),
+    api_case("load-scenario-overrides-list", lambda tmp: observer.load_scenario(
+        "double_mass", [("simulation.h", 1e-3)]), "overrides", "must be a dict"),
+    api_case("load-scenario-complex-entry", lambda tmp: observer.load_scenario(
+        "double_mass", {"initial.q": [1j, 0.0]}), "initial.q", "complex"),
+    api_case("load-scenario-numpy-strings", lambda tmp: observer.load_scenario(
+        "double_mass", {"system.M": np.array([["1", "0"], ["0", "1"]])}), "system.M", "string"),
+    api_case("from-dict-not-a-table", lambda tmp: observer.Scenario.from_dict([1, 2]), "scenario",
+             "must be a table"),
+    # --- closing logs ----------------------------------------------------------------------------
+    log_case("log-negative-time", "contact,t_close,t_open\n0,-0.5,0.002\n", "< 0"),
+    log_case("log-text-contact", "contact,t_close,t_open\nzero,0.001,0.002\n", "not a number"),
+    # --- scenario files ----------------------------------------------------------------------------
+    file_case("file-dev-zero", None, "/dev/zero", "16 MiB", path="/dev/zero"),
+    file_case("file-oversized", b"# " + b"x" * (16 * 2 ** 20) + b"\n", "{tmp}/case.toml", "16 MiB"),
+    file_case("file-nested-100000-deep", "a = " + "[" * 100_000 + "]" * 100_000,
+              "{tmp}/case.toml", "nested deeper than 64"),
+    file_case("file-tables-nested-deep", "a = " + "{b = " * 3000 + "1" + "}" * 3000,
+              "{tmp}/case.toml", "nested deeper than 64"),
+    file_case("file-nested-70-deep", "a = " + "[" * 70 + "]" * 70, "{tmp}/case.toml",
+              "nested deeper than 64"),
+    file_case("file-t-end-string", _dm_doc(_put("simulation.t_end", "20")), "simulation.t_end",
+              "the string '20'"),
+    file_case("file-M-subnormal", _dm_doc(_put("system.M", [[1e-310, 0.0], [0.0, 1e-310]])),
+              "system.M", "inverse overflows"),
+    file_case("file-K-huge", _dm_doc(_put("system.K", [[1e308, 0.0], [0.0, 1e308]])), "system.K",
+              "square overflows"),
+    file_case("file-empty", "", "system.M", "required key is missing"),
+    file_case("file-system-array-of-tables", "[[system]]\nM = 1\n", "system", "must be a table"),
+    file_case("file-duplicate-key", "[simulation]\nh = 1.0\nh = 2.0\n", "{tmp}/case.toml",
+              "invalid TOML"),
+    file_case("file-nul-bytes", b"[simulation]\x00\nh = 1\n", "{tmp}/case.toml", "invalid TOML"),
+    file_case("file-huge-integer", _dm_doc(_put("simulation.t_end", 10 ** 400)), "simulation.t_end",
+              "not a numeric array"),
+    file_case("file-path-with-newline", "[system\n", "{tmp}/a\\nb.toml", "invalid TOML",
+              name="a\nb.toml"),
+    file_case("file-missing-path-with-newline", None, "{tmp}/no\\nsuch.toml", "file not found",
+              path="{tmp}/no\nsuch.toml"),
+    # --- output paths --------------------------------------------------------------------------
+    out_case("out-path-with-newline", ["run", "double_mass", "--out", "{tmp}/a\nb.txt"],
+             "unsupported file type"),
+    # --- bench ---------------------------------------------------------------------------------
+    bench_case("bench-unknown-suite", ["run", "nosuch", "--out", "{tmp}"], "suite", "unknown suite"),
+    bench_case("bench-status-unknown-suite", ["status", "nosuch", "--out", "{tmp}"], "suite",
+               "unknown suite"),
+    bench_case("bench-show-unknown-suite", ["show", "nosuch"], "suite", "unknown suite"),
+    bench_case("bench-workers-negative", ["run", "smoke", "--workers=-1", "--out", "{tmp}"],
+               "argument --workers", ">= 0"),
+    bench_case("bench-workers-text", ["run", "smoke", "--workers", "many", "--out", "{tmp}"],
+               "argument --workers", ">= 0"),
+    bench_case("bench-limit-text", ["run", "smoke", "--limit", "few", "--out", "{tmp}"],
+               "argument --limit", "invalid int"),
+    bench_case("bench-limit-negative", ["run", "smoke", "--limit=-1", "--out", "{tmp}"], "--limit",
+               ">= 0"),
+    bench_case("bench-out-is-a-file", ["run", "smoke", "--out", "{tmp}/file"], "--out",
+               "not a directory", files={"file": "x"}),
+    bench_case("bench-status-out-is-a-file", ["status", "smoke", "--out", "{tmp}/file"], "--out",
+               "not a directory", files={"file": "x"}),
+    bench_case("bench-out-empty", ["run", "smoke", "--out", ""], "--out", "results folder"),
+    bench_case("bench-scheduler-no-port", ["run", "smoke", "--no-progress", "--scheduler", "nonsense",
+                                           "--out", "{tmp}"], "--scheduler", "cannot connect"),
+    bench_case("bench-command-unknown", ["fly"], "argument cmd", "invalid choice"),
+]
+
 
 def _prepare(case: Bad, tmp: Path) -> None:
     for name, content in case.files.items():
@@ -374,11 +560,12 @@ def _fill(text: str, tmp: Path) -> str:
     return text.replace("{tmp}", str(tmp))
 
 
-def test_the_matrix_has_at_least_60_distinct_bad_inputs():
+def test_the_matrix_has_at_least_150_distinct_bad_inputs():
     ids = [c.id for c in CASES]
     assert len(set(ids)) == len(ids)
-    assert len(CASES) >= 60
-    kinds = {k: sum(c.kind == k for c in CASES) for k in ("doc", "param", "api", "cli", "log", "out")}
+    assert len(CASES) >= 150
+    kinds = {k: sum(c.kind == k for c in CASES)
+             for k in ("doc", "param", "api", "cli", "log", "out", "file", "bench")}
     assert all(v >= 5 for v in kinds.values()), kinds
     assert sum(kinds.values()) == len(CASES)
 
@@ -400,8 +587,9 @@ def test_cli_exits_2_with_one_line_naming_the_field(case, tmp_path, capsys, monk
     _prepare(case, tmp_path)
     monkeypatch.chdir(tmp_path)
     argv = [_fill(a, tmp_path) for a in case.argv]
+    main = bench_main if case.prog == "bench" else cli.main
     with _exit_code() as code:
-        code.value = cli.main(argv)
+        code.value = main(argv)
     out, err = capsys.readouterr()
     lines = err.splitlines()
     assert code.value == 2, err
@@ -411,6 +599,7 @@ def test_cli_exits_2_with_one_line_naming_the_field(case, tmp_path, capsys, monk
     assert case.hint in lines[0], lines[0]
     assert "Traceback" not in err and out == ""
     assert not (tmp_path / "out.csv").exists()
+    assert not list(tmp_path.rglob("*.parquet"))
 
 
 class _exit_code:
@@ -428,8 +617,8 @@ class _exit_code:
         return False
 
 
-SUBPROCESS_CASES = ["W-nearly-dependent-jump", "param-k1-zero-jump", "h-option-nan", "log-overlapping",
-                    "out-unwritable"]
+SUBPROCESS_CASES = ["h-option-nan", "out-unwritable", "file-dev-zero", "file-nested-100000-deep",
+                    "record-every-2-to-the-70", "bench-limit-negative"]
 
 
 def test_subprocess_prints_one_line_and_no_traceback(tmp_path):
@@ -442,7 +631,7 @@ def test_subprocess_prints_one_line_and_no_traceback(tmp_path):
         tmp.mkdir()
         _prepare(case, tmp)
         argv = [_fill(a, tmp) for a in case.argv]
-        procs[name] = (tmp, case, subprocess.Popen([sys.executable, "-m", "observer", *argv], cwd=tmp,
+        procs[name] = (tmp, case, subprocess.Popen([sys.executable, "-m", case.prog, *argv], cwd=tmp,
                                                    env=env, stdout=subprocess.PIPE,
                                                    stderr=subprocess.PIPE, text=True))
     for name, (tmp, case, proc) in procs.items():
@@ -471,3 +660,134 @@ def test_nojump_accepts_what_only_the_jump_observer_refuses():
         frame = res.to_frame()
         assert np.isfinite(frame.to_numpy(dtype=float)).all()
         assert "V_nojump" in frame.columns
+
+
+# --- issue 20: the same refusal on every route ----------------------------------------------------
+PARITY = {
+    "h-option-nan": ({"h": float("nan")}, {"simulation.h": "nan"}),
+    "t-end-string": ({"t_end": "20"}, {"simulation.t_end": '"20"'}),
+    "theta-high": ({"theta": 1.5}, {"simulation.theta": "1.5"}),
+    "t-end-below-h": ({"t_end": 1e-5}, {"simulation.t_end": "1e-5"}),
+    "solver-unknown": ({"solver": "gauss"}, {"simulation.solver": '"gauss"'}),
+    "master-projection-text": ({"master_projection": "yes"}, {"simulation.master_projection": '"yes"'}),
+}
+
+
+@pytest.mark.parametrize("name", sorted(PARITY))
+def test_api_keyword_and_toml_field_are_refused_with_the_same_message(name):
+    keywords, overrides = PARITY[name]
+    with pytest.raises(InputError) as api:
+        observer.simulate("double_mass", **keywords)
+    with pytest.raises(InputError) as toml:
+        load_scenario("double_mass", overrides)
+    assert str(api.value) == str(toml.value)
+
+
+def test_reversed_coupling_window_same_message_from_the_api_and_the_toml_table():
+    with pytest.raises(InputError) as api:
+        observer.simulate("double_mass", t_end=0.01, observers=["jump"], coupling=(5.0, 1.0))
+    with pytest.raises(InputError) as toml:
+        observer.simulate(load_scenario("double_mass", {"observer.coupling": "[5.0, 1.0]"}),
+                          t_end=0.01, observers=["jump"])
+    assert str(api.value) == str(toml.value) == "observer.coupling: t_off = 1.0 < t_on = 5.0"
+
+
+PROOFS_PARITY = ["file-dev-zero", "file-nested-100000-deep", "file-t-end-string", "file-M-subnormal",
+                 "file-K-huge", "file-path-with-newline", "scenario-file-invalid-toml",
+                 "scenario-file-not-utf8"]
+
+
+@pytest.mark.parametrize("name", PROOFS_PARITY)
+def test_proofs_checks_refuses_what_observer_run_refuses_with_the_same_line(name, tmp_path, capsys):
+    from proofs_checks.cli import main as proofs_main
+
+    case = next(c for c in CASES if c.id == name)
+    _prepare(case, tmp_path)
+    path = _fill(case.argv[1], tmp_path)
+    assert cli.main(["run", path, "--out", str(tmp_path / "out.csv")]) == 2
+    run_err = capsys.readouterr().err
+    assert proofs_main([path]) == 2
+    out, proofs_err = capsys.readouterr()
+    assert proofs_err == run_err and len(run_err.splitlines()) == 1 and out == ""
+    assert run_err.startswith(f"error: {_fill(case.field, tmp_path)}: ")
+
+
+def test_an_error_naming_a_path_with_line_breaks_stays_on_one_line():
+    for brk in ("\n", "\r", "\x0b", "\x0c", "\x1c", "\x85", "\u2028"):
+        err = InputError(f"dir{brk}name.toml", f"problem{brk}text")
+        assert len(str(err).splitlines()) == 1 and brk not in str(err)
+        assert str(err) == f"dir{brk!r}name.toml: problem{brk!r}text".replace("'", "")
+
+
+def _tmpfs(path: Path, size: str) -> bool:
+    """Mount a small tmpfs at ``path`` (root only; False where mounting is not allowed)."""
+    if os.geteuid() != 0 or not Path("/proc/filesystems").read_text().count("tmpfs"):
+        return False
+    path.mkdir()
+    return subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)],
+                          capture_output=True).returncode == 0
+
+
+def test_a_full_disk_is_one_line_naming_the_file(tmp_path, capsys):
+    """``observer run`` writing to a 64 KiB tmpfs (a real full disk: root may mount one,
+    else a write to /dev/full through a symlink, which fails with the same ENOSPC)."""
+    mnt = tmp_path / "small"
+    mounted = _tmpfs(mnt, "64k")
+    try:
+        if not mounted:
+            mnt.mkdir()
+            (mnt / "out.csv").symlink_to("/dev/full")
+        code = cli.main(["run", "double_mass", "--t-end", "0.5", "--out", str(mnt / "out.csv")])
+        err = capsys.readouterr().err
+        lines = err.splitlines()
+        assert code == 2, err
+        assert len(lines) == 1 and "Traceback" not in err, err
+        assert lines[0].startswith(f"error: {mnt}/") and lines[0].endswith("No space left on device")
+    finally:
+        if mounted:
+            subprocess.run(["umount", str(mnt)], check=True)
+
+
+def test_a_numerical_library_failure_is_one_line_naming_the_scenario(monkeypatch, capsys, tmp_path):
+    """Should an input pass validation and still break a computation, the command line prints
+    one line naming the scenario (never a LinAlgError traceback)."""
+    def breaks(*args, **kwargs):
+        raise np.linalg.LinAlgError("Singular matrix")
+
+    monkeypatch.setattr(sys.modules["observer.simulate"], "simulate", breaks)
+    code = cli.main(["run", "double_mass", "--out", str(tmp_path / "out.csv")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.splitlines() == [
+        "error: double_mass: the computation failed (LinAlgError: Singular matrix); please report "
+        "this input"]
+    assert not (tmp_path / "out.csv").exists()
+
+
+def test_a_numerical_library_failure_in_the_api_is_an_input_error_naming_the_scenario(monkeypatch):
+    """The same through :func:`observer.simulate`: an :class:`InputError` naming ``scenario``
+    with the library's exception as its cause; a toolkit error or a NumPy MemoryError passes
+    unchanged."""
+    def singular():
+        raise np.linalg.LinAlgError("Singular matrix")
+
+    def too_large():
+        return np.empty(2 ** 50)        # 8 PiB, beyond any address space: NumPy's MemoryError
+
+    def toolkit_bug():
+        raise KeyError("not a library's")
+
+    failures = iter([singular, too_large, toolkit_bug])
+
+    def breaks(*args, **kwargs):
+        return next(failures)()
+
+    monkeypatch.setattr(sys.modules["observer.simulate"], "run_loop", breaks)
+    with pytest.raises(InputError) as info:
+        observer.simulate("double_mass", t_end=0.01)
+    assert str(info.value) == ("scenario: double_mass: the computation failed (LinAlgError: Singular "
+                               "matrix); please report this input")
+    assert isinstance(info.value.__cause__, np.linalg.LinAlgError)
+    with pytest.raises(MemoryError):
+        observer.simulate("double_mass", t_end=0.01)
+    with pytest.raises(KeyError):
+        observer.simulate("double_mass", t_end=0.01)

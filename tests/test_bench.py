@@ -622,6 +622,17 @@ def test_observer_rows_carry_settling_times_recomputed_from_V(tmp_path):
     assert reached >= 1                        # not a comparison of two infinities only
 
 
+def _write_with_checksum(frame: pd.DataFrame, path: Path) -> None:
+    """``frame`` as a case file whose checksum matches (:func:`bench.results.content_digest`)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from bench.results import CHECKSUM_KEY, content_digest
+
+    table = pa.Table.from_pandas(frame, preserve_index=False).replace_schema_metadata(None)
+    pq.write_table(table.replace_schema_metadata({CHECKSUM_KEY: content_digest(table).encode()}), path)
+
+
 def test_rows_without_settling_times_are_rerun(tmp_path):
     """An observers case written before the settling columns existed is moved to the stale
     file and run again; other cases are kept."""
@@ -633,8 +644,8 @@ def test_rows_without_settling_times_are_rerun(tmp_path):
     store = CaseStore(results_path("old", tmp_path))
     path = store.case_path(obs.case_id)
     old = pd.read_parquet(path)
-    old.drop(columns=[c for c in old.columns if c.startswith(("t_settle_", "above_after_"))]) \
-        .to_parquet(path, index=False)
+    old = old.drop(columns=[c for c in old.columns if c.startswith(("t_settle_", "above_after_"))])
+    _write_with_checksum(old, path)          # whole, as that version wrote it: not damaged
     wp_bytes = store.case_path(wp.case_id).read_bytes()
     summary = run_suite(suite, tmp_path, progress=False, micro=False)
     assert summary.ran == 1 and summary.skipped == 1 and summary.stale_rows == 2

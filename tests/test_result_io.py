@@ -156,17 +156,25 @@ def test_a_result_without_events_has_no_events_file(observed_run, tmp_path):
     assert read_events(path) is None and not events_path(path).exists()
 
 
-def test_csv_without_sidecar_reads_with_empty_metadata(observed_run, tmp_path):
-    observed_run.to_frame().to_csv(tmp_path / "edited.csv", index=False)   # e.g. a spreadsheet
-    df, meta = read_result(tmp_path / "edited.csv")
-    assert meta == {} and list(df.columns) == DM_COLUMNS
+def test_csv_without_sidecar_is_refused_unless_partial(observed_run, tmp_path):
+    """A CSV with no row count or checksum (e.g. saved by a spreadsheet) cannot prove it is
+    whole: refused by default, read as its whole rows with status "partial" on request."""
+    observed_run.to_frame().to_csv(tmp_path / "edited.csv", index=False)
+    with pytest.raises(InputError, match="no row count or checksum") as ei:
+        read_result(tmp_path / "edited.csv")
+    assert ei.value.field == str(tmp_path / "edited.csv")
+    df, meta = read_result(tmp_path / "edited.csv", partial=True)
+    assert list(df.columns) == DM_COLUMNS and len(df) == observed_run.t.size
+    assert meta["status"]["state"] == "partial" and "no row count" in meta["status"]["reason"]
 
 
-def test_legacy_csv_with_a_metadata_comment_line_is_still_read(tmp_path):
+def test_legacy_csv_with_a_metadata_comment_line_is_read_as_partial(tmp_path):
     path = tmp_path / "old.csv"
     path.write_text('# metadata: {"h": 0.1}\nt,q0\n0,1.5\n0.1,2.5\n', encoding="utf-8")
-    df, meta = read_result(path)
-    assert meta == {"h": 0.1} and df["q0"].tolist() == [1.5, 2.5]
+    with pytest.raises(InputError, match="no row count or checksum"):
+        read_result(path)
+    df, meta = read_result(path, partial=True)
+    assert meta["h"] == 0.1 and meta["status"]["state"] == "partial" and df["q0"].tolist() == [1.5, 2.5]
 
 
 @pytest.mark.parametrize("name, field_part", [("x.xlsx", "unsupported extension"),
@@ -179,8 +187,10 @@ def test_bad_result_paths_name_the_file(tmp_path, name, field_part):
 
 def test_a_csv_that_is_not_a_result_is_refused(tmp_path):
     (tmp_path / "other.csv").write_text("a,b\n1,2\n", encoding="utf-8")
-    with pytest.raises(InputError, match="no column 't'"):
+    with pytest.raises(InputError, match="no row count or checksum"):
         read_result(tmp_path / "other.csv")
+    with pytest.raises(InputError, match="no column 't'"):
+        read_result(tmp_path / "other.csv", partial=True)
 
 
 def test_write_refuses_unknown_extension_and_leaves_no_file(observed_run, tmp_path):
@@ -201,7 +211,9 @@ def test_events_are_written_beside_the_result(observed_run, tmp_path, ext):
     assert read_events(path).equals(back)
     assert np.array_equal(back["time"].to_numpy(), ev["time"].to_numpy())
     assert back["kind"].tolist() == ["impact"] * 3
-    assert not (tmp_path / "ev.events.json").exists()            # no metadata, no sidecar
+    if ext == "csv":                                 # the events file proves it is whole too
+        side = json.loads((tmp_path / "ev.events.json").read_text(encoding="utf-8"))
+        assert side["integrity"]["rows"] == 3 and side["integrity"]["state"] == "complete"
 
 
 def test_cli_run_files_read_by_plain_pandas(tmp_path):

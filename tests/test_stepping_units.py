@@ -307,14 +307,25 @@ def test_choose_structure():
 # ---------------------------------------------------------------------------------------
 # the grid
 # ---------------------------------------------------------------------------------------
-@pytest.mark.parametrize("t_end,h,t0,steps", [(1.0, 0.1, 0.0, 10), (1.05, 0.1, 0.0, 11),
+@pytest.mark.parametrize("t_end,h,t0,steps", [(1.0, 0.1, 0.0, 10), (1.05, 0.1, 0.0, 10),
                                               (0.3, 0.1, 0.0, 3), (2.0, 0.25, 1.0, 4),
-                                              (1.0 + 1e-8, 0.1, 0.0, 11), (0.1, 0.1, 0.0, 1)])
+                                              (1.0 + 1e-8, 0.1, 0.0, 10), (1.0 - 1e-8, 0.1, 0.0, 9),
+                                              (0.1, 0.1, 0.0, 1), (0.19, 0.1, 0.0, 1)])
 def test_grid_step_count(t_end, h, t0, steps):
+    """The grid ends at the last t_k ≤ t_end (t_end = N·h in floating point counts N): it never
+    steps past t_end."""
     g = Grid.build(two_dof(), h, t_end, 0.5, t0)
     assert g.steps == steps and g.t.shape == (steps + 1,)
     close(g.t, t0 + h * np.arange(steps + 1))
     assert g.t[0] == t0
+    assert t0 + steps * h <= t_end * (1 + 1e-12) and t0 + (steps + 1) * h > t_end
+
+
+@pytest.mark.parametrize("t_end", [0.05, 0.0999])
+def test_a_horizon_shorter_than_one_step_is_refused(t_end):
+    with pytest.raises(InputError) as ei:
+        Grid.build(two_dof(), 0.1, t_end, 0.5)
+    assert ei.value.field == "simulation.t_end"
 
 
 def test_grid_steps_default_start_time_is_zero():
@@ -369,7 +380,10 @@ def test_grid_theta_averaged_forcing_and_gap_signals(theta):
 
 def test_step_parameters_are_validated():
     assert check_step_parameters(1e-3, 0.5) == (1e-3, 0.5)
-    assert check_step_parameters("0.01", 1) == (0.01, 1.0)
+    assert check_step_parameters(np.float32(0.5), 1) == (0.5, 1.0)
+    with pytest.raises(InputError, match="the string '0.01'") as info:   # a number, not text (issue 20)
+        check_step_parameters("0.01", 1)
+    assert info.value.field == "simulation.h"
     assert isinstance(check_step_parameters(1, 1)[1], float)
     for h in (0.0, -1e-3):
         with pytest.raises(InputError) as info:

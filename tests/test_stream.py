@@ -21,7 +21,7 @@ import pandas as pd
 import pytest
 
 import observer.loop as loop
-from observer.io import read_result
+from observer.io import part_path, read_result
 from observer.loop import LoopInput
 from observer.simulate import simulate
 from observer.scenario import load_scenario
@@ -175,7 +175,8 @@ def test_sigint_mid_run_leaves_every_finished_step(tmp_path):
     try:
         deadline = time.monotonic() + 240
         while time.monotonic() < deadline and proc.poll() is None:
-            if path.exists() and path.stat().st_size > 1_000_000:     # a few windows written
+            part = part_path(path)                                    # renamed when closed
+            if part.exists() and part.stat().st_size > 1_000_000:     # a few windows written
                 break
             time.sleep(0.05)
         assert proc.poll() is None, f"the run ended before it was interrupted: {proc.stderr.read()}"
