@@ -59,11 +59,13 @@ def exact_log(frame):
 
 
 def measured(log, sigma, rng):
-    """Endpoints moved by N(0, σ²) errors (an impact, zero length, as a whole), intervals
-    sorted and overlapping ones merged."""
+    """Endpoints moved by N(0, σ²) errors (an impact, zero length, as a whole), clipped at the
+    start of the recording t = 0 (a log holds no time before it), intervals sorted and
+    overlapping ones merged."""
     err_close, err_open = rng.normal(0.0, sigma, (2, len(log)))
     err_open = np.where(log["t_open"] == log["t_close"], err_close, err_open)
     noisy = log.assign(t_close=log["t_close"] + err_close, t_open=log["t_open"] + err_open)
+    noisy[["t_close", "t_open"]] = noisy[["t_close", "t_open"]].clip(lower=0.0)
     noisy["t_open"] = noisy[["t_close", "t_open"]].max(axis=1)        # a contact opens after it closes
     merged = []
     for j, a, b in noisy.sort_values(["contact", "t_close"]).itertuples(index=False):
