@@ -768,7 +768,8 @@ def _verdict(summaries: list[dict], failing: list, label: str, counts: dict, wit
         p_ = witness.get("slack_order_impulse_slack", float("nan"))
         if not np.isfinite(p_):
             p_ = witness.get("slack_order_impulse_target", float("nan"))
-        order = f"order ≈ {p_:.2g}" if np.isfinite(p_) else "order not fitted"
+        order = (f"order ≈ {p_:.2g}" if np.isfinite(p_) and p_ > 0 else
+                 f"fitted order {p_:.2g}: its decrease with h not seen" if np.isfinite(p_) else "order not fitted")
         return f"holds up to the discrete slack ({order})", "bounded"
     return "holds exactly: no rise of V beyond round-off", "bounded"
 

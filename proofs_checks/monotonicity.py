@@ -312,7 +312,7 @@ def _exact_result(res: CheckResult, decisions: dict, law: ImpactLaw) -> CheckRes
                     "(round-off): every piece is proved monotone")
         n = sum(d["pieces"] for d in decisions.values())
         return CheckResult(res.name, True, max(res.margin, 0.0), 0.0, w, note, res.equation, res.summary_keys,
-                           evidence="proved", verdict=f"A3 holds: {n} pieces of the impact map checked (exact)")
+                           evidence="proved", verdict=f"A3 holds: {n} piece{'' if n == 1 else 's'} of the impact map checked (exact)")
     lname, d = bad
     rho = exact.to_float(d["rho"])
     w.update(exact_law=lname, exact_active_set=d["active_set"], exact_piece=d["piece"],

@@ -536,6 +536,7 @@ def test_order_note_when_the_slack_does_not_decrease(monkeypatch):
     assert ("the positive slack from the discrete impact law does not decrease with h over h ∈ [0.01, 0.04] "
             "(fitted order -0.5; not in the asymptotic range?)") in r.reason
     assert r.witness["slack_order_projection_unprojected_gap"] == 2.0
+    assert r.verdict == "holds up to the discrete slack (fitted order -0.5: its decrease with h not seen)"
     assert "plain master's penetration" not in r.reason          # base slack 0: no note
     assert r.reason.count("; ") >= 2
 
