@@ -197,6 +197,8 @@ class Flow:
         """``exp(A dt)`` (a few recent values cached: the output step and the search window)."""
         dt = float(dt)
         hit = self._expm_cache.get(dt)
+        if hit is None and dt == 0.0:
+            return np.eye(self.N)                 # exactly (the Padé quotient is 1 − eps/2)
         if hit is None:
             # balanced: exp(A dt) = T exp(B dt) T⁻¹, B = T⁻¹AT of smaller norm
             hit = expm_pade13(self._balanced * dt) * self.scale[:, None] / self.scale[None, :]
