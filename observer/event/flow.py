@@ -240,17 +240,21 @@ class Flow:
         return expm_pade13(big)[:N, N] * (dt * size) * self.scale
 
     def power_stack(self, dt: float, count: int) -> np.ndarray:
-        """``exp(A j dt)`` for j = 1..count, shape (count, N, N) (cached for one (dt, count)):
-        a whole block of equally spaced samples in one product."""
-        key = (float(dt), int(count))
-        if getattr(self, "_stack_key", None) != key:
+        """``exp(A j dt)`` for j = 1..count, shape (count, N, N): a whole block of equally
+        spaced samples in one product. Cached for one dt and extended on demand (a short run
+        does not pay for a long block)."""
+        dt, count = float(dt), int(count)
+        if getattr(self, "_stack_dt", None) != dt:
+            self._stack, self._stack_dt = self.expm(dt)[None].copy(), dt
+        have = self._stack.shape[0]
+        if have < count:
             E = self.expm(dt)
             stack = np.empty((count, self.N, self.N))
-            stack[0] = E
-            for j in range(1, count):
+            stack[:have] = self._stack
+            for j in range(have, count):
                 stack[j] = E @ stack[j - 1]
-            self._stack, self._stack_key = stack, key
-        return self._stack
+            self._stack = stack
+        return self._stack[:count]
 
     # -- the flow --------------------------------------------------------------------------
     def propagate(self, t0: float, z0: np.ndarray, dt: float) -> np.ndarray:

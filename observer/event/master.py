@@ -203,7 +203,7 @@ class _Run:
             t_cur, k = tg[k], k + 1
         while k < end:                                # the rest: blocks of equal steps h
             count = min(end - k, SAMPLE_BLOCK)
-            stack = flow.power_stack(self.h, SAMPLE_BLOCK)[:count]
+            stack = flow.power_stack(self.h, count)
             Z = stack @ z_cur                         # (count, N)
             Z[:, 2 * self.n:-1] = _oscillator_block(flow, tg[k:k + count])
             Z[:, -1] = 1.0
