@@ -81,7 +81,7 @@ impact sequence is driven by round-off, no longer by the dynamics). 10, not more
 at 1e4 round-offs (|γ⁻| ≈ 2e-5 on double_mass) leaves the extrapolated state ≈ 4e-10 off,
 which re-injects ≈ 1e-19 into the exact observers' V at every landing (a floor)."""
 
-ZENO_TAIL_RTOL = 1e-10
+ZENO_TAIL_RTOL = 1e-9
 """A geometric run of one contact is also extrapolated once the representation error of its
 gap would put more than this fraction of max(|t|, τ) into t_∞ (:meth:`_Run.noisy_tail`)."""
 
