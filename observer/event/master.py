@@ -15,20 +15,27 @@ the impact instant (simultaneous impacts: the multi-contact law). After an impac
 contacts with ``γ⁺ = 0`` (within round-off) enter persistent contact if the
 acceleration LCP ``0 ≤ λ ⊥ γ̇ = G λ + γ̇_free ≥ 0`` gives them a positive force.
 
-Grazing (stated tolerances): a **touch**, a local minimum of g_j within
-:data:`observer.event.roots.TOUCH_FACTOR` round-offs of zero, is a graze with zero impulse
-(the run continues past it); a crossing with ``|γ⁻| ≤`` CONTACT_TOL round-offs of γ is
-labelled a graze too, and its (tiny) impulse is applied. A minimum above the touch band
-is a miss: no event.
+Grazing (stated tolerances, on the scale of the motion): a **touch**, a local minimum m* of
+g_j within the touch band δ* (:func:`observer.event.roots.touch_band`, the guaranteed
+crossing depth) of zero, is a graze with zero impulse (the run continues past it); its row
+carries ``depth = m*`` and a note stating δ*. A crossing with ``|γ⁻| ≤`` CONTACT_TOL motion
+tolerances of γ is labelled a graze too, and its (tiny) impulse is applied. A minimum above
+the touch band is a miss: no event. Contacts count as closed together (simultaneous impact)
+when their gaps are within CONTACT_TOL motion tolerances
+(:func:`observer.event.roots.motion_tolerance`), which do not shrink with the gap when the
+contact sits at the coordinate origin (ν = 0).
 
 Zeno: a run of impacts of one contact set whose intervals shrink geometrically (consecutive
 ratios equal within :data:`ZENO_RATIO_SPREAD`) is stopped once the impact velocity has
 fallen by :data:`ZENO_VELOCITY_RATIO`, or the intervals reach the time resolution, or the
-hops reach the gap's round-off; the accumulation time t_∞ is extrapolated
-(:meth:`_Run.tail_time`: geometric, ``t_k + Δ_k ρ/(1 − ρ)``, exact for a constant contact
-acceleration, THEORY §7.1, with a first-order correction of the ratio for one contact),
-the state is carried to t_∞ by the constrained flow, and the contacts switch to
-persistent contact there if the acceleration LCP gives them a positive force.
+hops reach the gap's round-off, or (one contact) resolving more impacts would put more of
+the gap's representation error than :data:`ZENO_TAIL_RTOL` into t_∞; the accumulation time
+t_∞ is extrapolated from the velocity γ⁺ after the last resolved impact and the exact
+contact acceleration and its rate (:meth:`_Run.velocity_tail`: ``2γ⁺/(α(1 − e))`` for a
+constant acceleration α, exact for the ball, THEORY §7.1; several contacts: geometric,
+:meth:`_Run.tail_time`), the state is carried to t_∞ by the constrained flow, and the
+contacts switch to persistent contact there if the acceleration LCP gives them a positive
+force.
 
 A cluster of impacts that alternate between contacts (the chain's blocks settling on each
 other: the impacting set changes at every impact, so no run of one set is geometric) is
@@ -113,9 +120,11 @@ class MasterEventResult:
         The exact solution: ``(t_start, t_stop, held contacts, x(t_start))`` per flow piece
         (see :meth:`state`).
     events : DataFrame
-        One row per event and contact: ``time, contact, kind, gamma_minus, gamma_plus, impulse``.
+        One row per event and contact: ``time, contact, kind, gamma_minus, gamma_plus, impulse,
+        depth, note`` (:data:`MASTER_EVENT_COLUMNS`).
     status : str
-        ``"ok"`` or ``"stopped: <reason>"`` (the frame is NaN after the stop).
+        ``"ok"`` or ``"stopped: <reason>"``; a stopped run's frame ends at the last grid
+        time before the stop (``frame.attrs["t_stop"]``), never with NaN rows.
     closings, openings : list of ndarray
         Per contact, the times it closes and opens again (χ_j = 1 on each
         ``[closing, opening]``; an impact or graze is a zero-length interval; ``inf``:
@@ -143,7 +152,8 @@ class MasterEventResult:
         for t_a, t_b, active, x_a in reversed(self.segments):
             if t_a <= t <= t_b:
                 return flow_for(self.scenario.system, active).state(t_a, x_a, t - t_a)
-        raise ValueError(f"t = {t!r} is outside the run [0, {self.t_end!r}]")
+        raise ValueError(f"t = {t!r} is outside the run [{self.segments[0][0] if self.segments else 0.0!r}, "
+                         f"{self.t_end!r}]")
 
     def intervals(self, j: int) -> np.ndarray:
         """Closed intervals ``[closing, opening]`` of contact j, shape (k, 2)."""

@@ -15,12 +15,20 @@ is approached monotonically from the safe side, at the rate of Newton's method.
 A double root (grazing: ψ_i touches zero with ψ_i' = 0) cannot be certified either way in
 floating point; when the minimum of ψ_i lies in a window on which ψ_i'' > 0 is certified
 (``ψ_i''(a) − B_i s > 0``), ψ_i has exactly one local minimum t_m there, found as the
-simple zero of ψ_i'. Its value decides: above the round-off tolerance of ψ_i, the whole
+simple zero of ψ_i'. Its value decides: above the touch band of ψ_i (:func:`touch_band`, the
+guaranteed crossing depth, on the scale of the motion), the whole
 convex window is certified positive; within it, a **touch** (graze) at t_m; below it, a
 **cross** before t_m, isolated by the bracket ``[a, t_m]``.
 
 Zeros are refined by safeguarded Newton steps (bisection when a step leaves the bracket)
-until the step is below :data:`TIME_RTOL`·max(1, |t|).
+until the step is below the time resolution :data:`TIME_RTOL`·max(|t|, τ).
+
+Tolerances are the motion's (issue 19): "zero" is decided against
+:func:`motion_tolerance` (evaluation floor, the motion scale S = Σ_k |ψ^(k)| τ^k/k! over the
+system's time scale τ, and |ψ'| times the time resolution), invariant under translations of
+coordinates and time and covariant with units but for the evaluation floor Σ|r z|, which
+float64 imposes. A search interval no longer than the time resolution is integrated as flow
+and not searched; zeros closer than it are taken by their time to zero and noted.
 """
 
 from __future__ import annotations
