@@ -115,6 +115,9 @@ class Flow:
         ``g = gap_rows @ z`` (paper eq. (2)), ``γ = velocity_rows @ z`` (eq. (3)).
     force_rows : ndarray, shape (len(active), N)
         ``λ_I = force_rows @ z`` (zero rows for the free flow).
+    time_scale : float
+        The system's own time scale τ (:func:`_time_scale`): tolerances are relative to the
+        motion over τ.
     norm_bound : float
         ``‖T⁻¹AT‖₂`` for the balancing similarity T (``scale``): ``‖T⁻¹z(t+τ)‖ ≤
         exp(norm_bound·τ)‖T⁻¹z(t)‖``, the growth bound used by the root isolation.
@@ -167,6 +170,8 @@ class Flow:
         self.scale = np.diag(T).copy()
         self._balanced = B
         self.norm_bound = float(np.linalg.norm(B, 2))
+        self.time_scale = (_time_scale(system, self.freqs, self.norm_bound) if not self.active
+                           else flow_for(system, ()).time_scale)       # one τ for all active sets
         self._expm_cache: OrderedDict = OrderedDict()
         self._phi_cache: OrderedDict = OrderedDict()
 
@@ -192,6 +197,8 @@ class Flow:
         """``exp(A dt)`` (a few recent values cached: the output step and the search window)."""
         dt = float(dt)
         hit = self._expm_cache.get(dt)
+        if hit is None and dt == 0.0:
+            return np.eye(self.N)                 # exactly (the Padé quotient is 1 − eps/2)
         if hit is None:
             # balanced: exp(A dt) = T exp(B dt) T⁻¹, B = T⁻¹AT of smaller norm
             hit = expm_pade13(self._balanced * dt) * self.scale[:, None] / self.scale[None, :]
@@ -233,17 +240,21 @@ class Flow:
         return expm_pade13(big)[:N, N] * (dt * size) * self.scale
 
     def power_stack(self, dt: float, count: int) -> np.ndarray:
-        """``exp(A j dt)`` for j = 1..count, shape (count, N, N) (cached for one (dt, count)):
-        a whole block of equally spaced samples in one product."""
-        key = (float(dt), int(count))
-        if getattr(self, "_stack_key", None) != key:
+        """``exp(A j dt)`` for j = 1..count, shape (count, N, N): a whole block of equally
+        spaced samples in one product. Cached for one dt and extended on demand (a short run
+        does not pay for a long block)."""
+        dt, count = float(dt), int(count)
+        if getattr(self, "_stack_dt", None) != dt:
+            self._stack, self._stack_dt = self.expm(dt)[None].copy(), dt
+        have = self._stack.shape[0]
+        if have < count:
             E = self.expm(dt)
             stack = np.empty((count, self.N, self.N))
-            stack[0] = E
-            for j in range(1, count):
+            stack[:have] = self._stack
+            for j in range(have, count):
                 stack[j] = E @ stack[j - 1]
-            self._stack, self._stack_key = stack, key
-        return self._stack
+            self._stack = stack
+        return self._stack[:count]
 
     # -- the flow --------------------------------------------------------------------------
     def propagate(self, t0: float, z0: np.ndarray, dt: float) -> np.ndarray:
@@ -288,6 +299,31 @@ class Flow:
         if not self.active:
             return np.zeros(0)
         return self.force_rows @ self.integral(dt, self.z(t0, x0))
+
+
+def _time_scale(system: LinearSystem, freqs: list[float], norm_bound: float) -> float:
+    """The system's own time scale τ = 1/ω_max, for the tolerances of
+    :mod:`observer.event.roots` (a property of the motion, not of the coordinates).
+
+    ω_max is the largest of the natural frequencies √|eig(M⁻¹K)|, the damping rates
+    |eig(M⁻¹C)| and the forcing and gap frequencies: all invariant under a translation of
+    coordinates and a shift of the time origin, and scaled as 1/time by a change of units.
+    A system with none of them (K = C = 0, constant forcing: the bouncing ball) has no
+    intrinsic time scale; its flow's window ``0.5/‖T⁻¹AT‖`` is used (covariant with units
+    up to the power-of-2 rounding of the balancing, invariant under translations, which
+    leave A unchanged when K = 0).
+    """
+    Minv = np.linalg.inv(system.M)
+    rates = [0.0]
+    for mat, root in ((Minv @ system.K, True), (Minv @ system.C, False)):
+        if np.any(mat):
+            ev = np.abs(np.linalg.eigvals(mat))
+            rates.append(float(np.max(np.sqrt(ev) if root else ev)))
+    rates.extend(float(w) for w in freqs)
+    w_max = max(rates)
+    if w_max > 0.0:
+        return 1.0 / w_max
+    return 0.5 / max(norm_bound, 1e-300)
 
 
 _FLOWS: dict = {}

@@ -15,20 +15,27 @@ the impact instant (simultaneous impacts: the multi-contact law). After an impac
 contacts with ``γ⁺ = 0`` (within round-off) enter persistent contact if the
 acceleration LCP ``0 ≤ λ ⊥ γ̇ = G λ + γ̇_free ≥ 0`` gives them a positive force.
 
-Grazing (stated tolerances): a **touch**, a local minimum of g_j within
-:data:`observer.event.roots.TOUCH_FACTOR` round-offs of zero, is a graze with zero impulse
-(the run continues past it); a crossing with ``|γ⁻| ≤`` CONTACT_TOL round-offs of γ is
-labelled a graze too, and its (tiny) impulse is applied. A minimum above the touch band
-is a miss: no event.
+Grazing (stated tolerances, on the scale of the motion): a **touch**, a local minimum m* of
+g_j within the touch band δ* (:func:`observer.event.roots.touch_band`, the guaranteed
+crossing depth) of zero, is a graze with zero impulse (the run continues past it); its row
+carries ``depth = m*`` and a note stating δ*. A crossing with ``|γ⁻| ≤`` CONTACT_TOL motion
+tolerances of γ is labelled a graze too, and its (tiny) impulse is applied. A minimum above
+the touch band is a miss: no event. Contacts count as closed together (simultaneous impact)
+when their gaps are within CONTACT_TOL motion tolerances
+(:func:`observer.event.roots.motion_tolerance`), which do not shrink with the gap when the
+contact sits at the coordinate origin (ν = 0).
 
 Zeno: a run of impacts of one contact set whose intervals shrink geometrically (consecutive
 ratios equal within :data:`ZENO_RATIO_SPREAD`) is stopped once the impact velocity has
 fallen by :data:`ZENO_VELOCITY_RATIO`, or the intervals reach the time resolution, or the
-hops reach the gap's round-off; the accumulation time t_∞ is extrapolated
-(:meth:`_Run.tail_time`: geometric, ``t_k + Δ_k ρ/(1 − ρ)``, exact for a constant contact
-acceleration, THEORY §7.1, with a first-order correction of the ratio for one contact),
-the state is carried to t_∞ by the constrained flow, and the contacts switch to
-persistent contact there if the acceleration LCP gives them a positive force.
+hops reach the gap's round-off, or (one contact) resolving more impacts would put more of
+the gap's representation error than :data:`ZENO_TAIL_RTOL` into t_∞; the accumulation time
+t_∞ is extrapolated from the velocity γ⁺ after the last resolved impact and the exact
+contact acceleration and its rate (:meth:`_Run.velocity_tail`: ``2γ⁺/(α(1 − e))`` for a
+constant acceleration α, exact for the ball, THEORY §7.1; several contacts: geometric,
+:meth:`_Run.tail_time`), the state is carried to t_∞ by the constrained flow, and the
+contacts switch to persistent contact there if the acceleration LCP gives them a positive
+force.
 
 A cluster of impacts that alternate between contacts (the chain's blocks settling on each
 other: the impacting set changes at every impact, so no run of one set is geometric) is
@@ -47,7 +54,7 @@ import numpy as np
 
 from observer.contact import get_solver
 from observer.event.flow import Flow, flow_for
-from observer.event.roots import RootIsolationError, first_zero, tolerance
+from observer.event.roots import RootIsolationError, first_zero, motion_tolerance, tolerance
 from observer.impact import ImpactLaw, impact
 from observer.scenario import Scenario
 
@@ -81,6 +88,10 @@ impact sequence is driven by round-off, no longer by the dynamics). 10, not more
 at 1e4 round-offs (|γ⁻| ≈ 2e-5 on double_mass) leaves the extrapolated state ≈ 4e-10 off,
 which re-injects ≈ 1e-19 into the exact observers' V at every landing (a floor)."""
 
+ZENO_TAIL_RTOL = 1e-9
+"""A geometric run of one contact is also extrapolated once the representation error of its
+gap would put more than this fraction of max(|t|, τ) into t_∞ (:meth:`_Run.noisy_tail`)."""
+
 SAMPLE_BLOCK = 256
 """Output samples computed per block product (``exp(A j h)``, j = 1..SAMPLE_BLOCK)."""
 
@@ -89,6 +100,10 @@ STALL_EVENTS = 50
 
 EVENT_KINDS = ("impact", "graze", "stick", "liftoff", "accumulation")
 EVENT_COLUMNS = ["time", "contact", "kind", "gamma_minus", "gamma_plus", "impulse"]
+MASTER_EVENT_COLUMNS = EVENT_COLUMNS + ["depth", "note"]
+"""The master's event table: :data:`EVENT_COLUMNS` plus ``depth`` (for a ``graze``, the gap's
+local minimum m*: > 0 a clearance, < 0 a penetration shallower than the guaranteed crossing
+depth; 0 otherwise) and ``note`` (empty, or how a decision float64 cannot take was taken)."""
 
 
 @dataclass
@@ -105,9 +120,11 @@ class MasterEventResult:
         The exact solution: ``(t_start, t_stop, held contacts, x(t_start))`` per flow piece
         (see :meth:`state`).
     events : DataFrame
-        One row per event and contact: ``time, contact, kind, gamma_minus, gamma_plus, impulse``.
+        One row per event and contact: ``time, contact, kind, gamma_minus, gamma_plus, impulse,
+        depth, note`` (:data:`MASTER_EVENT_COLUMNS`).
     status : str
-        ``"ok"`` or ``"stopped: <reason>"`` (the frame is NaN after the stop).
+        ``"ok"`` or ``"stopped: <reason>"``; a stopped run's frame ends at the last grid
+        time before the stop (``frame.attrs["t_stop"]``), never with NaN rows.
     closings, openings : list of ndarray
         Per contact, the times it closes and opens again (χ_j = 1 on each
         ``[closing, opening]``; an impact or graze is a zero-length interval; ``inf``:
@@ -135,7 +152,8 @@ class MasterEventResult:
         for t_a, t_b, active, x_a in reversed(self.segments):
             if t_a <= t <= t_b:
                 return flow_for(self.scenario.system, active).state(t_a, x_a, t - t_a)
-        raise ValueError(f"t = {t!r} is outside the run [0, {self.t_end!r}]")
+        raise ValueError(f"t = {t!r} is outside the run [{self.segments[0][0] if self.segments else 0.0!r}, "
+                         f"{self.t_end!r}]")
 
     def intervals(self, j: int) -> np.ndarray:
         """Closed intervals ``[closing, opening]`` of contact j, shape (k, 2)."""
@@ -154,17 +172,17 @@ class _Run:
     """Mutable state of one master run (the event loop's bookkeeping)."""
 
     def __init__(self, scenario: Scenario, h: float, t_end: float, max_events: int,
-                 zeno_velocity_ratio: float) -> None:
+                 zeno_velocity_ratio: float, t0: float = 0.0) -> None:
         self.sc = scenario
         self.system = scenario.system
         self.law: ImpactLaw = scenario.law
         self.solve = get_solver(scenario.solver, field="simulation.solver").solve
         self.n, self.m = self.system.n, self.system.m
-        self.h, self.t_end = h, t_end
+        self.h, self.t_end, self.t0 = h, t_end, t0
         self.max_events = max_events
         self.zeno_velocity_ratio = zeno_velocity_ratio
-        count = int(np.floor(t_end / h + 1e-9)) + 1
-        self.t_grid = np.minimum(h * np.arange(count), t_end)     # k·h may exceed t_end by an ulp
+        count = int(np.floor((t_end - t0) / h + 1e-9)) + 1
+        self.t_grid = np.minimum(t0 + h * np.arange(count), t_end)   # may exceed t_end by an ulp
         self.X = np.full((count, 2 * self.n), np.nan)
         self.P = np.zeros((count, self.m))
         self.k_next = 0
@@ -177,6 +195,8 @@ class _Run:
         self.segments: list[tuple[float, float, tuple, np.ndarray]] = []
         self.free_flow = flow_for(self.system, ())
         self.Minv = self.free_flow.Minv
+        self.tau = self.free_flow.time_scale
+        self.note, self.note_time = "", np.nan
 
     # -- sampling --------------------------------------------------------------------------
     def fill(self, flow: Flow, t_a: float, x_a: np.ndarray, t_b: float, include_end: bool) -> None:
@@ -193,7 +213,7 @@ class _Run:
             t_cur, k = tg[k], k + 1
         while k < end:                                # the rest: blocks of equal steps h
             count = min(end - k, SAMPLE_BLOCK)
-            stack = flow.power_stack(self.h, SAMPLE_BLOCK)[:count]
+            stack = flow.power_stack(self.h, count)
             Z = stack @ z_cur                         # (count, N)
             Z[:, 2 * self.n:-1] = _oscillator_block(flow, tg[k:k + count])
             Z[:, -1] = 1.0
@@ -222,8 +242,17 @@ class _Run:
             self.P[k, list(contacts)] += impulse
 
     # -- bookkeeping -----------------------------------------------------------------------
-    def event(self, t, j, kind, gm, gp, imp) -> None:
-        self.events.append((float(t), int(j), kind, float(gm), float(gp), float(imp)))
+    def event(self, t, j, kind, gm, gp, imp, depth=0.0, note=None) -> None:
+        if note is None:                       # the note of the zero that triggered the event
+            note = self.note if t == self.note_time else ""
+        self.events.append((float(t), int(j), kind, float(gm), float(gp), float(imp),
+                            float(depth), str(note)))
+
+    def tol(self, rows: np.ndarray, z: np.ndarray, t: float, flow: Flow | None = None) -> np.ndarray:
+        """Motion tolerance (:func:`observer.event.roots.motion_tolerance`) of ``rows @ z`` at t
+        along ``flow`` (default the free flow)."""
+        fl = flow or self.free_flow
+        return motion_tolerance(rows, fl.A, z, self.tau, t)
 
     def close(self, j: int, t: float) -> None:
         self.closed_since.setdefault(j, t)
@@ -249,7 +278,7 @@ class _Run:
         rows = self.free_flow.velocity_rows @ self.free_flow.A
         b = rows[cand] @ z
         lam = self.solve(self.delassus(cand), b).x
-        tol = CONTACT_TOL * tolerance(rows[cand], z)
+        tol = CONTACT_TOL * self.tol(rows[cand], z, t)
         G = self.delassus(cand)
         scale = np.abs(G) @ np.abs(lam) + tol
         return [c for c, l, s in zip(cand, lam, scale) if l > CONTACT_TOL * 1e-13 * s]
@@ -273,8 +302,8 @@ class _Run:
         fl = self.free_flow
         z = fl.z(t, x)
         g, gam = fl.gap_rows @ z, fl.velocity_rows @ z
-        tol_g = CONTACT_TOL * tolerance(fl.gap_rows, z)
-        tol_v = CONTACT_TOL * tolerance(fl.velocity_rows, z)
+        tol_g = CONTACT_TOL * self.tol(fl.gap_rows, z, t)
+        tol_v = CONTACT_TOL * self.tol(fl.velocity_rows, z, t)
         closing = {j for j in range(self.m) if abs(g[j]) <= tol_g[j] and gam[j] < tol_v[j]}
         A = sorted(set(persistent) | set(trigger) | closing)
         idx = np.array(A, dtype=int)
@@ -308,7 +337,8 @@ class _Run:
         return x, tuple(stick), A, gm, lam
 
     # -- Zeno ------------------------------------------------------------------------------
-    def zeno_check(self, key: tuple, t: float, x: np.ndarray, gm: np.ndarray) -> float | None:
+    def zeno_check(self, key: tuple, t: float, x: np.ndarray, gm: np.ndarray,
+                   persistent: tuple = ()) -> float | None:
         """Accumulation time t_∞ if the run of impacts of the contact set ``key`` is geometric
         and resolved enough: its impact speed max|γ⁻| fell by ``zeno_velocity_ratio``, or its
         intervals reach the time resolution, or its next hop ``γ⁺²/(2|γ̇|)`` is within
@@ -319,7 +349,7 @@ class _Run:
         v_plus = fl.velocity_rows[idx] @ z
         accel = fl.velocity_rows[idx] @ fl.A @ z
         hop = np.where(accel < 0.0, v_plus * v_plus / (2.0 * np.abs(accel) + 1e-300), np.inf)
-        hop_small = bool(np.all(hop <= ZENO_HOP_ROUNDOFF * tolerance(fl.gap_rows[idx], z)))
+        hop_small = bool(np.all(hop <= ZENO_HOP_ROUNDOFF * self.hop_tol(fl, idx, z)))
         speed = float(np.max(np.abs(gm)))
         if self.last_key != key:
             self.history.clear()
@@ -336,10 +366,69 @@ class _Run:
             del hist[:-3]                      # not geometric: a new run starts
             return None
         v0 = hist[0][1]
-        if (speed > self.zeno_velocity_ratio * v0 and d[2] > ZENO_MIN_INTERVAL * max(1.0, abs(t))
-                and not hop_small):
+        if (speed > self.zeno_velocity_ratio * v0 and d[2] > ZENO_MIN_INTERVAL * max(abs(t), self.tau)
+                and not hop_small and not self.noisy_tail(key, fl, idx, z, v_plus, t)):
             return None
-        return t + self.tail_time(key, d[1], d[2])
+        held = flow_for(self.system, persistent)
+        zh = held.z(t, x)
+        jerk_rows = held.velocity_rows[idx] @ held.A
+        tail = self.velocity_tail(key, v_plus, jerk_rows @ zh, jerk_rows @ held.A @ zh)
+        return t + (tail if tail is not None else self.tail_time(key, d[1], d[2]))
+
+    def hop_tol(self, fl: Flow, idx: list, z: np.ndarray) -> np.ndarray:
+        """Evaluation round-off of the gaps ``idx`` (:func:`observer.event.roots.tolerance`):
+        a hop below ZENO_HOP_ROUNDOFF of it is not resolvable. It grows with |q| and |ν|;
+        the extrapolated t_∞ does not (:meth:`velocity_tail` from an accurate impact)."""
+        return tolerance(fl.gap_rows[idx], z)
+
+    def noisy_tail(self, key: tuple, fl: Flow, idx: list, z: np.ndarray, v_plus: np.ndarray,
+                   t: float) -> bool:
+        """True once resolving more impacts would make the extrapolated t_∞ less accurate.
+
+        The gap is evaluated with an absolute error δg ≈ eps·Σ|r z| (its representation: it
+        grows with |q| and |ν|), so an impact at speed v is located to δg/v and its
+        γ⁺ to |γ̇|δg/v; the velocity tail (:meth:`velocity_tail`) then errs by about
+        ``(1 + 2/(1 − e))·δg/γ⁺``. Once that reaches ZENO_TAIL_RTOL·max(|t|, τ), the run is
+        extrapolated from the current (still accurate) impact."""
+        if len(key) != 1 or self.law.law not in ("newton", "poisson"):
+            return False
+        e = float(self.law.restitution[key[0]])
+        if not 0.0 <= e < 1.0:
+            return False
+        dg = float(np.finfo(float).eps * (np.abs(fl.gap_rows[idx]) @ np.abs(z))[0])
+        v = max(float(v_plus[0]), np.finfo(float).tiny)
+        return (1.0 + 2.0 / (1.0 - e)) * dg / v >= ZENO_TAIL_RTOL * max(abs(t), self.tau)
+
+    def velocity_tail(self, key: tuple, v_plus: np.ndarray, accel: np.ndarray,
+                      jerk: np.ndarray) -> float | None:
+        """Tail duration from the accurate quantities after the last resolved impact: γ⁺ and
+        the contact acceleration γ̇ = −α(t) of the flow (α > 0), with α(t) = α₀ + α₁(t − t_k)
+        (α₁ = −γ̈, exact derivatives of the flow).
+
+        A hop leaving with speed v at t flies ``Δ = 2v/α − 4α₁v²/(3α³)`` and lands with
+        speed ``v + 2α₁v²/(3α²)`` (Taylor to second order in v), which Newton's law (eq. (5))
+        returns multiplied by e; the hops are summed until they vanish. For α₁ = 0 the sum is
+        ``2γ⁺/(α₀(1 − e))``, exact for a constant acceleration (THEORY §7.1); the error is
+        O(tail³·α₁²/α₀², …). None for several contacts or another law (for one contact
+        Poisson’s law, eq. (6), is Newton’s).
+        """
+        if len(key) != 1 or self.law.law not in ("newton", "poisson"):
+            return None
+        e = float(self.law.restitution[key[0]])
+        v, a0, a1 = float(v_plus[0]), -float(accel[0]), -float(jerk[0])
+        if not (a0 > 0.0 and v >= 0.0 and 0.0 <= e < 1.0):
+            return None
+        tail = 0.0
+        for _ in range(100_000):
+            alpha = a0 + a1 * tail
+            if alpha <= 0.0:
+                return None
+            step = 2.0 * v / alpha - 4.0 * a1 * v * v / (3.0 * alpha ** 3)
+            tail += step
+            v = e * (v + 2.0 * a1 * v * v / (3.0 * alpha * alpha))
+            if step <= 1e-17 * tail or v <= 0.0:
+                break
+        return tail
 
     def tail_time(self, key: tuple, d_prev: float, d_last: float) -> float:
         """Duration of the unresolved tail after an interval d_last (preceded by d_prev).
@@ -419,7 +508,7 @@ class _Run:
         idx = list(contacts)
         v = fl.velocity_rows[idx] @ z
         a = (fl.velocity_rows[idx] @ fl.A) @ z
-        tol = ZENO_HOP_ROUNDOFF * tolerance(fl.gap_rows[idx], z)
+        tol = ZENO_HOP_ROUNDOFF * self.hop_tol(fl, idx, z)
         return [c for c, vc, ac, tc in zip(idx, v, a, tol) if ac < 0.0 and vc * vc <= 2.0 * -ac * tc]
 
     def land(self, contacts: list[int], t: float, x: np.ndarray, persistent: tuple,
@@ -472,7 +561,7 @@ def _oscillator_block(flow: Flow, t: np.ndarray) -> np.ndarray:
 
 def run_master(scenario: Scenario, h: float | None = None, t_end: float | None = None,
                max_events: int = 100_000,
-               zeno_velocity_ratio: float = ZENO_VELOCITY_RATIO) -> MasterEventResult:
+               zeno_velocity_ratio: float = ZENO_VELOCITY_RATIO, t0: float = 0.0) -> MasterEventResult:
     """Exact event-driven run of the master of ``scenario`` (see module docstring).
 
     Parameters
@@ -487,12 +576,21 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
         ``"stopped: event cap …"``.
     zeno_velocity_ratio : float
         See :data:`ZENO_VELOCITY_RATIO`.
+    t0 : float
+        Initial time (the scenario's initial state is taken at t0; the grid is t0 + k·h):
+        a shift of the time origin.
+
+    A run that stops (event cap, stalled isolation, no progress) returns the frame up to its
+    stop time, never NaN rows, with the reason in ``status``.
     """
     h = float(scenario.h if h is None else h)
     t_end = float(scenario.t_end if t_end is None else t_end)
-    run = _Run(scenario, h, t_end, max_events, zeno_velocity_ratio)
+    t0 = float(t0)
+    if not (np.isfinite(t0) and np.isfinite(t_end) and t_end >= t0):
+        raise ValueError(f"t_end = {t_end!r} must be finite and ≥ t0 = {t0!r}")
+    run = _Run(scenario, h, t_end, max_events, zeno_velocity_ratio, t0)
     status = "ok"
-    t = 0.0
+    t = t0
     x = np.concatenate([scenario.q0, scenario.u0]).astype(float)
     x, persistent = _initial_contacts(run, x)
     certified: dict[tuple[str, int], float] = {}
@@ -529,10 +627,13 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
             certified[(kind, j)] = zero.resume
             if kind == "g":
                 gam = flow.velocities(t, x)[j]
-                run.event(t, j, "graze", gam, gam, 0.0)
+                note = zero.note or (f"minimum {zero.value:.3g} within the touch band "
+                                     f"±{zero.band:.3g} (the guaranteed crossing depth)")
+                run.event(t, j, "graze", gam, gam, 0.0, depth=zero.value, note=note)
                 run.touch(j, t)
             continue
         certified = {}
+        run.note, run.note_time = zero.note, t
         if kind == "f":                                # lift-off: the force of j crosses zero
             x, persistent, cert_new = _liftoff(run, t, x, persistent, j)
             run.history.clear()
@@ -544,7 +645,7 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
         t_inf = None
         if key and set(new_persistent) == set(persistent):
             bouncing = [A.index(c) for c in key]
-            t_inf = run.zeno_check(key, t, x, gm[bouncing])
+            t_inf = run.zeno_check(key, t, x, gm[bouncing], persistent)
             if t_inf is not None:
                 out = run.accumulate(key, t, x, persistent, t_inf, float(np.max(np.abs(gm[bouncing]))))
                 if out is None:
@@ -562,17 +663,18 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
         persistent = new_persistent
     if status == "ok" and run.k_next < run.t_grid.size:
         status = "stopped: sampling incomplete"
-    return _result(run, scenario, status)
+    return _result(run, scenario, status, t)
 
 
 def _initial_contacts(run: _Run, x: np.ndarray):
     """Closed contacts at t0: an impact if approaching, persistent contact if the force is positive."""
     fl = run.free_flow
-    z = fl.z(0.0, x)
+    t0 = run.t0
+    z = fl.z(t0, x)
     g = fl.gap_rows @ z
     scale = np.abs(fl.gap_rows) @ np.abs(z)
     gam = fl.velocity_rows @ z
-    tol_v = CONTACT_TOL * tolerance(fl.velocity_rows, z)
+    tol_v = CONTACT_TOL * run.tol(fl.velocity_rows, z, t0)
     closed = {j for j in range(run.m)
               if abs(g[j]) <= INITIAL_GAP_RTOL * max(1.0, scale[j]) and gam[j] <= tol_v[j]}
     if not closed:
@@ -581,7 +683,7 @@ def _initial_contacts(run: _Run, x: np.ndarray):
     idx = sorted(closed)
     W = run.system.W[:, idx]
     qfix[:run.n] -= run.Minv @ W @ np.linalg.solve(run.delassus(idx), g[idx])
-    x_new, stick, *_ = run.collide(0.0, qfix, (), set(idx))
+    x_new, stick, *_ = run.collide(t0, qfix, (), set(idx))
     return x_new, stick
 
 
@@ -603,16 +705,19 @@ def _liftoff(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int):
     for c in leaving:
         r = flow.gap_rows[c]
         d3 = float(r @ np.linalg.matrix_power(flow.A, 3) @ z)
-        tol = float(CONTACT_TOL * tolerance(r[None, :], z)[0])
+        tol = float(CONTACT_TOL * motion_tolerance(r[None, :], flow.A, z, run.tau, t)[0])
         if d3 > 0.0:
             cert[("g", c)] = t + (24.0 * tol / d3) ** (1.0 / 3.0)
     return x, new, cert
 
 
-def _result(run: _Run, scenario: Scenario, status: str) -> MasterEventResult:
+def _result(run: _Run, scenario: Scenario, status: str, t_stop: float) -> MasterEventResult:
     import pandas as pd
 
     n, m = run.n, run.m
+    if status != "ok":                 # a stopped run ends at its stop time: no NaN rows
+        keep = run.k_next
+        run.t_grid, run.X, run.P = run.t_grid[:keep], run.X[:keep], run.P[:keep]
     t_grid = run.t_grid
     for j, since in list(run.closed_since.items()):
         run.intervals[j].append((since, np.inf))
@@ -632,8 +737,9 @@ def _result(run: _Run, scenario: Scenario, status: str) -> MasterEventResult:
         cols[f"active{j}"] = active[:, j]
     frame = pd.DataFrame(cols)
     frame.attrs.update({"scenario": scenario.name, "integrator": "event", "h": run.h,
-                        "t_end": run.t_end, "status": status})
-    events = pd.DataFrame(run.events, columns=EVENT_COLUMNS)
+                        "t_end": run.t_end, "status": status,
+                        "t_stop": float(run.t_end if status == "ok" else t_stop)})
+    events = pd.DataFrame(run.events, columns=MASTER_EVENT_COLUMNS)
     closings = [np.array([c for c, _ in iv]) for iv in run.intervals]
     openings = [np.array([o for _, o in iv]) for iv in run.intervals]
     return MasterEventResult(scenario, run.h, run.t_end, frame, events, status, closings,

@@ -15,12 +15,20 @@ is approached monotonically from the safe side, at the rate of Newton's method.
 A double root (grazing: ψ_i touches zero with ψ_i' = 0) cannot be certified either way in
 floating point; when the minimum of ψ_i lies in a window on which ψ_i'' > 0 is certified
 (``ψ_i''(a) − B_i s > 0``), ψ_i has exactly one local minimum t_m there, found as the
-simple zero of ψ_i'. Its value decides: above the round-off tolerance of ψ_i, the whole
+simple zero of ψ_i'. Its value decides: above the touch band of ψ_i (:func:`touch_band`, the
+guaranteed crossing depth, on the scale of the motion), the whole
 convex window is certified positive; within it, a **touch** (graze) at t_m; below it, a
 **cross** before t_m, isolated by the bracket ``[a, t_m]``.
 
 Zeros are refined by safeguarded Newton steps (bisection when a step leaves the bracket)
-until the step is below :data:`TIME_RTOL`·max(1, |t|).
+until the step is below the time resolution :data:`TIME_RTOL`·max(|t|, τ).
+
+Tolerances are the motion's (issue 19): "zero" is decided against
+:func:`motion_tolerance` (evaluation floor, the motion scale S = Σ_k |ψ^(k)| τ^k/k! over the
+system's time scale τ, and |ψ'| times the time resolution), invariant under translations of
+coordinates and time and covariant with units but for the evaluation floor Σ|r z|, which
+float64 imposes. A search interval no longer than the time resolution is integrated as flow
+and not searched; zeros closer than it are taken by their time to zero and noted.
 """
 
 from __future__ import annotations
@@ -35,16 +43,25 @@ WINDOW = 0.5
 """Window length in units of ``1/‖T⁻¹AT‖``: the growth factor of z over a window is ≤ e^0.5."""
 
 ROUNDOFF = 64.0 * np.finfo(float).eps
-"""Round-off tolerance of a functional: ``ROUNDOFF · Σ_j |r_ij z_j|`` (its evaluation error)."""
+"""Relative round-off of a functional: of its evaluation ``r·z`` (``ROUNDOFF · Σ_j |r_ij z_j|``,
+the representation floor) and of the motion it describes (``ROUNDOFF · S``, :func:`motion_scale`)."""
 
 TOUCH_FACTOR = 1e3
-"""A local minimum of ψ_i within ±TOUCH_FACTOR round-off tolerances of zero is a **touch**
-(graze): round-off accumulated along a run (about 1e-13 relative after 50 s on the
-grazing scenario) must not turn an exact graze into a miss or a crossing. A minimum
-above it is a miss, below it a crossing (an impact, however shallow)."""
+"""The touch (graze) band of a local minimum of ψ_i is ``TOUCH_FACTOR · ROUNDOFF · S`` (S the
+motion scale of ψ_i at the minimum, :func:`touch_band`) plus ``FLOOR_FACTOR · ROUNDOFF ·
+Σ|r_ij z_j|``: round-off accumulated along a run (about 1e-13 of the orbit's size after 50 s
+on the grazing scenario) must not turn an exact graze into a miss or a crossing. A minimum
+above the band is a miss, below it a crossing (an impact, however shallow). The band is the
+**guaranteed crossing depth**: a crossing deeper than the band is never reported as a graze."""
+
+FLOOR_FACTOR = 16.0
+"""Multiple of the representation floor ``ROUNDOFF · Σ|r_ij z_j|`` in the touch band (it grows
+with the size of the coordinates |q|, |ν|, not with the motion: kept small)."""
 
 TIME_RTOL = 2.0 * np.finfo(float).eps
-"""Newton refinement stops when the step is below ``TIME_RTOL · max(1, |t|)``."""
+"""Time resolution ``TIME_RTOL · max(|t|, τ)`` (τ the system's time scale,
+:attr:`observer.event.flow.Flow.time_scale`): Newton refinement stops at it, and a search
+interval no longer than it is integrated as a flow, not searched (a remainder of a few ulp)."""
 
 MAX_STEPS = 200_000
 """Safe advances per search before :class:`RootIsolationError` (a stalled isolation)."""
@@ -74,6 +91,10 @@ class Zero:
     resume : float
         For a touch, a time after which ψ_i is certified to exceed its round-off again
         (ψ_i is convex in between); t for a cross.
+    band : float
+        For a touch, the touch band it was decided with (:func:`touch_band`).
+    note : str
+        Empty, or how a decision that float64 cannot take was taken (``"unresolved: …"``).
     """
 
     t: float
@@ -83,11 +104,58 @@ class Zero:
     value: float
     slope: float
     resume: float
+    band: float = 0.0
+    note: str = ""
 
 
 def tolerance(rows: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """Round-off tolerance of each functional ``rows @ z``: ROUNDOFF·Σ|r_ij z_j|."""
+    """Evaluation round-off of each functional ``rows @ z``: ROUNDOFF·Σ|r_ij z_j| (the
+    representation floor: it depends on the coordinates, see :func:`motion_tolerance`)."""
     return ROUNDOFF * (np.abs(rows) @ np.abs(z)) + np.finfo(float).tiny
+
+
+def resolution(t: float, tau: float) -> float:
+    """Time resolution at t: ``TIME_RTOL · max(|t|, τ)`` (a few ulp of t, or of τ near t = 0)."""
+    return TIME_RTOL * max(abs(float(t)), tau)
+
+
+def motion_scale(derivs, tau: float) -> np.ndarray:
+    """Motion scale ``S = Σ_k |ψ^(k)| τ^k / k!`` of functionals with derivatives
+    ``derivs = (ψ, ψ', ψ'', …)`` over the time scale τ: how much ψ changes over τ. Invariant
+    under a translation of coordinates and a shift of the time origin (ψ and its derivatives
+    are), scaled with ψ's unit by a change of units (τ scales with time)."""
+    out = np.zeros_like(np.asarray(derivs[0], dtype=float))
+    fac, tk = 1.0, 1.0
+    for k, dk in enumerate(derivs):
+        if k:
+            fac *= k
+            tk *= tau
+        out = out + np.abs(dk) * (tk / fac)
+    return out
+
+
+def motion_tolerance(rows: np.ndarray, A: np.ndarray, z: np.ndarray, tau: float, t: float
+                     ) -> np.ndarray:
+    """Zero tolerance of the functionals ``rows @ z`` of a flow with generator A at time t:
+    the representation floor ``ROUNDOFF·Σ|r z|``, the motion's round-off ``ROUNDOFF·S``
+    (:func:`motion_scale` of ψ and its first three derivatives) and what the time resolution
+    hides, ``|ψ'|·δt`` (:func:`resolution`)."""
+    rows = np.atleast_2d(rows)
+    d = [rows @ z]
+    R = rows
+    for _ in range(3):
+        R = R @ A
+        d.append(R @ z)
+    return (tolerance(rows, z) + ROUNDOFF * motion_scale(d, tau)
+            + np.abs(d[1]) * resolution(t, tau))
+
+
+def touch_band(d2, d3, floor, tau: float):
+    """Touch band at a local minimum (ψ' = 0) with ψ'' = d2, ψ''' = d3 and representation
+    floor ``floor = ROUNDOFF·Σ|r z|``: ``TOUCH_FACTOR·ROUNDOFF·(|d2|τ²/2 + |d3|τ³/6) +
+    FLOOR_FACTOR·floor``, the guaranteed crossing depth (:data:`TOUCH_FACTOR`)."""
+    return (TOUCH_FACTOR * ROUNDOFF * (np.abs(d2) * tau * tau / 2.0 + np.abs(d3) * tau ** 3 / 6.0)
+            + FLOOR_FACTOR * floor)
 
 
 def first_cubic_zero(d0: float, d1: float, d2: float, bound: float, width: float) -> float:
@@ -174,7 +242,8 @@ class FunctionalSet:
 def _refine(fs: FunctionalSet, i: int, k: int, a: float, za: np.ndarray, lo: float, hi: float,
             tau: float) -> float:
     """Zero of the k-th derivative of ψ_i on the bracket ``[lo, hi]`` (offsets from a), where
-    ``ψ_i^{(k)}(lo) ≥ 0 ≥ ψ_i^{(k)}(hi)`` or the reverse; safeguarded Newton from ``tau``."""
+    ``ψ_i^{(k)}(lo) ≥ 0 ≥ ψ_i^{(k)}(hi)`` or the reverse; safeguarded Newton from ``tau``,
+    stopped at the time resolution (:func:`resolution`)."""
     flow = fs.flow
     f_lo = fs.value(i, k, flow.expm(lo) @ za) if lo > 0 else fs.value(i, k, za)
     sign_lo = np.sign(f_lo)
@@ -194,18 +263,20 @@ def _refine(fs: FunctionalSet, i: int, k: int, a: float, za: np.ndarray, lo: flo
             new = 0.5 * (lo + hi)
             step = new - tau
         tau = new
-        if abs(step) <= TIME_RTOL * max(1.0, abs(a + tau)) or hi - lo <= TIME_RTOL * max(1.0, abs(a + tau)):
+        res = resolution(a + tau, flow.time_scale)
+        if abs(step) <= res or hi - lo <= res:
             return tau
     return tau
 
 
 def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: float, d1: float,
-                    d2: float, bound: float, width: float, tol: float):
+                    d2: float, bound: float, width: float):
     """Analyse functional i on a window where its minimum is near (d1 < 0 < d2).
 
     Returns ``None`` when convexity cannot be certified on ``[a, a + 2s_m]`` (s_m = −d1/d2,
     within ``width``), else ``("positive", certified_until)``, ``("touch", Zero)`` or
-    ``("cross", Zero)``.
+    ``("cross", Zero)``. The minimum's value m* is compared with the touch band
+    (:func:`touch_band`) of ψ_i at the minimum.
     """
     s_m = -d1 / d2
     span = 2.0 * s_m
@@ -215,7 +286,8 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
     tau_m = _refine(fs, i, 1, a, za, 0.0, span, s_m)
     z_m = flow.expm(tau_m) @ za
     m_star = fs.value(i, 0, z_m)
-    touch = TOUCH_FACTOR * tol
+    floor = ROUNDOFF * float(fs.abs_d[0][i] @ np.abs(z_m))
+    touch = float(touch_band(fs.value(i, 2, z_m), fs.value(i, 3, z_m), floor, flow.time_scale))
     if m_star > touch:
         return "positive", a + span
     t_m = a + tau_m
@@ -224,7 +296,8 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
         # ψ ≥ m* + (ψ''_min/2)(t − t_m)² with ψ''_min ≥ d2 − bound·span > 0: above 2·touch after
         curv = d2 - bound * span
         resume = t_m + np.sqrt(max(2.0 * (2.0 * touch - m_star), 0.0) / curv)
-        return "touch", Zero(t_m, i, "touch", z_m, m_star, fs.value(i, 1, z_m), float(resume))
+        return "touch", Zero(t_m, i, "touch", z_m, m_star, fs.value(i, 1, z_m), float(resume),
+                             band=touch)
     tau = _refine(fs, i, 0, a, za, 0.0, tau_m, 0.5 * tau_m) if d0 > 0.0 else 0.0
     z = _reset(flow, a + tau, flow.expm(tau) @ za)
     return "cross", Zero(a + tau, i, "cross", z, fs.value(i, 0, z), fs.value(i, 1, z), a + tau)
@@ -238,7 +311,8 @@ def _reset(flow: Flow, t: float, z: np.ndarray) -> np.ndarray:
 
 
 def _zero_now(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d: np.ndarray) -> Zero:
-    """Functional i is at zero (within round-off) at a and not leaving: a cross at a, refined."""
+    """Functional i is at zero (within its tolerance) at a and not leaving: a cross at a,
+    refined to the exact zero when ψ_i(a) > 0 is still approaching."""
     d0, d1 = d[0, i], d[1, i]
     tau = 0.0
     if d0 > 0.0 and d1 < 0.0:
@@ -252,13 +326,13 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, tols,
     """Largest step from a over which no functional is certified to vanish, and the zeros
     found exactly on the way (convex minima, zeros at a). Vectorised quick test first: a
     functional whose cubic bound stays positive on the whole window needs no more work."""
-    tol, tol1, tol2 = tols
-    d0, d1, d2 = d
+    tol, tol1, tol2, band = tols
+    d0, d1, d2 = d[0], d[1], d[2]
     step = w
     found: list[Zero] = []
     with np.errstate(divide="ignore", invalid="ignore"):
         s_min = np.where((d1 < 0.0) & (d2 > 0.0), -d1 / d2, np.inf)
-        near_touch = (s_min <= w) & (d0 - d1 * d1 / (2.0 * d2) <= 2.0 * TOUCH_FACTOR * tol)
+        near_touch = (s_min <= w) & (d0 - d1 * d1 / (2.0 * d2) <= 2.0 * band)
     quick = (d0 > tol) & ~near_touch & (
         d0 + np.minimum(d1, 0.0) * w + np.minimum(d2, 0.0) * w * w / 2 - bound * w ** 3 / 6 > 0.0)
     for i in np.flatnonzero(~quick):
@@ -270,7 +344,7 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, tols,
         leaving = d1[i] > tol1[i] or (abs(d1[i]) <= tol1[i] and d2[i] > tol2[i])
         convex = d1[i] < 0.0 < d2[i]
         if d0[i] <= tol[i] and not leaving:
-            res = _convex_minimum(fs, i, a, za, d0[i], d1[i], d2[i], bound[i], w, tol[i]) \
+            res = _convex_minimum(fs, i, a, za, d0[i], d1[i], d2[i], bound[i], w) \
                 if convex else None
             if res is None:
                 found.append(_zero_now(fs, i, a, za, d))
@@ -282,7 +356,7 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, tols,
             continue
         s = first_cubic_zero(max(d0[i], 0.0), d1[i], d2[i], bound[i], w)
         if (s < w or near_touch[i]) and convex:
-            res = _convex_minimum(fs, i, a, za, d0[i], d1[i], d2[i], bound[i], w, tol[i])
+            res = _convex_minimum(fs, i, a, za, d0[i], d1[i], d2[i], bound[i], w)
             if res is not None:
                 if res[0] != "positive":
                     found.append(res[1])
@@ -296,6 +370,10 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, tols,
 def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: float,
                certified: dict[int, float] | None = None) -> tuple[Zero | None, float, np.ndarray]:
     """First zero in ``[t0, t_end]`` of any functional ``rows[i]·z(t)`` along ``flow``.
+
+    Tolerances are the motion's (:func:`motion_tolerance`, :func:`touch_band`). A search
+    interval (or its remainder) no longer than the time resolution (:func:`resolution`) is
+    integrated as a flow, not searched: a few ulp cannot hold a decidable zero.
 
     Parameters
     ----------
@@ -316,23 +394,30 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
         state where the search stopped (the zero's, or t_end).
     """
     rows = np.atleast_2d(rows)
-    if rows.shape[0] == 0:
-        z = _reset(flow, t_end, flow.expm(t_end - t0) @ z0) if t_end > t0 else z0
+    a, za = float(t0), np.asarray(z0, dtype=float)
+    tau = flow.time_scale
+    if rows.shape[0] == 0 or t_end - a <= resolution(t_end, tau):
+        z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
         return None, t_end, z
     fs = FunctionalSet(flow, rows)
     certified = dict(certified or {})
     window = WINDOW / max(flow.norm_bound, 1e-300)
-    a, za = float(t0), np.asarray(z0, dtype=float)
     growth = np.exp(WINDOW)
     for _ in range(MAX_STEPS):
-        if a >= t_end:
-            return None, t_end, za
+        if t_end - a <= resolution(t_end, tau):          # a remainder of a few ulp: flow
+            z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
+            return None, t_end, z
         w = min(window, t_end - a)
-        d = np.array([fs.d[k] @ za for k in range(3)])
+        d = np.array([fs.d[k] @ za for k in range(4)])
         az = np.abs(za)
-        tol, tol1, tol2 = (ROUNDOFF * (r @ az) + np.finfo(float).tiny for r in fs.abs_d)
+        floor = [ROUNDOFF * (r @ az) + np.finfo(float).tiny for r in fs.abs_d]
+        res = resolution(a, tau)
+        tol = floor[0] + ROUNDOFF * motion_scale(d, tau) + np.abs(d[1]) * res
+        tol1 = floor[1] + ROUNDOFF * motion_scale(d[1:], tau) + np.abs(d[2]) * res
+        tol2 = floor[2] + ROUNDOFF * motion_scale(d[2:], tau) + np.abs(d[3]) * res
+        band = touch_band(d[2], d[3], floor[0], tau)
         bound = fs.third_norm * growth * np.linalg.norm(za / flow.scale) * (1.0 + 1e-12)
-        step, found = _safe_step(fs, a, za, d, (tol, tol1, tol2), bound, w, certified)
+        step, found = _safe_step(fs, a, za, d, (tol, tol1, tol2, band), bound, w, certified)
         # no functional without a found zero vanishes in (a, a + step): the earliest found zero
         # within that reach is the first zero; one beyond it is recomputed later
         if found:
@@ -340,19 +425,24 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
             if first.t <= a + step:
                 return first, first.t, first.z
         step = max(step, 0.0)
-        zero = _earliest_pending(fs, a, za, step, d, tol)
-        if zero is not None:
-            return zero, zero.t, zero.z
+        if step < w and step <= res:
+            zero = _unresolved(fs, a, za, d)
+            if zero is not None:
+                return zero, zero.t, zero.z
+            step = min(res, w)                       # nothing approaches: time moves on
         a, za = a + step, _reset(flow, a + step, flow.expm(step) @ za)
     raise RootIsolationError(f"root isolation stalled near t = {a!r} ({MAX_STEPS} safe steps)")
 
 
-def _earliest_pending(fs: FunctionalSet, a: float, za: np.ndarray, step: float, d: np.ndarray,
-                      tol: np.ndarray) -> Zero | None:
-    """Guard against a step that makes no progress (step below the time resolution): the
-    functional with the smallest value is then at its zero within round-off."""
-    if step > TIME_RTOL * max(1.0, abs(a)):
+def _unresolved(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray) -> Zero | None:
+    """The safe step fell below the time resolution: some functional reaches zero within a
+    few ulp of a, where float64 cannot order the zeros. Taken consistently: the approaching
+    functional (ψ' < 0) with the smallest first-order time to zero ``ψ/|ψ'|`` (a time, the
+    same in any coordinates); None if none approaches. The zero's note says so."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ttz = np.where(d[1] < 0.0, np.maximum(d[0], 0.0) / -d[1], np.inf)
+    if not np.isfinite(ttz).any():
         return None
-    ratio = d[0] / tol
-    i = int(np.argmin(ratio))
-    return Zero(a, i, "cross", za, float(d[0, i]), float(d[1, i]), a)
+    i = int(np.argmin(ttz))
+    return Zero(a, i, "cross", za, float(d[0, i]), float(d[1, i]), a,
+                note=f"unresolved: zero within the time resolution of t = {a:.17g}")

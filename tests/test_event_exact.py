@@ -1,0 +1,264 @@
+"""Issue 19: the exact integrator in ordinary coordinates — the four failure classes, as named
+tests against closed forms and an independent 50-digit reference (mpmath).
+
+1. contacts at the coordinate origin (gap offset ν = 0);
+2. t_end a few ulp past a search-window boundary, t_end = t∞ + 1, t_end = 1e-300;
+3. the Zeno limit t∞ for gap offsets up to 100;
+4. a shallow crossing (2.7e-8 deep at 3e-4 m/s) on an orbit centred at 1000.
+"""
+
+from __future__ import annotations
+
+import mpmath as mp
+import numpy as np
+import pytest
+
+import observer
+from observer.event.flow import Flow
+from observer.event.master import run_master
+from observer.scenario import Scenario
+
+G0 = 9.81
+mp.mp.dps = 50
+
+
+def scenario(M, K, W, f, nu, q0, u0, e, t_end, h=1e-2) -> Scenario:
+    n = len(M)
+    doc = {"scenario": {"name": "issue19"},
+           "system": {"M": M, "C": np.zeros((n, n)).tolist(), "K": K, "W": W,
+                      "forcing": {"constant": f}, "gap": {"offset": nu}},
+           "impact": {"law": "newton", "restitution": e},
+           "initial": {"q": q0, "u": u0},
+           "simulation": {"t_end": t_end, "h": h}}
+    return Scenario.from_dict(doc)
+
+
+def ball(height: float, nu: float = 0.0, e: float = 0.5, t_end: float = 1.0, h: float = 1e-2):
+    """A ball (W = 1) at gap ``height`` over a ground at offset ν: q0 = height − ν."""
+    return scenario([[1.0]], [[0.0]], [[1.0]], [-G0], [nu], [height - nu], [0.0], e, t_end, h)
+
+
+def no_nan(res) -> bool:
+    return not res.frame.drop(columns=[c for c in res.frame if c.startswith("active")]).isna().to_numpy().any()
+
+
+def ball_impacts(height, e, count):
+    """Impact times and speeds of a ball dropped from ``height`` (50 digits)."""
+    g = mp.mpf(G0)
+    v = mp.sqrt(2 * g * mp.mpf(height))
+    t = mp.sqrt(2 * mp.mpf(height) / g)
+    out = []
+    for _ in range(count):
+        out.append((t, v))
+        v = mp.mpf(e) * v
+        t = t + 2 * v / g
+    return out
+
+
+def ball_t_inf(height, e):
+    g = mp.mpf(G0)
+    v1 = mp.sqrt(2 * g * mp.mpf(height))
+    return mp.sqrt(2 * mp.mpf(height) / g) + 2 * v1 * mp.mpf(e) / (g * (1 - mp.mpf(e)))
+
+
+# -- class 1: contacts at ν = 0 -----------------------------------------------------------------
+
+def test_two_contacts_at_nu_zero_with_impacts_1e8_apart_both_bounce():
+    """Two independent balls on grounds at ν = 0, the second's impact 1e-8 s after the first:
+    each bounces at its own closed-form times with γ⁺ = −eγ⁻; no graze, no stop, no NaN."""
+    e = 0.5
+    t1 = mp.sqrt(2 / mp.mpf(G0))
+    h2 = float(mp.mpf(G0) * (t1 + mp.mpf("1e-8")) ** 2 / 2)
+    sc = scenario([[1.0, 0.0], [0.0, 1.0]], [[0.0, 0.0], [0.0, 0.0]], [[1.0, 0.0], [0.0, 1.0]],
+                  [-G0, -G0], [0.0, 0.0], [1.0, h2], [0.0, 0.0], e, 1.2)
+    res = run_master(sc)
+    assert res.status == "ok" and no_nan(res)
+    ev = res.events
+    assert set(ev["kind"]) == {"impact"}
+    for j, height in ((0, 1.0), (1, h2)):
+        mine = ev[ev["contact"] == j]
+        exact = ball_impacts(height, e, len(mine))
+        assert len(mine) == 3
+        for (_, row), (t, v) in zip(mine.iterrows(), exact):
+            assert abs(row["time"] - float(t)) <= 1e-12
+            assert abs(row["gamma_minus"] + float(v)) <= 1e-11
+            assert row["gamma_plus"] == pytest.approx(-e * row["gamma_minus"], rel=1e-12)
+    first = ev.groupby("contact")["time"].min()
+    assert 0.9e-8 <= first[1] - first[0] <= 1.1e-8
+
+
+def test_a_flat_body_at_nu_zero_lands_on_both_corners_at_once():
+    """A bar (y, φ) with corners y ∓ Lφ, dropped flat onto grounds at ν = 0: both corners
+    impact at the ball's closed-form times with the same γ⁺ = −eγ⁻; φ stays 0."""
+    e, L = 0.5, 0.5
+    sc = scenario([[1.0, 0.0], [0.0, 0.1]], [[0.0, 0.0], [0.0, 0.0]], [[1.0, 1.0], [-L, L]],
+                  [-G0, 0.0], [0.0, 0.0], [1.0, 0.0], [0.0, 0.0], e, 1.2)
+    res = run_master(sc)
+    assert res.status == "ok" and no_nan(res)
+    ev = res.events
+    assert set(ev["kind"]) == {"impact"}
+    exact = ball_impacts(1.0, e, 3)
+    for j in (0, 1):
+        mine = ev[ev["contact"] == j]
+        assert len(mine) == 3
+        assert np.max(np.abs(mine["time"].to_numpy() - [float(t) for t, _ in exact])) <= 1e-12
+        assert np.max(np.abs(mine["gamma_plus"].to_numpy() - [e * float(v) for _, v in exact])) <= 1e-11
+    assert np.max(np.abs(res.frame["q1"])) <= 1e-14
+
+
+def test_the_impact_oscillator_at_the_wall_x0_lifts_off_when_its_contact_force_vanishes():
+    """The built-in impact_oscillator (wall at x = 0, ν = 0) with e = 0.5, ω = 0.3: the impacts
+    accumulate, the mass sticks to the wall with λ = cos ωt (ẍ = −x + cos ωt − λ at x = 0)
+    and lifts off when λ crosses zero, at t = π/(2ω) (50 digits), to 1e-12."""
+    sc = observer.load_scenario("impact_oscillator", {"impact.restitution": 0.5,
+                                                      "system.forcing.omega": 0.3,
+                                                      "simulation.t_end": 6.0})
+    res = run_master(sc)
+    assert res.status == "ok" and no_nan(res)
+    ev = res.events
+    lift = ev[ev["kind"] == "liftoff"]
+    stick = ev[ev["kind"] == "stick"]
+    assert len(lift) == 1 and len(stick) == 1
+    assert stick["time"].iloc[0] < lift["time"].iloc[0]
+    assert abs(lift["time"].iloc[0] - float(mp.pi / (2 * mp.mpf("0.3")))) <= 1e-12
+    # the same physics with the wall moved to 0.3 runs too (the offset is no special case)
+    moved = observer.load_scenario("impact_oscillator", {"impact.restitution": 0.5,
+                                                         "system.forcing.omega": 0.3,
+                                                         "system.gap.offset": [0.3],
+                                                         "initial.q": [-0.2],
+                                                         "simulation.t_end": 6.0})
+    assert run_master(moved).status == "ok"
+
+
+def test_two_dof_singular_stiffness_at_nu_zero_first_impact_against_mpmath():
+    """Two unit masses joined by a unit spring (K singular), falling; contact on mass 0 at
+    ν = 0: q0(t) = 1.25 − g t²/2 − 0.25 cos(√2 t) until the first impact (mpmath root)."""
+    e = 0.5
+    sc = scenario([[1.0, 0.0], [0.0, 1.0]], [[1.0, -1.0], [-1.0, 1.0]], [[1.0], [0.0]],
+                  [-G0, -G0], [0.0], [1.0, 1.5], [0.0, 0.0], e, 3.0)
+    res = run_master(sc)
+    assert res.status == "ok" and no_nan(res)
+    q = lambda t: mp.mpf("1.25") - mp.mpf(G0) * t ** 2 / 2 - mp.cos(mp.sqrt(2) * t) / 4  # noqa: E731
+    t1 = mp.findroot(q, mp.mpf("0.45"))
+    v1 = -mp.diff(q, t1)
+    first = res.events.iloc[0]
+    assert first["kind"] == "impact" and abs(first["time"] - float(t1)) <= 1e-12
+    assert abs(-first["gamma_minus"] - float(v1)) <= 1e-11
+    assert len(res.events) >= 5
+
+
+# -- class 2: ends of runs and of windows --------------------------------------------------------
+
+def window_of(sc) -> float:
+    from observer.event.roots import WINDOW
+    return WINDOW / Flow(sc.system).norm_bound
+
+
+@pytest.mark.parametrize("ulps", [-3, -1, 0, 1, 2, 5])
+@pytest.mark.parametrize("where", ["one", "window", "two_windows"])
+def test_free_flight_has_no_event_for_t_end_ulps_from_a_boundary(where, ulps):
+    """A ball 10 m up flies freely for 1.4 s: for t_end a few ulp from 1.0 or from the first
+    (second) search-window boundary, no event, status ok, no NaN, and the last row is the
+    parabola (closed form)."""
+    base = ball(10.0, t_end=1.0, h=0.25)
+    t_b = {"one": 1.0, "window": window_of(base), "two_windows": 2.0 * window_of(base)}[where]
+    t_end = t_b
+    for _ in range(abs(ulps)):
+        t_end = np.nextafter(t_end, np.inf if ulps > 0 else -np.inf)
+    res = run_master(base, t_end=t_end)
+    assert res.status == "ok" and res.events.empty and no_nan(res)
+    t = res.frame["t"].to_numpy()
+    assert np.allclose(res.frame["q0"], 10.0 - G0 * t ** 2 / 2, rtol=0, atol=1e-13)
+
+
+def test_t_end_1e300_is_one_row_in_free_flight():
+    res = run_master(ball(10.0), t_end=1e-300)
+    assert res.status == "ok" and res.events.empty and no_nan(res)
+    assert res.frame["q0"].iloc[-1] == 10.0
+
+
+@pytest.mark.parametrize("offset", [1.0, 0.25])
+def test_a_ball_at_rest_after_zeno_has_no_false_liftoff_at_t_end(offset):
+    """t_end = t∞ + offset: the ball lands (accumulation) and rests; no lift-off, no stop."""
+    e = 0.5
+    t_inf = float(ball_t_inf(1.0, e))
+    res = run_master(ball(1.0, e=e, t_end=t_inf + offset))
+    assert res.status == "ok" and no_nan(res)
+    kinds = res.events["kind"].tolist()
+    assert "liftoff" not in kinds and kinds[-2:] == ["accumulation", "stick"]
+    assert abs(res.frame["q0"].iloc[-1]) <= 1e-15 and abs(res.frame["u0"].iloc[-1]) <= 1e-15
+
+
+@pytest.mark.parametrize("ulps", [-2, 0, 2])
+def test_t_end_at_ulps_from_an_impact_time_adds_no_event(ulps):
+    """t_end a few ulp around the second impact: the events are a prefix of the long run's."""
+    full = run_master(ball(1.0, t_end=1.2))
+    t2 = full.events["time"].iloc[1]
+    t_end = t2
+    for _ in range(abs(ulps)):
+        t_end = np.nextafter(t_end, np.inf if ulps > 0 else -np.inf)
+    res = run_master(ball(1.0, t_end=1.2), t_end=t_end)
+    assert res.status == "ok" and no_nan(res)
+    k = len(res.events)
+    assert k in (1, 2)
+    assert np.array_equal(res.events["kind"].to_numpy(), full.events["kind"].to_numpy()[:k])
+    assert np.max(np.abs(res.events["time"].to_numpy() - full.events["time"].to_numpy()[:k])) <= 1e-15
+
+
+# -- class 3: the Zeno limit -------------------------------------------------------------------
+
+@pytest.mark.parametrize("nu", [0.0, 1.0, 100.0, -100.0])
+def test_zeno_limit_to_1e9_for_any_gap_offset(nu):
+    """Ball dropped from gap 1 m over a ground at offset ν: t∞ (50-digit closed form,
+    THEORY §7.1) to 1e-9 whatever ν is."""
+    e = 0.5
+    res = run_master(ball(1.0, nu=nu, e=e, t_end=2.0))
+    assert res.status == "ok" and len(res.zeno) == 1
+    assert abs(res.zeno[0]["t_inf"] - float(ball_t_inf(1.0, e))) <= 1e-9
+
+
+# -- class 4: shallow crossings --------------------------------------------------------------------
+
+def centred_orbit(centre: float, depth: float, e: float = 0.8) -> Scenario:
+    """ẍ = −(x − centre) from x = centre − A at rest (A = 5/3), a wall at centre + A − depth:
+    the orbit crosses the wall ``depth`` deep at speed √(A² − (A − depth)²) = 3e-4 m/s."""
+    A = 0.09e-6 / (2 * 2.7e-8)
+    return scenario([[1.0]], [[1.0]], [[-1.0]], [centre], [centre + A - depth], [centre - A],
+                    [0.0], e, 7.0, h=0.05)
+
+
+@pytest.mark.parametrize("centre", [0.0, 1000.0])
+def test_a_crossing_27nm_deep_at_3e4_gets_its_impulse_wherever_the_orbit_is(centre):
+    A = mp.mpf("0.09e-6") / (2 * mp.mpf("2.7e-8"))
+    depth = mp.mpf("2.7e-8")
+    v = mp.sqrt(A ** 2 - (A - depth) ** 2)          # speed at the wall (energy)
+    t_hit = mp.pi - mp.acos((A - depth) / A)         # x − centre = −A cos t = A − depth
+    res = run_master(centred_orbit(centre, 2.7e-8))
+    ev = res.events
+    assert res.status == "ok" and len(ev) >= 1
+    first = ev.iloc[0]
+    assert first["kind"] == "impact"
+    # the gap near x = 1000 is known to δg ≈ 16 eps·(|x| + |ν|): the crossing time to δg/v,
+    # the crossing speed to |ẍ|δg/v (|ẍ| = A): representation, not the integrator
+    dg = 16 * np.finfo(float).eps * (1.0 + 2.0 * centre)
+    assert abs(first["gamma_minus"] + float(v)) <= 1e-12 + float(A) * dg / float(v)
+    assert first["gamma_plus"] == pytest.approx(-0.8 * first["gamma_minus"], rel=1e-9)
+    assert abs(first["time"] - float(t_hit)) <= 1e-12 + dg / float(v)
+    assert abs(first["impulse"] - 1.8 * float(v)) <= 1e-12 + 1.8 * float(A) * dg / float(v)
+
+
+@pytest.mark.parametrize("centre", [0.0, 1000.0])
+def test_a_near_miss_27nm_below_the_wall_is_no_event(centre):
+    """The same orbit with the wall 2.7e-8 above its top: no contact at all."""
+    res = run_master(centred_orbit(centre, -2.7e-8))
+    assert res.status == "ok" and res.events.empty
+
+
+def test_a_graze_row_states_its_depth_within_the_touch_band():
+    """The grazing scenario (clearance 0): every row is a graze whose depth is within its
+    stated band, and the band is far below the 2.7e-8 crossing above."""
+    res = run_master(observer.load_scenario("grazing"), h=1e-2, t_end=20.0)
+    ev = res.events
+    assert len(ev) >= 2 and set(ev["kind"]) == {"graze"}
+    band = ev["note"].str.extract(r"±([0-9.e+-]+)")[0].astype(float)
+    assert np.all(np.abs(ev["depth"]) <= band) and np.all(band < 1e-10)
