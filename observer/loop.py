@@ -771,15 +771,20 @@ def wave_table(t0: float, h: float, k0: int, k1: int, omega: np.ndarray, phase: 
 
 
 def quadratic_forms(stepper: MoreauJean) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """M, K and the symmetric part of C in the kernel's structure (dense or lower band)."""
+    """M, K and the symmetric part of C in the kernel's structure (dense or lower band).
+
+    Always fresh writable C-contiguous copies: numba types a read-only array differently, so
+    passing the scenario's (sometimes read-only) matrices as they are compiled a second
+    specialization of the kernel in the middle of a timed run (12–17 s, seen in the bench's
+    observer cases)."""
     from observer.stepping import to_band
 
     sys_ = stepper.system
     C = 0.5 * (sys_.C + sys_.C.T)
     if stepper.S.band is None:
-        return tuple(np.ascontiguousarray(A) for A in (sys_.M, sys_.K, C))
+        return tuple(np.array(A, dtype=np.float64, order="C", copy=True) for A in (sys_.M, sys_.K, C))
     bw = stepper.S.band.bw
-    return tuple(np.ascontiguousarray(to_band(A, bw)) for A in (sys_.M, sys_.K, C))
+    return tuple(np.array(to_band(A, bw), dtype=np.float64, order="C", copy=True) for A in (sys_.M, sys_.K, C))
 
 
 def coupling_samples(inp: LoopInput) -> tuple[int, int]:

@@ -334,3 +334,20 @@ def test_loop_times_are_the_grid(name, S):
     assert loop.run(inp, engine="compiled", record_every=3).t is None
     res = observer.simulate(sc, t_end=steps * sc.h, observers=[])
     assert np.array_equal(res.t, np.arange(steps + 1) * sc.h)
+
+
+def test_one_kernel_specialization_with_and_without_summary():
+    """The kernel's arguments have one numba type on every path: the summary's quadratic forms
+    were the scenario's read-only M and K, the other runs passed writable placeholders, so a
+    summary run after a plain one (or the reverse) compiled a second specialization inside a
+    timed run (12–17 s, seen in the bench's observer cases)."""
+    from observer import kernel
+    from observer.observers import OBSERVER_DESIGNS
+
+    sc = observer.load_scenario("double_mass", {"simulation.t_end": 0.01})
+    observer.simulate(sc)
+    before = {f: len(getattr(kernel, f).signatures) for f in ("advance", "_summary_step")}
+    observer.simulate(sc, store="summary")
+    observer.simulate(sc, observers=tuple(OBSERVER_DESIGNS), store="summary")
+    observer.simulate(sc, observers=tuple(OBSERVER_DESIGNS))
+    assert {f: len(getattr(kernel, f).signatures) for f in before} == before
