@@ -289,7 +289,7 @@ def _simulate_event(sc: Scenario, observers, source, coupling, log, engine, reco
     if isinstance(observers, str):
         observers = scenario_observers(sc) if observers == "scenario" else [observers]
     observers = list(observers)
-    master = run_master(sc)
+    master = run_master(sc)                 # overflow is a stop (status), silenced inside
     df = master.frame
     n, m = system.n, system.m
     t = df["t"].to_numpy(float)
@@ -301,7 +301,10 @@ def _simulate_event(sc: Scenario, observers, source, coupling, log, engine, reco
             "events": int(len(master.events)), "zeno": master.zeno,
             "versions": package_versions()}
     slaves, chi = {}, None
-    status = RunStatus() if master.status == "ok" else RunStatus("stopped", f"master: {master.status}")
+    status = (RunStatus() if master.status == "ok"
+              else RunStatus("stopped", master.status.removeprefix("stopped: "))
+              if master.status.startswith("stopped: non-finite")      # names the master's quantity
+              else RunStatus("stopped", f"master: {master.status}"))
     if observers:
         base_dir = str(Path(sc.source).parent) if sc.source.endswith(".toml") else None
         cfg = ObserverConfig.from_table(sc.observer, n, sc.q0, sc.u0, base_dir)
@@ -310,8 +313,9 @@ def _simulate_event(sc: Scenario, observers, source, coupling, log, engine, reco
             check_finite_energy("observer", system, s.q0, s.u0)
         source = source or cfg.source
         intervals = _event_intervals(sc, master, source, log or cfg.log)
-        obs = run_observers(master, sc, specs, intervals=intervals,
-                            coupling=cfg.coupling if coupling == "scenario" else coupling)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # overflow: stopped below
+            obs = run_observers(master, sc, specs, intervals=intervals,
+                                coupling=cfg.coupling if coupling == "scenario" else coupling)
         chi = obs.chi
         for name, r in obs.runs.items():
             slaves[name] = SlaveTrajectory(name, r.q, r.u, r.P, r.V, None, None, None, r.sigma)
@@ -319,9 +323,42 @@ def _simulate_event(sc: Scenario, observers, source, coupling, log, engine, reco
                     observer_events={name: int(len(r.events)) for name, r in obs.runs.items()})
         if obs.status != "ok" and status.ok:
             status = RunStatus("stopped", f"observer {obs.status}")
+    keep, bad = _event_finite_rows(t, q, u, P, slaves)
+    if bad is not None:                     # an observer's state or V overflowed: a stop, no row
+        t, q, u, P, active = t[:keep], q[:keep], u[:keep], P[:keep], active[:keep]
+        chi = chi[:keep] if chi is not None else None
+        slaves = {name: SlaveTrajectory(name, r.q[:keep], r.u[:keep], r.P[:keep], r.V[:keep], None, None,
+                                        None, r.sigma[:keep]) for name, r in slaves.items()}
+        status = RunStatus("stopped", f"non-finite {bad}; the output ends at t = {t[-1]:.9g}, "
+                                      "the last finite state")
+    if not status.ok:                       # where and why, as a stopped time-stepped run says it
+        meta["steps"] = int(t.size - 1)
+        meta["stopped"] = {"step": int(t.size - 1), "t": float(t[-1]) if t.size else None,
+                           "reason": status.reason, "signal": None}
     return SimulationResult(t, q, u, P, active, system, meta, chi=chi, slaves=slaves,
                             sigma=np.zeros_like(P), events=master.events[list(EVENT_COLUMNS)],
                             status=status)
+
+
+def _event_finite_rows(t, q, u, P, slaves: dict) -> tuple[int, str | None]:
+    """Rows of an event-driven result before the first one holding a non-finite value (the
+    master's rows are finite already, :func:`observer.event.master.run_master`; an
+    observer's q, u, P or V may overflow later), and that quantity with its time (None:
+    every row finite). One vectorised test in the usual case."""
+    blocks = [(f"{p} of the master", a) for p, a in (("q", q), ("u", u), ("P", P))]
+    for name, r in slaves.items():
+        blocks += [(f"{p} of observer {name!r}", a) for p, a in (("q", r.q), ("u", r.u), ("P", r.P))]
+        blocks.append((f"V of observer {name!r}", np.asarray(r.V)[:, None]))
+    if all(np.isfinite(a).all() for _, a in blocks):
+        return t.size, None
+    first, what = t.size, None
+    for name, a in blocks:
+        rows = np.flatnonzero(~np.isfinite(a).all(axis=1))
+        if rows.size and rows[0] < first:
+            col = int(np.flatnonzero(~np.isfinite(a[rows[0]]))[0])
+            label = name if name.startswith("V ") else f"{name[0]}{col}{name[1:]}"
+            first, what = int(rows[0]), f"{label} ({a[rows[0], col]}) at t = {t[rows[0]]:.9g}"
+    return first, what
 
 
 def _event_intervals(sc: Scenario, master, source: str, log) -> list[np.ndarray] | None:

@@ -54,7 +54,7 @@ import numpy as np
 
 from observer.contact import get_solver
 from observer.event.flow import Flow, flow_for
-from observer.event.roots import RootIsolationError, first_zero, motion_tolerance, tolerance
+from observer.event.roots import NonFiniteFlow, RootIsolationError, first_zero, motion_tolerance, tolerance
 from observer.impact import ImpactLaw, impact
 from observer.scenario import Scenario
 
@@ -581,8 +581,19 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
         a shift of the time origin.
 
     A run that stops (event cap, stalled isolation, no progress) returns the frame up to its
-    stop time, never NaN rows, with the reason in ``status``.
+    stop time, never NaN rows, with the reason in ``status``. So does a state that leaves the
+    floating-point range (issue 20): the root isolation checks the state and the derivatives
+    it uses at every safe step (:class:`~observer.event.roots.NonFiniteFlow`), the frame's rows
+    are checked once more when it is built, and the run stops with ``"stopped: non-finite
+    QUANTITY of the master (VALUE) at t = …; the output ends at t = …, the last finite
+    state"``; overflow inside the engine is silenced (``np.errstate``), the stop says it.
     """
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        return _run_master(scenario, h, t_end, max_events, zeno_velocity_ratio, t0)
+
+
+def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_ratio: float,
+                t0: float) -> MasterEventResult:
     h = float(scenario.h if h is None else h)
     t_end = float(scenario.t_end if t_end is None else t_end)
     t0 = float(t0)
@@ -604,6 +615,12 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
         cert = {i: certified[k] for i, k in enumerate(keys) if k in certified}
         try:
             zero, t_stop, _ = first_zero(flow, rows, t, flow.z(t, x), t_end, cert)
+        except NonFiniteFlow as exc:                  # overflow: a stop at the last finite state
+            if np.all(np.isfinite(exc.z_ok)):
+                run.fill(flow, t, x, exc.t_ok, include_end=True)
+            status = f"stopped: non-finite {_flow_quantity(run, keys, exc)} at t = {exc.t:.9g}"
+            t = exc.t
+            break
         except RootIsolationError as exc:
             status = f"stopped: {exc}"
             break
@@ -711,6 +728,41 @@ def _liftoff(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int):
     return x, new, cert
 
 
+def _flow_quantity(run: _Run, keys: list, exc: NonFiniteFlow) -> str:
+    """The non-finite quantity of a :class:`NonFiniteFlow`, named: ``u1 of the master (inf)``,
+    ``derivative 2 of the master's gap g0 (inf)``, ``bound on derivative 3 of the master's
+    gap g0 over the search window (inf)``."""
+    n = run.n
+    if exc.what[0] == "state":
+        i = exc.what[1]
+        name = f"q{i}" if i < n else (f"u{i - n}" if i < 2 * n else f"exogenous state z{i}")
+        return f"{name} of the master ({exc.value})"
+    k, i = exc.what[1], exc.what[2]
+    kind, j = keys[i]
+    base = f"gap g{j}" if kind == "g" else f"contact force λ{j}"
+    if exc.what[0] == "bound":
+        return f"bound on derivative 3 of the master's {base} over the search window ({exc.value})"
+    if k == 0:
+        return f"{base} of the master ({exc.value})"
+    return f"derivative {k} of the master's {base} ({exc.value})"
+
+
+def _finite_rows(run: _Run, G: np.ndarray) -> tuple[int, str | None]:
+    """Rows of the frame before the first one with a non-finite q, u, g or P, and that
+    quantity named (None: every row finite). Cheap: one vectorised test in the usual case."""
+    n = run.n
+    blocks = (("q", run.X[:, :n]), ("u", run.X[:, n:]), ("g", G), ("P", run.P))
+    if all(np.isfinite(b).all() for _, b in blocks):
+        return run.t_grid.size, None
+    first, what = run.t_grid.size, None
+    for name, b in blocks:
+        bad = np.flatnonzero(~np.isfinite(b).all(axis=1))
+        if bad.size and bad[0] < first:
+            j = int(np.flatnonzero(~np.isfinite(b[bad[0]]))[0])
+            first, what = int(bad[0]), f"{name}{j} of the master ({b[bad[0], j]})"
+    return first, what
+
+
 def _result(run: _Run, scenario: Scenario, status: str, t_stop: float) -> MasterEventResult:
     import pandas as pd
 
@@ -718,6 +770,16 @@ def _result(run: _Run, scenario: Scenario, status: str, t_stop: float) -> Master
     if status != "ok":                 # a stopped run ends at its stop time: no NaN rows
         keep = run.k_next
         run.t_grid, run.X, run.P = run.t_grid[:keep], run.X[:keep], run.P[:keep]
+    G = run.X[:, :n] @ run.system.W + run.system.nu(run.t_grid)
+    keep, bad = _finite_rows(run, G)   # non-finite rows (overflow): the output ends before them
+    if bad is not None:
+        if status == "ok" or not status.startswith("stopped: non-finite"):
+            status = f"stopped: non-finite {bad} at t = {run.t_grid[keep]:.9g}"
+        t_stop = float(run.t_grid[keep])
+        run.t_grid, run.X, run.P, G = run.t_grid[:keep], run.X[:keep], run.P[:keep], G[:keep]
+    if status.startswith("stopped: non-finite"):
+        status += (f"; the output ends at t = {run.t_grid[-1]:.9g}, the last finite state"
+                   if run.t_grid.size else "; no finite output row")
     t_grid = run.t_grid
     for j, since in list(run.closed_since.items()):
         run.intervals[j].append((since, np.inf))
@@ -728,7 +790,6 @@ def _result(run: _Run, scenario: Scenario, status: str, t_stop: float) -> Master
             k1 = int(np.searchsorted(t_grid, o, side="left")) if np.isfinite(o) else t_grid.size - 1
             active[k0:min(k1, t_grid.size - 1) + 1, j] = 1
     Q, U = run.X[:, :n], run.X[:, n:]
-    G = Q @ run.system.W + run.system.nu(t_grid)
     cols: dict[str, np.ndarray] = {"t": t_grid}
     for name, arr, width in (("q", Q, n), ("u", U, n), ("g", G, m), ("P", run.P, m)):
         for j in range(width):
