@@ -9,7 +9,13 @@ started at q = 2 has e = cosh(√κ t), v = √κ sinh(√κ t), whose V overflo
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
+import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -119,3 +125,81 @@ def test_huge_forcing_through_the_cli_with_the_event_integrator(tmp_path, capsys
     df, meta = read_result(path)
     assert meta["status"]["state"] == "stopped" and meta["stopped"]["step"] == 0
     assert len(df) == 1 and np.all(np.isfinite(df.to_numpy(dtype=float)))
+
+
+# ---------------------------------------------------------------------------------------
+# Ctrl-C / SIGTERM during `observer run --integrator event --out`: the finished rows, whole
+# ---------------------------------------------------------------------------------------
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a running process (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
+@pytest.mark.parametrize("sig, ext, observers, t_end, cpu", [
+    (signal.SIGINT, "parquet", "none", "200", 3.5),        # in the master's run (≈ 47 s of CPU)
+    (signal.SIGTERM, "csv", "jump,nojump", "200", 2.0)])   # in the master's run: observers up to there
+def test_a_signal_during_an_event_run_leaves_a_readable_stopped_file(tmp_path, sig, ext, observers,
+                                                                     t_end, cpu):
+    """``cpu``: CPU seconds of the process when the signal is sent (imports ≈ 0.7 s, then the
+    master at ≈ 4 s of motion per CPU second here)."""
+    path = tmp_path / f"exact.{ext}"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-m", "observer", "run", "double_mass", "--set", f"param.t_end={t_end}",
+                             "--integrator", "event",
+                             "--t-end", t_end, "--observers", observers, "--out", str(path)],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while _cpu_seconds(proc.pid) < cpu:       # imports done, the run under way
+            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+            time.sleep(0.05)
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    name = signal.Signals(sig).name
+    assert proc.returncode == 128 + int(sig), err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1 and name in err
+    df, meta = read_result(path)                  # verified against its checksums
+    assert meta["status"]["state"] == "stopped" and name in meta["status"]["reason"]
+    assert meta["stopped"]["signal"] == name and len(df) == meta["stopped"]["step"] + 1
+    assert 1.0 < df["t"].iloc[-1] < float(t_end) and np.all(np.isfinite(df.to_numpy(dtype=float)))
+    # the rows are those of an uninterrupted run (recomputed over the first second)
+    ref = simulate(load_scenario("double_mass", {"param.t_end": t_end}), t_end=1.0, integrator="event",
+                   observers=[] if observers == "none" else observers.split(",")).to_frame()
+    assert list(df.columns) == list(ref.columns)
+    np.testing.assert_allclose(df.iloc[:len(ref)].to_numpy(dtype=float), ref.to_numpy(dtype=float),
+                               rtol=1e-9, atol=1e-12)
+
+
+def test_a_signal_during_the_event_observers_keeps_the_rows_every_system_reached(monkeypatch):
+    """SIGTERM while the observers run (after the whole master): the first observer stops at
+    its next switching, the second runs up to the same row, the result ends there."""
+    import threading
+
+    from observer.event import observers as event_observers
+
+    run_observers = event_observers.run_observers
+
+    def signalled_run(*args, **kwargs):           # the signal arrives 0.2 s into the observers
+        threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGTERM)).start()
+        return run_observers(*args, **kwargs)
+
+    monkeypatch.setattr(event_observers, "run_observers", signalled_run)
+    sc = load_scenario("double_mass", {"param.t_end": 5})
+    res = simulate(sc, integrator="event", observers=["jump", "nojump"], on_chunk=lambda chunk: None)
+    assert res.status.state.value == "stopped" and res.status.reason.startswith("SIGTERM at t = ")
+    assert res.metadata["stopped"]["signal"] == "SIGTERM" and res.t.size < 50001
+    assert res.metadata["master_status"] == "ok"          # the master was whole
+    _assert_finite(res)
+    monkeypatch.setattr(event_observers, "run_observers", run_observers)
+    ref = simulate(sc, t_end=float(res.t[-1]), integrator="event", observers=["jump", "nojump"])
+    assert ref.status.ok and ref.t.size == res.t.size
+    np.testing.assert_allclose(res.to_frame().to_numpy(dtype=float), ref.to_frame().to_numpy(dtype=float),
+                               rtol=1e-9, atol=1e-12)

@@ -197,6 +197,8 @@ class _Run:
         self.Minv = self.free_flow.Minv
         self.tau = self.free_flow.time_scale
         self.note, self.note_time = "", np.nan
+        self.should_stop = None        # callable → a signal name (SIGINT/SIGTERM) or None
+        self.halted: str | None = None # the signal that stopped the sampling (no row after)
 
     # -- sampling --------------------------------------------------------------------------
     def fill(self, flow: Flow, t_a: float, x_a: np.ndarray, t_b: float, include_end: bool) -> None:
@@ -204,6 +206,8 @@ class _Run:
         (t_a, x_a), and the force impulses ∫λ dt of the persistent set per sample interval."""
         if t_b > t_a or include_end:
             self.segments.append((float(t_a), float(t_b), flow.active, np.array(x_a, dtype=float)))
+        if self.halted:
+            return
         tg, k = self.t_grid, self.k_next
         forced = list(flow.active)
         end = int(np.searchsorted(tg, t_b, side="right" if include_end else "left"))
@@ -212,6 +216,9 @@ class _Run:
             z_cur = self._sample(flow, k, tg[k] - t_a, z_cur, forced)
             t_cur, k = tg[k], k + 1
         while k < end:                                # the rest: blocks of equal steps h
+            if self.should_stop is not None and (sig := self.should_stop()):
+                self.halted, self.k_next = sig, k     # a signal: the rows so far are whole
+                return
             count = min(end - k, SAMPLE_BLOCK)
             stack = flow.power_stack(self.h, count)
             Z = stack @ z_cur                         # (count, N)
@@ -561,7 +568,8 @@ def _oscillator_block(flow: Flow, t: np.ndarray) -> np.ndarray:
 
 def run_master(scenario: Scenario, h: float | None = None, t_end: float | None = None,
                max_events: int = 100_000,
-               zeno_velocity_ratio: float = ZENO_VELOCITY_RATIO, t0: float = 0.0) -> MasterEventResult:
+               zeno_velocity_ratio: float = ZENO_VELOCITY_RATIO, t0: float = 0.0,
+               should_stop=None) -> MasterEventResult:
     """Exact event-driven run of the master of ``scenario`` (see module docstring).
 
     Parameters
@@ -579,6 +587,10 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
     t0 : float
         Initial time (the scenario's initial state is taken at t0; the grid is t0 + k·h):
         a shift of the time origin.
+    should_stop : callable, optional
+        Called between events and between blocks of samples; a signal name (``"SIGINT"``)
+        stops the run there (status ``"stopped: SIGINT at t = …"``, the frame up to the last
+        sample computed): a streamed run interrupted keeps its finished rows.
 
     A run that stops (event cap, stalled isolation, no progress) returns the frame up to its
     stop time, never NaN rows, with the reason in ``status``. So does a state that leaves the
@@ -589,17 +601,18 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
     state"``; overflow inside the engine is silenced (``np.errstate``), the stop says it.
     """
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        return _run_master(scenario, h, t_end, max_events, zeno_velocity_ratio, t0)
+        return _run_master(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, should_stop)
 
 
 def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_ratio: float,
-                t0: float) -> MasterEventResult:
+                t0: float, should_stop) -> MasterEventResult:
     h = float(scenario.h if h is None else h)
     t_end = float(scenario.t_end if t_end is None else t_end)
     t0 = float(t0)
     if not (np.isfinite(t0) and np.isfinite(t_end) and t_end >= t0):
         raise ValueError(f"t_end = {t_end!r} must be finite and ≥ t0 = {t0!r}")
     run = _Run(scenario, h, t_end, max_events, zeno_velocity_ratio, t0)
+    run.should_stop = should_stop
     status = "ok"
     t = t0
     x = np.concatenate([scenario.q0, scenario.u0]).astype(float)
@@ -608,6 +621,10 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
     n_events, same_time, t_last_event = 0, 0, -np.inf
     n_impacts = 0                                      # impacts since the last landing
     while True:
+        sig = run.halted or (should_stop() if should_stop is not None else None)
+        if sig:                                        # SIGINT/SIGTERM of a streamed run
+            status = f"stopped: {sig} at t = {t:.9g}"
+            break
         flow = flow_for(run.system, persistent)
         free = [j for j in range(run.m) if j not in persistent]
         rows = np.vstack([flow.gap_rows[free], flow.force_rows])
@@ -678,6 +695,9 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
             run.history.clear()
             n_impacts = 0
         persistent = new_persistent
+    if run.halted and not status.startswith("stopped: non-finite"):
+        t = float(run.t_grid[run.k_next - 1]) if run.k_next else t0
+        status = f"stopped: {run.halted} at t = {t:.9g}"
     if status == "ok" and run.k_next < run.t_grid.size:
         status = "stopped: sampling incomplete"
     return _result(run, scenario, status, t)
