@@ -96,7 +96,9 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         Time-stepping: called with each :class:`observer.loop.Chunk` of finished rows as the
         loop produces them (e.g. an :class:`observer.stream.ChunkWriter`); while it is set,
         SIGINT/SIGTERM stop the run after the current window and the result's status says
-        where (``metadata["stopped"]``). Ignored by ``integrator="event"``.
+        where (``metadata["stopped"]``). ``integrator="event"`` passes no chunk (its rows are
+        written whole at the end, :meth:`~observer.stream.ChunkWriter.finish`), but with
+        ``on_chunk`` set a signal stops it likewise, with the rows finished up to there.
     integrator : {"time-stepping", "event"}
         ``"event"``: the exact event-driven integrator (:mod:`observer.event`): exact flow
         between events, impact times to round-off, Zeno resolved into persistent contact; the
@@ -124,7 +126,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     if overrides:
         sc = sc.with_overrides(overrides)
     if integrator == "event":
-        return _simulate_event(sc, observers, source, coupling, log, engine, record_every, store)
+        return _simulate_event(sc, observers, source, coupling, log, engine, record_every, store,
+                               on_chunk)
     check_engine(engine)
     engine_note = None
     if engine == "compiled" and sc.solver != "pivoting":
@@ -272,8 +275,22 @@ def stepping_events(t, q, u, P, active, system) -> pd.DataFrame:
 
 
 def _simulate_event(sc: Scenario, observers, source, coupling, log, engine, record_every,
-                    store) -> SimulationResult:
-    """:func:`simulate` with ``integrator="event"`` (see there)."""
+                    store, on_chunk=None) -> SimulationResult:
+    """:func:`simulate` with ``integrator="event"`` (see there).
+
+    With ``on_chunk`` (a streamed run: ``observer run --out``) SIGINT and SIGTERM stop the
+    master between events or blocks of samples, and the observers between switchings; the
+    result ends at the last row every system reached, with the status and ``metadata["stopped"]``
+    naming the signal, and is written whole by the caller (:meth:`ChunkWriter.finish`)."""
+    from observer.loop import _Stopper
+
+    with _Stopper(on_chunk is not None) as stopper:
+        return _event_run(sc, observers, source, coupling, log, engine, record_every, store,
+                          lambda: stopper.signal)
+
+
+def _event_run(sc: Scenario, observers, source, coupling, log, engine, record_every, store,
+               signalled) -> SimulationResult:
     from observer.event.master import run_master
     from observer.event.observers import run_observers
 
@@ -289,7 +306,8 @@ def _simulate_event(sc: Scenario, observers, source, coupling, log, engine, reco
     if isinstance(observers, str):
         observers = scenario_observers(sc) if observers == "scenario" else [observers]
     observers = list(observers)
-    master = run_master(sc)
+    master = run_master(sc, should_stop=signalled)   # overflow is a stop (status), silenced inside
+    master_signal = signalled()
     df = master.frame
     n, m = system.n, system.m
     t = df["t"].to_numpy(float)
@@ -301,7 +319,11 @@ def _simulate_event(sc: Scenario, observers, source, coupling, log, engine, reco
             "events": int(len(master.events)), "zeno": master.zeno,
             "versions": package_versions()}
     slaves, chi = {}, None
-    status = RunStatus() if master.status == "ok" else RunStatus("stopped", f"master: {master.status}")
+    observers_whole = True                  # every observer reached the master's last row
+    status = (RunStatus() if master.status == "ok"
+              else RunStatus("stopped", master.status.removeprefix("stopped: "))
+              if master.status.startswith("stopped: non-finite")      # names the master's quantity
+              else RunStatus("stopped", f"master: {master.status}"))
     if observers:
         base_dir = str(Path(sc.source).parent) if sc.source.endswith(".toml") else None
         cfg = ObserverConfig.from_table(sc.observer, n, sc.q0, sc.u0, base_dir)
@@ -310,18 +332,64 @@ def _simulate_event(sc: Scenario, observers, source, coupling, log, engine, reco
             check_finite_energy("observer", system, s.q0, s.u0)
         source = source or cfg.source
         intervals = _event_intervals(sc, master, source, log or cfg.log)
-        obs = run_observers(master, sc, specs, intervals=intervals,
-                            coupling=cfg.coupling if coupling == "scenario" else coupling)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # overflow: stopped below
+            obs = run_observers(master, sc, specs, intervals=intervals,
+                                coupling=cfg.coupling if coupling == "scenario" else coupling,
+                                should_stop=None if master_signal else signalled)
         chi = obs.chi
         for name, r in obs.runs.items():
             slaves[name] = SlaveTrajectory(name, r.q, r.u, r.P, r.V, None, None, None, r.sigma)
         meta.update(observers=list(obs.runs), source=source,
                     observer_events={name: int(len(r.events)) for name, r in obs.runs.items()})
+        observers_whole = all(r.status == "ok" for r in obs.runs.values())
         if obs.status != "ok" and status.ok:
             status = RunStatus("stopped", f"observer {obs.status}")
+    sig = signalled()
+    keep, bad = _event_finite_rows(t, q, u, P, slaves)
+    if bad is not None:                     # rows an observer did not reach or where it overflowed
+        t, q, u, P, active = t[:keep], q[:keep], u[:keep], P[:keep], active[:keep]
+        chi = chi[:keep] if chi is not None else None
+        slaves = {name: SlaveTrajectory(name, r.q[:keep], r.u[:keep], r.P[:keep], r.V[:keep], None, None,
+                                        None, r.sigma[:keep]) for name, r in slaves.items()}
+        if not sig and observers_whole:     # an observer's state or V overflowed first: a stop, no row
+            status = RunStatus("stopped", f"non-finite {bad}; the output ends at t = {t[-1]:.9g}, "
+                                          "the last finite state")
+        elif not sig:                       # an observer stopped (its rows not reached are NaN)
+            status = RunStatus("stopped", f"{status.reason}; the output ends at t = {t[-1]:.9g}")
+    if sig and (status.ok or sig in status.reason):
+        status = RunStatus("stopped", f"{sig} at t = {t[-1]:.9g} (the event-driven run was "
+                                      f"interrupted; every row up to there is whole)")
+    if not status.ok:                       # where and why, as a stopped time-stepped run says it
+        meta["steps"] = int(t.size - 1)
+        meta["stopped"] = {"step": int(t.size - 1), "t": float(t[-1]) if t.size else None,
+                           "reason": status.reason, "signal": sig if sig and sig in status.reason else None}
+    events = master.events[list(EVENT_COLUMNS)]
+    if not status.ok and t.size:            # the events of the rows kept
+        events = events[events["time"] <= t[-1]].reset_index(drop=True)
+        meta["events"] = int(len(events))
     return SimulationResult(t, q, u, P, active, system, meta, chi=chi, slaves=slaves,
-                            sigma=np.zeros_like(P), events=master.events[list(EVENT_COLUMNS)],
-                            status=status)
+                            sigma=np.zeros_like(P), events=events, status=status)
+
+
+def _event_finite_rows(t, q, u, P, slaves: dict) -> tuple[int, str | None]:
+    """Rows of an event-driven result before the first one holding a non-finite value (the
+    master's rows are finite already, :func:`observer.event.master.run_master`; an
+    observer's q, u, P or V may overflow later), and that quantity with its time (None:
+    every row finite). One vectorised test in the usual case."""
+    blocks = [(f"{p} of the master", a) for p, a in (("q", q), ("u", u), ("P", P))]
+    for name, r in slaves.items():
+        blocks += [(f"{p} of observer {name!r}", a) for p, a in (("q", r.q), ("u", r.u), ("P", r.P))]
+        blocks.append((f"V of observer {name!r}", np.asarray(r.V)[:, None]))
+    if all(np.isfinite(a).all() for _, a in blocks):
+        return t.size, None
+    first, what = t.size, None
+    for name, a in blocks:
+        rows = np.flatnonzero(~np.isfinite(a).all(axis=1))
+        if rows.size and rows[0] < first:
+            col = int(np.flatnonzero(~np.isfinite(a[rows[0]]))[0])
+            label = name if name.startswith("V ") else f"{name[0]}{col}{name[1:]}"
+            first, what = int(rows[0]), f"{label} ({a[rows[0], col]}) at t = {t[rows[0]]:.9g}"
+    return first, what
 
 
 def _event_intervals(sc: Scenario, master, source: str, log) -> list[np.ndarray] | None:

@@ -54,7 +54,7 @@ import numpy as np
 
 from observer.contact import get_solver
 from observer.event.flow import Flow, flow_for
-from observer.event.roots import RootIsolationError, first_zero, motion_tolerance, tolerance
+from observer.event.roots import NonFiniteFlow, RootIsolationError, first_zero, motion_tolerance, tolerance
 from observer.impact import ImpactLaw, impact
 from observer.scenario import Scenario
 
@@ -197,6 +197,8 @@ class _Run:
         self.Minv = self.free_flow.Minv
         self.tau = self.free_flow.time_scale
         self.note, self.note_time = "", np.nan
+        self.should_stop = None        # callable → a signal name (SIGINT/SIGTERM) or None
+        self.halted: str | None = None # the signal that stopped the sampling (no row after)
 
     # -- sampling --------------------------------------------------------------------------
     def fill(self, flow: Flow, t_a: float, x_a: np.ndarray, t_b: float, include_end: bool) -> None:
@@ -204,6 +206,8 @@ class _Run:
         (t_a, x_a), and the force impulses ∫λ dt of the persistent set per sample interval."""
         if t_b > t_a or include_end:
             self.segments.append((float(t_a), float(t_b), flow.active, np.array(x_a, dtype=float)))
+        if self.halted:
+            return
         tg, k = self.t_grid, self.k_next
         forced = list(flow.active)
         end = int(np.searchsorted(tg, t_b, side="right" if include_end else "left"))
@@ -212,6 +216,9 @@ class _Run:
             z_cur = self._sample(flow, k, tg[k] - t_a, z_cur, forced)
             t_cur, k = tg[k], k + 1
         while k < end:                                # the rest: blocks of equal steps h
+            if self.should_stop is not None and (sig := self.should_stop()):
+                self.halted, self.k_next = sig, k     # a signal: the rows so far are whole
+                return
             count = min(end - k, SAMPLE_BLOCK)
             stack = flow.power_stack(self.h, count)
             Z = stack @ z_cur                         # (count, N)
@@ -561,7 +568,8 @@ def _oscillator_block(flow: Flow, t: np.ndarray) -> np.ndarray:
 
 def run_master(scenario: Scenario, h: float | None = None, t_end: float | None = None,
                max_events: int = 100_000,
-               zeno_velocity_ratio: float = ZENO_VELOCITY_RATIO, t0: float = 0.0) -> MasterEventResult:
+               zeno_velocity_ratio: float = ZENO_VELOCITY_RATIO, t0: float = 0.0,
+               should_stop=None) -> MasterEventResult:
     """Exact event-driven run of the master of ``scenario`` (see module docstring).
 
     Parameters
@@ -579,16 +587,32 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
     t0 : float
         Initial time (the scenario's initial state is taken at t0; the grid is t0 + k·h):
         a shift of the time origin.
+    should_stop : callable, optional
+        Called between events and between blocks of samples; a signal name (``"SIGINT"``)
+        stops the run there (status ``"stopped: SIGINT at t = …"``, the frame up to the last
+        sample computed): a streamed run interrupted keeps its finished rows.
 
     A run that stops (event cap, stalled isolation, no progress) returns the frame up to its
-    stop time, never NaN rows, with the reason in ``status``.
+    stop time, never NaN rows, with the reason in ``status``. So does a state that leaves the
+    floating-point range (issue 20): the root isolation checks the state and the derivatives
+    it uses at every safe step (:class:`~observer.event.roots.NonFiniteFlow`), the frame's rows
+    are checked once more when it is built, and the run stops with ``"stopped: non-finite
+    QUANTITY of the master (VALUE) at t = …; the output ends at t = …, the last finite
+    state"``; overflow inside the engine is silenced (``np.errstate``), the stop says it.
     """
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        return _run_master(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, should_stop)
+
+
+def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_ratio: float,
+                t0: float, should_stop) -> MasterEventResult:
     h = float(scenario.h if h is None else h)
     t_end = float(scenario.t_end if t_end is None else t_end)
     t0 = float(t0)
     if not (np.isfinite(t0) and np.isfinite(t_end) and t_end >= t0):
         raise ValueError(f"t_end = {t_end!r} must be finite and ≥ t0 = {t0!r}")
     run = _Run(scenario, h, t_end, max_events, zeno_velocity_ratio, t0)
+    run.should_stop = should_stop
     status = "ok"
     t = t0
     x = np.concatenate([scenario.q0, scenario.u0]).astype(float)
@@ -597,6 +621,10 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
     n_events, same_time, t_last_event = 0, 0, -np.inf
     n_impacts = 0                                      # impacts since the last landing
     while True:
+        sig = run.halted or (should_stop() if should_stop is not None else None)
+        if sig:                                        # SIGINT/SIGTERM of a streamed run
+            status = f"stopped: {sig} at t = {t:.9g}"
+            break
         flow = flow_for(run.system, persistent)
         free = [j for j in range(run.m) if j not in persistent]
         rows = np.vstack([flow.gap_rows[free], flow.force_rows])
@@ -604,6 +632,12 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
         cert = {i: certified[k] for i, k in enumerate(keys) if k in certified}
         try:
             zero, t_stop, _ = first_zero(flow, rows, t, flow.z(t, x), t_end, cert)
+        except NonFiniteFlow as exc:                  # overflow: a stop at the last finite state
+            if np.all(np.isfinite(exc.z_ok)):
+                run.fill(flow, t, x, exc.t_ok, include_end=True)
+            status = f"stopped: non-finite {_flow_quantity(run, keys, exc)} at t = {exc.t:.9g}"
+            t = exc.t
+            break
         except RootIsolationError as exc:
             status = f"stopped: {exc}"
             break
@@ -661,6 +695,9 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
             run.history.clear()
             n_impacts = 0
         persistent = new_persistent
+    if run.halted and not status.startswith("stopped: non-finite"):
+        t = float(run.t_grid[run.k_next - 1]) if run.k_next else t0
+        status = f"stopped: {run.halted} at t = {t:.9g}"
     if status == "ok" and run.k_next < run.t_grid.size:
         status = "stopped: sampling incomplete"
     return _result(run, scenario, status, t)
@@ -711,6 +748,41 @@ def _liftoff(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int):
     return x, new, cert
 
 
+def _flow_quantity(run: _Run, keys: list, exc: NonFiniteFlow) -> str:
+    """The non-finite quantity of a :class:`NonFiniteFlow`, named: ``u1 of the master (inf)``,
+    ``derivative 2 of the master's gap g0 (inf)``, ``bound on derivative 3 of the master's
+    gap g0 over the search window (inf)``."""
+    n = run.n
+    if exc.what[0] == "state":
+        i = exc.what[1]
+        name = f"q{i}" if i < n else (f"u{i - n}" if i < 2 * n else f"exogenous state z{i}")
+        return f"{name} of the master ({exc.value})"
+    k, i = exc.what[1], exc.what[2]
+    kind, j = keys[i]
+    base = f"gap g{j}" if kind == "g" else f"contact force λ{j}"
+    if exc.what[0] == "bound":
+        return f"bound on derivative 3 of the master's {base} over the search window ({exc.value})"
+    if k == 0:
+        return f"{base} of the master ({exc.value})"
+    return f"derivative {k} of the master's {base} ({exc.value})"
+
+
+def _finite_rows(run: _Run, G: np.ndarray) -> tuple[int, str | None]:
+    """Rows of the frame before the first one with a non-finite q, u, g or P, and that
+    quantity named (None: every row finite). Cheap: one vectorised test in the usual case."""
+    n = run.n
+    blocks = (("q", run.X[:, :n]), ("u", run.X[:, n:]), ("g", G), ("P", run.P))
+    if all(np.isfinite(b).all() for _, b in blocks):
+        return run.t_grid.size, None
+    first, what = run.t_grid.size, None
+    for name, b in blocks:
+        bad = np.flatnonzero(~np.isfinite(b).all(axis=1))
+        if bad.size and bad[0] < first:
+            j = int(np.flatnonzero(~np.isfinite(b[bad[0]]))[0])
+            first, what = int(bad[0]), f"{name}{j} of the master ({b[bad[0], j]})"
+    return first, what
+
+
 def _result(run: _Run, scenario: Scenario, status: str, t_stop: float) -> MasterEventResult:
     import pandas as pd
 
@@ -718,6 +790,16 @@ def _result(run: _Run, scenario: Scenario, status: str, t_stop: float) -> Master
     if status != "ok":                 # a stopped run ends at its stop time: no NaN rows
         keep = run.k_next
         run.t_grid, run.X, run.P = run.t_grid[:keep], run.X[:keep], run.P[:keep]
+    G = run.X[:, :n] @ run.system.W + run.system.nu(run.t_grid)
+    keep, bad = _finite_rows(run, G)   # non-finite rows (overflow): the output ends before them
+    if bad is not None:
+        if status == "ok" or not status.startswith("stopped: non-finite"):
+            status = f"stopped: non-finite {bad} at t = {run.t_grid[keep]:.9g}"
+        t_stop = float(run.t_grid[keep])
+        run.t_grid, run.X, run.P, G = run.t_grid[:keep], run.X[:keep], run.P[:keep], G[:keep]
+    if status.startswith("stopped: non-finite"):
+        status += (f"; the output ends at t = {run.t_grid[-1]:.9g}, the last finite state"
+                   if run.t_grid.size else "; no finite output row")
     t_grid = run.t_grid
     for j, since in list(run.closed_since.items()):
         run.intervals[j].append((since, np.inf))
@@ -728,7 +810,6 @@ def _result(run: _Run, scenario: Scenario, status: str, t_stop: float) -> Master
             k1 = int(np.searchsorted(t_grid, o, side="left")) if np.isfinite(o) else t_grid.size - 1
             active[k0:min(k1, t_grid.size - 1) + 1, j] = 1
     Q, U = run.X[:, :n], run.X[:, n:]
-    G = Q @ run.system.W + run.system.nu(t_grid)
     cols: dict[str, np.ndarray] = {"t": t_grid}
     for name, arr, width in (("q", Q, n), ("u", U, n), ("g", G, m), ("P", run.P, m)):
         for j in range(width):

@@ -466,6 +466,7 @@ class _ObserverIntegrator:
         self._modes: dict[tuple, Mode] = {}
         self._hold_maps: dict[tuple, tuple] = {}
         self.events: list[tuple] = []
+        self.should_stop = None        # callable → a signal name (stop between switchings) or None
 
     def mode(self, closed: frozenset, active: frozenset) -> Mode:
         key = (tuple(sorted(closed)) if self.jumps else (), tuple(sorted(active)))
@@ -581,6 +582,10 @@ class _ObserverIntegrator:
         k_next = 1                                   # next grid row to fill
         status = "ok"
         for t_sw, on, off in schedule + [(float(t[-1]), [], [])]:
+            sig = self.should_stop() if self.should_stop is not None else None
+            if sig:                                  # SIGINT/SIGTERM of a streamed run
+                status = f"stopped: {sig} at t = {now:.9g}"
+                break
             q, u, now, closed, active, k_next, status = self._flow_until(
                 t, Q, U, q, u, now, t_sw, closed, active, k_next)
             if status != "ok":
@@ -725,7 +730,7 @@ def _slaves(scenario, observers: Iterable) -> list[Slave]:
 
 def run_observers(master, scenario, observers: Iterable = ("jump", "nojump"), *,
                   intervals: list[np.ndarray] | None = None, coupling="scenario",
-                  solver: str = "pivoting") -> EventObserversResult:
+                  solver: str = "pivoting", should_stop=None) -> EventObserversResult:
     """Exact event-driven observers driven by the exact χ of an event-driven master run.
 
     Parameters
@@ -745,6 +750,9 @@ def run_observers(master, scenario, observers: Iterable = ("jump", "nojump"), *,
         (default), None (coupled over the whole run) or an explicit window.
     solver : str
         Contact solver for the impact and force LCPs (default ``"pivoting"``).
+    should_stop : callable, optional
+        Called between two switchings; a signal name (``"SIGINT"``) stops the coupled run
+        there (status ``"stopped: SIGINT at t = …"``, the rows not reached NaN).
 
     Returns
     -------
@@ -775,10 +783,31 @@ def run_observers(master, scenario, observers: Iterable = ("jump", "nojump"), *,
     chi = _grid_chi(t, intervals)
     chi[:k_on] = False
     out = EventObserversResult(t, chi, master_status=str(getattr(master, "status", "ok")))
+    limit = t.size               # rows to compute: fewer once a signal stopped an observer
     for s in slaves:
-        out.runs[s.name] = _run_one(scenario, s, t, k_on, schedule, solver)
-        out.runs[s.name].V = lyapunov(system, out.runs[s.name].q, out.runs[s.name].u, qm, um)
+        if limit == t.size:
+            run = _run_one(scenario, s, t, k_on, schedule, solver, should_stop)
+            if should_stop is not None and should_stop() and run.status != "ok":
+                reached = np.isfinite(run.q).all(axis=1)
+                if not reached.all():
+                    limit = max(int(np.argmin(reached)), k_on + 1)
+        else:                    # the others up to the stopped one's last row, whole
+            sched = switching_schedule(intervals, float(t[k_on]), float(t[limit - 1]))
+            run = _pad(_run_one(scenario, s, t[:limit], k_on, sched, solver), t.size)
+        run.V = lyapunov(system, run.q, run.u, qm, um)
+        out.runs[s.name] = run
     return out
+
+
+def _pad(run: EventObserverRun, size: int) -> EventObserverRun:
+    """``run`` on the first rows of a grid of ``size`` rows: the rows not computed NaN (q, u)
+    or 0 (P, σ), as a stopped run leaves them."""
+    k = run.q.shape[0]
+    grow = lambda a, fill: np.vstack([a, np.full((size - k,) + a.shape[1:], fill)])  # noqa: E731
+    run.q, run.u = grow(run.q, np.nan), grow(run.u, np.nan)
+    run.P, run.sigma = grow(run.P, 0.0), grow(run.sigma, 0.0)
+    run.V = np.full(size, np.nan)
+    return run
 
 
 def _coupling_start(coupling, t: np.ndarray) -> int:
@@ -801,7 +830,8 @@ def _coupling_start(coupling, t: np.ndarray) -> int:
     return k_on
 
 
-def _run_one(scenario, s: Slave, t: np.ndarray, k_on: int, schedule, solver: str) -> EventObserverRun:
+def _run_one(scenario, s: Slave, t: np.ndarray, k_on: int, schedule, solver: str,
+             should_stop=None) -> EventObserverRun:
     """One observer: uncoupled on [t_0, t_on] (the event master from its state), coupled after."""
     import pandas as pd
 
@@ -812,6 +842,7 @@ def _run_one(scenario, s: Slave, t: np.ndarray, k_on: int, schedule, solver: str
         pre = _uncoupled(scenario, q0, u0, t[:k_on + 1])
         q0, u0 = pre["q"][-1], pre["u"][-1]
     integ = _ObserverIntegrator(system, scenario.law, metric_matrix(system, s.metric), get_solver(solver))
+    integ.should_stop = should_stop
     Q, U, status = integ.run(t[k_on:], q0, u0, schedule)
     P, sigma, events = integ.P, integ.sigma, _event_frame(integ.events)
     if pre is not None:

@@ -71,6 +71,41 @@ class RootIsolationError(RuntimeError):
     """The safe advance stalled (more than :data:`MAX_STEPS` steps in one search)."""
 
 
+class NonFiniteFlow(RootIsolationError):
+    """The flow left the floating-point range during a search (issue 20: a stop, never a row).
+
+    Attributes
+    ----------
+    t : float
+        Where the augmented state ``z``, or a derivative of a functional the isolation needs,
+        is first not finite.
+    t_ok, z_ok : float, ndarray
+        The last search point where everything was finite (``t_ok ≤ t``) and its state.
+    what : tuple
+        ``("state", i)`` for the entry i of z, ``("derivative", k, i)`` for the k-th
+        derivative of functional i, ``("bound", 3, i)`` for the certified bound on the third
+        derivative of functional i over the search window (the search cannot proceed).
+    value : float
+        The non-finite value.
+    """
+
+    def __init__(self, t: float, t_ok: float, z_ok: np.ndarray, what: tuple, value: float) -> None:
+        super().__init__(f"non-finite flow at t = {t!r}")
+        self.t, self.t_ok, self.z_ok, self.what, self.value = t, t_ok, z_ok, what, value
+
+
+def _check_finite(a: float, za: np.ndarray, d: np.ndarray, t_ok: float, z_ok: np.ndarray) -> None:
+    """Raise :class:`NonFiniteFlow` unless the state ``za`` and the derivatives ``d`` at ``a``
+    are finite (one vectorised test; the names only on failure)."""
+    if np.isfinite(za).all() and np.isfinite(d).all():
+        return
+    bad = np.flatnonzero(~np.isfinite(za))
+    if bad.size:
+        raise NonFiniteFlow(a, t_ok, z_ok, ("state", int(bad[0])), float(za[bad[0]]))
+    k, i = (int(v[0]) for v in np.nonzero(~np.isfinite(d)))
+    raise NonFiniteFlow(a, a, za, ("derivative", k, i), float(d[k, i]))   # the state is finite
+
+
 @dataclass
 class Zero:
     """The first zero of one functional.
@@ -367,6 +402,17 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, tols,
     return step, found
 
 
+def _norm(v: np.ndarray) -> float:
+    """‖v‖₂, also where ``v·v`` overflows (|v| ≳ 1e154): ``max|v_i|·‖v/max|v_i|‖₂`` then
+    (the plain value otherwise, bit for bit)."""
+    with np.errstate(over="ignore"):
+        nv = float(np.linalg.norm(v))
+    if np.isfinite(nv) or not np.isfinite(v).all():
+        return nv
+    big = float(np.max(np.abs(v)))
+    return big * float(np.linalg.norm(v / big))
+
+
 def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: float,
                certified: dict[int, float] | None = None) -> tuple[Zero | None, float, np.ndarray]:
     """First zero in ``[t0, t_end]`` of any functional ``rows[i]·z(t)`` along ``flow``.
@@ -403,12 +449,16 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     certified = dict(certified or {})
     window = WINDOW / max(flow.norm_bound, 1e-300)
     growth = np.exp(WINDOW)
+    t_ok, z_ok = a, za                                # the last search point with finite values
     for _ in range(MAX_STEPS):
         if t_end - a <= resolution(t_end, tau):          # a remainder of a few ulp: flow
             z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
+            _check_finite(t_end, z, np.zeros((1, 1)), t_ok, z_ok)
             return None, t_end, z
         w = min(window, t_end - a)
         d = np.array([fs.d[k] @ za for k in range(4)])
+        _check_finite(a, za, d, t_ok, z_ok)           # overflow: a stop (NonFiniteFlow)
+        t_ok, z_ok = a, za
         az = np.abs(za)
         floor = [ROUNDOFF * (r @ az) + np.finfo(float).tiny for r in fs.abs_d]
         res = resolution(a, tau)
@@ -416,7 +466,10 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
         tol1 = floor[1] + ROUNDOFF * motion_scale(d[1:], tau) + np.abs(d[2]) * res
         tol2 = floor[2] + ROUNDOFF * motion_scale(d[2:], tau) + np.abs(d[3]) * res
         band = touch_band(d[2], d[3], floor[0], tau)
-        bound = fs.third_norm * growth * np.linalg.norm(za / flow.scale) * (1.0 + 1e-12)
+        bound = fs.third_norm * growth * _norm(za / flow.scale) * (1.0 + 1e-12)
+        if not np.isfinite(bound).all():              # the certified bound overflows: no search
+            i = int(np.flatnonzero(~np.isfinite(bound))[0])
+            raise NonFiniteFlow(a, a, za, ("bound", 3, i), float(bound[i]))
         step, found = _safe_step(fs, a, za, d, (tol, tol1, tol2, band), bound, w, certified)
         # no functional without a found zero vanishes in (a, a + step): the earliest found zero
         # within that reach is the first zero; one beyond it is recomputed later
