@@ -75,14 +75,14 @@ def _table(rows: list[dict]):
 
 
 def content_digest(table) -> str:
-    """SHA-256 of a table's column names and values (JSON of its rows; floats by their
-    shortest round-trip repr, NaN included): the same for the table written and the table
-    read back from Parquet, different as soon as one value, row or column differs."""
-    import json
+    """SHA-256 of a table's column names, types and values (:class:`observer.io.ContentHash`,
+    the checksum of the toolkit's own Parquet results): the same for the table written and the
+    table read back from Parquet, different as soon as one value, row or column differs."""
+    from observer.io import ContentHash
 
-    text = json.dumps({"columns": table.column_names, "rows": table.to_pylist()},
-                      allow_nan=True, default=repr)
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+    content = ContentHash()
+    content.add_table(table)
+    return content.hexdigest()
 
 
 def _read_case(path: Path):

@@ -26,6 +26,7 @@ from typing import Any, Callable
 
 import numpy as np
 import pytest
+from cli_exit import ExitCode
 
 import observer
 from bench.__main__ import main as bench_main
@@ -588,7 +589,7 @@ def test_cli_exits_2_with_one_line_naming_the_field(case, tmp_path, capsys, monk
     monkeypatch.chdir(tmp_path)
     argv = [_fill(a, tmp_path) for a in case.argv]
     main = bench_main if case.prog == "bench" else cli.main
-    with _exit_code() as code:
+    with ExitCode() as code:
         code.value = main(argv)
     out, err = capsys.readouterr()
     lines = err.splitlines()
@@ -600,21 +601,6 @@ def test_cli_exits_2_with_one_line_naming_the_field(case, tmp_path, capsys, monk
     assert "Traceback" not in err and out == ""
     assert not (tmp_path / "out.csv").exists()
     assert not list(tmp_path.rglob("*.parquet"))
-
-
-class _exit_code:
-    """Context manager catching argparse's ``SystemExit`` as an exit code."""
-
-    value: int | None = None
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, exc_type, exc, tb):
-        if exc_type is SystemExit:
-            self.value = exc.code
-            return True
-        return False
 
 
 SUBPROCESS_CASES = ["h-option-nan", "out-unwritable", "file-dev-zero", "file-nested-100000-deep",

@@ -6,24 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from cli_exit import ExitCode
 
 from observer.validation import INV_MIN
 from proofs_checks.cli import main as proofs_main
-
-
-class _exit_code:
-    """Context manager catching argparse's ``SystemExit`` as an exit code."""
-
-    value: int | None = None
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, exc_type, exc, tb):
-        if exc_type is SystemExit:
-            self.value = exc.code
-            return True
-        return False
 
 
 @pytest.mark.parametrize("argv, line", [
@@ -34,7 +20,7 @@ class _exit_code:
     (["--h", "fast"], "error: argument --h: invalid float value: 'fast' (see --help)"),
 ])
 def test_proofs_checks_run_options_are_refused_in_one_line(argv, line, capsys):
-    with _exit_code() as code:                    # argparse errors exit through SystemExit
+    with ExitCode() as code:                    # argparse errors exit through SystemExit
         code.value = proofs_main(["double_mass", "--only", "mass_spd", *argv])
     out, err = capsys.readouterr()
     assert code.value == 2 and err.splitlines() == [line] and out == ""
