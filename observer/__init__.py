@@ -20,8 +20,7 @@ from observer.scenario import Scenario
 from observer.scenarios import SCENARIOS
 from observer.simulate import load_scenario, simulate
 from observer.stepping import MoreauJean
-
-__version__ = "0.1.0"
+from observer.version import __version__
 
 __all__ = ["CONTACT_SOLVERS", "ContactSolverError", "Harmonic", "IMPACT_LAWS", "ImpactLaw", "InputError",
            "LinearSystem", "MoreauJean", "OBSERVER_DESIGNS", "ObserverDesign", "SCENARIOS", "Scenario", "SimulationResult",

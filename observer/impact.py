@@ -24,18 +24,20 @@ Newton step for one contact.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from observer.contact.lcp import LCPSolution
 from observer.errors import InputError
 from observer.validation import broadcast_vector
+
+if TYPE_CHECKING:                    # a type only: the model layer imports no contact solver
+    from observer.contact.lcp import LCPSolution
 
 NEWTON, POISSON = 0, 1
 """The compiled kernel's integer codes of the built-in laws."""
 
-Solve = Callable[[np.ndarray, np.ndarray], LCPSolution]
+Solve = Callable[[np.ndarray, np.ndarray], "LCPSolution"]
 ImpactMap = Callable[[np.ndarray, np.ndarray, np.ndarray, Solve], np.ndarray]
 StepMap = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Solve],
                    tuple[np.ndarray, np.ndarray, np.ndarray]]

@@ -36,9 +36,9 @@ if TYPE_CHECKING:
 def _versions() -> tuple:
     from importlib import metadata
 
-    import observer
+    from observer.version import __version__
 
-    out = {"python": platform.python_version(), "observer": observer.__version__}
+    out = {"python": platform.python_version(), "observer": __version__}
     for pkg in ("numpy", "scipy", "pandas", "cvxpy", "osqp", "matplotlib", "numba"):
         try:
             out[pkg] = metadata.version(pkg)
