@@ -46,92 +46,37 @@ def _numerical_failures_refused(func):
 
 @_numerical_failures_refused
 def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: float | None = None, *,
-             solver: str | None = None, theta: float | None = None,
-             master_projection: bool | None = None,
+             solver: str | None = None, theta: float | None = None, master_projection: bool | None = None,
              observers: Iterable[str | Slave] | str = (), source: str | None = None,
-             coupling: tuple[float, float] | None | str = "scenario",
-             log: str | Path | None = None, residual_tol: float = 1e-9,
-             engine: str | None = None, record_every: int | None = None,
-             store: str = "full", integrator: str | None = None,
-             on_chunk=None) -> SimulationResult:
-    """Simulate the master (and the observers) of ``scenario`` on an engine of
-    :data:`observer.engines.ENGINES` (default: Moreau–Jean on the compiled kernel).
+             coupling: tuple[float, float] | None | str = "scenario", log: str | Path | None = None,
+             residual_tol: float = 1e-9, engine: str | None = None, record_every: int | None = None,
+             store: str = "full", integrator: str | None = None, on_chunk=None) -> SimulationResult:
+    """Simulate the master and the observers of ``scenario`` on a registered engine.
 
     Parameters
     ----------
     scenario : str, Path or Scenario
         Built-in name, TOML path or a loaded :class:`Scenario`.
-    h, t_end, solver, theta, master_projection
+    h, t_end, solver, theta, master_projection : optional
         Override the scenario's settings.
-    observers : iterable of str or Slave, or "scenario"
-        Registered design names (:data:`~observer.observers.OBSERVER_DESIGNS`) start from the
-        scenario's ``[observer]`` state; a :class:`~observer.observers.Slave` gives its own
-        name, design and state; ``"scenario"`` runs the designs the scenario's
-        ``[observer] observers`` lists (none when it has no ``[observer]`` table). Default:
-        none (the master alone).
-    source : {"master", "log", "self"}, optional
-        Switching signal (default: the scenario's ``observer.source``, else "master").
-    coupling : (t_on, t_off) or None
-        Coupling window (default: the scenario's; None couples over the whole run).
-    log : path, optional
-        Closing log for ``source="log"`` (default: the scenario's ``observer.log``).
-    engine : str, optional
-        A registered engine (:data:`observer.engines.ENGINES`): ``"compiled"`` (the numba
-        kernel), ``"python"`` (the readable numpy reference; both give the same trajectories
-        to round-off) or ``"event"``. Default: the first engine of ``integrator`` that accepts
-        the run, so the compiled one unless it lacks the run's contact solver (it has block
-        pivoting only) or impact law; then the python engine runs it and
-        ``metadata["engine_note"]`` says why. An engine asked for by name that cannot take the
-        run raises :class:`InputError` naming ``engine``, with its reason.
-    record_every : int, optional
-        Keep every k-th step (row r = step r·k); default 1, or about 10 000 rows with
-        ``store="summary"``. The per-step decrements of V need every step and are left out
-        (None) otherwise.
-    store : {"full", "summary"}
-        ``"summary"`` (compiled engine) computes in the kernel, streaming over every step,
-        V of each observer, its damping/impulse/remaining parts, first-passage and settling
-        times, the master's closings per contact and its deepest penetration, and keeps the
-        trajectories only at the recorded rows: memory independent of the horizon beyond
-        that (``result.summary``, a DataFrame built on first read: the run itself does not
-        import pandas).
-
-    on_chunk : callable, optional
-        Time-stepping: called with each :class:`observer.loop.Chunk` of finished rows as the
-        loop produces them (e.g. an :class:`observer.stream.ChunkWriter`); while it is set,
-        SIGINT/SIGTERM stop the run after the current window and the result's status says
-        where (``metadata["stopped"]``). ``integrator="event"`` passes no chunk (its rows are
-        written whole at the end, :meth:`~observer.stream.ChunkWriter.finish`), but with
-        ``on_chunk`` set a signal stops it likewise, with the rows finished up to there.
-    integrator : {"time-stepping", "event"}, optional
-        Default: the requested engine's, else ``"time-stepping"``. ``"event"``: the exact
-        event-driven integrator (:mod:`observer.event`): exact flow between events, impact
-        times to round-off, Zeno resolved into persistent contact; the observers switch at the
-        master's exact closing and opening times. The result is sampled on the grid
-        t_k = k·h; ``solver`` (other than pivoting), ``record_every`` and ``store`` are
-        time-stepping options and are refused.
+    observers, source, coupling, log, residual_tol, record_every, store, on_chunk : optional
+        The run's observers and their χ, its tolerance, the rows it keeps and who receives
+        them: see :class:`observer.engines.base.RunDescription` (defaults from the scenario).
+    engine, integrator : str, optional
+        An engine of :data:`observer.engines.ENGINES` (compiled, python, event) and
+        ``"time-stepping"`` or ``"event"``. Default: the first engine of the integrator that
+        accepts the run (compiled; else python, and ``metadata["engine_note"]`` says why). An
+        engine asked for that cannot take the run raises :class:`InputError` naming ``engine``.
 
     Returns
     -------
     SimulationResult
-        With one :class:`~observer.result.SlaveTrajectory` per observer (V relative to the
-        master), the switching signal ``chi`` and ``events`` (time-stepping: the master's
-        closing and opening steps, an approximation of the event table).
+        Built from the engine's :class:`~observer.result.RunRecord`.
     """
-    requested = ENGINES.get(engine) if isinstance(engine, str) else None
-    if integrator is None:
-        integrator = requested.integrator if requested is not None else "time-stepping"
-    coupling, residual_tol, observers = check_arguments(integrator, coupling, residual_tol,
-                                                        record_every, observers, on_chunk)
-    for name, value in (("h", h), ("t_end", t_end), ("theta", theta)):
-        if value is not None:       # a number, as in the TOML document (a string is refused)
-            as_scalar(f"simulation.{name}", value)
-    sc = load_scenario(scenario)
-    overrides = {k: v for k, v in (("simulation.h", h), ("simulation.t_end", t_end),
-                                   ("simulation.solver", solver), ("simulation.theta", theta),
-                                   ("simulation.master_projection", master_projection))
-                 if v is not None}
-    if overrides:
-        sc = sc.with_overrides(overrides)
+    integrator, coupling, residual_tol, observers = check_arguments(
+        engine, integrator, coupling, residual_tol, record_every, observers, on_chunk)
+    sc = _scenario(scenario, h=h, t_end=t_end, solver=solver, theta=theta,
+                   master_projection=master_projection)
     run = describe(sc, integrator, observers, source, coupling, log, residual_tol, record_every,
                    store, on_chunk)
     chosen, note = choose(run, engine)
@@ -141,18 +86,33 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     return SimulationResult.from_record(record, sc.system)
 
 
-def check_arguments(integrator, coupling, residual_tol, record_every, observers,
+def _scenario(scenario: str | Path | Scenario, **settings) -> Scenario:
+    """``scenario`` loaded with the :func:`simulate` keywords that override its ``[simulation]``
+    settings (h, t_end and θ must be numbers, as in the TOML document: a string is refused)."""
+    for name in ("h", "t_end", "theta"):
+        if settings[name] is not None:
+            as_scalar(f"simulation.{name}", settings[name])
+    sc = load_scenario(scenario)
+    overrides = {f"simulation.{k}": v for k, v in settings.items() if v is not None}
+    return sc.with_overrides(overrides) if overrides else sc
+
+
+def check_arguments(engine, integrator, coupling, residual_tol, record_every, observers,
                     on_chunk) -> tuple:
     """Validate the keywords of :func:`simulate` that do not come from the scenario document
     (the others are validated with the document, with the TOML path's messages); return
-    ``(coupling, residual_tol, observers)`` normalized (a window as a tuple of floats,
-    an iterable of observers as a list).
+    ``(integrator, coupling, residual_tol, observers)`` normalized (the integrator defaulted
+    to the requested engine's, else time-stepping; a window as a tuple of floats, an
+    iterable of observers as a list).
 
     Raises
     ------
     InputError
         Naming the keyword (``observer.coupling`` for the window, as the TOML path does).
     """
+    if integrator is None:
+        requested = ENGINES.get(engine) if isinstance(engine, str) else None
+        integrator = requested.integrator if requested is not None else "time-stepping"
     if not isinstance(integrator, str) or integrator not in INTEGRATORS:
         raise InputError("integrator", f"must be one of {list(INTEGRATORS)}, got {integrator!r}")
     if coupling not in ("scenario", None):
@@ -175,4 +135,4 @@ def check_arguments(integrator, coupling, residual_tol, record_every, observers,
                                  f"got {ob!r}")
     if on_chunk is not None and not callable(on_chunk):
         raise InputError("on_chunk", f"must be callable (or None), got {on_chunk!r}")
-    return coupling, residual_tol, observers
+    return integrator, coupling, residual_tol, observers

@@ -37,28 +37,47 @@ class Refusal(str):
 
 @dataclass(frozen=True)
 class RunDescription:
-    """One run, described once for every engine.
+    """One run, described once for every engine (:func:`describe` builds it from the
+    keywords of :func:`observer.simulate`).
 
     Attributes
     ----------
     scenario : Scenario
         With the call's overrides (h, t_end, solver, θ, master projection) applied.
     integrator : {"time-stepping", "event"}
+        ``"event"``: the exact event-driven integrator (:mod:`observer.event`): exact flow
+        between events, impact times to round-off, Zeno resolved into persistent contact,
+        the observers switched at the master's exact closing and opening times; sampled on
+        t_k = k·h (``record_every`` and ``store`` are time-stepping options).
     slaves : tuple of Slave
-        The observers (designs resolved, initial states checked).
-    source : str or None
-        Source of χ (:data:`observer.switching.SOURCES`); None without observers.
+        The observers: registered design names (:data:`~observer.observers.OBSERVER_DESIGNS`)
+        start from the scenario's ``[observer]`` state, a :class:`~observer.observers.Slave`
+        brings its own; ``"scenario"`` gives the designs of ``[observer] observers``.
+        Each has V relative to the master in the result.
+    source : {"master", "log", "self"} or None
+        Source of χ (default: the scenario's ``observer.source``, else "master").
     coupling : (t_on, t_off) or None
-        The coupling window (None: the whole run).
+        The coupling window (default: the scenario's; None: the whole run).
     log : str or Path or None
-        The closing log (``source="log"``), read into ``log_frame``.
+        The closing log for ``source="log"`` (default: the scenario's ``observer.log``), read
+        into ``log_frame``.
     log_frame : DataFrame or None
     residual_tol : float
+        Largest complementarity residual a step may leave (above it the run stops).
     record_every : int or None
-        As given (None: the engine's default).
+        Keep every k-th step (row r = step r·k); None: 1, or about 10 000 rows with
+        ``store="summary"``. The per-step decrements of V need every step (else None).
     store : {"full", "summary"}
+        ``"summary"`` (compiled engine): V of each observer, its damping/impulse/remaining
+        parts, first-passage and settling times, the master's closings and deepest
+        penetration computed in the kernel over every step, the trajectories kept only at
+        the recorded rows (``result.summary``, a DataFrame built on first read).
     on_chunk : callable or None
-        Receives the finished rows (time-stepping) and makes a run stoppable by a signal.
+        Time-stepping: called with each :class:`observer.loop.Chunk` of finished rows (e.g.
+        an :class:`observer.stream.ChunkWriter`). While it is set SIGINT/SIGTERM stop the run
+        (time-stepping: after the current window; event: between events or switchings) and
+        the result's status says where (``metadata["stopped"]``); the event engine passes no
+        chunk (its rows are written whole at the end).
     """
 
     scenario: Scenario
