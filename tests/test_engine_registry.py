@@ -164,3 +164,34 @@ def test_toy_law_through_the_cli_on_the_event_engine(toys, tmp_path, capsys):
     assert main(["run", "bouncing_ball", "--t-end", "0.6", "--set", "impact.law=toy_plastic",
                  "--engine", "compiled", "--out", str(out)]) == 2
     assert "'toy_plastic' has no code in the compiled kernel" in capsys.readouterr().err
+
+
+def test_a_preferred_toy_engine_takes_the_quick_suites_master_runs_into_the_report(monkeypatch, tmp_path):
+    """Registered first, the toy engine is the first that accepts a run of the master alone:
+    the quick suite's work-precision cases run on it (no change to bench/), the runs with
+    observers stay on the compiled engine, and the report is built from those rows."""
+    from bench.results import CaseStore
+    from bench.runners import Context, run_case
+    from bench.suites import SUITES
+    from reports.build import build_report
+    from observer.scenarios import SCENARIOS
+    from toys import toy_scenario
+
+    monkeypatch.setitem(SCENARIOS, "toy", toy_scenario)
+    preferred = {TOY_ENGINE.name: TOY_ENGINE, **ENGINES}
+    monkeypatch.setattr("observer.engines.ENGINES", preferred)
+    cases = [c for c in SUITES["quick"].cases if c.scenario == "toy"]
+    wp = [c for c in cases if c.kind == "work_precision" and c.solver == "pivoting"
+          and c.law == "newton"][:2]
+    ctx = Context("quick", tmp_path, {"cpu": "test"})
+    rows = [run_case(c, ctx)[0] for c in wp]
+    assert [r["engine"] for r in rows] == ["toy", "toy"]
+    assert all(r["status"] == "ok" for r in rows)
+    assert rows[1]["err_mean"] < rows[0]["err_mean"] < 1e-2      # converges as h halves
+    assert observer.simulate("toy", t_end=T_END, observers=("nojump",)).metadata["engine"] == "compiled"
+    store = CaseStore(tmp_path / "quick.cases")
+    for c, r in zip(wp, rows):
+        store.write_case("quick", c.case_id, [r])
+    assert set(store.frame()["engine"]) == {"toy"}
+    page = build_report([store.path], tmp_path / "report").read_text()
+    assert "toy · master · newton · pivoting" in page          # the toy engine's points, tabled
