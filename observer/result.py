@@ -36,9 +36,9 @@ if TYPE_CHECKING:
 def _versions() -> tuple:
     from importlib import metadata
 
-    import observer
-
-    out = {"python": platform.python_version(), "observer": observer.__version__}
+    # the package is imported already (this is one of its modules): read its version without
+    # an import of the package from inside it (no cycle in the import graph)
+    out = {"python": platform.python_version(), "observer": sys.modules["observer"].__version__}
     for pkg in ("numpy", "scipy", "pandas", "cvxpy", "osqp", "matplotlib", "numba"):
         try:
             out[pkg] = metadata.version(pkg)
