@@ -195,3 +195,18 @@ def test_a_preferred_toy_engine_takes_the_quick_suites_master_runs_into_the_repo
     assert set(store.frame()["engine"]) == {"toy"}
     page = build_report([store.path], tmp_path / "report").read_text()
     assert "toy · master · newton · pivoting" in page          # the toy engine's points, tabled
+
+
+def test_the_python_engine_judges_a_step_by_newtons_residual_only_where_the_law_declares_it(monkeypatch):
+    """The same Newton maps without the declared facts: same trajectory, but the step is no
+    longer judged by Newton's recomputed residual (the solver's own is counted)."""
+    plain = dataclasses.replace(IMPACT_LAWS["newton"], name="newton_plain", code=None, is_newton=False,
+                                single_contact_is_newton=False)
+    monkeypatch.setitem(IMPACT_LAWS, plain.name, plain)
+    declared = observer.simulate("bouncing_ball", t_end=1.0, engine="python")
+    undeclared = observer.simulate(observer.load_scenario("bouncing_ball", {"impact.law": "newton_plain"}),
+                                   t_end=1.0)
+    assert undeclared.metadata["engine"] == "python"
+    np.testing.assert_array_equal(declared.q, undeclared.q)
+    assert declared.metadata["health"]["residual_source"] == "applied"
+    assert undeclared.metadata["health"]["residual_source"] == "applied+solver"
