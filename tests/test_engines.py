@@ -262,9 +262,10 @@ def test_lean_kernels_are_the_general_kernel_bitwise(name, monkeypatch):
 
     calls = []                          # the loop each kernel call took
     advance, advance_scalar = kernel.advance, kernel.advance_scalar
-    monkeypatch.setattr(kernel, "advance",
-                        lambda *a: calls.append("lean" if a[-1] is None else "general") or advance(*a))
-    monkeypatch.setattr(kernel, "advance_scalar", lambda *a: calls.append("scalar") or advance_scalar(*a))
+    monkeypatch.setattr(kernel, "advance", lambda *a, **kw: calls.append(
+        "lean" if kw["general"] is None else "general") or advance(*a, **kw))
+    monkeypatch.setattr(kernel, "advance_scalar",
+                        lambda *a, **kw: calls.append("scalar") or advance_scalar(*a, **kw))
     sc = observer.load_scenario(name)
     T = min(sc.t_end, 4000 * sc.h)
     alone = observer.simulate(sc, t_end=T, observers=[])
