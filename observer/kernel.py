@@ -730,6 +730,38 @@ def project_positions(k, act, a, slot, Wp, Wi, Wv, nu, KinvWT, L, q1, sig, g, s_
     return OK
 
 
+@njit(**JIT)
+def project_closed(q, k, act, Wp, Wi, Wv, nu, NinvWT, L, slot):
+    """:func:`project_positions` for a caller outside the step loop: the numpy reference
+    (:meth:`observer.stepping.MoreauJean.project`) projects with this very code.
+
+    ``q`` (n,) positions, ``act`` (int64) the closed contacts, ``nu[k]`` the gap offsets at the
+    step's time, W in CSC (:func:`csc_arrays`), the stacks ``NinvWT`` (P, m, n) and ``L``
+    (P, m, m) of the projection metrics and the metric's ``slot``. Returns
+    ``(status, q⁺, Σ)`` (q is not modified).
+    """
+    m = Wp.shape[0] - 1
+    a = act.shape[0]
+    q1 = q.copy()
+    sig = np.zeros(a)
+    if a == 0:
+        return OK, q1, sig
+    g, s_, Gp, Lf = np.empty(m), np.empty(m), np.empty((m, m)), np.empty((m, m))
+    status = project_positions(k, act, a, slot, Wp, Wi, Wv, nu, NinvWT, L, q1, sig, g, s_, Gp, Lf)
+    return status, q1, sig
+
+
+def csc_arrays(W: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """W (n, m) in the kernel's CSC storage ``(Wp, Wi, Wv)``: column j's nonzero entries are
+    ``Wv[Wp[j]:Wp[j+1]]`` in rows ``Wi[Wp[j]:Wp[j+1]]`` (ascending; int64, int64, float64), what
+    ``scipy.sparse.csc_matrix(W)`` stores with sorted indices."""
+    WT = np.asarray(W, dtype=np.float64).T
+    nz = WT != 0.0
+    Wp = np.zeros(WT.shape[0] + 1, dtype=np.int64)
+    np.cumsum(nz.sum(axis=1), out=Wp[1:])
+    return Wp, np.ascontiguousarray(np.nonzero(nz)[1], dtype=np.int64), np.ascontiguousarray(WT[nz])
+
+
 # ---------------------------------------------------------------------------------------
 # streaming summary (store="summary"): V of every observer and its parts, without trajectories
 # ---------------------------------------------------------------------------------------

@@ -45,7 +45,6 @@ from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
 
 from observer.errors import InputError
 from observer.impact import NEWTON, POISSON
@@ -504,7 +503,6 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool, on_chunk=No
     stepper = inp.stepper
     rec, _ = _allocate(inp, record_every, record_pre)
     S = inp.q0.shape[0]
-    proj = [projection_matrices(stepper, inp.metric_of(s)) for s in range(S)]
     states = [(inp.q0[s].copy(), inp.u0[s].copy()) for s in range(S)]
     coupled = inp.coupled(stepper.grid.t)
     chi_log = inp.chi_window(stepper.grid.t, 0)
@@ -526,7 +524,7 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool, on_chunk=No
             for s in range(S):
                 q, u = states[s]
                 try:
-                    q1, u1, P, sig, q_pre, act, chi = _python_step(inp, stepper, *proj[s], k, s, q, u, chi, coupled[k],
+                    q1, u1, P, sig, q_pre, act, chi = _python_step(inp, stepper, k, s, q, u, chi, coupled[k],
                                                                    None if chi_log is None else chi_log[k])
                 except NonFiniteState:                  # the step's free velocity is not finite
                     stop, reason = k, guard.stop_text(guard.free_velocity(k, s, q, u) or "free velocity", k)
@@ -602,17 +600,22 @@ def _python_health(stepper: MoreauJean, k: int, s: int, q, u, u1, P, act, q1, he
 
 def newton_residual(stepper: MoreauJean, k: int, q, u, u1, P, act) -> float:
     """``max|min(P, b + d)| / max(‖b‖_∞, ‖d‖_∞)`` with ``b = γ_free + e∘γ_k`` and
-    ``d = W_Aᵀ(Â⁻¹W_A P)`` (numpy twin of :func:`observer.kernel.applied_residual`)."""
+    ``d = W_Aᵀδu``, ``δu = Â⁻¹W_A P`` the velocity change the step applied: computed by the
+    kernel's own :func:`observer.kernel.applied_residual` (one implementation for both engines)."""
+    from observer.kernel import applied_residual
+
     W_A = stepper.S.W[:, act]
     u_free = stepper.free_velocity(k, q, u)
     nd = stepper.grid.nu_dot
     b = (u_free @ W_A + nd[k + 1, act]) + stepper.law.restitution[act] * (u @ W_A + nd[k, act])
-    d = (stepper.S.AinvW[:, act] @ P) @ W_A
-    scale = max(float(np.max(np.abs(b))), float(np.max(np.abs(d))), 1e-300)
-    return float(np.max(np.abs(np.minimum(P, b + d)))) / scale
+    du = stepper.S.AinvW[:, act] @ P
+    Wp, Wi, Wv = stepper.csc
+    return float(applied_residual(Wp, Wi, Wv, np.ascontiguousarray(act, dtype=np.int64), int(act.size),
+                                  np.ascontiguousarray(du, dtype=np.float64), np.ascontiguousarray(b, dtype=np.float64),
+                                  np.ascontiguousarray(P, dtype=np.float64)))
 
 
-def _python_step(inp: LoopInput, stepper: MoreauJean, NinvW, L, k: int, s: int, q, u, chi,
+def _python_step(inp: LoopInput, stepper: MoreauJean, k: int, s: int, q, u, chi,
                  coupled_k: bool, chi_row):
     """Step k of system s with the numpy stepper: its closed set (the master's predictor, χ
     while coupled, else its own predictor), the step, the projection. Returns
@@ -630,17 +633,11 @@ def _python_step(inp: LoopInput, stepper: MoreauJean, NinvW, L, k: int, s: int, 
     q_pre = q1
     sig = None
     if proj and act.size:
-        q1, sig = _project(stepper, inp.metric_of(s), NinvW, L, k + 1, q1, act)
+        slots, NinvWT, L = projection_slots(inp)        # the kernel's projection, in system s's metric
+        q1, sig = stepper.project(k + 1, q1, act, (NinvWT, L), slots[s])
     return q1, u1, P, sig, q_pre, act, chi
 
 
-def _project(stepper, metric, NinvW, L, k, q, act):
-    """The step's position projection: the library's K projection, or the N-metric one."""
-    if metric is None:
-        return stepper.project(k, q, act)
-    g = q @ stepper.S.W[:, act] + stepper.grid.nu[k, act]
-    sigma = -np.linalg.solve(L[np.ix_(act, act)], g)
-    return q + NinvW[:, act] @ sigma, sigma
 
 
 # ---------------------------------------------------------------------------------------
@@ -689,7 +686,7 @@ def system_bundle(inp: LoopInput) -> "SystemBundle":
 
     stepper = inp.stepper
     S = stepper.S
-    Wp, Wi, Wv = csc_arrays(S.W)
+    Wp, Wi, Wv = stepper.csc
     c = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
     dummy = np.zeros((1, 1))
     if S.band is None:
@@ -701,15 +698,6 @@ def system_bundle(inp: LoopInput) -> "SystemBundle":
                         Rq_b=banded[1], Ach_b=banded[2], bw=bw, Wp=Wp, Wi=Wi, Wv=Wv, AinvWT=c(S.AinvW.T),
                         Ghat=c(S.Ghat), G0=c(S.G0), h=float(stepper.h), theta=float(stepper.theta),
                         t0=float(stepper.t0))
-
-
-def csc_arrays(W: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """W in CSC storage ``(indptr, indices, data)`` (int64, int64, float64; sorted indices):
-    the kernel's layout of W (:func:`observer.kernel.project_positions`, …)."""
-    Wc = sp.csc_matrix(np.asarray(W, dtype=np.float64))
-    Wc.sort_indices()
-    return (np.ascontiguousarray(Wc.indptr, dtype=np.int64), np.ascontiguousarray(Wc.indices, dtype=np.int64),
-            np.ascontiguousarray(Wc.data, dtype=np.float64))
 
 
 def law_bundle(stepper: MoreauJean) -> "LawBundle":
@@ -1100,8 +1088,7 @@ def _fallback_step(inp, stepper, k, s, qs, us, chi_now, record_every, record_pre
                    coupled_k, chi_row) -> None:
     """Step k of system s, which the kernel could not solve, with the reference solver."""
     ref = _reference_stepper(stepper)
-    NinvW, L = projection_matrices(ref, inp.metric_of(s))
-    q1, u1, P, sig, q_pre, act, chi = _python_step(inp, ref, NinvW, L, k, s, qs[s], us[s],
+    q1, u1, P, sig, q_pre, act, chi = _python_step(inp, ref, k, s, qs[s], us[s],
                                                    np.flatnonzero(chi_now), coupled_k, chi_row)
     if s == 0:
         chi_now[:] = False
