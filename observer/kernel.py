@@ -36,8 +36,8 @@ solvers that return ``(iterations, status, residual)``.
   residual exceeds the tolerance stops the kernel with :data:`RESIDUAL_EXCEEDED` (the caller
   stops the run there, :mod:`observer.loop`).
 
-* **Cost.** The step loop of :func:`advance` creates no array value per step (no views, no
-  tuples, no inlined calls with array arguments: each would be an atomic reference-count
+* **Cost.** The step loop of :func:`advance` (:func:`_advance_loop`) creates no array value
+  per step (no views, no tuples, no inlined calls with array arguments: each would be an atomic reference-count
   increment and decrement): systems are rows of the 2-D state arrays, indexed in place, the
   work buffers are allocated once per call, and the steps without contacts (the common case)
   run without a function call. The contact impulse, the banded solve, the projection and the
@@ -46,7 +46,9 @@ solvers that return ``(iterations, status, residual)``.
   prunes the observers', summary's and projection's branches at compile time; with one degree
   of freedom and one contact, :func:`advance_scalar` runs that loop on scalars (numba reloads
   every array value after each store to a record: it cannot tell they do not alias), about
-  twice as fast. Every
+  twice as fast. The entry points take their arguments in a few named bundles
+  (:class:`SystemBundle`, …) and pass each field by name to the positional step loops, once
+  per call (:func:`advance` says why this is done in Python). Every
   function uses numba's ``error_model="numpy"`` (IEEE division, no ``ZeroDivisionError``
   branch: every denominator here is positive or guarded), whose raise branches would
   otherwise keep numba's reference-count pruning from removing the increments.
@@ -887,8 +889,49 @@ def summary_start(state, system, tally):
 # ---------------------------------------------------------------------------------------
 # the loop: master (system 0) and observers (1..S-1)
 # ---------------------------------------------------------------------------------------
-@njit(**JIT)
 def advance(k0, k1, s0, system, impact, signals, window, observers, state, storage, tally, general):
+    """Advance every system from step k0 (starting with system s0) up to step k1.
+
+    The step loop :func:`_advance_loop` (its docstring: the scheme, the signals, the records,
+    the summary) fed by bundles, so that no call can pass an argument in the wrong order:
+    ``system`` (:class:`SystemBundle`), ``impact`` (:class:`LawBundle`), ``signals``
+    (:class:`SignalBundle`), ``window`` (:class:`WindowBundle`), ``observers``
+    (:class:`ObserverBundle`), ``state`` (:class:`StateBundle`, advanced in place),
+    ``storage`` (:class:`StorageBundle`, the records written in place) and ``tally``
+    (:class:`SummaryBundle`). Each field goes to the loop by name, once per call. This is a
+    Python function on purpose: the loop keeps its positional parameters because reading the
+    fields inside it, even into locals before the steps, made it 6–17 % slower per step
+    (measured against main's loop, issue 21), and a compiled wrapper gets the loop inlined
+    into it by LLVM, which compiles it again, differently.
+
+    ``general`` selects the compiled specialization: ``True`` the general loop; ``None`` the
+    lean loop of the master alone, dense, without summary, pre-projection records or master
+    projection (:func:`observer.loop.specialization`), whose other branches numba prunes at
+    compile time: bitwise the same trajectory, a shorter step.
+
+    Returns ``(k, s, status)``: ``status == OK`` and k = k1 when done; otherwise the step and
+    system that failed (their state untouched).
+    """
+    return _advance_loop(
+        k0, k1, s0, window.kb, state.qs, state.us, observers.jumps, observers.slots,
+        observers.master_projection, window.coupled, window.chi_log, window.use_log, state.chi_now,
+        storage.record_every, storage.q, storage.u, storage.P, storage.sigma, storage.active, storage.chi,
+        storage.q_pre, storage.record_pre, tally.on, tally.k_on, tally.k_off, tally.rhos, tally.summ,
+        tally.vprev, tally.Vprev, tally.rec_V, tally.closings, tally.prev_act, tally.Mq, tally.Kq, tally.Cq,
+        impact.code, system.h, system.theta, system.structure, system.Bu, system.Bq, system.Bf, system.Ru_b,
+        system.Rq_b, system.Ach_b, system.bw, window.waves, signals.e_ptr, signals.e_col, signals.e_coef,
+        signals.e_wave, signals.v_ptr, signals.v_col, signals.f_c, signals.nu_c, system.Wp, system.Wi,
+        system.Wv, system.AinvWT, system.Ghat, system.G0, observers.KinvWT, observers.L, impact.e, impact.tol,
+        state.stats, general)
+
+
+@njit(**JIT)
+def _advance_loop(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, chi_log, use_log, chi_now,
+            record_every, rec_q, rec_u, rec_P, rec_sig, rec_act, rec_chi, rec_qpre, record_pre,
+            summary, k_on, k_off, rhos, summ, vprev, Vprev, rec_V, closings, prev_act, Mq, Kq, Cq,
+            law, h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, waves,
+            e_ptr, e_col, e_coef, e_wave, v_ptr, v_col, f_c, nu_c, Wp, Wi, Wv, AinvWT, Ghat, G0,
+            KinvWT, L, e, tol, stats, general):
     """Advance every system from step k0 (starting with system s0) up to step k1.
 
     One Moreau–Jean step of system s (row s of ``qs``, ``us``) on its closed set A: the
@@ -928,37 +971,15 @@ def advance(k0, k1, s0, system, impact, signals, window, observers, state, stora
     at compile time (the same operations on the same values: bitwise the same trajectory, a
     shorter step). The caller passes ``None`` only in that case (:func:`observer.loop.specialization`).
 
-    The arguments come in bundles (named fields: no call can pass them in the wrong order):
-    ``system`` (:class:`SystemBundle`), ``impact`` (:class:`LawBundle`), ``signals``
-    (:class:`SignalBundle`), ``window`` (:class:`WindowBundle`), ``observers``
-    (:class:`ObserverBundle`), ``state`` (:class:`StateBundle`, advanced in place), ``storage``
-    (:class:`StorageBundle`) and ``tally`` (:class:`SummaryBundle`). Their fields are read
-    into locals once, before the step loop (the loop itself reads no tuple).
-
-    Why one function of this length: the step loop is the hot path, and every piece moved
-    into a function of its own would be a call with array arguments per step (a reference
-    count each, see the module docstring) or, inlined, the same; the pieces that are not per
-    step (contacts, banded solve, projection, summary) are already calls.
-
     Returns ``(k, s, status)``: ``status == OK`` and k = k1 when done; otherwise the step and
     system that failed (their state untouched).
+
+    Called only by :func:`advance`, which passes each bundle field by name. Why one function
+    of this length: it is the step loop, the hot path; every piece moved into a function of
+    its own would be a call with array arguments per step (a reference count each, see the
+    module docstring) or, inlined, the same; the pieces that are not per step (contacts,
+    banded solve, projection, summary) are already calls.
     """
-    qs, us, chi_now, stats = state.qs, state.us, state.chi_now, state.stats
-    jumps, slots, master_projection = observers.jumps, observers.slots, observers.master_projection
-    KinvWT, L = observers.KinvWT, observers.L
-    kb, waves, coupled, chi_log, use_log = window.kb, window.waves, window.coupled, window.chi_log, window.use_log
-    record_every, record_pre = storage.record_every, storage.record_pre
-    rec_q, rec_u, rec_P, rec_sig = storage.q, storage.u, storage.P, storage.sigma
-    rec_act, rec_chi, rec_qpre = storage.active, storage.chi, storage.q_pre
-    summary, k_on, k_off, rhos, summ = tally.on, tally.k_on, tally.k_off, tally.rhos, tally.summ
-    vprev, Vprev, rec_V, closings, prev_act = tally.vprev, tally.Vprev, tally.rec_V, tally.closings, tally.prev_act
-    Mq, Kq, Cq = tally.Mq, tally.Kq, tally.Cq
-    law, e, tol = impact.code, impact.e, impact.tol
-    h, theta, structure, bw = system.h, system.theta, system.structure, system.bw
-    Bu, Bq, Bf, Ru_b, Rq_b, Ach_b = system.Bu, system.Bq, system.Bf, system.Ru_b, system.Rq_b, system.Ach_b
-    Wp, Wi, Wv, AinvWT, Ghat = system.Wp, system.Wi, system.Wv, system.AinvWT, system.Ghat
-    e_ptr, e_col, e_coef, e_wave = signals.e_ptr, signals.e_col, signals.e_coef, signals.e_wave
-    v_ptr, v_col, f_c, nu_c = signals.v_ptr, signals.v_col, signals.f_c, signals.nu_c
     S, n = qs.shape
     if general is None:             # the lean specialization (see above): pruned at compile time
         S = 1
@@ -1168,8 +1189,25 @@ def advance(k0, k1, s0, system, impact, signals, window, observers, state, stora
 # ---------------------------------------------------------------------------------------
 # the scalar loop: one degree of freedom, one contact, the master alone
 # ---------------------------------------------------------------------------------------
-@njit(**JIT)
 def advance_scalar(k0, k1, system, impact, signals, window, state, storage):
+    """:func:`advance` for n = m = 1 (the master alone, dense): the scalar step loop
+    :func:`_advance_scalar_loop` (the state in registers; bitwise the same trajectory) fed by
+    the same bundles, each field passed by name (a Python function, for the reason given in
+    :func:`advance`). Writes the rows' times into
+    ``storage.t`` when it has a row per record. Returns ``(k, 0, status)``.
+    """
+    return _advance_scalar_loop(
+        k0, k1, window.kb, state.qs, state.us, storage.record_every, storage.q, storage.u, storage.P,
+        storage.active, storage.t, system.t0, system.h, system.theta, system.Bu, system.Bq, system.Bf,
+        window.waves, signals.e_ptr, signals.e_col, signals.e_coef, signals.e_wave, signals.v_ptr,
+        signals.f_c, signals.nu_c, system.Wp, system.Wi, system.Wv, system.AinvWT, system.Ghat, impact.e,
+        impact.tol, state.stats)
+
+
+@njit(**JIT)
+def _advance_scalar_loop(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, rec_act, rec_t, t0, h, theta,
+                   Bu, Bq, Bf, waves, e_ptr, e_col, e_coef, e_wave, v_ptr, f_c, nu_c, Wp, Wi, Wv, AinvWT, Ghat,
+                   e, tol, stats):
     """:func:`advance`'s lean loop for n = m = 1 (the master alone, dense): the same
     operations on the same values, with the state, the signals and the scheme's 1×1 matrices
     held in scalars instead of arrays (numba cannot tell that a store to a record does not
@@ -1178,18 +1216,10 @@ def advance_scalar(k0, k1, system, impact, signals, window, state, storage):
     and the same return value ``(k, 0, status)``. A contact step calls :func:`impulse_one`
     on one-element buffers. When ``rec_t`` has a row per record (else it is empty), each
     recorded row's time ``t0 + k·h`` is written there too, computed as
-    :meth:`observer.stepping.MoreauJean.time` computes it (bitwise its values). The bundles
-    are :func:`advance`'s (the fields read into locals before the loop); one function for the
-    same reason as :func:`advance`'s loop.
+    :meth:`observer.stepping.MoreauJean.time` computes it (bitwise its values).
+
+    Called only by :func:`advance_scalar`; one function for the reason of :func:`_advance_loop`.
     """
-    qs, us, stats, kb, waves = state.qs, state.us, state.stats, window.kb, window.waves
-    record_every, rec_q, rec_u, rec_P = storage.record_every, storage.q, storage.u, storage.P
-    rec_act, rec_t = storage.active, storage.t
-    t0, h, theta, Bu, Bq, Bf = system.t0, system.h, system.theta, system.Bu, system.Bq, system.Bf
-    Wp, Wi, Wv, AinvWT, Ghat = system.Wp, system.Wi, system.Wv, system.AinvWT, system.Ghat
-    e, tol = impact.e, impact.tol
-    e_ptr, e_col, e_coef, e_wave = signals.e_ptr, signals.e_col, signals.e_coef, signals.e_wave
-    v_ptr, f_c, nu_c = signals.v_ptr, signals.f_c, signals.nu_c
     q, u = qs[0, 0], us[0, 0]
     bu, bq, bf = Bu[0, 0], Bq[0, 0], Bf[0, 0]
     wnz = Wp[1] > Wp[0]                              # W's one entry (none: every gap is ν)
