@@ -47,10 +47,10 @@ def _workers(text: str) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Parse ``argv`` and run the command; bad input (an unknown suite, an unusable ``--out``,
     a full disk) is one ``error: ...`` line on stderr and exit status 2, never a traceback."""
-    from observer.cli import _Parser, guarded
+    from observer.cli_common import Parser, guarded
 
-    p = _Parser(prog="python -m bench", description=__doc__.split("\n\n")[0])
-    sub = p.add_subparsers(dest="cmd", required=True, parser_class=_Parser)
+    p = Parser(prog="python -m bench", description=__doc__.split("\n\n")[0])
+    sub = p.add_subparsers(dest="cmd", required=True, parser_class=Parser)
     sub.add_parser("list", help="list the suites")
     s = sub.add_parser("show", help="list the cases of a suite")
     s.add_argument("suite")

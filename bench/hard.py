@@ -16,7 +16,7 @@ the health numbers (largest complementarity residual recomputed from the applied
 against the run's tolerance, deepest penetration relative to the length scale, h·ω_max), and
 the error against the reference.
 
-Error norm (the work-precision suite's, :func:`bench.runners.trajectory_error`): on the
+Error norm (the work-precision suite's, :func:`bench.norms.trajectory_error`): on the
 recorded rows t_k, ``e_k = max_i |q_i(t_k) − q_ref,i(t_k)|``; ``err_max = max_k e_k`` and
 ``err_mean`` its time average. Without a reference both are NaN and ``reference_note`` says
 why.
@@ -38,6 +38,8 @@ from typing import Any, Callable
 import numpy as np
 
 import observer
+from bench.norms import trajectory_error
+from bench.schema import CASE, HARD, TIMING
 from observer.closed_form import closed_form_position
 from observer.errors import InputError
 from observer.result import RunState
@@ -61,24 +63,14 @@ STATES = (*(s.value for s in RunState), "refused")
 """Values of a row's ``status``: the run's :class:`observer.result.RunState`, or ``refused``
 (an :class:`~observer.errors.InputError` before the first step)."""
 
-METRICS: dict[str, Any] = {
-    "description": str, "stop_reason": str, "has_nan": bool, "steps": int, "store": str,
-    "record_every": int, "samples": int, "max_residual": float, "residual_tol": float,
-    "residual_held": (bool, type(None)), "penetration_rel": float, "h_omega_max": float,
-    "warnings": str, "reference": str, "reference_note": str, "norm": str, "err_max": float,
-    "err_mean": float, "ref_cpu_time_s": float,
-}
-"""The columns of a ``hard`` row beyond :data:`bench.schema.CASE` and
-:data:`bench.schema.TIMING`, with their types (:func:`bench.schema.check_row` conventions:
-``float`` columns may hold NaN; ``residual_held`` is None for a refused case, which ran no
-step)."""
+METRICS: dict[str, Any] = HARD
+"""The columns of a ``hard`` row beyond ``CASE`` and ``TIMING`` (:data:`bench.schema.HARD`,
+declared with the other kinds' rows)."""
 
 
 def columns() -> dict[str, Any]:
     """Every column of a ``hard`` row: ``CASE``, ``TIMING`` (:mod:`bench.schema`) and
     :data:`METRICS`."""
-    from bench.schema import CASE, TIMING
-
     return {**CASE, **TIMING, **METRICS}
 
 
@@ -356,8 +348,6 @@ def error_columns(res, q_ref: np.ndarray | None) -> dict[str, float]:
     without a reference."""
     if q_ref is None:
         return {"err_max": float("nan"), "err_mean": float("nan")}
-    from bench.runners import trajectory_error
-
     if res.t.size < 2:
         e = float(np.max(np.abs(res.q - q_ref)))
         return {"err_max": e, "err_mean": e}

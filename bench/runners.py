@@ -42,6 +42,7 @@ from observer.errors import InputError
 from observer.metrics import excursions_after_passage, settling_time, switchings
 from observer.switching import log_from_active
 
+from bench.norms import trajectory_error  # noqa: F401  (its home before bench.norms)
 from bench.perturb import perturb_log
 from observer.closed_form import closed_form_position
 from bench.results import now_iso
@@ -125,7 +126,8 @@ def simulate(sc, case: Case, **kwargs):
     if case.integrator == "event":
         kwargs = {k: v for k, v in kwargs.items() if k not in ("solver", "record_every")}
         return _timed(observer.simulate, sc, integrator="event", **kwargs)
-    kwargs.setdefault("engine", engine_for(kwargs.get("solver") or case.solver))
+    if engine_for(kwargs.get("solver") or case.solver) != "compiled":   # else: the engine registry's
+        kwargs.setdefault("engine", "python")                          # first that accepts the run
     return _timed(observer.simulate, sc, **kwargs)
 
 
@@ -358,14 +360,6 @@ def _event_reference(case: Case, spacing: float, ctx: Context) -> EventReference
         cache[key] = EventReference(res.t, res.q, {n: res.slaves[n].q for n in observers},
                                     fine, cpu)
     return cache[key].every(k)
-
-
-def trajectory_error(t: np.ndarray, q: np.ndarray, q_ref: np.ndarray) -> dict[str, float]:
-    """``err_mean`` (time average of the max-over-coordinates error), ``err_max``, ``err_end``."""
-    e = np.max(np.abs(q - q_ref), axis=1)
-    T = t[-1] - t[0]
-    return {"err_mean": float(np.trapezoid(e, t) / T), "err_max": float(e.max()),
-            "err_end": float(e[-1])}
 
 
 def run_work_precision(case: Case, ctx: Context) -> list[dict]:

@@ -15,7 +15,6 @@ from typing import Any
 
 import numpy as np
 
-from bench.hard import METRICS as HARD_METRICS
 from observer.metrics import RHOS, above_column, settle_column, sync_column
 
 Columns = dict[str, Any]
@@ -31,6 +30,17 @@ TIMING: Columns = {"cpu_time_s": float, "wall_time_s": float, "cpu_scope": str}
 ENGINE: Columns = {"engine": str, "structure": str, "loop_time_s": float,
                    "loop_per_step_s": float, "run_compile_time_s": float, "solver_fallbacks": int}
 """The time loop's engine, structure, own wall time and fallbacks (:func:`bench.runners.engine_columns`)."""
+
+HARD: Columns = {
+    "description": str, "stop_reason": str, "has_nan": bool, "steps": int, "store": str,
+    "record_every": int, "samples": int, "max_residual": float, "residual_tol": float,
+    "residual_held": (bool, type(None)), "penetration_rel": float, "h_omega_max": float,
+    "warnings": str, "reference": str, "reference_note": str, "norm": str, "err_max": float,
+    "err_mean": float, "ref_cpu_time_s": float,
+}
+"""The columns of a ``hard`` row (:mod:`bench.hard`) beyond :data:`CASE` and :data:`TIMING`,
+with their types (:func:`check_row` conventions: ``float`` columns may hold NaN;
+``residual_held`` is None for a refused case, which ran no step)."""
 
 
 def sync_columns() -> Columns:
@@ -70,7 +80,7 @@ ROWS: dict[str, Columns] = {
     "checks": {**CASE, **TIMING, "check": str, "equation": str, "check_status": str,
                "passed": (bool, type(None)), "margin": float, "tolerance": float, "witness": str,
                "reason": str, "check_elapsed_s": float, "evidence": str, "verdict": str},
-    "hard": {**CASE, **TIMING, **HARD_METRICS},
+    "hard": {**CASE, **TIMING, **HARD},
 }
 """Kind → the columns of its rows and their types (``peers`` rows are declared by
 :mod:`bench.peers`, whose columns depend on the peer's run)."""

@@ -10,22 +10,16 @@ import argparse
 import sys
 from pathlib import Path
 
-from observer.errors import ContactSolverError, InputError, is_numerical_failure, one_line
+from observer.cli_common import Parser, guarded, parse_pairs
+from observer.engines import ENGINES
+from observer.errors import InputError
 from observer.validation import check_output_path
+
+_Parser = Parser
+"""The former name of :class:`observer.cli_common.Parser`."""
 
 IMAGE_SUFFIXES = (".png", ".svg", ".pdf")
 """Image formats ``plot --out`` writes."""
-
-
-def parse_pairs(items: list[str] | None, flag: str = "--set") -> dict[str, str]:
-    """``["a.b=1", "c=x"]`` → ``{"a.b": "1", "c": "x"}``; a malformed item is an error on ``flag``."""
-    out = {}
-    for item in items or []:
-        if "=" not in item:
-            raise InputError(flag, f"expected KEY=VALUE, got {item!r}")
-        key, value = item.split("=", 1)
-        out[key.strip()] = value.strip()
-    return out
 
 
 def cmd_scenarios(args) -> int:
@@ -67,7 +61,7 @@ def cmd_run(args) -> int:
     if args.events is not None:
         write_events(res, args.events)
     meta = res.metadata
-    if args.integrator == "event":
+    if meta.get("integrator") == "event":
         print(f"{sc.name}: exact event-driven run, {meta['events']} master events, sampled every "
               f"h = {meta['h']:g} ({meta['steps']} rows); status {res.status.state.value}"
               + (f": {res.status.reason}" if res.status.reason else ""))
@@ -107,7 +101,7 @@ def _integrator_options(args) -> dict:
                 raise InputError(flag, "is a time-stepping option; --integrator event samples "
                                        "the exact solution on the grid t_k = k·h")
         return {"integrator": "event"}
-    return {"engine": args.engine or "compiled", "record_every": args.record_every,
+    return {"engine": args.engine, "integrator": args.integrator, "record_every": args.record_every,
             "store": args.store or "full"}
 
 
@@ -149,13 +143,6 @@ def cmd_plot(args) -> int:
     return 0
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse with one-line errors (``error: ...``, exit status 2), like every other input error."""
-
-    def error(self, message: str):
-        self.exit(2, f"error: {message} (see --help)\n")
-
-
 def cmd_log(args) -> int:
     import numpy as np
 
@@ -176,9 +163,9 @@ def cmd_log(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="python -m observer",
+    p = Parser(prog="python -m observer",
                                 description="Impact-time state observers for nonsmooth mechanical systems.")
-    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
     s = sub.add_parser("scenarios", help="list the built-in scenarios")
     s.set_defaults(func=cmd_scenarios)
     s = sub.add_parser("show", help="print a scenario as an editable TOML file")
@@ -194,13 +181,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--observers", help="comma-separated observer designs, e.g. jump,nojump; "
                                        "'none' runs the master alone (default: the scenario's "
                                        "[observer] observers)")
-    s.add_argument("--integrator", choices=["time-stepping", "event"], default="time-stepping",
-                   help="Moreau–Jean time-stepping (default) or the exact event-driven integrator")
+    s.add_argument("--integrator", choices=["time-stepping", "event"], default=None,
+                   help="Moreau–Jean time-stepping (default, or the --engine's) or the exact "
+                        "event-driven integrator")
     s.add_argument("--events", metavar="FILE", help="also write the events table (.csv or .parquet)")
     s.add_argument("--source", choices=["master", "log", "self"], help="switching signal source")
     s.add_argument("--log", help="closing log CSV (contact,t_close,t_open) for --source log")
-    s.add_argument("--engine", choices=["compiled", "python"], default=None,
-                   help="time loop: the numba kernel (default) or the numpy reference")
+    s.add_argument("--engine", choices=list(ENGINES), default=None,
+                   help="a registered engine: compiled (the numba kernel), python (the numpy "
+                        "reference), event, ... (default: the first that accepts the run)")
     s.add_argument("--record-every", type=int, default=None, metavar="K",
                    help="keep every K-th step (default 1; about 10 000 rows with --store summary)")
     s.add_argument("--store", choices=["full", "summary"], default=None,
@@ -228,44 +217,3 @@ def main(argv: list[str] | None = None) -> int:
     warnings.formatwarning = lambda msg, cat, *a, **k: f"warning: {msg}\n"
     args = build_parser().parse_args(argv)
     return guarded(args.func, args)
-
-
-def _os_error_file(exc: OSError, args: tuple) -> str:
-    """The file an :class:`OSError` is about: its own ``filename``, else the command's output
-    file(s) (a failed ``write`` on an open file, "No space left on device", names none)."""
-    if exc.filename is not None:
-        return str(exc.filename)
-    ns = args[0] if args else None
-    outs = [str(v) for k in ("out", "events", "json") if (v := getattr(ns, k, None))]
-    return " or ".join(outs) or "output file"
-
-
-def guarded(func, *args) -> int:
-    """Call ``func(*args)``; turn input, solver, file and out-of-memory errors, and a numerical
-    library's own exception (:func:`~observer.errors.is_numerical_failure`), into one
-    ``error:`` line on stderr and exit status 2 (130 on Ctrl-C). Shared by every command line
-    of the toolkit."""
-    try:
-        return func(*args)
-    except (InputError, ContactSolverError) as exc:
-        print(f"error: {one_line(str(exc))}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"error: {one_line(_os_error_file(exc, args))}: {one_line(exc.strerror or str(exc))}",
-              file=sys.stderr)
-        return 2
-    except MemoryError:
-        print("error: --store: the run does not fit in memory; keep fewer rows (--record-every K, "
-              "or --store summary), shorten the run (--t-end, --h) or use a smaller system", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return 130
-    except Exception as exc:            # noqa: BLE001  (re-raised unless a library's failure)
-        if not is_numerical_failure(exc):
-            raise
-        where = getattr(args[0], "scenario", None) if args else None
-        print(f"error: {one_line(str(where or 'input'))}: the computation failed "
-              f"({type(exc).__name__}: {one_line(str(exc))}); please report this input",
-              file=sys.stderr)
-        return 2

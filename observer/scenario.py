@@ -36,6 +36,7 @@ import numpy as np
 from observer.errors import InputError
 from observer.impact import ImpactLaw
 from observer.model import Harmonic, LinearSystem
+from observer.solver_registry import solver_factory
 from observer.validation import MAX_DEPTH, as_array, as_scalar, check_step_count, check_step_parameters
 
 _HARMONIC = {"amplitude": None, "omega": None, "phase": None}
@@ -219,8 +220,7 @@ class Scenario:
         check_angles("system.forcing", sysd.get("forcing", {}), forcing, t_end)
         check_angles("system.gap", sysd.get("gap", {}), gap, t_end)
         solver = simd.get("solver", "pivoting")
-        from observer.contact import get_solver
-        get_solver(solver, field="simulation.solver")
+        solver_factory(solver, field="simulation.solver")
         projection = simd.get("master_projection", False)
         if not isinstance(projection, bool):
             raise InputError("simulation.master_projection", f"must be true or false, got {projection!r}")

@@ -37,6 +37,7 @@ from proofs_checks.lyapunov import check_convergence, check_lyapunov_decrease
 from proofs_checks.monotonicity import check_impact_monotone
 from proofs_checks.projection import check_projection_closed_form, check_projection_psd
 from proofs_checks.proposition import check_proposition1_exact, check_proposition1_h_scaling
+from proofs_checks.registry import results_frame, run_checks
 from proofs_checks.result import CheckResult
 from proofs_checks.switching import check_switching_generated
 
@@ -60,7 +61,6 @@ def assert_checks(scenario: str | Path | Scenario, only=None, *, allow_not_appli
     The message starts with the results table (check, status, margin, tolerance, witness)
     and then gives each failed check's full witness. Returns the results otherwise.
     """
-    from proofs_checks import results_frame, run_checks
     results = run_checks(scenario, only, **kwargs)
     bad = [r for r in results if r.passed is False or (r.passed is None and not allow_not_applicable)]
     if bad:
@@ -76,7 +76,6 @@ def _helper(name: str, fn: Callable[..., CheckResult]) -> Callable[..., CheckRes
     def helper(*args: Any, allow_not_applicable: bool = True, **kwargs: Any) -> CheckResult:
         __tracebackhide__ = True
         if len(args) == 1 and isinstance(args[0], (str, Path, Scenario)):
-            from proofs_checks import run_checks
             run_kw = {k: kwargs.pop(k) for k in ("seed", "h", "t_end", "overrides") if k in kwargs}
             res = run_checks(args[0], [name], options={name: kwargs} if kwargs else None, **run_kw)[0]
         else:

@@ -16,7 +16,7 @@ import sys
 import time
 from pathlib import Path
 
-from observer.cli import _Parser, guarded, parse_pairs
+from observer.cli_common import Parser, guarded, parse_pairs
 from observer.errors import InputError
 
 STATUS_WIDTH = 6
@@ -57,7 +57,7 @@ def format_table(results) -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     from proofs_checks import CHECKS
-    p = _Parser(                           # one-line argparse errors, as observer's CLI
+    p = Parser(                           # one-line argparse errors, as observer's CLI
         prog="python -m proofs_checks",
         description="Numerically verify the steps of Proposition 1 and Theorem 1 on a scenario. "
                     f"Checks: {', '.join(CHECKS)}.")

@@ -17,7 +17,7 @@ import scipy.linalg as sla
 
 import proofs_checks as pc
 from observer.errors import InputError
-from proofs_checks import cli
+from proofs_checks import asserts, cli
 from proofs_checks.context import CheckContext, CheckSettings
 from proofs_checks.result import CheckResult
 
@@ -402,7 +402,7 @@ def test_assert_checks_forwards_keywords_and_formats_the_table(monkeypatch):
     b = CheckResult.from_margin("second", -2.0, 0.0, {}, "e", (), "why")
     for r in (a, b):
         r.scenario = "sc"
-    monkeypatch.setattr(pc, "run_checks", lambda *args, **kw: [a, b])
+    monkeypatch.setattr(asserts, "run_checks", lambda *args, **kw: [a, b])
     with pytest.raises(AssertionError) as info:
         pc.assert_checks("sc")
     text = str(info.value)

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import proofs_checks as pc
+from proofs_checks import asserts
 from proofs_checks.asserts import _helper
 from proofs_checks.assumptions import check_mass_spd
 from proofs_checks.result import CheckResult
@@ -44,7 +45,7 @@ def _recording_runner(monkeypatch, result):
     def fake_run_checks(scenario, only=None, **kwargs):
         calls.append((scenario, only, kwargs))
         return [result]
-    monkeypatch.setattr(pc, "run_checks", fake_run_checks)
+    monkeypatch.setattr(asserts, "run_checks", fake_run_checks)
     return calls
 
 

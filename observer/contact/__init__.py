@@ -22,6 +22,7 @@ from observer.contact.lcp import (LCPSolution, block_principal_pivoting, lcp_res
                                   nnls_cholesky, solve_single)
 from observer.contact.reference import solve_reference
 from observer.errors import ContactSolverError, InputError
+from observer.solver_registry import CONTACT_SOLVERS, solver_factory
 
 ACCEPT_RESIDUAL = 1e-10
 """Largest residual of block pivoting that the pivoting solver accepts without trying Lemke."""
@@ -87,16 +88,13 @@ class ExactSolver:
         return sol
 
 
-CONTACT_SOLVERS = {
+CONTACT_SOLVERS.update({
     "pivoting": PivotingSolver,
     "lemke": lambda: ExactSolver("lemke", lemke, "ended on a secondary ray (infeasible LCP)"),
     "nnls": lambda: ExactSolver("nnls", nnls_cholesky, "Delassus matrix is not positive definite"),
     "reference": lambda: ExactSolver("reference", solve_reference, "no solution"),
-}
-"""Registry: stable name → solver factory (``pivoting``: block pivoting with Lemke as
-fallback; ``lemke``: Lemke's algorithm, any PSD G; ``nnls``: NNLS on the Cholesky factor, SPD G;
-``reference``: cvxpy + OSQP on the equivalent convex QP, compiled once per size). The
-micro-benchmarks and the report iterate over it."""
+})
+# the registry itself (and its documentation) is in observer.solver_registry, below the model
 
 
 def get_solver(name: str, field: str = "solver", **options):
@@ -105,11 +103,7 @@ def get_solver(name: str, field: str = "solver", **options):
     ``options`` go to the solver's constructor (e.g. ``fallback=False`` for ``"pivoting"``);
     an option the solver does not have raises ``InputError`` naming ``field``.
     """
-    try:
-        factory = CONTACT_SOLVERS[name]
-    except (KeyError, TypeError):
-        raise InputError(field, f"unknown contact solver {name!r}; "
-                         f"choose from {sorted(CONTACT_SOLVERS)}") from None
+    factory = solver_factory(name, field)
     try:
         return factory(**options)
     except TypeError:

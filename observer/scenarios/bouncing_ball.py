@@ -10,25 +10,11 @@ contact with λ = m g0.
 
 from __future__ import annotations
 
-import numpy as np
+from observer.scenarios.exact import accumulation_time, ball_reference, impact_times  # noqa: F401
 
 DESCRIPTION = "ball dropped on the ground: Zeno accumulation at t_inf = 4.06 s, then rest"
 
 PARAMETERS = dict(m=1.0, g0=9.81, h0=1.0, restitution=0.8, law="newton", h=1e-3, t_end=6.0)
-
-
-def accumulation_time(h0: float, g0: float, e: float) -> float:
-    """Zeno time t_∞ = sqrt(2h0/g0)(1 + e)/(1 − e)."""
-    return float(np.sqrt(2 * h0 / g0) * (1 + e) / (1 - e))
-
-
-def impact_times(h0: float, g0: float, e: float, count: int) -> np.ndarray:
-    """The first ``count`` impact times t_k = t1 + (2v1/g0) e(1 − e^{k−1})/(1 − e)."""
-    t1 = np.sqrt(2 * h0 / g0)
-    v1 = np.sqrt(2 * g0 * h0)
-    k = np.arange(1, count + 1)
-    return t1 + (2 * v1 / g0) * e * (1 - e ** (k - 1)) / (1 - e)
-
 
 PLOT = dict(dof=0, contact=0, labels=("height q (m)", "gap (m)"))
 NOTES = ("K = 0: only the no-jump observer applies; Zeno accumulation of impacts, then "
@@ -43,8 +29,7 @@ SUITE = {
 
 
 def reference(scenario, t):
-    """The closed form of THEORY §7.1 (:func:`observer.closed_form.ball_reference`)."""
-    from observer.closed_form import ball_reference
+    """The closed form of THEORY §7.1 (:func:`observer.scenarios.exact.ball_reference`)."""
     return ball_reference(scenario, t)
 
 

@@ -24,9 +24,9 @@ SUITE = {
 
 
 def reference(scenario, t):
-    """The exact solution (:func:`observer.closed_form.oscillator_reference`): undamped,
+    """The exact solution (:func:`observer.scenarios.exact.oscillator_reference`): undamped,
     one harmonic forcing term, fixed wall; None otherwise."""
-    from observer.closed_form import oscillator_reference
+    from observer.scenarios.exact import oscillator_reference
     return oscillator_reference(scenario, t)
 
 
