@@ -974,11 +974,11 @@ def _advance_loop(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupl
     Returns ``(k, s, status)``: ``status == OK`` and k = k1 when done; otherwise the step and
     system that failed (their state untouched).
 
-    Called only by :func:`advance`, which passes each bundle field by name. Why one function
-    of this length: it is the step loop, the hot path; every piece moved into a function of
-    its own would be a call with array arguments per step (a reference count each, see the
-    module docstring) or, inlined, the same; the pieces that are not per step (contacts,
-    banded solve, projection, summary) are already calls.
+    Called only by :func:`advance`, which passes each bundle field by name.
+    One function because it is the step loop, the hot path: every piece moved into a function of its own
+    would be a call with array arguments per step (a reference count each, see the module
+    docstring) or, inlined, the same; the pieces that are not per step (contacts, banded
+    solve, projection, summary) are already calls.
     """
     S, n = qs.shape
     if general is None:             # the lean specialization (see above): pruned at compile time
@@ -1218,7 +1218,8 @@ def _advance_scalar_loop(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, 
     recorded row's time ``t0 + k·h`` is written there too, computed as
     :meth:`observer.stepping.MoreauJean.time` computes it (bitwise its values).
 
-    Called only by :func:`advance_scalar`; one function for the reason of :func:`_advance_loop`.
+    Called only by :func:`advance_scalar`. One function because it is a step loop, for the
+    reason of :func:`_advance_loop`.
     """
     q, u = qs[0, 0], us[0, 0]
     bu, bq, bf = Bu[0, 0], Bq[0, 0], Bf[0, 0]

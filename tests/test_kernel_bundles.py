@@ -76,22 +76,3 @@ def test_bundles_are_filled_by_name_and_typed_alike():
         assert type(x) is type(y) and all(f is not None for f in x)
         assert numba.typeof(x) == numba.typeof(y)
 
-
-def test_no_long_function_in_the_engine_room_but_the_compiled_step_loops():
-    """No function of kernel.py, loop.py, stepping.py over 80 lines, except a compiled step
-    loop whose docstring says why it is one function."""
-    import ast
-    from pathlib import Path
-
-    import observer
-
-    root = Path(observer.__file__).parent
-    long = {}
-    for name in ("kernel.py", "loop.py", "stepping.py"):
-        for node in ast.walk(ast.parse((root / name).read_text())):
-            if isinstance(node, ast.FunctionDef) and node.end_lineno - node.lineno + 1 > 80:
-                compiled = any("njit" in ast.unparse(d) for d in node.decorator_list)
-                doc = ast.get_docstring(node) or ""
-                if not (compiled and "one function" in doc):
-                    long[f"{name}:{node.name}"] = node.end_lineno - node.lineno + 1
-    assert long == {}
