@@ -37,21 +37,22 @@ solvers that return ``(iterations, status, residual)``.
   stops the run there, :mod:`observer.loop`).
 
 * **Cost.** The step loop of :func:`advance` (:func:`_advance_loop`) creates no array value
-  per step (no views, no tuples, no inlined calls with array arguments: each would be an atomic reference-count
-  increment and decrement): systems are rows of the 2-D state arrays, indexed in place, the
-  work buffers are allocated once per call, and the steps without contacts (the common case)
-  run without a function call. The contact impulse, the banded solve, the projection and the
-  summary are plain compiled calls. The common case (the master alone, dense, plain records)
-  is a second compiled specialization of the same function (``general=None``), in which numba
-  prunes the observers', summary's and projection's branches at compile time; with one degree
-  of freedom and one contact, :func:`advance_scalar` runs that loop on scalars (numba reloads
-  every array value after each store to a record: it cannot tell they do not alias), about
-  twice as fast. The entry points take their arguments in a few named bundles
-  (:class:`SystemBundle`, …) and pass each field by name to the positional step loops, once
-  per call (:func:`advance` says why this is done in Python). Every
-  function uses numba's ``error_model="numpy"`` (IEEE division, no ``ZeroDivisionError``
-  branch: every denominator here is positive or guarded), whose raise branches would
-  otherwise keep numba's reference-count pruning from removing the increments.
+  per step (no views, no tuples, no inlined calls with array arguments: each would be an
+  atomic reference-count increment and decrement): systems are rows of the 2-D state arrays,
+  indexed in place, the work buffers are allocated once per call, and the steps without
+  contacts (the common case) run without a function call. The contact impulse, the banded
+  solve, the projection and the summary are plain compiled calls. The common case (the
+  master alone, dense, plain records) is a second compiled specialization of the same
+  function (``general=None``), in which numba prunes the observers', summary's and
+  projection's branches at compile time; with one degree of freedom and one contact,
+  :func:`advance_scalar` runs that loop on scalars (numba reloads every array value after
+  each store to a record: it cannot tell they do not alias), about twice as fast. The entry
+  points take their arguments in a few named bundles (:class:`SystemBundle`, …) and pass
+  each field by name to the positional step loops, once per call (:func:`advance` says why
+  this is done in Python). Every function uses numba's ``error_model="numpy"`` (IEEE
+  division, no ``ZeroDivisionError`` branch: every denominator here is positive or guarded),
+  whose raise branches would otherwise keep numba's reference-count pruning from removing
+  the increments.
 
 Statuses: :data:`OK`, :data:`LCP_FAILED` (the step's contact problem was not solved to
 tolerance), :data:`PROJECTION_FAILED` (L_I not positive definite), :data:`RESIDUAL_EXCEEDED`
@@ -975,10 +976,10 @@ def _advance_loop(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupl
     system that failed (their state untouched).
 
     Called only by :func:`advance`, which passes each bundle field by name.
-    One function because it is the step loop, the hot path: every piece moved into a function of its own
-    would be a call with array arguments per step (a reference count each, see the module
-    docstring) or, inlined, the same; the pieces that are not per step (contacts, banded
-    solve, projection, summary) are already calls.
+    One function because it is the step loop, the hot path: every piece moved into a
+    function of its own would be a call with array arguments per step (a reference count
+    each, see the module docstring) or, inlined, the same; the pieces that are not per step
+    (contacts, banded solve, projection, summary) are already calls.
     """
     S, n = qs.shape
     if general is None:             # the lean specialization (see above): pruned at compile time

@@ -608,9 +608,8 @@ def newton_residual(stepper: MoreauJean, k: int, q, u, u1, P, act) -> float:
     b = (u_free @ W_A + nd[k + 1, act]) + stepper.law.restitution[act] * (u @ W_A + nd[k, act])
     du = stepper.S.AinvW[:, act] @ P
     Wp, Wi, Wv = stepper.csc
-    return float(applied_residual(Wp, Wi, Wv, np.ascontiguousarray(act, dtype=np.int64), int(act.size),
-                                  np.ascontiguousarray(du, dtype=np.float64), np.ascontiguousarray(b, dtype=np.float64),
-                                  np.ascontiguousarray(P, dtype=np.float64)))
+    c = lambda x, dtype=np.float64: np.ascontiguousarray(x, dtype=dtype)  # noqa: E731
+    return float(applied_residual(Wp, Wi, Wv, c(act, np.int64), int(act.size), c(du), c(b), c(P)))
 
 
 def _python_step(inp: LoopInput, stepper: MoreauJean, k: int, s: int, q, u, chi,
@@ -691,7 +690,8 @@ def system_bundle(inp: LoopInput) -> "SystemBundle":
         structure, dense, banded, bw = STRUCTURE_DENSE, (c(S.Bu), c(S.Bq), c(S.Bf)), (dummy,) * 3, 0
     else:
         b = S.band
-        structure, dense, banded, bw = STRUCTURE_BANDED, (dummy,) * 3, (c(b.Ru), c(b.Rq), c(b.Achol)), int(b.bw)
+        banded = (c(b.Ru), c(b.Rq), c(b.Achol))
+        structure, dense, bw = STRUCTURE_BANDED, (dummy,) * 3, int(b.bw)
     return SystemBundle(structure=structure, Bu=dense[0], Bq=dense[1], Bf=dense[2], Ru_b=banded[0],
                         Rq_b=banded[1], Ach_b=banded[2], bw=bw, Wp=Wp, Wi=Wi, Wv=Wv, AinvWT=c(S.AinvW.T),
                         Ghat=c(S.Ghat), G0=c(S.G0), h=float(stepper.h), theta=float(stepper.theta),
@@ -702,8 +702,8 @@ def law_bundle(stepper: MoreauJean) -> "LawBundle":
     """The impact law's kernel code, its restitution and the residual tolerance."""
     from observer.kernel import LawBundle
 
-    return LawBundle(code=int(stepper.law.code), e=np.ascontiguousarray(stepper.law.restitution, dtype=np.float64),
-                     tol=float(stepper.residual_tol))
+    e = np.ascontiguousarray(stepper.law.restitution, dtype=np.float64)
+    return LawBundle(code=int(stepper.law.code), e=e, tol=float(stepper.residual_tol))
 
 
 def observer_bundle(inp: LoopInput) -> "ObserverBundle":
@@ -753,7 +753,8 @@ def summary_bundle(inp: LoopInput, on: bool, rhos: tuple, R: int) -> "SummaryBun
 _NO_COUPLING, _NO_LOG = np.zeros(1, np.bool_), np.zeros((1, 1), np.bool_)
 
 
-def window_bundle(inp: LoopInput, signals: "SignalBundle", kb: int, k1: int, tw: np.ndarray | None) -> "WindowBundle":
+def window_bundle(inp: LoopInput, signals: "SignalBundle", kb: int, k1: int,
+                  tw: np.ndarray | None) -> "WindowBundle":
     """The window of steps kb..k1: its waves, and (with observers; ``tw`` its grid points)
     the coupling and χ from a log."""
     from observer.kernel import WindowBundle
