@@ -661,8 +661,7 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
             certified[(kind, j)] = zero.resume
             if kind == "g":
                 gam = flow.velocities(t, x)[j]
-                note = zero.note or (f"minimum {zero.value:.3g} within the touch band "
-                                     f"±{zero.band:.3g} (the guaranteed crossing depth)")
+                note = zero.note or _graze_note(zero)
                 run.event(t, j, "graze", gam, gam, 0.0, depth=zero.value, note=note)
                 run.touch(j, t)
             continue
@@ -722,6 +721,15 @@ def _initial_contacts(run: _Run, x: np.ndarray):
     qfix[:run.n] -= run.Minv @ W @ np.linalg.solve(run.delassus(idx), g[idx])
     x_new, stick, *_ = run.collide(t0, qfix, (), set(idx))
     return x_new, stick
+
+
+def _graze_note(zero) -> str:
+    """The note of a graze row: the minimum m*, its certified enclosure, the touch band and the
+    guaranteed crossing depth δ* = band + enclosure width there
+    (:func:`observer.event.roots.minimum_enclosure`)."""
+    lo, hi = zero.enclosure or (zero.value, zero.value)
+    return (f"minimum {zero.value:.3g} in [{lo:.3g}, {hi:.3g}] (certified) within the touch band "
+            f"±{zero.band:.3g}; guaranteed crossing depth {zero.band + (hi - lo):.3g}")
 
 
 def _liftoff(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int):
