@@ -54,7 +54,8 @@ import numpy as np
 
 from observer.contact import get_solver
 from observer.event.flow import Flow, flow_for
-from observer.event.roots import NonFiniteFlow, RootIsolationError, first_zero, motion_tolerance, tolerance
+from observer.event.roots import (FLOOR_FACTOR, NonFiniteFlow, RootIsolationError, first_zero,
+                                  motion_tolerance, tolerance)
 from observer.impact import ImpactLaw, impact
 from observer.scenario import Scenario
 
@@ -65,10 +66,6 @@ CONTACT_TOL = 1e3
 """A contact counts as closed (simultaneous impact, persistent contact) when |g| and the
 relevant velocity are within CONTACT_TOL × their round-off tolerance
 (:func:`observer.event.roots.tolerance`)."""
-
-INITIAL_GAP_RTOL = 1e-9
-"""At t0, |g_j| ≤ INITIAL_GAP_RTOL·max(1, Σ|r_j z|) counts as closed (the scenario's own
-acceptance of an initial penetration, :data:`observer.scenario.INITIAL_GAP_TOL`)."""
 
 ZENO_MIN_IMPACTS = 6
 """Impacts of one run needed before a geometric accumulation is recognised."""
@@ -195,7 +192,7 @@ class _Run:
         self.segments: list[tuple[float, float, tuple, np.ndarray]] = []
         self.free_flow = flow_for(self.system, ())
         self.Minv = self.free_flow.Minv
-        self.tau = self.free_flow.time_scale
+        self.tau = self.free_flow.time_scale      # a system without one: set by run_master
         self.note, self.note_time = "", np.nan
         self.should_stop = None        # callable → a signal name (SIGINT/SIGTERM) or None
         self.halted: str | None = None # the signal that stopped the sampling (no row after)
@@ -376,11 +373,18 @@ class _Run:
         if (speed > self.zeno_velocity_ratio * v0 and d[2] > ZENO_MIN_INTERVAL * max(abs(t), self.tau)
                 and not hop_small and not self.noisy_tail(key, fl, idx, z, v_plus, t)):
             return None
+        tail = self.tail_after(key, t, x, persistent)
+        return t + (tail if tail is not None else self.tail_time(key, d[1], d[2]))
+
+    def tail_after(self, key: tuple, t: float, x: np.ndarray, persistent: tuple) -> float | None:
+        """:meth:`velocity_tail` after an impact of ``key`` at t (state x after it), on the flow
+        that holds ``persistent``: from γ⁺ and the exact contact acceleration and its rate."""
         held = flow_for(self.system, persistent)
         zh = held.z(t, x)
+        idx = list(key)
         jerk_rows = held.velocity_rows[idx] @ held.A
-        tail = self.velocity_tail(key, v_plus, jerk_rows @ zh, jerk_rows @ held.A @ zh)
-        return t + (tail if tail is not None else self.tail_time(key, d[1], d[2]))
+        return self.velocity_tail(key, held.velocity_rows[idx] @ zh, jerk_rows @ zh,
+                                  jerk_rows @ held.A @ zh)
 
     def hop_tol(self, fl: Flow, idx: list, z: np.ndarray) -> np.ndarray:
         """Evaluation round-off of the gaps ``idx`` (:func:`observer.event.roots.tolerance`):
@@ -462,17 +466,19 @@ class _Run:
         return tail
 
     def accumulate(self, key: tuple, t: float, x: np.ndarray, persistent: tuple, t_inf: float,
-                   speed: float):
+                   speed: float, impacts: int | None = None):
         """Carry the state to the accumulation time t_∞ and switch ``key`` to persistent contact.
 
         The tail in the limit is persistent contact from the last resolved impact t_k on:
         the projection γ⁺ → 0 at t_k is the impulse −G⁻¹γ⁺, the rest of the tail's impulse
         is ∫λ dt over [t_k, t_∞] (so the frame's momentum balance holds exactly).
+        ``impacts``: the impacts resolved, when the run's history is not the count (a landing
+        of sub-round-off hops, :func:`_impact`); its ratio is then the restitution.
         """
-        hist = self.history.pop(key)
+        hist = self.history.pop(key, [])
         self.last_key = None
         d = np.diff([p[0] for p in hist[-3:]])
-        ratio = d[1] / d[0]
+        ratio = d[1] / d[0] if d.size == 2 else float(self.law.restitution[key[0]])
         setp = tuple(sorted(set(persistent) | set(key)))
         for c in key:          # the tail is densely closed: χ_c = 1 from the last resolved impact
             if self.intervals[c] and self.intervals[c][-1] == (t, t):
@@ -491,7 +497,8 @@ class _Run:
         for c in key:
             self.event(t_inf, c, "accumulation", -speed * ratio, 0.0, tail[setp.index(c)])
         self.zeno.append({"contact": key[0] if len(key) == 1 else key, "t_inf": t_inf,
-                          "impacts_resolved": len(hist), "tail_time": t_inf - t,
+                          "impacts_resolved": len(hist) if impacts is None else impacts,
+                          "tail_time": t_inf - t,
                           "tail_impulse": float(np.sum([tail[setp.index(c)] for c in key])),
                           "ratio": ratio})
         stick = self.sticking(t_inf, x_inf, list(setp))
@@ -616,6 +623,8 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
     status = "ok"
     t = t0
     x = np.concatenate([scenario.q0, scenario.u0]).astype(float)
+    if not run.free_flow.intrinsic:
+        run.tau = motion_time_scale(run.free_flow, t0, x)
     x, persistent = _initial_contacts(run, x)
     certified: dict[tuple[str, int], float] = {}
     n_events, same_time, t_last_event = 0, 0, -np.inf
@@ -631,7 +640,7 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
         keys = [("g", j) for j in free] + [("f", j) for j in persistent]
         cert = {i: certified[k] for i, k in enumerate(keys) if k in certified}
         try:
-            zero, t_stop, _ = first_zero(flow, rows, t, flow.z(t, x), t_end, cert)
+            zero, t_stop, _ = first_zero(flow, rows, t, flow.z(t, x), t_end, cert, run.tau)
         except NonFiniteFlow as exc:                  # overflow: a stop at the last finite state
             if np.all(np.isfinite(exc.z_ok)):
                 run.fill(flow, t, x, exc.t_ok, include_end=True)
@@ -672,28 +681,9 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
             run.history.clear()
             certified.update(cert_new)
             continue
-        x, new_persistent, A, gm, lam = run.collide(t, x, persistent, {j})
-        n_impacts += 1
-        key = tuple(c for c in A if c not in new_persistent)
-        t_inf = None
-        if key and set(new_persistent) == set(persistent):
-            bouncing = [A.index(c) for c in key]
-            t_inf = run.zeno_check(key, t, x, gm[bouncing], persistent)
-            if t_inf is not None:
-                out = run.accumulate(key, t, x, persistent, t_inf, float(np.max(np.abs(gm[bouncing]))))
-                if out is None:
-                    t = t_end
-                    break
-                x, new_persistent = out
-                t = t_inf
-        else:
-            run.history.clear()
-        landing = run.tiny_hops(t, x, key, new_persistent) if key and t_inf is None else []
-        if landing:                                    # a cluster settling below round-off
-            x, new_persistent = run.land(landing, t, x, new_persistent, n_impacts)
-            run.history.clear()
-            n_impacts = 0
-        persistent = new_persistent
+        t, x, persistent, n_impacts, done = _impact(run, t, x, persistent, j, n_impacts)
+        if done:                                       # the accumulation lies beyond t_end
+            break
     if run.halted and not status.startswith("stopped: non-finite"):
         t = float(run.t_grid[run.k_next - 1]) if run.k_next else t0
         status = f"stopped: {run.halted} at t = {t:.9g}"
@@ -702,17 +692,76 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
     return _result(run, scenario, status, t)
 
 
+def _impact(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int, n_impacts: int):
+    """An impact triggered by contact j at t, then the Zeno check of the run of impacts and
+    the landing of sub-round-off hops. Returns ``(t, x, persistent, n_impacts, done)``;
+    done: an accumulation at or beyond t_end ended the run (t = t_end)."""
+    x, new_persistent, A, gm, lam = run.collide(t, x, persistent, {j})
+    n_impacts += 1
+    key = tuple(c for c in A if c not in new_persistent)
+    if key and set(new_persistent) == set(persistent):
+        bouncing = [A.index(c) for c in key]
+        t_inf = run.zeno_check(key, t, x, gm[bouncing], persistent)
+        if t_inf is not None:
+            out = run.accumulate(key, t, x, persistent, t_inf, float(np.max(np.abs(gm[bouncing]))))
+            if out is None:
+                return run.t_end, x, persistent, n_impacts, True
+            return t_inf, out[0], out[1], n_impacts, False
+    else:
+        run.history.clear()
+    landing = run.tiny_hops(t, x, key, new_persistent) if key else []
+    if not landing:
+        return t, x, new_persistent, n_impacts, False
+    # one contact bouncing alone: its tail is extrapolated from γ⁺ (where the hops fall
+    # below round-off depends on the coordinates, t∞ must not); a cluster lands at t
+    tail = (run.tail_after(key, t, x, new_persistent)
+            if len(key) == 1 and landing == list(key) and set(new_persistent) == set(persistent)
+            else None)
+    if tail is None:
+        x, new_persistent = run.land(landing, t, x, new_persistent, n_impacts)
+        run.history.clear()
+        return t, x, new_persistent, 0, False
+    out = run.accumulate(key, t, x, persistent, t + tail, float(abs(gm[A.index(key[0])])),
+                         impacts=n_impacts)
+    run.history.clear()
+    if out is None:
+        return run.t_end, x, persistent, 0, True
+    return t + tail, out[0], out[1], 0, False
+
+
+def motion_time_scale(flow: Flow, t0: float, x: np.ndarray) -> float:
+    """Time scale τ of a motion whose system has none (no stiffness, damping or frequency: the
+    bouncing ball), from its initial state: the largest of the contacts' times
+    ``√(2|g|/|γ̇|)``, ``|γ|/|γ̇|`` and ``|g|/|γ|`` (free fall, stop, approach) at t0, all
+    invariant under translations and time shifts and in seconds whatever the length unit
+    (the flow's window, which scales with the acceleration's length unit, only if all vanish)."""
+    z = flow.z(t0, x)
+    g, gam = np.abs(flow.gap_rows @ z), np.abs(flow.velocity_rows @ z)
+    acc = np.abs(flow.velocity_rows @ flow.A @ z)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cand = np.concatenate([np.sqrt(2.0 * g / acc), gam / acc, g / gam])
+    cand = cand[np.isfinite(cand) & (cand > 0.0)]
+    return float(cand.max()) if cand.size else flow.time_scale
+
+
 def _initial_contacts(run: _Run, x: np.ndarray):
-    """Closed contacts at t0: an impact if approaching, persistent contact if the force is positive."""
+    """Closed contacts at t0: an impact if approaching, persistent contact if the force is positive.
+
+    A contact is closed at t0 when its gap is below CONTACT_TOL round-offs of the motion
+    (:func:`observer.event.roots.motion_tolerance` without its floor: a property of the
+    motion, the same in any units and at any translation) plus FLOOR_FACTOR round-offs of
+    the gap's representation ``ROUNDOFF·Σ|r_j z_j|`` (what float64 cannot resolve, as in
+    the touch band), a penetration accepted by the scenario
+    (:data:`observer.scenario.INITIAL_GAP_TOL`) included, and its velocity is not leaving."""
     fl = run.free_flow
     t0 = run.t0
     z = fl.z(t0, x)
     g = fl.gap_rows @ z
-    scale = np.abs(fl.gap_rows) @ np.abs(z)
     gam = fl.velocity_rows @ z
+    floor = tolerance(fl.gap_rows, z)                  # the gap's representation floor
+    tol_g = CONTACT_TOL * (run.tol(fl.gap_rows, z, t0) - floor) + FLOOR_FACTOR * floor
     tol_v = CONTACT_TOL * run.tol(fl.velocity_rows, z, t0)
-    closed = {j for j in range(run.m)
-              if abs(g[j]) <= INITIAL_GAP_RTOL * max(1.0, scale[j]) and gam[j] <= tol_v[j]}
+    closed = {j for j in range(run.m) if g[j] <= tol_g[j] and gam[j] <= tol_v[j]}
     if not closed:
         return x, ()
     qfix = x.copy()

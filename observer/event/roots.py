@@ -279,8 +279,9 @@ class FunctionalSet:
     |r̂_k|)·|z|`` (:meth:`errors`), likewise inflated.
     """
 
-    def __init__(self, flow: Flow, rows: np.ndarray) -> None:
+    def __init__(self, flow: Flow, rows: np.ndarray, tau: float | None = None) -> None:
         self.flow = flow
+        self.tau = flow.time_scale if tau is None else float(tau)   # the motion's time scale
         self.rows = np.atleast_2d(np.asarray(rows, dtype=float))
         N = self.rows.shape[1]
         u = np.finfo(float).eps / 2.0
@@ -375,7 +376,7 @@ def _refine(fs: FunctionalSet, i: int, k: int, a: float, za: np.ndarray, lo: flo
             new = 0.5 * (lo + hi)
             step = new - tau
         tau = new
-        res = resolution(a + tau, flow.time_scale)
+        res = resolution(a + tau, fs.tau)
         if abs(step) <= res or hi - lo <= res:
             return tau
     return tau
@@ -405,7 +406,7 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
     z_m = flow.expm(tau_m) @ za
     m_star = fs.value(i, 0, z_m)
     floor = ROUNDOFF * float(fs.abs_d[0][i] @ np.abs(z_m))
-    touch = float(touch_band(fs.value(i, 2, z_m), fs.value(i, 3, z_m), floor, flow.time_scale))
+    touch = float(touch_band(fs.value(i, 2, z_m), fs.value(i, 3, z_m), floor, fs.tau))
     lower, upper = minimum_enclosure(fs, i, za, tau_m, span)
     if lower > touch:
         return "positive", a + span
@@ -515,7 +516,8 @@ def _norm(v: np.ndarray) -> float:
 
 
 def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: float,
-               certified: dict[int, float] | None = None) -> tuple[Zero | None, float, np.ndarray]:
+               certified: dict[int, float] | None = None, tau: float | None = None
+               ) -> tuple[Zero | None, float, np.ndarray]:
     """First zero in ``[t0, t_end]`` of any functional ``rows[i]·z(t)`` along ``flow``.
 
     Tolerances are the motion's (:func:`motion_tolerance`, :func:`touch_band`). A search
@@ -533,6 +535,9 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
         End of the search.
     certified : dict, optional
         ``{i: t}``: ψ_i is known to stay positive until t (after a touch).
+    tau : float, optional
+        The motion's time scale τ of the tolerances (default ``flow.time_scale``; a run
+        of a system without one passes its motion's, :func:`observer.event.master.motion_time_scale`).
 
     Returns
     -------
@@ -542,11 +547,11 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     """
     rows = np.atleast_2d(rows)
     a, za = float(t0), np.asarray(z0, dtype=float)
-    tau = flow.time_scale
+    tau = flow.time_scale if tau is None else float(tau)
     if rows.shape[0] == 0 or t_end - a <= resolution(t_end, tau):
         z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
         return None, t_end, z
-    fs = FunctionalSet(flow, rows)
+    fs = FunctionalSet(flow, rows, tau)
     certified = dict(certified or {})
     window = WINDOW / max(flow.norm_bound, 1e-300)
     growth = np.exp(WINDOW * (1.0 + BOUND_MARGIN))     # ‖T⁻¹AT‖₂ w ≤ WINDOW, to its margin
