@@ -87,7 +87,12 @@ which re-injects ≈ 1e-19 into the exact observers' V at every landing (a floor
 
 ZENO_TAIL_RTOL = 1e-9
 """A geometric run of one contact is also extrapolated once the representation error of its
-gap would put more than this fraction of max(|t|, τ) into t_∞ (:meth:`_Run.noisy_tail`)."""
+gap would put more than this fraction of max(|t|, τ) into t_∞ (:meth:`_Run.noisy_tail`);
+where the run is cut depends on the coordinates, t_∞ does not (:meth:`_Run.hop_tail`)."""
+
+HOP_ORDER = 8
+"""Degree of the Taylor polynomial of a hop in :meth:`_Run.hop_tail` (hops last ≲ the Zeno
+tail ≪ τ, so the truncation is (Δ/τ)^9 of the hop, below round-off)."""
 
 SAMPLE_BLOCK = 256
 """Output samples computed per block product (``exp(A j h)``, j = 1..SAMPLE_BLOCK)."""
@@ -195,6 +200,7 @@ class _Run:
         self.tau = self.free_flow.time_scale      # a system without one: set by run_master
         self.note, self.note_time = "", np.nan
         self.should_stop = None        # callable → a signal name (SIGINT/SIGTERM) or None
+        self.hop_end = None            # (contact, t_k, t_last, x_last) of the last hop_tail
         self.halted: str | None = None # the signal that stopped the sampling (no row after)
 
     # -- sampling --------------------------------------------------------------------------
@@ -374,7 +380,30 @@ class _Run:
                 and not hop_small and not self.noisy_tail(key, fl, idx, z, v_plus, t)):
             return None
         tail = self.tail_after(key, t, x, persistent)
-        return t + (tail if tail is not None else self.tail_time(key, d[1], d[2]))
+        t_inf = t + (tail if tail is not None else self.tail_time(key, d[1], d[2]))
+        return t_inf if self.tail_is_clear(key, t, x, persistent, t_inf) else None
+
+    def tail_is_clear(self, key: tuple, t: float, x: np.ndarray, persistent: tuple,
+                      t_inf: float) -> bool:
+        """True if no other event (a gap of another open contact closing, a held contact's
+        force vanishing) falls in the tail ``[t, t_∞]``, searched on the flow that holds
+        ``key`` and ``persistent`` (the tail's limit): the extrapolation skips the tail, so it
+        must not skip another contact's impact (which, coming first, ends the run of ``key``;
+        the accumulation is then resolved further)."""
+        setp = tuple(sorted(set(persistent) | set(key)))
+        flow = flow_for(self.system, setp)
+        others = [j for j in range(self.m) if j not in setp]
+        held = [setp.index(c) for c in persistent]
+        rows = np.vstack([flow.gap_rows[others], flow.force_rows[held]])
+        if rows.shape[0] == 0 or t_inf <= t:
+            return True
+        xp = self.project(t, x, list(setp))
+        try:
+            zero, _, _ = first_zero(flow, rows, t, flow.z(t, xp), min(t_inf, self.t_end),
+                                    tau=self.tau)
+        except RootIsolationError:
+            return False
+        return zero is None
 
     def tail_after(self, key: tuple, t: float, x: np.ndarray, persistent: tuple) -> float | None:
         """:meth:`velocity_tail` after an impact of ``key`` at t (state x after it), on the flow
@@ -383,8 +412,49 @@ class _Run:
         zh = held.z(t, x)
         idx = list(key)
         jerk_rows = held.velocity_rows[idx] @ held.A
-        return self.velocity_tail(key, held.velocity_rows[idx] @ zh, jerk_rows @ zh,
+        tail = self.velocity_tail(key, held.velocity_rows[idx] @ zh, jerk_rows @ zh,
                                   jerk_rows @ held.A @ zh)
+        return None if tail is None else self.hop_tail(key[0], t, zh, held, tail)
+
+    def hop_tail(self, c: int, t: float, z: np.ndarray, held: Flow, guess: float) -> float:
+        """The tail after an impact of contact c alone at t (augmented state z after it) by
+        exact hops relative to the contact point: each hop leaves g = 0 exactly, lasts the
+        first zero Δ > 0 of ``g(t_k + Δ) − g(t_k) = Σ_{j≥1} g^{(j)}(t_k) Δ^j/j!`` (degree
+        :data:`HOP_ORDER`, Newton from 2γ⁺/|γ̇|), and lands with the flow's exact velocity,
+        which Newton's law returns times e. The gap's own value, which carries the
+        coordinates' round-off (|q| + |ν|), is never used: the tail, and t_∞, are the same
+        in any coordinates. Falls back to ``guess`` (:meth:`velocity_tail`) if a hop is not
+        a falling-back parabola."""
+        e = float(self.law.restitution[c])
+        n = self.n
+        R = [held.velocity_rows[c]]
+        for _ in range(HOP_ORDER - 1):
+            R.append(R[-1] @ held.A)
+        R = np.array(R)                                     # rows of g', g'', …
+        fact = np.cumprod(np.arange(1, HOP_ORDER + 1, dtype=float))   # 1!, 2!, …
+        push = self.Minv @ self.system.W[:, c] / float(self.delassus([c])[0, 0])
+        tail, v0 = 0.0, float(R[0] @ z)
+        self.hop_end = None
+        for _ in range(100_000):
+            d = R @ z
+            if d[0] <= 1e-12 * v0 or d[1] >= 0.0:          # landed, or no longer falling back
+                self.hop_end = (c, t, t + tail, held.x_of(z))  # the state after the last hop
+                return tail + (2.0 * max(d[0], 0.0) / -d[1] / (1.0 - e) if d[1] < 0.0 else 0.0)
+            co = d / fact                                   # (g(t_k + Δ) − 0)/Δ = Σ co_j Δ^j
+            dt = -2.0 * d[0] / d[1]
+            for _ in range(30):
+                P = np.polyval(co[::-1], dt)
+                dP = np.polyval((co[1:] * np.arange(1, HOP_ORDER))[::-1], dt)
+                step = P / dP if dP != 0.0 else 0.0
+                dt -= step
+                if abs(step) <= 4e-16 * dt:
+                    break
+            if not 0.0 < dt <= 4.0 * d[0] / -d[1]:
+                return guess
+            z = held.propagate(t + tail, z, dt)
+            tail += dt
+            z[n:2 * n] -= push * (1.0 + e) * float(R[0] @ z)   # γ⁺ = −e γ⁻
+        return guess
 
     def hop_tol(self, fl: Flow, idx: list, z: np.ndarray) -> np.ndarray:
         """Evaluation round-off of the gaps ``idx`` (:func:`observer.event.roots.tolerance`):
@@ -399,7 +469,9 @@ class _Run:
         The gap is evaluated with an absolute error δg ≈ eps·Σ|r z| (its representation: it
         grows with |q| and |ν|), so an impact at speed v is located to δg/v and its
         γ⁺ to |γ̇|δg/v; the velocity tail (:meth:`velocity_tail`) then errs by about
-        ``(1 + 2/(1 − e))·δg/γ⁺``. Once that reaches ZENO_TAIL_RTOL·max(|t|, τ), the run is
+        ``(1 + 2/(1 − e))·δg/γ⁺``. Once that reaches ZENO_TAIL_RTOL·max(|t|, τ) (the time
+        resolution's scale; a cut there, not earlier, keeps the tail, which the observers
+        treat as closed, short), the run is
         extrapolated from the current (still accurate) impact."""
         if len(key) != 1 or self.law.law not in ("newton", "poisson"):
             return False
@@ -492,7 +564,15 @@ class _Run:
         self.fill(flow, t, xp, min(t_inf, self.t_end), include_end=t_inf >= self.t_end)
         if t_inf >= self.t_end:
             return None
-        x_inf = self.project(t_inf, flow.state(t, xp, t_inf - t), list(setp))
+        hop = self.hop_end
+        if hop is not None and hop[0] == key[0] and hop[1] == t and t <= hop[2] <= t_inf:
+            # the state after the exact hops (:meth:`hop_tail`), not the held flow's over the
+            # whole tail: the same wherever the resolved impacts were cut
+            x_last = self.project(hop[2], hop[3], list(setp))
+            x_inf = self.project(t_inf, flow.state(hop[2], x_last, t_inf - hop[2]), list(setp))
+        else:
+            x_inf = self.project(t_inf, flow.state(t, xp, t_inf - t), list(setp))
+        self.hop_end = None
         tail = proj_impulse + flow.force_impulse(t, xp, t_inf - t)
         for c in key:
             self.event(t_inf, c, "accumulation", -speed * ratio, 0.0, tail[setp.index(c)])
@@ -717,6 +797,8 @@ def _impact(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int, n_imp
     tail = (run.tail_after(key, t, x, new_persistent)
             if len(key) == 1 and landing == list(key) and set(new_persistent) == set(persistent)
             else None)
+    if tail is not None and not run.tail_is_clear(key, t, x, persistent, t + tail):
+        tail = None
     if tail is None:
         x, new_persistent = run.land(landing, t, x, new_persistent, n_impacts)
         run.history.clear()
