@@ -16,9 +16,10 @@ contacts with ``γ⁺ = 0`` (within round-off) enter persistent contact if the
 acceleration LCP ``0 ≤ λ ⊥ γ̇ = G λ + γ̇_free ≥ 0`` gives them a positive force.
 
 Grazing (stated tolerances, on the scale of the motion): a **touch**, a local minimum m* of
-g_j within the touch band δ* (:func:`observer.event.roots.touch_band`, the guaranteed
-crossing depth) of zero, is a graze with zero impulse (the run continues past it); its row
-carries ``depth = m*`` and a note stating δ*. A crossing with ``|γ⁻| ≤`` CONTACT_TOL motion
+g_j whose certified enclosure meets the touch band ±δ (:func:`observer.event.roots.touch_band`)
+is a graze with zero impulse (the run continues past it); its row carries ``depth = m*`` and
+a note stating the enclosure, δ and the guaranteed crossing depth δ* = δ + its width.
+A crossing with ``|γ⁻| ≤`` CONTACT_TOL motion
 tolerances of γ is labelled a graze too, and its (tiny) impulse is applied. A minimum above
 the touch band is a miss: no event. Contacts count as closed together (simultaneous impact)
 when their gaps are within CONTACT_TOL motion tolerances
@@ -406,8 +407,9 @@ class _Run:
         return zero is None
 
     def tail_after(self, key: tuple, t: float, x: np.ndarray, persistent: tuple) -> float | None:
-        """:meth:`velocity_tail` after an impact of ``key`` at t (state x after it), on the flow
-        that holds ``persistent``: from γ⁺ and the exact contact acceleration and its rate."""
+        """Tail duration after an impact of ``key`` at t (state x after it), on the flow that
+        holds ``persistent``: :meth:`hop_tail` (exact hops), with :meth:`velocity_tail` (from γ⁺
+        and the contact acceleration and its rate) as its fallback; None if neither applies."""
         held = flow_for(self.system, persistent)
         zh = held.z(t, x)
         idx = list(key)

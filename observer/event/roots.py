@@ -15,10 +15,12 @@ is approached monotonically from the safe side, at the rate of Newton's method.
 A double root (grazing: ψ_i touches zero with ψ_i' = 0) cannot be certified either way in
 floating point; when the minimum of ψ_i lies in a window on which ψ_i'' > 0 is certified
 (``ψ_i''(a) − B_i s > 0``), ψ_i has exactly one local minimum t_m there, found as the
-simple zero of ψ_i'. Its value decides: above the touch band of ψ_i (:func:`touch_band`, the
-guaranteed crossing depth, on the scale of the motion), the whole
-convex window is certified positive; within it, a **touch** (graze) at t_m; below it, a
-**cross** before t_m, isolated by the bracket ``[a, t_m]``.
+simple zero of ψ_i'. A certified enclosure ``[lower, upper]`` of its value (a Taylor model
+with Lagrange remainder, :meth:`FunctionalSet.enclose`, :func:`minimum_enclosure`) decides
+against the touch band δ of ψ_i (:func:`touch_band`, on the scale of the motion):
+``lower > δ``, the whole convex window is certified positive; ``upper < −δ``, a **cross**
+before t_m, isolated by the bracket ``[a, t_m]``; otherwise a **touch** (graze) at t_m. The
+guaranteed crossing depth is δ* = δ + (upper − lower): a deeper minimum is always a cross.
 
 Zeros are refined by safeguarded Newton steps (bisection when a step leaves the bracket)
 until the step is below the time resolution :data:`TIME_RTOL`·max(|t|, τ).
@@ -51,8 +53,9 @@ TOUCH_FACTOR = 1e3
 motion scale of ψ_i at the minimum, :func:`touch_band`) plus ``FLOOR_FACTOR · ROUNDOFF ·
 Σ|r_ij z_j|``: round-off accumulated along a run (about 1e-13 of the orbit's size after 50 s
 on the grazing scenario) must not turn an exact graze into a miss or a crossing. A minimum
-above the band is a miss, below it a crossing (an impact, however shallow). The band is the
-**guaranteed crossing depth**: a crossing deeper than the band is never reported as a graze."""
+certified above the band is a miss, below it a crossing (an impact, however shallow); the
+**guaranteed crossing depth** is the band plus the width of the minimum's certified
+enclosure (:func:`minimum_enclosure`): a crossing deeper than it is never a graze."""
 
 FLOOR_FACTOR = 16.0
 """Multiple of the representation floor ``ROUNDOFF · Σ|r_ij z_j|`` in the touch band (it grows
