@@ -364,3 +364,25 @@ def test_the_certified_enclosure_of_a_gap_and_its_rate_holds_the_50_digit_value(
         ref = 1e-40 * size * (1 + fl.norm_bound) ** j     # the 50-digit reference's own error
         assert lo - ref <= exact <= hi + ref and hi - lo <= 1e-13 * size * (1 + fl.norm_bound) ** j
 
+
+
+@pytest.mark.parametrize("alpha", [1.0, 1e3, 1e-3])
+@pytest.mark.parametrize("nu", [0.0, 100.0])
+def test_initial_contact_is_a_property_of_the_motion_not_of_units_or_origin(alpha, nu):
+    """A ball at rest 1e-10 m above the ground is open at t0 in metres, millimetres and
+    kilometres, with the ground at ν = 0 or 100 (the old rule, 1e-9·max(1, |q| + |ν|), closed
+    it in metres and opened it in millimetres): it first lands at √(2δ/g) (50 digits, to the
+    gap's representation error over the speed); the same ball on the ground (gap 0) sticks
+    at t0 whatever the units."""
+    def drop(gap):
+        return scenario([[1.0]], [[0.0]], [[1.0]], [-G0 * alpha], [nu * alpha],
+                        [(gap - nu) * alpha], [0.0], 0.5, 0.01, h=1e-3)
+    res = run_master(drop(1e-10))
+    first = res.events.iloc[0]
+    t1 = mp.sqrt(2 * mp.mpf(1e-10) / G0)
+    dg = 4 * EPS * (1e-10 + 2 * nu)                   # the gap's representation error (metres)
+    assert res.status == "ok" and first["kind"] == "impact"
+    assert abs(first["time"] - float(t1)) <= dg / float(G0 * t1) + 1e-15
+    rest = run_master(drop(0.0))
+    assert rest.status == "ok" and rest.events["kind"].tolist() == ["stick"]
+    assert rest.events["time"].iloc[0] == 0.0 and abs(rest.frame["u0"]).max() == 0.0
