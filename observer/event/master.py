@@ -794,10 +794,11 @@ def _impact(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int, n_imp
     landing = run.tiny_hops(t, x, key, new_persistent) if key else []
     if not landing:
         return t, x, new_persistent, n_impacts, False
-    # one contact bouncing alone: its tail is extrapolated from γ⁺ (where the hops fall
-    # below round-off depends on the coordinates, t∞ must not); a cluster lands at t
+    # one contact bouncing alone, nothing held: its tail is extrapolated from γ⁺ (where the
+    # hops fall below round-off depends on the coordinates, t∞ must not); a cluster, or a
+    # contact bouncing on a held set (the chain's blocks), lands at t
     tail = (run.tail_after(key, t, x, new_persistent)
-            if len(key) == 1 and landing == list(key) and set(new_persistent) == set(persistent)
+            if len(key) == 1 and landing == list(key) and not persistent and not new_persistent
             else None)
     if tail is not None and not run.tail_is_clear(key, t, x, persistent, t + tail):
         tail = None
