@@ -483,3 +483,35 @@ def test_the_enclosure_check_fails_a_bound_without_its_remainder_or_with_small_n
         real = roots.norm_upper
         monkeypatch.setattr(roots, "norm_upper", lambda v: 0.25 * real(v))
     assert _enclosure_failures(3, monkeypatch) > 0
+
+
+# -- the Zeno cut-offs depend on the time origin only through ulp(t) -------------------------------
+
+def _zeno_cuts(origins, nu=0.0):
+    """(impacts resolved, tail time, t∞ − T) of the ball dropped from 1 m (e = 0.5) at t0 = T."""
+    out = []
+    for T in origins:
+        z = run_master(ball(1.0, nu=nu, e=0.5, t_end=2.0), t0=T, t_end=T + 2.0).zeno[0]
+        out.append((z["impacts_resolved"], z["tail_time"], z["t_inf"] - T))
+    return out
+
+
+def test_zeno_cut_is_the_same_for_time_origins_in_one_binade_of_ulp_t():
+    """The Zeno cut-offs are multiples of ulp(max(|t|, τ)), the resolution of the time
+    differences the run forms: time origins 1100, 1500 and 2000 (t in [1024, 2048)) resolve
+    the same impacts and give the same tail and t∞ − T bit for bit; across binades (origin
+    0, 1e5) the cut may move and t∞ − T stays within 1e-9 of the 50-digit closed form."""
+    same = _zeno_cuts([1100.0, 1500.0, 2000.0])
+    assert same[0] == same[1] == same[2]
+    exact = float(ball_t_inf(1.0, 0.5))
+    for _, _, t_inf in same + _zeno_cuts([0.0, 1e5 + 100.0]):
+        assert abs(t_inf - exact) <= 1e-9
+
+
+def test_zeno_cut_check_fails_a_cut_off_proportional_to_t(monkeypatch):
+    """... and the same check fails the old rule, thresholds proportional to max(|t|, τ)
+    (continuous in t, so a shift of the time origin within a binade moves the cut)."""
+    import observer.event.master as master
+    monkeypatch.setattr(master, "time_ulp", lambda t, tau: np.finfo(float).eps * max(abs(t), tau))
+    same = _zeno_cuts([1100.0, 1500.0, 2000.0])
+    assert not same[0] == same[1] == same[2]
