@@ -356,8 +356,10 @@ def norm_upper(v: np.ndarray) -> float:
 
 def exp_upper(x: float) -> float:
     """A proved upper bound of ``e^x`` (ball arithmetic, python-flint ``arb``)."""
-    if not np.isfinite(x):
-        return np.inf if x > 0 else 0.0
+    if np.isnan(x) or x == np.inf:
+        return np.inf                                   # no bound: the search cannot proceed
+    if x == -np.inf:
+        return 0.0
     return up(float(flint.arb(float(x)).exp().upper()), 1)
 
 
@@ -374,7 +376,11 @@ def spectral_norm_upper(A: np.ndarray, scale: np.ndarray) -> float:
     N = A.shape[0]
     s = np.asarray(scale, dtype=float)
     B = A * s[None, :] / s[:, None]
-    _, V = np.linalg.eigh(B.T @ B)
+    with np.errstate(over="ignore", invalid="ignore"):
+        M = B.T @ B
+    if not np.isfinite(M).all():
+        return np.inf                                   # ‖B‖² beyond float64: no finite bound
+    _, V = np.linalg.eigh(M)
     with flint.ctx.workprec(128):
         Ba = flint.arb_mat([[flint.arb(A[i, j]) * flint.arb(s[j]) / flint.arb(s[i])
                              for j in range(N)] for i in range(N)])

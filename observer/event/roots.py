@@ -300,7 +300,7 @@ class FunctionalSet:
         self.err = [np.zeros_like(self.rows)]
         self._extend(3)
         third = (np.abs(self.d[3]) + self.err[3]) * flow.scale   # ≥ |r_3 T| entrywise
-        self.third_norm = np.array([norm_upper(r) for r in third])
+        self.third_norm = np.array([_row_norm(r) for r in third])
         self.abs_d = [np.abs(r) for r in self.d[:3]]
 
     def _extend(self, k: int) -> None:
@@ -353,7 +353,7 @@ class FunctionalSet:
         term = up(term * (1.0 + (2 * K + 1) * _U))
         rest = np.abs(self.d[K + j][i]) + self.err[K + j][i]
         growth = exp_upper(up(flow.certified_norm * s * (1.0 + 2.0 * _U)))
-        remainder = up(norm_upper(rest * flow.scale) * growth * norm_upper(z / flow.scale)
+        remainder = up(_row_norm(rest * flow.scale) * growth * norm_upper(z / flow.scale)
                        * term * (1.0 + 5.0 * _U))
         u = np.finfo(float).eps / 2.0
         g3k = 3.0 * K * u / (1.0 - 3.0 * K * u)
@@ -511,6 +511,12 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, tols,
                 s = res[1] - a
         step = min(step, s)
     return step, found
+
+
+def _row_norm(v: np.ndarray) -> float:
+    """Proved upper bound of ‖v‖₂ for a derivative row, ``inf`` once its squares overflow
+    (|v_i| ≥ 2^511; the search then stops as non-finite, as with float64's norm)."""
+    return norm_upper(v) if float(np.max(np.abs(v))) < 2.0 ** 511 else np.inf
 
 
 def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: float,
