@@ -386,3 +386,132 @@ def test_initial_contact_is_a_property_of_the_motion_not_of_units_or_origin(alph
     rest = run_master(drop(0.0))
     assert rest.status == "ok" and rest.events["kind"].tolist() == ["stick"]
     assert rest.events["time"].iloc[0] == 0.0 and abs(rest.frame["u0"]).max() == 0.0
+
+
+# -- the certified norms behind δ* are proved bounds (no relative margin) ----------------------
+
+def _mp_spectral_norm(A, s):
+    """‖T⁻¹AT‖₂ to 50 digits (mpmath SVD of the exact balanced matrix)."""
+    with mp.workdps(50):
+        N = A.shape[0]
+        B = mp.matrix([[mp.mpf(A[i, j]) * mp.mpf(s[j]) / mp.mpf(s[i]) for j in range(N)]
+                       for i in range(N)])
+        return max(mp.svd_r(B, compute_uv=False))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_certified_spectral_norm_is_a_tight_upper_bound_of_the_50_digit_norm(seed):
+    """Flow.certified_norm (Gershgorin on V⁻¹BᵀBV in ball arithmetic) ≥ the 50-digit ‖T⁻¹AT‖₂
+    and within 1e-13 of it, for random generators spanning 6 decades, a matrix with a
+    repeated singular value (two equal rotations) and a built-in scenario."""
+    from observer.event.flow import spectral_norm_upper
+    rng = np.random.default_rng(seed)
+    if seed == 0:
+        A = np.kron(np.eye(2), np.array([[0.0, 3.0], [-3.0, 0.0]]))
+        s = np.ones(4)
+    elif seed == 1:
+        fl = Flow(observer.load_scenario("double_mass").system)
+        A, s = fl.A, fl.scale
+    else:
+        N = int(rng.integers(3, 9))
+        A = rng.normal(size=(N, N)) * 10.0 ** rng.integers(-3, 4, size=(N, N))
+        s = 2.0 ** rng.integers(-5, 6, size=N)
+    exact = _mp_spectral_norm(A, s)
+    bound = spectral_norm_upper(A, s)
+    assert exact <= bound <= exact * (1 + 1e-13)
+
+
+def test_the_vector_norm_and_exponential_bounds_are_upper_bounds_at_50_digits():
+    """norm_upper ≥ ‖v‖₂ (50 digits) within 1e-15 relative, including entries near overflow
+    and underflow; exp_upper ≥ eˣ within 1e-15."""
+    from observer.event.flow import exp_upper, norm_upper
+    rng = np.random.default_rng(7)
+    for scale in (1.0, 1e300, 1e-300, 1e-160):
+        for _ in range(50):
+            v = rng.normal(size=int(rng.integers(1, 30))) * scale
+            with mp.workdps(50):
+                exact = mp.sqrt(mp.fsum(mp.mpf(x) ** 2 for x in v))
+            b = norm_upper(v)
+            assert exact <= b <= exact * (1 + 1e-14) + 1e-320
+    for x in np.linspace(0.0, 0.6, 61):
+        with mp.workdps(50):
+            ex = mp.exp(mp.mpf(x))
+        assert ex <= exp_upper(x) <= ex * (1 + 1e-15)
+
+
+def _enclosure_failures(order, monkeypatch):
+    """Number of (state, offset, j) where a Taylor model of degree ``order − 1`` fails to
+    hold the 50-digit value of g^{(j)} for the forced oscillator x'' + 0.3x' + 4x = 2 cos 1.3t
+    (so that the Lagrange remainder, not round-off, dominates the enclosure's width)."""
+    from observer.event import roots
+    monkeypatch.setattr(roots, "TAYLOR_ORDER", order)
+    k, c, F0, a, w = 4.0, 0.3, 0.0, 2.0, 1.3
+    forcing = Harmonic.build("f", 1, constant=F0, terms=[{"amplitude": a, "omega": w}])
+    system = LinearSystem([[1.0]], [[c]], [[k]], [[1.0]], forcing,
+                          Harmonic.build("nu", 1, constant=0.5, kind="sin"))
+    fl = Flow(system)
+    fs = FunctionalSet(fl, fl.gap_rows)
+    fails = 0
+    for phase in np.linspace(0.0, 2 * np.pi, 12, endpoint=False):
+        x0, u0 = np.cos(phase), 2.0 * np.sin(phase)
+        x = oscillator_x(k, c, F0, a, w, x0, u0)
+        z = fl.z(0.0, np.array([x0, u0]))
+        for frac in (0.25, 0.5, 0.75, 1.0):
+            s = frac * WINDOW / fl.norm_bound
+            for j in (0, 1):
+                exact = x(mp.mpf(s))[j] + (0.5 if j == 0 else 0)
+                lo, hi = fs.enclose(0, j, z, s)
+                fails += not (lo <= exact <= hi)
+    return fails
+
+
+@pytest.mark.parametrize("order", [3, 5, 16])
+def test_a_low_order_taylor_model_is_held_by_its_certified_remainder(order, monkeypatch):
+    """With degree 2, 4 or 15 the enclosure holds the 50-digit value at every state and offset
+    (the remainder bound is what holds it at low degree) ..."""
+    assert _enclosure_failures(order, monkeypatch) == 0
+
+
+@pytest.mark.parametrize("bad", ["no remainder", "norms 4x too small"])
+def test_the_enclosure_check_fails_a_bound_without_its_remainder_or_with_small_norms(bad, monkeypatch):
+    """... and the same check fails a known-bad bound: the remainder dropped (growth 0) or the
+    norms of ``r A^K T`` and ``T⁻¹z`` taken 4 times too small."""
+    from observer.event import roots
+    if bad == "no remainder":
+        monkeypatch.setattr(roots, "exp_upper", lambda x: 0.0)
+    else:
+        real = roots.norm_upper
+        monkeypatch.setattr(roots, "norm_upper", lambda v: 0.25 * real(v))
+    assert _enclosure_failures(3, monkeypatch) > 0
+
+
+# -- the Zeno cut-offs depend on the time origin only through ulp(t) -------------------------------
+
+def _zeno_cuts(origins, nu=0.0):
+    """(impacts resolved, tail time, t∞ − T) of the ball dropped from 1 m (e = 0.5) at t0 = T."""
+    out = []
+    for T in origins:
+        z = run_master(ball(1.0, nu=nu, e=0.5, t_end=2.0), t0=T, t_end=T + 2.0).zeno[0]
+        out.append((z["impacts_resolved"], z["tail_time"], z["t_inf"] - T))
+    return out
+
+
+def test_zeno_cut_is_the_same_for_time_origins_in_one_binade_of_ulp_t():
+    """The Zeno cut-offs are multiples of ulp(max(|t|, τ)), the resolution of the time
+    differences the run forms: time origins 1100, 1500 and 2000 (t in [1024, 2048)) resolve
+    the same impacts and give the same tail and t∞ − T bit for bit; across binades (origin
+    0, 1e5) the cut may move and t∞ − T stays within 1e-9 of the 50-digit closed form."""
+    same = _zeno_cuts([1100.0, 1500.0, 2000.0])
+    assert same[0] == same[1] == same[2]
+    exact = float(ball_t_inf(1.0, 0.5))
+    for _, _, t_inf in same + _zeno_cuts([0.0, 1e5 + 100.0]):
+        assert abs(t_inf - exact) <= 1e-9
+
+
+def test_zeno_cut_check_fails_a_cut_off_proportional_to_t(monkeypatch):
+    """... and the same check fails the old rule, thresholds proportional to max(|t|, τ)
+    (continuous in t, so a shift of the time origin within a binade moves the cut)."""
+    import observer.event.master as master
+    monkeypatch.setattr(master, "time_ulp", lambda t, tau: np.finfo(float).eps * max(abs(t), tau))
+    same = _zeno_cuts([1100.0, 1500.0, 2000.0])
+    assert not same[0] == same[1] == same[2]

@@ -164,23 +164,29 @@ def test_event_tables_and_trajectories_are_invariant_under_translation_time_shif
 @given(systems(zeno=True), st.data())
 def test_zeno_accumulations_are_invariant_under_translation_time_shift_and_units(p, data):
     """The same three properties on systems whose impacts accumulate (a ball or a forced block
-    dropped onto a wall, t∞ < T_END): the impacts above V_TAIL, the accumulation times t∞
-    (to 1e-9 s, the README's claim) and the trajectory outside the tails agree; every
-    drawn system comes to rest on a wall (a stick at t∞)."""
+    dropped onto a wall, t∞ < T_END), one drawn per example (two runs per example instead of
+    four; each of (a)–(c) on about a third of the 200 examples): the impacts above V_TAIL, the
+    accumulation times t∞ (to T_INF_TOL) and the trajectory outside the tails agree; every
+    drawn system comes to rest on a wall (a stick at t∞). (Composed, a translation by 100 and
+    a time shift by 1e3 can be 6e-9 apart: see the README.)"""
     base = comparable(run_master(build(p)))
     assert base[2].size >= 1                                 # a Zeno accumulation ended
     scale = motion_scale(p)
     n = p["M"].shape[0]
-    c = np.array([data.draw(st.sampled_from([-100.0, -7.5, 3.25, 100.0])) for _ in range(n)])
-    assert_same(base, comparable(run_master(build(p, c=c)), c=c), scale, rtol=1e-6,
-                t_inf_tol=T_INF_TOL)
-    T = data.draw(st.sampled_from([0.1, 1.0, 37.5, 1e3]))
-    assert_same(base, comparable(run_master(build(p, T=T), t0=T, t_end=T + T_END), T=T), scale,
-                t_inf_tol=T_INF_TOL)
-    alpha = data.draw(st.sampled_from([1e-3, 1e3, 2.0 ** 10]))
-    beta = data.draw(st.sampled_from([1e-3, 1e3, 0.1]))
-    assert_same(base, comparable(run_master(build(p, alpha=alpha, beta=beta)), alpha=alpha,
-                                 beta=beta), scale, t_inf_tol=T_INF_TOL)
+    kind = data.draw(st.sampled_from(["translation", "time shift", "units"]))
+    rtol = 1e-7
+    if kind == "translation":
+        c = np.array([data.draw(st.sampled_from([-100.0, -7.5, 3.25, 100.0])) for _ in range(n)])
+        moved = comparable(run_master(build(p, c=c)), c=c)
+        rtol = 1e-6
+    elif kind == "time shift":
+        T = data.draw(st.sampled_from([0.1, 1.0, 37.5, 1e3]))
+        moved = comparable(run_master(build(p, T=T), t0=T, t_end=T + T_END), T=T)
+    else:
+        alpha = data.draw(st.sampled_from([1e-3, 1e3, 2.0 ** 10]))
+        beta = data.draw(st.sampled_from([1e-3, 1e3, 0.1]))
+        moved = comparable(run_master(build(p, alpha=alpha, beta=beta)), alpha=alpha, beta=beta)
+    assert_same(base, moved, scale, rtol=rtol, t_inf_tol=T_INF_TOL)
 
 
 @settings(max_examples=80, deadline=None, derandomize=True, database=None, phases=NO_SHRINK)

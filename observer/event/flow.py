@@ -21,8 +21,10 @@ linear functionals ``r·z``; :mod:`observer.event.roots` finds their zeros.
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
 
+import flint
 import numpy as np
 import scipy.linalg as sla
 
@@ -125,7 +127,10 @@ class Flow:
         (:func:`observer.event.master.motion_time_scale`).
     norm_bound : float
         ``‖T⁻¹AT‖₂`` for the balancing similarity T (``scale``): ``‖T⁻¹z(t+τ)‖ ≤
-        exp(norm_bound·τ)‖T⁻¹z(t)‖``, the growth bound used by the root isolation.
+        exp(norm_bound·τ)‖T⁻¹z(t)‖`` (float64 SVD): it sets the root isolation's window.
+    certified_norm : float
+        A proved upper bound of ``‖T⁻¹AT‖₂`` (:func:`spectral_norm_upper`, computed on first
+        use): the growth factor of the certified bounds of :mod:`observer.event.roots`.
     scale : ndarray, shape (N,)
         Diagonal of T.
     """
@@ -181,6 +186,14 @@ class Flow:
                                            else (free.time_scale, free.intrinsic))  # one τ for all
         self._expm_cache: OrderedDict = OrderedDict()
         self._phi_cache: OrderedDict = OrderedDict()
+        self._certified_norm: float | None = None
+
+    @property
+    def certified_norm(self) -> float:
+        """A proved upper bound of ``‖T⁻¹AT‖₂`` (:func:`spectral_norm_upper`), cached."""
+        if self._certified_norm is None:
+            self._certified_norm = spectral_norm_upper(self.A, self.scale)
+        return self._certified_norm
 
     # -- augmented state -------------------------------------------------------------------
     def oscillators(self, t: float) -> np.ndarray:
@@ -306,6 +319,77 @@ class Flow:
         if not self.active:
             return np.zeros(0)
         return self.force_rows @ self.integral(dt, self.z(t0, x0))
+
+
+# -- certified bounds (issue 19: δ* proved, not estimated) ----------------------------------
+
+_U = np.finfo(float).eps / 2.0
+
+
+def up(x: float, ulps: int = 1) -> float:
+    """``x`` moved ``ulps`` floats towards +∞ (an outward rounding)."""
+    for _ in range(ulps):
+        x = float(np.nextafter(x, np.inf))
+    return x
+
+
+def norm_upper(v: np.ndarray) -> float:
+    """A proved upper bound of the Euclidean norm ‖v‖₂ of the float vector v.
+
+    v is scaled by a power of two 2^-e (exact) to ``max|v_i| ∈ [1/2, 1)``; each square is
+    rounded (relative error ≤ u), ``math.fsum`` rounds the sum once (≤ u) and ``sqrt``
+    once (≤ u), so ``‖v/2^e‖₂ ≤ r/(1 − u)² ≤ r(1 + 3u)``, rounded up by ulps; squares that
+    underflow add at most ``N·2^-1074`` to the sum. Overflow cannot occur.
+    """
+    v = np.asarray(v, dtype=float).ravel()
+    if not np.isfinite(v).all():
+        return np.inf
+    big = float(np.max(np.abs(v))) if v.size else 0.0
+    if big == 0.0:
+        return 0.0
+    e = math.frexp(big)[1]
+    w = np.ldexp(v, -e)
+    s = up(math.fsum((w * w).tolist()) + v.size * 5e-324, 2)
+    r = up(math.sqrt(s) * (1.0 + 4.0 * _U), 2)
+    return math.ldexp(r, e)
+
+
+def exp_upper(x: float) -> float:
+    """A proved upper bound of ``e^x`` (ball arithmetic, python-flint ``arb``)."""
+    if np.isnan(x) or x == np.inf:
+        return np.inf                                   # no bound: the search cannot proceed
+    if x == -np.inf:
+        return 0.0
+    return up(float(flint.arb(float(x)).exp().upper()), 1)
+
+
+def spectral_norm_upper(A: np.ndarray, scale: np.ndarray) -> float:
+    """A proved upper bound of ``‖T⁻¹AT‖₂`` (T = diag(scale)), by Gershgorin in ball arithmetic.
+
+    With ``M = BᵀB`` (B = T⁻¹AT, formed exactly in 128-bit balls) and V the float
+    eigenvectors of the float M, ``C ∋ V⁻¹MV`` is computed in ball arithmetic (``arb_mat``,
+    V⁻¹ enclosed by a certified inverse). C is similar to M, whose eigenvalues are real, so
+    ``‖B‖₂² = λ_max(M) ≤ max_i (C_ii + Σ_{j≠i} |C_ij|)`` (Gershgorin), with the balls'
+    upper ends. V is nearly orthogonal, so the bound exceeds the SVD's value by O(N·eps).
+    """
+    A = np.asarray(A, dtype=float)
+    N = A.shape[0]
+    s = np.asarray(scale, dtype=float)
+    B = A * s[None, :] / s[:, None]
+    with np.errstate(over="ignore", invalid="ignore"):
+        M = B.T @ B
+    if not np.isfinite(M).all():
+        return np.inf                                   # ‖B‖² beyond float64: no finite bound
+    _, V = np.linalg.eigh(M)
+    with flint.ctx.workprec(128):
+        Ba = flint.arb_mat([[flint.arb(A[i, j]) * flint.arb(s[j]) / flint.arb(s[i])
+                             for j in range(N)] for i in range(N)])
+        Va = flint.arb_mat(V.tolist())
+        C = Va.inv() * (Ba.transpose() * Ba) * Va
+        rows = [C[i, i] + sum((abs(C[i, j]) for j in range(N) if j != i), flint.arb(0))
+                for i in range(N)]
+        top = max(up(float(r.upper()), 1) for r in rows)      # arf → float: at most 1 ulp low
+    return up(math.sqrt(max(top, 0.0)), 1)
 
 
 def _time_scale(system: LinearSystem, freqs: list[float], norm_bound: float) -> float:

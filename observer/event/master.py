@@ -30,7 +30,7 @@ Zeno: a run of impacts of one contact set whose intervals shrink geometrically (
 ratios equal within :data:`ZENO_RATIO_SPREAD`) is stopped once the impact velocity has
 fallen by :data:`ZENO_VELOCITY_RATIO`, or the intervals reach the time resolution, or the
 hops reach the gap's round-off, or (one contact) resolving more impacts would put more of
-the gap's representation error than :data:`ZENO_TAIL_RTOL` into t_∞; the accumulation time
+the gap's representation error than :data:`ZENO_TAIL_RTOL` ulps of t into t_∞; the accumulation time
 t_∞ is extrapolated from the velocity γ⁺ after the last resolved impact and the exact
 contact acceleration and its rate (:meth:`_Run.velocity_tail`: ``2γ⁺/(α(1 − e))`` for a
 constant acceleration α, exact for the ball, THEORY §7.1; several contacts: geometric,
@@ -78,8 +78,9 @@ ZENO_RATIO_SPREAD = 0.02
 ZENO_VELOCITY_RATIO = 1e-9
 """A geometric run is extrapolated once |γ⁻| has fallen below this fraction of its first value."""
 
-ZENO_MIN_INTERVAL = 1e-11
-"""... or once an interval is below this fraction of max(1, t) (the time resolution)."""
+ZENO_MIN_INTERVAL = 2.0 ** 16
+"""... or once an interval is below this many ulps of max(|t|, τ) (:func:`time_ulp`; 2^16 ulp
+∈ (7.3e-12, 1.5e-11]·max(|t|, τ): the time resolution)."""
 
 ZENO_HOP_ROUNDOFF = 10.0
 """... or once the next hop height is below this many round-offs of the gap (beyond it the
@@ -87,10 +88,24 @@ impact sequence is driven by round-off, no longer by the dynamics). 10, not more
 at 1e4 round-offs (|γ⁻| ≈ 2e-5 on double_mass) leaves the extrapolated state ≈ 4e-10 off,
 which re-injects ≈ 1e-19 into the exact observers' V at every landing (a floor)."""
 
-ZENO_TAIL_RTOL = 1e-9
+ZENO_TAIL_RTOL = 2.0 ** 22
 """A geometric run of one contact is also extrapolated once the representation error of its
-gap would put more than this fraction of max(|t|, τ) into t_∞ (:meth:`_Run.noisy_tail`);
-where the run is cut depends on the coordinates, t_∞ does not (:meth:`_Run.hop_tail`)."""
+gap would put more than this many ulps of max(|t|, τ) (``np.spacing``: 2^22 ulp ∈
+(4.7e-10, 9.3e-10]·max(|t|, τ)) into t_∞ (:meth:`_Run.noisy_tail`). The time differences
+the run forms (hops, t_∞ − t) are resolved to ulp(t), a property of the float
+representation of t: the cut is exactly the same under any shift of the time origin that
+keeps max(|t|, τ) in its binade [2^k, 2^{k+1}), and moves by at most a factor 2 of its
+threshold beyond. Where the run is cut depends on the coordinates, t_∞ does not
+(:meth:`_Run.hop_tail`)."""
+
+def time_ulp(t: float, tau: float) -> float:
+    """ulp(max(|t|, τ)) (``np.spacing``): the resolution of the time differences a Zeno run
+    forms (its intervals, t_∞ − t), a property of the float representation of t. The Zeno
+    cut-offs (:data:`ZENO_MIN_INTERVAL`, :data:`ZENO_TAIL_RTOL`) are multiples of it, so
+    they depend on the time origin only through the binade [2^k, 2^{k+1}) of max(|t|, τ):
+    a shift within it changes no decision, one across it scales the thresholds by 2."""
+    return float(np.spacing(max(abs(float(t)), float(tau))))
+
 
 HOP_ORDER = 8
 """Degree of the Taylor polynomial of a hop in :meth:`_Run.hop_tail` (hops last ≲ the Zeno
@@ -410,7 +425,7 @@ class _Run:
             del hist[:-3]                      # not geometric: a new run starts
             return None
         v0 = hist[0][1]
-        if (speed > self.zeno_velocity_ratio * v0 and d[2] > ZENO_MIN_INTERVAL * max(abs(t), self.tau)
+        if (speed > self.zeno_velocity_ratio * v0 and d[2] > ZENO_MIN_INTERVAL * time_ulp(t, self.tau)
                 and not hop_small and not self.noisy_tail(key, fl, idx, z, v_plus, t)):
             return None
         tail = self.tail_after(key, t, x, persistent)
@@ -504,10 +519,11 @@ class _Run:
         The gap is evaluated with an absolute error δg ≈ eps·Σ|r z| (its representation: it
         grows with |q| and |ν|), so an impact at speed v is located to δg/v and its
         γ⁺ to |γ̇|δg/v; the velocity tail (:meth:`velocity_tail`) then errs by about
-        ``(1 + 2/(1 − e))·δg/γ⁺``. Once that reaches ZENO_TAIL_RTOL·max(|t|, τ) (the time
-        resolution's scale; a cut there, not earlier, keeps the tail, which the observers
-        treat as closed, short), the run is
-        extrapolated from the current (still accurate) impact."""
+        ``(1 + 2/(1 − e))·δg/γ⁺``. Once that reaches ZENO_TAIL_RTOL ulps of max(|t|, τ)
+        (the resolution of the time differences the run forms; a cut there, not earlier,
+        keeps the tail, which the observers treat as closed, short), the run is extrapolated
+        from the current (still accurate) impact. The decision depends on t only through
+        ulp(max(|t|, τ)): a time shift within the binade does not change it."""
         if len(key) != 1 or not self.law.definition.single_contact_is_newton:
             return False
         e = float(self.law.restitution[key[0]])
@@ -515,7 +531,7 @@ class _Run:
             return False
         dg = float(np.finfo(float).eps * (np.abs(fl.gap_rows[idx]) @ np.abs(z))[0])
         v = max(float(v_plus[0]), np.finfo(float).tiny)
-        return (1.0 + 2.0 / (1.0 - e)) * dg / v >= ZENO_TAIL_RTOL * max(abs(t), self.tau)
+        return (1.0 + 2.0 / (1.0 - e)) * dg / v >= ZENO_TAIL_RTOL * time_ulp(t, self.tau)
 
     def velocity_tail(self, key: tuple, v_plus: np.ndarray, accel: np.ndarray,
                       jerk: np.ndarray) -> float | None:

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from observer.event.flow import Flow
+from observer.event.flow import Flow, exp_upper, norm_upper, up
 
 WINDOW = 0.5
 """Window length in units of ``1/‖T⁻¹AT‖``: the growth factor of z over a window is ≤ e^0.5."""
@@ -71,9 +71,14 @@ TAYLOR_ORDER = 16
 Lagrange remainder over a window (``‖T⁻¹AT‖ s ≤`` :data:`WINDOW`) is at most
 ``e^0.5·0.5^16/16! ≈ 1.2e-17`` of ``‖r T‖‖T⁻¹z‖``, below round-off."""
 
-BOUND_MARGIN = 1e-9
-"""Relative margin on the norms of the certified bounds (``‖T⁻¹AT‖₂`` by an SVD,
-``‖r A^k T‖₂``): their float64 error is O(N·eps), far below it."""
+_U = np.finfo(float).eps / 2.0
+"""Unit round-off u. The certified bounds use proved upper bounds of their norms, not
+estimates: ``‖T⁻¹AT‖₂`` by Gershgorin in ball arithmetic (:attr:`Flow.certified_norm`),
+vector norms with outward rounding (:func:`~observer.event.flow.norm_upper`), ``e^x`` in
+ball arithmetic (:func:`~observer.event.flow.exp_upper`); a product of n rounded
+non-negative factors is raised by ``(1 + (n + 1)u)`` and one ulp. T is a diagonal of powers
+of two (``scipy.linalg.matrix_balance``), so ``r T`` and ``T⁻¹z`` are exact floats (gradual
+underflow, below 1e-308, aside)."""
 
 MAX_STEPS = 200_000
 """Safe advances per search before :class:`RootIsolationError` (a stalled isolation)."""
@@ -294,8 +299,8 @@ class FunctionalSet:
         self.d = [self.rows]
         self.err = [np.zeros_like(self.rows)]
         self._extend(3)
-        self.third_norm = np.linalg.norm((np.abs(self.d[3]) + self.err[3]) * flow.scale,
-                                         axis=1) * (1.0 + BOUND_MARGIN)
+        third = (np.abs(self.d[3]) + self.err[3]) * flow.scale   # ≥ |r_3 T| entrywise
+        self.third_norm = np.array([_row_norm(r) for r in third])
         self.abs_d = [np.abs(r) for r in self.d[:3]]
 
     def _extend(self, k: int) -> None:
@@ -344,11 +349,12 @@ class FunctionalSet:
             val += c * term
             mag += abs(c) * term
             err += ec * term
-        term *= s / K
+        term *= s / K                  # s^K/K! to (1 + u)^{2K}: raised by (1 + (2K + 1)u)
+        term = up(term * (1.0 + (2 * K + 1) * _U))
         rest = np.abs(self.d[K + j][i]) + self.err[K + j][i]
-        growth = np.exp(flow.norm_bound * (1.0 + BOUND_MARGIN) * s) * (1.0 + BOUND_MARGIN)
-        remainder = (float(np.linalg.norm(rest * flow.scale)) * growth
-                     * _norm(z / flow.scale) * term * (1.0 + BOUND_MARGIN))
+        growth = exp_upper(up(flow.certified_norm * s * (1.0 + 2.0 * _U)))
+        remainder = up(_row_norm(rest * flow.scale) * growth * norm_upper(z / flow.scale)
+                       * term * (1.0 + 5.0 * _U))
         u = np.finfo(float).eps / 2.0
         g3k = 3.0 * K * u / (1.0 - 3.0 * K * u)
         width = 2.0 * (err + g3k * mag + remainder) + np.finfo(float).tiny
@@ -507,15 +513,10 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, tols,
     return step, found
 
 
-def _norm(v: np.ndarray) -> float:
-    """‖v‖₂, also where ``v·v`` overflows (|v| ≳ 1e154): ``max|v_i|·‖v/max|v_i|‖₂`` then
-    (the plain value otherwise, bit for bit)."""
-    with np.errstate(over="ignore"):
-        nv = float(np.linalg.norm(v))
-    if np.isfinite(nv) or not np.isfinite(v).all():
-        return nv
-    big = float(np.max(np.abs(v)))
-    return big * float(np.linalg.norm(v / big))
+def _row_norm(v: np.ndarray) -> float:
+    """Proved upper bound of ‖v‖₂ for a derivative row, ``inf`` once its squares overflow
+    (|v_i| ≥ 2^511; the search then stops as non-finite, as with float64's norm)."""
+    return norm_upper(v) if float(np.max(np.abs(v))) < 2.0 ** 511 else np.inf
 
 
 def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: float,
@@ -557,7 +558,7 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     fs = FunctionalSet(flow, rows, tau)
     certified = dict(certified or {})
     window = WINDOW / max(flow.norm_bound, 1e-300)
-    growth = np.exp(WINDOW * (1.0 + BOUND_MARGIN))     # ‖T⁻¹AT‖₂ w ≤ WINDOW, to its margin
+    growth = exp_upper(up(flow.certified_norm * window * (1.0 + 2.0 * _U)))  # ≥ e^{‖T⁻¹AT‖₂ w}
     t_ok, z_ok = a, za                                # the last search point with finite values
     for _ in range(MAX_STEPS):
         if t_end - a <= resolution(t_end, tau):          # a remainder of a few ulp: flow
@@ -575,7 +576,8 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
         tol1 = floor[1] + ROUNDOFF * motion_scale(d[1:], tau) + np.abs(d[2]) * res
         tol2 = floor[2] + ROUNDOFF * motion_scale(d[2:], tau) + np.abs(d[3]) * res
         band = touch_band(d[2], d[3], floor[0], tau)
-        bound = fs.third_norm * growth * _norm(za / flow.scale) * (1.0 + BOUND_MARGIN)
+        bound = np.nextafter(fs.third_norm * (growth * norm_upper(za / flow.scale))
+                             * (1.0 + 4.0 * _U), np.inf)
         if not np.isfinite(bound).all():              # the certified bound overflows: no search
             i = int(np.flatnonzero(~np.isfinite(bound))[0])
             raise NonFiniteFlow(a, a, za, ("bound", 3, i), float(bound[i]))
