@@ -1,0 +1,309 @@
+"""The compiled kernel (:mod:`observer.kernel`) on small cases: the tests its mutation session
+runs (``nox -s mutants -- kernel``, the kernel as plain Python under ``NUMBA_DISABLE_JIT=1``).
+
+* every specialization of the time loop (scalar, lean, general; dense and banded; with
+  observers, coupling windows, master projection, summary store) against the numpy reference
+  engine (``engine="python"``) on short runs: the same trajectories to round-off, the same
+  closed sets and switching signal, the same kernel statistics;
+* the kernel's linear algebra and LCP helpers against numpy and against complementarity
+  recomputed from their answers;
+* the failure statuses (an LCP the kernel cannot solve goes to the reference solver).
+
+Short horizons keep each test well under a second compiled and a few seconds in plain Python.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import observer
+from observer import kernel
+from observer.observers import Slave
+from observer.scenario import Scenario
+
+from oracles import oracle
+
+
+def rel(a: np.ndarray, b: np.ndarray) -> float:
+    scale = max(np.abs(a).max(), np.abs(b).max(), 1e-300)
+    return float(np.abs(a - b).max() / scale)
+
+
+SHORT = {"bouncing_ball": {"simulation.t_end": 1.5},
+         "impact_oscillator": {"simulation.t_end": 3.0},
+         "grazing": {"simulation.t_end": 2.0},
+         "double_mass": {"simulation.t_end": 1.0, "simulation.h": 1e-3},
+         "rocking_chain": {"simulation.t_end": 0.15, "simulation.h": 1e-3}}
+
+
+def short(name: str, **extra) -> Scenario:
+    return observer.load_scenario(name, {**SHORT[name], **extra})
+
+
+def slaves(sc: Scenario) -> list[Slave]:
+    """A jump and a no-jump observer from a perturbed state (different from the master's)."""
+    rng = np.random.default_rng(3)
+    dq = 0.05 * np.abs(sc.q0).max() * rng.standard_normal(sc.system.n)
+    du = 0.1 * rng.standard_normal(sc.system.n)
+    jump = sc.system.is_stiffness_definite()        # position jumps need K ≻ 0
+    return [Slave("a", jump, sc.q0 + dq, sc.u0 + du), Slave("b", False, sc.q0 - dq, sc.u0 - du)]
+
+
+def assert_same_run(a, b, tol=1e-13):
+    assert a.metadata["engine"] == "python" and b.metadata["engine"] == "compiled"
+    assert np.array_equal(a.t, b.t)
+    assert np.array_equal(a.active, b.active)
+    for x, y in ((a.q, b.q), (a.u, b.u), (a.P, b.P)):
+        assert x.shape == y.shape and rel(x, y) <= tol
+    assert a.slaves.keys() == b.slaves.keys()
+    for k in a.slaves:
+        sa, sb = a.slaves[k], b.slaves[k]
+        for x, y in ((sa.q, sb.q), (sa.u, sb.u), (sa.P, sb.P)):
+            assert rel(x, y) <= tol
+        if sa.V is not None:
+            assert rel(sa.V, sb.V) <= 1e-11
+    if a.slaves:
+        assert np.array_equal(a.chi, b.chi)
+    ma, mb = a.metadata, b.metadata
+    assert ma["min_gap"] == pytest.approx(mb["min_gap"], rel=1e-12, abs=1e-15)
+    assert ma["min_gap_t"] == mb["min_gap_t"]
+    assert mb["solver_fallbacks"] == 0 and mb["stopped"] is None
+
+
+@pytest.mark.parametrize("name", list(SHORT))
+def test_engines_agree_with_observers(name):
+    """General loop: master, a jump and a no-jump observer from other states, coupled over a
+    window inside the run (χ switches on and off)."""
+    sc = short(name)
+    T = sc.t_end
+    obs = slaves(sc)
+    a, b = (observer.simulate(sc, observers=obs, coupling=(0.2 * T, 0.7 * T), engine=e)
+            for e in ("python", "compiled"))
+    assert a.active.any() and b.chi.any() and not b.chi.all()
+    assert_same_run(a, b, tol=2e-13 if name == "rocking_chain" else 1e-13)
+    assert np.abs(b.slaves["a"].q - b.slaves["b"].q).max() > 0
+
+
+@pytest.mark.parametrize("name", list(SHORT))
+def test_engines_agree_master_alone(name):
+    """The lean and scalar loops (master alone) against the reference engine."""
+    sc = short(name)
+    a, b = (observer.simulate(sc, observers=[], engine=e) for e in ("python", "compiled"))
+    assert a.active.any()
+    assert_same_run(a, b)
+    assert b.metadata["max_contact_residual"] <= 1e-12
+    assert b.metadata["health"]["max_residual"] <= 1e-12
+
+
+@pytest.mark.parametrize("name", ["double_mass", "rocking_chain", "impact_oscillator"])
+def test_engines_agree_projected_master(name):
+    """Master projection (the projection onto the closed contacts after each step)."""
+    sc = short(name)
+    a, b = (observer.simulate(sc, master_projection=True, observers=slaves(sc), engine=e, coupling=None)
+            for e in ("python", "compiled"))
+    plain = observer.simulate(sc, observers=[], coupling=None)
+    assert np.abs(b.q - plain.q).max() > 1e-9          # the projection acted
+    assert_same_run(a, b, tol=2e-13)
+    # projected: no closed contact is left penetrating (up to round-off)
+    g = b.g[1:]
+    assert g[b.active[1:]].min() >= -1e-12
+
+
+@pytest.mark.parametrize("name", ["rocking_chain", "double_mass"])
+def test_engines_agree_poisson(name):
+    sc = short(name, **{"impact.law": "poisson"})
+    a, b = (observer.simulate(sc, observers=slaves(sc), engine=e, coupling=None)
+            for e in ("python", "compiled"))
+    assert_same_run(a, b, tol=2e-13)
+
+
+def test_engines_agree_self_switching():
+    sc = short("double_mass")
+    a, b = (observer.simulate(sc, observers=slaves(sc), source="self", engine=e, coupling=None)
+            for e in ("python", "compiled"))
+    assert_same_run(a, b)
+
+
+def siconos_two_contact(theta: str, t_end: float):
+    spec = json.loads(oracle("siconos", "generated", f"two_contact_theta{theta}.json").read_text())
+    ref = pd.read_csv(oracle("siconos", "generated", f"two_contact_theta{theta}.csv"))
+    f = spec["forcing"]
+    doc = {"system": {"M": spec["M"], "C": spec["C"], "K": spec["K"], "W": spec["W"],
+                      "forcing": {"constant": f["constant"], "amplitude": f["amplitude"],
+                                  "omega": f["omega"], "phase": f["phase"]},
+                      "gap": {"offset": spec["gap_offset"]}},
+           "impact": {"law": "newton", "restitution": spec["restitution"]},
+           "initial": {"q": spec["q0"], "u": spec["u0"]},
+           "simulation": {"h": spec["h"], "t_end": t_end, "theta": spec["theta"]}}
+    return Scenario.from_dict(doc, "two_contact"), ref
+
+
+@pytest.mark.parametrize("theta", ["0.5", "1.0"])
+def test_two_contacts_reproduce_siconos(theta):
+    """Several contacts (the LCP by block pivoting): Siconos' q, u, P at every step."""
+    sc, ref = siconos_two_contact(theta, 1.0)
+    res = observer.simulate(sc, engine="compiled")
+    k = res.t.size
+    assert res.active.all(axis=1).any()                   # both contacts closed at once
+    for key, arr, width in (("q", res.q, sc.system.n), ("u", res.u, sc.system.n), ("P", res.P, sc.system.m)):
+        want = ref[[f"{key}{j}" for j in range(width)]].to_numpy()[:k]
+        np.testing.assert_allclose(arr, want, rtol=0, atol=1e-10 * max(np.abs(want).max(), 1.0))
+
+
+def test_summary_store_matches_the_full_run():
+    """store="summary": the kernel's streaming metrics equal those of the full trajectories."""
+    sc = short("double_mass", **{"simulation.t_end": 2.0})
+    obs = slaves(sc)
+    full = observer.simulate(sc, observers=obs)
+    summ = observer.simulate(sc, observers=obs, store="summary", record_every=5)
+    sync = full.synchronization()
+    assert len(summ.summary) == 2
+    for _, row in summ.summary.iterrows():
+        ref = sync[sync.observer == row.observer].iloc[0]
+        for rho in (1e-3, 1e-6, 1e-9):
+            for key in (f"t_sync_{rho:g}", f"t_settle_{rho:g}"):
+                if np.isnan(ref[key]):
+                    assert np.isnan(row[key])
+                else:
+                    assert row[key] == pytest.approx(ref[key], abs=1e-12)
+        s = full.slaves[row.observer]
+        V = s.V
+        assert row.V_on == pytest.approx(V[0], rel=1e-14)
+        assert row.V_end == pytest.approx(V[-1], rel=1e-9, abs=1e-300)
+        assert row.rises == int(np.sum(np.diff(V) > 0))
+        for col, part in (("sum_damping", s.dV_damping), ("sum_impulse", s.dV_impulse),
+                          ("sum_projection", s.dV_projection)):
+            assert row[col] == pytest.approx(part.sum(), rel=1e-9, abs=1e-12 * V[0])
+        np.testing.assert_allclose(summ.slaves[row.observer].V, V[::5], rtol=1e-12, atol=0)
+        np.testing.assert_array_equal(summ.slaves[row.observer].q, s.q[::5])
+    closings = int(np.sum(full.active[1:, 0] & ~full.active[:-1, 0]))
+    assert summ.summary.attrs["master_closings"] == [closings]
+    assert summ.metadata["min_gap"] == pytest.approx(full.g[1:].min(), rel=1e-12)
+
+
+# ---------------------------------------------------------------------------------------
+# the kernel's helpers
+# ---------------------------------------------------------------------------------------
+
+
+def spd(rng, m, cond=10.0):
+    Q, _ = np.linalg.qr(rng.standard_normal((m, m)))
+    return (Q * np.geomspace(1.0, cond, m)) @ Q.T
+
+
+@pytest.mark.parametrize("m", [1, 2, 3, 5])
+def test_cholesky_and_solve(m):
+    rng = np.random.default_rng(m)
+    G = spd(rng, m)
+    Lf = np.zeros((m, m))
+    assert kernel._cholesky(G, m, Lf)
+    L = np.linalg.cholesky(G)
+    np.testing.assert_allclose(np.tril(Lf[:m, :m]), L, rtol=0, atol=1e-13)
+    rhs = rng.standard_normal(m)
+    out = np.zeros(m)
+    kernel._cho_solve(Lf, m, rhs.copy(), out)
+    np.testing.assert_allclose(out, np.linalg.solve(G, rhs), rtol=1e-12, atol=1e-13)
+    # not positive definite: refused
+    B = G.copy()
+    B[m - 1, m - 1] = -1.0
+    assert not kernel._cholesky(B, m, np.zeros((m, m)))
+
+
+def lcp_buffers(m):
+    return (np.zeros(m), np.zeros(m, dtype=np.bool_), np.zeros(m, dtype=np.bool_), np.zeros((m, m)),
+            np.zeros(m), np.zeros(m), np.zeros((m, m)))
+
+
+@pytest.mark.parametrize("m", [1, 2, 3, 4, 6])
+def test_solve_lcp_complementarity(m):
+    """Random SPD LCPs: x ≥ 0, w = Gx + b ≥ 0, x·w = 0, recomputed from the returned x."""
+    rng = np.random.default_rng(10 + m)
+    for _ in range(40):
+        G = spd(rng, m, cond=100.0)
+        b = rng.standard_normal(m)
+        x, basic, infeas, Gs, rhs, sol, Lf = lcp_buffers(m)
+        it, status, res = kernel.solve_lcp(G, b, m, x, basic, infeas, Gs, rhs, sol, Lf, 100)
+        assert status == 0
+        w = G @ x + b
+        scale = max(np.abs(b).max(), 1.0)
+        assert x.min() >= 0.0 and w.min() >= -1e-12 * scale
+        assert np.abs(np.minimum(x, w)).max() <= 1e-12 * scale
+        assert res == pytest.approx(kernel.lcp_residual(G, b, x, m), abs=1e-15)
+        assert res <= 1e-14
+
+
+def test_lcp_residual_is_the_relative_natural_residual():
+    G = np.array([[2.0, 0.5], [0.5, 1.0]])
+    b = np.array([-1.0, 3.0])
+    x = np.array([0.6, 0.1])
+    w = G @ x + b
+    want = np.abs(np.minimum(x, w)).max() / max(np.abs(b).max(), np.abs(G @ x).max())
+    assert kernel.lcp_residual(G, b, x, 2) == pytest.approx(want, rel=1e-15)
+
+
+# ---------------------------------------------------------------------------------------
+# failure statuses
+# ---------------------------------------------------------------------------------------
+
+
+def nearly_redundant_contacts() -> Scenario:
+    """Two contacts parallel to 1e-9 (built unchecked): the kernel's Cholesky pivoting
+    refuses their singular Delassus matrix (LCP_FAILED); the step goes to the reference solver."""
+    from observer.model import LinearSystem
+    sc = Scenario.from_dict({
+        "system": {"M": [[1.0, 0.0], [0.0, 1.0]], "C": [[0.0, 0.0], [0.0, 0.0]],
+                   "K": [[0.0, 0.0], [0.0, 0.0]], "W": [[1.0, 1.0], [0.0, 1e-3]],
+                   "forcing": {"constant": [-9.81, 0.0]}, "gap": {"offset": [0.0, 0.0]}},
+        "impact": {"law": "newton", "restitution": 0.5},
+        "initial": {"q": [0.2, 0.0], "u": [0.0, 0.0]},
+        "simulation": {"h": 1e-3, "t_end": 0.4}}, "nearly redundant")
+    s = sc.system
+    W = np.array([[1.0, 1.0], [0.0, 1e-9]])
+    return dataclasses.replace(sc, system=LinearSystem(s.M, s.C, s.K, W, s.forcing, s.gap, check=False))
+
+
+def test_lcp_failure_goes_to_the_reference_solver():
+    sc = nearly_redundant_contacts()
+    py = observer.simulate(sc, engine="python")
+    co = observer.simulate(sc, engine="compiled")
+    fb = co.metadata["fallback_steps"]
+    assert co.metadata["solver_fallbacks"] == len(fb) > 0
+    both = set(np.flatnonzero(py.active[1:].all(axis=1)))
+    pushed = set(np.flatnonzero(py.P[1:].sum(axis=1) > 0))
+    assert {f["step"] for f in fb} == both & pushed
+    np.testing.assert_allclose(co.q, py.q, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(co.u, py.u, rtol=0, atol=1e-8)
+
+
+# ---------------------------------------------------------------------------------------
+# banded structure (the kernel's banded free velocity)
+# ---------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("S", [1, 3])
+def test_banded_structure_is_the_dense_one(S):
+    """The rocking chain (tridiagonal M, C, K) stepped with the banded scheme through
+    :func:`observer.loop.run`: the same trajectories as the dense scheme (and the python
+    engine) to round-off, with and without observers."""
+    from observer import loop
+
+    sc = short("rocking_chain", **{"simulation.t_end": 0.1})
+    q0 = np.stack([sc.q0] + [sc.q0 * (1 + 0.1 * i) for i in range(1, S)])
+    u0 = np.stack([sc.u0] + [sc.u0 + 0.05 * i for i in range(1, S)])
+    jumps = np.array([False] + [i % 2 == 1 for i in range(1, S)])
+    out = {}
+    for structure, engine in (("banded", "compiled"), ("dense", "compiled"), ("dense", "python")):
+        st = observer.MoreauJean(sc.system, sc.law, sc.h, sc.t_end, sc.theta, structure=structure)
+        assert (st.S.band is not None) == (structure == "banded")
+        out[structure, engine] = loop.run(loop.LoopInput(st, q0, u0, jumps, False), engine=engine)
+    b = out["banded", "compiled"]
+    assert b.active.any()
+    for ref in (out["dense", "compiled"], out["dense", "python"]):
+        assert np.array_equal(ref.active, b.active)
+        for x, y in ((ref.q, b.q), (ref.u, b.u), (ref.P, b.P)):
+            assert x.shape == y.shape and rel(x, y) <= 1e-13
