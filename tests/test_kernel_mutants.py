@@ -307,3 +307,162 @@ def test_banded_structure_is_the_dense_one(S):
         assert np.array_equal(ref.active, b.active)
         for x, y in ((ref.q, b.q), (ref.u, b.u), (ref.P, b.P)):
             assert x.shape == y.shape and rel(x, y) <= 1e-13
+
+
+# ---------------------------------------------------------------------------------------
+# the streaming summary over a coupling window, against the full run's V
+# ---------------------------------------------------------------------------------------
+
+
+def summary_oracle(res, name, k_on, k_off, rhos, h):
+    """The summary row of observer ``name`` recomputed in numpy from the full run's V and its
+    parts (row kg = step kg−1 → kg; window steps kg−1 ≥ k_on, kg ≤ k_off; samples k_on..k_off)."""
+    s = res.slaves[name]
+    V = s.V
+    win = np.arange(k_on + 1, k_off + 1)
+    dV = V[win] - V[win - 1]
+    prev = V[win - 1]
+    rise_rel = np.where((dV > 0) & (prev > 0), dV / np.where(prev > 0, prev, 1.0), 0.0)
+    imp_rel = np.where(prev > 0, s.dV_impulse[win] / np.where(prev > 0, prev, 1.0), 0.0)
+    Vw = V[k_on:k_off + 1]
+    row = {"V_on": V[k_on], "V_max": Vw.max(), "V_end": V[-1], "rises": int(np.sum(dV > 0)),
+           "max_rise_rel": max(rise_rel.max(), 0.0), "max_impulse_rel": max(imp_rel.max(), 0.0),
+           "sum_damping": s.dV_damping[win].sum(), "sum_impulse": s.dV_impulse[win].sum(),
+           "sum_projection": s.dV_projection[win].sum()}
+    for rho in rhos:
+        below = Vw <= rho * V[k_on]
+        first = np.flatnonzero(below)
+        above = np.flatnonzero(~below)
+        row[f"t_sync_{rho:g}"] = first[0] * h if first.size else np.inf
+        row[f"t_settle_{rho:g}"] = (0.0 if not above.size else np.inf if above[-1] + k_on >= k_off
+                                    else (above[-1] + 1) * h)
+    return row
+
+
+@pytest.mark.parametrize("name,window", [("double_mass", (0.3, 0.8)), ("impact_oscillator", (0.5, 2.5))])
+def test_summary_over_a_coupling_window(name, window):
+    """store="summary" with a coupling window inside the run: every field of the summary row
+    (V_on, V_max, V_end, rises, largest rise, the three sums, the largest impulse part, first
+    passage and settling per ρ) equals its numpy recomputation from the full run."""
+    sc = short(name)
+    obs = slaves(sc)
+    full = observer.simulate(sc, observers=obs, coupling=window)
+    summ = observer.simulate(sc, observers=obs, coupling=window, store="summary", record_every=1)
+    h = sc.h
+    checked = 0
+    for _, row in summ.summary.iterrows():
+        k_on, k_off = round(row.t_on / h), round(row.t_off / h)
+        assert (k_on * h, k_off * h) == pytest.approx(window, abs=h)
+        want = summary_oracle(full, row.observer, k_on, k_off, (1e-3, 1e-6, 1e-9), h)
+        scale = max(abs(want["V_on"]), 1e-300)
+        for key, value in want.items():
+            if key == "rises":
+                assert row[key] == value
+            elif np.isinf(value):
+                assert np.isinf(row[key]), key
+            elif key.startswith("t_"):
+                assert row[key] == pytest.approx(value, abs=1e-9), key
+            elif key.startswith("max_"):
+                assert row[key] == pytest.approx(value, rel=1e-9, abs=1e-12), key
+            else:
+                assert row[key] == pytest.approx(value, rel=1e-9, abs=1e-12 * scale), key
+        checked += 1
+        np.testing.assert_allclose(summ.slaves[row.observer].V, full.slaves[row.observer].V, rtol=1e-12,
+                                   atol=1e-14 * scale)
+    assert checked == 2
+
+
+def test_banded_summary_is_the_dense_one():
+    """The summary's quadratic forms in band storage (:func:`observer.kernel._quad`): the same
+    fields as the dense structure, observers coupled over a window."""
+    from observer import loop
+
+    sc = short("rocking_chain", **{"simulation.t_end": 0.08})
+    obs = slaves(sc)
+    q0 = np.stack([sc.q0] + [o.q0 for o in obs])
+    u0 = np.stack([sc.u0] + [o.u0 for o in obs])
+    jumps = np.array([False] + [o.position_jumps for o in obs])
+    out = {}
+    for structure in ("banded", "dense"):
+        st = observer.MoreauJean(sc.system, sc.law, sc.h, sc.t_end, sc.theta, structure=structure)
+        inp = loop.LoopInput(st, q0, u0, jumps, False, coupling=(0.02, 0.06))
+        out[structure] = loop.run(inp, engine="compiled", store="summary", record_every=2)
+    b, d = out["banded"], out["dense"]
+    fb, fd = b.summary["fields"], d.summary["fields"]
+    assert fb.shape == fd.shape and np.abs(fd[1:, :9]).max() > 0
+    np.testing.assert_allclose(fb, fd, rtol=1e-11, atol=1e-13 * np.abs(fd[1:, 0]).max())
+    np.testing.assert_allclose(b.V, d.V, rtol=1e-11, atol=0)
+
+
+# ---------------------------------------------------------------------------------------
+# the position projection of eqs. (13)-(14)
+# ---------------------------------------------------------------------------------------
+
+
+def csc(W):
+    m = W.shape[1]
+    Wp, Wi, Wv = [0], [], []
+    for j in range(m):
+        rows = np.flatnonzero(W[:, j])
+        Wi.extend(rows)
+        Wv.extend(W[rows, j])
+        Wp.append(len(Wi))
+    return np.array(Wp, dtype=np.int64), np.array(Wi, dtype=np.int64), np.array(Wv, dtype=float)
+
+
+@pytest.mark.parametrize("act", [[1], [0, 2], [3, 1, 0]])
+def test_project_positions_closes_the_gaps_in_the_K_metric(act):
+    """``q1 ← q1 + K⁻¹W_A Σ`` with ``g_A(q1) = 0`` afterwards (the gaps of the closed contacts
+    vanish), Σ the solution of ``(W_AᵀK⁻¹W_A)Σ = −g_A``; the open contacts' columns untouched."""
+    rng = np.random.default_rng(len(act))
+    n, m = 5, 4
+    K = spd(rng, n, cond=20.0)
+    W = rng.standard_normal((n, m))
+    W[rng.random((n, m)) < 0.3] = 0.0
+    Wp, Wi, Wv = csc(W)
+    KinvW = np.linalg.solve(K, W)
+    KinvWT = KinvW.T[None].copy()
+    L = (W.T @ KinvW)[None].copy()
+    nu = rng.standard_normal((3, m))
+    k = 2
+    q0 = rng.standard_normal(n)
+    q1 = q0.copy()
+    a = len(act)
+    sig = np.zeros(m)
+    status = kernel.project_positions(k, np.array(act + [0] * (m - a), dtype=np.int64), a, 0, Wp, Wi, Wv,
+                                      nu, KinvWT, L, q1, sig, np.zeros(m), np.zeros(m), np.zeros((m, m)),
+                                      np.zeros((m, m)))
+    assert status == kernel.OK
+    A = np.array(act)
+    np.testing.assert_allclose(W[:, A].T @ q1 + nu[k, A], 0.0, atol=1e-12)
+    want = np.linalg.solve(L[0][np.ix_(A, A)], -(W[:, A].T @ q0 + nu[k, A]))
+    np.testing.assert_allclose(sig[:a], want, rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(q1, q0 + KinvW[:, A] @ want, rtol=1e-12, atol=1e-13)
+    if a == 1:                                   # the one-contact helper: the same answer
+        q2, sig2 = q0.copy(), np.zeros(1)
+        assert kernel.project_one(k, act[0], 0, Wp, Wi, Wv, nu, KinvWT, L, q2, sig2) == kernel.OK
+        np.testing.assert_allclose(q2, q1, rtol=1e-14, atol=1e-15)
+        assert sig2[0] == pytest.approx(sig[0], rel=1e-14)
+    # a metric that is not positive definite on A: refused, q1 untouched beyond this point
+    Lbad = L.copy()
+    Lbad[0][A[-1], A[-1]] = -1.0 if a == 1 else -abs(Lbad[0][A[-1], A[-1]])
+    q3 = q0.copy()
+    status = kernel.project_positions(k, np.array(act + [0] * (m - a), dtype=np.int64), a, 0, Wp, Wi, Wv,
+                                      nu, KinvWT, Lbad, q3, np.zeros(m), np.zeros(m), np.zeros(m),
+                                      np.zeros((m, m)), np.zeros((m, m)))
+    assert status == kernel.PROJECTION_FAILED
+    np.testing.assert_array_equal(q3, q0)
+    if a == 1:
+        assert kernel.project_one(k, act[0], 0, Wp, Wi, Wv, nu, KinvWT, Lbad, q0.copy(), np.zeros(1)) \
+            == kernel.PROJECTION_FAILED
+
+
+@pytest.mark.parametrize("theta", ["1.0"])
+def test_two_contacts_projected_master_engines_agree(theta):
+    """The projection on two closed contacts at once (a Cholesky solve), both engines."""
+    sc, _ = siconos_two_contact(theta, 1.0)
+    if not sc.system.is_stiffness_definite():
+        pytest.skip("K singular")
+    a, b = (observer.simulate(sc, master_projection=True, engine=e) for e in ("python", "compiled"))
+    assert b.active.all(axis=1).any()
+    assert_same_run(a, b, tol=1e-13)
