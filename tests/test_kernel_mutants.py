@@ -339,7 +339,8 @@ def summary_oracle(res, name, k_on, k_off, rhos, h):
     return row
 
 
-@pytest.mark.parametrize("name,window", [("double_mass", (0.3, 0.8)), ("impact_oscillator", (0.5, 2.5))])
+@pytest.mark.parametrize("name,window", [("double_mass", (0.3, 0.8)), ("impact_oscillator", (0.5, 2.5)),
+                                         ("rocking_chain", (0.03, 0.12))])
 def test_summary_over_a_coupling_window(name, window):
     """store="summary" with a coupling window inside the run: every field of the summary row
     (V_on, V_max, V_end, rises, largest rise, the three sums, the largest impulse part, first
@@ -466,3 +467,39 @@ def test_two_contacts_projected_master_engines_agree(theta):
     a, b = (observer.simulate(sc, master_projection=True, engine=e) for e in ("python", "compiled"))
     assert b.active.all(axis=1).any()
     assert_same_run(a, b, tol=1e-13)
+
+
+# ---------------------------------------------------------------------------------------
+# the scalar loop (n = m = 1, master alone): signals, several windows, thinned records
+# ---------------------------------------------------------------------------------------
+
+
+def scalar_with_signals(t_end: float) -> Scenario:
+    """A damped 1-DOF oscillator with two forcing harmonics and a moving obstacle
+    ν(t) = o + Σ aᵢ sin(ωᵢt + φᵢ) (two terms), so f, ν and ν̇ all vary in the kernel."""
+    return Scenario.from_dict({
+        "system": {"M": [[1.0]], "C": [[0.1]], "K": [[100.0]], "W": [[1.0]],
+                   "forcing": {"constant": [-25.0], "amplitude": [7.0], "omega": 2.3, "phase": 0.4,
+                               "harmonics": [{"amplitude": [3.0], "omega": 5.1, "phase": -0.2}]},
+                   "gap": {"offset": [0.2], "amplitude": [0.05], "omega": 3.0, "phase": 0.2,
+                           "harmonics": [{"amplitude": [0.02], "omega": 7.0, "phase": 0.0}]}},
+        "impact": {"law": "newton", "restitution": 0.8},
+        "initial": {"q": [0.5], "u": [0.0]},
+        "simulation": {"h": 1e-3, "t_end": t_end}}, "scalar with signals")
+
+
+@pytest.mark.parametrize("record_every", [1, 3])
+def test_scalar_loop_with_signals_over_several_windows(record_every, monkeypatch):
+    """The scalar specialization over more than two windows (:data:`observer.loop.WINDOW`,
+    shortened here to 700 steps), every signal varying, every row or every third: the python
+    engine's rows."""
+    import observer.loop as loop
+    monkeypatch.setattr(loop, "WINDOW", 700)
+    sc = scalar_with_signals(2 * 700 * 1e-3 + 0.037)
+    a, b = (observer.simulate(sc, engine=e, record_every=record_every) for e in ("python", "compiled"))
+    full = observer.simulate(sc, engine="compiled")
+    assert full.active.sum() >= 4 and full.P.max() > 0            # several impacts
+    assert_same_run(a, b, tol=1e-12)
+    np.testing.assert_array_equal(b.q, full.q[::record_every])
+    np.testing.assert_array_equal(b.t, full.t[::record_every])
+    assert full.metadata["min_gap"] == pytest.approx(full.g[1:].min(), rel=1e-12)
