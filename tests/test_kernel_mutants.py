@@ -503,3 +503,35 @@ def test_scalar_loop_with_signals_over_several_windows(record_every, monkeypatch
     np.testing.assert_array_equal(b.q, full.q[::record_every])
     np.testing.assert_array_equal(b.t, full.t[::record_every])
     assert full.metadata["min_gap"] == pytest.approx(full.g[1:].min(), rel=1e-12)
+
+
+@pytest.mark.parametrize("coupling", [None, (0.2, 0.7)])
+def test_summary_thresholds_are_the_first_and_last_samples(coupling):
+    """The summary's per-threshold fields (first sample with V ≤ ρV(t_on), last with
+    V > ρV(t_on)) and V_max, on thresholds that are all crossed (ρ = 1 is met at t_on itself),
+    recomputed from the kernel's own V at every step."""
+    from observer import loop
+    from observer.kernel import F_VMAX, F_VON, SUMMARY_FIELDS
+
+    sc = short("double_mass")
+    obs = slaves(sc)
+    st = observer.MoreauJean(sc.system, sc.law, sc.h, sc.t_end, sc.theta)
+    inp = loop.LoopInput(st, np.stack([sc.q0] + [o.q0 for o in obs]), np.stack([sc.u0] + [o.u0 for o in obs]),
+                         np.array([False] + [o.position_jumps for o in obs]), False, coupling=coupling)
+    rhos = (1.0, 0.9, 0.5, 1e-3)
+    out = loop.run(inp, engine="compiled", store="summary", rhos=rhos)
+    f, k_on, k_off = out.summary["fields"], out.summary["k_on"], out.summary["k_off"]
+    assert (k_on == 0) == (coupling is None)
+    nr = len(rhos)
+    for s in (1, 2):
+        V = np.asarray(out.V[s], dtype=float)
+        Vw = V[k_on:k_off + 1]
+        assert f[s, F_VON] == V[k_on] and f[s, F_VMAX] == Vw.max()
+        for i, rho in enumerate(rhos):
+            below = Vw <= rho * V[k_on]
+            first = np.flatnonzero(below)
+            last = np.flatnonzero(~below)
+            assert f[s, SUMMARY_FIELDS + i] == (first[0] + k_on if first.size else -1), (s, rho)
+            assert f[s, SUMMARY_FIELDS + nr + i] == (last[-1] + k_on if last.size else -1), (s, rho)
+        assert f[s, SUMMARY_FIELDS] == k_on                   # ρ = 1: met at t_on
+        assert f[s, SUMMARY_FIELDS + 2] > k_on                # ρ = ½: met later
