@@ -535,3 +535,24 @@ def test_summary_thresholds_are_the_first_and_last_samples(coupling):
             assert f[s, SUMMARY_FIELDS + nr + i] == (last[-1] + k_on if last.size else -1), (s, rho)
         assert f[s, SUMMARY_FIELDS] == k_on                   # ρ = 1: met at t_on
         assert f[s, SUMMARY_FIELDS + 2] > k_on                # ρ = ½: met later
+
+
+@pytest.mark.parametrize("observers", [(), ("a",)])
+def test_a_ball_resting_on_the_ground_stays_exactly_there(observers):
+    """A unit mass at rest on the ground (g = 0, u = 0) under gravity: the predicted gap is
+    exactly 0, the contact is closed (``≤ 0``), and each step's impulse h·9.81 cancels gravity
+    exactly: q = u = 0 at every step, bit for bit (scalar loop, and general loop with an observer)."""
+    sc = Scenario.from_dict({
+        "system": {"M": [[1.0]], "C": [[0.0]], "K": [[0.0]], "W": [[1.0]],
+                   "forcing": {"constant": [-9.81]}, "gap": {"offset": [0.0]}},
+        "impact": {"law": "newton", "restitution": 0.5},
+        "initial": {"q": [0.0], "u": [0.0]},
+        "simulation": {"h": 1e-3, "t_end": 0.05}}, "resting ball")
+    obs = [Slave(name, False, np.array([0.0]), np.array([0.0])) for name in observers]
+    res = observer.simulate(sc, observers=obs)
+    assert res.metadata["engine"] == "compiled"
+    assert np.all(res.q == 0.0) and np.all(res.u == 0.0)
+    assert res.active[1:].all()
+    np.testing.assert_allclose(res.P[1:], 9.81e-3, rtol=1e-15)
+    for s in res.slaves.values():
+        assert np.all(s.q == 0.0) and np.all(s.u == 0.0)
