@@ -549,8 +549,11 @@ def test_a_ball_resting_on_the_ground_stays_exactly_there(observers):
         "initial": {"q": [0.0], "u": [0.0]},
         "simulation": {"h": 1e-3, "t_end": 0.05}}, "resting ball")
     obs = [Slave(name, False, np.array([0.0]), np.array([0.0])) for name in observers]
-    res = observer.simulate(sc, observers=obs)
-    assert res.metadata["engine"] == "compiled"
+    py, res = (observer.simulate(sc, observers=obs, engine=e) for e in ("python", "compiled"))
+    assert_same_run(py, res)                     # min_gap 0 first reached at the first step
+    assert res.metadata["min_gap"] == 0.0 and res.metadata["min_gap_t"] == pytest.approx(1e-3, abs=1e-15)
+    # every step's applied residual is exactly 0: no step is named the worst
+    assert res.metadata["health"]["max_residual"] == 0.0 and res.metadata["health"]["max_residual_t"] is None
     assert np.all(res.q == 0.0) and np.all(res.u == 0.0)
     assert res.active[1:].all()
     np.testing.assert_allclose(res.P[1:], 9.81e-3, rtol=1e-15)
@@ -582,3 +585,33 @@ def test_a_moving_obstacle_closes_the_contact_on_the_midpoint_prediction(observe
     first = int(np.flatnonzero(b.active[:, 0])[0])
     assert first == k + 1                                               # row k+1 = step k
     assert b.P[first, 0] > 0 and np.all(b.q[:first] == 0.0)
+
+
+def awkward_oscillator(t_end: float) -> Scenario:
+    """1-DOF, 1 contact, with entries that are not powers of two: the applied residual of an
+    impact step is round-off, not exactly 0."""
+    return Scenario.from_dict({
+        "system": {"M": [[3.3]], "C": [[0.17]], "K": [[7.1]], "W": [[0.73]],
+                   "forcing": {"constant": [-9.7], "amplitude": [2.1], "omega": 2.3, "phase": 0.4},
+                   "gap": {"offset": [0.31]}},
+        "impact": {"law": "newton", "restitution": 0.77},
+        "initial": {"q": [0.5], "u": [0.1]},
+        "simulation": {"h": 1.1e-3, "t_end": t_end}}, "awkward oscillator")
+
+
+def test_applied_residual_statistics_are_the_reference_engines():
+    """The largest applied residual and its step, the smallest gap and its step: bitwise the
+    python engine's, in the scalar loop (master alone) and the general loop (an observer in
+    the master's state)."""
+    sc = awkward_oscillator(3.0)
+    runs = [observer.simulate(sc, engine=e, observers=obs) for e in ("python", "compiled")
+            for obs in ([], [Slave("x", False, sc.q0, sc.u0)])]
+    ref = runs[0].metadata
+    assert ref["health"]["max_residual"] > 0.0 and runs[0].active.any()
+    for r in runs[1:]:
+        md = r.metadata
+        for key in ("min_gap", "min_gap_t", "max_contact_residual"):
+            assert md[key] == ref[key], key
+        for key in ("max_residual", "max_residual_t"):
+            assert md["health"][key] == ref["health"][key], key
+
