@@ -285,14 +285,15 @@ def test_lcp_failure_goes_to_the_reference_solver():
 # ---------------------------------------------------------------------------------------
 
 
+@pytest.mark.parametrize("name", ["rocking_chain", "spring_chain"])
 @pytest.mark.parametrize("S", [1, 3])
-def test_banded_structure_is_the_dense_one(S):
+def test_banded_structure_is_the_dense_one(S, name):
     """The rocking chain (tridiagonal M, C, K) stepped with the banded scheme through
     :func:`observer.loop.run`: the same trajectories as the dense scheme (and the python
     engine) to round-off, with and without observers."""
     from observer import loop
 
-    sc = short("rocking_chain", **{"simulation.t_end": 0.1})
+    sc = short("rocking_chain", **{"simulation.t_end": 0.1}) if name == "rocking_chain" else spring_chain()
     q0 = np.stack([sc.q0] + [sc.q0 * (1 + 0.1 * i) for i in range(1, S)])
     u0 = np.stack([sc.u0] + [sc.u0 + 0.05 * i for i in range(1, S)])
     jumps = np.array([False] + [i % 2 == 1 for i in range(1, S)])
@@ -373,12 +374,29 @@ def test_summary_over_a_coupling_window(name, window):
     assert checked == 2
 
 
-def test_banded_summary_is_the_dense_one():
+def spring_chain(n: int = 8) -> Scenario:
+    """n unit-ish masses in a line, neighbours joined by springs and dampers (tridiagonal M,
+    C, K: the first subdiagonal is nonzero), two of them above a ground, under gravity."""
+    K = 40.0 * (2 * np.eye(n) - np.eye(n, k=1) - np.eye(n, k=-1))
+    M = np.diag(1.0 + 0.1 * np.arange(n)) + 0.05 * (np.eye(n, k=1) + np.eye(n, k=-1))
+    W = np.zeros((n, 2))
+    W[2, 0] = W[n - 3, 1] = 1.0
+    q0 = 0.01 * np.arange(n)
+    return Scenario.from_dict({
+        "system": {"M": M.tolist(), "C": (0.01 * K).tolist(), "K": K.tolist(), "W": W.tolist(),
+                   "forcing": {"constant": [-9.81] * n}, "gap": {"offset": [0.0, 0.0]}},
+        "impact": {"law": "newton", "restitution": 0.5},
+        "initial": {"q": q0.tolist(), "u": [0.0] * n},
+        "simulation": {"h": 1e-3, "t_end": 0.3}}, "spring chain")
+
+
+@pytest.mark.parametrize("name", ["rocking_chain", "spring_chain"])
+def test_banded_summary_is_the_dense_one(name):
     """The summary's quadratic forms in band storage (:func:`observer.kernel._quad`): the same
     fields as the dense structure, observers coupled over a window."""
     from observer import loop
 
-    sc = short("rocking_chain", **{"simulation.t_end": 0.08})
+    sc = short("rocking_chain", **{"simulation.t_end": 0.08}) if name == "rocking_chain" else spring_chain()
     obs = slaves(sc)
     q0 = np.stack([sc.q0] + [o.q0 for o in obs])
     u0 = np.stack([sc.u0] + [o.u0 for o in obs])
@@ -386,7 +404,7 @@ def test_banded_summary_is_the_dense_one():
     out = {}
     for structure in ("banded", "dense"):
         st = observer.MoreauJean(sc.system, sc.law, sc.h, sc.t_end, sc.theta, structure=structure)
-        inp = loop.LoopInput(st, q0, u0, jumps, False, coupling=(0.02, 0.06))
+        inp = loop.LoopInput(st, q0, u0, jumps, False, coupling=(0.25 * sc.t_end, 0.75 * sc.t_end))
         out[structure] = loop.run(inp, engine="compiled", store="summary", record_every=2)
     b, d = out["banded"], out["dense"]
     fb, fd = b.summary["fields"], d.summary["fields"]
