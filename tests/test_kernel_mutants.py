@@ -341,12 +341,12 @@ def summary_oracle(res, name, k_on, k_off, rhos, h):
 
 
 @pytest.mark.parametrize("name,window", [("double_mass", (0.3, 0.8)), ("impact_oscillator", (0.5, 2.5)),
-                                         ("rocking_chain", (0.03, 0.12))])
+                                         ("rocking_chain", (0.03, 0.12)), ("two_contact", (0.1, 0.95))])
 def test_summary_over_a_coupling_window(name, window):
     """store="summary" with a coupling window inside the run: every field of the summary row
     (V_on, V_max, V_end, rises, largest rise, the three sums, the largest impulse part, first
     passage and settling per ρ) equals its numpy recomputation from the full run."""
-    sc = short(name)
+    sc = siconos_two_contact("0.5", 1.0)[0] if name == "two_contact" else short(name)
     obs = slaves(sc)
     full = observer.simulate(sc, observers=obs, coupling=window)
     summ = observer.simulate(sc, observers=obs, coupling=window, store="summary", record_every=1)
