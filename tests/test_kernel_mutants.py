@@ -471,9 +471,11 @@ def test_project_positions_closes_the_gaps_in_the_K_metric(act):
                                       np.zeros((m, m)), np.zeros((m, m)))
     assert status == kernel.PROJECTION_FAILED
     np.testing.assert_array_equal(q3, q0)
-    if a == 1:
-        assert kernel.project_one(k, act[0], 0, Wp, Wi, Wv, nu, KinvWT, Lbad, q0.copy(), np.zeros(1)) \
-            == kernel.PROJECTION_FAILED
+    if a == 1:                                   # negative or exactly zero: refused
+        for bad in (-1.0, 0.0):
+            Lbad[0][A[0], A[0]] = bad
+            assert kernel.project_one(k, act[0], 0, Wp, Wi, Wv, nu, KinvWT, Lbad, q0.copy(), np.zeros(1)) \
+                == kernel.PROJECTION_FAILED
 
 
 @pytest.mark.parametrize("theta", ["1.0"])
