@@ -474,8 +474,11 @@ def test_project_positions_closes_the_gaps_in_the_K_metric(act):
     if a == 1:                                   # negative or exactly zero: refused
         for bad in (-1.0, 0.0):
             Lbad[0][A[0], A[0]] = bad
-            assert kernel.project_one(k, act[0], 0, Wp, Wi, Wv, nu, KinvWT, Lbad, q0.copy(), np.zeros(1)) \
+            q4, sig4 = q0.copy(), np.full(1, 7.0)
+            assert kernel.project_one(k, act[0], 0, Wp, Wi, Wv, nu, KinvWT, Lbad, q4, sig4) \
                 == kernel.PROJECTION_FAILED
+            np.testing.assert_array_equal(q4, q0)        # like project_positions: q untouched
+            assert sig4[0] == 0.0
 
 
 @pytest.mark.parametrize("theta", ["1.0"])
