@@ -638,3 +638,20 @@ def test_applied_residual_statistics_are_the_reference_engines():
         for key in ("max_residual", "max_residual_t"):
             assert md["health"][key] == ref["health"][key], key
 
+
+
+@pytest.mark.parametrize("observers", [(), ("a",)])
+def test_a_mass_at_rest_on_the_ground_without_force(observers):
+    """No force, at rest on the ground: every step's contact problem is ``b = 0`` (zero
+    impulse, exactly solved: residual 0, not 0/0); no step goes to the reference solver."""
+    sc = Scenario.from_dict({
+        "system": {"M": [[1.0]], "C": [[0.0]], "K": [[0.0]], "W": [[1.0]],
+                   "forcing": {"constant": [0.0]}, "gap": {"offset": [0.0]}},
+        "impact": {"law": "newton", "restitution": 0.5},
+        "initial": {"q": [0.0], "u": [0.0]},
+        "simulation": {"h": 1e-3, "t_end": 0.01}}, "mass at rest")
+    obs = [Slave(name, False, np.array([0.0]), np.array([0.0])) for name in observers]
+    res = observer.simulate(sc, observers=obs)
+    assert res.metadata["solver_fallbacks"] == 0 and res.metadata["stopped"] is None
+    assert res.active[1:].all() and np.all(res.P == 0.0) and np.all(res.q == 0.0)
+    assert res.metadata["max_contact_residual"] == 0.0
