@@ -479,6 +479,18 @@ def test_project_positions_closes_the_gaps_in_the_K_metric(act):
                 == kernel.PROJECTION_FAILED
             np.testing.assert_array_equal(q4, q0)        # like project_positions: q untouched
             assert sig4[0] == 0.0
+            q5 = q0.copy()
+            assert kernel.project_positions(k, np.array(act + [0] * (m - a), dtype=np.int64), a, 0, Wp, Wi, Wv,
+                                            nu, KinvWT, Lbad, q5, np.zeros(m), np.zeros(m), np.zeros(m),
+                                            np.zeros((m, m)), np.zeros((m, m))) == kernel.PROJECTION_FAILED
+            np.testing.assert_array_equal(q5, q0)
+        # a stiffer metric (K → 1000 K): L_jj < 1 is still positive definite, the same gap closed
+        q6 = q0.copy()
+        assert L[0][A[0], A[0]] / 1e3 < 1.0
+        assert kernel.project_positions(k, np.array(act + [0] * (m - a), dtype=np.int64), a, 0, Wp, Wi, Wv,
+                                        nu, KinvWT / 1e3, L / 1e3, q6, np.zeros(m), np.zeros(m), np.zeros(m),
+                                        np.zeros((m, m)), np.zeros((m, m))) == kernel.OK
+        np.testing.assert_allclose(q6, q1, rtol=1e-12, atol=1e-13)
 
 
 @pytest.mark.parametrize("theta", ["1.0"])
