@@ -587,6 +587,9 @@ def test_a_ball_resting_on_the_ground_stays_exactly_there(observers):
     py, res = (observer.simulate(sc, observers=obs, engine=e) for e in ("python", "compiled"))
     assert_same_run(py, res)                     # min_gap 0 first reached at the first step
     assert res.metadata["min_gap"] == 0.0 and res.metadata["min_gap_t"] == pytest.approx(1e-3, abs=1e-15)
+    # one closed-form contact solve per system and step, no pivoting iterations
+    assert res.metadata["contact_solves"] == 50 * (1 + len(observers))
+    assert res.metadata["solver_iterations"] == 0
     # every step's applied residual is exactly 0: no step is named the worst
     assert res.metadata["health"]["max_residual"] == 0.0 and res.metadata["health"]["max_residual_t"] is None
     assert np.all(res.q == 0.0) and np.all(res.u == 0.0)
