@@ -96,7 +96,21 @@ MUTATION_TARGETS: dict[str, tuple[list[str], list[str]]] = {
     "proofs_checks_plugin": (["proofs_checks/plugin.py"],
                              ["-p", "no:proofs_checks", "-p", "proofs_checks.plugin",
                               "tests/test_proofs_kill_plugin.py"]),
+    # the engines: the compiled kernel (run as plain Python, see PLAIN_PYTHON_TARGETS), the loop
+    # drivers and the event engine, each against small cases
+    "kernel": (["observer/kernel.py"], ["tests/test_kernel_mutants.py"]),
+    "loop": (["observer/loop.py"], ["tests/test_kernel_mutants.py"]),
+    "event": (["observer/event/*"], ["tests/test_event_master.py", "tests/test_event_exact.py",
+                                     "tests/test_event_observers.py", "tests/test_event_simulate.py",
+                                     "tests/test_event_nonfinite.py",
+                                     "-k", "not signal and not 1e18 and not twenty_seconds"]),
 }
+PLAIN_PYTHON_TARGETS = frozenset({"kernel", "loop", "event"})
+"""Targets run through ``tests/mutants/run_mutmut.py`` with ``NUMBA_DISABLE_JIT=1``: numba's
+``@njit`` then returns the plain function, so mutmut may mutate the kernel's decorated
+functions (the wrapper allows that one decorator) and its trampolines run; the kernel runs
+as Python (about 50 µs per step, hence the small cases of the tests)."""
+MUTMUT_WRAPPER = "tests/mutants/run_mutmut.py"
 MUTANTS_DIR = ROOT / "mutants"
 EQUIVALENT_DIR = ROOT / "tests" / "mutants"
 _COPIED = ("observer", "proofs_checks", "tests")
@@ -210,7 +224,11 @@ def mutants(session: nox.Session) -> None:
             shutil.copytree(ROOT / name, work / name, ignore=ignore)
         (work / "pyproject.toml").write_text(_mutmut_pyproject(module, tests), encoding="utf-8")
         with session.chdir(work):
-            session.run("mutmut", "run", *max_children, env={**env, **SINGLE_THREAD_BLAS})
+            if module in PLAIN_PYTHON_TARGETS:
+                session.run("python", MUTMUT_WRAPPER, "run", *max_children,
+                            env={**env, **SINGLE_THREAD_BLAS, "NUMBA_DISABLE_JIT": "1"})
+            else:
+                session.run("mutmut", "run", *max_children, env={**env, **SINGLE_THREAD_BLAS})
             summaries.append(_mutation_summary(session, module, work))
     (MUTANTS_DIR / "summary.json").write_text(json.dumps(summaries, indent=2))
 
