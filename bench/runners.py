@@ -126,7 +126,8 @@ def simulate(sc, case: Case, **kwargs):
     if case.integrator == "event":
         kwargs = {k: v for k, v in kwargs.items() if k not in ("solver", "record_every")}
         return _timed(observer.simulate, sc, integrator="event", **kwargs)
-    kwargs.setdefault("engine", engine_for(kwargs.get("solver") or case.solver))
+    if engine_for(kwargs.get("solver") or case.solver) != "compiled":   # else: the engine registry's
+        kwargs.setdefault("engine", "python")                          # first that accepts the run
     return _timed(observer.simulate, sc, **kwargs)
 
 

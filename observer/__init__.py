@@ -4,13 +4,14 @@ Public API (a contract relied on by the benchmarks, reports and users):
 
 * :func:`load_scenario` — a built-in scenario by name or a TOML file, with overrides;
 * :func:`simulate` — Moreau–Jean simulation of the master and its observers;
-* :data:`SCENARIOS`, :data:`OBSERVER_DESIGNS`, :data:`IMPACT_LAWS`, :data:`CONTACT_SOLVERS` —
+* :data:`SCENARIOS`, :data:`OBSERVER_DESIGNS`, :data:`IMPACT_LAWS`, :data:`CONTACT_SOLVERS`, :data:`ENGINES` —
   registries (add an entry, and it runs everywhere);
 * :class:`LinearSystem`, :class:`ImpactLaw`, :class:`Scenario`, :class:`MoreauJean`,
   :class:`SimulationResult`, :class:`Slave`.
 """
 
 from observer.contact import CONTACT_SOLVERS
+from observer.engines import ENGINES
 from observer.errors import ContactSolverError, InputError
 from observer.impact import IMPACT_LAWS, ImpactLaw
 from observer.model import Harmonic, LinearSystem
@@ -22,6 +23,6 @@ from observer.simulate import load_scenario, simulate
 from observer.stepping import MoreauJean
 from observer.version import __version__
 
-__all__ = ["CONTACT_SOLVERS", "ContactSolverError", "Harmonic", "IMPACT_LAWS", "ImpactLaw", "InputError",
+__all__ = ["CONTACT_SOLVERS", "ContactSolverError", "ENGINES", "Harmonic", "IMPACT_LAWS", "ImpactLaw", "InputError",
            "LinearSystem", "MoreauJean", "OBSERVER_DESIGNS", "ObserverDesign", "SCENARIOS", "Scenario", "SimulationResult",
            "Slave", "load_scenario", "lyapunov", "read_frame", "read_result", "simulate", "__version__"]

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from observer.cli_common import Parser, guarded, parse_pairs
+from observer.engines import ENGINES
 from observer.errors import InputError
 from observer.validation import check_output_path
 
@@ -60,7 +61,7 @@ def cmd_run(args) -> int:
     if args.events is not None:
         write_events(res, args.events)
     meta = res.metadata
-    if args.integrator == "event":
+    if meta.get("integrator") == "event":
         print(f"{sc.name}: exact event-driven run, {meta['events']} master events, sampled every "
               f"h = {meta['h']:g} ({meta['steps']} rows); status {res.status.state.value}"
               + (f": {res.status.reason}" if res.status.reason else ""))
@@ -100,7 +101,7 @@ def _integrator_options(args) -> dict:
                 raise InputError(flag, "is a time-stepping option; --integrator event samples "
                                        "the exact solution on the grid t_k = k·h")
         return {"integrator": "event"}
-    return {"engine": args.engine or "compiled", "record_every": args.record_every,
+    return {"engine": args.engine, "integrator": args.integrator, "record_every": args.record_every,
             "store": args.store or "full"}
 
 
@@ -180,13 +181,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--observers", help="comma-separated observer designs, e.g. jump,nojump; "
                                        "'none' runs the master alone (default: the scenario's "
                                        "[observer] observers)")
-    s.add_argument("--integrator", choices=["time-stepping", "event"], default="time-stepping",
-                   help="Moreau–Jean time-stepping (default) or the exact event-driven integrator")
+    s.add_argument("--integrator", choices=["time-stepping", "event"], default=None,
+                   help="Moreau–Jean time-stepping (default, or the --engine's) or the exact "
+                        "event-driven integrator")
     s.add_argument("--events", metavar="FILE", help="also write the events table (.csv or .parquet)")
     s.add_argument("--source", choices=["master", "log", "self"], help="switching signal source")
     s.add_argument("--log", help="closing log CSV (contact,t_close,t_open) for --source log")
-    s.add_argument("--engine", choices=["compiled", "python"], default=None,
-                   help="time loop: the numba kernel (default) or the numpy reference")
+    s.add_argument("--engine", choices=list(ENGINES), default=None,
+                   help="a registered engine: compiled (the numba kernel), python (the numpy "
+                        "reference), event, ... (default: the first that accepts the run)")
     s.add_argument("--record-every", type=int, default=None, metavar="K",
                    help="keep every K-th step (default 1; about 10 000 rows with --store summary)")
     s.add_argument("--store", choices=["full", "summary"], default=None,

@@ -13,8 +13,11 @@ For one contact the two coincide exactly.
 :data:`IMPACT_LAWS` is the registry: each :class:`ImpactLawDefinition` carries the law's
 impact map (the continuous law on (G, γ⁻), which the event-driven integrator and the proof
 checks call), its step map (the discrete impulse of one Moreau–Jean step, which both
-time-stepping engines realise) and the integer code of the compiled kernel (None: a law
-only the python engine runs). A new law is one function pair plus one registry entry.
+time-stepping engines realise), the integer code of the compiled kernel (None: the kernel
+does not have it) and the facts the engines consult (:mod:`observer.engines`): whether it is
+Newton's law on one closed contact (the kernel assumes so), whether the event-driven engine
+runs it and how it acts there on a closed set with separating contacts. A new law is one
+function pair plus one registry entry; an engine that lacks it refuses it by name.
 
 :func:`poisson_step` is the discrete Poisson step of :mod:`observer.stepping`: Glocker's law
 with the step's Delassus matrix on the step's pre-impact velocity, equal to the discrete
@@ -37,6 +40,11 @@ if TYPE_CHECKING:                    # a type only: the model layer imports no c
 NEWTON, POISSON = 0, 1
 """The compiled kernel's integer codes of the built-in laws."""
 
+KERNEL_LAWS = {NEWTON: "newton", POISSON: "poisson"}
+"""The law paths the compiled kernel implements: code → the law it computes."""
+
+EVENT_CLOSED_SETS = ("all", "approaching")
+
 Solve = Callable[[np.ndarray, np.ndarray], "LCPSolution"]
 ImpactMap = Callable[[np.ndarray, np.ndarray, np.ndarray, Solve], np.ndarray]
 StepMap = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Solve],
@@ -56,8 +64,25 @@ class ImpactLawDefinition:
         The impulse of one time step with the step's Delassus matrix Ĝ (Λ_C, Λ_E the phases
         where the law has them, else empty).
     code : int or None
-        Integer code of the compiled kernel; None runs the law on the python engine only.
+        Integer code of the compiled kernel's path for this law (:data:`KERNEL_LAWS`); None:
+        the kernel does not have it (the compiled engine refuses it).
     description : str
+    is_newton : bool
+        The step is Newton's discrete law ``0 ≤ γ_{k+1} + e∘γ_k ⊥ P ≥ 0`` on any closed set
+        (the engines then judge a step by Newton's recomputed residual).
+    single_contact_is_newton : bool
+        On one closed contact the law is Newton's (impact and step map): the compiled kernel
+        computes every one-contact step in Newton's closed form, and the event engine's Zeno
+        tail uses Newton's hop sequence. A law with a kernel code must declare it (else the
+        compiled engine refuses it).
+    event_engine : bool
+        The event-driven engine runs it (through ``impact_map``); False: it refuses the law.
+    event_closed_set : {"all", "approaching"}
+        How the event engine's observers apply the impact map on a closed set I with some
+        separating contacts (γ_i⁻ > 0): ``"all"`` on I (the map keeps γ⁺ ≥ 0 by construction,
+        as Poisson's inequality form does); ``"approaching"`` on J = {γ_i⁻ ≤ 0}, a separating
+        contact the impulse drives below 0 joining J with e = 0 (Newton's law would else
+        let it leave with γ⁺ = −eγ⁻ < 0).
     """
 
     name: str
@@ -65,6 +90,20 @@ class ImpactLawDefinition:
     step_map: StepMap
     code: int | None
     description: str
+    is_newton: bool = False
+    single_contact_is_newton: bool = False
+    event_engine: bool = True
+    event_closed_set: str = "all"
+
+    def __post_init__(self):
+        if self.event_closed_set not in EVENT_CLOSED_SETS:
+            raise InputError("impact.law", f"{self.name}: event_closed_set must be one of "
+                             f"{list(EVENT_CLOSED_SETS)}, got {self.event_closed_set!r}")
+
+    def newton_on(self, closed: int) -> bool:
+        """True when a step on ``closed`` closed contacts is Newton's discrete law (its
+        recomputed residual then judges the step)."""
+        return self.is_newton or (closed == 1 and self.single_contact_is_newton)
 
 
 @dataclass(frozen=True)
@@ -99,7 +138,7 @@ class ImpactLaw:
 
     @property
     def code(self) -> int | None:
-        """Integer code used inside the compiled kernel (None: python engine only)."""
+        """Integer code of the compiled kernel's path (None: the kernel does not have it)."""
         return self.definition.code
 
     @property
@@ -173,9 +212,11 @@ def newton_step(G: np.ndarray, gamma_free: np.ndarray, gamma_k: np.ndarray, e: n
 
 IMPACT_LAWS: dict[str, ImpactLawDefinition] = {d.name: d for d in (
     ImpactLawDefinition("newton", newton_impact, newton_step, NEWTON,
-                        "generalized Newton: 0 ≤ γ⁺ + e∘γ⁻ ⊥ Λ ≥ 0 (eq. (5))"),
+                        "generalized Newton: 0 ≤ γ⁺ + e∘γ⁻ ⊥ Λ ≥ 0 (eq. (5))", is_newton=True,
+                        single_contact_is_newton=True, event_closed_set="approaching"),
     ImpactLawDefinition("poisson", poisson_impact, poisson_step, POISSON,
-                        "generalized Poisson, Glocker's inequality form (eq. (6))"),
+                        "generalized Poisson, Glocker's inequality form (eq. (6))",
+                        single_contact_is_newton=True),
 )}
 """Registry of impact laws: name → :class:`ImpactLawDefinition`."""
 

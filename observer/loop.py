@@ -49,7 +49,6 @@ import scipy.sparse as sp
 
 from observer.errors import InputError
 from observer.sparse import abs_sum
-from observer.impact import NEWTON, POISSON
 from observer.stepping import MoreauJean, NonFiniteState
 
 if TYPE_CHECKING:
@@ -577,8 +576,8 @@ def _python_health(stepper: MoreauJean, k: int, s: int, q, u, u1, P, act, q1, he
     contacts). The master's gaps after the step update the deepest penetration. The residual
     is that of Newton's discrete law ``0 ≤ γ_{k+1} + e∘γ_k ⊥ P ≥ 0`` with ``ĜP`` replaced by
     ``W_Aᵀ(u_{k+1} − u_free)`` (the kernel's :func:`observer.kernel.applied_residual`), valid
-    for the Newton law and every one-contact Poisson step; Poisson steps on several contacts
-    and registered laws without kernel code count the solver's own residual
+    where the law declares its step Newton's (:meth:`~observer.impact.ImpactLawDefinition.newton_on`:
+    Newton's law, a one-contact Poisson step); other steps count the solver's own residual
     (``residual_source = "applied+solver"``)."""
     if s == 0:
         g = stepper.system.gaps(q1, stepper.time(k + 1))
@@ -587,8 +586,7 @@ def _python_health(stepper: MoreauJean, k: int, s: int, q, u, u1, P, act, q1, he
             health["min_gap"], health["min_gap_step"] = float(g[j]), k + 1
     if act.size == 0:
         return 0.0
-    code = stepper.law.code
-    if code == NEWTON or (code == POISSON and act.size == 1):
+    if stepper.law.definition.newton_on(act.size):       # the law's declared fact
         res = newton_residual(stepper, k, q, u, u1, P, act)
     else:
         res = float(stepper.stats.max_residual)

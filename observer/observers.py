@@ -215,3 +215,19 @@ def _sigma(traj: dict, shape: tuple[int, int]) -> np.ndarray:
     if s is None:
         return np.zeros((shape[0], traj["P"].shape[1]))
     return s
+
+
+def make_slaves(cfg: ObserverConfig, observers: list) -> list[Slave]:
+    """Observer names become slaves started from the ``[observer]`` state; Slave objects pass."""
+    out: list[Slave] = []
+    for ob in observers:
+        if isinstance(ob, Slave):
+            out.append(ob)
+            continue
+        check_observer_name(ob)
+        design = OBSERVER_DESIGNS[ob]
+        out.append(Slave(ob, design.position_jumps, cfg.q0, cfg.u0, design))
+    names = [s.name for s in out]
+    if len(set(names)) != len(names):
+        raise InputError("observer.observers", f"observer names must be unique, got {names}")
+    return out

@@ -220,6 +220,45 @@ def check_events(events: pd.DataFrame | None) -> pd.DataFrame | None:
     return events
 
 
+@dataclass(frozen=True)
+class EventTable:
+    """Events as arrays, one entry per event and contact (the columns of
+    :data:`EVENT_COLUMNS`); :meth:`frame` is the DataFrame, built only when asked for."""
+
+    time: np.ndarray
+    contact: np.ndarray
+    kind: np.ndarray
+    gamma_minus: np.ndarray
+    gamma_plus: np.ndarray
+    impulse: np.ndarray
+
+    @classmethod
+    def from_rows(cls, rows: list) -> "EventTable":
+        """From rows ``(time, contact, kind, γ⁻, γ⁺, impulse, ...)`` (extra columns ignored)."""
+        cols = list(zip(*[r[:6] for r in rows])) if rows else [()] * 6
+        return cls(np.array(cols[0], dtype=float), np.array(cols[1], dtype=np.int64),
+                   np.array(cols[2], dtype=object), *(np.array(c, dtype=float) for c in cols[3:]))
+
+    def __len__(self) -> int:
+        return int(self.time.size)
+
+    def until(self, t: float) -> "EventTable":
+        """The events at times ≤ t."""
+        keep = self.time <= t
+        return EventTable(*(getattr(self, c)[keep] for c in EVENT_COLUMNS))
+
+    def frame(self) -> pd.DataFrame:
+        """The table as a DataFrame with :data:`EVENT_COLUMNS`."""
+        import pandas as pd
+
+        return pd.DataFrame({c: getattr(self, c) for c in EVENT_COLUMNS})
+
+
+def event_table_frame(table: EventTable) -> pd.DataFrame:
+    """``table.frame()`` (a module-level function: a :class:`LazyFrame` builder)."""
+    return table.frame()
+
+
 def records_frame(rows: list[dict]) -> pd.DataFrame:
     """A DataFrame with one row per dict of ``rows`` (``pandas.DataFrame(rows)``)."""
     import pandas as pd
@@ -349,6 +388,17 @@ class SimulationResult:
         for name in ("t", "q", "u", "P", "active", "chi", "sigma"):
             object.__setattr__(self, name, _read_only(getattr(self, name)))
 
+    @classmethod
+    def from_record(cls, record: RunRecord, system: LinearSystem) -> "SimulationResult":
+        """The public result of an engine's :class:`RunRecord` (the one place it is built);
+        an event table given as arrays becomes a DataFrame on first read."""
+        events = record.events
+        if isinstance(events, EventTable):
+            events = LazyFrame(event_table_frame, (events,))
+        return cls(record.t, record.q, record.u, record.P, record.active, system, record.metadata,
+                   chi=record.chi, slaves=record.slaves, sigma=record.sigma, summary=record.summary,
+                   status=record.status, stats=record.stats, events=events)
+
     @property
     def g(self) -> np.ndarray:
         """Gaps g = Wᵀq + ν(t), shape (N+1, m)."""
@@ -435,6 +485,44 @@ class SimulationResult:
         if self.events is not None:
             write_frame(self.events, events_path(path))
         return write_frame(df, path)
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """What every engine returns (:mod:`observer.engines`): the master's arrays on the
+    output grid, the observers' trajectories, the events, how the run ended and its
+    counters. :meth:`SimulationResult.from_record` turns it into the public result.
+
+    Attributes
+    ----------
+    engine : str
+        The engine's registry name.
+    t, q, u, P, sigma, active, chi
+        As :class:`SimulationResult` (``chi`` None without observers).
+    slaves : dict[str, SlaveTrajectory]
+    status : RunStatus
+        :class:`RunState` (ok / fallback / stopped) and the reason.
+    stats : StepStats
+    metadata : dict
+    events : EventTable, LazyFrame or None
+        The event table as arrays, or a table derived on first read (time-stepping), or None.
+    summary : LazyFrame or None
+    """
+
+    engine: str
+    t: np.ndarray
+    q: np.ndarray
+    u: np.ndarray
+    P: np.ndarray
+    sigma: np.ndarray
+    active: np.ndarray
+    chi: np.ndarray | None
+    slaves: dict
+    status: RunStatus
+    stats: StepStats
+    metadata: dict
+    events: EventTable | LazyFrame | None = None
+    summary: LazyFrame | None = None
 
 
 def run_metadata(scenario, stepper, out) -> dict:

@@ -236,7 +236,8 @@ def test_cli_engine_and_store_options(tmp_path, capsys):
     assert "compiled engine" in text and "t_settle_1e-06" in text and "of the 1000 kept rows" in text
     assert main(["run", "double_mass", "--store", "summary", "--engine", "python",
                  "--out", str(tmp_path / "x.csv")]) == 2
-    assert capsys.readouterr().err.strip() == 'error: store: store="summary" needs engine="compiled"'
+    assert capsys.readouterr().err.strip() == ('error: engine: the python engine cannot take this run: '
+                                               'store="summary" needs the compiled engine')
 
 
 def test_other_solvers_run_on_the_python_engine_and_say_so():

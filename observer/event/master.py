@@ -48,6 +48,7 @@ acceleration LCP decides whether it stays closed.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -112,19 +113,22 @@ class MasterEventResult:
 
     Attributes
     ----------
-    frame : DataFrame
-        The exact solution on ``t_k = k·h``: ``t, q0.., u0.., g0.., P0.., active0..``
-        (``P_j``: impulse of contact j in ``(t_{k−1}, t_k]``, impacts plus ∫λ dt;
-        ``active_j``: contact j closed at some instant of ``(t_{k−1}, t_k]``, row 0 at t0).
+    t : ndarray, shape (N+1,)
+        The output grid ``t_k = t0 + k·h`` (up to the stop of a stopped run).
+    q, u : ndarray, shape (N+1, n)
+        The exact solution on the grid.
+    g, P : ndarray, shape (N+1, m)
+        Gaps; ``P_j``: impulse of contact j in ``(t_{k−1}, t_k]``, impacts plus ∫λ dt.
+    active : ndarray of bool, shape (N+1, m)
+        Contact j closed at some instant of ``(t_{k−1}, t_k]`` (row 0 at t0).
+    event_rows : list of tuple
+        The events as rows of :data:`MASTER_EVENT_COLUMNS`.
     segments : list of tuple
         The exact solution: ``(t_start, t_stop, held contacts, x(t_start))`` per flow piece
         (see :meth:`state`).
-    events : DataFrame
-        One row per event and contact: ``time, contact, kind, gamma_minus, gamma_plus, impulse,
-        depth, note`` (:data:`MASTER_EVENT_COLUMNS`).
     status : str
-        ``"ok"`` or ``"stopped: <reason>"``; a stopped run's frame ends at the last grid
-        time before the stop (``frame.attrs["t_stop"]``), never with NaN rows.
+        ``"ok"`` or ``"stopped: <reason>"``; a stopped run's rows end at the last grid
+        time before the stop (:attr:`t_stop`), never with NaN rows.
     closings, openings : list of ndarray
         Per contact, the times it closes and opens again (χ_j = 1 on each
         ``[closing, opening]``; an impact or graze is a zero-length interval; ``inf``:
@@ -138,13 +142,44 @@ class MasterEventResult:
     scenario: Scenario
     h: float
     t_end: float
-    frame: pd.DataFrame
-    events: pd.DataFrame
+    t: np.ndarray
+    q: np.ndarray
+    u: np.ndarray
+    g: np.ndarray
+    P: np.ndarray
+    active: np.ndarray
+    event_rows: list
     status: str
     closings: list
     openings: list
     zeno: list = field(default_factory=list)
     segments: list = field(default_factory=list)
+    t_stop: float = float("nan")
+
+    @cached_property
+    def frame(self) -> pd.DataFrame:
+        """The solution as a DataFrame ``t, q0.., u0.., g0.., P0.., active0..`` (built on first
+        read; ``attrs``: scenario, integrator, h, t_end, status, t_stop)."""
+        import pandas as pd
+
+        cols: dict[str, np.ndarray] = {"t": self.t}
+        for name, arr in (("q", self.q), ("u", self.u), ("g", self.g), ("P", self.P)):
+            for j in range(arr.shape[1]):
+                cols[f"{name}{j}"] = arr[:, j]
+        for j in range(self.active.shape[1]):
+            cols[f"active{j}"] = self.active[:, j].astype(np.int8)
+        frame = pd.DataFrame(cols)
+        frame.attrs.update({"scenario": self.scenario.name, "integrator": "event", "h": self.h,
+                            "t_end": self.t_end, "status": self.status, "t_stop": self.t_stop})
+        return frame
+
+    @cached_property
+    def events(self) -> pd.DataFrame:
+        """One row per event and contact: ``time, contact, kind, gamma_minus, gamma_plus,
+        impulse, depth, note`` (:data:`MASTER_EVENT_COLUMNS`; built on first read)."""
+        import pandas as pd
+
+        return pd.DataFrame(self.event_rows, columns=MASTER_EVENT_COLUMNS)
 
     def state(self, t: float) -> np.ndarray:
         """Exact state ``(q, u)`` at any time t of the run (right-continuous at impacts), from
@@ -162,10 +197,8 @@ class MasterEventResult:
 
     def impact_times(self, j: int | None = None) -> np.ndarray:
         """Times of the impacts (of contact j, or of any contact), in order."""
-        ev = self.events[self.events["kind"] == "impact"]
-        if j is not None:
-            ev = ev[ev["contact"] == j]
-        return np.unique(ev["time"].to_numpy())
+        return np.unique(np.array([r[0] for r in self.event_rows
+                                   if r[2] == "impact" and (j is None or r[1] == j)], dtype=float))
 
 
 class _Run:
@@ -397,7 +430,7 @@ class _Run:
         γ⁺ to |γ̇|δg/v; the velocity tail (:meth:`velocity_tail`) then errs by about
         ``(1 + 2/(1 − e))·δg/γ⁺``. Once that reaches ZENO_TAIL_RTOL·max(|t|, τ), the run is
         extrapolated from the current (still accurate) impact."""
-        if len(key) != 1 or self.law.law not in ("newton", "poisson"):
+        if len(key) != 1 or not self.law.definition.single_contact_is_newton:
             return False
         e = float(self.law.restitution[key[0]])
         if not 0.0 <= e < 1.0:
@@ -419,7 +452,7 @@ class _Run:
         O(tail³·α₁²/α₀², …). None for several contacts or another law (for one contact
         Poisson’s law, eq. (6), is Newton’s).
         """
-        if len(key) != 1 or self.law.law not in ("newton", "poisson"):
+        if len(key) != 1 or not self.law.definition.single_contact_is_newton:
             return None
         e = float(self.law.restitution[key[0]])
         v, a0, a1 = float(v_plus[0]), -float(accel[0]), -float(jerk[0])
@@ -784,8 +817,6 @@ def _finite_rows(run: _Run, G: np.ndarray) -> tuple[int, str | None]:
 
 
 def _result(run: _Run, scenario: Scenario, status: str, t_stop: float) -> MasterEventResult:
-    import pandas as pd
-
     n, m = run.n, run.m
     if status != "ok":                 # a stopped run ends at its stop time: no NaN rows
         keep = run.k_next
@@ -809,19 +840,9 @@ def _result(run: _Run, scenario: Scenario, status: str, t_stop: float) -> Master
             k0 = int(np.searchsorted(t_grid, c, side="left"))
             k1 = int(np.searchsorted(t_grid, o, side="left")) if np.isfinite(o) else t_grid.size - 1
             active[k0:min(k1, t_grid.size - 1) + 1, j] = 1
-    Q, U = run.X[:, :n], run.X[:, n:]
-    cols: dict[str, np.ndarray] = {"t": t_grid}
-    for name, arr, width in (("q", Q, n), ("u", U, n), ("g", G, m), ("P", run.P, m)):
-        for j in range(width):
-            cols[f"{name}{j}"] = arr[:, j]
-    for j in range(m):
-        cols[f"active{j}"] = active[:, j]
-    frame = pd.DataFrame(cols)
-    frame.attrs.update({"scenario": scenario.name, "integrator": "event", "h": run.h,
-                        "t_end": run.t_end, "status": status,
-                        "t_stop": float(run.t_end if status == "ok" else t_stop)})
-    events = pd.DataFrame(run.events, columns=MASTER_EVENT_COLUMNS)
     closings = [np.array([c for c, _ in iv]) for iv in run.intervals]
     openings = [np.array([o for _, o in iv]) for iv in run.intervals]
-    return MasterEventResult(scenario, run.h, run.t_end, frame, events, status, closings,
-                             openings, run.zeno, run.segments)
+    return MasterEventResult(scenario, run.h, run.t_end, t_grid, run.X[:, :n], run.X[:, n:], G,
+                             run.P, active.astype(bool), list(run.events), status, closings,
+                             openings, run.zeno, run.segments,
+                             float(run.t_end if status == "ok" else t_stop))

@@ -66,9 +66,9 @@ import numpy as np
 from observer.contact import get_solver
 from observer.event.flow import expm_pade13
 from observer.errors import InputError
-from observer.impact import NEWTON, ImpactLaw, impact, newton_impact
+from observer.impact import ImpactLaw
 from observer.model import LinearSystem
-from observer.observers import ObserverConfig, Slave, lyapunov
+from observer.observers import ObserverConfig, Slave, lyapunov, make_slaves
 from observer.result import EVENT_COLUMNS
 
 if TYPE_CHECKING:
@@ -363,8 +363,9 @@ class EventObserverRun:
         Impact impulses Λ of the observer in (t_{k−1}, t_k] (row 0: at t_0).
     sigma : ndarray, shape (N+1, m)
         Position-jump multipliers Σ of eq. (14) in (t_{k−1}, t_k].
-    events : DataFrame
-        Columns :data:`observer.result.EVENT_COLUMNS`, kinds :data:`EVENT_KINDS`.
+    event_rows : list of tuple
+        The observer's own events, rows of :data:`observer.result.EVENT_COLUMNS` (kinds
+        :data:`EVENT_KINDS`); :attr:`events` is their DataFrame.
     status : str
         ``"ok"`` or ``"stopped: <reason>"``.
     """
@@ -376,8 +377,13 @@ class EventObserverRun:
     V: np.ndarray
     P: np.ndarray
     sigma: np.ndarray
-    events: pd.DataFrame
+    event_rows: list = field(default_factory=list)
     status: str = "ok"
+
+    @property
+    def events(self) -> pd.DataFrame:
+        """The observer's own events as a DataFrame (:data:`observer.result.EVENT_COLUMNS`)."""
+        return _event_frame(self.event_rows)
 
     def as_slave(self):
         """This run as a :class:`observer.result.SlaveTrajectory` (for ``SimulationResult.slaves``;
@@ -503,22 +509,26 @@ class _ObserverIntegrator:
         return q - R @ (W.T @ q + self.system.nu(t)[list(idx)])
 
     def collide(self, t: float, u: np.ndarray, closed: frozenset, k_row: int) -> np.ndarray:
-        """Impact of eq. (9) on the closed set I when some γ_i⁻ < 0 (the master's impact-law code).
+        """Impact of eq. (9) on the closed set I when some γ_i⁻ < 0 (the master's impact law).
 
-        Poisson (Glocker's inequality form) acts on all of I: it keeps γ⁺ ≥ 0 by construction.
-        Newton's ``0 ≤ γ⁺ + eγ⁻ ⊥ Λ ≥ 0`` would let a separating contact of I (γ_i⁻ > 0) leave
-        with γ_i⁺ = −eγ_i⁻ < 0, violating its velocity constraint; so it acts on the
-        approaching and resting contacts J = {i ∈ I : γ_i⁻ ≤ 0}, and a separating contact the
-        impulse drives to γ⁺ < 0 joins J with e = 0 (until none does; for one contact: Newton).
+        Where the law acts is its declared fact
+        (:attr:`~observer.impact.ImpactLawDefinition.event_closed_set`): ``"all"`` of I (Poisson,
+        Glocker's inequality form, keeps γ⁺ ≥ 0 by construction); ``"approaching"``: Newton's
+        ``0 ≤ γ⁺ + eγ⁻ ⊥ Λ ≥ 0`` would let a separating contact of I (γ_i⁻ > 0) leave with
+        γ_i⁺ = −eγ_i⁻ < 0, violating its velocity constraint; so it acts on the approaching and
+        resting contacts J = {i ∈ I : γ_i⁻ ≤ 0}, and a separating contact the impulse drives to
+        γ⁺ < 0 joins J with e = 0 (until none does; for one contact: the law itself).
         """
         idx = np.array(sorted(closed))
         gam = self.system.contact_velocities(u, t)[idx]
         if not np.any(gam < 0.0):
             return u
-        if self.law.code != NEWTON:
-            J, Lam = idx, impact(self.law, self._delassus(idx), gam, idx, self.solver.solve)
+        law = self.law.definition
+        if law.event_closed_set == "all":
+            J, Lam = idx, law.impact_map(self._delassus(idx), gam, self.law.restitution[idx],
+                                         self.solver.solve)
         else:
-            J, Lam = self._newton_on_approaching(t, u, idx, gam)
+            J, Lam = self._on_approaching(t, u, idx, gam)
         u = u + self.Minv @ self.system.W[:, J] @ Lam
         gp = self.system.contact_velocities(u, t)
         gm = dict(zip(idx.tolist(), gam))
@@ -533,14 +543,15 @@ class _ObserverIntegrator:
         W = self.system.W[:, idx]
         return W.T @ self.Minv @ W
 
-    def _newton_on_approaching(self, t, u, idx, gam):
-        """Newton's impulse on J = {γ⁻ ≤ 0}, growing J (e = 0) by the separating contacts it pushes below 0."""
+    def _on_approaching(self, t, u, idx, gam):
+        """The law's impulse on J = {γ⁻ ≤ 0}, growing J (e = 0) by the separating contacts it pushes below 0."""
         e_all = dict(zip(idx.tolist(), self.law.restitution[idx]))
         J = [int(i) for i, g in zip(idx, gam) if g <= 0.0]
         gm = dict(zip(idx.tolist(), gam))
         for _ in range(idx.size):
             e = np.array([e_all[j] for j in J])
-            Lam = newton_impact(self._delassus(J), np.array([gm[j] for j in J]), e, self.solver.solve)
+            Lam = self.law.definition.impact_map(self._delassus(J), np.array([gm[j] for j in J]), e,
+                                                 self.solver.solve)
             gp = self.system.contact_velocities(u + self.Minv @ self.system.W[:, J] @ Lam, t)
             tol = 1e-13 * max(1.0, float(np.max(np.abs(gam))))
             pushed = [int(i) for i in idx if int(i) not in J and gp[i] < -tol]
@@ -712,18 +723,9 @@ def _grid_chi(t: np.ndarray, intervals: list[np.ndarray]) -> np.ndarray:
     return chi
 
 
-def _master_arrays(master, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    df = master.frame
-    t = df["t"].to_numpy(dtype=float)
-    q = df[[f"q{j}" for j in range(n)]].to_numpy(dtype=float)
-    u = df[[f"u{j}" for j in range(n)]].to_numpy(dtype=float)
-    return t, q, u
-
-
 def _slaves(scenario, observers: Iterable) -> list[Slave]:
     """Observer names (from the scenario's ``[observer]`` state) or Slave objects, as
     :func:`observer.simulate` builds them."""
-    from observer.simulate import make_slaves
     cfg = ObserverConfig.from_table(scenario.observer, scenario.system.n, scenario.q0, scenario.u0)
     return make_slaves(cfg, list(observers))
 
@@ -736,8 +738,8 @@ def run_observers(master, scenario, observers: Iterable = ("jump", "nojump"), *,
     Parameters
     ----------
     master : MasterEventResult
-        From :func:`observer.event.master.run_master`: its ``frame`` (grid t and the master's
-        q, u for V) and its closed intervals ``intervals(j)`` (χ_j = 1 on them).
+        From :func:`observer.event.master.run_master`: its grid ``t`` and the master's ``q``,
+        ``u`` (for V) and its closed intervals ``intervals(j)`` (χ_j = 1 on them).
     scenario : Scenario
         The scenario the master ran (system, impact law, ``[observer]`` initial state).
     observers : iterable of str or Slave
@@ -772,7 +774,7 @@ def run_observers(master, scenario, observers: Iterable = ("jump", "nojump"), *,
     slaves = _slaves(scenario, observers)
     if any(s.metric == "K" for s in slaves):
         system.require_definite_stiffness("the observer with position jumps")
-    t, qm, um = _master_arrays(master, system.n)
+    t, qm, um = master.t, master.q, master.u
     if coupling == "scenario":
         coupling = scenario.observer.get("coupling")
     k_on = _coupling_start(coupling, t)
@@ -833,8 +835,6 @@ def _coupling_start(coupling, t: np.ndarray) -> int:
 def _run_one(scenario, s: Slave, t: np.ndarray, k_on: int, schedule, solver: str,
              should_stop=None) -> EventObserverRun:
     """One observer: uncoupled on [t_0, t_on] (the event master from its state), coupled after."""
-    import pandas as pd
-
     system = scenario.system
     q0, u0 = np.asarray(s.q0, float), np.asarray(s.u0, float)
     pre = None
@@ -844,13 +844,13 @@ def _run_one(scenario, s: Slave, t: np.ndarray, k_on: int, schedule, solver: str
     integ = _ObserverIntegrator(system, scenario.law, metric_matrix(system, s.metric), get_solver(solver))
     integ.should_stop = should_stop
     Q, U, status = integ.run(t[k_on:], q0, u0, schedule)
-    P, sigma, events = integ.P, integ.sigma, _event_frame(integ.events)
+    P, sigma, events = integ.P, integ.sigma, list(integ.events)
     if pre is not None:
         Q, U = np.vstack([pre["q"][:-1], Q]), np.vstack([pre["u"][:-1], U])
         P = np.vstack([pre["P"][:-1], P])
         P[k_on] += pre["P"][-1]
         sigma = np.vstack([np.zeros((k_on, system.m)), sigma])
-        events = pd.concat([pre["events"], events], ignore_index=True) if len(pre["events"]) else events
+        events = pre["events"] + events
         if pre["status"] != "ok":
             status = f"uncoupled phase {pre['status']}"
     return EventObserverRun(s.name, s.position_jumps, Q, U, np.full(t.size, np.nan), P, sigma, events, status)
@@ -862,14 +862,11 @@ def _uncoupled(scenario, q0: np.ndarray, u0: np.ndarray, t: np.ndarray) -> dict:
     sc = scenario.with_overrides({"initial.q": q0.tolist(), "initial.u": u0.tolist(),
                                   "simulation.t_end": float(t[-1])})
     res = run_master(sc)
-    df = res.frame
-    n, m = scenario.system.n, scenario.system.m
-    if df.shape[0] < t.size or not np.array_equal(df["t"].to_numpy()[:t.size], t):
+    k = t.size
+    if res.t.size < k or not np.array_equal(res.t[:k], t):
         raise InputError("observer.coupling", "the uncoupled phase's grid does not match the master's")
-    df = df.iloc[:t.size]
-    ev = res.events[list(EVENT_COLUMNS)] if len(res.events) else _event_frame([])
-    return {"q": df[[f"q{j}" for j in range(n)]].to_numpy(), "u": df[[f"u{j}" for j in range(n)]].to_numpy(),
-            "P": df[[f"P{j}" for j in range(m)]].to_numpy(), "events": ev, "status": res.status}
+    return {"q": res.q[:k], "u": res.u[:k], "P": res.P[:k],
+            "events": [r[:len(EVENT_COLUMNS)] for r in res.event_rows], "status": res.status}
 
 
 def metric_matrix(system: LinearSystem, metric: str | None) -> np.ndarray | None:
@@ -915,4 +912,4 @@ def run_schedule(system: LinearSystem, law: ImpactLaw, t: np.ndarray, q0: np.nda
     Q, U, status = integ.run(t, np.asarray(q0, float), np.asarray(u0, float), schedule)
     name = "nojump" if metric is None else ("jump" if metric == "K" else f"jump_{metric}")
     return EventObserverRun(name, metric is not None, Q, U, np.full(t.shape[0], np.nan),
-                            integ.P, integ.sigma, _event_frame(integ.events), status)
+                            integ.P, integ.sigma, list(integ.events), status)

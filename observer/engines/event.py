@@ -1,0 +1,152 @@
+"""The exact event-driven engine (:mod:`observer.event`): exact flow between events, impact
+times to round-off, Zeno resolved into persistent contact; sampled on the grid t_k = k·h.
+
+The master's and the observers' arrays go into the :class:`~observer.result.RunRecord`
+directly (no DataFrame is built unless a user reads one), their status strings become a
+:class:`~observer.result.RunStatus` here, in one place.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from observer.engines.base import Engine, Refusal, RunDescription
+from observer.result import EventTable, RunRecord, RunState, RunStatus, SlaveTrajectory, StepStats, \
+    package_versions
+
+
+class EventEngine(Engine):
+    """The exact event-driven integrator: impact problems by pivoting, the impact laws that
+    declare :attr:`~observer.impact.ImpactLawDefinition.event_engine`, χ from the master's
+    exact intervals or a closing log."""
+
+    name = "event"
+    integrator = "event"
+    description = "exact event-driven integration, sampled on t_k = k·h"
+
+    def refuses(self, run: RunDescription) -> Refusal | None:
+        """Time-stepping options, another solver, a law it lacks, a self-driven χ."""
+        for option, value, default in (("record_every", run.record_every, None),
+                                       ("store", run.store, "full")):
+            if value != default:
+                return Refusal(f"{option} is a time-stepping option; integrator=\"event\" samples on "
+                               f"the grid t_k = k·h (got {option} = {value!r})", option)
+        sc = run.scenario
+        if sc.solver != "pivoting":
+            return Refusal("the event-driven integrator solves its impact problems by pivoting "
+                           f"(got {sc.solver!r})", "simulation.solver")
+        if not sc.law.definition.event_engine:
+            return Refusal(f"impact law {sc.law.law!r} is not supported by the event-driven engine",
+                           "impact.law")
+        if run.slaves and run.source not in ("master", "log"):
+            return Refusal(f"the event-driven integrator drives observers by the master or a log, "
+                           f"not {run.source!r}", "observer.source")
+        return None
+
+    def run(self, run: RunDescription) -> RunRecord:
+        """The master, then the observers, stoppable by a signal when ``run.on_chunk`` is set
+        (the rows every system reached are kept, the status says where)."""
+        from observer.loop import _Stopper
+
+        with _Stopper(run.on_chunk is not None) as stopper:
+            return _event_run(run, lambda: stopper.signal)
+
+
+def master_status(status: str) -> RunStatus:
+    """The master's status string as a :class:`RunStatus`."""
+    if status == "ok":
+        return RunStatus()
+    if status.startswith("stopped: non-finite"):                 # names the master's quantity
+        return RunStatus(RunState.STOPPED, status.removeprefix("stopped: "))
+    return RunStatus(RunState.STOPPED, f"master: {status}")
+
+
+def _event_run(run: RunDescription, signalled) -> RunRecord:
+    from observer.event.master import run_master
+
+    sc = run.scenario
+    master = run_master(sc, should_stop=signalled)   # overflow is a stop (status), silenced inside
+    master_signal = signalled()
+    t, q, u, P, active = master.t, master.q, master.u, master.P, master.active
+    n, m = sc.system.n, sc.system.m
+    meta = {"scenario": sc.name, "integrator": "event", "h": sc.h, "t_end": sc.t_end,
+            "n": n, "m": m, "law": sc.law.law, "restitution": sc.law.restitution.tolist(),
+            "steps": int(t.size - 1), "master_status": master.status,
+            "events": len(master.event_rows), "zeno": master.zeno,
+            "versions": package_versions(), "engine": "event"}
+    status = master_status(master.status)
+    slaves, chi, observers_whole = {}, None, True
+    if run.slaves:
+        slaves, chi, obs = _observers(run, master, master_signal, signalled)
+        meta.update(observers=list(obs.runs), source=run.source,
+                    observer_events={name: len(r.event_rows) for name, r in obs.runs.items()})
+        observers_whole = all(r.status == "ok" for r in obs.runs.values())
+        if obs.status != "ok" and status.ok:
+            status = RunStatus(RunState.STOPPED, f"observer {obs.status}")
+    sig = signalled()
+    keep, bad = _event_finite_rows(t, q, u, P, slaves)
+    if bad is not None:                     # rows an observer did not reach or where it overflowed
+        t, q, u, P, active = t[:keep], q[:keep], u[:keep], P[:keep], active[:keep]
+        chi = chi[:keep] if chi is not None else None
+        slaves = {name: SlaveTrajectory(name, r.q[:keep], r.u[:keep], r.P[:keep], r.V[:keep], None, None,
+                                        None, r.sigma[:keep]) for name, r in slaves.items()}
+        if not sig and observers_whole:     # an observer's state or V overflowed first: a stop, no row
+            status = RunStatus(RunState.STOPPED, f"non-finite {bad}; the output ends at t = {t[-1]:.9g}, "
+                                                 "the last finite state")
+        elif not sig:                       # an observer stopped (its rows not reached are NaN)
+            status = RunStatus(RunState.STOPPED, f"{status.reason}; the output ends at t = {t[-1]:.9g}")
+    if sig and (status.ok or sig in status.reason):
+        status = RunStatus(RunState.STOPPED, f"{sig} at t = {t[-1]:.9g} (the event-driven run was "
+                                             f"interrupted; every row up to there is whole)")
+    events = EventTable.from_rows(master.event_rows)
+    if not status.ok:                       # where and why, as a stopped time-stepped run says it
+        meta["steps"] = int(t.size - 1)
+        meta["stopped"] = {"step": int(t.size - 1), "t": float(t[-1]) if t.size else None,
+                           "reason": status.reason, "signal": sig if sig and sig in status.reason else None}
+        if t.size:                          # the events of the rows kept
+            events = events.until(t[-1])
+            meta["events"] = len(events)
+    return RunRecord("event", t, q, u, P, np.zeros_like(P), active, chi, slaves, status,
+                     StepStats.from_metadata(meta), meta, events)
+
+
+def _observers(run: RunDescription, master, master_signal, signalled):
+    """The event-driven observers of ``run`` against ``master``: ``(slaves, χ, result)``."""
+    from observer.event.observers import run_observers
+
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # overflow: stopped by the caller
+        obs = run_observers(master, run.scenario, list(run.slaves), intervals=_intervals(run),
+                            coupling=run.coupling, should_stop=None if master_signal else signalled)
+    slaves = {name: r.as_slave() for name, r in obs.runs.items()}
+    return slaves, obs.chi, obs
+
+
+def _intervals(run: RunDescription) -> list[np.ndarray] | None:
+    """χ's closed intervals per contact: None for the master's exact ones (the observers
+    take them from the master run), the closing log's for ``source="log"``."""
+    if run.source != "log":
+        return None
+    frame = run.log_frame
+    return [frame.loc[frame.contact == j, ["t_close", "t_open"]].to_numpy(float)
+            for j in range(run.scenario.system.m)]
+
+
+def _event_finite_rows(t, q, u, P, slaves: dict) -> tuple[int, str | None]:
+    """Rows of an event-driven result before the first one holding a non-finite value (the
+    master's rows are finite already, :func:`observer.event.master.run_master`; an
+    observer's q, u, P or V may overflow later), and that quantity with its time (None:
+    every row finite). One vectorised test in the usual case."""
+    blocks = [(f"{p} of the master", a) for p, a in (("q", q), ("u", u), ("P", P))]
+    for name, r in slaves.items():
+        blocks += [(f"{p} of observer {name!r}", a) for p, a in (("q", r.q), ("u", r.u), ("P", r.P))]
+        blocks.append((f"V of observer {name!r}", np.asarray(r.V)[:, None]))
+    if all(np.isfinite(a).all() for _, a in blocks):
+        return t.size, None
+    first, what = t.size, None
+    for name, a in blocks:
+        rows = np.flatnonzero(~np.isfinite(a).all(axis=1))
+        if rows.size and rows[0] < first:
+            col = int(np.flatnonzero(~np.isfinite(a[rows[0]]))[0])
+            label = name if name.startswith("V ") else f"{name[0]}{col}{name[1:]}"
+            first, what = int(rows[0]), f"{label} ({a[rows[0], col]}) at t = {t[rows[0]]:.9g}"
+    return first, what

@@ -1,0 +1,124 @@
+"""What the two Moreau–Jean engines share: the stepper, the loop's input, the record.
+
+:class:`TimeStepping` runs a :class:`~observer.engines.base.RunDescription` through
+:func:`observer.loop.run` with the loop named by :attr:`TimeStepping.loop`; the compiled and
+the numpy engine (:mod:`observer.engines.compiled`, :mod:`observer.engines.python`) differ in
+what they accept and in the stepper's matrix structure.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from observer.engines.base import Engine, RunDescription
+from observer.loop import LoopInput, check_record_every, summary_frame
+from observer.loop import run as run_loop
+from observer.observers import lyapunov, lyapunov_decrements
+from observer.result import (LazyFrame, RunRecord, RunStatus, SimulationResult, SlaveTrajectory,
+                             StepStats, records_frame, run_metadata)
+from observer.stepping import MoreauJean
+
+
+class TimeStepping(Engine):
+    """A Moreau–Jean engine: the loop :attr:`loop` of :func:`observer.loop.run` on the
+    stepper of the scenario (matrix structure :attr:`structure`)."""
+
+    integrator = "time-stepping"
+    loop = "python"
+    structure = "dense"
+
+    def run(self, run: RunDescription) -> RunRecord:
+        """The master and the observers over the grid t_k = t0 + k·h."""
+        sc, slaves = run.scenario, run.slaves
+        stepper = MoreauJean(sc.system, sc.law, sc.h, sc.t_end, sc.theta, solver=sc.solver,
+                             residual_tol=run.residual_tol, structure=self.structure)
+        record_every = run.record_every
+        if record_every is None:
+            record_every = max(1, stepper.steps // 10_000) if run.store == "summary" else 1
+        record_every = check_record_every(record_every)
+        inp = loop_input(run, stepper)
+        other_metric = any(s.position_jumps and s.metric != "K" for s in slaves)
+        out = run_loop(inp, engine=self.loop, record_every=record_every, store=run.store,
+                       record_pre=other_metric and run.store == "full", on_chunk=run.on_chunk)
+        return stepping_record(run, stepper, out, record_every)
+
+
+def loop_input(run: RunDescription, stepper: MoreauJean) -> LoopInput:
+    """The loop's input: master first, then the observers (state, jumps, metric, name)."""
+    sc, slaves, system = run.scenario, run.slaves, run.scenario.system
+    return LoopInput(stepper, np.stack([sc.q0] + [s.q0 for s in slaves]),
+                     np.stack([sc.u0] + [s.u0 for s in slaves]),
+                     np.array([False] + [s.position_jumps for s in slaves]),
+                     bool(sc.master_projection), run.coupling, run.source == "self", run.log_frame,
+                     metrics=(None,) + tuple(None if s.design is None else s.design.metric_matrix(system)
+                                             for s in slaves),
+                     names=tuple(s.name for s in slaves))
+
+
+def stepping_record(run: RunDescription, stepper: MoreauJean, out, record_every: int) -> RunRecord:
+    """The :class:`RunRecord` of a loop's output (metadata, trajectories, V, tables)."""
+    sc, slaves, system = run.scenario, run.slaves, run.scenario.system
+    meta = run_metadata(sc, stepper, out)
+    names = [s.name for s in slaves]
+    if slaves:
+        meta.update(observers=names, source=run.source,
+                    coupling=None if run.coupling is None else list(run.coupling),
+                    log=str(run.log) if run.log else None)
+    master = {"q": out.q[0], "u": out.u[0], "P": out.P[0], "sigma": out.sigma[0]}
+    if out.q_pre is not None:
+        master["q_pre"] = out.q_pre[0]
+    trajectories = {s.name: _trajectory(system, sc.h, out, i, s.name, master, record_every)
+                    for i, s in enumerate(slaves, start=1)}
+    summary = None
+    if out.summary is not None:                     # the tables: DataFrames built on first read
+        rows = summary_frame(out, names, stepper.t0, stepper.h, frame=False)
+        summary = LazyFrame(records_frame, (rows,), {"master_closings": out.summary["closings"].tolist()})
+    t = out.t if out.t is not None else stepper.time(out.rows)
+    events = LazyFrame(result_events, of_result=True) if record_every == 1 else None
+    return RunRecord(out.engine, t, out.q[0], out.u[0], out.P[0], out.sigma[0], out.active,
+                     out.chi if slaves else None, trajectories, RunStatus.from_metadata(meta),
+                     StepStats.from_metadata(meta), meta, events, summary)
+
+
+def _trajectory(system, h: float, out, i: int, name: str, master: dict,
+                record_every: int) -> SlaveTrajectory:
+    """Observer ``i`` of the loop's output as a :class:`SlaveTrajectory` (V and, when every
+    step is kept, its per-step damping/impulse/projection parts)."""
+    traj = {"q": out.q[i], "u": out.u[i], "P": out.P[i], "sigma": out.sigma[i]}
+    if out.q_pre is not None:
+        traj["q_pre"] = out.q_pre[i]
+    V = (out.V[i] if out.V is not None
+         else lyapunov(system, traj["q"], traj["u"], master["q"], master["u"]))
+    parts = (lyapunov_decrements(system, h, traj, master) if record_every == 1
+             else {"damping": None, "impulse": None, "projection": None})
+    return SlaveTrajectory(name, traj["q"], traj["u"], traj["P"], V, parts["damping"],
+                           parts["impulse"], parts["projection"], traj["sigma"])
+
+
+def result_events(res: SimulationResult):
+    """:func:`stepping_events` of a time-stepped result keeping every step (its
+    :attr:`~observer.result.SimulationResult.events`, built on first read)."""
+    return stepping_events(res.t, res.q, res.u, res.P, res.active, res.system)
+
+
+def stepping_events(t, q, u, P, active, system):
+    """The event table of a time-stepped master, approximately: a closing step with an
+    impulse is an ``impact`` (γ⁻ = γ_k, γ⁺ = γ_{k+1}, the step's impulse; time t_k), a
+    closing step without one a ``stick``, an opening step a ``liftoff``."""
+    from observer.result import EVENT_COLUMNS, EventTable
+
+    rows = []
+    closing = active[1:] & ~active[:-1]
+    opening = ~active[1:] & active[:-1]
+    ks, js = np.nonzero(closing | opening)
+    if ks.size:                                     # γ = Wᵀu + ν̇ at the event rows only
+        both = np.concatenate([ks, ks + 1])
+        gamma = u[both] @ system.W + system.nu_dot(t[both])
+        g_minus, g_plus = gamma[:ks.size], gamma[ks.size:]
+    for i, (k, j) in enumerate(zip(ks, js)):
+        kind = "liftoff" if opening[k, j] else ("impact" if P[k + 1, j] > 0 else "stick")
+        rows.append((float(t[k]), int(j), kind, float(g_minus[i, j]), float(g_plus[i, j]),
+                     float(P[k + 1, j])))
+    df = EventTable.from_rows(rows).frame()
+    return df.astype({"time": float, "contact": int, "kind": str, "gamma_minus": float,
+                      "gamma_plus": float, "impulse": float})[list(EVENT_COLUMNS)]
