@@ -204,22 +204,37 @@ def largest_eigenvalue(A: Any, M: Any = None) -> tuple[float, str]:
         return gershgorin_max(A), "Gershgorin upper bound (Lanczos did not converge)"
 
 
+def gershgorin_min(A: Any) -> float:
+    """Gershgorin lower bound of the smallest eigenvalue of symmetric A."""
+    A = sp.csr_matrix(A)
+    d = A.diagonal()
+    return float(np.min(d - (np.asarray(abs(A).sum(axis=1)).ravel() - np.abs(d))))
+
+
 def smallest_eigenvalue(A: Any) -> tuple[float, str]:
-    """Smallest eigenvalue of symmetric sparse A and how it was computed: shift-invert Lanczos
-    on the banded Cholesky factor when A is positive definite and narrowly banded, else
-    Lanczos for the smallest algebraic eigenvalue."""
+    """Smallest eigenvalue of symmetric sparse A and how it was computed.
+
+    Narrowly banded A: shift-invert Lanczos about a shift σ ≤ λ_min with a banded Cholesky
+    factor of ``A − σI`` — σ = 0 when A is positive definite, else below the Gershgorin lower
+    bound (then ``A − σI`` is positive definite and the eigenvalue nearest σ is λ_min): O(n) per
+    iteration, to :data:`LANCZOS_TOL`. Otherwise Lanczos for the smallest algebraic eigenvalue."""
     A = sp.csr_matrix(A)
     n = A.shape[0]
     if n < 3:
         return float(np.linalg.eigvalsh(A.toarray())[0]), "dense (n < 3)"
-    chol = banded_cholesky(A) if is_narrowly_banded(A) else None
     v0, ncv = _start_vector(n), min(n - 1, LANCZOS_NCV)
-    if chol is not None:
+    if is_narrowly_banded(A):
+        sigma, chol = 0.0, banded_cholesky(A)
+        spread = max(abs(gershgorin_min(A)), abs(gershgorin_max(A)), np.finfo(float).tiny)
+        while chol is None:
+            sigma = min(sigma, gershgorin_min(A)) - 1e-6 * spread
+            spread *= 2.0
+            chol = banded_cholesky(A, -sigma)
         op = spla.LinearOperator((n, n), matvec=lambda x: sla.cho_solve_banded((chol, True), x),
                                  dtype=float)
-        lam = spla.eigsh(A, k=1, sigma=0.0, which="LM", OPinv=op, tol=LANCZOS_TOL, ncv=ncv, v0=v0,
+        lam = spla.eigsh(A, k=1, sigma=sigma, which="LM", OPinv=op, tol=LANCZOS_TOL, ncv=ncv, v0=v0,
                          return_eigenvectors=False)[0]
-        return float(lam), f"shift-invert Lanczos on the banded Cholesky factor ({LANCZOS_TOL:g})"
+        return float(lam), f"shift-invert Lanczos on a banded Cholesky factor ({LANCZOS_TOL:g})"
     lam = spla.eigsh(A, k=1, which="SA", tol=LANCZOS_TOL_MAX, ncv=ncv, v0=v0, maxiter=100 * n,
                      return_eigenvectors=False)[0]
     return float(lam), f"Lanczos (eigsh SA, relative residual {LANCZOS_TOL_MAX:g})"

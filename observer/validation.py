@@ -272,13 +272,18 @@ def singular_value_range(W: np.ndarray) -> tuple[float, float]:
     """Smallest and largest singular value of W (n×m, m ≤ n); (0, 1) when m > n.
 
     Dense SVD up to m = 512; beyond, from the extreme eigenvalues of WᵀW (banded, O(m·bw²);
-    sparse W: the sparse WᵀW by Lanczos, shift-invert on its banded Cholesky factor for σ_min).
+    sparse W: the sparse WᵀW by Lanczos, shift-invert on its banded Cholesky factor for σ_min;
+    σ_min = 0 when that factorization fails, i.e. σ_min/σ_max ≲ √ε: numerically dependent).
     """
     n, m = W.shape
     if m > n:
         return 0.0, 1.0
     if sps.is_sparse(W):
-        lo, hi = sps.extreme_eigenvalues(sp.csr_matrix(W.T @ W))
+        G = sp.csr_matrix(W.T @ W)
+        if sps.is_narrowly_banded(G) and sps.banded_cholesky(G) is None:
+            # WᵀW not positive definite to round-off: σ_min/σ_max ≲ √ε, numerically rank deficient
+            return 0.0, float(np.sqrt(max(sps.largest_eigenvalue(G)[0], 0.0)))
+        lo, hi = sps.extreme_eigenvalues(G)
         return float(np.sqrt(max(lo, 0.0))), float(np.sqrt(max(hi, 0.0)))
     if m <= 512:
         sv = np.linalg.svd(W, compute_uv=False)
