@@ -72,33 +72,6 @@ def _start_vector(n: int) -> np.ndarray:
     return 1.0 + 0.5 * np.sin(np.arange(n, dtype=float))
 
 
-def triplet_matrix(field: str, value: dict) -> sp.csr_matrix:
-    """A CSR matrix from a document's triplet table (:data:`TRIPLET_KEYS`); errors name
-    ``field.KEY``."""
-    unknown = sorted(set(value) - set(TRIPLET_KEYS))
-    if unknown:
-        raise InputError(f"{field}.{unknown[0]}", f"unknown key of a sparse matrix (known: "
-                         f"{', '.join(TRIPLET_KEYS)})")
-    for key in TRIPLET_KEYS:
-        if key not in value:
-            raise InputError(f"{field}.{key}", "required key of a sparse matrix is missing")
-    from observer.validation import as_array
-    shape = as_array(f"{field}.shape", value["shape"], (2,))
-    if not (np.all(shape == np.round(shape)) and np.all(shape >= 1)):
-        raise InputError(f"{field}.shape", f"must be two positive integers, got {value['shape']!r}")
-    n, m = int(shape[0]), int(shape[1])
-    vals = as_array(f"{field}.values", value["values"], (None,))
-    idx = []
-    for key, size in (("rows", n), ("cols", m)):
-        ix = as_array(f"{field}.{key}", value[key], (vals.size,))
-        if not (np.all(ix == np.round(ix)) and np.all(ix >= 0) and np.all(ix < size)):
-            raise InputError(f"{field}.{key}", f"must be integers in 0..{size - 1}, one per value")
-        idx.append(ix.astype(np.int64))
-    A = sp.coo_matrix((vals, (idx[0], idx[1])), shape=(n, m)).tocsr()
-    A.sum_duplicates()
-    return A
-
-
 def triplet_document(A: sp.spmatrix) -> dict:
     """The TOML-ready triplet table of sparse ``A`` (row-major order, the inverse of
     :func:`triplet_matrix`)."""

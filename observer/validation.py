@@ -115,7 +115,7 @@ def as_matrix(field: str, value: Any, shape: tuple[int | None, int | None]) -> A
     document's sparse triplet table (:data:`observer.sparse.TRIPLET_KEYS`); the shape and the
     finiteness of the entries are checked either way (errors name ``field``)."""
     if isinstance(value, dict):
-        value = sps.triplet_matrix(field, value)
+        value = triplet_matrix(field, value)
     if not sps.is_sparse(value):
         return as_array(field, value, shape)
     A = sp.csr_matrix(value, dtype=float)
@@ -124,6 +124,32 @@ def as_matrix(field: str, value: Any, shape: tuple[int | None, int | None]) -> A
         raise InputError(field, f"wrong shape: expected {want}, got {A.shape[0]}x{A.shape[1]}")
     if not np.all(np.isfinite(A.data)):
         raise InputError(field, "contains NaN or infinity")
+    return A
+
+
+def triplet_matrix(field: str, value: dict) -> sp.csr_matrix:
+    """A CSR matrix from a document's triplet table (:data:`observer.sparse.TRIPLET_KEYS`); errors name
+    ``field.KEY``."""
+    unknown = sorted(set(value) - set(sps.TRIPLET_KEYS))
+    if unknown:
+        raise InputError(f"{field}.{unknown[0]}", f"unknown key of a sparse matrix (known: "
+                         f"{', '.join(sps.TRIPLET_KEYS)})")
+    for key in sps.TRIPLET_KEYS:
+        if key not in value:
+            raise InputError(f"{field}.{key}", "required key of a sparse matrix is missing")
+    shape = as_array(f"{field}.shape", value["shape"], (2,))
+    if not (np.all(shape == np.round(shape)) and np.all(shape >= 1)):
+        raise InputError(f"{field}.shape", f"must be two positive integers, got {value['shape']!r}")
+    n, m = int(shape[0]), int(shape[1])
+    vals = as_array(f"{field}.values", value["values"], (None,))
+    idx = []
+    for key, size in (("rows", n), ("cols", m)):
+        ix = as_array(f"{field}.{key}", value[key], (vals.size,))
+        if not (np.all(ix == np.round(ix)) and np.all(ix >= 0) and np.all(ix < size)):
+            raise InputError(f"{field}.{key}", f"must be integers in 0..{size - 1}, one per value")
+        idx.append(ix.astype(np.int64))
+    A = sp.coo_matrix((vals, (idx[0], idx[1])), shape=(n, m)).tocsr()
+    A.sum_duplicates()
     return A
 
 

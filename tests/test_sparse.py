@@ -171,3 +171,15 @@ def test_loading_and_checking_a_large_chain_allocates_nothing_of_size_n_squared(
         tracemalloc.stop()
     assert sc.system.sparse and w > 0
     assert peak < 64 * 2**20, f"peak {peak / 2**20:.0f} MB"
+
+
+@pytest.mark.parametrize("steps, n, systems", [(1000, 200_000, 3), (10**6, 20, 3), (1000, 20, 1),
+                                               (50_000, 20_000, 3)])
+def test_summary_rows_are_bounded_for_any_size(steps, n, systems):
+    from observer.engines.timestepping import SUMMARY_ROW_VALUES, summary_record_every
+    k = summary_record_every(steps, n, systems)
+    rows = steps // k + 1
+    assert rows * 2 * n * systems <= SUMMARY_ROW_VALUES + 2 * n * systems     # within one row
+    assert rows <= 10_001
+    if steps * 2 * n * systems < SUMMARY_ROW_VALUES:                       # small: as before
+        assert k == max(1, steps // 10_000)

@@ -85,6 +85,13 @@ def matrices(N: int, m: float, b: float, H: float, a: float, k: float, c: float)
     return M.toarray(), C.toarray(), K.toarray(), W.toarray(), K_int, C_int
 
 
+def document_matrix(A) -> list | dict:
+    """A matrix as the document holds it: nested lists up to n = :data:`observer.sparse.DENSE_MAX_N`
+    (as always), beyond a sparse triplet table (O(nnz), never a dense n × n)."""
+    from observer.sparse import DENSE_MAX_N, triplet_document
+    return A.toarray().tolist() if A.shape[0] <= DENSE_MAX_N else triplet_document(A)
+
+
 def static_state(K, W, f_grav: np.ndarray, s: np.ndarray):
     """The static configuration ``q_s = K⁻¹f_grav`` and the unloaded clearances
     ``g⁰ = s − Wᵀq_s``: dense for n ≤ :data:`observer.sparse.DENSE_MAX_N` (the reference
@@ -132,6 +139,7 @@ def document(**overrides) -> dict:
     f_grav = np.zeros(n)
     f_grav[0::2] = -p["g0"] * p["m"]
     q_s, g0 = static_state(K, W, f_grav, np.tile([p["s_L"], p["s_R"]], N))
+    entry = document_matrix
     Y, Om = p["Y"], p["Omega"]
     # f = f_grav + E_1ᵀ(K_1 [Y sin Ωt, 0] + C_1 [YΩ cos Ωt, 0]); sin Ωt = cos(Ωt − π/2)
     amp_k = np.zeros(n)
@@ -145,7 +153,7 @@ def document(**overrides) -> dict:
     slave_q[n - 2] += p["slave_offset"]
     return {
         "scenario": {"name": "rocking_chain", "description": DESCRIPTION},
-        "system": {"M": M, "C": C, "K": K, "W": W,      # scipy.sparse: from_dict keeps them so
+        "system": {"M": entry(M), "C": entry(C), "K": entry(K), "W": entry(W),
                    "forcing": {"constant": f_grav.tolist(), "amplitude": amp_c.tolist(),
                                "omega": Om, "phase": 0.0,
                                "harmonics": [{"amplitude": amp_k.tolist(), "omega": Om,
