@@ -72,14 +72,16 @@ def _start_vector(n: int) -> np.ndarray:
     return 1.0 + 0.5 * np.sin(np.arange(n, dtype=float))
 
 
-def triplet_document(A: sp.spmatrix) -> dict:
-    """The TOML-ready triplet table of sparse ``A`` (row-major order, the inverse of
-    :func:`triplet_matrix`)."""
+def triplet_document(A: sp.spmatrix, plain: bool = True) -> dict:
+    """The triplet table of sparse ``A`` (row-major order, the inverse of
+    :func:`observer.validation.triplet_matrix`): TOML-ready lists, or with ``plain=False``
+    NumPy arrays (a generator's document: read back without a pass over Python lists)."""
     C = sp.csr_matrix(A)
     C.sum_duplicates()
     coo = C.tocoo()
-    return {"shape": [int(C.shape[0]), int(C.shape[1])], "rows": coo.row.tolist(),
-            "cols": coo.col.tolist(), "values": coo.data.tolist()}
+    cast = (lambda x: x.tolist()) if plain else np.asarray
+    return {"shape": [int(C.shape[0]), int(C.shape[1])], "rows": cast(coo.row.astype(np.int64)),
+            "cols": cast(coo.col.astype(np.int64)), "values": cast(coo.data)}
 
 
 def bandwidth(*mats: Any) -> int:
