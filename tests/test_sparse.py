@@ -183,3 +183,26 @@ def test_summary_rows_are_bounded_for_any_size(steps, n, systems):
     assert rows <= 10_001
     if steps * 2 * n * systems < SUMMARY_ROW_VALUES:                       # small: as before
         assert k == max(1, steps // 10_000)
+
+
+def test_closed_set_projection_matches_the_dense_projection():
+    """K⁻¹W_I and L_I from the banded factor of K (once), against the dense K⁻¹W and L
+    restricted to I; the projected state closes the gaps of I exactly (to round-off)."""
+    from observer.stepping import ClosedSetProjection
+    M, C, K, W, _, _ = chain(300)
+    proj = ClosedSetProjection(K, W)
+    Kd, Wd = K.toarray(), W.toarray()
+    KinvW = np.linalg.solve(Kd, Wd)
+    L = Wd.T @ KinvW
+    rng = np.random.default_rng(3)
+    closed = np.sort(rng.choice(W.shape[1], 7, replace=False))
+    KinvWI, LI = proj.matrices(closed)
+    np.testing.assert_allclose(KinvWI, KinvW[:, closed], rtol=0, atol=1e-12 * np.abs(KinvW).max())
+    np.testing.assert_allclose(LI, L[np.ix_(closed, closed)], rtol=0, atol=1e-12 * np.abs(L).max())
+    q = rng.normal(size=K.shape[0]) * 1e-3
+    g = Wd[:, closed].T @ q - 1e-4                  # gaps of the closed contacts (ν = −1e-4)
+    q1, sigma = proj.project(q, g, closed)
+    assert np.max(np.abs(Wd[:, closed].T @ q1 - 1e-4)) <= 1e-14 * max(1.0, np.abs(q).max())
+    with pytest.raises(InputError) as err:
+        ClosedSetProjection(sp.csr_matrix(K - 2e6 * sp.eye(K.shape[0])), W)
+    assert err.value.field == "system.K"
