@@ -36,20 +36,23 @@ solvers that return ``(iterations, status, residual)``.
   residual exceeds the tolerance stops the kernel with :data:`RESIDUAL_EXCEEDED` (the caller
   stops the run there, :mod:`observer.loop`).
 
-* **Cost.** The step loop of :func:`advance` creates no array value per step (no views, no
-  tuples, no inlined calls with array arguments: each would be an atomic reference-count
-  increment and decrement): systems are rows of the 2-D state arrays, indexed in place, the
-  work buffers are allocated once per call, and the steps without contacts (the common case)
-  run without a function call. The contact impulse, the banded solve, the projection and the
-  summary are plain compiled calls. The common case (the master alone, dense, plain records)
-  is a second compiled specialization of the same function (``general=None``), in which numba
-  prunes the observers', summary's and projection's branches at compile time; with one degree
-  of freedom and one contact, :func:`advance_scalar` runs that loop on scalars (numba reloads
-  every array value after each store to a record: it cannot tell they do not alias), about
-  twice as fast. Every
-  function uses numba's ``error_model="numpy"`` (IEEE division, no ``ZeroDivisionError``
-  branch: every denominator here is positive or guarded), whose raise branches would
-  otherwise keep numba's reference-count pruning from removing the increments.
+* **Cost.** The step loop of :func:`advance` (:func:`_advance_loop`) creates no array value
+  per step (no views, no tuples, no inlined calls with array arguments: each would be an
+  atomic reference-count increment and decrement): systems are rows of the 2-D state arrays,
+  indexed in place, the work buffers are allocated once per call, and the steps without
+  contacts (the common case) run without a function call. The contact impulse, the banded
+  solve, the projection and the summary are plain compiled calls. The common case (the
+  master alone, dense, plain records) is a second compiled specialization of the same
+  function (``general=None``), in which numba prunes the observers', summary's and
+  projection's branches at compile time; with one degree of freedom and one contact,
+  :func:`advance_scalar` runs that loop on scalars (numba reloads every array value after
+  each store to a record: it cannot tell they do not alias), about twice as fast. The entry
+  points take their arguments in a few named bundles (:class:`SystemBundle`, …) and pass
+  each field by name to the positional step loops, once per call (:func:`advance` says why
+  this is done in Python). Every function uses numba's ``error_model="numpy"`` (IEEE
+  division, no ``ZeroDivisionError`` branch: every denominator here is positive or guarded),
+  whose raise branches would otherwise keep numba's reference-count pruning from removing
+  the increments.
 
 Statuses: :data:`OK`, :data:`LCP_FAILED` (the step's contact problem was not solved to
 tolerance), :data:`PROJECTION_FAILED` (L_I not positive definite), :data:`RESIDUAL_EXCEEDED`
@@ -57,6 +60,8 @@ tolerance), :data:`PROJECTION_FAILED` (L_I not positive definite), :data:`RESIDU
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -79,6 +84,243 @@ JIT = {"cache": True, "error_model": "numpy"}
 (``inline="always"``) into the functions that call them, never into the step loop of
 :func:`advance`: there an inlined array argument is a reference count per step, while a
 function that calls nothing (a leaf) has its reference counts pruned by numba."""
+
+
+# ---------------------------------------------------------------------------------------
+# the bundles: the kernel's arguments by name (built by observer.loop's constructors)
+# ---------------------------------------------------------------------------------------
+class SystemBundle(NamedTuple):
+    """The scheme's constant arrays for one grid (:func:`observer.loop.system_bundle`).
+
+    Attributes
+    ----------
+    structure : int
+        :data:`STRUCTURE_DENSE` or :data:`STRUCTURE_BANDED`.
+    Bu, Bq, Bf : ndarray (n, n)
+        ``u_free = Bu u + Bq q + Bf f̄`` (dense; (1, 1) placeholders when banded).
+    Ru_b, Rq_b, Ach_b : ndarray (bw + 1, n)
+        R_u, R_q and the Cholesky factor of Â in lower band storage (banded; (1, 1)
+        placeholders when dense).
+    bw : int
+        The bandwidth (0 when dense).
+    Wp, Wi, Wv : ndarray
+        W in CSC storage (column pointers, row indices, values; indices sorted).
+    AinvWT : ndarray (m, n)
+        ``(Â⁻¹W)ᵀ``.
+    Ghat, G0 : ndarray (m, m)
+        ``Ĝ = WᵀÂ⁻¹W`` and ``G₀ = WᵀM⁻¹W``.
+    h, theta, t0 : float
+        The step, θ and the grid's start.
+    """
+
+    structure: int
+    Bu: np.ndarray
+    Bq: np.ndarray
+    Bf: np.ndarray
+    Ru_b: np.ndarray
+    Rq_b: np.ndarray
+    Ach_b: np.ndarray
+    bw: int
+    Wp: np.ndarray
+    Wi: np.ndarray
+    Wv: np.ndarray
+    AinvWT: np.ndarray
+    Ghat: np.ndarray
+    G0: np.ndarray
+    h: float
+    theta: float
+    t0: float
+
+
+class LawBundle(NamedTuple):
+    """The impact law and the solver's settings (:func:`observer.loop.law_bundle`).
+
+    Attributes
+    ----------
+    code : int
+        The law's kernel code (0: Newton; :data:`observer.impact.POISSON`: Glocker's phases).
+    e : ndarray (m,)
+        Restitution coefficients.
+    tol : float
+        Largest accepted relative complementarity residual (LCP and applied).
+    """
+
+    code: int
+    e: np.ndarray
+    tol: float
+
+
+class SignalBundle(NamedTuple):
+    """The tables of the signals f(t), ν(t), ν̇(t) (:func:`observer.loop.signal_tables`).
+
+    Attributes
+    ----------
+    omega, phase : ndarray (waves,)
+        The distinct waves ``function(ω t + phase)``.
+    function : ndarray of int (waves,)
+        Their function codes (:data:`WAVE_NAMES`).
+    e_ptr : ndarray of int (4,)
+        Signal i's entries are ``e_ptr[i]:e_ptr[i+1]`` (f, ν, ν̇).
+    e_col, e_coef, e_wave : ndarray (entries,)
+        Each entry's column, coefficient and wave, in summation order.
+    v_ptr : ndarray of int (4,)
+        Signal i's varying columns are ``v_col[v_ptr[i]:v_ptr[i+1]]``.
+    v_col : ndarray of int
+        The varying columns.
+    f_c, nu_c : ndarray (n,), (m,)
+        The constants of f and ν.
+    """
+
+    omega: np.ndarray
+    phase: np.ndarray
+    function: np.ndarray
+    e_ptr: np.ndarray
+    e_col: np.ndarray
+    e_coef: np.ndarray
+    e_wave: np.ndarray
+    v_ptr: np.ndarray
+    v_col: np.ndarray
+    f_c: np.ndarray
+    nu_c: np.ndarray
+
+
+class WindowBundle(NamedTuple):
+    """What changes per window of steps kb..k1 (:func:`observer.loop.window_bundle`).
+
+    Attributes
+    ----------
+    kb : int
+        The window's first step (row k − kb of the arrays below holds step k).
+    waves : ndarray (waves, k1 − kb + 1)
+        The waves at the window's grid points (:func:`observer.loop.wave_table`).
+    coupled : ndarray of bool
+        Per step, whether the observers are coupled to χ_k ((1,): the master alone).
+    chi_log : ndarray of bool (steps, m)
+        χ_k from a closing log or given explicitly ((1, 1) placeholder when unused).
+    use_log : bool
+        Whether ``chi_log`` is χ (else the master's closed set).
+    """
+
+    kb: int
+    waves: np.ndarray
+    coupled: np.ndarray
+    chi_log: np.ndarray
+    use_log: bool
+
+
+class ObserverBundle(NamedTuple):
+    """The observers' designs and the projection metrics (:func:`observer.loop.observer_bundle`).
+
+    Attributes
+    ----------
+    jumps : ndarray of bool (S,)
+        Position jumps while coupled (row 0, the master, ignored).
+    slots : ndarray of int (S,)
+        Each system's projection metric (slot in the stacks below).
+    master_projection : bool
+        The master is projected on its closed set.
+    KinvWT : ndarray (P, m, n)
+        ``(N⁻¹W)ᵀ`` per projection metric N.
+    L : ndarray (P, m, m)
+        ``WᵀN⁻¹W`` per projection metric N.
+    """
+
+    jumps: np.ndarray
+    slots: np.ndarray
+    master_projection: bool
+    KinvWT: np.ndarray
+    L: np.ndarray
+
+
+class StateBundle(NamedTuple):
+    """The mutable state the kernel advances in place (:func:`observer.loop.state_bundle`).
+
+    Attributes
+    ----------
+    qs, us : ndarray (S, n)
+        The current states, row 0 the master.
+    chi_now : ndarray of bool (m,)
+        The closed set fed to the observers at the current step.
+    stats : ndarray (:data:`STATS_SIZE`,)
+        The work and health counters.
+    """
+
+    qs: np.ndarray
+    us: np.ndarray
+    chi_now: np.ndarray
+    stats: np.ndarray
+
+
+class StorageBundle(NamedTuple):
+    """The records (:func:`observer.loop.storage_bundle`); row r holds step r·record_every.
+
+    Attributes
+    ----------
+    record_every : int
+    q, u : ndarray (S, R, n)
+    P, sigma : ndarray (S, R, m)
+        Impulses and projection multipliers (zero-filled).
+    active, chi : ndarray of bool (R, m)
+        The master's closed set and the observers' χ (zero-filled).
+    q_pre : ndarray (S, R or 0, n)
+        Positions before the projection.
+    record_pre : bool
+        Whether ``q_pre`` is recorded.
+    t : ndarray (R,) or (0,)
+        The rows' times, written by :func:`advance_scalar` when it has a row per record.
+    """
+
+    record_every: int
+    q: np.ndarray
+    u: np.ndarray
+    P: np.ndarray
+    sigma: np.ndarray
+    active: np.ndarray
+    chi: np.ndarray
+    q_pre: np.ndarray
+    record_pre: bool
+    t: np.ndarray
+
+
+class SummaryBundle(NamedTuple):
+    """The streaming summary (``store="summary"``, :func:`observer.loop.summary_bundle`).
+
+    Attributes
+    ----------
+    on : bool
+        Whether the summary is computed.
+    k_on, k_off : int
+        The coupling window's grid samples.
+    rhos : ndarray (thresholds,)
+    summ : ndarray (S, :data:`SUMMARY_FIELDS` + 2·thresholds)
+    vprev : ndarray (S, n)
+        Each observer's previous velocity difference.
+    Vprev : ndarray (S,)
+        Each observer's previous V.
+    rec_V : ndarray (S, R or 0)
+        V at the recorded rows.
+    closings : ndarray of int (m,)
+        The master's closings per contact.
+    prev_act : ndarray of bool (m,)
+        The master's previous closed set.
+    Mq, Kq, Cq : ndarray
+        M, K and the symmetric part of C in the system's structure ((1, 1) placeholders
+        when off).
+    """
+
+    on: bool
+    k_on: int
+    k_off: int
+    rhos: np.ndarray
+    summ: np.ndarray
+    vprev: np.ndarray
+    Vprev: np.ndarray
+    rec_V: np.ndarray
+    closings: np.ndarray
+    prev_act: np.ndarray
+    Mq: np.ndarray
+    Kq: np.ndarray
+    Cq: np.ndarray
 
 
 # ---------------------------------------------------------------------------------------
@@ -491,6 +733,38 @@ def project_positions(k, act, a, slot, Wp, Wi, Wv, nu, KinvWT, L, q1, sig, g, s_
     return OK
 
 
+@njit(**JIT)
+def project_closed(q, k, act, Wp, Wi, Wv, nu, NinvWT, L, slot):
+    """:func:`project_positions` for a caller outside the step loop: the numpy reference
+    (:meth:`observer.stepping.MoreauJean.project`) projects with this very code.
+
+    ``q`` (n,) positions, ``act`` (int64) the closed contacts, ``nu[k]`` the gap offsets at the
+    step's time, W in CSC (:func:`csc_arrays`), the stacks ``NinvWT`` (P, m, n) and ``L``
+    (P, m, m) of the projection metrics and the metric's ``slot``. Returns
+    ``(status, q⁺, Σ)`` (q is not modified).
+    """
+    m = Wp.shape[0] - 1
+    a = act.shape[0]
+    q1 = q.copy()
+    sig = np.zeros(a)
+    if a == 0:
+        return OK, q1, sig
+    g, s_, Gp, Lf = np.empty(m), np.empty(m), np.empty((m, m)), np.empty((m, m))
+    status = project_positions(k, act, a, slot, Wp, Wi, Wv, nu, NinvWT, L, q1, sig, g, s_, Gp, Lf)
+    return status, q1, sig
+
+
+def csc_arrays(W: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """W (n, m) in the kernel's CSC storage ``(Wp, Wi, Wv)``: column j's nonzero entries are
+    ``Wv[Wp[j]:Wp[j+1]]`` in rows ``Wi[Wp[j]:Wp[j+1]]`` (ascending; int64, int64, float64), what
+    ``scipy.sparse.csc_matrix(W)`` stores with sorted indices."""
+    WT = np.asarray(W, dtype=np.float64).T
+    nz = WT != 0.0
+    Wp = np.zeros(WT.shape[0] + 1, dtype=np.int64)
+    np.cumsum(nz.sum(axis=1), out=Wp[1:])
+    return Wp, np.ascontiguousarray(np.nonzero(nz)[1], dtype=np.int64), np.ascontiguousarray(WT[nz])
+
+
 # ---------------------------------------------------------------------------------------
 # streaming summary (store="summary"): V of every observer and its parts, without trajectories
 # ---------------------------------------------------------------------------------------
@@ -591,8 +865,13 @@ def _summary_step(kg, s, qs, us, vprev, Vprev, Pfull_m, P, act, a, structure, Mq
 
 
 @njit(**JIT)
-def summary_start(qs, us, structure, Mq, Kq, bw, vprev, Vprev, summ, k_on, k_off, rhos, rec_V):
-    """The summary's first sample: V(t_0) of every observer, and v_0 for the damping part."""
+def summary_start(state, system, tally):
+    """The summary's first sample: V(t_0) of every observer, and v_0 for the damping part
+    (:class:`StateBundle`, :class:`SystemBundle`, :class:`SummaryBundle`)."""
+    qs, us = state.qs, state.us
+    structure, bw = system.structure, system.bw
+    Mq, Kq, vprev, Vprev, summ = tally.Mq, tally.Kq, tally.vprev, tally.Vprev, tally.summ
+    k_on, k_off, rhos, rec_V = tally.k_on, tally.k_off, tally.rhos, tally.rec_V
     S, n = qs.shape
     wv = np.empty(n)
     for s in range(1, S):
@@ -611,8 +890,44 @@ def summary_start(qs, us, structure, Mq, Kq, bw, vprev, Vprev, summ, k_on, k_off
 # ---------------------------------------------------------------------------------------
 # the loop: master (system 0) and observers (1..S-1)
 # ---------------------------------------------------------------------------------------
+def advance(k0, k1, s0, system, impact, signals, window, observers, state, storage, tally, general):
+    """Advance every system from step k0 (starting with system s0) up to step k1.
+
+    The step loop :func:`_advance_loop` (its docstring: the scheme, the signals, the records,
+    the summary) fed by bundles, so that no call can pass an argument in the wrong order:
+    ``system`` (:class:`SystemBundle`), ``impact`` (:class:`LawBundle`), ``signals``
+    (:class:`SignalBundle`), ``window`` (:class:`WindowBundle`), ``observers``
+    (:class:`ObserverBundle`), ``state`` (:class:`StateBundle`, advanced in place),
+    ``storage`` (:class:`StorageBundle`, the records written in place) and ``tally``
+    (:class:`SummaryBundle`). Each field goes to the loop by name, once per call. This is a
+    Python function on purpose: the loop keeps its positional parameters because reading the
+    fields inside it, even into locals before the steps, made it 6–17 % slower per step
+    (measured against main's loop, issue 21), and a compiled wrapper gets the loop inlined
+    into it by LLVM, which compiles it again, differently.
+
+    ``general`` selects the compiled specialization: ``True`` the general loop; ``None`` the
+    lean loop of the master alone, dense, without summary, pre-projection records or master
+    projection (:func:`observer.loop.specialization`), whose other branches numba prunes at
+    compile time: bitwise the same trajectory, a shorter step.
+
+    Returns ``(k, s, status)``: ``status == OK`` and k = k1 when done; otherwise the step and
+    system that failed (their state untouched).
+    """
+    return _advance_loop(
+        k0, k1, s0, window.kb, state.qs, state.us, observers.jumps, observers.slots,
+        observers.master_projection, window.coupled, window.chi_log, window.use_log, state.chi_now,
+        storage.record_every, storage.q, storage.u, storage.P, storage.sigma, storage.active, storage.chi,
+        storage.q_pre, storage.record_pre, tally.on, tally.k_on, tally.k_off, tally.rhos, tally.summ,
+        tally.vprev, tally.Vprev, tally.rec_V, tally.closings, tally.prev_act, tally.Mq, tally.Kq, tally.Cq,
+        impact.code, system.h, system.theta, system.structure, system.Bu, system.Bq, system.Bf, system.Ru_b,
+        system.Rq_b, system.Ach_b, system.bw, window.waves, signals.e_ptr, signals.e_col, signals.e_coef,
+        signals.e_wave, signals.v_ptr, signals.v_col, signals.f_c, signals.nu_c, system.Wp, system.Wi,
+        system.Wv, system.AinvWT, system.Ghat, system.G0, observers.KinvWT, observers.L, impact.e, impact.tol,
+        state.stats, general)
+
+
 @njit(**JIT)
-def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, chi_log, use_log, chi_now,
+def _advance_loop(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, chi_log, use_log, chi_now,
             record_every, rec_q, rec_u, rec_P, rec_sig, rec_act, rec_chi, rec_qpre, record_pre,
             summary, k_on, k_off, rhos, summ, vprev, Vprev, rec_V, closings, prev_act, Mq, Kq, Cq,
             law, h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, waves,
@@ -659,6 +974,12 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
 
     Returns ``(k, s, status)``: ``status == OK`` and k = k1 when done; otherwise the step and
     system that failed (their state untouched).
+
+    Called only by :func:`advance`, which passes each bundle field by name.
+    One function because it is the step loop, the hot path: every piece moved into a
+    function of its own would be a call with array arguments per step (a reference count
+    each, see the module docstring) or, inlined, the same; the pieces that are not per step
+    (contacts, banded solve, projection, summary) are already calls.
     """
     S, n = qs.shape
     if general is None:             # the lean specialization (see above): pruned at compile time
@@ -869,8 +1190,23 @@ def advance(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, ch
 # ---------------------------------------------------------------------------------------
 # the scalar loop: one degree of freedom, one contact, the master alone
 # ---------------------------------------------------------------------------------------
+def advance_scalar(k0, k1, system, impact, signals, window, state, storage):
+    """:func:`advance` for n = m = 1 (the master alone, dense): the scalar step loop
+    :func:`_advance_scalar_loop` (the state in registers; bitwise the same trajectory) fed by
+    the same bundles, each field passed by name (a Python function, for the reason given in
+    :func:`advance`). Writes the rows' times into
+    ``storage.t`` when it has a row per record. Returns ``(k, 0, status)``.
+    """
+    return _advance_scalar_loop(
+        k0, k1, window.kb, state.qs, state.us, storage.record_every, storage.q, storage.u, storage.P,
+        storage.active, storage.t, system.t0, system.h, system.theta, system.Bu, system.Bq, system.Bf,
+        window.waves, signals.e_ptr, signals.e_col, signals.e_coef, signals.e_wave, signals.v_ptr,
+        signals.f_c, signals.nu_c, system.Wp, system.Wi, system.Wv, system.AinvWT, system.Ghat, impact.e,
+        impact.tol, state.stats)
+
+
 @njit(**JIT)
-def advance_scalar(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, rec_act, rec_t, t0, h, theta,
+def _advance_scalar_loop(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, rec_act, rec_t, t0, h, theta,
                    Bu, Bq, Bf, waves, e_ptr, e_col, e_coef, e_wave, v_ptr, f_c, nu_c, Wp, Wi, Wv, AinvWT, Ghat,
                    e, tol, stats):
     """:func:`advance`'s lean loop for n = m = 1 (the master alone, dense): the same
@@ -882,6 +1218,9 @@ def advance_scalar(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, rec_ac
     on one-element buffers. When ``rec_t`` has a row per record (else it is empty), each
     recorded row's time ``t0 + k·h`` is written there too, computed as
     :meth:`observer.stepping.MoreauJean.time` computes it (bitwise its values).
+
+    Called only by :func:`advance_scalar`. One function because it is a step loop, for the
+    reason of :func:`_advance_loop`.
     """
     q, u = qs[0, 0], us[0, 0]
     bu, bq, bf = Bu[0, 0], Bq[0, 0], Bf[0, 0]

@@ -45,7 +45,6 @@ from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
 
 from observer.errors import InputError
 from observer.sparse import abs_sum
@@ -53,6 +52,9 @@ from observer.stepping import MoreauJean, NonFiniteState
 
 if TYPE_CHECKING:
     import pandas as pd
+
+    from observer.kernel import (LawBundle, ObserverBundle, SignalBundle, StateBundle, StorageBundle,
+                                 SummaryBundle, SystemBundle, WindowBundle)
 
 ENGINES = ("compiled", "python")
 """Registered engines; the first is the default."""
@@ -501,7 +503,6 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool, on_chunk=No
     stepper = inp.stepper
     rec, _ = _allocate(inp, record_every, record_pre)
     S = inp.q0.shape[0]
-    proj = [projection_matrices(stepper, inp.metric_of(s)) for s in range(S)]
     states = [(inp.q0[s].copy(), inp.u0[s].copy()) for s in range(S)]
     coupled = inp.coupled(stepper.grid.t)
     chi_log = inp.chi_window(stepper.grid.t, 0)
@@ -523,7 +524,7 @@ def _run_python(inp: LoopInput, record_every: int, record_pre: bool, on_chunk=No
             for s in range(S):
                 q, u = states[s]
                 try:
-                    q1, u1, P, sig, q_pre, act, chi = _python_step(inp, stepper, *proj[s], k, s, q, u, chi, coupled[k],
+                    q1, u1, P, sig, q_pre, act, chi = _python_step(inp, stepper, k, s, q, u, chi, coupled[k],
                                                                    None if chi_log is None else chi_log[k])
                 except NonFiniteState:                  # the step's free velocity is not finite
                     stop, reason = k, guard.stop_text(guard.free_velocity(k, s, q, u) or "free velocity", k)
@@ -598,17 +599,21 @@ def _python_health(stepper: MoreauJean, k: int, s: int, q, u, u1, P, act, q1, he
 
 def newton_residual(stepper: MoreauJean, k: int, q, u, u1, P, act) -> float:
     """``max|min(P, b + d)| / max(‖b‖_∞, ‖d‖_∞)`` with ``b = γ_free + e∘γ_k`` and
-    ``d = W_Aᵀ(Â⁻¹W_A P)`` (numpy twin of :func:`observer.kernel.applied_residual`)."""
+    ``d = W_Aᵀδu``, ``δu = Â⁻¹W_A P`` the velocity change the step applied: computed by the
+    kernel's own :func:`observer.kernel.applied_residual` (one implementation for both engines)."""
+    from observer.kernel import applied_residual
+
     W_A = stepper.S.W[:, act]
     u_free = stepper.free_velocity(k, q, u)
     nd = stepper.grid.nu_dot
     b = (u_free @ W_A + nd[k + 1, act]) + stepper.law.restitution[act] * (u @ W_A + nd[k, act])
-    d = (stepper.S.AinvW[:, act] @ P) @ W_A
-    scale = max(float(np.max(np.abs(b))), float(np.max(np.abs(d))), 1e-300)
-    return float(np.max(np.abs(np.minimum(P, b + d)))) / scale
+    du = stepper.S.AinvW[:, act] @ P
+    Wp, Wi, Wv = stepper.csc
+    c = lambda x, dtype=np.float64: np.ascontiguousarray(x, dtype=dtype)  # noqa: E731
+    return float(applied_residual(Wp, Wi, Wv, c(act, np.int64), int(act.size), c(du), c(b), c(P)))
 
 
-def _python_step(inp: LoopInput, stepper: MoreauJean, NinvW, L, k: int, s: int, q, u, chi,
+def _python_step(inp: LoopInput, stepper: MoreauJean, k: int, s: int, q, u, chi,
                  coupled_k: bool, chi_row):
     """Step k of system s with the numpy stepper: its closed set (the master's predictor, χ
     while coupled, else its own predictor), the step, the projection. Returns
@@ -626,17 +631,11 @@ def _python_step(inp: LoopInput, stepper: MoreauJean, NinvW, L, k: int, s: int, 
     q_pre = q1
     sig = None
     if proj and act.size:
-        q1, sig = _project(stepper, inp.metric_of(s), NinvW, L, k + 1, q1, act)
+        slots, NinvWT, L = projection_slots(inp)        # the kernel's projection, in system s's metric
+        q1, sig = stepper.project(k + 1, q1, act, (NinvWT, L), slots[s])
     return q1, u1, P, sig, q_pre, act, chi
 
 
-def _project(stepper, metric, NinvW, L, k, q, act):
-    """The step's position projection: the library's K projection, or the N-metric one."""
-    if metric is None:
-        return stepper.project(k, q, act)
-    g = q @ stepper.S.W[:, act] + stepper.grid.nu[k, act]
-    sigma = -np.linalg.solve(L[np.ix_(act, act)], g)
-    return q + NinvW[:, act] @ sigma, sigma
 
 
 # ---------------------------------------------------------------------------------------
@@ -676,34 +675,106 @@ def compile_time() -> float:
     return time.perf_counter() - t0
 
 
-def kernel_data(inp: LoopInput) -> tuple:
-    """The scheme's constant arrays: ``(structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw)`` and
-    ``(Wp, Wi, Wv, (Â⁻¹W)ᵀ, Ĝ, G₀, (N⁻¹W)ᵀ, WᵀN⁻¹W, e, tol)`` in the kernel's order, the last
-    two stacked over the distinct projection metrics (:func:`projection_slots`)."""
-    from observer.kernel import STRUCTURE_BANDED, STRUCTURE_DENSE
+def system_bundle(inp: LoopInput) -> "SystemBundle":
+    """The scheme's constant arrays in the kernel's layout (:class:`observer.kernel.SystemBundle`):
+    dense ``Bu, Bq, Bf`` or the banded ``R_u, R_q`` and factor of Â, W in CSC, ``(Â⁻¹W)ᵀ``,
+    Ĝ, G₀, and the grid's h, θ, t0. Every array a fresh C-contiguous float64 (or int64) one,
+    so that every run types the kernel alike (:func:`quadratic_forms`)."""
+    from observer.kernel import STRUCTURE_BANDED, STRUCTURE_DENSE, SystemBundle
 
     stepper = inp.stepper
     S = stepper.S
-    Wc = sp.csc_matrix(S.W)
-    Wc.sort_indices()
-    _, NinvWT, L = projection_slots(inp)
-    c = lambda a, dtype=np.float64: np.ascontiguousarray(a, dtype=dtype)  # noqa: E731
+    Wp, Wi, Wv = stepper.csc
+    c = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
     dummy = np.zeros((1, 1))
     if S.band is None:
-        head = (STRUCTURE_DENSE, c(S.Bu), c(S.Bq), c(S.Bf), dummy, dummy, dummy, 0)
+        structure, dense, banded, bw = STRUCTURE_DENSE, (c(S.Bu), c(S.Bq), c(S.Bf)), (dummy,) * 3, 0
     else:
         b = S.band
-        head = (STRUCTURE_BANDED, dummy, dummy, dummy, c(b.Ru), c(b.Rq), c(b.Achol), int(b.bw))
-    tail = (c(Wc.indptr, np.int64), c(Wc.indices, np.int64), c(Wc.data), c(S.AinvW.T), c(S.Ghat),
-            c(S.G0), NinvWT, L, c(stepper.law.restitution), float(stepper.residual_tol))
-    return head, tail
+        banded = (c(b.Ru), c(b.Rq), c(b.Achol))
+        structure, dense, bw = STRUCTURE_BANDED, (dummy,) * 3, int(b.bw)
+    return SystemBundle(structure=structure, Bu=dense[0], Bq=dense[1], Bf=dense[2], Ru_b=banded[0],
+                        Rq_b=banded[1], Ach_b=banded[2], bw=bw, Wp=Wp, Wi=Wi, Wv=Wv, AinvWT=c(S.AinvW.T),
+                        Ghat=c(S.Ghat), G0=c(S.G0), h=float(stepper.h), theta=float(stepper.theta),
+                        t0=float(stepper.t0))
 
 
-def signal_tables(system) -> tuple:
+def law_bundle(stepper: MoreauJean) -> "LawBundle":
+    """The impact law's kernel code, its restitution and the residual tolerance."""
+    from observer.kernel import LawBundle
+
+    e = np.ascontiguousarray(stepper.law.restitution, dtype=np.float64)
+    return LawBundle(code=int(stepper.law.code), e=e, tol=float(stepper.residual_tol))
+
+
+def observer_bundle(inp: LoopInput) -> "ObserverBundle":
+    """The designs' jumps, each system's projection slot and the stacked metrics
+    (:func:`projection_slots`)."""
+    from observer.kernel import ObserverBundle
+
+    slots, NinvWT, L = projection_slots(inp)
+    return ObserverBundle(jumps=np.asarray(inp.jumps, dtype=np.bool_), slots=slots,
+                          master_projection=bool(inp.master_projection), KinvWT=NinvWT, L=L)
+
+
+def state_bundle(inp: LoopInput) -> "StateBundle":
+    """Fresh copies of the initial states, χ cleared, the counters at their start values."""
+    from observer.kernel import STATS_SIZE, StateBundle
+
+    stats = np.zeros(STATS_SIZE)
+    stats[3:7] = (np.inf, -1.0, 0.0, -1.0)
+    return StateBundle(qs=inp.q0.astype(float).copy(), us=inp.u0.astype(float).copy(),
+                       chi_now=np.zeros(inp.stepper.system.m, dtype=np.bool_), stats=stats)
+
+
+def storage_bundle(rec: dict, record_every: int, record_pre: bool, t_rec: np.ndarray | None) -> "StorageBundle":
+    """The records of :func:`_allocate` (``t_rec``: the rows' times, or None)."""
+    from observer.kernel import StorageBundle
+
+    return StorageBundle(record_every=int(record_every), q=rec["q"], u=rec["u"], P=rec["P"], sigma=rec["sigma"],
+                         active=rec["active"], chi=rec["chi"], q_pre=rec["q_pre"], record_pre=bool(record_pre),
+                         t=np.empty(0) if t_rec is None else t_rec)
+
+
+def summary_bundle(inp: LoopInput, on: bool, rhos: tuple, R: int) -> "SummaryBundle":
+    """The streaming summary's arrays (placeholders of the same types when ``on`` is False)."""
+    from observer.kernel import SUMMARY_FIELDS, SummaryBundle
+
+    S, n, m = inp.q0.shape[0], inp.stepper.system.n, inp.stepper.system.m
+    Mq, Kq, Cq = quadratic_forms(inp.stepper) if on else (np.zeros((1, 1)),) * 3
+    rho_arr = np.asarray(rhos, dtype=np.float64)
+    k_on, k_off = coupling_samples(inp)
+    summ = np.zeros((S, SUMMARY_FIELDS + 2 * rho_arr.size))
+    summ[:, SUMMARY_FIELDS:] = -1.0
+    return SummaryBundle(on=bool(on), k_on=int(k_on), k_off=int(k_off), rhos=rho_arr, summ=summ,
+                         vprev=np.zeros((S, n)), Vprev=np.zeros(S), rec_V=np.zeros((S, R if on else 0)),
+                         closings=np.zeros(m, np.int64), prev_act=np.zeros(m, np.bool_), Mq=Mq, Kq=Kq, Cq=Cq)
+
+
+_NO_COUPLING, _NO_LOG = np.zeros(1, np.bool_), np.zeros((1, 1), np.bool_)
+
+
+def window_bundle(inp: LoopInput, signals: "SignalBundle", kb: int, k1: int,
+                  tw: np.ndarray | None) -> "WindowBundle":
+    """The window of steps kb..k1: its waves, and (with observers; ``tw`` its grid points)
+    the coupling and χ from a log."""
+    from observer.kernel import WindowBundle
+
+    st = inp.stepper
+    waves = wave_table(st.t0, st.h, kb, k1, signals.omega, signals.phase, signals.function)
+    if inp.q0.shape[0] == 1:
+        return WindowBundle(kb=int(kb), waves=waves, coupled=_NO_COUPLING, chi_log=_NO_LOG, use_log=False)
+    chi_w = inp.chi_window(tw, kb)
+    return WindowBundle(kb=int(kb), waves=waves, coupled=np.ascontiguousarray(inp.coupled(tw), dtype=np.bool_),
+                        chi_log=_NO_LOG if chi_w is None else np.ascontiguousarray(chi_w, dtype=np.bool_),
+                        use_log=chi_w is not None)
+
+
+def signal_tables(system) -> "SignalBundle":
     """The kernel's tables of the signals f(t), ν(t), ν̇(t) (:func:`observer.kernel.advance`
-    evaluates them at every grid point).
+    evaluates them at every grid point), as a :class:`observer.kernel.SignalBundle`.
 
-    Returns ``(ω, phase, function)`` of the distinct waves (function codes
+    ``(ω, phase, function)`` of the distinct waves (function codes
     :data:`~observer.kernel.WAVE_COS`, ``WAVE_SIN``, ``WAVE_MINUS_SIN``); the entries
     ``(column, coefficient, wave)`` of f, then ν, then ν̇, each signal's in the summation
     order of :meth:`observer.model.Harmonic.entries` (``e_ptr`` (4,): signal i's entries are
@@ -711,7 +782,7 @@ def signal_tables(system) -> tuple:
     (``v_ptr``, ``v_col`` likewise); and the constants of f and ν. A wave shared by several
     entries (the same ω, phase and function) is evaluated once per grid point.
     """
-    from observer.kernel import WAVE_NAMES
+    from observer.kernel import WAVE_NAMES, SignalBundle
 
     codes = {name: code for code, name in enumerate(WAVE_NAMES)}
     waves: dict[tuple, int] = {}
@@ -727,10 +798,11 @@ def signal_tables(system) -> tuple:
         v_ptr.append(len(v_col))
     wv = np.array(list(waves), dtype=float).reshape(-1, 3)
     i64 = lambda x: np.array(x, dtype=np.int64)  # noqa: E731
-    return (np.ascontiguousarray(wv[:, 0]), np.ascontiguousarray(wv[:, 1]), wv[:, 2].astype(np.int64),
-            i64(e_ptr), i64(cols), np.array(coefs, dtype=float), i64(wave), i64(v_ptr), i64(v_col),
-            np.ascontiguousarray(system.forcing.constant, dtype=float),
-            np.ascontiguousarray(system.gap.constant, dtype=float))
+    return SignalBundle(omega=np.ascontiguousarray(wv[:, 0]), phase=np.ascontiguousarray(wv[:, 1]),
+                        function=wv[:, 2].astype(np.int64), e_ptr=i64(e_ptr), e_col=i64(cols),
+                        e_coef=np.array(coefs, dtype=float), e_wave=i64(wave), v_ptr=i64(v_ptr), v_col=i64(v_col),
+                        f_c=np.ascontiguousarray(system.forcing.constant, dtype=float),
+                        nu_c=np.ascontiguousarray(system.gap.constant, dtype=float))
 
 
 SPECIALIZATIONS = ("general", "lean", "scalar")
@@ -806,150 +878,175 @@ def coupling_samples(inp: LoopInput) -> tuple[int, int]:
     return k_on, k_off
 
 
+class _CompiledRun:
+    """One run of the compiled engine: the kernel's bundles, built once, and the windows.
+
+    The run advances window by window (:data:`WINDOW` steps): :meth:`window` calls the kernel
+    (:meth:`advance_to`, which handles its statuses: the reference solver for a failed
+    contact step, a stop for an exceeded residual) and, when the window ends with a
+    non-finite (or overflowing) state, runs it again one step at a time to stop before the
+    step that made it (:class:`FiniteGuard`); :meth:`output` assembles the records.
+    """
+
+    def __init__(self, inp: LoopInput, record_every: int, record_pre: bool, summary: bool, rhos: tuple,
+                 warm: bool, on_chunk, stopper: _Stopper | None):
+        from observer.kernel import summary_start
+
+        st = self.stepper = inp.stepper
+        self.inp, self.warm, self.stopper, self.rhos = inp, warm, stopper, rhos
+        self.S = inp.q0.shape[0]
+        self.compile_time = 0.0 if (warm or _COMPILED) else compile_time()
+        self.rec, R = _allocate(inp, record_every, record_pre)
+        self.t_rec = np.empty(R) if record_every == 1 else None
+        if self.t_rec is not None:
+            self.t_rec[0] = st.time(np.zeros(1, np.int64))[0]   # row 0; rows 1.. by the loop (scalar) or tw
+        self.system, self.law, self.signals = system_bundle(inp), law_bundle(st), signal_tables(st.system)
+        self.observers, self.state = observer_bundle(inp), state_bundle(inp)
+        self.storage = storage_bundle(self.rec, record_every, record_pre, self.t_rec)
+        self.tally = summary_bundle(inp, summary, rhos, R)
+        self.spec = specialization(self.S, self.system.structure, summary, record_pre, inp.master_projection,
+                                   st.system.n, st.system.m)
+        if summary:
+            summary_start(self.state, self.system, self.tally)
+        self.fallbacks: list[dict] = []
+        self.emit = _emitter(inp, self.rec, record_every, on_chunk, self.tally.rec_V if summary else None)
+        self.guard = FiniteGuard(inp)
+        t = self.tally
+        self.mutable = (*self.state, t.summ, t.vprev, t.Vprev, t.closings, t.prev_act)
+
+    def kernel(self, window, k: int, k_end: int, s: int) -> tuple[int, int, int]:
+        """One kernel call from (k, s) up to step k_end in the run's specialization."""
+        from observer import kernel
+
+        if self.spec == "scalar":
+            return kernel.advance_scalar(k, k_end, system=self.system, impact=self.law, signals=self.signals,
+                                         window=window, state=self.state, storage=self.storage)
+        return kernel.advance(k, k_end, s, system=self.system, impact=self.law, signals=self.signals,
+                              window=window, observers=self.observers, state=self.state, storage=self.storage,
+                              tally=self.tally, general=None if self.spec == "lean" else True)
+
+    def advance_to(self, window, k: int, s: int, k_end: int):
+        """Advance from (k, s) up to step k_end; the kernel's statuses handled (the reference
+        solver for a failed contact step). Returns (k, s, stop, reason, finite): ``finite``
+        False when the stop is a non-finite free velocity."""
+        from observer.kernel import OK
+
+        qs, us = self.state.qs, self.state.us
+        while k < k_end:
+            k, s, status = self.kernel(window, k, k_end, s)
+            if status == OK:
+                break
+            bad = self.guard.free_velocity(k, s, qs[s], us[s])
+            if bad is not None:                 # the failed step's input is not finite
+                return k, s, k, self.guard.stop_text(bad, k), False
+            stop = self._failed_step(window, k, s, status)
+            if stop is not None:
+                return k, s, k, stop, True
+            s += 1
+            if s == self.S:
+                k, s = k + 1, 0
+        return k, s, None, "", True
+
+    def _failed_step(self, window, k: int, s: int, status: int) -> str | None:
+        """Step k of system s, at which the kernel stopped with ``status``: the stop reason
+        (residual exceeded), an error (projection failed; summary store), or the step re-solved
+        with the reference solver and recorded (None)."""
+        from observer.kernel import PROJECTION_FAILED, RESIDUAL_EXCEEDED
+
+        st = self.stepper
+        if status == RESIDUAL_EXCEEDED:
+            return _stop_text(st, f"complementarity residual {self.state.stats[7]:.3g} > tolerance "
+                              f"{st.residual_tol:.3g} in step {k} (system {s})", k)
+        if status == PROJECTION_FAILED:
+            st.system.require_definite_stiffness("the position projection (position jumps)")
+            raise InputError("system.W", f"W_IᵀK⁻¹W_I is not positive definite at step {k} "
+                             f"(t = {float(st.time(k)):.6g}): the closed contacts' columns "
+                             "of W are dependent in the K metric")
+        if self.tally.on:
+            raise InputError("store", f'store="summary": the kernel could not solve the contact '
+                             f"problem of step {k} (t = {float(st.time(k)):.6g}); run with "
+                             'store="full", which re-solves such steps with the reference solver')
+        kw = k - window.kb
+        _fallback_step(self.inp, st, k, s, self.state.qs, self.state.us, self.state.chi_now,
+                       self.storage.record_every, self.storage.record_pre, self.rec,
+                       self.S > 1 and bool(window.coupled[kw]), window.chi_log[kw] if window.use_log else None)
+        self.fallbacks.append({"step": int(k), "t": float(st.time(k)), "system": int(s)})
+        return None
+
+    def window(self, k: int, s: int):
+        """The window from step k: its bundle, the kernel over it, and, when it ends with a
+        quantity that is not finite, the same window again one step at a time to stop before
+        the step that made it. Returns (k, s, stop, reason)."""
+        st, kb = self.stepper, k
+        k1 = min(st.steps, kb + WINDOW)
+        tw = None
+        # the window's grid points; every step recorded: written in place as the rows' times
+        # (the scalar loop writes them itself)
+        if (self.t_rec is not None and self.spec != "scalar") or self.S > 1:
+            tw = st.time(np.arange(kb, k1 + 1), out=None if self.t_rec is None else self.t_rec[kb:k1 + 1])
+        window = window_bundle(self.inp, self.signals, kb, k1, tw)
+        snap = _snapshot(self.mutable, self.fallbacks, st)
+        k, s, stop, reason, finite = self.advance_to(window, k, s, k1)
+        state = self.state
+        if self.warm or (finite and self.guard.state_ok(state.qs, state.us,
+                                                          self.tally.summ if self.tally.on else None)):
+            return k, s, stop, reason
+        _restore(self.mutable, snap, self.fallbacks, st)
+        k, s, stop, reason = kb, 0, None, ""
+        while k < k1 and stop is None:
+            one = _snapshot(self.mutable, self.fallbacks, st)
+            k_before = k
+            k, s, stop, reason, _ = self.advance_to(window, k, s, k + 1)
+            if stop is None:
+                bad = self.guard.first_problem(k, state.qs, state.us)
+                if bad is not None:
+                    _restore(self.mutable, one, self.fallbacks, st)
+                    stop, reason = k_before, self.guard.stop_text(bad, k_before)
+        return k, s, stop, reason
+
+    def run(self) -> LoopOutput:
+        """Every window, the stop signal checked between them; the output."""
+        stop, reason = None, ""
+        t0 = time.perf_counter()
+        k, s = 0, 0
+        while k < self.stepper.steps and stop is None:
+            if self.stopper is not None and self.stopper.signal and not self.warm:
+                stop, reason = k, _stop_text(self.stepper, self.stopper.signal, k)
+                break
+            k, s, stop, reason = self.window(k, s)
+            self.emit(k if stop is None else stop)
+        out = self.output(time.perf_counter() - t0)
+        if self.warm:
+            return out
+        return _finish(self.inp, out, stop, reason, self.stopper.signal if self.stopper is not None else None)
+
+    def output(self, run_time: float) -> LoopOutput:
+        """The records, the counters (the reference solver's added) and the summary."""
+        ref = getattr(self.stepper, "_reference_twin", None)
+        ref_stats = ref.stats if (ref is not None and self.fallbacks) else None
+        stats, t, rec = self.state.stats, self.tally, self.rec
+        out_summary = None
+        if t.on:
+            out_summary = {"fields": t.summ, "closings": t.closings, "k_on": t.k_on, "k_off": t.k_off,
+                           "rhos": tuple(self.rhos)}
+        counts = {"contact_solves": int(stats[0]) + (ref_stats.contact_solves if ref_stats else 0),
+                  "iterations": int(stats[1]) + (ref_stats.iterations if ref_stats else 0),
+                  "max_residual": max(float(stats[2]), ref_stats.max_residual if ref_stats else 0.0),
+                  "fallbacks": len(self.fallbacks), "min_gap": float(stats[3]),
+                  "min_gap_step": int(stats[4]), "applied_residual": float(stats[5]),
+                  "applied_residual_step": int(stats[6]), "residual_source": "applied"}
+        return LoopOutput(self.storage.record_every, rec["q"], rec["u"], rec["P"], rec["sigma"], rec["active"],
+                          rec["chi"], rec["q_pre"] if self.storage.record_pre else None, "compiled", counts,
+                          self.fallbacks, self.compile_time, run_time, t.rec_V if t.on else None, out_summary,
+                          t=self.t_rec)
+
+
 def _run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: bool = False,
                   rhos: tuple = (1e-3,), warm: bool = False, on_chunk=None,
                   stopper: _Stopper | None = None) -> LoopOutput:
-    from observer.kernel import (OK, PROJECTION_FAILED, RESIDUAL_EXCEEDED, STATS_SIZE, SUMMARY_FIELDS,
-                                 advance, advance_scalar, summary_start)
-
-    stepper = inp.stepper
-    steps, n, m = stepper.steps, stepper.system.n, stepper.system.m
-    S = inp.q0.shape[0]
-    ct = 0.0 if (warm or _COMPILED) else compile_time()
-    rec, R = _allocate(inp, record_every, record_pre)
-    head, tail = kernel_data(inp)
-    signals = signal_tables(stepper.system)
-    t_rec = np.empty(R) if record_every == 1 else None
-    if t_rec is not None:
-        t_rec[0] = stepper.time(np.zeros(1, np.int64))[0]     # row 0; rows 1.. by the loop (scalar) or tw
-    no_times = np.empty(0)
-    spec = specialization(S, head[0], summary, record_pre, inp.master_projection, n, m)
-    general = None if spec == "lean" else True
-    no_coupling, no_log = np.zeros(1, np.bool_), np.zeros((1, 1), np.bool_)
-    slots = projection_slots(inp)[0]
-    qs, us = inp.q0.astype(float).copy(), inp.u0.astype(float).copy()
-    jumps = np.asarray(inp.jumps, dtype=np.bool_)
-    chi_now = np.zeros(m, dtype=np.bool_)
-    stats = np.zeros(STATS_SIZE)
-    stats[3:7] = (np.inf, -1.0, 0.0, -1.0)
-    law = int(stepper.law.code)
-    Mq, Kq, Cq = quadratic_forms(stepper) if summary else (np.zeros((1, 1)),) * 3
-    rho_arr = np.asarray(rhos, dtype=np.float64)
-    k_on, k_off = coupling_samples(inp)
-    summ = np.zeros((S, SUMMARY_FIELDS + 2 * rho_arr.size))
-    summ[:, SUMMARY_FIELDS:] = -1.0
-    vprev, Vprev = np.zeros((S, n)), np.zeros(S)
-    rec_V = np.zeros((S, R if summary else 0))
-    closings, prev_act = np.zeros(m, np.int64), np.zeros(m, np.bool_)
-    if summary:
-        summary_start(qs, us, head[0], Mq, Kq, head[7], vprev, Vprev, summ, k_on, k_off, rho_arr, rec_V)
-    fallbacks: list[dict] = []
-    emit = _emitter(inp, rec, record_every, on_chunk, rec_V if summary else None)
-    guard = FiniteGuard(inp)
-    state = (qs, us, chi_now, stats, summ, vprev, Vprev, closings, prev_act)
-    stop, reason = None, ""
-    t0 = time.perf_counter()
-    k, s = 0, 0
-    while k < steps and stop is None:
-        if stopper is not None and stopper.signal and not warm:
-            stop, reason = k, _stop_text(stepper, stopper.signal, k)
-            break
-        kb = k
-        k1 = min(steps, kb + WINDOW)
-        # the window's grid points; every step recorded: written in place as the rows' times
-        # (the scalar loop writes them itself)
-        if (t_rec is not None and spec != "scalar") or S > 1:
-            tw = stepper.time(np.arange(kb, k1 + 1), out=None if t_rec is None else t_rec[kb:k1 + 1])
-        waves = wave_table(stepper.t0, stepper.h, kb, k1, *signals[:3])
-        if S > 1:                                   # the observers' coupling and χ of the window
-            coupled = np.ascontiguousarray(inp.coupled(tw), dtype=np.bool_)
-            chi_w = inp.chi_window(tw, kb)
-        else:
-            coupled, chi_w = no_coupling, None
-        use_log = chi_w is not None
-        chi_log = np.ascontiguousarray(chi_w, dtype=np.bool_) if use_log else no_log
-
-        def kernel(k, k_end, s):
-            if spec == "scalar":
-                return advance_scalar(k, k_end, kb, qs, us, record_every, rec["q"], rec["u"], rec["P"],
-                                      rec["active"], no_times if t_rec is None else t_rec,
-                                      stepper.t0, stepper.h, stepper.theta, *head[1:4], waves,
-                                      *signals[3:8], *signals[9:], *tail[:5], *tail[8:], stats)
-            return advance(k, k_end, s, kb, qs, us, jumps, slots, bool(inp.master_projection), coupled,
-                           chi_log, use_log, chi_now, record_every, rec["q"], rec["u"], rec["P"],
-                           rec["sigma"], rec["active"], rec["chi"], rec["q_pre"], record_pre,
-                           summary, k_on, k_off, rho_arr, summ, vprev, Vprev, rec_V, closings,
-                           prev_act, Mq, Kq, Cq, law, stepper.h, stepper.theta, *head, waves,
-                           *signals[3:], *tail, stats, general)
-
-        def to(k, s, k_end):
-            """Advance from (k, s) up to step k_end; the kernel's statuses handled (the
-            reference solver for a failed contact step). Returns (k, s, stop, reason, finite):
-            ``finite`` False when the stop is a non-finite free velocity."""
-            while k < k_end:
-                k, s, status = kernel(k, k_end, s)
-                if status == OK:
-                    break
-                bad = guard.free_velocity(k, s, qs[s], us[s])
-                if bad is not None:                 # the failed step's input is not finite
-                    return k, s, k, guard.stop_text(bad, k), False
-                if status == RESIDUAL_EXCEEDED:
-                    return k, s, k, _stop_text(stepper, f"complementarity residual {stats[7]:.3g} > "
-                                               f"tolerance {stepper.residual_tol:.3g} in step {k} "
-                                               f"(system {s})", k), True
-                if status == PROJECTION_FAILED:
-                    stepper.system.require_definite_stiffness("the position projection (position jumps)")
-                    raise InputError("system.W", f"W_IᵀK⁻¹W_I is not positive definite at step {k} "
-                                     f"(t = {float(stepper.time(k)):.6g}): the closed contacts' columns "
-                                     "of W are dependent in the K metric")
-                if summary:
-                    raise InputError("store", f'store="summary": the kernel could not solve the contact '
-                                     f"problem of step {k} (t = {float(stepper.time(k)):.6g}); run with "
-                                     'store="full", which re-solves such steps with the reference solver')
-                _fallback_step(inp, stepper, k, s, qs, us, chi_now, record_every, record_pre, rec,
-                               S > 1 and bool(coupled[k - kb]), None if chi_w is None else chi_w[k - kb])
-                fallbacks.append({"step": int(k), "t": float(stepper.time(k)), "system": int(s)})
-                s += 1
-                if s == S:
-                    k, s = k + 1, 0
-            return k, s, None, "", True
-
-        snap = _snapshot(state, fallbacks, stepper)
-        k, s, stop, reason, finite = to(k, s, k1)
-        if not warm and not (finite and guard.state_ok(qs, us, summ if summary else None)):
-            # a non-finite (or overflowing) quantity in this window: again from its start, one
-            # step at a time, to stop before the first step that makes one
-            _restore(state, snap, fallbacks, stepper)
-            k, s, stop, reason = kb, 0, None, ""
-            while k < k1 and stop is None:
-                one = _snapshot(state, fallbacks, stepper)
-                k_before = k
-                k, s, stop, reason, _ = to(k, s, k + 1)
-                if stop is None:
-                    bad = guard.first_problem(k, qs, us)
-                    if bad is not None:
-                        _restore(state, one, fallbacks, stepper)
-                        stop, reason = k_before, guard.stop_text(bad, k_before)
-        emit(k if stop is None else stop)
-    run_time = time.perf_counter() - t0
-    ref = getattr(stepper, "_reference_twin", None)
-    ref_stats = ref.stats if (ref is not None and fallbacks) else None
-    out_summary = None
-    if summary:
-        out_summary = {"fields": summ, "closings": closings, "k_on": k_on, "k_off": k_off,
-                       "rhos": tuple(rhos)}
-    out = LoopOutput(record_every, rec["q"], rec["u"], rec["P"], rec["sigma"], rec["active"], rec["chi"],
-                      rec["q_pre"] if record_pre else None, "compiled",
-                      {"contact_solves": int(stats[0]) + (ref_stats.contact_solves if ref_stats else 0),
-                       "iterations": int(stats[1]) + (ref_stats.iterations if ref_stats else 0),
-                       "max_residual": max(float(stats[2]), ref_stats.max_residual if ref_stats else 0.0),
-                       "fallbacks": len(fallbacks), "min_gap": float(stats[3]),
-                       "min_gap_step": int(stats[4]), "applied_residual": float(stats[5]),
-                       "applied_residual_step": int(stats[6]), "residual_source": "applied"},
-                      fallbacks, ct, run_time, rec_V if summary else None, out_summary, t=t_rec)
-    if warm:
-        return out
-    return _finish(inp, out, stop, reason, stopper.signal if stopper is not None else None)
+    """Run ``inp`` on the compiled engine (:class:`_CompiledRun`); ``warm``: a compile-only
+    run (no guard re-runs, no health record)."""
+    return _CompiledRun(inp, record_every, record_pre, summary, rhos, warm, on_chunk, stopper).run()
 
 
 def summary_frame(out: LoopOutput, names: list[str], t0: float, h: float, *,
@@ -991,8 +1088,7 @@ def _fallback_step(inp, stepper, k, s, qs, us, chi_now, record_every, record_pre
                    coupled_k, chi_row) -> None:
     """Step k of system s, which the kernel could not solve, with the reference solver."""
     ref = _reference_stepper(stepper)
-    NinvW, L = projection_matrices(ref, inp.metric_of(s))
-    q1, u1, P, sig, q_pre, act, chi = _python_step(inp, ref, NinvW, L, k, s, qs[s], us[s],
+    q1, u1, P, sig, q_pre, act, chi = _python_step(inp, ref, k, s, qs[s], us[s],
                                                    np.flatnonzero(chi_now), coupled_k, chi_row)
     if s == 0:
         chi_now[:] = False

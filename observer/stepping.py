@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.linalg as sla
@@ -493,20 +494,42 @@ class MoreauJean:
             q1, sigma = self.project(k + 1, q1, active)
         return q1, u1, P, sigma
 
-    def project(self, k: int, q: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """K-metric projection of q onto ``{W_Iᵀq + ν_I(t_k) = 0}`` (paper eqs. (13)-(14)).
+    def project(self, k: int, q: np.ndarray, active: np.ndarray, stacks: tuple | None = None,
+                slot: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Projection of q onto ``{W_Iᵀq + ν_I(t_k) = 0}`` in the metric N (paper eqs. (13)-(14)).
 
-        ``q⁺ = q − K⁻¹W_I L_I⁻¹ g_I`` with ``L_I = W_IᵀK⁻¹W_I``; returns (q⁺, Σ_I = −L_I⁻¹g_I).
+        ``q⁺ = q − N⁻¹W_I L_I⁻¹ g_I`` with ``L_I = W_IᵀN⁻¹W_I``; returns (q⁺, Σ_I = −L_I⁻¹g_I).
+        N is K, or the metric ``slot`` of ``stacks = ((N⁻¹W)ᵀ, WᵀN⁻¹W)`` stacked over metrics
+        (:func:`observer.loop.projection_slots`). Computed by the compiled kernel's own
+        projection (:func:`observer.kernel.project_closed`): one implementation for both engines.
         """
-        S = self.S
+        from observer.kernel import OK, project_closed
+
         if active.size == 0:
             return q, np.zeros(0)
-        if S.L is None:
+        if stacks is None:
+            if self.S.L is None:
+                self.system.require_definite_stiffness("the position projection (position jumps)")
+            stacks, slot = self._k_stacks, 0
+        Wp, Wi, Wv = self.csc
+        status, q1, sigma = project_closed(np.ascontiguousarray(q, dtype=np.float64), int(k),
+                                           np.ascontiguousarray(active, dtype=np.int64), Wp, Wi, Wv,
+                                           self.grid.nu, stacks[0], stacks[1], int(slot))
+        if status != OK:
             self.system.require_definite_stiffness("the position projection (position jumps)")
-        W_I, _, _, _, KinvW_I, L_I, _ = self._active_slices(active)
-        g = q @ W_I + self.grid.nu[k, active]
-        if active.size == 1:
-            sigma = -g / L_I[0, 0]
-        else:
-            sigma = -np.linalg.solve(L_I, g)
-        return q + KinvW_I @ sigma, sigma
+            raise InputError("system.W", f"W_IᵀN⁻¹W_I is not positive definite at step {k - 1} "
+                             f"(t = {float(self.time(k - 1)):.6g}): the closed contacts' columns "
+                             "of W are dependent in the projection metric")
+        return q1, sigma
+
+    @cached_property
+    def csc(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """W in the kernel's CSC storage (:func:`observer.kernel.csc_arrays`)."""
+        from observer.kernel import csc_arrays
+
+        return csc_arrays(self.S.W)
+
+    @cached_property
+    def _k_stacks(self) -> tuple[np.ndarray, np.ndarray]:
+        """``((K⁻¹W)ᵀ, WᵀK⁻¹W)`` as one-metric stacks (the kernel's layout)."""
+        return (np.ascontiguousarray(self.S.KinvW.T)[None], np.ascontiguousarray(self.S.L)[None])

@@ -41,10 +41,7 @@ MODEL = ("observer.errors", "observer.sparse", "observer.validation", "observer.
 SOLVERS = "observer.contact"
 CLI_NAMES = ("cli", "__main__")
 
-ALLOWED_CYCLE_EDGES = {
-    # removed by the engines branch (the registry helper breaks event/observers ↔ simulate)
-    ("observer.event.observers", "observer.simulate"),
-}
+ALLOWED_CYCLE_EDGES: set[tuple[str, str]] = set()
 """Edges left out of the cycle search, each to be deleted when its cycle is broken."""
 
 
