@@ -248,6 +248,9 @@ def test_smoke_suite_rows_are_tidy_and_complete(smoke_run):
         read_log(out / f, 1)
     sc = df[df["kind"] == "scaling"]
     assert (sc["peak_mem_mb"] > 0).all() and (sc["cpu_per_step_s"] > 0).all()
+    # the whole call (issue 23): load + simulate, at least its load part and the run's own CPU
+    assert (sc["load_cpu_s"] > 0).all() and (sc["whole_call_cpu_s"] > sc["load_cpu_s"]).all()
+    assert (sc["whole_call_wall_s"] > 0).all()
     # compiled engine everywhere (pivoting solver), compile time measured once and apart
     timed = df[(df["status"] == "ok") & df["kind"].isin(["observers", "work_precision", "robustness",
                                                           "scaling"])]
