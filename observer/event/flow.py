@@ -118,6 +118,11 @@ class Flow:
     time_scale : float
         The system's own time scale τ (:func:`_time_scale`): tolerances are relative to the
         motion over τ.
+    intrinsic : bool
+        Whether the system has a time scale of its own (a natural frequency, a damping rate or
+        a harmonic frequency); if not, ``time_scale`` is the flow's window, which is not
+        covariant with the length unit, and a run takes its motion's
+        (:func:`observer.event.master.motion_time_scale`).
     norm_bound : float
         ``‖T⁻¹AT‖₂`` for the balancing similarity T (``scale``): ``‖T⁻¹z(t+τ)‖ ≤
         exp(norm_bound·τ)‖T⁻¹z(t)‖``, the growth bound used by the root isolation.
@@ -170,8 +175,10 @@ class Flow:
         self.scale = np.diag(T).copy()
         self._balanced = B
         self.norm_bound = float(np.linalg.norm(B, 2))
-        self.time_scale = (_time_scale(system, self.freqs, self.norm_bound) if not self.active
-                           else flow_for(system, ()).time_scale)       # one τ for all active sets
+        free = None if not self.active else flow_for(system, ())
+        self.time_scale, self.intrinsic = ((_time_scale(system, self.freqs, self.norm_bound),
+                                            _has_rates(system, self.freqs)) if free is None
+                                           else (free.time_scale, free.intrinsic))  # one τ for all
         self._expm_cache: OrderedDict = OrderedDict()
         self._phi_cache: OrderedDict = OrderedDict()
 
@@ -324,6 +331,11 @@ def _time_scale(system: LinearSystem, freqs: list[float], norm_bound: float) -> 
     if w_max > 0.0:
         return 1.0 / w_max
     return 0.5 / max(norm_bound, 1e-300)
+
+
+def _has_rates(system: LinearSystem, freqs: list[float]) -> bool:
+    """True if K, C or a harmonic term gives the system a time scale of its own."""
+    return bool(np.any(system.K) or np.any(system.C) or freqs)
 
 
 _FLOWS: dict = {}

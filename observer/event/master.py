@@ -16,9 +16,10 @@ contacts with ``γ⁺ = 0`` (within round-off) enter persistent contact if the
 acceleration LCP ``0 ≤ λ ⊥ γ̇ = G λ + γ̇_free ≥ 0`` gives them a positive force.
 
 Grazing (stated tolerances, on the scale of the motion): a **touch**, a local minimum m* of
-g_j within the touch band δ* (:func:`observer.event.roots.touch_band`, the guaranteed
-crossing depth) of zero, is a graze with zero impulse (the run continues past it); its row
-carries ``depth = m*`` and a note stating δ*. A crossing with ``|γ⁻| ≤`` CONTACT_TOL motion
+g_j whose certified enclosure meets the touch band ±δ (:func:`observer.event.roots.touch_band`)
+is a graze with zero impulse (the run continues past it); its row carries ``depth = m*`` and
+a note stating the enclosure, δ and the guaranteed crossing depth δ* = δ + its width.
+A crossing with ``|γ⁻| ≤`` CONTACT_TOL motion
 tolerances of γ is labelled a graze too, and its (tiny) impulse is applied. A minimum above
 the touch band is a miss: no event. Contacts count as closed together (simultaneous impact)
 when their gaps are within CONTACT_TOL motion tolerances
@@ -55,7 +56,8 @@ import numpy as np
 
 from observer.contact import get_solver
 from observer.event.flow import Flow, flow_for
-from observer.event.roots import NonFiniteFlow, RootIsolationError, first_zero, motion_tolerance, tolerance
+from observer.event.roots import (FLOOR_FACTOR, NonFiniteFlow, RootIsolationError, first_zero,
+                                  motion_tolerance, tolerance)
 from observer.impact import ImpactLaw, impact
 from observer.scenario import Scenario
 
@@ -66,10 +68,6 @@ CONTACT_TOL = 1e3
 """A contact counts as closed (simultaneous impact, persistent contact) when |g| and the
 relevant velocity are within CONTACT_TOL × their round-off tolerance
 (:func:`observer.event.roots.tolerance`)."""
-
-INITIAL_GAP_RTOL = 1e-9
-"""At t0, |g_j| ≤ INITIAL_GAP_RTOL·max(1, Σ|r_j z|) counts as closed (the scenario's own
-acceptance of an initial penetration, :data:`observer.scenario.INITIAL_GAP_TOL`)."""
 
 ZENO_MIN_IMPACTS = 6
 """Impacts of one run needed before a geometric accumulation is recognised."""
@@ -91,7 +89,12 @@ which re-injects ≈ 1e-19 into the exact observers' V at every landing (a floor
 
 ZENO_TAIL_RTOL = 1e-9
 """A geometric run of one contact is also extrapolated once the representation error of its
-gap would put more than this fraction of max(|t|, τ) into t_∞ (:meth:`_Run.noisy_tail`)."""
+gap would put more than this fraction of max(|t|, τ) into t_∞ (:meth:`_Run.noisy_tail`);
+where the run is cut depends on the coordinates, t_∞ does not (:meth:`_Run.hop_tail`)."""
+
+HOP_ORDER = 8
+"""Degree of the Taylor polynomial of a hop in :meth:`_Run.hop_tail` (hops last ≲ the Zeno
+tail ≪ τ, so the truncation is (Δ/τ)^9 of the hop, below round-off)."""
 
 SAMPLE_BLOCK = 256
 """Output samples computed per block product (``exp(A j h)``, j = 1..SAMPLE_BLOCK)."""
@@ -228,9 +231,10 @@ class _Run:
         self.segments: list[tuple[float, float, tuple, np.ndarray]] = []
         self.free_flow = flow_for(self.system, ())
         self.Minv = self.free_flow.Minv
-        self.tau = self.free_flow.time_scale
+        self.tau = self.free_flow.time_scale      # a system without one: set by run_master
         self.note, self.note_time = "", np.nan
         self.should_stop = None        # callable → a signal name (SIGINT/SIGTERM) or None
+        self.hop_end = None            # (contact, t_k, t_last, x_last) of the last hop_tail
         self.halted: str | None = None # the signal that stopped the sampling (no row after)
 
     # -- sampling --------------------------------------------------------------------------
@@ -409,11 +413,83 @@ class _Run:
         if (speed > self.zeno_velocity_ratio * v0 and d[2] > ZENO_MIN_INTERVAL * max(abs(t), self.tau)
                 and not hop_small and not self.noisy_tail(key, fl, idx, z, v_plus, t)):
             return None
+        tail = self.tail_after(key, t, x, persistent)
+        t_inf = t + (tail if tail is not None else self.tail_time(key, d[1], d[2]))
+        return t_inf if self.tail_is_clear(key, t, x, persistent, t_inf) else None
+
+    def tail_is_clear(self, key: tuple, t: float, x: np.ndarray, persistent: tuple,
+                      t_inf: float) -> bool:
+        """True if no other event (a gap of another open contact closing, a held contact's
+        force vanishing) falls in the tail ``[t, t_∞]``, searched on the flow that holds
+        ``key`` and ``persistent`` (the tail's limit): the extrapolation skips the tail, so it
+        must not skip another contact's impact (which, coming first, ends the run of ``key``;
+        the accumulation is then resolved further)."""
+        setp = tuple(sorted(set(persistent) | set(key)))
+        flow = flow_for(self.system, setp)
+        others = [j for j in range(self.m) if j not in setp]
+        held = [setp.index(c) for c in persistent]
+        rows = np.vstack([flow.gap_rows[others], flow.force_rows[held]])
+        if rows.shape[0] == 0 or t_inf <= t:
+            return True
+        xp = self.project(t, x, list(setp))
+        try:
+            zero, _, _ = first_zero(flow, rows, t, flow.z(t, xp), min(t_inf, self.t_end),
+                                    tau=self.tau)
+        except RootIsolationError:
+            return False
+        return zero is None
+
+    def tail_after(self, key: tuple, t: float, x: np.ndarray, persistent: tuple) -> float | None:
+        """Tail duration after an impact of ``key`` at t (state x after it), on the flow that
+        holds ``persistent``: :meth:`hop_tail` (exact hops), with :meth:`velocity_tail` (from γ⁺
+        and the contact acceleration and its rate) as its fallback; None if neither applies."""
         held = flow_for(self.system, persistent)
         zh = held.z(t, x)
+        idx = list(key)
         jerk_rows = held.velocity_rows[idx] @ held.A
-        tail = self.velocity_tail(key, v_plus, jerk_rows @ zh, jerk_rows @ held.A @ zh)
-        return t + (tail if tail is not None else self.tail_time(key, d[1], d[2]))
+        tail = self.velocity_tail(key, held.velocity_rows[idx] @ zh, jerk_rows @ zh,
+                                  jerk_rows @ held.A @ zh)
+        return None if tail is None else self.hop_tail(key[0], t, zh, held, tail)
+
+    def hop_tail(self, c: int, t: float, z: np.ndarray, held: Flow, guess: float) -> float:
+        """The tail after an impact of contact c alone at t (augmented state z after it) by
+        exact hops relative to the contact point: each hop leaves g = 0 exactly, lasts the
+        first zero Δ > 0 of ``g(t_k + Δ) − g(t_k) = Σ_{j≥1} g^{(j)}(t_k) Δ^j/j!`` (degree
+        :data:`HOP_ORDER`, Newton from 2γ⁺/|γ̇|), and lands with the flow's exact velocity,
+        which Newton's law returns times e. The gap's own value, which carries the
+        coordinates' round-off (|q| + |ν|), is never used: the tail, and t_∞, are the same
+        in any coordinates. Falls back to ``guess`` (:meth:`velocity_tail`) if a hop is not
+        a falling-back parabola."""
+        e = float(self.law.restitution[c])
+        n = self.n
+        R = [held.velocity_rows[c]]
+        for _ in range(HOP_ORDER - 1):
+            R.append(R[-1] @ held.A)
+        R = np.array(R)                                     # rows of g', g'', …
+        fact = np.cumprod(np.arange(1, HOP_ORDER + 1, dtype=float))   # 1!, 2!, …
+        push = self.Minv @ self.system.W[:, c] / float(self.delassus([c])[0, 0])
+        tail, v0 = 0.0, float(R[0] @ z)
+        self.hop_end = None
+        for _ in range(100_000):
+            d = R @ z
+            if d[0] <= 1e-12 * v0 or d[1] >= 0.0:          # landed, or no longer falling back
+                self.hop_end = (c, t, t + tail, held.x_of(z))  # the state after the last hop
+                return tail + (2.0 * max(d[0], 0.0) / -d[1] / (1.0 - e) if d[1] < 0.0 else 0.0)
+            co = d / fact                                   # (g(t_k + Δ) − 0)/Δ = Σ co_j Δ^j
+            dt = -2.0 * d[0] / d[1]
+            for _ in range(30):
+                P = np.polyval(co[::-1], dt)
+                dP = np.polyval((co[1:] * np.arange(1, HOP_ORDER))[::-1], dt)
+                step = P / dP if dP != 0.0 else 0.0
+                dt -= step
+                if abs(step) <= 4e-16 * dt:
+                    break
+            if not 0.0 < dt <= 4.0 * d[0] / -d[1]:
+                return guess
+            z = held.propagate(t + tail, z, dt)
+            tail += dt
+            z[n:2 * n] -= push * (1.0 + e) * float(R[0] @ z)   # γ⁺ = −e γ⁻
+        return guess
 
     def hop_tol(self, fl: Flow, idx: list, z: np.ndarray) -> np.ndarray:
         """Evaluation round-off of the gaps ``idx`` (:func:`observer.event.roots.tolerance`):
@@ -428,7 +504,9 @@ class _Run:
         The gap is evaluated with an absolute error δg ≈ eps·Σ|r z| (its representation: it
         grows with |q| and |ν|), so an impact at speed v is located to δg/v and its
         γ⁺ to |γ̇|δg/v; the velocity tail (:meth:`velocity_tail`) then errs by about
-        ``(1 + 2/(1 − e))·δg/γ⁺``. Once that reaches ZENO_TAIL_RTOL·max(|t|, τ), the run is
+        ``(1 + 2/(1 − e))·δg/γ⁺``. Once that reaches ZENO_TAIL_RTOL·max(|t|, τ) (the time
+        resolution's scale; a cut there, not earlier, keeps the tail, which the observers
+        treat as closed, short), the run is
         extrapolated from the current (still accurate) impact."""
         if len(key) != 1 or not self.law.definition.single_contact_is_newton:
             return False
@@ -495,17 +573,19 @@ class _Run:
         return tail
 
     def accumulate(self, key: tuple, t: float, x: np.ndarray, persistent: tuple, t_inf: float,
-                   speed: float):
+                   speed: float, impacts: int | None = None):
         """Carry the state to the accumulation time t_∞ and switch ``key`` to persistent contact.
 
         The tail in the limit is persistent contact from the last resolved impact t_k on:
         the projection γ⁺ → 0 at t_k is the impulse −G⁻¹γ⁺, the rest of the tail's impulse
         is ∫λ dt over [t_k, t_∞] (so the frame's momentum balance holds exactly).
+        ``impacts``: the impacts resolved, when the run's history is not the count (a landing
+        of sub-round-off hops, :func:`_impact`); its ratio is then the restitution.
         """
-        hist = self.history.pop(key)
+        hist = self.history.pop(key, [])
         self.last_key = None
         d = np.diff([p[0] for p in hist[-3:]])
-        ratio = d[1] / d[0]
+        ratio = d[1] / d[0] if d.size == 2 else float(self.law.restitution[key[0]])
         setp = tuple(sorted(set(persistent) | set(key)))
         for c in key:          # the tail is densely closed: χ_c = 1 from the last resolved impact
             if self.intervals[c] and self.intervals[c][-1] == (t, t):
@@ -519,12 +599,21 @@ class _Run:
         self.fill(flow, t, xp, min(t_inf, self.t_end), include_end=t_inf >= self.t_end)
         if t_inf >= self.t_end:
             return None
-        x_inf = self.project(t_inf, flow.state(t, xp, t_inf - t), list(setp))
+        hop = self.hop_end
+        if hop is not None and hop[0] == key[0] and hop[1] == t and t <= hop[2] <= t_inf:
+            # the state after the exact hops (:meth:`hop_tail`), not the held flow's over the
+            # whole tail: the same wherever the resolved impacts were cut
+            x_last = self.project(hop[2], hop[3], list(setp))
+            x_inf = self.project(t_inf, flow.state(hop[2], x_last, t_inf - hop[2]), list(setp))
+        else:
+            x_inf = self.project(t_inf, flow.state(t, xp, t_inf - t), list(setp))
+        self.hop_end = None
         tail = proj_impulse + flow.force_impulse(t, xp, t_inf - t)
         for c in key:
             self.event(t_inf, c, "accumulation", -speed * ratio, 0.0, tail[setp.index(c)])
         self.zeno.append({"contact": key[0] if len(key) == 1 else key, "t_inf": t_inf,
-                          "impacts_resolved": len(hist), "tail_time": t_inf - t,
+                          "impacts_resolved": len(hist) if impacts is None else impacts,
+                          "tail_time": t_inf - t,
                           "tail_impulse": float(np.sum([tail[setp.index(c)] for c in key])),
                           "ratio": ratio})
         stick = self.sticking(t_inf, x_inf, list(setp))
@@ -649,6 +738,8 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
     status = "ok"
     t = t0
     x = np.concatenate([scenario.q0, scenario.u0]).astype(float)
+    if not run.free_flow.intrinsic:
+        run.tau = motion_time_scale(run.free_flow, t0, x)
     x, persistent = _initial_contacts(run, x)
     certified: dict[tuple[str, int], float] = {}
     n_events, same_time, t_last_event = 0, 0, -np.inf
@@ -664,7 +755,7 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
         keys = [("g", j) for j in free] + [("f", j) for j in persistent]
         cert = {i: certified[k] for i, k in enumerate(keys) if k in certified}
         try:
-            zero, t_stop, _ = first_zero(flow, rows, t, flow.z(t, x), t_end, cert)
+            zero, t_stop, _ = first_zero(flow, rows, t, flow.z(t, x), t_end, cert, run.tau)
         except NonFiniteFlow as exc:                  # overflow: a stop at the last finite state
             if np.all(np.isfinite(exc.z_ok)):
                 run.fill(flow, t, x, exc.t_ok, include_end=True)
@@ -694,8 +785,7 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
             certified[(kind, j)] = zero.resume
             if kind == "g":
                 gam = flow.velocities(t, x)[j]
-                note = zero.note or (f"minimum {zero.value:.3g} within the touch band "
-                                     f"±{zero.band:.3g} (the guaranteed crossing depth)")
+                note = zero.note or _graze_note(zero)
                 run.event(t, j, "graze", gam, gam, 0.0, depth=zero.value, note=note)
                 run.touch(j, t)
             continue
@@ -706,28 +796,9 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
             run.history.clear()
             certified.update(cert_new)
             continue
-        x, new_persistent, A, gm, lam = run.collide(t, x, persistent, {j})
-        n_impacts += 1
-        key = tuple(c for c in A if c not in new_persistent)
-        t_inf = None
-        if key and set(new_persistent) == set(persistent):
-            bouncing = [A.index(c) for c in key]
-            t_inf = run.zeno_check(key, t, x, gm[bouncing], persistent)
-            if t_inf is not None:
-                out = run.accumulate(key, t, x, persistent, t_inf, float(np.max(np.abs(gm[bouncing]))))
-                if out is None:
-                    t = t_end
-                    break
-                x, new_persistent = out
-                t = t_inf
-        else:
-            run.history.clear()
-        landing = run.tiny_hops(t, x, key, new_persistent) if key and t_inf is None else []
-        if landing:                                    # a cluster settling below round-off
-            x, new_persistent = run.land(landing, t, x, new_persistent, n_impacts)
-            run.history.clear()
-            n_impacts = 0
-        persistent = new_persistent
+        t, x, persistent, n_impacts, done = _impact(run, t, x, persistent, j, n_impacts)
+        if done:                                       # the accumulation lies beyond t_end
+            break
     if run.halted and not status.startswith("stopped: non-finite"):
         t = float(run.t_grid[run.k_next - 1]) if run.k_next else t0
         status = f"stopped: {run.halted} at t = {t:.9g}"
@@ -736,17 +807,79 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
     return _result(run, scenario, status, t)
 
 
+def _impact(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int, n_impacts: int):
+    """An impact triggered by contact j at t, then the Zeno check of the run of impacts and
+    the landing of sub-round-off hops. Returns ``(t, x, persistent, n_impacts, done)``;
+    done: an accumulation at or beyond t_end ended the run (t = t_end)."""
+    x, new_persistent, A, gm, lam = run.collide(t, x, persistent, {j})
+    n_impacts += 1
+    key = tuple(c for c in A if c not in new_persistent)
+    if key and set(new_persistent) == set(persistent):
+        bouncing = [A.index(c) for c in key]
+        t_inf = run.zeno_check(key, t, x, gm[bouncing], persistent)
+        if t_inf is not None:
+            out = run.accumulate(key, t, x, persistent, t_inf, float(np.max(np.abs(gm[bouncing]))))
+            if out is None:
+                return run.t_end, x, persistent, n_impacts, True
+            return t_inf, out[0], out[1], n_impacts, False
+    else:
+        run.history.clear()
+    landing = run.tiny_hops(t, x, key, new_persistent) if key else []
+    if not landing:
+        return t, x, new_persistent, n_impacts, False
+    # one contact bouncing alone, nothing held: its tail is extrapolated from γ⁺ (where the
+    # hops fall below round-off depends on the coordinates, t∞ must not); a cluster, or a
+    # contact bouncing on a held set (the chain's blocks), lands at t
+    tail = (run.tail_after(key, t, x, new_persistent)
+            if len(key) == 1 and landing == list(key) and not persistent and not new_persistent
+            else None)
+    if tail is not None and not run.tail_is_clear(key, t, x, persistent, t + tail):
+        tail = None
+    if tail is None:
+        x, new_persistent = run.land(landing, t, x, new_persistent, n_impacts)
+        run.history.clear()
+        return t, x, new_persistent, 0, False
+    out = run.accumulate(key, t, x, persistent, t + tail, float(abs(gm[A.index(key[0])])),
+                         impacts=n_impacts)
+    run.history.clear()
+    if out is None:
+        return run.t_end, x, persistent, 0, True
+    return t + tail, out[0], out[1], 0, False
+
+
+def motion_time_scale(flow: Flow, t0: float, x: np.ndarray) -> float:
+    """Time scale τ of a motion whose system has none (no stiffness, damping or frequency: the
+    bouncing ball), from its initial state: the largest of the contacts' times
+    ``√(2|g|/|γ̇|)``, ``|γ|/|γ̇|`` and ``|g|/|γ|`` (free fall, stop, approach) at t0, all
+    invariant under translations and time shifts and in seconds whatever the length unit
+    (the flow's window, which scales with the acceleration's length unit, only if all vanish)."""
+    z = flow.z(t0, x)
+    g, gam = np.abs(flow.gap_rows @ z), np.abs(flow.velocity_rows @ z)
+    acc = np.abs(flow.velocity_rows @ flow.A @ z)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cand = np.concatenate([np.sqrt(2.0 * g / acc), gam / acc, g / gam])
+    cand = cand[np.isfinite(cand) & (cand > 0.0)]
+    return float(cand.max()) if cand.size else flow.time_scale
+
+
 def _initial_contacts(run: _Run, x: np.ndarray):
-    """Closed contacts at t0: an impact if approaching, persistent contact if the force is positive."""
+    """Closed contacts at t0: an impact if approaching, persistent contact if the force is positive.
+
+    A contact is closed at t0 when its gap is below CONTACT_TOL round-offs of the motion
+    (:func:`observer.event.roots.motion_tolerance` without its floor: a property of the
+    motion, the same in any units and at any translation) plus FLOOR_FACTOR round-offs of
+    the gap's representation ``ROUNDOFF·Σ|r_j z_j|`` (what float64 cannot resolve, as in
+    the touch band), a penetration accepted by the scenario
+    (:data:`observer.scenario.INITIAL_GAP_TOL`) included, and its velocity is not leaving."""
     fl = run.free_flow
     t0 = run.t0
     z = fl.z(t0, x)
     g = fl.gap_rows @ z
-    scale = np.abs(fl.gap_rows) @ np.abs(z)
     gam = fl.velocity_rows @ z
+    floor = tolerance(fl.gap_rows, z)                  # the gap's representation floor
+    tol_g = CONTACT_TOL * (run.tol(fl.gap_rows, z, t0) - floor) + FLOOR_FACTOR * floor
     tol_v = CONTACT_TOL * run.tol(fl.velocity_rows, z, t0)
-    closed = {j for j in range(run.m)
-              if abs(g[j]) <= INITIAL_GAP_RTOL * max(1.0, scale[j]) and gam[j] <= tol_v[j]}
+    closed = {j for j in range(run.m) if g[j] <= tol_g[j] and gam[j] <= tol_v[j]}
     if not closed:
         return x, ()
     qfix = x.copy()
@@ -755,6 +888,15 @@ def _initial_contacts(run: _Run, x: np.ndarray):
     qfix[:run.n] -= run.Minv @ W @ np.linalg.solve(run.delassus(idx), g[idx])
     x_new, stick, *_ = run.collide(t0, qfix, (), set(idx))
     return x_new, stick
+
+
+def _graze_note(zero) -> str:
+    """The note of a graze row: the minimum m*, its certified enclosure, the touch band and the
+    guaranteed crossing depth δ* = band + enclosure width there
+    (:func:`observer.event.roots.minimum_enclosure`)."""
+    lo, hi = zero.enclosure or (zero.value, zero.value)
+    return (f"minimum {zero.value:.3g} in [{lo:.3g}, {hi:.3g}] (certified) within the touch band "
+            f"±{zero.band:.3g}; guaranteed crossing depth {zero.band + (hi - lo):.3g}")
 
 
 def _liftoff(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int):

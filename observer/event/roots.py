@@ -15,10 +15,12 @@ is approached monotonically from the safe side, at the rate of Newton's method.
 A double root (grazing: ψ_i touches zero with ψ_i' = 0) cannot be certified either way in
 floating point; when the minimum of ψ_i lies in a window on which ψ_i'' > 0 is certified
 (``ψ_i''(a) − B_i s > 0``), ψ_i has exactly one local minimum t_m there, found as the
-simple zero of ψ_i'. Its value decides: above the touch band of ψ_i (:func:`touch_band`, the
-guaranteed crossing depth, on the scale of the motion), the whole
-convex window is certified positive; within it, a **touch** (graze) at t_m; below it, a
-**cross** before t_m, isolated by the bracket ``[a, t_m]``.
+simple zero of ψ_i'. A certified enclosure ``[lower, upper]`` of its value (a Taylor model
+with Lagrange remainder, :meth:`FunctionalSet.enclose`, :func:`minimum_enclosure`) decides
+against the touch band δ of ψ_i (:func:`touch_band`, on the scale of the motion):
+``lower > δ``, the whole convex window is certified positive; ``upper < −δ``, a **cross**
+before t_m, isolated by the bracket ``[a, t_m]``; otherwise a **touch** (graze) at t_m. The
+guaranteed crossing depth is δ* = δ + (upper − lower): a deeper minimum is always a cross.
 
 Zeros are refined by safeguarded Newton steps (bisection when a step leaves the bracket)
 until the step is below the time resolution :data:`TIME_RTOL`·max(|t|, τ).
@@ -51,8 +53,9 @@ TOUCH_FACTOR = 1e3
 motion scale of ψ_i at the minimum, :func:`touch_band`) plus ``FLOOR_FACTOR · ROUNDOFF ·
 Σ|r_ij z_j|``: round-off accumulated along a run (about 1e-13 of the orbit's size after 50 s
 on the grazing scenario) must not turn an exact graze into a miss or a crossing. A minimum
-above the band is a miss, below it a crossing (an impact, however shallow). The band is the
-**guaranteed crossing depth**: a crossing deeper than the band is never reported as a graze."""
+certified above the band is a miss, below it a crossing (an impact, however shallow); the
+**guaranteed crossing depth** is the band plus the width of the minimum's certified
+enclosure (:func:`minimum_enclosure`): a crossing deeper than it is never a graze."""
 
 FLOOR_FACTOR = 16.0
 """Multiple of the representation floor ``ROUNDOFF · Σ|r_ij z_j|`` in the touch band (it grows
@@ -62,6 +65,15 @@ TIME_RTOL = 2.0 * np.finfo(float).eps
 """Time resolution ``TIME_RTOL · max(|t|, τ)`` (τ the system's time scale,
 :attr:`observer.event.flow.Flow.time_scale`): Newton refinement stops at it, and a search
 interval no longer than it is integrated as a flow, not searched (a remainder of a few ulp)."""
+
+TAYLOR_ORDER = 16
+"""Degree + 1 of the Taylor model of a functional in :func:`FunctionalSet.enclose`: its
+Lagrange remainder over a window (``‖T⁻¹AT‖ s ≤`` :data:`WINDOW`) is at most
+``e^0.5·0.5^16/16! ≈ 1.2e-17`` of ``‖r T‖‖T⁻¹z‖``, below round-off."""
+
+BOUND_MARGIN = 1e-9
+"""Relative margin on the norms of the certified bounds (``‖T⁻¹AT‖₂`` by an SVD,
+``‖r A^k T‖₂``): their float64 error is O(N·eps), far below it."""
 
 MAX_STEPS = 200_000
 """Safe advances per search before :class:`RootIsolationError` (a stalled isolation)."""
@@ -128,6 +140,10 @@ class Zero:
         (ψ_i is convex in between); t for a cross.
     band : float
         For a touch, the touch band it was decided with (:func:`touch_band`).
+    enclosure : tuple
+        For a touch, ``(lower, upper)``: the certified enclosure of the minimum's value
+        (:func:`minimum_enclosure`); the guaranteed crossing depth there is
+        ``band + upper − lower``.
     note : str
         Empty, or how a decision that float64 cannot take was taken (``"unresolved: …"``).
     """
@@ -141,6 +157,7 @@ class Zero:
     resume: float
     band: float = 0.0
     note: str = ""
+    enclosure: tuple = ()
 
 
 def tolerance(rows: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -254,17 +271,40 @@ def _quadratic_roots(A: float, B: float, C: float) -> list[float]:
 
 
 class FunctionalSet:
-    """The functionals ``rows`` of ``flow`` and their derivative rows (k = 0..3)."""
+    """The functionals ``rows`` of ``flow``, their derivative rows ``r_k = r A^k`` and a
+    certified bound on the float64 error of each derivative row.
 
-    def __init__(self, flow: Flow, rows: np.ndarray) -> None:
+    The rows ``r̂_k`` are computed in float64; ``err[k] ≥ |r̂_k − r A^k|`` entrywise by the
+    a-priori bound of a matrix product (Higham, *Accuracy and Stability*, §3.5):
+    ``err_{k+1} = (err_k + γ_N |r̂_k|) |A|``, γ_N = N·u/(1 − N·u), times ``1 + 2γ_N`` to
+    dominate the rounding of the bound itself (a sum of non-negative terms). The value
+    ``ψ^{(k)} = r̂_k·z`` of a float state z is then known to ``e_k(z) = (err_k + γ_N
+    |r̂_k|)·|z|`` (:meth:`errors`), likewise inflated.
+    """
+
+    def __init__(self, flow: Flow, rows: np.ndarray, tau: float | None = None) -> None:
         self.flow = flow
+        self.tau = flow.time_scale if tau is None else float(tau)   # the motion's time scale
         self.rows = np.atleast_2d(np.asarray(rows, dtype=float))
-        A = flow.A
+        N = self.rows.shape[1]
+        u = np.finfo(float).eps / 2.0
+        self.gamma = N * u / (1.0 - N * u)
+        self._inflate = 1.0 + 2.0 * self.gamma
+        self._absA = np.abs(flow.A)
         self.d = [self.rows]
-        for _ in range(3):
-            self.d.append(self.d[-1] @ A)
-        self.third_norm = np.linalg.norm(self.d[3] * flow.scale, axis=1)
+        self.err = [np.zeros_like(self.rows)]
+        self._extend(3)
+        self.third_norm = np.linalg.norm((np.abs(self.d[3]) + self.err[3]) * flow.scale,
+                                         axis=1) * (1.0 + BOUND_MARGIN)
         self.abs_d = [np.abs(r) for r in self.d[:3]]
+
+    def _extend(self, k: int) -> None:
+        """Derivative rows and their error bounds up to order k."""
+        A = self.flow.A
+        while len(self.d) <= k:
+            prev, e = self.d[-1], self.err[-1]
+            self.d.append(prev @ A)
+            self.err.append(self._inflate * ((e + self.gamma * np.abs(prev)) @ self._absA))
 
     def __len__(self) -> int:
         return self.rows.shape[0]
@@ -272,6 +312,47 @@ class FunctionalSet:
     def value(self, i: int, k: int, z: np.ndarray) -> float:
         """k-th derivative of functional i at augmented state z."""
         return float(self.d[k][i] @ z)
+
+    def errors(self, z: np.ndarray, kmax: int = 2) -> np.ndarray:
+        """Certified bounds ``e_k ≥ |fl(r̂_k·z) − r_k·z|`` for k = 0..kmax, all functionals,
+        shape (kmax + 1, p) (z taken as exact data; gradual underflow, below 1e-300, aside)."""
+        self._extend(kmax)
+        az = np.abs(z)
+        return np.array([self._inflate * ((self.err[k] + self.gamma * np.abs(self.d[k])) @ az)
+                         for k in range(kmax + 1)])
+
+    def enclose(self, i: int, j: int, z: np.ndarray, s: float) -> tuple[float, float]:
+        """Certified enclosure ``[lo, hi]`` of ``ψ_i^{(j)}(a + s)`` for the exact flow from the
+        state z at a (``0 ≤ s``, ``‖T⁻¹AT‖ s ≤`` :data:`WINDOW`), by a Taylor model.
+
+        ``ψ_i^{(j)}(a + s) = Σ_{k<K} r_{k+j}·z s^k/k! + R`` with K = :data:`TAYLOR_ORDER` and
+        ``|R| ≤ ‖r_{K+j} T‖₂ e^{‖T⁻¹AT‖ s} ‖T⁻¹z‖₂ s^K/K!`` (Lagrange; ``T⁻¹e^{As}T =
+        e^{Bs}``, ``‖e^{Bs}‖ ≤ e^{‖B‖s}``). The coefficients carry their certified errors
+        (:meth:`errors`), the polynomial's evaluation its a-priori error γ_{3K}·Σ|terms|,
+        and the sum of the bounds is doubled to dominate its own rounding.
+        """
+        K = TAYLOR_ORDER
+        self._extend(K + j)
+        flow = self.flow
+        az = np.abs(z)
+        val, mag, err, term = 0.0, 0.0, 0.0, 1.0
+        for k in range(K):
+            if k:
+                term *= s / k
+            c = float(self.d[k + j][i] @ z)
+            ec = float((self.err[k + j][i] + self.gamma * np.abs(self.d[k + j][i])) @ az)
+            val += c * term
+            mag += abs(c) * term
+            err += ec * term
+        term *= s / K
+        rest = np.abs(self.d[K + j][i]) + self.err[K + j][i]
+        growth = np.exp(flow.norm_bound * (1.0 + BOUND_MARGIN) * s) * (1.0 + BOUND_MARGIN)
+        remainder = (float(np.linalg.norm(rest * flow.scale)) * growth
+                     * _norm(z / flow.scale) * term * (1.0 + BOUND_MARGIN))
+        u = np.finfo(float).eps / 2.0
+        g3k = 3.0 * K * u / (1.0 - 3.0 * K * u)
+        width = 2.0 * (err + g3k * mag + remainder) + np.finfo(float).tiny
+        return val - width, val + width
 
 
 def _refine(fs: FunctionalSet, i: int, k: int, a: float, za: np.ndarray, lo: float, hi: float,
@@ -298,44 +379,64 @@ def _refine(fs: FunctionalSet, i: int, k: int, a: float, za: np.ndarray, lo: flo
             new = 0.5 * (lo + hi)
             step = new - tau
         tau = new
-        res = resolution(a + tau, flow.time_scale)
+        res = resolution(a + tau, fs.tau)
         if abs(step) <= res or hi - lo <= res:
             return tau
     return tau
 
 
 def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: float, d1: float,
-                    d2: float, bound: float, width: float):
+                    d2: float, bound: float, width: float, e2: float = 0.0):
     """Analyse functional i on a window where its minimum is near (d1 < 0 < d2).
 
     Returns ``None`` when convexity cannot be certified on ``[a, a + 2s_m]`` (s_m = −d1/d2,
-    within ``width``), else ``("positive", certified_until)``, ``("touch", Zero)`` or
-    ``("cross", Zero)``. The minimum's value m* is compared with the touch band
-    (:func:`touch_band`) of ψ_i at the minimum.
+    within ``width``; ``d2 − e2 − bound·2s_m > 0``, e2 the certified error of d2), else
+    ``("positive", certified_until)``, ``("touch", Zero)`` or ``("cross", Zero)``.
+
+    The decision is certified (:func:`minimum_enclosure`): the minimum m of the exact flow
+    from ``za`` over the window lies in ``[lower, upper]``; ``lower >`` the touch band
+    (:func:`touch_band`) is a miss, ``upper < −band`` a crossing, anything else a touch
+    whose row states ``m* = ψ_i(t_m)``, the band and the enclosure. So a minimum deeper than
+    the guaranteed crossing depth ``δ* = band + (upper − lower)`` is always a crossing.
     """
     s_m = -d1 / d2
     span = 2.0 * s_m
-    if span > width or d2 - bound * span <= 0.0:
+    curv = d2 - e2 - bound * span               # certified: ψ_i'' ≥ curv > 0 on the span
+    if span > width or curv <= 0.0:
         return None
     flow = fs.flow
     tau_m = _refine(fs, i, 1, a, za, 0.0, span, s_m)
     z_m = flow.expm(tau_m) @ za
     m_star = fs.value(i, 0, z_m)
     floor = ROUNDOFF * float(fs.abs_d[0][i] @ np.abs(z_m))
-    touch = float(touch_band(fs.value(i, 2, z_m), fs.value(i, 3, z_m), floor, flow.time_scale))
-    if m_star > touch:
+    touch = float(touch_band(fs.value(i, 2, z_m), fs.value(i, 3, z_m), floor, fs.tau))
+    lower, upper = minimum_enclosure(fs, i, za, tau_m, span)
+    if lower > touch:
         return "positive", a + span
     t_m = a + tau_m
-    if m_star >= -touch:
+    if upper >= -touch:
         z_m = _reset(flow, t_m, z_m)
-        # ψ ≥ m* + (ψ''_min/2)(t − t_m)² with ψ''_min ≥ d2 − bound·span > 0: above 2·touch after
-        curv = d2 - bound * span
-        resume = t_m + np.sqrt(max(2.0 * (2.0 * touch - m_star), 0.0) / curv)
-        return "touch", Zero(t_m, i, "touch", z_m, m_star, fs.value(i, 1, z_m), float(resume),
-                             band=touch)
+        # ψ ≥ lower + (curv/2)(t − t_m)² on the span: above 2·touch after resume (≤ the span)
+        resume = t_m + np.sqrt(max(2.0 * (2.0 * touch - lower), 0.0) / curv)
+        return "touch", Zero(t_m, i, "touch", z_m, m_star, fs.value(i, 1, z_m),
+                             float(min(resume, a + span)), band=touch, enclosure=(lower, upper))
     tau = _refine(fs, i, 0, a, za, 0.0, tau_m, 0.5 * tau_m) if d0 > 0.0 else 0.0
     z = _reset(flow, a + tau, flow.expm(tau) @ za)
     return "cross", Zero(a + tau, i, "cross", z, fs.value(i, 0, z), fs.value(i, 1, z), a + tau)
+
+
+def minimum_enclosure(fs: FunctionalSet, i: int, za: np.ndarray, tau_m: float, span: float
+                      ) -> tuple[float, float]:
+    """Certified enclosure ``[lower, upper]`` of ``min ψ_i`` over ``[a, a + span]`` for the
+    exact flow from ``za`` at a, where ψ_i is certified convex, near its computed minimum
+    point ``a + tau_m``: ``upper`` bounds ψ_i(a + tau_m) from above, and by convexity
+    ``ψ_i(a + s) ≥ ψ_i(a + tau_m) + ψ_i'(a + tau_m)(s − tau_m)`` gives ``lower`` (both
+    from :meth:`FunctionalSet.enclose`)."""
+    lo0, hi0 = fs.enclose(i, 0, za, tau_m)
+    lo1, hi1 = fs.enclose(i, 1, za, tau_m)
+    slope = max(abs(lo1), abs(hi1))
+    lower = lo0 - slope * max(tau_m, span - tau_m) * (1.0 + 4.0 * np.finfo(float).eps)
+    return float(lower), float(hi0)
 
 
 def _reset(flow: Flow, t: float, z: np.ndarray) -> np.ndarray:
@@ -360,16 +461,20 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, tols,
                w: float, certified: dict[int, float]) -> tuple[float, list[Zero]]:
     """Largest step from a over which no functional is certified to vanish, and the zeros
     found exactly on the way (convex minima, zeros at a). Vectorised quick test first: a
-    functional whose cubic bound stays positive on the whole window needs no more work."""
-    tol, tol1, tol2, band = tols
+    functional whose cubic bound stays positive on the whole window needs no more work.
+    The cubic lower bound uses the derivatives minus their certified errors ``err``
+    (:meth:`FunctionalSet.errors`), so that it bounds the exact flow from za."""
+    tol, tol1, tol2, band, err = tols
+    tol = np.maximum(tol, 2.0 * err[0])   # ψ_i > tol leaves a positive certified lower bound
     d0, d1, d2 = d[0], d[1], d[2]
+    l0, l1, l2 = d0 - err[0], d1 - err[1], d2 - err[2]   # certified lower bounds
     step = w
     found: list[Zero] = []
     with np.errstate(divide="ignore", invalid="ignore"):
         s_min = np.where((d1 < 0.0) & (d2 > 0.0), -d1 / d2, np.inf)
         near_touch = (s_min <= w) & (d0 - d1 * d1 / (2.0 * d2) <= 2.0 * band)
     quick = (d0 > tol) & ~near_touch & (
-        d0 + np.minimum(d1, 0.0) * w + np.minimum(d2, 0.0) * w * w / 2 - bound * w ** 3 / 6 > 0.0)
+        l0 + np.minimum(l1, 0.0) * w + np.minimum(l2, 0.0) * w * w / 2 - bound * w ** 3 / 6 > 0.0)
     for i in np.flatnonzero(~quick):
         i = int(i)
         until = certified.get(i, -np.inf)
@@ -379,7 +484,7 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, tols,
         leaving = d1[i] > tol1[i] or (abs(d1[i]) <= tol1[i] and d2[i] > tol2[i])
         convex = d1[i] < 0.0 < d2[i]
         if d0[i] <= tol[i] and not leaving:
-            res = _convex_minimum(fs, i, a, za, d0[i], d1[i], d2[i], bound[i], w) \
+            res = _convex_minimum(fs, i, a, za, d0[i], d1[i], d2[i], bound[i], w, err[2, i]) \
                 if convex else None
             if res is None:
                 found.append(_zero_now(fs, i, a, za, d))
@@ -389,9 +494,9 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, tols,
             else:
                 found.append(res[1])
             continue
-        s = first_cubic_zero(max(d0[i], 0.0), d1[i], d2[i], bound[i], w)
+        s = first_cubic_zero(max(l0[i], 0.0), l1[i], l2[i], bound[i], w)
         if (s < w or near_touch[i]) and convex:
-            res = _convex_minimum(fs, i, a, za, d0[i], d1[i], d2[i], bound[i], w)
+            res = _convex_minimum(fs, i, a, za, d0[i], d1[i], d2[i], bound[i], w, err[2, i])
             if res is not None:
                 if res[0] != "positive":
                     found.append(res[1])
@@ -414,7 +519,8 @@ def _norm(v: np.ndarray) -> float:
 
 
 def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: float,
-               certified: dict[int, float] | None = None) -> tuple[Zero | None, float, np.ndarray]:
+               certified: dict[int, float] | None = None, tau: float | None = None
+               ) -> tuple[Zero | None, float, np.ndarray]:
     """First zero in ``[t0, t_end]`` of any functional ``rows[i]·z(t)`` along ``flow``.
 
     Tolerances are the motion's (:func:`motion_tolerance`, :func:`touch_band`). A search
@@ -432,6 +538,9 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
         End of the search.
     certified : dict, optional
         ``{i: t}``: ψ_i is known to stay positive until t (after a touch).
+    tau : float, optional
+        The motion's time scale τ of the tolerances (default ``flow.time_scale``; a run
+        of a system without one passes its motion's, :func:`observer.event.master.motion_time_scale`).
 
     Returns
     -------
@@ -441,14 +550,14 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     """
     rows = np.atleast_2d(rows)
     a, za = float(t0), np.asarray(z0, dtype=float)
-    tau = flow.time_scale
+    tau = flow.time_scale if tau is None else float(tau)
     if rows.shape[0] == 0 or t_end - a <= resolution(t_end, tau):
         z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
         return None, t_end, z
-    fs = FunctionalSet(flow, rows)
+    fs = FunctionalSet(flow, rows, tau)
     certified = dict(certified or {})
     window = WINDOW / max(flow.norm_bound, 1e-300)
-    growth = np.exp(WINDOW)
+    growth = np.exp(WINDOW * (1.0 + BOUND_MARGIN))     # ‖T⁻¹AT‖₂ w ≤ WINDOW, to its margin
     t_ok, z_ok = a, za                                # the last search point with finite values
     for _ in range(MAX_STEPS):
         if t_end - a <= resolution(t_end, tau):          # a remainder of a few ulp: flow
@@ -466,11 +575,12 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
         tol1 = floor[1] + ROUNDOFF * motion_scale(d[1:], tau) + np.abs(d[2]) * res
         tol2 = floor[2] + ROUNDOFF * motion_scale(d[2:], tau) + np.abs(d[3]) * res
         band = touch_band(d[2], d[3], floor[0], tau)
-        bound = fs.third_norm * growth * _norm(za / flow.scale) * (1.0 + 1e-12)
+        bound = fs.third_norm * growth * _norm(za / flow.scale) * (1.0 + BOUND_MARGIN)
         if not np.isfinite(bound).all():              # the certified bound overflows: no search
             i = int(np.flatnonzero(~np.isfinite(bound))[0])
             raise NonFiniteFlow(a, a, za, ("bound", 3, i), float(bound[i]))
-        step, found = _safe_step(fs, a, za, d, (tol, tol1, tol2, band), bound, w, certified)
+        tols = (tol, tol1, tol2, band, fs.errors(za))
+        step, found = _safe_step(fs, a, za, d, tols, bound, w, certified)
         # no functional without a found zero vanishes in (a, a + step): the earliest found zero
         # within that reach is the first zero; one beyond it is recomputed later
         if found:
