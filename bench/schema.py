@@ -76,7 +76,8 @@ ROWS: dict[str, Columns] = {
                 "cpu_per_step_s": float, "cpu_per_step_total_s": float, "wall_per_step_s": float,
                 "steps_per_s": float, "contact_solves": int, "closed_step_fraction": float,
                 "mean_active": float, "max_active": int, "peak_mem_mb": float,
-                "trajectory_mb": float},
+                "trajectory_mb": float, "whole_call_cpu_s": float, "whole_call_wall_s": float,
+                "load_cpu_s": float},
     "checks": {**CASE, **TIMING, "check": str, "equation": str, "check_status": str,
                "passed": (bool, type(None)), "margin": float, "tolerance": float, "witness": str,
                "reason": str, "check_elapsed_s": float, "evidence": str, "verdict": str},
@@ -89,12 +90,13 @@ OPTIONAL: dict[str, frozenset] = {
     "observers": frozenset(SYNC) | frozenset(ENGINE) | frozenset(
         {"steps", "steps_per_s", "contact_solves", "integrator", "plot_dof", "plot_contact", "trajectory",
          "cpu_time_s", "wall_time_s", "cpu_scope"}),
-    "scaling": frozenset({"peak_mem_mb", "trajectory_mb"}),
+    "scaling": frozenset({"peak_mem_mb", "trajectory_mb", "whole_call_cpu_s", "whole_call_wall_s",
+                          "load_cpu_s"}),
     "checks": frozenset({"evidence", "verdict"}),
 }
 """Columns a row of the kind may lack: an observers row of a design that does not apply
 (status "n/a") has no synchronization, engine or timing columns; a scaling case declared
-with ``memory=False`` has no memory columns; a checks row written before the evidence levels
+with ``memory=False`` has no memory columns, one written before issue 23 no whole-call columns; a checks row written before the evidence levels
 has no ``evidence`` and ``verdict``."""
 
 

@@ -33,6 +33,11 @@ Every run of :func:`observer.loop.run` gets a :class:`Health` record (issue 12, 
     term (README, "What holds in discrete time"). Checked: ``energy_growth ≤
     ENERGY_ROUNDOFF + ENERGY_SLACK·h·ω_ref`` with ω_ref = max(ω_max, 1/T) over the horizon T.
     None when not applicable.
+``computed_by``
+    How the spectral quantities were computed: ``omega_max`` (dense ``eigh``, or Lanczos with
+    its tolerance for a large sparse system) and the model's checks of M, C, K, W
+    (:attr:`observer.model.LinearSystem.check_methods`: dense eigenvalues and SVD, or banded
+    Cholesky and Lanczos).
 
 ``warnings`` lists one line per check outside its bound; :func:`emit` sends them to stderr
 (``warnings.warn`` with :class:`RunHealthWarning`).
@@ -47,6 +52,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import scipy.linalg as sla
+
+from observer import sparse as sps
 
 H_OMEGA_MAX = 1.0
 """Bound on h·ω_max: above it the stiffest mode's discrete frequency is off by > 7 %."""
@@ -81,6 +88,7 @@ class Health:
     energy_growth: float | None = None
     energy_bound: float | None = None
     warnings: tuple = field(default_factory=tuple)
+    computed_by: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         """Plain JSON-ready dict (the run's ``metadata["health"]``)."""
@@ -105,13 +113,30 @@ def length_scale(system, q0: np.ndarray, t0: float, q: np.ndarray | None = None)
 
 def omega_max(system) -> float:
     """Largest ω with ``K v = ω² M v`` (0 for K = 0); computed once per system (cached in
-    its ``__dict__``, as :meth:`LinearSystem.stiffness_eigenvalue_range` does)."""
+    its ``__dict__``, as :meth:`LinearSystem.stiffness_eigenvalue_range` does).
+
+    Dense ``eigh`` (the last eigenvalue only) for a dense system; for a sparse one
+    (:data:`observer.sparse.DENSE_MAX_N`) Lanczos on the generalized problem, O(n) per
+    iteration (:func:`observer.sparse.largest_eigenvalue`: relative residual
+    :data:`~observer.sparse.LANCZOS_TOL_MAX`, else the Gershgorin bound). :func:`omega_max_method`
+    says which."""
     cached = system.__dict__.get("_omega_max")
     if cached is None:
         n = system.n
-        lam = sla.eigh(system.K, system.M, eigvals_only=True, subset_by_index=[n - 1, n - 1])[0]
+        if system.sparse:
+            lam, how = sps.largest_eigenvalue(system.K, system.M)
+        else:
+            lam = sla.eigh(system.K, system.M, eigvals_only=True, subset_by_index=[n - 1, n - 1])[0]
+            how = "dense generalized eigh (LAPACK)"
         cached = system.__dict__["_omega_max"] = float(np.sqrt(max(lam, 0.0)))
+        system.__dict__["_omega_max_how"] = how
     return cached
+
+
+def omega_max_method(system) -> str:
+    """How :func:`omega_max` computed ω_max of ``system`` (computing it if needed)."""
+    omega_max(system)
+    return system.__dict__["_omega_max_how"]
 
 
 def min_eig_projected(L_of, sets: list[tuple[int, np.ndarray]]) -> float | None:
@@ -142,8 +167,8 @@ def unforced(system, law, master_projection: bool) -> bool:
 def mechanical_energy(system, q: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``E = ½uᵀMu + ½qᵀKq − f_cᵀq`` per row and its scale ``½uᵀMu + ½qᵀKq + |f_cᵀq|``."""
     fc = np.asarray(system.forcing.constant, dtype=float)
-    T = 0.5 * np.einsum("ki,ij,kj->k", u, system.M, u)
-    U = 0.5 * np.einsum("ki,ij,kj->k", q, system.K, q)
+    T = 0.5 * sps.quadratic_rows(u, system.M)
+    U = 0.5 * sps.quadratic_rows(q, system.K)
     W = q @ fc
     return T + U - W, T + U + np.abs(W)
 
@@ -212,7 +237,8 @@ def assess(inp, record_every: int, q: np.ndarray, u: np.ndarray, active: np.ndar
     return Health(res, float(st.time(res_step)) if res_step >= 0 else None, tol,
                   stats.get("residual_source", "applied"), pen,
                   float(st.time(gap_step)) if gap_step >= 0 and pen > 0 else None, ell,
-                  float(pen_rel), lam, how, growth, bound, tuple(msgs))
+                  float(pen_rel), lam, how, growth, bound, tuple(msgs),
+                  {"omega_max": omega_max_method(sys_), **getattr(sys_, "check_methods", {})})
 
 
 def projected_sets(inp, record_every: int, active: np.ndarray, chi: np.ndarray) -> list:

@@ -47,6 +47,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from observer.errors import InputError
+from observer.sparse import abs_sum
 from observer.stepping import MoreauJean, NonFiniteState
 
 if TYPE_CHECKING:
@@ -321,9 +322,9 @@ class FiniteGuard:
         self.names = ("the master",) + tuple(
             f"observer {n!r}" for n in (tuple(inp.names) or tuple(f"obs{i}" for i in range(1, self.S))))
         with np.errstate(over="ignore", invalid="ignore"):
-            lim = OVERFLOW / (float(np.sum(np.abs(sys_.W))) + 1.0)
+            lim = OVERFLOW / (abs_sum(sys_.W) + 1.0)
             if self.S > 1:
-                quad = 2.0 * (float(np.sum(np.abs(sys_.M))) + float(np.sum(np.abs(sys_.K))))
+                quad = 2.0 * (abs_sum(sys_.M) + abs_sum(sys_.K))
                 lim = min(lim, float(np.sqrt(OVERFLOW / quad)) if quad > 0.0 else lim)
         self.limit = lim if np.isfinite(lim) else 0.0
 
@@ -847,12 +848,12 @@ def quadratic_forms(stepper: MoreauJean) -> tuple[np.ndarray, np.ndarray, np.nda
     passing the scenario's (sometimes read-only) matrices as they are compiled a second
     specialization of the kernel in the middle of a timed run (12–17 s, seen in the bench's
     observer cases)."""
-    from observer.stepping import to_band
+    from observer.stepping import dense, to_band
 
     sys_ = stepper.system
     C = 0.5 * (sys_.C + sys_.C.T)
     if stepper.S.band is None:
-        return tuple(np.array(A, dtype=np.float64, order="C", copy=True) for A in (sys_.M, sys_.K, C))
+        return tuple(np.array(dense(A), dtype=np.float64, order="C", copy=True) for A in (sys_.M, sys_.K, C))
     bw = stepper.S.band.bw
     return tuple(np.array(to_band(A, bw), dtype=np.float64, order="C", copy=True) for A in (sys_.M, sys_.K, C))
 

@@ -15,8 +15,9 @@ from typing import Any
 
 import numpy as np
 
+from observer import sparse as sps
 from observer.errors import InputError
-from observer.validation import (PROJECTION_COND_MAX, as_array, as_scalar, broadcast_vector,
+from observer.validation import (PROJECTION_COND_MAX, as_array, as_matrix, as_scalar, broadcast_vector,
                                  check_independent_columns, check_psd, check_spd, check_symmetric,
                                  extreme_eigenvalues, projection_condition)
 
@@ -183,10 +184,12 @@ class LinearSystem:
 
     Parameters
     ----------
-    M, C, K : ndarray, shape (n, n)
+    M, C, K : ndarray or scipy.sparse matrix, shape (n, n)
         Mass (SPD), damping and stiffness (symmetric PSD) matrices.
-    W : ndarray, shape (n, m)
+    W : ndarray or scipy.sparse matrix, shape (n, m)
         Generalized force directions w_j as columns, linearly independent.
+        Sparse matrices stay sparse (CSR) when n > :data:`observer.sparse.DENSE_MAX_N` and
+        are densified otherwise; dense ones stay dense. :attr:`sparse` says which.
     forcing : Harmonic
         f(t) = constant + Σ amplitude·cos(omega t + phase), dimension n.
     gap : Harmonic
@@ -205,15 +208,17 @@ class LinearSystem:
     check: bool = field(default=True, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        M = as_array("system.M", self.M, (None, None))
+        M = as_matrix("system.M", self.M, (None, None))
         n = M.shape[0]
         if M.shape != (n, n):
             raise InputError("system.M", f"must be square, got shape {M.shape[0]}x{M.shape[1]}")
         if n == 0:
             raise InputError("system.M", "must have at least one degree of freedom")
-        C = as_array("system.C", self.C, (n, n))
-        K = as_array("system.K", self.K, (n, n))
-        W = as_array("system.W", self.W, (n, None))
+        C = as_matrix("system.C", self.C, (n, n))
+        K = as_matrix("system.K", self.K, (n, n))
+        W = as_matrix("system.W", self.W, (n, None))
+        if n <= sps.DENSE_MAX_N:          # small: the dense code paths (sparse input densified)
+            M, C, K, W = (A.toarray() if sps.is_sparse(A) else A for A in (M, C, K, W))
         m = W.shape[1]
         if m == 0:
             raise InputError("system.W", "needs at least one contact column")
@@ -222,14 +227,23 @@ class LinearSystem:
         if self.gap.dim != m:
             raise InputError("system.gap", f"has dimension {self.gap.dim}, expected m = {m}")
         if self.check:
-            check_spd("system.M", M)
+            how = {"check_M": check_spd("system.M", M)}
             check_symmetric("system.C", C)
-            check_psd("system.C", C)
-            check_psd("system.K", K)
+            how["check_C"] = check_psd("system.C", C)
+            how["check_K"] = check_psd("system.K", K)
             check_independent_columns("system.W", W)
+            how["check_W"] = ("σ of W from Lanczos on the sparse WᵀW" if sps.is_sparse(W)
+                              else "dense SVD or banded eigenvalues of WᵀW")
+            object.__setattr__(self, "check_methods", how)
         for name, arr in (("M", M), ("C", C), ("K", K), ("W", W)):
-            arr.setflags(write=False)
+            if not sps.is_sparse(arr):
+                arr.setflags(write=False)
             object.__setattr__(self, name, arr)
+
+    @property
+    def sparse(self) -> bool:
+        """True when the matrices are held sparse (a large sparse system)."""
+        return any(sps.is_sparse(A) for A in (self.M, self.C, self.K, self.W))
 
     # -- sizes -----------------------------------------------------------------------------
     @property
@@ -313,5 +327,9 @@ class LinearSystem:
 
     def energy(self, q: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Mechanical energy ½uᵀMu + ½qᵀKq (kinetic plus elastic), time-major input allowed."""
+        if self.sparse:
+            U, Q = np.atleast_2d(u), np.atleast_2d(q)
+            E = 0.5 * sps.quadratic_rows(U, self.M) + 0.5 * sps.quadratic_rows(Q, self.K)
+            return E if np.ndim(u) > 1 else E[0]
         return 0.5 * np.einsum("...i,ij,...j->...", u, self.M, u) + 0.5 * np.einsum(
             "...i,ij,...j->...", q, self.K, q)

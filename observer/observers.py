@@ -20,9 +20,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 from observer.errors import InputError
 from observer.model import LinearSystem
+from observer.sparse import dense, quadratic_rows
 from observer.switching import SOURCES
 from observer.validation import as_array
 
@@ -68,7 +71,7 @@ class ObserverDesign:
     def metric_matrix(self, system: LinearSystem) -> np.ndarray | None:
         """The metric N as a matrix (None: K, the stepper's own cached projection)."""
         if self.metric == "mass":
-            return system.M
+            return dense(system.M)
         if self.metric == "identity":
             return np.eye(system.n)
         return None
@@ -168,8 +171,7 @@ def lyapunov(system: LinearSystem, q_s: np.ndarray, u_s: np.ndarray, q_m: np.nda
     """V = ½(u_s−u_m)ᵀM(u_s−u_m) + ½(q_s−q_m)ᵀK(q_s−q_m), time-major (N+1,) output."""
     v = u_s - u_m
     e = q_s - q_m
-    return 0.5 * np.einsum("ki,ij,kj->k", v, system.M, v) + 0.5 * np.einsum(
-        "ki,ij,kj->k", e, system.K, e)
+    return 0.5 * quadratic_rows(v, system.M) + 0.5 * quadratic_rows(e, system.K)
 
 
 def lyapunov_decrements(system: LinearSystem, h: float, a: dict, b: dict) -> dict[str, np.ndarray]:
@@ -189,18 +191,19 @@ def lyapunov_decrements(system: LinearSystem, h: float, a: dict, b: dict) -> dic
     e = a["q"] - b["q"]
     vbar = 0.5 * (v[1:] + v[:-1])
     out = {k: np.zeros(v.shape[0]) for k in ("damping", "impulse", "projection", "total", "residual")}
-    out["damping"][1:] = -h * np.einsum("ki,ij,kj->k", vbar, system.C, vbar)
+    out["damping"][1:] = -h * quadratic_rows(vbar, system.C)
     out["impulse"][1:] = np.einsum("ki,ki->k", vbar @ system.W, a["P"][1:] - b["P"][1:])
     dsig = _sigma(a, v.shape) - _sigma(b, v.shape)
     if "q_pre" in a and "q_pre" in b:          # any projection metric: the recorded pre-jump states
         e_pre = a["q_pre"][1:] - b["q_pre"][1:]
-        out["projection"][1:] = 0.5 * (np.einsum("ki,ij,kj->k", e[1:], system.K, e[1:])
-                                       - np.einsum("ki,ij,kj->k", e_pre, system.K, e_pre))
+        out["projection"][1:] = 0.5 * (quadratic_rows(e[1:], system.K)
+                                       - quadratic_rows(e_pre, system.K))
     elif np.any(dsig):                         # the K metric: e⁻ = e⁺ − K⁻¹WΔΣ
-        de = np.linalg.solve(system.K, system.W @ dsig[1:].T).T
+        de = (np.linalg.solve(system.K, system.W @ dsig[1:].T).T if not system.sparse
+              else spla.splu(sp.csc_matrix(system.K)).solve(np.asarray(system.W @ dsig[1:].T)).T)
         e_pre = e[1:] - de
-        out["projection"][1:] = 0.5 * (np.einsum("ki,ij,kj->k", e[1:], system.K, e[1:])
-                                       - np.einsum("ki,ij,kj->k", e_pre, system.K, e_pre))
+        out["projection"][1:] = 0.5 * (quadratic_rows(e[1:], system.K)
+                                       - quadratic_rows(e_pre, system.K))
     V = lyapunov(system, a["q"], a["u"], b["q"], b["u"])
     out["total"][1:] = np.diff(V)
     out["residual"] = out["total"] - out["damping"] - out["impulse"] - out["projection"]

@@ -8,7 +8,9 @@ so that ``python -m observer show NAME`` prints a file that ``run`` accepts unch
 TOML format (the contract; ``[observer]`` is used by the observers)::
 
     [scenario]          name, description
-    [system]            M, C, K (n×n), W (n×m, column j is w_j)
+    [system]            M, C, K (n×n), W (n×m, column j is w_j): each a nested array, or a
+                        sparse triplet table {shape = [n, m], rows, cols, values}
+                        (0-based, repeated pairs summed; large systems stay sparse)
     [system.forcing]    constant (n), amplitude (n), omega, phase  : f = c + a∘cos(ωt + φ)
     [[system.forcing.harmonics]]  amplitude, omega, phase          : more cos terms
     [system.gap]        offset (m), amplitude (m), omega, phase    : ν = o + a∘sin(ωt + φ)
@@ -37,7 +39,9 @@ from observer.errors import InputError
 from observer.impact import ImpactLaw
 from observer.model import Harmonic, LinearSystem
 from observer.solver_registry import solver_factory
-from observer.validation import MAX_DEPTH, as_array, as_scalar, check_step_count, check_step_parameters
+from observer import sparse as sps
+from observer.validation import (MAX_DEPTH, as_array, as_matrix, as_scalar, check_step_count,
+                                 check_step_parameters)
 
 _HARMONIC = {"amplitude": None, "omega": None, "phase": None}
 SCHEMA: dict = {
@@ -187,8 +191,11 @@ class Scenario:
 
     # -- construction ----------------------------------------------------------------------
     @staticmethod
-    def from_dict(doc: dict, source: str = "") -> "Scenario":
-        """Validate a scenario document (see module docstring) and build the scenario."""
+    def from_dict(doc: dict, source: str = "", system: LinearSystem | None = None) -> "Scenario":
+        """Validate a scenario document (see module docstring) and build the scenario.
+
+        ``system``: the already validated system of ``doc["system"]`` (:meth:`with_overrides`
+        when no ``system.*`` key changes: its checks are not repeated)."""
         if not isinstance(doc, dict):
             raise InputError("scenario", f"the document must be a table (a dict), got "
                              f"{type(doc).__name__}")
@@ -196,18 +203,19 @@ class Scenario:
         for key in REQUIRED:
             _get(doc, key)
         sysd = doc["system"]
-        M = as_array("system.M", sysd["M"], (None, None))
+        M = as_matrix("system.M", sysd["M"], (None, None))
         n = M.shape[0]
         if M.shape != (n, n) or n == 0:
             raise InputError("system.M", f"must be a non-empty square matrix, got shape "
                              f"{M.shape[0]}x{M.shape[1]}")
-        W = as_array("system.W", sysd["W"], (n, None))
+        W = as_matrix("system.W", sysd["W"], (n, None))
         m = W.shape[1]
         if m == 0:
             raise InputError("system.W", "needs at least one contact column")
         forcing = _harmonic_doc("system.forcing", sysd.get("forcing", {}), n, "cos", "constant")
         gap = _harmonic_doc("system.gap", sysd.get("gap", {}), m, "sin", "offset")
-        system = LinearSystem(M, sysd["C"], sysd["K"], W, forcing, gap)
+        if system is None:
+            system = LinearSystem(M, sysd["C"], sysd["K"], W, forcing, gap)
         law = ImpactLaw.build(doc["impact"]["law"], doc["impact"]["restitution"], m)
         q0 = as_array("initial.q", doc["initial"]["q"], (n,))
         u0 = as_array("initial.u", doc["initial"]["u"], (n,))
@@ -234,8 +242,20 @@ class Scenario:
                         solver, projection, dict(doc.get("observer", {})), source)
 
     def to_dict(self) -> dict:
-        """The scenario as a TOML-ready document (inverse of :meth:`from_dict`)."""
+        """The scenario as a TOML-ready document (inverse of :meth:`from_dict`): dense
+        matrices as nested lists, sparse ones as triplet tables (never densified)."""
+        return self._document(plain=True)
+
+    def _document(self, plain: bool) -> dict:
+        """The document; ``plain=False`` keeps the matrices and the initial state as the arrays
+        they are (what :meth:`with_overrides` hands back to :meth:`from_dict`: no round trip
+        through Python lists)."""
         s = self.system
+
+        def mat(A):
+            if not plain:
+                return A
+            return sps.triplet_document(A) if sps.is_sparse(A) else A.tolist()
 
         def harmonic(hm: Harmonic, const_key: str) -> dict:
             d: dict = {const_key: hm.constant.tolist()}
@@ -248,11 +268,11 @@ class Scenario:
 
         doc = {
             "scenario": {"name": self.name, "description": self.description},
-            "system": {"M": s.M.tolist(), "C": s.C.tolist(), "K": s.K.tolist(), "W": s.W.tolist(),
+            "system": {"M": mat(s.M), "C": mat(s.C), "K": mat(s.K), "W": mat(s.W),
                        "forcing": harmonic(s.forcing, "constant"), "gap": harmonic(s.gap, "offset")},
             "impact": {"law": self.law.law, "restitution": self.law.restitution.tolist()
                        if not self.law.is_global else float(self.law.restitution[0])},
-            "initial": {"q": self.q0.tolist(), "u": self.u0.tolist()},
+            "initial": {"q": mat(self.q0), "u": mat(self.u0)},
             "simulation": {"t_end": self.t_end, "h": self.h, "theta": self.theta,
                            "solver": self.solver, "master_projection": self.master_projection},
         }
@@ -262,7 +282,10 @@ class Scenario:
 
     def with_overrides(self, overrides: dict[str, Any]) -> "Scenario":
         """A new scenario with dotted-key overrides applied to its document."""
-        return Scenario.from_dict(apply_overrides(self.to_dict(), overrides), self.source)
+        overrides = check_overrides(overrides)
+        same = not any(k == "system" or k.startswith("system.") for k in overrides)
+        return Scenario.from_dict(apply_overrides(self._document(plain=False), overrides), self.source,
+                                  self.system if same else None)
 
     def parameters(self) -> dict:
         """Flat metadata describing the run settings (for results and reports)."""
@@ -280,8 +303,8 @@ def check_finite_energy(prefix: str, system: LinearSystem, q: np.ndarray, u: np.
     Errors name ``PREFIX.u`` or ``PREFIX.q``.
     """
     with np.errstate(over="ignore", invalid="ignore"):
-        kinetic = 0.5 * float(u @ system.M @ u)
-        elastic = 0.5 * float(q @ system.K @ q)
+        kinetic = 0.5 * float(u @ (system.M @ u))
+        elastic = 0.5 * float(q @ (system.K @ q))
         gaps = q @ system.W
     if not np.isfinite(kinetic):
         raise InputError(f"{prefix}.u", f"kinetic energy ½uᵀMu overflows ({kinetic}): the state is too large")

@@ -14,6 +14,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
+from observer import sparse as sps
 from observer.errors import InputError
 
 SYMMETRY_RTOL = 1e-10
@@ -109,10 +110,55 @@ def as_array(field: str, value: Any, shape: tuple[int | None, ...]) -> np.ndarra
     return arr
 
 
+def as_matrix(field: str, value: Any, shape: tuple[int | None, int | None]) -> Any:
+    """A system matrix: :func:`as_array`, or a CSR matrix for a ``scipy.sparse`` value or a
+    document's sparse triplet table (:data:`observer.sparse.TRIPLET_KEYS`); the shape and the
+    finiteness of the entries are checked either way (errors name ``field``)."""
+    if isinstance(value, dict):
+        value = triplet_matrix(field, value)
+    if not sps.is_sparse(value):
+        return as_array(field, value, shape)
+    A = sp.csr_matrix(value, dtype=float)
+    if any(s is not None and s != a for s, a in zip(shape, A.shape)):
+        want = "x".join("*" if s is None else str(s) for s in shape)
+        raise InputError(field, f"wrong shape: expected {want}, got {A.shape[0]}x{A.shape[1]}")
+    if not np.all(np.isfinite(A.data)):
+        raise InputError(field, "contains NaN or infinity")
+    return A
+
+
+def triplet_matrix(field: str, value: dict) -> sp.csr_matrix:
+    """A CSR matrix from a document's triplet table (:data:`observer.sparse.TRIPLET_KEYS`); errors name
+    ``field.KEY``."""
+    unknown = sorted(set(value) - set(sps.TRIPLET_KEYS))
+    if unknown:
+        raise InputError(f"{field}.{unknown[0]}", f"unknown key of a sparse matrix (known: "
+                         f"{', '.join(sps.TRIPLET_KEYS)})")
+    for key in sps.TRIPLET_KEYS:
+        if key not in value:
+            raise InputError(f"{field}.{key}", "required key of a sparse matrix is missing")
+    shape = as_array(f"{field}.shape", value["shape"], (2,))
+    if not (np.all(shape == np.round(shape)) and np.all(shape >= 1)):
+        raise InputError(f"{field}.shape", f"must be two positive integers, got {value['shape']!r}")
+    n, m = int(shape[0]), int(shape[1])
+    vals = as_array(f"{field}.values", value["values"], (None,))
+    idx = []
+    for key, size in (("rows", n), ("cols", m)):
+        ix = as_array(f"{field}.{key}", value[key], (vals.size,))
+        if not (np.all(ix == np.round(ix)) and np.all(ix >= 0) and np.all(ix < size)):
+            raise InputError(f"{field}.{key}", f"must be integers in 0..{size - 1}, one per value")
+        idx.append(ix.astype(np.int64))
+    A = sp.coo_matrix((vals, (idx[0], idx[1])), shape=(n, m)).tocsr()
+    A.sum_duplicates()
+    return A
+
+
 def check_entry_range(field: str, A: np.ndarray) -> None:
     """Raise unless every entry's square and every nonzero entry's inverse are finite:
     :data:`INV_MIN` ≤ |a| ≤ :data:`SQRT_MAX` or a = 0 (the system matrices enter quadratic
     forms, products and inverses; a 1e308 stiffness or a 1e-310 mass would overflow them)."""
+    if sps.is_sparse(A):
+        A = sp.csr_matrix(A).data          # the stored entries (an index into them is reported)
     mag = np.abs(A)
     big = np.argwhere(mag > SQRT_MAX)
     if big.size:
@@ -152,8 +198,12 @@ def check_symmetric(field: str, A: np.ndarray) -> None:
     """Raise unless ``A``'s entries are in range (:func:`check_entry_range`) and ``A`` is
     symmetric to :data:`SYMMETRY_RTOL`."""
     check_entry_range(field, A)
-    scale = max(float(np.max(np.abs(A))), np.finfo(float).tiny)
-    asym = float(np.max(np.abs(A - A.T)))
+    if sps.is_sparse(A):
+        scale = max(float(abs(A).max()), np.finfo(float).tiny)
+        asym = float(abs(A - A.T).max())
+    else:
+        scale = max(float(np.max(np.abs(A))), np.finfo(float).tiny)
+        asym = float(np.max(np.abs(A - A.T)))
     if asym > SYMMETRY_RTOL * scale:
         raise InputError(field, f"matrix is not symmetric (max |A - A^T| = {asym:.3g})")
 
@@ -167,8 +217,12 @@ def extreme_eigenvalues(A: np.ndarray) -> tuple[float, float]:
     """Smallest and largest eigenvalue of the symmetric part of ``A``.
 
     Dense ``eigvalsh`` for small or wide-band matrices; for n ≥ :data:`BANDED_EIG_MIN_N` with
-    bandwidth ≤ n/8 (the chain's M, C, K), ``scipy.linalg.eigvals_banded`` on the band only.
+    bandwidth ≤ n/8 (the chain's M, C, K), ``scipy.linalg.eigvals_banded`` on the band only; a
+    sparse A (a large system, :data:`observer.sparse.DENSE_MAX_N`) by Lanczos
+    (:func:`observer.sparse.extreme_eigenvalues`, O(n) for a banded A).
     """
+    if sps.is_sparse(A):
+        return sps.extreme_eigenvalues(A)
     S = 0.5 * (A + A.T)
     n = S.shape[0]
     if n >= BANDED_EIG_MIN_N:
@@ -185,21 +239,34 @@ def extreme_eigenvalues(A: np.ndarray) -> tuple[float, float]:
     return float(eig[0]), float(eig[-1])
 
 
-def check_spd(field: str, A: np.ndarray) -> None:
-    """Raise unless ``A`` is symmetric positive definite (smallest eigenvalue > 1e-14·largest)."""
+def check_spd(field: str, A: np.ndarray) -> str:
+    """Raise unless ``A`` is symmetric positive definite (smallest eigenvalue > 1e-14·largest).
+
+    A sparse narrowly banded A passes when ``A − 1e-14·γ·I`` has a banded Cholesky factor (γ its
+    Gershgorin bound ≥ λ_max: then λ_min > 1e-14·λ_max), in O(n·bw²); its eigenvalues are
+    computed only to word a failure."""
     check_symmetric(field, A)
+    if sps.is_sparse(A) and sps.definite_by_cholesky(A, -1e-14 * sps.gershgorin_max(A)):
+        return "banded Cholesky of A − 1e-14·γ·I (γ: Gershgorin bound)"
     lo, hi = extreme_eigenvalues(A)
     if lo <= 0 or lo <= 1e-14 * hi:
         raise InputError(field, f"matrix is not positive definite (smallest eigenvalue {lo:.3g})")
+    return "Lanczos extreme eigenvalues" if sps.is_sparse(A) else "dense or banded eigenvalues"
 
 
-def check_psd(field: str, A: np.ndarray) -> None:
-    """Raise unless ``A`` is symmetric positive semi-definite (to :data:`PSD_RTOL`)."""
+def check_psd(field: str, A: np.ndarray) -> str:
+    """Raise unless ``A`` is symmetric positive semi-definite (to :data:`PSD_RTOL`).
+
+    A sparse narrowly banded A passes when ``A + PSD_RTOL·γ·I`` has a banded Cholesky factor (γ
+    its Gershgorin bound, ≥ its largest eigenvalue), in O(n·bw²)."""
     check_symmetric(field, A)
+    if sps.is_sparse(A) and sps.definite_by_cholesky(A, PSD_RTOL * max(sps.gershgorin_max(A), 1e-300)):
+        return "banded Cholesky of A + 1e-10·γ·I (γ: Gershgorin bound)"
     lo, hi = extreme_eigenvalues(A)
     scale = max(abs(lo), abs(hi), 1.0e-300)
     if lo < -PSD_RTOL * scale:
         raise InputError(field, f"matrix is not positive semi-definite (smallest eigenvalue {lo:.3g})")
+    return "Lanczos extreme eigenvalues" if sps.is_sparse(A) else "dense or banded eigenvalues"
 
 
 def _bandwidth(A: np.ndarray) -> int:
@@ -230,11 +297,20 @@ cond(L_I)·ε ≤ 1e-6 on every active set I (cond(L_I) ≤ cond(L), Cauchy inte
 def singular_value_range(W: np.ndarray) -> tuple[float, float]:
     """Smallest and largest singular value of W (n×m, m ≤ n); (0, 1) when m > n.
 
-    Dense SVD up to m = 512; beyond, from the extreme eigenvalues of WᵀW (banded, O(m·bw²)).
+    Dense SVD up to m = 512; beyond, from the extreme eigenvalues of WᵀW (banded, O(m·bw²);
+    sparse W: the sparse WᵀW by Lanczos, shift-invert on its banded Cholesky factor for σ_min;
+    σ_min = 0 when that factorization fails, i.e. σ_min/σ_max ≲ √ε: numerically dependent).
     """
     n, m = W.shape
     if m > n:
         return 0.0, 1.0
+    if sps.is_sparse(W):
+        G = sp.csr_matrix(W.T @ W)
+        if sps.is_narrowly_banded(G) and sps.banded_cholesky(G) is None:
+            # WᵀW not positive definite to round-off: σ_min/σ_max ≲ √ε, numerically rank deficient
+            return 0.0, float(np.sqrt(max(sps.largest_eigenvalue(G)[0], 0.0)))
+        lo, hi = sps.extreme_eigenvalues(G)
+        return float(np.sqrt(max(lo, 0.0))), float(np.sqrt(max(hi, 0.0)))
     if m <= 512:
         sv = np.linalg.svd(W, compute_uv=False)
         return float(sv[-1]), float(sv[0])
@@ -249,7 +325,8 @@ def check_independent_columns(field: str, W: np.ndarray) -> tuple[float, float]:
     below m (σ_min ≤ max(n, m)·ε·σ_max, the tolerance of ``numpy.linalg.matrix_rank``: an
     exactly dependent W computes σ_min at round-off level, not 0); "nearly dependent" when
     σ_min/σ_max ≤ √ε; first, entries out of range (:func:`check_entry_range`). Returns
-    (σ_min, σ_max).
+    (σ_min, σ_max). A sparse W: σ² from the sparse WᵀW by Lanczos (shift-invert on its banded
+    Cholesky factor for σ_min; a failed factorization is a dependent W).
     """
     check_entry_range(field, W)
     sv_min, sv_max = singular_value_range(W)
@@ -281,6 +358,8 @@ def projection_condition(K: np.ndarray, W: np.ndarray,
     if bound <= PROJECTION_COND_MAX:
         return float(bound)
     n, m = W.shape
+    if sps.is_sparse(K) or sps.is_sparse(W):
+        return sparse_projection_condition(K, W, bound)
     try:
         bw = _bandwidth(K)
         if n >= BANDED_EIG_MIN_N and bw <= n // 8:
@@ -297,6 +376,26 @@ def projection_condition(K: np.ndarray, W: np.ndarray,
         lo, hi = extreme_eigenvalues(L)
         return float(hi / lo) if lo > 0.0 else float("inf")
     return cholesky_condition_estimate(L)
+
+
+def sparse_projection_condition(K: Any, W: Any, bound: float) -> float:
+    """cond(WᵀK⁻¹W) of a large sparse system without forming it: λ_max by Lanczos on
+    ``x ↦ Wᵀ K⁻¹ (W x)`` (banded Cholesky of K), λ_min as 1/λ_max of ``L⁻¹ = W⁻¹ K W⁻ᵀ`` when W is
+    square (sparse LU of W); otherwise the bound cond(K)·cond(W)² is returned (an upper bound)."""
+    n, m = W.shape
+    chol = sps.banded_cholesky(K) if sps.is_narrowly_banded(K) else None
+    if chol is None or n != m:
+        return float(bound)
+    import scipy.sparse.linalg as spla
+    Ws = sp.csc_matrix(W)
+    lu = spla.splu(Ws)
+    L_op = spla.LinearOperator((m, m), dtype=float,
+                               matvec=lambda x: Ws.T @ sla.cho_solve_banded((chol, True), Ws @ x))
+    Linv_op = spla.LinearOperator((m, m), dtype=float,
+                                  matvec=lambda x: lu.solve(K @ lu.solve(x, trans="T")))
+    hi = sps.largest_eigenvalue(L_op)[0]
+    inv_hi = sps.largest_eigenvalue(Linv_op)[0]
+    return float(hi * inv_hi) if inv_hi > 0.0 else float("inf")
 
 
 EXACT_COND_MAX_M = 512

@@ -378,7 +378,8 @@ def scaling_fits(scal: pd.DataFrame, big_from: int = 50,
     """Fitted exponents p of quantity ∝ N^p: CPU time per step over all N, from N =
     ``fit_from`` (the acceptance fit: ``"CPU time per step (N ≥ 10)"``), over N ≥ ``big_from``
     (each with ≥ 2 points and only when it differs from the full range), the loop's wall time
-    per step from N = ``fit_from`` (when the rows have it) and the peak memory. Columns
+    per step and the whole call's CPU time (load + setup + loop + health, issue 23) from N =
+    ``fit_from`` (when the rows have them) and the peak memory. Columns
     ``quantity, N_min, N_max, exponent, coefficient`` (the fit's log-intercept)."""
     scal = scal.sort_values("N")
     rows = []
@@ -399,6 +400,8 @@ def scaling_fits(scal: pd.DataFrame, big_from: int = 50,
     sub = scal[scal["N"] >= fit_from]
     if len(sub) >= 2:
         add(f"loop wall time per step (N ≥ {fit_from})", sub, "loop_per_step_s")
+    if len(sub) >= 2 and "whole_call_cpu_s" in sub and sub["whole_call_cpu_s"].notna().all():
+        add(f"whole call CPU time (N ≥ {fit_from})", sub, "whole_call_cpu_s")
     if "peak_mem_mb" in scal:
         add("peak memory", scal, "peak_mem_mb")
     return pd.DataFrame(rows, columns=["quantity", "N_min", "N_max", "exponent", "coefficient"])

@@ -205,15 +205,35 @@ def robustness_figure(rob: pd.DataFrame, kinds: list[str], labels: dict[str, str
                   "Markers: median over seeds; shaded band: 10–90 % of the seeds.")
 
 
+def _whole_call_panel(ax, sc: pd.DataFrame, fit: tuple[float, float, int] | None) -> None:
+    """The whole call's CPU time (load + setup + loop + health) against N, with its fit
+    ``(p, c, N_min)`` drawn over the N it was fitted on."""
+    N = sc["N"].to_numpy(dtype=float)
+    ax.loglog(N, sc["whole_call_cpu_s"], "o-", color="black", label="whole call")
+    if fit is not None:
+        p, c, n_min = fit
+        Nf = N[N >= n_min]
+        ax.loglog(Nf, np.exp(c) * Nf ** p, "--", color="tab:orange", label=f"fit ∝ N^{p:.2f} (N ≥ {n_min})")
+    ax.set_xlabel("N")
+    ax.set_ylabel("load_scenario + simulate, CPU (s)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+
+
 def scaling_figure(sc: pd.DataFrame, fit_time: tuple[float, float], fit_mem: tuple[float, float] | None,
-                   fit_from: int | None = None) -> Figure | None:
-    """CPU time per step and peak memory against N (log-log) with the fitted power laws (the
-    time fit drawn over the N it was fitted on, ``N ≥ fit_from``)."""
+                   fit_from: int | None = None,
+                   fit_whole: tuple[float, float, int] | None = None) -> Figure | None:
+    """CPU time per step, peak memory and (when the rows have it) the whole call's CPU time
+    against N (log-log) with the fitted power laws (the time fits drawn over the N they were
+    fitted on, ``N ≥ fit_from``)."""
     sc = sc[sc["status"] == "ok"].sort_values("N")
     if sc.empty:
         return None
     N = sc["N"].to_numpy(dtype=float)
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    whole = "whole_call_cpu_s" in sc and sc["whole_call_cpu_s"].notna().any()
+    fig, axes = plt.subplots(1, 3 if whole else 2, figsize=(15 if whole else 10, 3.8))
+    if whole:
+        _whole_call_panel(axes[2], sc, fit_whole)
     ax = axes[0]
     ax.loglog(N, sc["cpu_per_step_s"] * 1e6, "o-", color="black", label="measured")
     p, c = fit_time

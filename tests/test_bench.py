@@ -115,9 +115,9 @@ def test_quick_and_full_cover_every_kind_and_the_issue_grid(name):
     assert {c.perturbation for c in rob} == set(KINDS)
     seeds = Counter((c.perturbation, c.size) for c in rob if c.perturbation in RANDOM_KINDS)
     assert min(seeds.values()) >= (20 if full else 3)
-    # scaling: up to N = 1000 in full, from N = 5
+    # scaling: up to N = 2000 in full, from N = 5
     Ns = [dict(c.params)["param.N"] for c in suite.of_kind("scaling")]
-    assert Ns == ([5, 10, 20, 50, 100, 200, 500, 1000] if full else [5, 10, 20, 50, 100, 200])
+    assert Ns == ([5, 10, 20, 50, 100, 200, 500, 1000, 2000] if full else [5, 10, 20, 50, 100, 200])
     if full:
         assert [c.scenario for c in suite.of_kind("peers")] == list(PROBLEMS)
         assert {c.scenario for c in suite.of_kind("checks")} == set(check_scenarios())
@@ -248,6 +248,9 @@ def test_smoke_suite_rows_are_tidy_and_complete(smoke_run):
         read_log(out / f, 1)
     sc = df[df["kind"] == "scaling"]
     assert (sc["peak_mem_mb"] > 0).all() and (sc["cpu_per_step_s"] > 0).all()
+    # the whole call (issue 23): load + simulate, at least its load part and the run's own CPU
+    assert (sc["load_cpu_s"] > 0).all() and (sc["whole_call_cpu_s"] > sc["load_cpu_s"]).all()
+    assert (sc["whole_call_wall_s"] > 0).all()
     # compiled engine everywhere (pivoting solver), compile time measured once and apart
     timed = df[(df["status"] == "ok") & df["kind"].isin(["observers", "work_precision", "robustness",
                                                           "scaling"])]

@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("observer", "proofs_checks", "bench", "reports")
 """Lowest layer first: a package may import those to its left only."""
 
-MODEL = ("observer.errors", "observer.validation", "observer.model", "observer.impact",
+MODEL = ("observer.errors", "observer.sparse", "observer.validation", "observer.model", "observer.impact",
          "observer.tomlio", "observer.solver_registry", "observer.scenario", "observer.scenarios",
          "observer.closed_form")
 """The model layer of ``observer`` (a name covers its submodules)."""

@@ -466,7 +466,8 @@ def _synthetic_rows() -> list[tuple[str, list[dict]]]:
             "cpu_per_step_s": 3e-6 * N ** 1.04 * noise, "steps_per_s": 1 / (3e-6 * N ** 1.04 * noise),
             "loop_per_step_s": 2e-6 * N ** 1.08 / noise, "setup_cpu_time_s": 1e-4 * N,
             "mean_active": 0.5, "max_active": 3, "peak_mem_mb": 0.2 * N ** 2 / noise,
-            "trajectory_mb": 0.01 * N}]))
+            "trajectory_mb": 0.01 * N, "whole_call_cpu_s": 1e-3 * N ** 1.06 * noise ** 2,
+            "whole_call_wall_s": 1.1e-3 * N ** 1.06, "load_cpu_s": 1e-5 * N}]))
     rng = np.random.default_rng(2024)
     for kind, size, seeds in ROB_POINTS:
         for seed in range(seeds):
@@ -683,6 +684,7 @@ def test_scaling_exponents_are_recomputed(synthetic_report):
                 "CPU time per step (N ≥ 10)": _fitted(from10["N"], from10["cpu_per_step_s"]),
                 "CPU time per step (N ≥ 50)": _fitted(big["N"], big["cpu_per_step_s"]),
                 "loop wall time per step (N ≥ 10)": _fitted(from10["N"], from10["loop_per_step_s"]),
+                "whole call CPU time (N ≥ 10)": _fitted(from10["N"], from10["whole_call_cpu_s"]),
                 "peak memory": _fitted(sc["N"], sc["peak_mem_mb"])}
     p10 = expected["CPU time per step (N ≥ 10)"]
     assert p10 == pytest.approx(1.04, abs=0.03)
@@ -698,6 +700,10 @@ def test_scaling_exponents_are_recomputed(synthetic_report):
     assert f"all N from 5: N^{expected['CPU time per step']:.2f}" in key
     assert f"; N ≥ 50: N^{expected['CPU time per step (N ≥ 50)']:.2f})" in key
     assert ("acceptance (≤ 1.1 from N = 10 to 1000): met" in key) == (round(p10, 2) <= 1.1)
+    whole = expected["whole call CPU time (N ≥ 10)"]
+    assert f"the whole call (load_scenario + simulate: builder, validation, setup, loop, health) ∝ N^{whole:.2f}" in key
+    whole_col = page.table("scaling", "Scaling of the chain").column("whole call CPU (s)")
+    assert [_num(c) for c in whole_col] == pytest.approx(list(sc["whole_call_cpu_s"]), rel=5e-3)
     per_step = page.table("scaling", "Scaling of the chain").column("CPU per step (µs)")
     assert [_num(c) for c in per_step] == pytest.approx(list(sc["cpu_per_step_s"] * 1e6), rel=5e-3)
 

@@ -66,7 +66,8 @@ class RunDescription:
         Largest complementarity residual a step may leave (above it the run stops).
     record_every : int or None
         Keep every k-th step (row r = step r·k); None: 1, or about 10 000 rows with
-        ``store="summary"``. The per-step decrements of V need every step (else None).
+        ``store="summary"`` (fewer for a large system: at most 2²⁴ state values,
+        :func:`observer.engines.timestepping.summary_record_every`). The per-step decrements of V need every step (else None).
     store : {"full", "summary"}
         ``"summary"`` (compiled engine): V of each observer, its damping/impulse/remaining
         parts, first-passage and settling times, the master's closings and deepest

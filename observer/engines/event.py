@@ -11,8 +11,15 @@ from __future__ import annotations
 import numpy as np
 
 from observer.engines.base import Engine, Refusal, RunDescription
+from observer.sparse import DENSE_MAX_N
 from observer.result import EventTable, RunRecord, RunState, RunStatus, SlaveTrajectory, StepStats, \
     package_versions
+
+
+EVENT_MAX_N = DENSE_MAX_N
+"""Largest system the event engine accepts (:data:`observer.sparse.DENSE_MAX_N`, 512 degrees of
+freedom): its exact flow uses dense matrix exponentials of size 2n and dense M⁻¹, so a larger
+(sparse) system is refused with the size instead of attempted."""
 
 
 class EventEngine(Engine):
@@ -25,7 +32,13 @@ class EventEngine(Engine):
     description = "exact event-driven integration, sampled on t_k = k·h"
 
     def refuses(self, run: RunDescription) -> Refusal | None:
-        """Time-stepping options, another solver, a law it lacks, a self-driven χ."""
+        """Time-stepping options, another solver, a law it lacks, a self-driven χ, a system
+        larger than :data:`EVENT_MAX_N` degrees of freedom."""
+        n = run.scenario.system.n
+        if n > EVENT_MAX_N:
+            return Refusal(f"the event-driven integrator handles up to {EVENT_MAX_N} degrees of freedom "
+                           f"(it forms dense 2n × 2n matrix exponentials, O(n³)); this system has "
+                           f"n = {n}: use integrator=\"time-stepping\"", "integrator")
         for option, value, default in (("record_every", run.record_every, None),
                                        ("store", run.store, "full")):
             if value != default:

@@ -19,6 +19,20 @@ from observer.result import (LazyFrame, RunRecord, RunStatus, SimulationResult, 
 from observer.stepping import MoreauJean
 
 
+SUMMARY_ROW_VALUES = 1 << 24
+"""Most state values (q and u of every system, over the recorded rows) ``store="summary"``
+keeps by default: 2²⁴ floats = 128 MiB, whatever the horizon and the system's size."""
+
+
+def summary_record_every(steps: int, n: int, systems: int) -> int:
+    """The default ``record_every`` of ``store="summary"``: about 10 000 rows, and fewer when
+    the states of that many rows would exceed :data:`SUMMARY_ROW_VALUES` values (a chain of
+    10⁵ blocks, 3 systems, 1000 steps: every 72nd step), so that the memory of a summary run
+    is bounded for any n (the summary itself streams over every step)."""
+    per_row = 2 * n * systems
+    return max(1, steps // 10_000, -(-(steps + 1) * per_row // SUMMARY_ROW_VALUES))
+
+
 class TimeStepping(Engine):
     """A Moreau–Jean engine: the loop :attr:`loop` of :func:`observer.loop.run` on the
     stepper of the scenario (matrix structure :attr:`structure`)."""
@@ -34,7 +48,8 @@ class TimeStepping(Engine):
                              residual_tol=run.residual_tol, structure=self.structure)
         record_every = run.record_every
         if record_every is None:
-            record_every = max(1, stepper.steps // 10_000) if run.store == "summary" else 1
+            record_every = (summary_record_every(stepper.steps, sc.system.n, 1 + len(slaves))
+                            if run.store == "summary" else 1)
         record_every = check_record_every(record_every)
         inp = loop_input(run, stepper)
         other_metric = any(s.position_jumps and s.metric != "K" for s in slaves)

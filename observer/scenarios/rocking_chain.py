@@ -24,6 +24,8 @@ form (the Delassus matrix has negative off-diagonals for flat blocks, H < 2√2 
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
 
 DESCRIPTION = "N rocking blocks (y, phi), two corner contacts per interface, moving ground"
 
@@ -33,34 +35,76 @@ PARAMETERS = dict(N=10, m=1.0, b=0.1, H=0.1, a=0.08, k=1000.0, c=5.0, g0=9.81, s
 """Defaults (SI units). ``slave_offset`` perturbs φ1 and y_N of the observers' initial state."""
 
 
-def matrices(N: int, m: float, b: float, H: float, a: float, k: float, c: float):
-    """Return M, C, K, W of the chain (n = m = 2N) and the interface matrices K_j, C_j."""
+def sparse_matrices(N: int, m: float, b: float, H: float, a: float, k: float, c: float):
+    """Return M, C, K, W of the chain (n = m = 2N) as CSR matrices, assembled from triplets in
+    O(N) (never a dense n × n), and the interface matrices K_j, C_j (2 × 2, dense).
+
+    Interface j+1 joins block j (the ground if j = 0) to block j+1: with D = E_{j+1} − E_j,
+    ``DᵀXD`` adds X on the (j+1, j+1) block, −X on the off-diagonal blocks and X on the (j, j)
+    block; repeated entries are summed (two equal terms: exactly the dense assembly's values).
+    """
     n = 2 * N
     J = m * (4 * b * b + H * H) / 12.0
-    M = np.diag(np.tile([m, J], N))
     offsets = (-a, a)
     K_int = sum(k * np.outer([1.0, x], [1.0, x]) for x in offsets)
     C_int = sum(c * np.outer([1.0, x], [1.0, x]) for x in offsets)
-    K = np.zeros((n, n))
-    C = np.zeros((n, n))
-    W = np.zeros((n, n))
-    for j in range(N):                       # interface j+1 joins block j (ground if j = 0) to j+1
-        # D = E_{j+1} − E_j (2×n): Dᵀ X D adds X on the (j+1, j+1) block, −X on the
-        # off-diagonal blocks and X on the (j, j) block (assembled in place, O(N) overall)
-        hi = slice(2 * j, 2 * j + 2)
-        lo = slice(2 * j - 2, 2 * j) if j > 0 else None
-        for Mat, X in ((K, K_int), (C, C_int)):
-            Mat[hi, hi] += X
-            if lo is not None:
-                Mat[lo, lo] += X
-                Mat[lo, hi] -= X
-                Mat[hi, lo] -= X
-        for side, x in enumerate((-b, b)):
-            w = np.array([1.0, x])
-            W[hi, 2 * j + side] = w
-            if lo is not None:
-                W[lo, 2 * j + side] = -w
-    return M, C, K, W, K_int, C_int
+    r2, c2 = np.repeat([0, 1], 2), np.tile([0, 1], 2)              # a 2×2 block's entries
+    j = np.arange(N)
+    hi = (2 * j)[:, None]                                            # first row of block j+1
+    lo = (2 * j - 2)[1:, None]                                       # first row of block j (j ≥ 1)
+
+    def assemble(X):
+        x = X.ravel()
+        rows = [hi + r2, lo + r2, lo + r2, hi[1:] + r2]
+        cols = [hi + c2, lo + c2, hi[1:] + c2, lo + c2]
+        vals = [np.broadcast_to(x, (N, 4)), np.broadcast_to(x, (N - 1, 4)),
+                np.broadcast_to(-x, (N - 1, 4)), np.broadcast_to(-x, (N - 1, 4))]
+        return sp.csr_matrix((np.concatenate([v.ravel() for v in vals]),
+                              (np.concatenate([r.ravel() for r in rows]),
+                               np.concatenate([q.ravel() for q in cols]))), shape=(n, n))
+
+    M = sp.diags(np.tile([m, J], N)).tocsr()
+    w = np.array([[1.0, -b], [1.0, b]])                               # [1, x_s] for s = L, R
+    col = (2 * j[:, None] + np.arange(2))                            # contact (j, s)
+    rows = [hi[:, :, None] + np.arange(2)[None, None, :] + 0 * col[:, :, None],
+            lo[:, :, None] + np.arange(2)[None, None, :] + 0 * col[1:, :, None]]
+    cols = [np.broadcast_to(col[:, :, None], (N, 2, 2)), np.broadcast_to(col[1:, :, None], (N - 1, 2, 2))]
+    vals = [np.broadcast_to(w, (N, 2, 2)), np.broadcast_to(-w, (N - 1, 2, 2))]
+    W = sp.csr_matrix((np.concatenate([v.ravel() for v in vals]),
+                       (np.concatenate([r.ravel() for r in rows]),
+                        np.concatenate([q.ravel() for q in cols]))), shape=(n, n))
+    for A in (M, W):
+        A.sum_duplicates()
+    return M, assemble(C_int), assemble(K_int), W, K_int, C_int
+
+
+def matrices(N: int, m: float, b: float, H: float, a: float, k: float, c: float):
+    """Return M, C, K, W of the chain (n = m = 2N) as dense arrays and the interface matrices
+    K_j, C_j (:func:`sparse_matrices`, densified: for small N and the tests)."""
+    M, C, K, W, K_int, C_int = sparse_matrices(N, m, b, H, a, k, c)
+    return M.toarray(), C.toarray(), K.toarray(), W.toarray(), K_int, C_int
+
+
+def document_matrix(A) -> list | dict:
+    """A matrix as the document holds it: nested lists up to n = :data:`observer.sparse.DENSE_MAX_N`
+    (as always), beyond a sparse triplet table of NumPy arrays (O(nnz), never a dense n × n;
+    ``Scenario.to_dict`` gives the TOML lists)."""
+    from observer.sparse import DENSE_MAX_N, triplet_document
+    return A.toarray().tolist() if A.shape[0] <= DENSE_MAX_N else triplet_document(A, plain=False)
+
+
+def static_state(K, W, f_grav: np.ndarray, s: np.ndarray):
+    """The static configuration ``q_s = K⁻¹f_grav`` and the unloaded clearances
+    ``g⁰ = s − Wᵀq_s``: dense for n ≤ :data:`observer.sparse.DENSE_MAX_N` (the reference
+    values, bit for bit), else a banded Cholesky solve and a sparse product (O(n))."""
+    from observer.sparse import DENSE_MAX_N, to_band
+    n = K.shape[0]
+    if n <= DENSE_MAX_N:
+        q_s = np.linalg.solve(K.toarray(), f_grav)
+        return q_s, s - W.toarray().T @ q_s
+    chol = sla.cholesky_banded(to_band(K, 3), lower=True)
+    q_s = sla.cho_solve_banded((chol, True), f_grav)
+    return q_s, s - W.T @ q_s
 
 
 PLOT = dict(dof=1, contact=1, labels=("φ₁ (rad)", "corner gap (m)"))
@@ -91,13 +135,12 @@ def document(**overrides) -> dict:
     if N < 1 or N != p["N"]:
         from observer.errors import InputError
         raise InputError("param.N", f"must be a positive integer, got {p['N']!r}")
-    M, C, K, W, K_int, C_int = matrices(N, p["m"], p["b"], p["H"], p["a"], p["k"], p["c"])
+    M, C, K, W, K_int, C_int = sparse_matrices(N, p["m"], p["b"], p["H"], p["a"], p["k"], p["c"])
     n = 2 * N
     f_grav = np.zeros(n)
     f_grav[0::2] = -p["g0"] * p["m"]
-    q_s = np.linalg.solve(K, f_grav)
-    s = np.tile([p["s_L"], p["s_R"]], N)
-    g0 = s - W.T @ q_s
+    q_s, g0 = static_state(K, W, f_grav, np.tile([p["s_L"], p["s_R"]], N))
+    entry = document_matrix
     Y, Om = p["Y"], p["Omega"]
     # f = f_grav + E_1ᵀ(K_1 [Y sin Ωt, 0] + C_1 [YΩ cos Ωt, 0]); sin Ωt = cos(Ωt − π/2)
     amp_k = np.zeros(n)
@@ -111,7 +154,7 @@ def document(**overrides) -> dict:
     slave_q[n - 2] += p["slave_offset"]
     return {
         "scenario": {"name": "rocking_chain", "description": DESCRIPTION},
-        "system": {"M": M.tolist(), "C": C.tolist(), "K": K.tolist(), "W": W.tolist(),
+        "system": {"M": entry(M), "C": entry(C), "K": entry(K), "W": entry(W),
                    "forcing": {"constant": f_grav.tolist(), "amplitude": amp_c.tolist(),
                                "omega": Om, "phase": 0.0,
                                "harmonics": [{"amplitude": amp_k.tolist(), "omega": Om,

@@ -1,0 +1,230 @@
+"""Sparse and banded system matrices: storage, structure and O(n) spectral checks.
+
+A system's M, C, K, W are NumPy arrays for small systems and ``scipy.sparse`` CSR matrices
+for large sparse ones (:data:`DENSE_MAX_N`): a sparse input of at most that many degrees of
+freedom is densified on construction, so every small system runs the dense code paths it
+always ran (bitwise the same trajectories); beyond, nothing of size n × n is formed for a
+banded system.
+
+The spectral quantities of a large sparse matrix come from
+
+* a banded Cholesky factorization (``scipy.linalg.cholesky_banded``, O(n·bw²)) — positive
+  definiteness, and the shift-invert operator for the smallest eigenvalue;
+* Lanczos (``scipy.sparse.linalg.eigsh``, ARPACK) for the extreme eigenvalues, with the
+  residual tolerance :data:`LANCZOS_TOL` (for a symmetric matrix the Ritz value is within
+  ``‖r‖ ≤ tol·|λ|`` of an eigenvalue, and the largest Ritz value never exceeds λ_max);
+* the Gershgorin bound when Lanczos does not converge (a rigorous upper bound of λ_max).
+
+Every function that computes one says how (the ``how`` strings end up in the health record).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from observer.errors import InputError
+
+DENSE_MAX_N = 512
+"""Largest n held as dense arrays: a sparse M, C, K, W (a TOML triplet table, a generator's
+``scipy.sparse`` matrix) of a system with at most this many degrees of freedom is converted
+with ``.toarray()`` on construction (dense n × n costs at most 2 MiB there, and the dense
+code paths are the reference ones); a larger sparse system stays sparse (CSR)."""
+
+LANCZOS_TOL = 1e-8
+"""Relative residual tolerance of the shift-invert Lanczos for a smallest eigenvalue
+(``eigsh(tol=...)``): the Ritz value θ has ``‖Ax − θx‖ ≤ tol·|θ|`` and so lies within that of
+an eigenvalue (the inverse's top is well separated: a few dozen iterations)."""
+
+LANCZOS_TOL_MAX = 1e-3
+"""Relative residual tolerance of Lanczos for a largest eigenvalue. The top of a long chain's
+spectrum is a dense cluster: a tight tolerance costs thousands of restarts (N = 10⁴ blocks:
+50 s at 1e-6, 0.18 s at 1e-3), a loose one is met by a Ritz value θ ≤ λ_max within ``tol·θ``
+of an eigenvalue of the cluster. Measured on the chain N = 500 against dense ``eigh``: λ_max
+low by 2.0e-4 (ω_max by 1.0e-4); the health record's ω_max needs 1 %."""
+
+LANCZOS_NCV = 32
+"""Lanczos basis size (ARPACK ``ncv``): the chain's top eigenvalues cluster, a larger basis
+converges in fewer restarts."""
+
+TRIPLET_KEYS = ("shape", "rows", "cols", "values")
+"""The keys of a sparse matrix in a scenario document: ``{shape = [n, m], rows = [...],
+cols = [...], values = [...]}`` (0-based indices; repeated (row, col) pairs are summed)."""
+
+
+def is_sparse(A: Any) -> bool:
+    """True for a ``scipy.sparse`` matrix or array."""
+    return sp.issparse(A)
+
+
+def dense(A: Any) -> np.ndarray:
+    """A as a dense array (a sparse system's matrix on a dense code path: the python engine's
+    dense structure, a non-K projection metric); O(n²) memory, so only for what needs it."""
+    return A.toarray() if is_sparse(A) else A
+
+
+def _start_vector(n: int) -> np.ndarray:
+    """A fixed Lanczos start vector (ARPACK's default is random: results would vary by run)."""
+    return 1.0 + 0.5 * np.sin(np.arange(n, dtype=float))
+
+
+def triplet_document(A: sp.spmatrix, plain: bool = True) -> dict:
+    """The triplet table of sparse ``A`` (row-major order, the inverse of
+    :func:`observer.validation.triplet_matrix`): TOML-ready lists, or with ``plain=False``
+    NumPy arrays (a generator's document: read back without a pass over Python lists)."""
+    C = sp.csr_matrix(A)
+    C.sum_duplicates()
+    coo = C.tocoo()
+    cast = (lambda x: x.tolist()) if plain else np.asarray
+    return {"shape": [int(C.shape[0]), int(C.shape[1])], "rows": cast(coo.row.astype(np.int64)),
+            "cols": cast(coo.col.astype(np.int64)), "values": cast(coo.data)}
+
+
+def bandwidth(*mats: Any) -> int:
+    """Largest |i − j| over the nonzero entries of the given n×n matrices (dense or sparse)."""
+    bw = 0
+    for A in mats:
+        if is_sparse(A):
+            coo = sp.coo_matrix(A)
+            nz = coo.data != 0.0
+            d = np.abs(coo.row[nz].astype(np.int64) - coo.col[nz])
+        else:
+            i, j = np.nonzero(np.asarray(A))
+            d = np.abs(i - j)
+        bw = max(bw, int(d.max()) if d.size else 0)
+    return bw
+
+
+def to_band(A: Any, bw: int) -> np.ndarray:
+    """Lower band storage of symmetric A: ``ab[d, j] = A[j + d, j]`` (LAPACK/scipy layout);
+    A dense or sparse (a sparse A is read diagonal by diagonal, O(n·bw))."""
+    n = A.shape[0]
+    ab = np.zeros((bw + 1, n))
+    for d in range(bw + 1):
+        ab[d, :n - d] = A.diagonal(-d) if is_sparse(A) else np.diagonal(A, -d)
+    return ab
+
+
+def exactly_symmetric(A: Any) -> bool:
+    """``A == Aᵀ`` entry for entry (dense or sparse)."""
+    if is_sparse(A):
+        return (sp.csr_matrix(A) != sp.csr_matrix(A).T).nnz == 0
+    return bool(np.array_equal(A, A.T))
+
+
+def quadratic_rows(X: np.ndarray, A: Any) -> np.ndarray:
+    """``x_kᵀ A x_k`` for every row x_k of X (shape (N, n)): the dense einsum for a dense A
+    (the reference summation order), ``Σ_i x_ki (A x_k)_i`` for a sparse one (O(N·nnz))."""
+    if is_sparse(A):
+        return np.einsum("ki,ki->k", X, np.asarray(A @ X.T).T)
+    return np.einsum("ki,ij,kj->k", X, A, X)
+
+
+def abs_sum(A: Any) -> float:
+    """``Σ|a_ij|`` (dense or sparse)."""
+    return float(abs(A).sum()) if is_sparse(A) else float(np.sum(np.abs(A)))
+
+
+def gershgorin_max(A: Any) -> float:
+    """Gershgorin upper bound of the largest eigenvalue of symmetric A: ``max_i a_ii + Σ_{j≠i}|a_ij|``."""
+    A = sp.csr_matrix(A)
+    d = A.diagonal()
+    return float(np.max(d + np.asarray(abs(A).sum(axis=1)).ravel() - np.abs(d)))
+
+
+def banded_cholesky(A: Any, shift: float = 0.0) -> np.ndarray | None:
+    """The lower banded Cholesky factor of ``A + shift·I`` (symmetric, narrowly banded), or None
+    when the factorization fails (the shifted matrix is not positive definite to round-off)."""
+    ab = to_band(A, max(bandwidth(A), 1))
+    ab[0] += shift
+    try:
+        return sla.cholesky_banded(ab, lower=True)
+    except np.linalg.LinAlgError:
+        return None
+
+
+def is_narrowly_banded(A: Any) -> bool:
+    """Bandwidth at most n/8 (the banded factorizations pay off)."""
+    return bandwidth(A) <= A.shape[0] // 8
+
+
+def largest_eigenvalue(A: Any, M: Any = None) -> tuple[float, str]:
+    """Largest eigenvalue of symmetric sparse A (of ``A v = λ M v`` with M SPD when given), and
+    how it was computed: Lanczos to :data:`LANCZOS_TOL_MAX` or, if that does not converge, the
+    Gershgorin upper bound (of ``D^{-1/2} A D^{-1/2}`` for a diagonal M). A may also be a
+    ``LinearOperator`` (no Gershgorin fallback then)."""
+    operator = isinstance(A, spla.LinearOperator)
+    if not operator:
+        A = sp.csr_matrix(A)
+    n = A.shape[0]
+    if M is not None and bandwidth(M) == 0:          # diagonal M: a standard problem, scaled
+        s = sp.diags(1.0 / np.sqrt(sp.csr_matrix(M).diagonal()))
+        A, M = sp.csr_matrix(s @ A @ s), None
+    if n < 3 and not operator:
+        lam = float(np.linalg.eigvalsh(A.toarray())[-1]) if M is None else float(
+            sla.eigh(A.toarray(), sp.csr_matrix(M).toarray(), eigvals_only=True)[-1])
+        return lam, "dense (n < 3)"
+    try:
+        lam = spla.eigsh(A, k=1, M=None if M is None else sp.csc_matrix(M), which="LA",
+                         tol=LANCZOS_TOL_MAX, ncv=min(n - 1, LANCZOS_NCV), v0=_start_vector(n),
+                         return_eigenvectors=False)[0]
+        return float(lam), f"Lanczos (eigsh, relative residual {LANCZOS_TOL_MAX:g})"
+    except spla.ArpackNoConvergence:
+        if M is not None or operator:
+            raise
+        return gershgorin_max(A), "Gershgorin upper bound (Lanczos did not converge)"
+
+
+def gershgorin_min(A: Any) -> float:
+    """Gershgorin lower bound of the smallest eigenvalue of symmetric A."""
+    A = sp.csr_matrix(A)
+    d = A.diagonal()
+    return float(np.min(d - (np.asarray(abs(A).sum(axis=1)).ravel() - np.abs(d))))
+
+
+def smallest_eigenvalue(A: Any) -> tuple[float, str]:
+    """Smallest eigenvalue of symmetric sparse A and how it was computed.
+
+    Narrowly banded A: shift-invert Lanczos about a shift σ ≤ λ_min with a banded Cholesky
+    factor of ``A − σI`` — σ = 0 when A is positive definite, else below the Gershgorin lower
+    bound (then ``A − σI`` is positive definite and the eigenvalue nearest σ is λ_min): O(n) per
+    iteration, to :data:`LANCZOS_TOL`. Otherwise Lanczos for the smallest algebraic eigenvalue."""
+    A = sp.csr_matrix(A)
+    n = A.shape[0]
+    if n < 3:
+        return float(np.linalg.eigvalsh(A.toarray())[0]), "dense (n < 3)"
+    v0, ncv = _start_vector(n), min(n - 1, LANCZOS_NCV)
+    if is_narrowly_banded(A):
+        sigma, chol = 0.0, banded_cholesky(A)
+        spread = max(abs(gershgorin_min(A)), abs(gershgorin_max(A)), np.finfo(float).tiny)
+        while chol is None:
+            sigma = min(sigma, gershgorin_min(A)) - 1e-6 * spread
+            spread *= 2.0
+            chol = banded_cholesky(A, -sigma)
+        op = spla.LinearOperator((n, n), matvec=lambda x: sla.cho_solve_banded((chol, True), x),
+                                 dtype=float)
+        lam = spla.eigsh(A, k=1, sigma=sigma, which="LM", OPinv=op, tol=LANCZOS_TOL, ncv=ncv, v0=v0,
+                         return_eigenvectors=False)[0]
+        return float(lam), f"shift-invert Lanczos on a banded Cholesky factor ({LANCZOS_TOL:g})"
+    lam = spla.eigsh(A, k=1, which="SA", tol=LANCZOS_TOL_MAX, ncv=ncv, v0=v0, maxiter=100 * n,
+                     return_eigenvectors=False)[0]
+    return float(lam), f"Lanczos (eigsh SA, relative residual {LANCZOS_TOL_MAX:g})"
+
+
+def extreme_eigenvalues(A: Any) -> tuple[float, float]:
+    """Smallest and largest eigenvalue of the symmetric part of sparse A (O(n) for a banded A:
+    :func:`smallest_eigenvalue`, :func:`largest_eigenvalue`)."""
+    S = sp.csr_matrix(0.5 * (A + A.T))
+    return smallest_eigenvalue(S)[0], largest_eigenvalue(S)[0]
+
+
+def definite_by_cholesky(A: Any, shift: float) -> bool | None:
+    """Whether ``A + shift·I`` has a banded Cholesky factorization (None: A is not narrowly
+    banded, the test does not apply)."""
+    if not is_narrowly_banded(A):
+        return None
+    return banded_cholesky(A, shift) is not None

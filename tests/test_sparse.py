@@ -1,0 +1,208 @@
+"""Sparse system matrices (issue 23): storage, TOML triplet form, O(n) checks and ω_max.
+
+Oracles: dense computations of the same matrices at sizes where both are cheap (n = 600 …
+1000, just above :data:`observer.sparse.DENSE_MAX_N` so that the sparse path is the one
+taken), and tracemalloc for the absence of anything of size n² at N = 10⁴ blocks.
+"""
+
+from __future__ import annotations
+
+import tracemalloc
+
+import numpy as np
+import pytest
+import scipy.linalg as sla
+import scipy.sparse as sp
+
+from observer import load_scenario, simulate
+from observer import sparse as sps
+from observer.errors import InputError
+from observer.health import omega_max, omega_max_method
+from observer.model import LinearSystem
+from observer.scenario import Scenario
+from observer.scenarios import rocking_chain as rc
+from observer.tomlio import dumps, loads
+from observer.validation import check_independent_columns, check_psd, check_spd, extreme_eigenvalues
+
+
+def chain(N: int):
+    p = rc.PARAMETERS
+    return rc.sparse_matrices(N, p["m"], p["b"], p["H"], p["a"], p["k"], p["c"])
+
+
+def test_small_systems_stay_dense_large_ones_sparse():
+    small = load_scenario("rocking_chain", {"param.N": 10}).system
+    large = load_scenario("rocking_chain", {"param.N": 300}).system
+    assert not small.sparse and isinstance(small.K, np.ndarray)
+    assert large.sparse and all(sp.issparse(A) for A in (large.M, large.C, large.K, large.W))
+    assert large.n == 600 > sps.DENSE_MAX_N >= small.n
+
+
+def test_omega_max_by_lanczos_within_one_percent_of_dense_at_N500():
+    system = load_scenario("rocking_chain", {"param.N": 500}).system
+    assert system.sparse
+    dense = float(np.sqrt(sla.eigh(system.K.toarray(), system.M.toarray(), eigvals_only=True,
+                                   subset_by_index=[system.n - 1, system.n - 1])[0]))
+    w = omega_max(system)
+    assert "Lanczos" in omega_max_method(system)
+    assert abs(w / dense - 1.0) < 1e-2
+    assert abs(w / dense - 1.0) < 1e-3          # measured 1.0e-4 (LANCZOS_TOL_MAX = 1e-3)
+    assert w <= dense * (1 + 1e-12)             # a Ritz value never exceeds λ_max
+
+
+def test_sparse_extreme_eigenvalues_match_dense():
+    M, C, K, W, _, _ = chain(300)
+    lo, hi = extreme_eigenvalues(K)
+    eig = np.linalg.eigvalsh(K.toarray())
+    assert lo == pytest.approx(eig[0], rel=1e-8)
+    assert hi == pytest.approx(eig[-1], rel=1e-3) and hi <= eig[-1] * (1 + 1e-12)
+    lo_w, hi_w = extreme_eigenvalues(sp.csr_matrix(W.T @ W))
+    ew = np.linalg.eigvalsh((W.T @ W).toarray())
+    assert lo_w == pytest.approx(ew[0], rel=1e-8)
+
+
+def test_sparse_checks_refuse_what_the_dense_ones_refuse():
+    M, C, K, W, _, _ = chain(300)
+    assert "Cholesky" in check_spd("system.M", M)
+    assert "Cholesky" in check_psd("system.K", K)
+    lo = np.linalg.eigvalsh(K.toarray())[0]
+    indefinite = sp.csr_matrix(K - 2 * lo * sp.eye(K.shape[0]))
+    with pytest.raises(InputError, match="not positive semi-definite") as err:
+        check_psd("system.K", indefinite)
+    assert err.value.field == "system.K"
+    Mbad = M.tolil()
+    Mbad[5, 5] = -1.0
+    with pytest.raises(InputError, match="not positive definite") as err:
+        check_spd("system.M", sp.csr_matrix(Mbad))
+    assert err.value.field == "system.M"
+    Wdep = W.tolil()
+    Wdep[:, 1] = Wdep[:, 0]
+    with pytest.raises(InputError, match="linearly independent") as err:
+        check_independent_columns("system.W", sp.csr_matrix(Wdep))
+    assert err.value.field == "system.W"
+    asym = K.tolil()
+    asym[0, 1] += 1.0
+    with pytest.raises(InputError, match="not symmetric"):
+        LinearSystem(M, C, sp.csr_matrix(asym), W, *_signals(300))
+
+
+def _signals(N):
+    sc = load_scenario("rocking_chain", {"param.N": 2})
+    from observer.model import Harmonic
+    return Harmonic.build("system.forcing", 2 * N), Harmonic.build("system.gap", 2 * N, kind="sin")
+
+
+def test_triplet_toml_round_trip_keeps_the_matrices_sparse_and_equal():
+    sc = load_scenario("rocking_chain", {"param.N": 300})
+    doc = sc.to_dict()
+    assert set(doc["system"]["K"]) == set(sps.TRIPLET_KEYS)
+    assert len(doc["system"]["K"]["values"]) == sc.system.K.nnz
+    text = dumps(doc)
+    assert len(text) < 100 * (sc.system.K.nnz + sc.system.C.nnz + sc.system.W.nnz + 10 * sc.system.n)
+    back = Scenario.from_dict(loads(text, "round trip"))
+    for name in "MCKW":
+        A, B = getattr(sc.system, name), getattr(back.system, name)
+        assert sp.issparse(B) and (A != B).nnz == 0
+    assert np.array_equal(back.q0, sc.q0)
+
+
+def test_small_triplet_table_is_the_dense_matrix():
+    doc = load_scenario("double_mass").to_dict()
+    K = np.array(doc["system"]["K"])
+    r, c = np.nonzero(K)
+    doc["system"]["K"] = {"shape": list(K.shape), "rows": r.tolist(), "cols": c.tolist(),
+                          "values": K[r, c].tolist()}
+    sc = Scenario.from_dict(doc)
+    assert isinstance(sc.system.K, np.ndarray) and np.array_equal(sc.system.K, K)
+
+
+@pytest.mark.parametrize("edit, field, hint", [
+    (lambda t: t.update(rows=[t["shape"][0]] + t["rows"][1:]), "system.K.rows", "integers in"),
+    (lambda t: t.pop("values"), "system.K.values", "missing"),
+    (lambda t: t.update(dense=1), "system.K.dense", "unknown key"),
+    (lambda t: t.update(shape=[2.5, 2]), "system.K.shape", "positive integers"),
+    (lambda t: t.update(values=t["values"][:-1]), "system.K.rows", "wrong shape"),
+])
+def test_bad_triplet_tables_name_the_field(edit, field, hint):
+    doc = load_scenario("double_mass").to_dict()
+    K = np.array(doc["system"]["K"])
+    r, c = np.nonzero(K)
+    table = {"shape": list(K.shape), "rows": r.tolist(), "cols": c.tolist(), "values": K[r, c].tolist()}
+    edit(table)
+    doc["system"]["K"] = table
+    with pytest.raises(InputError, match=hint) as err:
+        Scenario.from_dict(doc)
+    assert err.value.field == field
+
+
+def test_sparse_and_dense_systems_run_the_same_trajectory():
+    """N = 300 (n = 600): the sparse system against the same matrices given dense."""
+    sc = load_scenario("rocking_chain", {"param.N": 300, "simulation.t_end": 0.15,
+                                         "simulation.h": 1e-3})
+    doc = sc.to_dict()
+    for name in "MCKW":
+        doc["system"][name] = getattr(sc.system, name).toarray().tolist()
+    sd = Scenario.from_dict(doc)
+    assert sc.system.sparse and not sd.system.sparse
+    a = simulate(sc, observers=["jump", "nojump"])
+    b = simulate(sd, observers=["jump", "nojump"])
+    for x, y in [(a.q, b.q), (a.u, b.u)] + [(a.slaves[k].q, b.slaves[k].q) for k in a.slaves]:
+        assert np.max(np.abs(x - y)) <= 1e-13 * max(1.0, np.max(np.abs(y)))
+    assert a.metadata["health"]["computed_by"]["omega_max"].startswith("Lanczos")
+    assert a.metadata["health"]["h_omega_max"] == pytest.approx(b.metadata["health"]["h_omega_max"], rel=1e-3)
+
+
+def test_event_engine_refuses_a_large_system_naming_its_size():
+    sc = load_scenario("rocking_chain", {"param.N": 300})
+    with pytest.raises(InputError, match="n = 600"):
+        simulate(sc, h=1e-3, t_end=0.01, integrator="event")
+
+
+def test_loading_and_checking_a_large_chain_allocates_nothing_of_size_n_squared():
+    """N = 10⁴ blocks (n = 2·10⁴): one dense n × n matrix would be 3.2 GB; the load (generator,
+    document, validation), an override round trip and ω_max stay below 64 MB."""
+    tracemalloc.start()
+    try:
+        sc = load_scenario("rocking_chain", {"param.N": 10_000})
+        sc = sc.with_overrides({"simulation.h": 1e-3})
+        w = omega_max(sc.system)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert sc.system.sparse and w > 0
+    assert peak < 64 * 2**20, f"peak {peak / 2**20:.0f} MB"
+
+
+@pytest.mark.parametrize("steps, n, systems", [(1000, 200_000, 3), (10**6, 20, 3), (1000, 20, 1),
+                                               (50_000, 20_000, 3)])
+def test_summary_rows_are_bounded_for_any_size(steps, n, systems):
+    from observer.engines.timestepping import SUMMARY_ROW_VALUES, summary_record_every
+    k = summary_record_every(steps, n, systems)
+    rows = steps // k + 1
+    assert rows * 2 * n * systems <= SUMMARY_ROW_VALUES + 2 * n * systems     # within one row
+    assert rows <= 10_001
+    if steps * 2 * n * systems < SUMMARY_ROW_VALUES:                       # small: as before
+        assert k == max(1, steps // 10_000)
+
+
+def test_closed_set_projection_matches_the_dense_projection():
+    """K⁻¹W_I and L_I from the banded factor of K (once), against the dense K⁻¹W and L
+    restricted to I; the projected state closes the gaps of I exactly (to round-off)."""
+    from observer.stepping import ClosedSetProjection
+    M, C, K, W, _, _ = chain(300)
+    proj = ClosedSetProjection(K, W)
+    Kd, Wd = K.toarray(), W.toarray()
+    KinvW = np.linalg.solve(Kd, Wd)
+    L = Wd.T @ KinvW
+    rng = np.random.default_rng(3)
+    closed = np.sort(rng.choice(W.shape[1], 7, replace=False))
+    KinvWI, LI = proj.matrices(closed)
+    np.testing.assert_allclose(KinvWI, KinvW[:, closed], rtol=0, atol=1e-12 * np.abs(KinvW).max())
+    np.testing.assert_allclose(LI, L[np.ix_(closed, closed)], rtol=0, atol=1e-12 * np.abs(L).max())
+    q = rng.normal(size=K.shape[0]) * 1e-3
+    g = Wd[:, closed].T @ q - 1e-4                  # gaps of the closed contacts (ν = −1e-4)
+    q1, sigma = proj.project(q, g, closed)
+    assert np.max(np.abs(Wd[:, closed].T @ q1 - 1e-4)) <= 1e-14 * max(1.0, np.abs(q).max())
+    with pytest.raises(InputError) as err:
+        ClosedSetProjection(sp.csr_matrix(K - 2e6 * sp.eye(K.shape[0])), W)
+    assert err.value.field == "system.K"
