@@ -91,6 +91,9 @@ def _reference(run, names):
         for dev, name, k, I, sa, sc in rec13:
             if w13 is None or dev / scale > w13["err"]:
                 w13 = dict(err=dev / scale, slave=name, step=k, I=I, sa=sa, sc=sc)
+        # every (slave, step) by its deviation: a maximum attained twice to round-off (two
+        # observers of one design) may be reported at either
+        w13["all"] = {(name, k): (dev / scale, I, sa, sc) for dev, name, k, I, sa, sc in rec13}
     return w14, w13, n14, n13
 
 
@@ -111,10 +114,12 @@ def _assert_witness(run, r, names):
         assert math.isnan(w["max_force_error_eq13"]) and "eq13_step" not in w
     else:
         assert w["max_force_error_eq13"] == pytest.approx(w13["err"], rel=1e-6, abs=1e-12)
-        assert w["eq13_slave"] == w13["slave"] and w["eq13_step"] == w13["step"]
-        assert w["eq13_time"] == run.t[w13["step"] + 1] and w["eq13_active_set"] == w13["I"]
-        assert np.allclose(w["eq13_sigma_applied"], w13["sa"], rtol=1e-8, atol=1e-12)
-        assert np.allclose(w["eq13_sigma_closed_form"], w13["sc"], rtol=1e-8, atol=1e-12)
+        # the reported (slave, step) attains the maximum (to round-off) and its entries are its own
+        dev, I, sa, sc = w13["all"][(w["eq13_slave"], w["eq13_step"])]
+        assert dev == pytest.approx(w13["err"], rel=1e-6, abs=1e-12)
+        assert w["eq13_time"] == run.t[w["eq13_step"] + 1] and w["eq13_active_set"] == I
+        assert np.allclose(w["eq13_sigma_applied"], sa, rtol=1e-8, atol=1e-12)
+        assert np.allclose(w["eq13_sigma_closed_form"], sc, rtol=1e-8, atol=1e-12)
     assert "eq14_value" not in w and "eq13_value" not in w
     assert r.summary_keys == ("max_jump_error_eq14", "max_force_error_eq13", "eq14_time", "eq14_active_set",
                               "eq14_Sigma_applied", "eq14_Sigma_closed_form", "metric")
