@@ -341,7 +341,7 @@ def _event_reference(case: Case, spacing: float, ctx: Context) -> EventReference
     Computed once per process on the finest grid of the case's reference group in this run
     (``ctx.reference_grids``, when ``spacing`` is a whole multiple of it) and subsampled: the
     event integrator's samples are the exact flow at t_k = k·h, so the subsampled reference
-    equals a run on the coarser grid to round-off (``tests/test_bench.py``).
+    equals a run on the coarser grid to round-off (``tests/bench/test_suites.py``).
     """
     group = reference_group(case)
     fine = ctx.reference_grids.get(group, spacing)

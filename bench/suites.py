@@ -258,7 +258,7 @@ def _reference_laws(full: bool) -> tuple[str, ...]:
     every sweep the suites declare, Poisson's runs repeat Newton's to round-off (one contact:
     Poisson's compression/expansion split of one impulse is Newton's law; the chain N = 4 of
     its sweep, e = 0.9 on every contact, at most two impulses per step: measured equal to
-    1e-16, ``tests/test_bench.py``)."""
+    1e-16, ``tests/bench/test_suites.py``)."""
     laws = tuple(IMPACT_LAWS)
     return laws if full else laws[:1]
 

@@ -46,7 +46,7 @@ def grid_wave(t0: float, h: float, k0: int, k1: int, omega: float, phase: float,
     Accuracy (as the direct evaluation): both round the angle, ≈ (|ω t_k| + |phase|)·ε, and the
     angle addition adds a few ε (``t_{aB} + j·h`` is t_k up to the rounding of the grid times):
     |value − function(ω t_k + phase)| ≤ 4(|ω|·max(|t_k|, |t_{aB}|) + |phase| + 1)·ε, where the
-    exact value uses the float grid time t_k (tests/test_signals.py checks this bound against
+    exact value uses the float grid time t_k (tests/observer/test_model_signals.py checks this bound against
     extended precision, and that the two evaluations agree to it). ``function`` is ``"cos"``,
     ``"sin"`` or ``"-sin"``.
     """

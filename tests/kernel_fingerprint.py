@@ -4,7 +4,7 @@
 ``tests/data/kernel_fingerprints.json``: per built-in scenario and run variant, the sha256 of
 the recorded arrays of a 4000-step run (at most the scenario's horizon). The stored table was
 written by main at d26e40e, before the kernel took its arguments in bundles (issue 21);
-:mod:`test_kernel_bundles` recomputes it and requires every digest unchanged, bit for bit.
+tests/observer/test_kernel.py recomputes it and requires every digest unchanged, bit for bit.
 
 Variants (each takes a different compiled loop, :func:`observer.loop.specialization`):
 ``alone`` (the master alone: the lean or the scalar loop), ``observers`` (the scenario's

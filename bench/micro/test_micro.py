@@ -16,7 +16,7 @@ divides the median by ``extra_info["steps"]``: the time per step. Each call's tr
 is stored in full (``record_every = 1``). Each benchmark checks its answer: a finite
 trajectory of the right length, and, in the test suite's run, the other engine on the same
 window agrees to 1e-9 relative (the engines' equality to 1e-13 is tested in
-``tests/test_engines.py``).
+``tests/observer/test_loop.py``).
 
 **Contact solves** (``test_contact_solve``): real Delassus matrices ``G = W_AᵀÂ⁻¹W_A`` of
 the built-in scenarios (m = 1: double_mass; m = 4 and 20: rocking_chain N = 10 with its first

@@ -28,7 +28,7 @@ from observer.scenario import load_scenario
 from observer.stepping import MoreauJean
 from observer.stream import SIGNAL_EXIT, ChunkWriter, chunk_frame
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _loop_input(name: str, t_end: float, h: float | None = None, jumps=(), **kw) -> LoopInput:

@@ -28,7 +28,7 @@ from observer.scenarios import double_mass as dm_module
 from observer.scenarios import rocking_chain as rc_module
 from observer.tomlio import dumps
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 CHAIN = rc_module.PARAMETERS
 
 

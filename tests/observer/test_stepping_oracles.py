@@ -41,7 +41,7 @@ from observer.scenarios import bouncing_ball as bb
 from observer.stepping import MoreauJean
 from oracles import oracle
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 SICONOS_TOML = DATA / "siconos_bouncing_ball.toml"
 
 EPS = np.finfo(float).eps

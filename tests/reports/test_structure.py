@@ -13,7 +13,7 @@ import pytest
 from observer.contact import CONTACT_SOLVERS
 from observer.observers import OBSERVER_DESIGNS
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 REPORTS = REPO / "reports"
 MAX_LINES = 80
 

@@ -2,7 +2,7 @@
 (issue 20).
 
 The reference is the closed form of an unstable system (K = −κ < 0, built with
-``check=False`` as in ``tests/test_nonfinite.py``): from q(0) = 1, u(0) = 0 the exact solution
+``check=False`` as in ``tests/observer/test_loop_nonfinite.py``): from q(0) = 1, u(0) = 0 the exact solution
 is q = cosh(√κ t), u = √κ sinh(√κ t), so the time where u overflows is known; an observer
 started at q = 2 has e = cosh(√κ t), v = √κ sinh(√κ t), whose V overflows long before.
 """
@@ -130,7 +130,7 @@ def test_huge_forcing_through_the_cli_with_the_event_integrator(tmp_path, capsys
 # ---------------------------------------------------------------------------------------
 # Ctrl-C / SIGTERM during `observer run --integrator event --out`: the finished rows, whole
 # ---------------------------------------------------------------------------------------
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def _cpu_seconds(pid: int) -> float:

@@ -27,7 +27,7 @@ from observer.result import RunState, RunStatus
 from observer.simulate import simulate
 from observer.stream import ChunkWriter
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")

@@ -60,7 +60,7 @@ ENGINE_RTOL = 1e-13
 
 SOLVER_RTOL = 1e-9
 """Agreement of the pivoting and reference solvers' x, relative to max(‖G⁻¹b‖∞, ‖x_ref‖∞)
-(the reference is OSQP polished on the support; tests/test_contact.py uses the same bound)."""
+(the reference is OSQP polished on the support; tests/observer/test_contact.py uses the same bound)."""
 
 LCP_TOL = 1e-9
 """Independent complementarity check: ``min(w) ≥ −tol·s`` and ``max|x_i w_i| ≤ tol·s·X``."""

@@ -4,7 +4,7 @@
 ``import observer`` and a ``simulate`` run load neither pandas nor pyarrow; the result's
 tables (``summary``, ``events``) are :class:`observer.result.LazyFrame` values built on first
 read, equal to what the run computed (checked against the ``store="full"`` run's metrics,
-as ``tests/test_engines.py`` does).
+as ``tests/observer/test_loop.py`` does).
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ import pytest
 from observer import SCENARIOS, simulate
 from observer.result import read_frame
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 

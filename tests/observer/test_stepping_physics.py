@@ -14,7 +14,7 @@ matrices alone (nothing precomputed by the stepper):
   expansion ``0 ≤ γ̃ + ĜP ⊥ Λ_E − ε∘Λ_C ≥ 0``.
 
 The stepper tests run on ``engine="python"`` (the reference implementation of
-:mod:`observer.stepping`); the compiled engine is held to it in ``test_engines.py``.
+:mod:`observer.stepping`); the compiled engine is held to it in ``observer/test_loop.py``.
 
 Tolerances: complementarity is checked to 1e-9 relative to the size of the velocities and
 impulses involved (the LCP solvers are exact up to round-off of order 1e-15 of the

@@ -24,7 +24,7 @@ from bench.results import CaseStore
 from bench.run import kernel_ready, results_path, run_suite
 from bench.suites import Case, Suite
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 STEPS = (4e-4, 3.5e-4, 3e-4, 2.5e-4, 2e-4, 4.5e-4, 5e-4, 5.5e-4)
 
 

@@ -38,7 +38,7 @@ from observer.scenarios import builtin_document
 from observer.switching import read_log
 from observer.tomlio import dumps
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 OUT = "{tmp}/out.csv"
 """Result path of the command-line runs; it must not exist after a refused run."""
 

@@ -31,7 +31,7 @@ from observer.errors import InputError
 from observer.scenarios import bouncing_ball as bb
 from observer.switching import read_log, validate_log
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 SMOKE = get_suite("smoke")
 
 

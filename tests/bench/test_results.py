@@ -23,7 +23,7 @@ from bench.results import CHECKSUM_KEY, DAMAGED_SUFFIX, CaseStore, load_results
 from bench.run import results_path, run_suite
 from bench.suites import Case, Suite
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 TINY = Suite("tiny", "three quick work-precision points of the bouncing ball", tuple(
     Case("work_precision", "bouncing_ball", law="newton", h=h, t_end=0.3, observers=(),
