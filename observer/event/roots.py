@@ -591,7 +591,7 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
                 return first, first.t, first.z
         step = max(step, 0.0)
         if step < w and step <= res:
-            zero = _unresolved(fs, a, za, d)
+            zero = _unresolved(fs, a, za, d, certified, res)
             if zero is not None:
                 return zero, zero.t, zero.z
             step = min(res, w)                       # nothing approaches: time moves on
@@ -599,13 +599,29 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     raise RootIsolationError(f"root isolation stalled near t = {a!r} ({MAX_STEPS} safe steps)")
 
 
-def _unresolved(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray) -> Zero | None:
+UNRESOLVED_REACH = 1e-3
+"""An unresolved zero (:func:`_unresolved`) is taken only among functionals whose first-order
+time to zero ψ/|ψ'| is within this fraction of the motion's time scale τ."""
+
+
+def _unresolved(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray,
+                certified: dict[int, float] | None = None, res: float = np.inf) -> Zero | None:
     """The safe step fell below the time resolution: some functional reaches zero within a
     few ulp of a, where float64 cannot order the zeros. Taken consistently: the approaching
     functional (ψ' < 0) with the smallest first-order time to zero ``ψ/|ψ'|`` (a time, the
-    same in any coordinates); None if none approaches. The zero's note says so."""
+    same in any coordinates); None if none approaches. A functional certified nonzero beyond
+    a (a graze just passed, ``certified[i] > a``) is not a candidate: its touch is what
+    shrank the step, and another functional far from zero must not be taken in its place;
+    nor is one whose first-order time to zero exceeds :data:`UNRESOLVED_REACH` times the
+    motion's time scale τ (or the resolution ``res`` if larger): it does not vanish near a
+    (a decision on a time of the motion, the same after a shift of the time origin). The
+    zero's note says so."""
     with np.errstate(divide="ignore", invalid="ignore"):
         ttz = np.where(d[1] < 0.0, np.maximum(d[0], 0.0) / -d[1], np.inf)
+    for i, until in (certified or {}).items():
+        if until > a:
+            ttz[i] = np.inf
+    ttz[ttz > UNRESOLVED_REACH * max(res, fs.tau)] = np.inf
     if not np.isfinite(ttz).any():
         return None
     i = int(np.argmin(ttz))

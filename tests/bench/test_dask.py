@@ -99,10 +99,10 @@ def test_killed_client_loses_no_finished_case(client, tmp_path):
     suite = tiny_suite()
     store = CaseStore(results_path(suite.name, tmp_path))
     script = ("import sys; sys.path[:0] = [{repo!r}, {tests!r}]\n"
-              "from test_bench_dask import tiny_suite\n"
+              "from test_dask import tiny_suite\n"
               "from bench.run import run_suite\n"
               "run_suite(tiny_suite(), {out!r}, scheduler={addr!r}, progress=False, micro=False)\n"
-              ).format(repo=str(REPO), tests=str(REPO / "tests"), out=str(tmp_path),
+              ).format(repo=str(REPO), tests=str(REPO / "tests" / "bench"), out=str(tmp_path),
                        addr=client.scheduler.address)
     proc = subprocess.Popen([sys.executable, "-c", script], cwd=REPO, start_new_session=True,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
