@@ -21,13 +21,13 @@ from observer.loop import compile_time
 from observer.scenarios import SCENARIOS
 
 from kernel_fingerprint import PATH, result_digest, variants
-import dataclasses
 import numpy as np
 import pandas as pd
 import observer
 from observer.observers import Slave
 from observer.scenario import Scenario
 from oracles import oracle
+from cases import nearly_redundant_contacts
 
 STORED = json.loads(PATH.read_text())
 
@@ -322,24 +322,8 @@ def test_lcp_residual_is_the_relative_natural_residual():
 # ---------------------------------------------------------------------------------------
 
 
-def nearly_redundant_contacts() -> Scenario:
-    """Two contacts parallel to 1e-9 (built unchecked): the kernel's Cholesky pivoting
-    refuses their singular Delassus matrix (LCP_FAILED); the step goes to the reference solver."""
-    from observer.model import LinearSystem
-    sc = Scenario.from_dict({
-        "system": {"M": [[1.0, 0.0], [0.0, 1.0]], "C": [[0.0, 0.0], [0.0, 0.0]],
-                   "K": [[0.0, 0.0], [0.0, 0.0]], "W": [[1.0, 1.0], [0.0, 1e-3]],
-                   "forcing": {"constant": [-9.81, 0.0]}, "gap": {"offset": [0.0, 0.0]}},
-        "impact": {"law": "newton", "restitution": 0.5},
-        "initial": {"q": [0.2, 0.0], "u": [0.0, 0.0]},
-        "simulation": {"h": 1e-3, "t_end": 0.4}}, "nearly redundant")
-    s = sc.system
-    W = np.array([[1.0, 1.0], [0.0, 1e-9]])
-    return dataclasses.replace(sc, system=LinearSystem(s.M, s.C, s.K, W, s.forcing, s.gap, check=False))
-
-
 def test_lcp_failure_goes_to_the_reference_solver():
-    sc = nearly_redundant_contacts()
+    sc = nearly_redundant_contacts(0.4)
     py = observer.simulate(sc, engine="python")
     co = observer.simulate(sc, engine="compiled")
     fb = co.metadata["fallback_steps"]

@@ -29,6 +29,7 @@ from observer.scenario import Scenario
 from observer.scenarios import SCENARIOS
 
 from oracles import oracle
+from cases import nearly_redundant_contacts
 
 
 def rel(a: np.ndarray, b: np.ndarray) -> float:
@@ -137,27 +138,6 @@ def test_record_every_keeps_the_rows_of_the_full_run(engine):
         assert np.array_equal(thin.slaves[k].V, full.slaves[k].V[rows])
         assert thin.slaves[k].dV_impulse is None
     assert thin.metadata["record_every"] == 7
-
-
-def nearly_redundant_contacts() -> Scenario:
-    """A point mass whose two contacts are parallel to 1e-9: their Delassus matrix rounds to
-    an exactly singular one, which the kernel's Cholesky-based pivoting refuses (status
-    LCP_FAILED), while the python engine's pivoting solver passes it to Lemke. Validation
-    refuses such a W (σ_min/σ_max ≤ √ε), so the system is built unchecked here, to exercise
-    the kernel's fallback path."""
-    import dataclasses
-
-    from observer.model import LinearSystem
-    sc = Scenario.from_dict({
-        "system": {"M": [[1.0, 0.0], [0.0, 1.0]], "C": [[0.0, 0.0], [0.0, 0.0]],
-                   "K": [[0.0, 0.0], [0.0, 0.0]], "W": [[1.0, 1.0], [0.0, 1e-3]],
-                   "forcing": {"constant": [-9.81, 0.0]}, "gap": {"offset": [0.0, 0.0]}},
-        "impact": {"law": "newton", "restitution": 0.5},
-        "initial": {"q": [0.2, 0.0], "u": [0.0, 0.0]},
-        "simulation": {"h": 1e-3, "t_end": 0.6}}, "nearly redundant")
-    s = sc.system
-    W = np.array([[1.0, 1.0], [0.0, 1e-9]])
-    return dataclasses.replace(sc, system=LinearSystem(s.M, s.C, s.K, W, s.forcing, s.gap, check=False))
 
 
 def test_kernel_failure_goes_to_the_reference_solver_and_is_recorded():
