@@ -266,9 +266,13 @@ def _finish(inp: LoopInput, out: LoopOutput, stopped_at: int | None, reason: str
         if out.V is not None:
             cut["V"] = out.V[:, :R]
         out = replace(out, stopped_at=int(stopped_at), stop_reason=reason, stop_signal=sig, **cut)
-    slots, _, Ls = projection_slots(inp)
-    health = assess(inp, out.record_every, out.q, out.u, out.active, out.chi, out.stats,
-                    lambda s: Ls[slots[s]])
+    if inp.stepper.S.factored:
+        L = FactoredL(inp.stepper)
+        L_of = lambda s: L  # noqa: E731
+    else:
+        slots, _, Ls = projection_slots(inp)
+        L_of = lambda s: Ls[slots[s]]  # noqa: E731
+    health = assess(inp, out.record_every, out.q, out.u, out.active, out.chi, out.stats, L_of)
     emit(health)
     return replace(out, health=health)
 
@@ -393,6 +397,21 @@ class FiniteGuard:
 
 def _stop_text(stepper, what: str, k: int) -> str:
     return f"{what} at t = {float(stepper.time(k)):.9g} (step {k} of {stepper.steps})"
+
+
+class FactoredL:
+    """``L = WᵀK⁻¹W`` of factored contact data (:attr:`observer.stepping.SchemeMatrices.factored`),
+    indexed by a closed set only: ``L[np.ix_(I, I)]`` is L_I from the banded factor of K
+    (:meth:`observer.stepping.MoreauJean._active_slices`, O(n·bw·|I|)); zeros when K is not
+    positive definite, as the dense ``L`` of :func:`projection_matrices`."""
+
+    def __init__(self, stepper: MoreauJean):
+        self.stepper = stepper
+
+    def __getitem__(self, ix) -> np.ndarray:
+        idx = np.asarray(ix[1], dtype=np.int64).ravel()
+        L = self.stepper._active_slices(idx)[5]
+        return np.zeros((idx.size, idx.size)) if L is None else L
 
 
 def check_engine(engine: str) -> str:

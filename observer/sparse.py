@@ -84,6 +84,96 @@ def triplet_document(A: sp.spmatrix, plain: bool = True) -> dict:
             "cols": cast(coo.col.astype(np.int64)), "values": cast(coo.data)}
 
 
+BANDED_KEYS = ("shape", "offsets", "diagonals", "symmetric")
+"""The keys of a banded matrix in a scenario document: ``{shape = [n, m], offsets = [...],
+diagonals = [[...], ...]}`` — diagonal k holds the entries ``A[i, i + k]`` in order of i (its
+length ``min(n, m − k)`` for k ≥ 0, ``min(n + k, m)`` for k < 0, scipy's ``A.diagonal(k)``),
+or one number when it is constant; with ``symmetric = true`` (optional) only offsets k ≤ 0 are
+given and mirrored. One value per stored entry and no indices: about a third of a triplet
+table (:func:`banded_document`)."""
+
+
+def banded_document(A: Any, plain: bool = True) -> dict:
+    """The banded table of sparse ``A`` (:data:`BANDED_KEYS`, the inverse of
+    :func:`banded_matrix`): its nonzero diagonals, each one number when constant, only the
+    lower ones of an exactly symmetric A; TOML-ready lists, or with ``plain=False`` NumPy arrays."""
+    C = sp.csr_matrix(A)
+    C.sum_duplicates()
+    coo = C.tocoo()
+    nz = coo.data != 0.0
+    offsets = np.unique(coo.col[nz].astype(np.int64) - coo.row[nz])
+    symmetric = C.shape[0] == C.shape[1] and exactly_symmetric(C)
+    if symmetric:
+        offsets = offsets[offsets <= 0]
+    diagonals = []
+    for k in offsets:
+        d = C.diagonal(int(k))
+        if d.size and np.all(d == d[0]):
+            diagonals.append(float(d[0]))
+        else:
+            diagonals.append(d.tolist() if plain else d)
+    doc = {"shape": [int(C.shape[0]), int(C.shape[1])], "offsets": [int(k) for k in offsets],
+           "diagonals": diagonals}
+    if symmetric:
+        doc["symmetric"] = True
+    return doc
+
+
+def banded_matrix(field: str, value: dict) -> sp.csr_matrix:
+    """A CSR matrix from a document's banded table (:data:`BANDED_KEYS`), in O(entries); errors
+    name ``field.KEY``."""
+    from observer.validation import as_array
+
+    unknown = sorted(set(value) - set(BANDED_KEYS))
+    if unknown:
+        raise InputError(f"{field}.{unknown[0]}", f"unknown key of a banded matrix (known: {', '.join(BANDED_KEYS)})")
+    for key in BANDED_KEYS[:3]:
+        if key not in value:
+            raise InputError(f"{field}.{key}", "required key of a banded matrix is missing")
+    shape = as_array(f"{field}.shape", value["shape"], (2,))
+    if not (np.all(shape == np.round(shape)) and np.all(shape >= 1)):
+        raise InputError(f"{field}.shape", f"must be two positive integers, got {value['shape']!r}")
+    n, m = int(shape[0]), int(shape[1])
+    symmetric = value.get("symmetric", False)
+    if not isinstance(symmetric, bool) or (symmetric and n != m):
+        raise InputError(f"{field}.symmetric", "must be true or false (true only for a square matrix)")
+    offsets = as_array(f"{field}.offsets", value["offsets"], (None,))
+    lo, hi = (-(n - 1), 0) if symmetric else (-(n - 1), m - 1)
+    if not (np.all(offsets == np.round(offsets)) and np.all((offsets >= lo) & (offsets <= hi))
+            and np.unique(offsets).size == offsets.size):
+        raise InputError(f"{field}.offsets", f"must be distinct integers in {lo}..{hi}")
+    diags = value["diagonals"]
+    if not isinstance(diags, (list, tuple)) or len(diags) != offsets.size:
+        raise InputError(f"{field}.diagonals", f"must be a list of {offsets.size} diagonals, one per offset")
+    data, ks = [], [int(k) for k in offsets]
+    for i, (k, d) in enumerate(zip(ks, diags)):
+        size = min(n, m - k) if k >= 0 else min(n + k, m)
+        d = as_array(f"{field}.diagonals[{i}]", d, () if np.ndim(d) == 0 else (size,))
+        data.append(np.full(size, float(d)) if d.ndim == 0 else d)
+    A = sp.diags(data, ks, shape=(n, m), format="csr") if data else sp.csr_matrix((n, m))
+    if symmetric:
+        strict = sp.diags([d for d, k in zip(data, ks) if k < 0], [k for k in ks if k < 0], shape=(n, m),
+                          format="csr") if any(k < 0 for k in ks) else sp.csr_matrix((n, m))
+        A = sp.csr_matrix(A + strict.T)
+    A.sum_duplicates()
+    return A
+
+
+def sparse_document(A: Any, plain: bool = True) -> dict:
+    """Sparse ``A`` as the shorter of its document tables: banded (:func:`banded_document`) when
+    its diagonals hold at most as many values as the triplet table's three per entry, else the
+    triplet table (:func:`triplet_document`)."""
+    C = sp.csr_matrix(A)
+    coo = C.tocoo()
+    nz = coo.data != 0.0
+    offsets = np.unique(coo.col[nz].astype(np.int64) - coo.row[nz])
+    n, m = C.shape
+    stored = sum(min(n, m - k) if k >= 0 else min(n + k, m) for k in offsets.tolist())
+    if stored <= 3 * int(np.count_nonzero(nz)):
+        return banded_document(A, plain)
+    return triplet_document(A, plain)
+
+
 def bandwidth(*mats: Any) -> int:
     """Largest |i − j| over the nonzero entries of the given n×n matrices (dense or sparse)."""
     bw = 0
