@@ -15,7 +15,13 @@ solvers that return ``(iterations, status, residual)``.
 * **Contacts.** W is stored by columns (CSC), so gaps and contact velocities cost
   O(nnz(W)); the closed set's Delassus matrices are gathered from the precomputed dense
   ``Ĝ = WᵀÂ⁻¹W`` and ``G₀ = WᵀM⁻¹W`` and the impulse is applied through the columns of
-  ``Â⁻¹W``: O(n|A| + |A|³) per step with |A| closed contacts.
+  ``Â⁻¹W``: O(n|A| + |A|³) per step with |A| closed contacts. Large banded systems
+  (:data:`CONTACTS_FACTORED`, n ≥ :data:`observer.stepping.FACTORED_MIN_N`) hold no n×m or
+  m×m matrix: ``Ĝ_AA`` and the projection's ``L_A = W_AᵀK⁻¹W_A`` are assembled per step from
+  the banded Cholesky factors of Â and K and a bounded cache of solved columns
+  (:func:`factored_gram`), and ``δu = Â⁻¹(W_A P)``, ``δq = K⁻¹(W_A Σ)`` are one banded solve
+  each: O(n·bw) per contact step, plus O(n·bw) per closed contact not in the cache; memory
+  O(n·(bw + cache)).
 * **LCPs.** One contact: the closed form ``x = max(0, −b/G)``. Several: block principal
   pivoting (Júdice & Pires with Murty's single-flip backup, finite for P-matrices) on a
   Cholesky-solved basis, the round-off tests of :mod:`observer.contact.lcp`. A solve whose

@@ -108,18 +108,20 @@ def test_triplet_toml_round_trip_keeps_the_matrices_sparse_and_equal():
 
 
 def test_banded_toml_round_trip_is_compact_sparse_and_equal():
-    """The default document of a large chain: banded tables (one value per stored diagonal
-    entry, constant diagonals one number, symmetric matrices their lower half), read back to
-    the same sparse matrices; an override round trip and ``show`` keep them sparse."""
+    """The default document of a large chain: banded tables (the chain's diagonals periodic:
+    the block's values, the top block's as a tail; symmetric matrices their lower half), read
+    back to the same sparse matrices; an override round trip and ``show`` keep them sparse."""
     sc = load_scenario("rocking_chain", {"param.N": 300})
     doc = sc.to_dict()
     K, M, W = doc["system"]["K"], doc["system"]["M"], doc["system"]["W"]
-    assert set(K) == set(sps.BANDED_KEYS) and K["symmetric"] is True and max(K["offsets"]) == 0
-    assert M["offsets"] == [0] and len(M["diagonals"][0]) == 600          # [m, J] alternate
+    assert set(K) == set(sps.BANDED_KEYS) and K["symmetric"] is True and K["offsets"] == [-2, 0]
+    J = rc.PARAMETERS["m"] * (4 * rc.PARAMETERS["b"] ** 2 + rc.PARAMETERS["H"] ** 2) / 12
+    assert M["offsets"] == [0] and M["diagonals"] == [{"pattern": [1.0, J]}]     # [m, J] alternate
+    k, a = rc.PARAMETERS["k"], rc.PARAMETERS["a"]
+    assert K["diagonals"][1] == {"pattern": [4 * k, 4 * k * a * a], "tail": [2 * k, 2 * k * a * a]}
     assert "symmetric" not in W
-    stored = sum(1 if np.ndim(d) == 0 else len(d) for t in (K, M, W) for d in t["diagonals"])
-    triplets = 3 * sum(getattr(sc.system, x).nnz for x in "KMW")
-    assert stored < triplets / 2
+    stored = sum(len(x) for t in (K, M, W) for d in t["diagonals"] for x in d.values())
+    assert stored <= 20
     text = dumps(doc)
     back = Scenario.from_dict(loads(text, "round trip"))
     over = back.with_overrides({"simulation.h": 1e-3})
@@ -343,3 +345,19 @@ def test_a_whole_run_at_N_1e4_allocates_O_n():
     assert res.stats.contact_solves > 0 and np.abs(res.slaves["jump"].sigma).max() > 0   # it projected
     assert peak < 12 * 1024 * n, f"peak {peak / n:.0f} B per degree of freedom"
     assert peak / small < 10 * 1.5, f"peak ratio {peak / small:.1f} for 10× the size"
+
+
+def test_periodic_diagonals_round_trip_mixed_with_constant_and_plain_ones():
+    """A periodic diagonal (head, pattern, tail) beside a constant and an aperiodic one: the
+    writer makes them all tables (TOML's array of tables), the reader gives A back exactly."""
+    n = 40
+    main = np.concatenate([[7.0], np.tile([1.0, 3.0], 19), [5.0]])
+    A = sp.diags([np.full(n - 1, 2.0), main, np.arange(n - 1.0)], [-1, 0, 1]).tocsr()
+    doc = sps.banded_document(A)
+    assert doc["diagonals"][1] == {"pattern": [1.0, 3.0], "head": [7.0], "tail": [5.0]}
+    assert doc["diagonals"][0] == {"pattern": [2.0]} and len(doc["diagonals"][2]["pattern"]) == n - 1
+    back = sps.banded_matrix("system.K", loads(dumps({"system": {"K": doc}}), "x")["system"]["K"])
+    assert (A != back).nnz == 0
+    with pytest.raises(InputError) as err:
+        sps.banded_matrix("system.K", {**doc, "diagonals": [{"pattern": [1.0], "head": [0.0] * 41}] * 3})
+    assert err.value.field == "system.K.diagonals[0].pattern"
