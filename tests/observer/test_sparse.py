@@ -361,3 +361,11 @@ def test_periodic_diagonals_round_trip_mixed_with_constant_and_plain_ones():
     with pytest.raises(InputError) as err:
         sps.banded_matrix("system.K", {**doc, "diagonals": [{"pattern": [1.0], "head": [0.0] * 41}] * 3})
     assert err.value.field == "system.K.diagonals[0].pattern"
+
+
+def test_other_projection_metrics_are_refused_with_factored_contact_data():
+    """n = 600: the M-metric design would need the dense n × n metric; refused by name."""
+    sc = load_scenario("rocking_chain", {"param.N": 300})
+    with pytest.raises(InputError, match="other than K") as err:
+        simulate(sc, h=1e-3, t_end=0.01, observers=["jump_mass"])
+    assert err.value.field == "observers"
