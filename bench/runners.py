@@ -452,7 +452,7 @@ def whole_call(case: Case) -> dict[str, float]:
     c0, w0 = time.process_time(), time.perf_counter()
     sc = observer.load_scenario(case.scenario, case.overrides())
     c1 = time.process_time()
-    observer.simulate(sc, engine=engine_for(case.solver))
+    observer.simulate(sc, engine=engine_for(case.solver), record_every=record_every(case.h, case.h_record))
     return {"whole_call_cpu_s": time.process_time() - c0, "whole_call_wall_s": time.perf_counter() - w0,
             "load_cpu_s": c1 - c0}
 
@@ -471,7 +471,8 @@ def run_scaling(case: Case, ctx: Context) -> list[dict]:
     wall time per step (metadata).
     """
     sc = observer.load_scenario(case.scenario, case.overrides())
-    res, cpu, wall = simulate(sc, case)
+    every = record_every(case.h, case.h_record)      # large N: rows every h_record (bounded memory)
+    res, cpu, wall = simulate(sc, case, record_every=every)
     short = sc.with_overrides({"simulation.t_end": SETUP_STEPS * sc.h})
     _, cpu_setup, _ = simulate(short, case)          # after the main run: no first-call costs
     steps = res.metadata["steps"]
@@ -494,12 +495,12 @@ def run_scaling(case: Case, ctx: Context) -> list[dict]:
         gc.collect()
         tracemalloc.start()
         try:
-            observer.simulate(sc, engine=engine_for(case.solver))
+            observer.simulate(sc, engine=engine_for(case.solver), record_every=every)
             _, peak = tracemalloc.get_traced_memory()
         finally:
             tracemalloc.stop()
         row["peak_mem_mb"] = peak / 1e6
-        row["trajectory_mb"] = (steps + 1) * (3 * sc.system.n + 3 * sc.system.m) * 8 / 1e6
+        row["trajectory_mb"] = (steps // every + 1) * (3 * sc.system.n + 3 * sc.system.m) * 8 / 1e6
     return [row]
 
 

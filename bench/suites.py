@@ -370,24 +370,28 @@ def robustness_cases(full: bool) -> list[Case]:
 
 
 # ---------------------------------------------------------------------------------- scaling
-SCALING_N = {"quick": (5, 10, 20, 50, 100, 200), "full": (5, 10, 20, 50, 100, 200, 500, 1000, 2000)}
-"""Chain sizes. The full suite stops at N = 2000: the compiled kernel still holds Â⁻¹W, K⁻¹W
-(n × m) and Ĝ, G₀, L (m × m) dense, O(N²) memory (peak RSS measured 2.9 GB at N = 3000;
-≈ 30 GB at N = 10⁴), so
-N = 10⁴ … 10⁵ (issue 23) waits for sparse contact data in the kernel."""
+SCALING_N = {"quick": (5, 10, 20, 50, 100, 200),
+             "full": (5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 10_000, 20_000, 50_000, 100_000)}
+"""Chain sizes. The full suite goes to N = 10⁵ blocks (issue 23: from n = 513 the kernel keeps
+the contacts' data as banded factors, nothing of size n × m or m × m)."""
 SCALING_FIT_FROM = 10
 """The per-step exponent is fitted from N = 10 to the largest N (issue 9: ≤ 1.1 up to 1000)."""
+SCALING_RECORD_VALUES = 1 << 24
+"""Above this many stored state values (steps × 2n), a scaling case keeps every ``h_record``
+(0.1 s) only: N = 10⁵ over 4 s would otherwise store 4001 × 4 rows of 2·10⁵ values (26 GB)."""
 
 
 def scaling_cases(full: bool) -> list[Case]:
-    """rocking_chain master (no observers) for N = 5 … 200 (``full``: … 1000), h = 1e-3 s.
+    """rocking_chain master (no observers) for N = 5 … 200 (``full``: … 10⁵), h = 1e-3 s.
 
     Contacts close from t ≈ 1 s on (the ground motion has to build up), so the horizon
-    covers 1 s (quick) or 3 s (full) of contact activity after that.
+    covers 1 s (quick) or 3 s (full) of contact activity after that. Runs whose trajectories
+    would exceed :data:`SCALING_RECORD_VALUES` store one row every 0.1 s (``h_record``).
     """
     key = "full" if full else "quick"
-    T = 4.0 if full else 2.0
-    return [Case("scaling", "rocking_chain", params=(("param.N", N),), observers=(), h=1e-3, t_end=T)
+    T, h = (4.0 if full else 2.0), 1e-3
+    return [Case("scaling", "rocking_chain", params=(("param.N", N),), observers=(), h=h, t_end=T,
+                 h_record=0.1 if (T / h) * 4 * N > SCALING_RECORD_VALUES else None)
             for N in SCALING_N[key]]
 
 

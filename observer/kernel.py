@@ -15,7 +15,13 @@ solvers that return ``(iterations, status, residual)``.
 * **Contacts.** W is stored by columns (CSC), so gaps and contact velocities cost
   O(nnz(W)); the closed set's Delassus matrices are gathered from the precomputed dense
   ``Ĝ = WᵀÂ⁻¹W`` and ``G₀ = WᵀM⁻¹W`` and the impulse is applied through the columns of
-  ``Â⁻¹W``: O(n|A| + |A|³) per step with |A| closed contacts.
+  ``Â⁻¹W``: O(n|A| + |A|³) per step with |A| closed contacts. Large banded systems
+  (:data:`CONTACTS_FACTORED`, n ≥ :data:`observer.stepping.FACTORED_MIN_N`) hold no n×m or
+  m×m matrix: ``Ĝ_AA`` and the projection's ``L_A = W_AᵀK⁻¹W_A`` are assembled per step from
+  the banded Cholesky factors of Â and K and a bounded cache of solved columns
+  (:func:`factored_gram`), and ``δu = Â⁻¹(W_A P)``, ``δq = K⁻¹(W_A Σ)`` are one banded solve
+  each: O(n·bw) per contact step, plus O(n·bw) per closed contact not in the cache; memory
+  O(n·(bw + cache)).
 * **LCPs.** One contact: the closed form ``x = max(0, −b/G)``. Several: block principal
   pivoting (Júdice & Pires with Murty's single-flip backup, finite for P-matrices) on a
   Cholesky-solved basis, the round-off tests of :mod:`observer.contact.lcp`. A solve whose
@@ -72,6 +78,14 @@ STATS_SIZE = 8
 master after a step, its step, max applied residual (:func:`applied_residual`), its step, the
 applied residual of the last contact step]."""
 STRUCTURE_DENSE, STRUCTURE_BANDED = 0, 1
+CONTACTS_DENSE, CONTACTS_FACTORED = 0, 1
+"""How the kernel holds the contacts' Delassus data (:attr:`SystemBundle.contacts`): the
+precomputed dense ``Â⁻¹W``, Ĝ and per-metric ``N⁻¹W``, ``WᵀN⁻¹W``, or, for large banded
+systems, the banded Cholesky factors of Â and of the projection metrics, from which each step
+assembles its closed set's blocks (:func:`factored_impulse`, :func:`factored_project`)."""
+FACTORED_BLOCK = 64
+"""Initial side of the closed-set work matrices with factored contacts (grown in the loop when
+more contacts close at once)."""
 WAVE_COS, WAVE_SIN, WAVE_MINUS_SIN = 0, 1, 2
 WAVE_NAMES = ("cos", "sin", "-sin")
 """Functions of the signal waves, by code: code c is ``WAVE_NAMES[c]``
@@ -106,9 +120,17 @@ class SystemBundle(NamedTuple):
     Wp, Wi, Wv : ndarray
         W in CSC storage (column pointers, row indices, values; indices sorted).
     AinvWT : ndarray (m, n)
-        ``(Â⁻¹W)ᵀ``.
+        ``(Â⁻¹W)ᵀ`` ((1, 1) placeholder with factored contacts).
     Ghat, G0 : ndarray (m, m)
-        ``Ĝ = WᵀÂ⁻¹W`` and ``G₀ = WᵀM⁻¹W``.
+        ``Ĝ = WᵀÂ⁻¹W`` and ``G₀ = WᵀM⁻¹W`` ((1, 1) placeholders with factored contacts).
+    contacts : int
+        :data:`CONTACTS_DENSE` or :data:`CONTACTS_FACTORED` (banded structure only: Ĝ_AA and
+        ``δu = Â⁻¹W_A P`` from ``Ach_b`` per step, :func:`factored_impulse`).
+    Acache : ndarray (C, n)
+        Cached columns ``Â⁻¹W_j`` (factored contacts; (1, 1) placeholder otherwise).
+    Aslot, Aowner, Astamp : ndarray of int (m,), (C,), (C + 1,)
+        The cache's contact → row and row → contact maps, last uses and clock
+        (:func:`_factored_column`).
     h, theta, t0 : float
         The step, θ and the grid's start.
     """
@@ -127,6 +149,11 @@ class SystemBundle(NamedTuple):
     AinvWT: np.ndarray
     Ghat: np.ndarray
     G0: np.ndarray
+    contacts: int
+    Acache: np.ndarray
+    Aslot: np.ndarray
+    Aowner: np.ndarray
+    Astamp: np.ndarray
     h: float
     theta: float
     t0: float
@@ -220,9 +247,17 @@ class ObserverBundle(NamedTuple):
     master_projection : bool
         The master is projected on its closed set.
     KinvWT : ndarray (P, m, n)
-        ``(N⁻¹W)ᵀ`` per projection metric N.
+        ``(N⁻¹W)ᵀ`` per projection metric N ((1, 1, 1) placeholder with factored contacts).
     L : ndarray (P, m, m)
-        ``WᵀN⁻¹W`` per projection metric N.
+        ``WᵀN⁻¹W`` per projection metric N ((1, 1, 1) placeholder with factored contacts).
+    Kch : ndarray (P, bwk + 1, n)
+        With factored contacts: the lower banded Cholesky factor of each metric (zeros: none,
+        the projection then fails); else a (1, 1, 1) placeholder.
+    bwk : int
+        Their bandwidth.
+    Kcache, Kslot, Kowner, Kstamp : ndarray
+        Per metric, the cache of columns ``N⁻¹W_j`` (P, C, n) and its maps (P, m), (P, C),
+        (P, C + 1) (:func:`_factored_column`).
     """
 
     jumps: np.ndarray
@@ -230,6 +265,12 @@ class ObserverBundle(NamedTuple):
     master_projection: bool
     KinvWT: np.ndarray
     L: np.ndarray
+    Kch: np.ndarray
+    bwk: int
+    Kcache: np.ndarray
+    Kslot: np.ndarray
+    Kowner: np.ndarray
+    Kstamp: np.ndarray
 
 
 class StateBundle(NamedTuple):
@@ -641,49 +682,20 @@ def contact_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, AinvWT, Ghat,
                     gk, bvec, x, lc, le, gc, rhs, sol, G, Gs, Lf, basic, infeas, du, u1, P):
     """The impulse of system s's step on the closed set ``act[:a]`` (a ≥ 1) and its velocity.
 
-    Newton (``law == 0``), and Poisson on one contact (the same map): ``LCP(Ĝ, γ_free + e∘γ_k)``;
-    Poisson on several: Glocker's compression and expansion phases. Writes ``P[:a]``,
-    ``u1 = u_free + δu`` with ``δu = Σ_j (Â⁻¹W)_j P_j`` summed once, and the applied residual
+    The closed set's block of the precomputed Ĝ, the impact law's impulse on it
+    (:func:`_law_impulse`); writes ``P[:a]``, ``u1 = u_free + δu`` with
+    ``δu = Σ_j (Â⁻¹W)_j P_j`` summed once, and the applied residual
     (:func:`applied_residual`) in ``stats[7]``; returns the status. ``gk`` … ``infeas`` are
     work buffers ((m,) and (m, m); separate arrays, not views: a view costs a reference count).
     """
     n = uf.shape[0]
-    max_iter = max(200, 20 * a)
-    for r in range(a):
-        j = act[r]
-        gk[r] = _wt_row(Wp, Wi, Wv, us, s, j) + nu_dot[k, j]
-        gc[r] = _wt(Wp, Wi, Wv, uf, j) + nu_dot[k + 1, j]                   # γ_free
     for r in range(a):
         for c in range(a):
             G[r, c] = Ghat[act[r], act[c]]
-    newton = law == 0 or a == 1
-    if newton:
-        for r in range(a):
-            bvec[r] = gc[r] + e[act[r]] * gk[r]
-        if not _solve_counted(G, bvec, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
-            return LCP_FAILED
-    else:
-        # Poisson: Glocker's phases with Ĝ on γ̃ = (γ_free + ε∘γ_k)/(1+ε)
-        for r in range(a):
-            er = e[act[r]]
-            bvec[r] = (gc[r] + er * gk[r]) / (1.0 + er)
-        if not _solve_counted(G, bvec, a, lc, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
-            return LCP_FAILED
-        for r in range(a):                                   # γ_C = γ̃ + ĜΛ_C
-            acc = 0.0
-            for c in range(a):
-                acc += G[r, c] * lc[c]
-            gc[r] = bvec[r] + acc
-        for r in range(a):                                   # γ_C + Ĝ(ε∘Λ_C)
-            acc = 0.0
-            for c in range(a):
-                acc += G[r, c] * (e[act[c]] * lc[c])
-            le[r] = gc[r] + acc
-        if not _solve_counted(G, le, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
-            return LCP_FAILED
-        for r in range(a):                                   # P = Λ_C + (ε∘Λ_C + μ)
-            le[r] = x[r]                                     # μ = Λ_E − ε∘Λ_C, kept
-            x[r] = lc[r] + (e[act[r]] * lc[r] + x[r])
+    status = _law_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, e, tol, stats, gk, bvec, x, lc, le,
+                          gc, rhs, sol, G, Gs, Lf, basic, infeas)
+    if status != OK:
+        return status
     for i in range(n):
         du[i] = 0.0
     for r in range(a):                                       # δu = Σ_j (Â⁻¹W)_j P_j, once
@@ -693,10 +705,56 @@ def contact_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, AinvWT, Ghat,
             du[i] += AinvWT[j, i] * x[r]
     for i in range(n):
         u1[i] = uf[i] + du[i]
-    res = applied_residual(Wp, Wi, Wv, act, a, du, bvec, x if newton else le)
+    res = applied_residual(Wp, Wi, Wv, act, a, du, bvec, x if (law == 0 or a == 1) else le)
     stats[7] = res
     if not res <= tol:
         return RESIDUAL_EXCEEDED
+    return OK
+
+
+@njit(**JIT)
+def _law_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, e, tol, stats, gk, bvec, x, lc, le, gc, rhs,
+                 sol, G, Gs, Lf, basic, infeas):
+    """The impact law's impulse on the closed set ``act[:a]`` with its Delassus block
+    ``G[:a, :a] = Ĝ_AA`` into ``x[:a]``; the LCP's right-hand side stays in ``bvec`` (and, for
+    Poisson on several contacts, μ = Λ_E − ε∘Λ_C in ``le``) for the applied residual.
+
+    Newton (``law == 0``), and Poisson on one contact (the same map): ``LCP(Ĝ, γ_free + e∘γ_k)``;
+    Poisson on several: Glocker's compression and expansion phases. Returns the status.
+    """
+    max_iter = max(200, 20 * a)
+    for r in range(a):
+        j = act[r]
+        gk[r] = _wt_row(Wp, Wi, Wv, us, s, j) + nu_dot[k, j]
+        gc[r] = _wt(Wp, Wi, Wv, uf, j) + nu_dot[k + 1, j]                   # γ_free
+    newton = law == 0 or a == 1
+    if newton:
+        for r in range(a):
+            bvec[r] = gc[r] + e[act[r]] * gk[r]
+        if not _solve_counted(G, bvec, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
+            return LCP_FAILED
+        return OK
+    # Poisson: Glocker's phases with Ĝ on γ̃ = (γ_free + ε∘γ_k)/(1+ε)
+    for r in range(a):
+        er = e[act[r]]
+        bvec[r] = (gc[r] + er * gk[r]) / (1.0 + er)
+    if not _solve_counted(G, bvec, a, lc, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
+        return LCP_FAILED
+    for r in range(a):                                   # γ_C = γ̃ + ĜΛ_C
+        acc = 0.0
+        for c in range(a):
+            acc += G[r, c] * lc[c]
+        gc[r] = bvec[r] + acc
+    for r in range(a):                                   # γ_C + Ĝ(ε∘Λ_C)
+        acc = 0.0
+        for c in range(a):
+            acc += G[r, c] * (e[act[c]] * lc[c])
+        le[r] = gc[r] + acc
+    if not _solve_counted(G, le, a, x, basic, infeas, Gs, rhs, sol, Lf, max_iter, tol, stats):
+        return LCP_FAILED
+    for r in range(a):                                   # P = Λ_C + (ε∘Λ_C + μ)
+        le[r] = x[r]                                     # μ = Λ_E − ε∘Λ_C, kept
+        x[r] = lc[r] + (e[act[r]] * lc[r] + x[r])
     return OK
 
 
@@ -730,6 +788,133 @@ def project_positions(k, act, a, slot, Wp, Wi, Wv, nu, KinvWT, L, q1, sig, g, s_
         j = act[r]
         for i in range(n):
             q1[i] += KinvWT[slot, j, i] * s_[r]
+    return OK
+
+
+# ---------------------------------------------------------------------------------------
+# factored contact data (CONTACTS_FACTORED): large banded systems, no n×m or m×m matrix
+# ---------------------------------------------------------------------------------------
+@njit(**JIT)
+def _factored_column(j, Wp, Wi, Wv, fac, bw, cache, slot_of, owner, stamp, col):
+    """The row of ``cache`` that holds ``N⁻¹W_j`` (N = L Lᵀ, ``fac`` its lower banded Cholesky
+    factor), solved into the least recently used row not used since the clock ``stamp[-1]``
+    last ticked; −1 when every row is in use (the column is then solved into ``col``).
+
+    ``slot_of`` (m,) maps a contact to its row (−1: none), ``owner`` (C,) a row to its contact
+    (−1: none), ``stamp`` (C + 1,) each row's last use and, last, the clock. O(n·bw) on a miss,
+    O(1) on a hit.
+    """
+    C = owner.shape[0]
+    clock = stamp[C]
+    c = slot_of[j]
+    if c < 0:
+        best = clock
+        for r in range(C):
+            if stamp[r] < best:
+                best = stamp[r]
+                c = r
+        if c >= 0:
+            if owner[c] >= 0:
+                slot_of[owner[c]] = -1
+            owner[c] = j
+            slot_of[j] = c
+        n = col.shape[0]
+        for i in range(n):
+            col[i] = 0.0
+        for p in range(Wp[j], Wp[j + 1]):
+            col[Wi[p]] = Wv[p]
+        _band_cho_solve(fac, bw, col)
+        if c >= 0:
+            for i in range(n):
+                cache[c, i] = col[i]
+    if c >= 0:
+        stamp[c] = clock
+    return c
+
+
+@njit(**JIT)
+def factored_gram(act, a, Wp, Wi, Wv, fac, bw, cache, slot_of, owner, stamp, col, G):
+    """``G[:a, :a] = sym(W_AᵀN⁻¹W_A)`` for the closed set ``act[:a]`` from the banded Cholesky
+    factor of N (Ĝ with N = Â, L_A with N = K, paper eqs. (13)-(14)): one banded solve per
+    column not in the cache (:func:`_factored_column`), then O(a·nnz(W_A)); symmetrized as
+    the dense ``0.5(Ĝ + Ĝᵀ)`` is."""
+    C = owner.shape[0]
+    stamp[C] += 1                                        # a new use: this set's rows are kept
+    for r in range(a):
+        c = _factored_column(act[r], Wp, Wi, Wv, fac, bw, cache, slot_of, owner, stamp, col)
+        for q in range(a):
+            j = act[q]
+            acc = 0.0
+            if c >= 0:
+                for p in range(Wp[j], Wp[j + 1]):
+                    acc += Wv[p] * cache[c, Wi[p]]
+            else:
+                for p in range(Wp[j], Wp[j + 1]):
+                    acc += Wv[p] * col[Wi[p]]
+            G[q, r] = acc
+    for r in range(a):
+        for q in range(r + 1, a):
+            v = 0.5 * (G[r, q] + G[q, r])
+            G[r, q] = v
+            G[q, r] = v
+
+
+@njit(**JIT)
+def _factored_apply(act, a, Wp, Wi, Wv, fac, bw, x, out):
+    """``out = N⁻¹(W_A x)`` by one banded solve (O(n·bw))."""
+    n = out.shape[0]
+    for i in range(n):
+        out[i] = 0.0
+    for r in range(a):
+        j = act[r]
+        for p in range(Wp[j], Wp[j + 1]):
+            out[Wi[p]] += Wv[p] * x[r]
+    _band_cho_solve(fac, bw, out)
+
+
+@njit(**JIT)
+def factored_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, Ach_b, bw, Acache, Aslot, Aowner, Astamp,
+                     e, tol, stats, gk, bvec, x, lc, le, gc, rhs, sol, G, Gs, Lf, basic, infeas, du, u1, P, col):
+    """:func:`contact_impulse` without the n×m ``Â⁻¹W`` and the m×m Ĝ: ``Ĝ_AA`` from the banded
+    factor of Â (:func:`factored_gram`, cached columns ``Acache``) and ``δu = Â⁻¹(W_A P)``
+    by one banded solve: O(n·bw) per contact step plus O(n·bw) per uncached closed contact."""
+    factored_gram(act, a, Wp, Wi, Wv, Ach_b, bw, Acache, Aslot, Aowner, Astamp, col, G)
+    status = _law_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, e, tol, stats, gk, bvec, x, lc, le,
+                          gc, rhs, sol, G, Gs, Lf, basic, infeas)
+    if status != OK:
+        return status
+    for r in range(a):
+        P[r] = x[r]
+    _factored_apply(act, a, Wp, Wi, Wv, Ach_b, bw, x, du)
+    for i in range(uf.shape[0]):
+        u1[i] = uf[i] + du[i]
+    res = applied_residual(Wp, Wi, Wv, act, a, du, bvec, x if (law == 0 or a == 1) else le)
+    stats[7] = res
+    if not res <= tol:
+        return RESIDUAL_EXCEEDED
+    return OK
+
+
+@njit(**JIT)
+def factored_project(k, act, a, slot, Wp, Wi, Wv, nu, Kch, bwk, Kcache, Kslot, Kowner, Kstamp, q1, sig, g, s_,
+                     Gp, Lf, col):
+    """:func:`project_positions` from the banded factor of the metric (``Kch[slot]``, eqs.
+    (13)-(14)): ``L_A`` by :func:`factored_gram` (cached columns ``Kcache[slot]``) and
+    ``q1 += N⁻¹(W_A Σ)`` by one banded solve. Returns the status (:data:`PROJECTION_FAILED`
+    when L_A is not positive definite, a singular factor included)."""
+    for r in range(a):
+        g[r] = _wt(Wp, Wi, Wv, q1, act[r]) + nu[k, act[r]]
+    factored_gram(act, a, Wp, Wi, Wv, Kch[slot], bwk, Kcache[slot], Kslot[slot], Kowner[slot], Kstamp[slot],
+                  col, Gp)
+    if not _cholesky(Gp, a, Lf):
+        return PROJECTION_FAILED
+    _cho_solve(Lf, a, g, s_)
+    for r in range(a):
+        s_[r] = -s_[r]
+        sig[r] = s_[r]
+    _factored_apply(act, a, Wp, Wi, Wv, Kch[slot], bwk, s_, col)
+    for i in range(q1.shape[0]):
+        q1[i] += col[i]
     return OK
 
 
@@ -922,7 +1107,9 @@ def advance(k0, k1, s0, system, impact, signals, window, observers, state, stora
         impact.code, system.h, system.theta, system.structure, system.Bu, system.Bq, system.Bf, system.Ru_b,
         system.Rq_b, system.Ach_b, system.bw, window.waves, signals.e_ptr, signals.e_col, signals.e_coef,
         signals.e_wave, signals.v_ptr, signals.v_col, signals.f_c, signals.nu_c, system.Wp, system.Wi,
-        system.Wv, system.AinvWT, system.Ghat, system.G0, observers.KinvWT, observers.L, impact.e, impact.tol,
+        system.Wv, system.AinvWT, system.Ghat, system.G0, observers.KinvWT, observers.L,
+        system.contacts, system.Acache, system.Aslot, system.Aowner, system.Astamp, observers.Kch, observers.bwk,
+        observers.Kcache, observers.Kslot, observers.Kowner, observers.Kstamp, impact.e, impact.tol,
         state.stats, general)
 
 
@@ -932,7 +1119,9 @@ def _advance_loop(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupl
             summary, k_on, k_off, rhos, summ, vprev, Vprev, rec_V, closings, prev_act, Mq, Kq, Cq,
             law, h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, waves,
             e_ptr, e_col, e_coef, e_wave, v_ptr, v_col, f_c, nu_c, Wp, Wi, Wv, AinvWT, Ghat, G0,
-            KinvWT, L, e, tol, stats, general):
+            KinvWT, L,
+            contacts, Acache, Aslot, Aowner, Astamp, Kch, bwk, Kcache, Kslot, Kowner, Kstamp,
+            e, tol, stats, general):
     """Advance every system from step k0 (starting with system s0) up to step k1.
 
     One Moreau–Jean step of system s (row s of ``qs``, ``us``) on its closed set A: the
@@ -1000,7 +1189,12 @@ def _advance_loop(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupl
     wv = np.empty(2 * n + m)
     gk, bvec, x, lc, le = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
     gc, rhs, sol, gp, sp_ = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
-    G, Gs, Lf, Gp = np.empty((m, m)), np.empty((m, m)), np.empty((m, m)), np.empty((m, m))
+    factored = contacts == CONTACTS_FACTORED
+    if general is None:
+        factored = False
+    mb = min(m, FACTORED_BLOCK) if factored else m       # factored: grown when more contacts close
+    G, Gs, Lf, Gp = np.empty((mb, mb)), np.empty((mb, mb)), np.empty((mb, mb)), np.empty((mb, mb))
+    col = np.empty(n if factored else 1)
     basic, infeas = np.zeros(m, np.bool_), np.zeros(m, np.bool_)
     # the signals at t_k (row 0) and t_{k+1} (row 1); f̄_k in row 0 of fbar
     fsig, nu, nu_dot, fbar = np.zeros((2, n)), np.zeros((2, m)), np.zeros((2, m)), np.zeros((1, n))
@@ -1104,7 +1298,14 @@ def _advance_loop(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupl
             else:
                 banded_free_velocity(kl, s, qs, us, h, Ru_b, Rq_b, Ach_b, bw, fbar, uf)
             if a > 0 or not dense:
-                if a == 1:
+                if factored and a > G.shape[0]:
+                    mb = min(m, 2 * a)
+                    G, Gs, Lf, Gp = np.empty((mb, mb)), np.empty((mb, mb)), np.empty((mb, mb)), np.empty((mb, mb))
+                if factored and a > 0:
+                    status = factored_impulse(kl, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, Ach_b, bw, Acache,
+                                              Aslot, Aowner, Astamp, e, tol, stats, gk, bvec, x, lc, le, gc, rhs,
+                                              sol, G, Gs, Lf, basic, infeas, du, u1, P, col)
+                elif a == 1:
                     status = impulse_one(kl, s, us, uf, act[0], Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol,
                                          stats, du, u1, P)
                 elif a > 1:
@@ -1127,7 +1328,10 @@ def _advance_loop(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupl
             if projected:
                 for i in range(n):
                     qpre[i] = q1[i]
-                if a == 1:
+                if factored:
+                    status = factored_project(kl + 1, act, a, slots[s], Wp, Wi, Wv, nu, Kch, bwk, Kcache, Kslot,
+                                              Kowner, Kstamp, q1, sig, gp, sp_, Gp, Lf, col)
+                elif a == 1:
                     status = project_one(kl + 1, act[0], slots[s], Wp, Wi, Wv, nu, KinvWT, L, q1, sig)
                 else:
                     status = project_positions(kl + 1, act, a, slots[s], Wp, Wi, Wv, nu, KinvWT, L, q1,

@@ -48,7 +48,7 @@ import numpy as np
 
 from observer.errors import InputError
 from observer.sparse import abs_sum
-from observer.stepping import MoreauJean, NonFiniteState
+from observer.stepping import FACTORED_MIN_N, MoreauJean, NonFiniteState
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -266,9 +266,13 @@ def _finish(inp: LoopInput, out: LoopOutput, stopped_at: int | None, reason: str
         if out.V is not None:
             cut["V"] = out.V[:, :R]
         out = replace(out, stopped_at=int(stopped_at), stop_reason=reason, stop_signal=sig, **cut)
-    slots, _, Ls = projection_slots(inp)
-    health = assess(inp, out.record_every, out.q, out.u, out.active, out.chi, out.stats,
-                    lambda s: Ls[slots[s]])
+    if inp.stepper.S.factored:
+        L = FactoredL(inp.stepper)
+        L_of = lambda s: L  # noqa: E731
+    else:
+        slots, _, Ls = projection_slots(inp)
+        L_of = lambda s: Ls[slots[s]]  # noqa: E731
+    health = assess(inp, out.record_every, out.q, out.u, out.active, out.chi, out.stats, L_of)
     emit(health)
     return replace(out, health=health)
 
@@ -393,6 +397,21 @@ class FiniteGuard:
 
 def _stop_text(stepper, what: str, k: int) -> str:
     return f"{what} at t = {float(stepper.time(k)):.9g} (step {k} of {stepper.steps})"
+
+
+class FactoredL:
+    """``L = WᵀK⁻¹W`` of factored contact data (:attr:`observer.stepping.SchemeMatrices.factored`),
+    indexed by a closed set only: ``L[np.ix_(I, I)]`` is L_I from the banded factor of K
+    (:meth:`observer.stepping.MoreauJean._active_slices`, O(n·bw·|I|)); zeros when K is not
+    positive definite, as the dense ``L`` of :func:`projection_matrices`."""
+
+    def __init__(self, stepper: MoreauJean):
+        self.stepper = stepper
+
+    def __getitem__(self, ix) -> np.ndarray:
+        idx = np.asarray(ix[1], dtype=np.int64).ravel()
+        L = self.stepper._active_slices(idx)[5]
+        return np.zeros((idx.size, idx.size)) if L is None else L
 
 
 def check_engine(engine: str) -> str:
@@ -607,7 +626,7 @@ def newton_residual(stepper: MoreauJean, k: int, q, u, u1, P, act) -> float:
     u_free = stepper.free_velocity(k, q, u)
     nd = stepper.grid.nu_dot
     b = (u_free @ W_A + nd[k + 1, act]) + stepper.law.restitution[act] * (u @ W_A + nd[k, act])
-    du = stepper.S.AinvW[:, act] @ P
+    du = stepper._active_slices(act)[1] @ P if stepper.S.factored else stepper.S.AinvW[:, act] @ P
     Wp, Wi, Wv = stepper.csc
     c = lambda x, dtype=np.float64: np.ascontiguousarray(x, dtype=dtype)  # noqa: E731
     return float(applied_residual(Wp, Wi, Wv, c(act, np.int64), int(act.size), c(du), c(b), c(P)))
@@ -630,7 +649,9 @@ def _python_step(inp: LoopInput, stepper: MoreauJean, k: int, s: int, q, u, chi,
     q1, u1, P, _ = stepper.step(k, q, u, act, False)
     q_pre = q1
     sig = None
-    if proj and act.size:
+    if proj and act.size and stepper.S.factored:     # the K metric from its factor
+        q1, sig = stepper.project(k + 1, q1, act, None if inp.metric_of(s) is None else (None, None))
+    elif proj and act.size:
         slots, NinvWT, L = projection_slots(inp)        # the kernel's projection, in system s's metric
         q1, sig = stepper.project(k + 1, q1, act, (NinvWT, L), slots[s])
     return q1, u1, P, sig, q_pre, act, chi
@@ -680,7 +701,7 @@ def system_bundle(inp: LoopInput) -> "SystemBundle":
     dense ``Bu, Bq, Bf`` or the banded ``R_u, R_q`` and factor of Â, W in CSC, ``(Â⁻¹W)ᵀ``,
     Ĝ, G₀, and the grid's h, θ, t0. Every array a fresh C-contiguous float64 (or int64) one,
     so that every run types the kernel alike (:func:`quadratic_forms`)."""
-    from observer.kernel import STRUCTURE_BANDED, STRUCTURE_DENSE, SystemBundle
+    from observer.kernel import CONTACTS_DENSE, CONTACTS_FACTORED, STRUCTURE_BANDED, STRUCTURE_DENSE, SystemBundle
 
     stepper = inp.stepper
     S = stepper.S
@@ -693,10 +714,32 @@ def system_bundle(inp: LoopInput) -> "SystemBundle":
         b = S.band
         banded = (c(b.Ru), c(b.Rq), c(b.Achol))
         structure, dense, bw = STRUCTURE_BANDED, (dummy,) * 3, int(b.bw)
+    if S.factored:
+        contacts, cache = CONTACTS_FACTORED, column_cache(1, stepper.system.n, stepper.system.m)
+        AinvWT, Ghat, G0 = dummy, dummy, dummy
+    else:
+        contacts, cache = CONTACTS_DENSE, column_cache(1, 1, 1, 1)
+        AinvWT, Ghat, G0 = c(S.AinvW.T), c(S.Ghat), c(S.G0)
     return SystemBundle(structure=structure, Bu=dense[0], Bq=dense[1], Bf=dense[2], Ru_b=banded[0],
-                        Rq_b=banded[1], Ach_b=banded[2], bw=bw, Wp=Wp, Wi=Wi, Wv=Wv, AinvWT=c(S.AinvW.T),
-                        Ghat=c(S.Ghat), G0=c(S.G0), h=float(stepper.h), theta=float(stepper.theta),
-                        t0=float(stepper.t0))
+                        Rq_b=banded[1], Ach_b=banded[2], bw=bw, Wp=Wp, Wi=Wi, Wv=Wv, AinvWT=AinvWT,
+                        Ghat=Ghat, G0=G0, contacts=contacts, Acache=cache[0][0], Aslot=cache[1][0],
+                        Aowner=cache[2][0], Astamp=cache[3][0], h=float(stepper.h),
+                        theta=float(stepper.theta), t0=float(stepper.t0))
+
+
+FACTORED_CACHE_BYTES = 1 << 26
+"""Memory of each cache of solved columns (``N⁻¹W_j``) of the factored contact data: 64 MiB,
+at least 8 and at most 256 columns (:func:`column_cache`)."""
+
+
+def column_cache(P: int, n: int, m: int, C: int | None = None) -> tuple[np.ndarray, ...]:
+    """P empty caches of C solved columns of length n for m contacts, in the kernel's layout
+    (:func:`observer.kernel._factored_column`): ``(cols (P, C, n), slot_of (P, m) = −1,
+    owner (P, C) = −1, stamp (P, C + 1) = 0)``; C from :data:`FACTORED_CACHE_BYTES` unless given."""
+    if C is None:
+        C = int(min(m, max(8, min(256, FACTORED_CACHE_BYTES // (8 * n)))))
+    return (np.zeros((P, C, n)), np.full((P, m), -1, np.int64), np.full((P, C), -1, np.int64),
+            np.zeros((P, C + 1), np.int64))
 
 
 def law_bundle(stepper: MoreauJean) -> "LawBundle":
@@ -712,9 +755,35 @@ def observer_bundle(inp: LoopInput) -> "ObserverBundle":
     (:func:`projection_slots`)."""
     from observer.kernel import ObserverBundle
 
+    jumps, mp = np.asarray(inp.jumps, dtype=np.bool_), bool(inp.master_projection)
+    st = inp.stepper
+    if st.S.factored:
+        slots, Kch = factored_metrics(inp)
+        cache = column_cache(Kch.shape[0], st.system.n, st.system.m)
+        dummy = np.zeros((1, 1, 1))
+        return ObserverBundle(jumps=jumps, slots=slots, master_projection=mp, KinvWT=dummy, L=dummy, Kch=Kch,
+                              bwk=int(Kch.shape[1] - 1), Kcache=cache[0], Kslot=cache[1], Kowner=cache[2],
+                              Kstamp=cache[3])
     slots, NinvWT, L = projection_slots(inp)
-    return ObserverBundle(jumps=np.asarray(inp.jumps, dtype=np.bool_), slots=slots,
-                          master_projection=bool(inp.master_projection), KinvWT=NinvWT, L=L)
+    cache = column_cache(1, 1, 1, 1)
+    return ObserverBundle(jumps=jumps, slots=slots, master_projection=mp, KinvWT=NinvWT, L=L,
+                          Kch=np.zeros((1, 1, 1)), bwk=0, Kcache=cache[0], Kslot=cache[1], Kowner=cache[2],
+                          Kstamp=cache[3])
+
+
+def factored_metrics(inp: LoopInput) -> tuple[np.ndarray, np.ndarray]:
+    """With factored contact data: every system's projection slot (0) and the one metric's
+    banded factor stack (1, bw + 1, n), K's (zeros when K is not positive definite: the
+    projection then fails, :data:`observer.kernel.PROJECTION_FAILED`). Another metric raises
+    :class:`InputError` naming ``observers``."""
+    st = inp.stepper
+    if any(inp.metric_of(s) is not None for s in range(inp.q0.shape[0])):
+        raise InputError("observers", "a projection metric other than K (jump_mass, jump_identity) needs "
+                         f"n < {FACTORED_MIN_N} degrees of freedom; this system has "
+                         f"n = {st.system.n} (use the K-metric design \"jump\")")
+    b = st.S.band
+    Kch = np.zeros((b.bw + 1, st.system.n)) if b.Kchol is None else np.array(b.Kchol, dtype=np.float64)
+    return np.zeros(inp.q0.shape[0], np.int64), np.ascontiguousarray(Kch[None])
 
 
 def state_bundle(inp: LoopInput) -> "StateBundle":
@@ -1117,6 +1186,7 @@ def _reference_stepper(stepper: MoreauJean) -> MoreauJean:
     if ref is None:
         ref = MoreauJean(stepper.system, stepper.law, stepper.h, float(stepper.time(stepper.steps)),
                          stepper.theta, t0=stepper.t0, solver="reference",
-                         residual_tol=stepper.residual_tol)
+                         residual_tol=stepper.residual_tol,
+                         structure="banded" if stepper.S.factored else "dense")
         stepper._reference_twin = ref
     return ref

@@ -243,7 +243,8 @@ class Scenario:
 
     def to_dict(self) -> dict:
         """The scenario as a TOML-ready document (inverse of :meth:`from_dict`): dense
-        matrices as nested lists, sparse ones as triplet tables (never densified)."""
+        matrices as nested lists, sparse ones as banded or triplet tables, the shorter
+        (:func:`observer.sparse.sparse_document`; never densified)."""
         return self._document(plain=True)
 
     def _document(self, plain: bool) -> dict:
@@ -255,7 +256,7 @@ class Scenario:
         def mat(A):
             if not plain:
                 return A
-            return sps.triplet_document(A) if sps.is_sparse(A) else A.tolist()
+            return sps.sparse_document(A) if sps.is_sparse(A) else A.tolist()
 
         def harmonic(hm: Harmonic, const_key: str) -> dict:
             d: dict = {const_key: hm.constant.tolist()}

@@ -84,6 +84,153 @@ def triplet_document(A: sp.spmatrix, plain: bool = True) -> dict:
             "cols": cast(coo.col.astype(np.int64)), "values": cast(coo.data)}
 
 
+BANDED_KEYS = ("shape", "offsets", "diagonals", "symmetric")
+"""The keys of a banded matrix in a scenario document: ``{shape = [n, m], offsets = [...],
+diagonals = [[...], ...]}`` — diagonal k holds the entries ``A[i, i + k]`` in order of i (its
+length ``min(n, m − k)`` for k ≥ 0, ``min(n + k, m)`` for k < 0, scipy's ``A.diagonal(k)``),
+or one number when it is constant, or a periodic table ``{pattern = [...], head = [...],
+tail = [...]}`` (:data:`PATTERN_KEYS`); with ``symmetric = true`` (optional) only offsets k ≤ 0
+are given and mirrored. At most one value per stored entry and no indices
+(:func:`banded_document`)."""
+
+PATTERN_KEYS = ("pattern", "head", "tail")
+"""A periodic diagonal: ``head``, then ``pattern`` repeated (and cut) to fill, then ``tail``
+(``head`` and ``tail`` optional, default empty): a chain of identical blocks stores its
+diagonals in O(block size) whatever its length (:func:`periodic_form`)."""
+
+PATTERN_MAX_PERIOD = 8
+"""Longest period :func:`periodic_form` looks for."""
+
+
+def periodic_form(d: np.ndarray, plain: bool = True) -> dict | None:
+    """``d`` as a periodic table (:data:`PATTERN_KEYS`) when that stores at most a quarter of
+    its values: the shortest period p ≤ :data:`PATTERN_MAX_PERIOD` and the longest p-periodic
+    stretch (``d[i] == d[i + p]`` throughout), what precedes it the head, what follows the tail;
+    None otherwise."""
+    n = d.size
+    best = None
+    for p in range(1, min(PATTERN_MAX_PERIOD, n // 2) + 1):
+        bad = np.flatnonzero(d[p:] != d[:-p])
+        edges = np.concatenate([[-1], bad, [n - p]])
+        k = int(np.argmax(np.diff(edges)))
+        start, end = int(edges[k]) + 1, int(edges[k + 1]) + p      # d[start:end] is p-periodic
+        stored = start + p + (n - end)
+        if best is None or stored < best[0]:
+            best = (stored, p, start, end)
+    if best is None or best[0] > n // 4:
+        return None
+    _, p, start, end = best
+    cast = (lambda x: x.tolist()) if plain else np.asarray
+    out = {"pattern": cast(d[start:start + p])}
+    if start:
+        out["head"] = cast(d[:start])
+    if end < n:
+        out["tail"] = cast(d[end:])
+    return out
+
+
+def _diagonal(field: str, d: Any, size: int) -> np.ndarray:
+    """One diagonal of a banded table (a number, a list of ``size`` values, a periodic table)."""
+    from observer.validation import as_array
+
+    if isinstance(d, dict):
+        unknown = sorted(set(d) - set(PATTERN_KEYS))
+        if unknown or "pattern" not in d:
+            raise InputError(f"{field}.{unknown[0] if unknown else 'pattern'}",
+                             f"a periodic diagonal has the keys {', '.join(PATTERN_KEYS)} (pattern required)")
+        pat = as_array(f"{field}.pattern", d["pattern"], (None,))
+        head = as_array(f"{field}.head", d.get("head", []), (None,))
+        tail = as_array(f"{field}.tail", d.get("tail", []), (None,))
+        fill = size - head.size - tail.size
+        if pat.size == 0 or fill < 0:
+            raise InputError(f"{field}.pattern", f"must be non-empty, with head and tail at most {size} values")
+        return np.concatenate([head, np.resize(pat, fill), tail])
+    d = as_array(field, d, () if np.ndim(d) == 0 else (size,))
+    return np.full(size, float(d)) if d.ndim == 0 else d
+
+
+def banded_document(A: Any, plain: bool = True) -> dict:
+    """The banded table of sparse ``A`` (:data:`BANDED_KEYS`, the inverse of
+    :func:`banded_matrix`): its nonzero diagonals, each one number when constant, only the
+    lower ones of an exactly symmetric A; TOML-ready lists, or with ``plain=False`` NumPy arrays."""
+    C = sp.csr_matrix(A)
+    C.sum_duplicates()
+    coo = C.tocoo()
+    nz = coo.data != 0.0
+    offsets = np.unique(coo.col[nz].astype(np.int64) - coo.row[nz])
+    symmetric = C.shape[0] == C.shape[1] and exactly_symmetric(C)
+    if symmetric:
+        offsets = offsets[offsets <= 0]
+    diagonals = []
+    for k in offsets:
+        d = C.diagonal(int(k))
+        if d.size and np.all(d == d[0]):
+            diagonals.append(float(d[0]))
+        else:
+            diagonals.append(periodic_form(d, plain) or (d.tolist() if plain else d))
+    if any(isinstance(d, dict) for d in diagonals):   # TOML: an array of tables holds tables only
+        diagonals = [d if isinstance(d, dict) else {"pattern": [d] if np.ndim(d) == 0 else d} for d in diagonals]
+    doc = {"shape": [int(C.shape[0]), int(C.shape[1])], "offsets": [int(k) for k in offsets],
+           "diagonals": diagonals}
+    if symmetric:
+        doc["symmetric"] = True
+    return doc
+
+
+def banded_matrix(field: str, value: dict) -> sp.csr_matrix:
+    """A CSR matrix from a document's banded table (:data:`BANDED_KEYS`), in O(entries); errors
+    name ``field.KEY``."""
+    from observer.validation import as_array
+
+    unknown = sorted(set(value) - set(BANDED_KEYS))
+    if unknown:
+        raise InputError(f"{field}.{unknown[0]}", f"unknown key of a banded matrix (known: {', '.join(BANDED_KEYS)})")
+    for key in BANDED_KEYS[:3]:
+        if key not in value:
+            raise InputError(f"{field}.{key}", "required key of a banded matrix is missing")
+    shape = as_array(f"{field}.shape", value["shape"], (2,))
+    if not (np.all(shape == np.round(shape)) and np.all(shape >= 1)):
+        raise InputError(f"{field}.shape", f"must be two positive integers, got {value['shape']!r}")
+    n, m = int(shape[0]), int(shape[1])
+    symmetric = value.get("symmetric", False)
+    if not isinstance(symmetric, bool) or (symmetric and n != m):
+        raise InputError(f"{field}.symmetric", "must be true or false (true only for a square matrix)")
+    offsets = as_array(f"{field}.offsets", value["offsets"], (None,))
+    lo, hi = (-(n - 1), 0) if symmetric else (-(n - 1), m - 1)
+    if not (np.all(offsets == np.round(offsets)) and np.all((offsets >= lo) & (offsets <= hi))
+            and np.unique(offsets).size == offsets.size):
+        raise InputError(f"{field}.offsets", f"must be distinct integers in {lo}..{hi}")
+    diags = value["diagonals"]
+    if not isinstance(diags, (list, tuple)) or len(diags) != offsets.size:
+        raise InputError(f"{field}.diagonals", f"must be a list of {offsets.size} diagonals, one per offset")
+    ks = [int(k) for k in offsets]
+    data = [_diagonal(f"{field}.diagonals[{i}]", d, min(n, m - k) if k >= 0 else min(n + k, m))
+            for i, (k, d) in enumerate(zip(ks, diags))]
+    A = sp.diags(data, ks, shape=(n, m), format="csr") if data else sp.csr_matrix((n, m))
+    if symmetric:
+        strict = sp.diags([d for d, k in zip(data, ks) if k < 0], [k for k in ks if k < 0], shape=(n, m),
+                          format="csr") if any(k < 0 for k in ks) else sp.csr_matrix((n, m))
+        A = sp.csr_matrix(A + strict.T)
+    A.sum_duplicates()
+    return A
+
+
+def sparse_document(A: Any, plain: bool = True) -> dict:
+    """Sparse ``A`` as the shorter of its document tables: banded (:func:`banded_document`) when
+    its diagonals hold at most as many values as the triplet table's three per entry (counted
+    in full: a periodic diagonal only makes it shorter), else the triplet table
+    (:func:`triplet_document`)."""
+    C = sp.csr_matrix(A)
+    coo = C.tocoo()
+    nz = coo.data != 0.0
+    offsets = np.unique(coo.col[nz].astype(np.int64) - coo.row[nz])
+    n, m = C.shape
+    stored = sum(min(n, m - k) if k >= 0 else min(n + k, m) for k in offsets.tolist())
+    if stored <= 3 * int(np.count_nonzero(nz)):
+        return banded_document(A, plain)
+    return triplet_document(A, plain)
+
+
 def bandwidth(*mats: Any) -> int:
     """Largest |i − j| over the nonzero entries of the given n×n matrices (dense or sparse)."""
     bw = 0

@@ -56,6 +56,7 @@ plain float arrays and index arrays only, ready for a compiled kernel.
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from dataclasses import dataclass
 from functools import cached_property
@@ -80,6 +81,16 @@ BANDED_MIN_N = 32
 """Smallest n for which a banded structure is used (smaller systems stay dense): measured on the
 chain, banded wins from N = 20 blocks (n = 40: 1.9 µs against 3.5 µs per step in the kernel)
 and loses slightly at N = 10 (n = 20: 1.07 against 1.00 µs)."""
+
+
+FACTORED_MIN_N = sps.DENSE_MAX_N + 1
+"""Smallest n whose banded structure keeps *factored* contact data: the banded Cholesky
+factors of Â, M and K, from which each closed set's ``Â⁻¹W_A``, Ĝ_AA, ``K⁻¹W_A`` and L_AA
+are computed when it occurs (O(n·bw) per column), never the n × m ``Â⁻¹W``, ``K⁻¹W`` nor the
+m × m Ĝ, G₀, L (:attr:`BandedScheme.factored`; the compiled kernel's
+:data:`observer.kernel.CONTACTS_FACTORED`). Below it, the precomputed dense ones (every
+system of at most :data:`observer.sparse.DENSE_MAX_N` degrees of freedom runs as before, bit
+for bit)."""
 
 
 def bandwidth(*mats) -> int:
@@ -108,7 +119,9 @@ class BandedScheme:
 
     ``Achol`` is the lower banded Cholesky factor of ``Â = M + hθC + h²θ²K``;
     ``Ru = M − h(1−θ)C − h²θ(1−θ)K`` and ``Rq = −hK`` are in lower band storage (``Ru_s``,
-    ``Rq_s`` the same as sparse matrices, for the numpy engine).
+    ``Rq_s`` the same as sparse matrices, for the numpy engine). ``factored``: the contact
+    data are kept as factors (n ≥ :data:`FACTORED_MIN_N`), with ``Mchol`` and ``Kchol`` the
+    lower banded Cholesky factors of M and K (``Kchol`` None when K is not positive definite).
     """
 
     bw: int
@@ -117,6 +130,9 @@ class BandedScheme:
     Rq: np.ndarray
     Ru_s: sp.csr_matrix
     Rq_s: sp.csr_matrix
+    factored: bool = False
+    Mchol: np.ndarray | None = None
+    Kchol: np.ndarray | None = None
 
     def free_velocity(self, h: float, q: np.ndarray, u: np.ndarray, fbar: np.ndarray) -> np.ndarray:
         return sla.cho_solve_banded((self.Achol, True), self.Ru_s @ u + self.Rq_s @ q + h * fbar)
@@ -130,7 +146,10 @@ class SchemeMatrices:
     (n ≥ :data:`BANDED_MIN_N`, symmetric M, C, K of bandwidth ≤ n/8, chosen automatically):
     ``Bu = Bq = Bf = None`` and :class:`BandedScheme` gives u_free in O(n·bw²). Always:
     ``AinvW = Â⁻¹W``; ``Ghat = WᵀÂ⁻¹W``; ``G0 = WᵀM⁻¹W``; ``KinvW = K⁻¹W`` and
-    ``L = WᵀK⁻¹W`` (None unless K ≻ 0).
+    ``L = WᵀK⁻¹W`` (None unless K ≻ 0) — except with factored contact data
+    (``band.factored``, n ≥ :data:`FACTORED_MIN_N`): then those five are None, W is a sparse
+    CSC matrix (``WT`` its CSR transpose) and :meth:`MoreauJean._active_slices` computes each
+    closed set's blocks from the factors.
     """
 
     h: float
@@ -188,14 +207,18 @@ class SchemeMatrices:
     @staticmethod
     def _build_banded(system: LinearSystem, h: float, theta: float) -> "SchemeMatrices":
         """The banded structure: no dense n×n matrix is formed or multiplied (M, C, K dense or
-        sparse; W densified, as the kernel's Â⁻¹W, K⁻¹W are dense n×m)."""
-        M, C, K, W = system.M, system.C, system.K, dense(system.W)
+        sparse; below :data:`FACTORED_MIN_N` W densified, as the kernel's dense Â⁻¹W, K⁻¹W
+        are n×m; from it nothing of size n×m or m×m, :meth:`_build_factored`)."""
+        M, C, K = system.M, system.C, system.K
         bw = max(bandwidth(M, C, K), 1)
         A_hat = M + h * theta * C + (h * theta) ** 2 * K
         Achol = sla.cholesky_banded(to_band(A_hat, bw), lower=True)
         Ru = M - h * (1.0 - theta) * C - h * h * theta * (1.0 - theta) * K
         Rq = -h * K
         band = BandedScheme(bw, Achol, to_band(Ru, bw), to_band(Rq, bw), sp.csr_matrix(Ru), sp.csr_matrix(Rq))
+        if system.n >= FACTORED_MIN_N:
+            return SchemeMatrices._build_factored(system, h, theta, band)
+        W = dense(system.W)
         Ws = sp.csc_matrix(W)
         AinvW = sla.cho_solve_banded((Achol, True), W)
         Ghat = np.asarray(Ws.T @ AinvW)
@@ -211,6 +234,29 @@ class SchemeMatrices:
             L = 0.5 * (L + L.T)
         return SchemeMatrices(h, theta, None, None, None, W, np.ascontiguousarray(W.T), AinvW,
                               0.5 * (Ghat + Ghat.T), 0.5 * (G0 + G0.T), KinvW, L, band)
+
+    @staticmethod
+    def _build_factored(system: LinearSystem, h: float, theta: float, band: BandedScheme) -> "SchemeMatrices":
+        """Factored contact data: the banded Cholesky factors of M and K next to Â's, W sparse;
+        O(n·bw²) time and O(n·bw + nnz(W)) memory."""
+        bw = band.bw
+        Mchol = sla.cholesky_banded(to_band(system.M, bw), lower=True)
+        Kchol = None
+        if system.is_stiffness_definite():
+            try:
+                Kchol = sla.cholesky_banded(to_band(system.K, bw), lower=True)
+            except np.linalg.LinAlgError:
+                Kchol = None
+        band = dataclasses.replace(band, factored=True, Mchol=Mchol, Kchol=Kchol)
+        W = sp.csc_matrix(system.W, dtype=np.float64)
+        W.sort_indices()
+        return SchemeMatrices(h, theta, None, None, None, W, sp.csr_matrix(W.T), None, None, None, None, None,
+                              band)
+
+    @property
+    def factored(self) -> bool:
+        """Whether the contact data are factors (no n×m / m×m matrices; :meth:`_build_factored`)."""
+        return self.band is not None and self.band.factored
 
 
 class ClosedSetProjection:
@@ -356,6 +402,8 @@ class MoreauJean:
 
     MAX_CACHED_SETS = 4096
     """Active sets whose matrix slices are kept (cleared when full)."""
+    MAX_FACTORED_SETS = 16
+    """The same with factored contact data, whose slices are n × |A| each (bounded memory)."""
 
     def _active_slices(self, active: np.ndarray) -> tuple:
         """Slices of the precomputed matrices for one active set (cached by the set).
@@ -366,15 +414,32 @@ class MoreauJean:
         hit = self._slices.get(key)
         if hit is None:
             S = self.S
-            ix = np.ix_(active, active)
-            hit = (np.ascontiguousarray(S.W[:, active]), np.ascontiguousarray(S.AinvW[:, active]),
-                   S.Ghat[ix], S.G0[ix],
-                   None if S.KinvW is None else np.ascontiguousarray(S.KinvW[:, active]),
-                   None if S.L is None else S.L[ix], self._e[active])
-            if len(self._slices) >= self.MAX_CACHED_SETS:
+            if S.factored:
+                hit = self._factored_slices(active)
+            else:
+                ix = np.ix_(active, active)
+                hit = (np.ascontiguousarray(S.W[:, active]), np.ascontiguousarray(S.AinvW[:, active]),
+                       S.Ghat[ix], S.G0[ix],
+                       None if S.KinvW is None else np.ascontiguousarray(S.KinvW[:, active]),
+                       None if S.L is None else S.L[ix], self._e[active])
+            if len(self._slices) >= (self.MAX_FACTORED_SETS if S.factored else self.MAX_CACHED_SETS):
                 self._slices.clear()
             self._slices[key] = hit
         return hit
+
+    def _factored_slices(self, active: np.ndarray) -> tuple:
+        """:meth:`_active_slices` from the banded factors (factored contact data): one banded
+        solve per closed contact and metric, O(n·bw·|A|); symmetrized like the dense blocks."""
+        S, b = self.S, self.S.band
+        W_A = S.W[:, np.asarray(active, dtype=np.int64)].toarray()
+        sym = lambda G: 0.5 * (G + G.T)  # noqa: E731
+        AinvW_A = sla.cho_solve_banded((b.Achol, True), W_A)
+        KinvW_A = L_A = None
+        if b.Kchol is not None:
+            KinvW_A = sla.cho_solve_banded((b.Kchol, True), W_A)
+            L_A = sym(W_A.T @ KinvW_A)
+        return (W_A, AinvW_A, sym(W_A.T @ AinvW_A), sym(W_A.T @ sla.cho_solve_banded((b.Mchol, True), W_A)),
+                KinvW_A, L_A, self._e[active])
 
     @property
     def grid(self) -> Grid:
@@ -507,6 +572,8 @@ class MoreauJean:
 
         if active.size == 0:
             return q, np.zeros(0)
+        if self.S.factored:
+            return self._project_factored(k, q, active, stacks)
         if stacks is None:
             if self.S.L is None:
                 self.system.require_definite_stiffness("the position projection (position jumps)")
@@ -522,11 +589,33 @@ class MoreauJean:
                              "of W are dependent in the projection metric")
         return q1, sigma
 
+    def _project_factored(self, k: int, q: np.ndarray, active: np.ndarray, stacks) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`project` with factored contact data: the K metric only, ``K⁻¹W_I`` and L_I from
+        the banded factor of K (O(n·bw·|I|), :meth:`_factored_slices`)."""
+        if stacks is not None:
+            raise InputError("observers", "a projection metric other than K needs the dense contact data "
+                             f"(n < {FACTORED_MIN_N}); this system has n = {self.system.n}")
+        _, _, _, _, KinvW_A, L_A, _ = self._active_slices(active)
+        if KinvW_A is None:
+            self.system.require_definite_stiffness("the position projection (position jumps)")
+        g = self.S.WT[active] @ q + self.grid.nu[k, active]
+        try:
+            sigma = -sla.cho_solve(sla.cho_factor(L_A), g)
+        except np.linalg.LinAlgError:
+            raise InputError("system.W", f"W_IᵀK⁻¹W_I is not positive definite at step {k - 1}: the closed "
+                             "contacts' columns of W are dependent in the K metric") from None
+        return q + KinvW_A @ sigma, sigma
+
     @cached_property
     def csc(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """W in the kernel's CSC storage (:func:`observer.kernel.csc_arrays`)."""
         from observer.kernel import csc_arrays
 
+        if sp.issparse(self.S.W):
+            W = sp.csc_matrix(self.S.W, dtype=np.float64, copy=True)
+            W.eliminate_zeros()
+            W.sort_indices()
+            return (W.indptr.astype(np.int64), W.indices.astype(np.int64), np.ascontiguousarray(W.data))
         return csc_arrays(self.S.W)
 
     @cached_property

@@ -112,10 +112,11 @@ def as_array(field: str, value: Any, shape: tuple[int | None, ...]) -> np.ndarra
 
 def as_matrix(field: str, value: Any, shape: tuple[int | None, int | None]) -> Any:
     """A system matrix: :func:`as_array`, or a CSR matrix for a ``scipy.sparse`` value or a
-    document's sparse triplet table (:data:`observer.sparse.TRIPLET_KEYS`); the shape and the
+    document's sparse triplet table (:data:`observer.sparse.TRIPLET_KEYS`) or banded table (a
+    table with ``offsets``, :data:`observer.sparse.BANDED_KEYS`); the shape and the
     finiteness of the entries are checked either way (errors name ``field``)."""
     if isinstance(value, dict):
-        value = triplet_matrix(field, value)
+        value = sps.banded_matrix(field, value) if "offsets" in value else triplet_matrix(field, value)
     if not sps.is_sparse(value):
         return as_array(field, value, shape)
     A = sp.csr_matrix(value, dtype=float)

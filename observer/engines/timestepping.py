@@ -16,7 +16,8 @@ from observer.loop import run as run_loop
 from observer.observers import lyapunov, lyapunov_decrements
 from observer.result import (LazyFrame, RunRecord, RunStatus, SimulationResult, SlaveTrajectory,
                              StepStats, records_frame, run_metadata)
-from observer.stepping import MoreauJean
+from observer.errors import InputError
+from observer.stepping import FACTORED_MIN_N, MoreauJean
 
 
 SUMMARY_ROW_VALUES = 1 << 24
@@ -51,8 +52,11 @@ class TimeStepping(Engine):
             record_every = (summary_record_every(stepper.steps, sc.system.n, 1 + len(slaves))
                             if run.store == "summary" else 1)
         record_every = check_record_every(record_every)
-        inp = loop_input(run, stepper)
         other_metric = any(s.position_jumps and s.metric != "K" for s in slaves)
+        if other_metric and stepper.S.factored:         # its metric would be a dense n × n matrix
+            raise InputError("observers", f"a projection metric other than K needs n < {FACTORED_MIN_N} "
+                             f"degrees of freedom; this system has n = {sc.system.n} (use \"jump\", the K metric)")
+        inp = loop_input(run, stepper)
         out = run_loop(inp, engine=self.loop, record_every=record_every, store=run.store,
                        record_pre=other_metric and run.store == "full", on_chunk=run.on_chunk)
         return stepping_record(run, stepper, out, record_every)

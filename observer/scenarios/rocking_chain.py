@@ -87,10 +87,10 @@ def matrices(N: int, m: float, b: float, H: float, a: float, k: float, c: float)
 
 def document_matrix(A) -> list | dict:
     """A matrix as the document holds it: nested lists up to n = :data:`observer.sparse.DENSE_MAX_N`
-    (as always), beyond a sparse triplet table of NumPy arrays (O(nnz), never a dense n × n;
-    ``Scenario.to_dict`` gives the TOML lists)."""
-    from observer.sparse import DENSE_MAX_N, triplet_document
-    return A.toarray().tolist() if A.shape[0] <= DENSE_MAX_N else triplet_document(A, plain=False)
+    (as always), beyond a banded table of NumPy arrays (:func:`observer.sparse.banded_document`:
+    O(n·bandwidth), never a dense n × n; ``Scenario.to_dict`` gives the TOML lists)."""
+    from observer.sparse import DENSE_MAX_N, banded_document
+    return A.toarray().tolist() if A.shape[0] <= DENSE_MAX_N else banded_document(A, plain=False)
 
 
 def static_state(K, W, f_grav: np.ndarray, s: np.ndarray):

@@ -115,9 +115,13 @@ def test_quick_and_full_cover_every_kind_and_the_issue_grid(name):
     assert {c.perturbation for c in rob} == set(KINDS)
     seeds = Counter((c.perturbation, c.size) for c in rob if c.perturbation in RANDOM_KINDS)
     assert min(seeds.values()) >= (20 if full else 3)
-    # scaling: up to N = 2000 in full, from N = 5
+    # scaling: up to N = 10⁵ in full (issue 23), from N = 5; stored rows bounded at large N
     Ns = [dict(c.params)["param.N"] for c in suite.of_kind("scaling")]
-    assert Ns == ([5, 10, 20, 50, 100, 200, 500, 1000, 2000] if full else [5, 10, 20, 50, 100, 200])
+    assert Ns == ([5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 10_000, 20_000, 50_000, 100_000]
+                  if full else [5, 10, 20, 50, 100, 200])
+    for c in suite.of_kind("scaling"):
+        N = dict(c.params)["param.N"]
+        assert (c.t_end / (c.h_record or c.h) + 1) * 4 * N <= 2 ** 24 + 16 * N
     if full:
         assert [c.scenario for c in suite.of_kind("peers")] == list(PROBLEMS)
         assert {c.scenario for c in suite.of_kind("checks")} == set(check_scenarios())
