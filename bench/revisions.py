@@ -51,9 +51,13 @@ PROBLEM = "impact_oscillator"
 """The timed problem: the peers suite's 1-DOF oscillator."""
 
 CHILD = r"""
-import gc, json, sys, time
-import observer
+import gc, importlib.util, json, pathlib, sys, time
 args = json.loads(sys.argv[1])
+origin = importlib.util.find_spec("observer").origin      # located, not imported yet
+if not pathlib.Path(origin).resolve().is_relative_to(pathlib.Path(args["tree"]).resolve()):
+    print(json.dumps({"file": origin}))                   # another tree's package: nothing timed
+    sys.exit(0)
+import observer
 sc = observer.load_scenario(args["scenario"], args["overrides"])
 sc = sc.with_overrides({"simulation.t_end": args["steps"] * sc.h})
 t0 = time.perf_counter()
@@ -108,7 +112,8 @@ def time_tree(tree: Path, steps: int, repeats: int, python: str = sys.executable
     overrides = {"impact.law": "newton"}          # bench.peers.peer_overrides()["impact_oscillator"]
     env = {**os.environ, "PYTHONPATH": str(tree), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
            "MKL_NUM_THREADS": "1"}
-    arg = json.dumps({"scenario": PROBLEM, "overrides": overrides, "steps": steps, "repeats": repeats})
+    arg = json.dumps({"scenario": PROBLEM, "overrides": overrides, "steps": steps, "repeats": repeats,
+                      "tree": str(tree)})
     proc = subprocess.run([python, "-c", CHILD, arg], cwd=tree, env=env, capture_output=True, text=True,
                           timeout=timeout)
     if proc.returncode != 0:
