@@ -5,12 +5,13 @@ time not worse than 5 %", and "the 1-DOF oscillator ≤ 25 ns/step for the whole
 call". Timings of two trees taken on different days, or one after the other, compare the
 machine's load as much as the code (on a shared machine the per-step time of the same tree
 moves by ±30 % within minutes). So :func:`compare` times both trees **in one run,
-alternating**: round r runs one process per tree (the order swapped every round), each
-process importing its tree's ``observer`` (the revision is extracted by ``git archive`` into a
-temporary directory and put first on ``PYTHONPATH``; the process reports the file it imported,
-checked here) and timing ``repeats`` whole :func:`observer.simulate` calls of the peers
-suite's oscillator problem (:func:`bench.peers.peer_overrides`: the built-in
-``impact_oscillator`` with Newton's law, master alone, default engine) over ``steps`` steps.
+alternating call by call**: each round starts one process per tree, each importing its
+tree's ``observer`` (the revision is extracted by ``git archive`` into a temporary directory
+and put first on ``PYTHONPATH``; the process reports the file it imports, checked here), and
+then asks them in turn for one whole :func:`observer.simulate` call of the peers suite's
+oscillator problem (:func:`bench.peers.peer_overrides`: the built-in ``impact_oscillator``
+with Newton's law, master alone, default engine) over ``steps`` steps, ``repeats`` calls
+each, while the other process waits.
 
 What is timed is the user's whole call, as the peers suite times it
 (:func:`bench.peers.run_toolkit`): one warm-up call on 10 steps first (numba compilation or
@@ -55,28 +56,28 @@ import gc, importlib.util, json, pathlib, sys, time
 args = json.loads(sys.argv[1])
 origin = importlib.util.find_spec("observer").origin      # located, not imported yet
 if not pathlib.Path(origin).resolve().is_relative_to(pathlib.Path(args["tree"]).resolve()):
-    print(json.dumps({"file": origin}))                   # another tree's package: nothing timed
+    print(json.dumps({"file": origin}), flush=True)       # another tree's package: nothing timed
     sys.exit(0)
 import observer
 sc = observer.load_scenario(args["scenario"], args["overrides"])
 sc = sc.with_overrides({"simulation.t_end": args["steps"] * sc.h})
 t0 = time.perf_counter()
-observer.simulate(sc, t_end=10 * sc.h)
-warmup = time.perf_counter() - t0
-calls, res = [], None
-for _ in range(args["repeats"]):
+res = observer.simulate(sc, t_end=10 * sc.h)
+print(json.dumps({"file": observer.__file__, "engine": res.metadata.get("engine", "?"),
+                  "warmup_s": time.perf_counter() - t0}), flush=True)
+for line in sys.stdin:                                    # one timed call per line, until EOF
     res = None
     gc.collect()
     w0, c0 = time.perf_counter(), time.process_time()
     res = observer.simulate(sc)
-    calls.append({"wall_s": time.perf_counter() - w0, "cpu_s": time.process_time() - c0,
-                  "loop_s": res.metadata.get("wall_time_s", float("nan")),
-                  "steps": int(res.metadata.get("steps", args["steps"]))})
-print(json.dumps({"file": observer.__file__, "engine": res.metadata.get("engine", "?"),
-                  "warmup_s": warmup, "calls": calls}))
+    print(json.dumps({"wall_s": time.perf_counter() - w0, "cpu_s": time.process_time() - c0,
+                      "loop_s": res.metadata.get("wall_time_s", float("nan")),
+                      "steps": int(res.metadata.get("steps", args["steps"]))}), flush=True)
 """
 """The timing process's script (run with the tree first on ``PYTHONPATH``; public API only,
-so that it runs on any revision that has ``load_scenario`` and ``simulate``)."""
+so that it runs on any revision that has ``load_scenario`` and ``simulate``): it reports the
+file it imports and its warm-up, then times one whole call per line read, until its input
+closes."""
 
 
 def extract(revision: str, dest: Path, repo: Path = ROOT) -> str:
@@ -99,40 +100,77 @@ def extract(revision: str, dest: Path, repo: Path = ROOT) -> str:
     return commit
 
 
-def time_tree(tree: Path, steps: int, repeats: int, python: str = sys.executable,
-              timeout: float = 3600.0) -> dict:
-    """One timing process on ``tree`` (:data:`CHILD`): its imported file, engine, warm-up
-    seconds and per-call times.
+class TreeTimer:
+    """A timing process on one source tree (:data:`CHILD`), kept alive between calls so that
+    two trees' calls can alternate one by one (each call runs while the other process waits).
+
+    Attributes
+    ----------
+    file, engine : str
+        The ``observer/__init__.py`` the process imported and the engine of its runs.
+    warmup_s : float
+        Its warm-up call's wall time (compilation or cache load).
 
     Raises
     ------
     RuntimeError
-        The process failed, or imported ``observer`` from outside ``tree``.
+        The process failed, or would import ``observer`` from outside ``tree`` (checked
+        before importing: nothing is timed then).
     """
-    overrides = {"impact.law": "newton"}          # bench.peers.peer_overrides()["impact_oscillator"]
-    env = {**os.environ, "PYTHONPATH": str(tree), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
-           "MKL_NUM_THREADS": "1"}
-    arg = json.dumps({"scenario": PROBLEM, "overrides": overrides, "steps": steps, "repeats": repeats,
-                      "tree": str(tree)})
-    proc = subprocess.run([python, "-c", CHILD, arg], cwd=tree, env=env, capture_output=True, text=True,
-                          timeout=timeout)
-    if proc.returncode != 0:
-        last = (proc.stderr.strip().splitlines() or ["no message"])[-1]
-        raise RuntimeError(f"timing process on {tree} failed (exit {proc.returncode}): {last}")
-    out = json.loads(proc.stdout.strip().splitlines()[-1])
-    if not Path(out["file"]).resolve().is_relative_to(Path(tree).resolve()):
-        raise RuntimeError(f"the timing process imported {out['file']}, not the tree {tree}")
-    return out
+
+    def __init__(self, tree: Path, steps: int, python: str = sys.executable):
+        env = {**os.environ, "PYTHONPATH": str(tree), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+               "MKL_NUM_THREADS": "1"}
+        arg = json.dumps({"scenario": PROBLEM, "overrides": {"impact.law": "newton"},  # peer_overrides()
+                          "steps": steps, "tree": str(tree)})
+        self.tree, self.steps = Path(tree), steps
+        self.proc = subprocess.Popen([python, "-c", CHILD, arg], cwd=tree, env=env, text=True,
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        head = self._read()
+        self.file = head["file"]
+        if not Path(self.file).resolve().is_relative_to(self.tree.resolve()):
+            self.close()
+            raise RuntimeError(f"the timing process imported {self.file}, not the tree {tree}")
+        self.engine, self.warmup_s = head["engine"], head["warmup_s"]
+
+    def _read(self) -> dict:
+        line = self.proc.stdout.readline()
+        if not line:
+            err = self.proc.stderr.read().strip().splitlines() or ["no message"]
+            self.proc.wait()
+            raise RuntimeError(f"timing process on {self.tree} failed (exit {self.proc.returncode}): {err[-1]}")
+        return json.loads(line)
+
+    def call(self) -> dict:
+        """One timed whole call: ``wall_s``, ``cpu_s``, ``loop_s``, ``steps``."""
+        self.proc.stdin.write("call\n")
+        self.proc.stdin.flush()
+        return self._read()
+
+    def close(self) -> None:
+        """Close the process's input (it exits) and wait for it."""
+        if self.proc.stdin and not self.proc.stdin.closed:
+            self.proc.stdin.close()
+        self.proc.wait()
+
+    def __enter__(self) -> "TreeTimer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def compare(revision: str, steps: int = 1_000_000, rounds: int = 3, repeats: int = 7,
             python: str = sys.executable, repo: Path = ROOT) -> pd.DataFrame:
     """Time this tree and ``revision`` alternately in one run; one row per timed call.
 
-    Columns: ``tree`` ("current" or "revision"), ``commit`` (the revision's hash; "working
-    tree" for this one), ``round``, ``process`` (order of the process in the run), ``call``,
-    ``steps``, ``ns_per_step`` (wall), ``cpu_ns_per_step``, ``loop_ns_per_step``,
-    ``warmup_s`` (the process's warm-up call: compilation or cache load), ``engine``.
+    Each round starts one process per tree (:class:`TreeTimer`), then alternates their calls
+    one by one, ``repeats`` each (the first of each pair swapped every call and every round),
+    so that both trees see the same load of the machine. Columns: ``tree`` ("current" or
+    "revision"), ``commit`` (the revision's hash; "working tree" for this one), ``round``,
+    ``process``, ``call``, ``steps``, ``ns_per_step`` (wall), ``cpu_ns_per_step``,
+    ``loop_ns_per_step`` (the loop's own wall time), ``warmup_s`` (the process's warm-up call:
+    compilation or cache load), ``engine``.
     """
     for name, value in (("steps", steps), ("rounds", rounds), ("repeats", repeats)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -141,19 +179,19 @@ def compare(revision: str, steps: int = 1_000_000, rounds: int = 3, repeats: int
     with tempfile.TemporaryDirectory(prefix="bench-rev-") as tmp:
         commit = extract(revision, Path(tmp), repo)
         trees = {"current": (repo, "working tree"), "revision": (Path(tmp), commit)}
-        process = 0
         for r in range(rounds):
-            order = ("revision", "current") if r % 2 == 0 else ("current", "revision")
-            for name in order:
-                tree, label = trees[name]
-                out = time_tree(tree, steps, repeats, python)
-                for i, c in enumerate(out["calls"]):
-                    rows.append({"tree": name, "commit": label, "round": r, "process": process, "call": i,
-                                 "steps": c["steps"], "ns_per_step": 1e9 * c["wall_s"] / c["steps"],
-                                 "cpu_ns_per_step": 1e9 * c["cpu_s"] / c["steps"],
-                                 "loop_ns_per_step": 1e9 * c["loop_s"] / c["steps"],
-                                 "warmup_s": out["warmup_s"], "engine": out["engine"]})
-                process += 1
+            with TreeTimer(trees["revision"][0], steps, python) as old, TreeTimer(repo, steps, python) as new:
+                timers = {"revision": (old, 2 * r), "current": (new, 2 * r + 1)}
+                for i in range(repeats):
+                    order = ("revision", "current") if (i + r) % 2 == 0 else ("current", "revision")
+                    for name in order:
+                        timer, process = timers[name]
+                        c = timer.call()
+                        rows.append({"tree": name, "commit": trees[name][1], "round": r, "process": process,
+                                     "call": i, "steps": c["steps"], "ns_per_step": 1e9 * c["wall_s"] / c["steps"],
+                                     "cpu_ns_per_step": 1e9 * c["cpu_s"] / c["steps"],
+                                     "loop_ns_per_step": 1e9 * c["loop_s"] / c["steps"],
+                                     "warmup_s": timer.warmup_s, "engine": timer.engine})
     return pd.DataFrame(rows)
 
 

@@ -32,7 +32,7 @@ def test_a_timing_process_that_imports_another_tree_is_refused(tmp_path):
     """A directory without the package: the process imports the installed observer, which
     is not that tree's, and the timing is refused rather than attributed to it."""
     with pytest.raises(RuntimeError, match="not the tree"):
-        revisions.time_tree(tmp_path, steps=10, repeats=1)
+        revisions.TreeTimer(tmp_path, steps=10)
 
 
 def test_summary_medians_spread_and_ratio():
