@@ -126,9 +126,15 @@ def simulate(sc, case: Case, **kwargs):
     if case.integrator == "event":
         kwargs = {k: v for k, v in kwargs.items() if k not in ("solver", "record_every")}
         return _timed(observer.simulate, sc, integrator="event", **kwargs)
-    if engine_for(kwargs.get("solver") or case.solver) != "compiled":   # else: the engine registry's
-        kwargs.setdefault("engine", "python")                          # first that accepts the run
+    kwargs = {**engine_kwargs(kwargs.get("solver") or case.solver), **kwargs}
     return _timed(observer.simulate, sc, **kwargs)
+
+
+def engine_kwargs(solver: str) -> dict[str, str]:
+    """The engine keyword of a case with contact solver ``solver``: none (the engine
+    registry's first that accepts the run: compiled) when the kernel has the solver, else
+    ``engine="python"`` (:func:`bench.suites.engine_for`)."""
+    return {} if engine_for(solver) == "compiled" else {"engine": "python"}
 
 
 def engine_columns(res) -> dict[str, Any]:
@@ -407,7 +413,7 @@ def run_work_precision(case: Case, ctx: Context) -> list[dict]:
 # ------------------------------------------------------------------------------- robustness
 def _base_log(sc, ctx: Context, key) -> pd.DataFrame:
     if key not in ctx.cache:
-        res = observer.simulate(sc, engine=engine_for("pivoting"))
+        res = observer.simulate(sc)
         ctx.cache[key] = log_from_active(res.t, res.active)
     return ctx.cache[key]
 
@@ -452,7 +458,7 @@ def whole_call(case: Case) -> dict[str, float]:
     c0, w0 = time.process_time(), time.perf_counter()
     sc = observer.load_scenario(case.scenario, case.overrides())
     c1 = time.process_time()
-    observer.simulate(sc, engine=engine_for(case.solver), record_every=record_every(case.h, case.h_record))
+    observer.simulate(sc, **engine_kwargs(case.solver), record_every=record_every(case.h, case.h_record))
     return {"whole_call_cpu_s": time.process_time() - c0, "whole_call_wall_s": time.perf_counter() - w0,
             "load_cpu_s": c1 - c0}
 
@@ -495,7 +501,7 @@ def run_scaling(case: Case, ctx: Context) -> list[dict]:
         gc.collect()
         tracemalloc.start()
         try:
-            observer.simulate(sc, engine=engine_for(case.solver), record_every=every)
+            observer.simulate(sc, **engine_kwargs(case.solver), record_every=every)
             _, peak = tracemalloc.get_traced_memory()
         finally:
             tracemalloc.stop()
@@ -523,7 +529,7 @@ def run_peers(case: Case, ctx: Context) -> list[dict]:
         raise Unavailable(f"Siconos absent: {info}")
     N = int(dict(case.params).get("param.N", 10))
     problem = peers.peer_problem(case.scenario, h=case.h, t_end=case.t_end, N=N)
-    row = peers.run_peer(problem, repeats=PEER_REPEATS, engine=engine_for("pivoting")).iloc[0].to_dict()
+    row = peers.run_peer(problem, repeats=PEER_REPEATS, engine=None).iloc[0].to_dict()
     if row.get("status") != "ok":
         raise Unavailable(f"Siconos absent: {row.get('status')}")
     out = {**base_row(case, None), **row, "kind": "peers", "name": case.name,

@@ -507,6 +507,11 @@ class RunRecord:
     events : EventTable, LazyFrame or None
         The event table as arrays, or a table derived on first read (time-stepping), or None.
     summary : LazyFrame or None
+    q_pre : ndarray, shape (1 + len(slaves), rows, n), or None
+        The positions before each step's projection (row k+1 = step k; equal to ``q`` where
+        nothing was projected): the master first, then the observers in the order of
+        ``slaves``. Kept when the run description asks for it (``record_pre``, the proof
+        checks' replays) or when an observer projects in another metric; None otherwise.
     """
 
     engine: str
@@ -523,6 +528,7 @@ class RunRecord:
     metadata: dict
     events: EventTable | LazyFrame | None = None
     summary: LazyFrame | None = None
+    q_pre: np.ndarray | None = None
 
 
 def run_metadata(scenario, stepper, out) -> dict:

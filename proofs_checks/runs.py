@@ -1,9 +1,13 @@
-"""Simulated runs for the run-based checks, through the library's one time loop.
+"""Simulated runs for the run-based checks, through the engine registry.
 
-:func:`replay` runs :func:`observer.loop.run` — the same loop, engines and kernel as
-:func:`observer.simulate` — with every observer coupled to χ over the whole run and the
-loop's options the checks need: ``record_pre=True`` (the positions before the step's
-projection) and a swappable projection ``metric``. With the same settings and engine it is
+:func:`replay` describes the run once (:class:`observer.engines.RunDescription`: the master
+and every observer coupled to χ over the whole run) and hands it to an engine of
+:data:`observer.engines.ENGINES` — the one named, or the first that accepts it, as
+:func:`observer.simulate` does — which returns a :class:`~observer.result.RunRecord`. The
+description sets the extras the checks need (:data:`observer.engines.base.EXTRAS`):
+``record_pre`` (the positions before the step's projection, ``RunRecord.q_pre``), and when
+asked an explicit χ and a swappable projection ``metric``; an engine that cannot provide one
+refuses the run by that field's name. With the same settings and engine a replay is
 therefore bitwise identical to :func:`observer.simulate` (a test asserts it). With ``metric``
 set, the position jumps use the given metric N instead of K::
 
@@ -17,16 +21,16 @@ Arrays are time-major, row 0 the initial state and row k+1 the step t_k → t_{k
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
+from observer.engines import RunDescription, choose
 from observer.model import LinearSystem
-from observer.observers import lyapunov
+from observer.observers import Slave, lyapunov
 from observer.scenario import Scenario
-from observer.loop import LoopInput
-from observer.loop import run as run_loop
 from observer.stepping import MoreauJean
 
 Projector = Callable[[int, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -149,7 +153,7 @@ def make_projector(stepper: MoreauJean, metric: np.ndarray | Projector | None) -
 def replay(scenario: Scenario, *, h: float | None = None, t_end: float | None = None,
            slaves: tuple[SlaveSpec, ...] | list[SlaveSpec] = (), master_projection: bool = False,
            metric: np.ndarray | None = None, system: LinearSystem | None = None,
-           chi: np.ndarray | None = None, engine: str = "compiled") -> Run:
+           chi: np.ndarray | None = None, engine: str | None = None) -> Run:
     """Simulate the master and observers coupled over the whole run, recording everything.
 
     Parameters
@@ -168,16 +172,24 @@ def replay(scenario: Scenario, *, h: float | None = None, t_end: float | None = 
         Replace the scenario's system (e.g. a known-bad one built with ``check=False``).
     chi : ndarray of bool, shape (N+1, m), optional
         Switching signal for the observers (row k+1 = step k) instead of the master's.
-    engine : {"compiled", "python"}
-        The loop's engine (:mod:`observer.loop`); the same default as :func:`observer.simulate`.
+    engine : str, optional
+        An engine of :data:`observer.engines.ENGINES`; default: the first time-stepping engine
+        that accepts the run (:func:`observer.engines.choose`, as :func:`observer.simulate`).
 
     Returns
     -------
     Run
+
+    Raises
+    ------
+    InputError
+        An engine (named, or every candidate) that cannot take the run, naming the field it
+        lacks (e.g. ``record_pre``: the positions before projection every check reads).
     """
     system = system or scenario.system
-    stepper = MoreauJean(system, scenario.law, h or scenario.h, t_end or scenario.t_end,
-                         scenario.theta, solver=scenario.solver)
+    sc = dataclasses.replace(scenario, system=system, h=float(h or scenario.h),
+                             t_end=float(t_end or scenario.t_end), master_projection=bool(master_projection))
+    stepper = MoreauJean(system, sc.law, sc.h, sc.t_end, sc.theta, solver=sc.solver)
     steps, m = stepper.steps, system.m
     slaves = list(slaves)
     if callable(metric):
@@ -187,33 +199,30 @@ def replay(scenario: Scenario, *, h: float | None = None, t_end: float | None = 
         chi = np.asarray(chi, dtype=bool)
         if chi.shape != (steps + 1, m):
             raise ValueError(f"chi has shape {chi.shape}, expected {(steps + 1, m)}")
-    inp = LoopInput(stepper, np.stack([scenario.q0] + [np.asarray(s.q0, float) for s in slaves]),
-                    np.stack([scenario.u0] + [np.asarray(s.u0, float) for s in slaves]),
-                    np.array([False] + [s.position_jumps for s in slaves]), master_projection,
-                    coupling=None, chi=None if chi is None else chi[1:],
-                    metric=None if metric is None else np.asarray(metric, dtype=float),
-                    metrics=(None,) + tuple(s.metric for s in slaves))
-    if stepper.law.code is None:           # a registered law the compiled kernel does not have
-        engine = "python"
-    out = run_loop(inp, engine=engine, record_pre=True)
-    t = stepper.time(out.rows)
+    run = RunDescription(sc, "time-stepping", tuple(Slave(s.name, s.position_jumps, np.asarray(s.q0, float),
+                                                          np.asarray(s.u0, float)) for s in slaves),
+                         "master", None, chi=None if chi is None else chi[1:],
+                         metric=None if metric is None else np.asarray(metric, dtype=float),
+                         metrics=tuple(s.metric for s in slaves) if any(s.metric is not None for s in slaves)
+                         else None, record_pre=True)
+    chosen, _ = choose(run, engine)
+    rec = chosen.run(run)
+    t = rec.t
 
     def trajectory(i: int, name: str, projected: bool, active: np.ndarray) -> Trajectory:
-        return Trajectory(name, out.q[i], out.q_pre[i], out.u[i], out.P[i], out.sigma[i],
-                          active, projected)
+        tr = rec.slaves[name] if i else rec
+        return Trajectory(name, tr.q, rec.q_pre[i], tr.u, tr.P, tr.sigma, active, projected)
 
-    master = trajectory(0, "master", master_projection, out.active)
-    chi_rec = out.chi if slaves else np.zeros_like(out.active)
-    if not slaves:
-        chi_rec = out.active.copy() if chi is None else chi
+    master = trajectory(0, "master", master_projection, rec.active)
+    chi_rec = rec.chi if slaves else (rec.active.copy() if chi is None else chi)
     subs = [trajectory(i, s.name, s.position_jumps, chi_rec) for i, s in enumerate(slaves, start=1)]
-    g_pred = np.zeros((steps + 1, m))
-    g_pred[1:] = ((out.q[0, :-1] + 0.5 * stepper.h * out.u[0, :-1]) @ system.W + system.nu(t[:-1])
+    g_pred = np.zeros((t.size, m))
+    g_pred[1:] = ((rec.q[:-1] + 0.5 * stepper.h * rec.u[:-1]) @ system.W + system.nu(t[:-1])
                   + 0.5 * stepper.h * system.nu_dot(t[:-1]))
     return Run(system, stepper, t, master, {tr.name: tr for tr in subs}, chi_rec, g_pred, desc,
                {"h": stepper.h, "t_end": float(t[-1]), "theta": stepper.theta,
                 "master_projection": master_projection, "metric": metric, "system": system,
-                "chi_override": chi is not None, "engine": engine}, scenario,
+                "chi_override": chi is not None, "engine": rec.engine}, scenario,
                {s.name: s.metric for s in slaves if s.metric is not None})
 
 

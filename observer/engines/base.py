@@ -22,6 +22,14 @@ from observer.switching import SOURCES, read_log
 INTEGRATORS = ("time-stepping", "event")
 """The integrators an engine may implement (:attr:`Engine.integrator`)."""
 
+EXTRAS = {"chi": "an explicit switching signal χ",
+          "metric": "a projection metric other than K",
+          "metrics": "the observers' own projection metric matrices",
+          "record_pre": "the positions before the projection (q_pre)"}
+"""The optional parts of a :class:`RunDescription` (field → what it asks for), set by the
+proof checks' replays (:func:`proofs_checks.runs.replay`), never by :func:`observer.simulate`;
+an engine takes a run that sets one only if it lists the field in :attr:`Engine.extras`."""
+
 
 class Refusal(str):
     """Why an engine does not take a run: one line (a ``str``) and the input field it is
@@ -79,6 +87,18 @@ class RunDescription:
         (time-stepping: after the current window; event: between events or switchings) and
         the result's status says where (``metadata["stopped"]``); the event engine passes no
         chunk (its rows are written whole at the end).
+    chi : ndarray of bool, shape (N, m), or None
+        χ_k given explicitly (row k = step k), instead of the master's closed set or a log
+        (an extra, :data:`EXTRAS`).
+    metric : ndarray (n, n) or None
+        Projection metric N of the position jumps of every system without its own (None: K;
+        an extra).
+    metrics : tuple of (ndarray (n, n) or None) or None
+        Per observer (in the order of ``slaves``), its own projection metric N, overriding
+        its design's (an extra).
+    record_pre : bool
+        Keep the positions before each step's projection, :attr:`RunRecord.q_pre
+        <observer.result.RunRecord.q_pre>` (an extra).
     """
 
     scenario: Scenario
@@ -92,25 +112,36 @@ class RunDescription:
     record_every: int | None = None
     store: str = "full"
     on_chunk: Callable | None = None
+    chi: Any = None
+    metric: Any = None
+    metrics: tuple | None = None
+    record_pre: bool = False
 
 
 class Engine:
     """An engine: a name, the integrator it implements, what it accepts, how it runs.
 
-    Subclasses set :attr:`name`, :attr:`integrator` and :attr:`description` and implement
-    :meth:`refuses` (only what is particular to them) and :meth:`run`. Adding an engine is one
-    module with such a class plus one entry of :data:`observer.engines.ENGINES`.
+    Subclasses set :attr:`name`, :attr:`integrator`, :attr:`description` and :attr:`extras`
+    and implement :meth:`refuses` (only what is particular to them) and :meth:`run`. Adding an
+    engine is one module with such a class plus one entry of :data:`observer.engines.ENGINES`.
     """
 
     name: str = ""
     integrator: str = "time-stepping"
     description: str = ""
+    extras: frozenset = frozenset()
+    """The fields of :data:`EXTRAS` this engine honours (a run setting another is refused,
+    naming the field)."""
 
     def accepts(self, run: RunDescription) -> Refusal | None:
         """None when this engine takes ``run``, else why not (one line)."""
         if run.integrator != self.integrator:
             return Refusal(f"the {self.name} engine integrates by {self.integrator}, not "
                            f"integrator={run.integrator!r}")
+        for extra, what in EXTRAS.items():
+            value = getattr(run, extra)
+            if value is not None and value is not False and extra not in self.extras:
+                return Refusal(f"the {self.name} engine does not provide {what}", extra)
         return self.refuses(run)
 
     def refuses(self, run: RunDescription) -> Refusal | None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from observer.engines.base import Engine, RunDescription
+from observer.engines.base import EXTRAS, Engine, RunDescription
 from observer.loop import LoopInput, check_record_every, summary_frame
 from observer.loop import run as run_loop
 from observer.observers import lyapunov, lyapunov_decrements
@@ -41,6 +41,7 @@ class TimeStepping(Engine):
     integrator = "time-stepping"
     loop = "python"
     structure = "dense"
+    extras = frozenset(EXTRAS)
 
     def run(self, run: RunDescription) -> RunRecord:
         """The master and the observers over the grid t_k = t0 + k·h."""
@@ -58,19 +59,24 @@ class TimeStepping(Engine):
                              f"degrees of freedom; this system has n = {sc.system.n} (use \"jump\", the K metric)")
         inp = loop_input(run, stepper)
         out = run_loop(inp, engine=self.loop, record_every=record_every, store=run.store,
-                       record_pre=other_metric and run.store == "full", on_chunk=run.on_chunk)
+                       record_pre=run.record_pre or (other_metric and run.store == "full"),
+                       on_chunk=run.on_chunk)
         return stepping_record(run, stepper, out, record_every)
 
 
 def loop_input(run: RunDescription, stepper: MoreauJean) -> LoopInput:
-    """The loop's input: master first, then the observers (state, jumps, metric, name)."""
+    """The loop's input: master first, then the observers (state, jumps, metric, name), with
+    the description's extras (an explicit χ, the projection metrics)."""
     sc, slaves, system = run.scenario, run.slaves, run.scenario.system
+    own = run.metrics or (None,) * len(slaves)
     return LoopInput(stepper, np.stack([sc.q0] + [s.q0 for s in slaves]),
                      np.stack([sc.u0] + [s.u0 for s in slaves]),
                      np.array([False] + [s.position_jumps for s in slaves]),
                      bool(sc.master_projection), run.coupling, run.source == "self", run.log_frame,
-                     metrics=(None,) + tuple(None if s.design is None else s.design.metric_matrix(system)
-                                             for s in slaves),
+                     chi=run.chi, metric=run.metric,
+                     metrics=(None,) + tuple(N if N is not None else None if s.design is None
+                                             else s.design.metric_matrix(system)
+                                             for s, N in zip(slaves, own)),
                      names=tuple(s.name for s in slaves))
 
 
@@ -96,7 +102,7 @@ def stepping_record(run: RunDescription, stepper: MoreauJean, out, record_every:
     events = LazyFrame(result_events, of_result=True) if record_every == 1 else None
     return RunRecord(out.engine, t, out.q[0], out.u[0], out.P[0], out.sigma[0], out.active,
                      out.chi if slaves else None, trajectories, RunStatus.from_metadata(meta),
-                     StepStats.from_metadata(meta), meta, events, summary)
+                     StepStats.from_metadata(meta), meta, events, summary, out.q_pre)
 
 
 def _trajectory(system, h: float, out, i: int, name: str, master: dict,

@@ -1,6 +1,7 @@
 """observer.engines: what each engine accepts, the refusals by name, the default choice and its
 note, the run record, an impact law's declared engine facts; the toy engine (tests/toys/
-toy_engine.py) and the toy law (tests/toys/toy_design_and_law.py) through simulate and the CLI."""
+toy_engine.py) and the toy law (tests/toys/toy_design_and_law.py) through simulate, the CLI,
+the proof checks, a quick suite and the report."""
 
 from __future__ import annotations
 
@@ -138,14 +139,22 @@ def test_toy_engine_through_simulate_and_the_cli(toys, tmp_path, capsys):
     np.testing.assert_array_equal(toy.active, ref.active)
     assert observer.simulate(sc).metadata["engine"] == "compiled"     # registered last: not the default
     with pytest.raises(observer.InputError) as info:
-        observer.simulate(sc, engine="toy", observers=("nojump",))
-    assert info.value.field == "engine" and "master alone" in str(info.value)
+        observer.simulate(sc, engine="toy", observers=("jump_identity",))
+    assert info.value.field == "engine" and "K metric only" in str(info.value)
+    both = dict(observers=("jump", "nojump"), coupling=None, t_end=2.0)
+    osc = observer.load_scenario("impact_oscillator")                 # K ≻ 0: the jumps are defined
+    toy_obs, py_obs = (observer.simulate(osc, engine=e, **both) for e in ("toy", "python"))
+    assert np.any(toy_obs.slaves["jump"].q != toy_obs.slaves["nojump"].q)    # the observers jumped
+    for name in both["observers"]:
+        np.testing.assert_allclose(toy_obs.slaves[name].q, py_obs.slaves[name].q, rtol=0, atol=1e-13)
+        np.testing.assert_allclose(toy_obs.slaves[name].V, py_obs.slaves[name].V, rtol=0, atol=1e-13)
+    np.testing.assert_array_equal(toy_obs.chi, py_obs.chi)
     out = tmp_path / "toy.csv"
     assert main(["run", "bouncing_ball", "--t-end", "0.6", "--engine", "toy", "--observers", "none",
                  "--out", str(out)]) == 0
     assert "toy engine" in capsys.readouterr().out
     np.testing.assert_allclose(observer.read_frame(out)["q0"].to_numpy(), ref.q[:, 0], rtol=0, atol=1e-13)
-    assert main(["run", "bouncing_ball", "--t-end", "0.6", "--engine", "toy", "--observers", "nojump",
+    assert main(["run", "bouncing_ball", "--t-end", "0.6", "--engine", "toy", "--observers", "jump_identity",
                  "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "engine: the toy engine cannot take this run" in err
@@ -168,8 +177,9 @@ def test_toy_law_through_the_cli_on_the_event_engine(toys, tmp_path, capsys):
 
 def test_a_preferred_toy_engine_takes_the_quick_suites_master_runs_into_the_report(monkeypatch, tmp_path):
     """Registered first, the toy engine is the first that accepts a run of the master alone:
-    the quick suite's work-precision cases run on it (no change to bench/), the runs with
-    observers stay on the compiled engine, and the report is built from those rows."""
+    the quick suite's work-precision cases run on it (no change to bench/), the runs it
+    refuses (a summary store) stay on the compiled engine, and the report is built from
+    those rows."""
     from bench.results import CaseStore
     from bench.runners import Context, run_case
     from bench.suites import SUITES
@@ -188,7 +198,7 @@ def test_a_preferred_toy_engine_takes_the_quick_suites_master_runs_into_the_repo
     assert [r["engine"] for r in rows] == ["toy", "toy"]
     assert all(r["status"] == "ok" for r in rows)
     assert rows[1]["err_mean"] < rows[0]["err_mean"] < 1e-2      # converges as h halves
-    assert observer.simulate("toy", t_end=T_END, observers=("nojump",)).metadata["engine"] == "compiled"
+    assert observer.simulate("toy", t_end=T_END, store="summary").metadata["engine"] == "compiled"
     store = CaseStore(tmp_path / "quick.cases")
     for c, r in zip(wp, rows):
         store.write_case("quick", c.case_id, [r])
@@ -210,3 +220,56 @@ def test_the_python_engine_judges_a_step_by_newtons_residual_only_where_the_law_
     np.testing.assert_array_equal(declared.q, undeclared.q)
     assert declared.metadata["health"]["residual_source"] == "applied"
     assert undeclared.metadata["health"]["residual_source"] == "applied+solver"
+
+
+RUN_CHECKS = "switching_generated,projection_closed_form,proposition1_exact,lyapunov_decrease,convergence"
+
+
+def test_toy_engine_and_toy_law_through_the_proof_checks(toys, monkeypatch):
+    """Registered first, the toy engine takes every run of the proof checks (their replays ask
+    for the positions before projection, which it records; the observers it projects in K):
+    on the toy law the checks give what the python engine gives, where the compiled engine,
+    lacking the law, is not chosen."""
+    from proofs_checks import run_checks
+    from proofs_checks.context import CheckSettings
+    from toys.toy_engine import ToyEngine
+
+    settings = CheckSettings(seed=0, max_steps=150, short_steps=100)
+    over = {"impact.law": "toy_plastic"}
+    ref = run_checks("double_mass", RUN_CHECKS, overrides=over, settings=settings)
+    ran = []
+    monkeypatch.setattr(TOY_ENGINE, "run", lambda run: ran.append(len(run.slaves)) or ToyEngine.run(TOY_ENGINE, run))
+    monkeypatch.setattr("observer.engines.ENGINES", {TOY_ENGINE.name: TOY_ENGINE, **ENGINES})
+    toy = run_checks("double_mass", RUN_CHECKS, overrides=over, settings=settings)
+    assert ran[0] == 4 and 1 in ran    # the shared replay (4 observers), Proposition 1's simulate pairs
+    assert [r.name for r in toy] == RUN_CHECKS.split(",")
+    for a, b in zip(ref, toy):
+        assert "exception" not in b.witness, (b.name, b.reason)
+        assert a.passed == b.passed, a.name
+        np.testing.assert_allclose(b.margin, a.margin, rtol=1e-9, atol=1e-15, err_msg=a.name)
+    assert toy[0].passed and toy[-2].passed                # χ generated; V never rises
+
+
+def test_the_proof_checks_replay_refuses_an_engine_without_pre_projection_positions(toys, monkeypatch):
+    """An engine that does not record q_pre is refused by the replay, naming the field, and
+    passed over when not named; a metric the toy engine lacks likewise."""
+    from proofs_checks.runs import SlaveSpec, replay
+    from toys.toy_engine import ToyEngine
+
+    class NoPre(ToyEngine):
+        name, extras = "toy_nopre", frozenset({"chi"})
+
+    monkeypatch.setattr("observer.engines.ENGINES", {"toy_nopre": NoPre(), **ENGINES})
+    sc = observer.load_scenario("double_mass")
+    with pytest.raises(observer.InputError) as info:
+        replay(sc, t_end=T_END, engine="toy_nopre")
+    assert info.value.field == "engine" and "(q_pre)" in str(info.value) and "\n" not in str(info.value)
+    assert replay(sc, t_end=T_END).settings["engine"] == "compiled"
+    assert NoPre().accepts(describe(sc, "time-stepping", (), None, "scenario", None, 1e-9, None, "full",
+                                    None)) is None          # simulate asks for no extra
+    spec = [SlaveSpec("e", True, sc.q0 + 0.01, sc.u0)]
+    with pytest.raises(observer.InputError, match="projection metric other than K"):
+        replay(sc, t_end=T_END, slaves=spec, metric=np.eye(2), engine="toy")
+    refusal = TOY_ENGINE.accepts(dataclasses.replace(
+        describe(sc, "time-stepping", (), None, "scenario", None, 1e-9, None, "full", None), metric=np.eye(2)))
+    assert refusal.field == "metric"

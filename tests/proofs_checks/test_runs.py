@@ -305,15 +305,16 @@ def test_an_observer_with_its_own_metric(sc):
     assert np.any(np.abs(dk[:, 1]) > 1e-6)            # the K-metric jump moves both masses
 
 
-def test_engine_choice_reaches_the_loop(sc, monkeypatch):
+def test_engine_choice_reaches_the_registry(sc, monkeypatch):
     from observer import impact as im
     seen = []
-    real = ru.run_loop
+    real = ru.choose
 
-    def spy(inp, **kw):
-        seen.append(kw.get("engine"))
-        return real(inp, **kw)
-    monkeypatch.setattr(ru, "run_loop", spy)
+    def spy(run, engine=None):
+        chosen, note = real(run, engine)
+        seen.append(chosen.name)
+        return chosen, note
+    monkeypatch.setattr(ru, "choose", spy)
     assert replay(sc, h=H, t_end=0.1, engine="python").settings["engine"] == "python"
     assert replay(sc, h=H, t_end=0.1).settings["engine"] == "compiled"
     # a registered law without a compiled code runs on the python engine
