@@ -27,6 +27,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from observer.arrays import as_array
 from observer.errors import InputError
 
 DENSE_MAX_N = 512
@@ -131,8 +132,6 @@ def periodic_form(d: np.ndarray, plain: bool = True) -> dict | None:
 
 def _diagonal(field: str, d: Any, size: int) -> np.ndarray:
     """One diagonal of a banded table (a number, a list of ``size`` values, a periodic table)."""
-    from observer.validation import as_array
-
     if isinstance(d, dict):
         unknown = sorted(set(d) - set(PATTERN_KEYS))
         if unknown or "pattern" not in d:
@@ -180,8 +179,6 @@ def banded_document(A: Any, plain: bool = True) -> dict:
 def banded_matrix(field: str, value: dict) -> sp.csr_matrix:
     """A CSR matrix from a document's banded table (:data:`BANDED_KEYS`), in O(entries); errors
     name ``field.KEY``."""
-    from observer.validation import as_array
-
     unknown = sorted(set(value) - set(BANDED_KEYS))
     if unknown:
         raise InputError(f"{field}.{unknown[0]}", f"unknown key of a banded matrix (known: {', '.join(BANDED_KEYS)})")

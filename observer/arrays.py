@@ -1,0 +1,91 @@
+"""Raw user values to finite float arrays, or an :class:`~observer.errors.InputError` naming the field.
+
+The lowest layer of validation: :mod:`observer.validation` and :mod:`observer.sparse` (which
+reads the banded and triplet tables) both use it, so neither imports the other for it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from observer.errors import InputError
+
+MAX_DEPTH = 64
+"""Deepest nesting of arrays and tables accepted in a scenario document or a value (a matrix
+is 2 deep; the reader refuses a deeper document before any recursion can overflow)."""
+
+_NUMERIC_KINDS = "fiu"
+
+
+def _describe(leaf: Any) -> str | None:
+    """Why ``leaf`` is not a number (None: it is one, or a type ``np.array`` refuses itself)."""
+    if isinstance(leaf, (bool, np.bool_)):
+        return f"a boolean ({str(bool(leaf)).lower()})"
+    if isinstance(leaf, (str, bytes)):
+        return f"the string {leaf!r}"
+    if isinstance(leaf, (complex, np.complexfloating)):
+        return f"the complex number {leaf!r}"
+    return None
+
+
+def non_numeric_entry(field: str, value: Any) -> tuple[tuple[int, ...], str] | None:
+    """The index and description of the first entry of ``value`` (a number or nested lists of
+    numbers) that is a string, a boolean or a complex number, or None.
+
+    TOML strings (``"1.0"``) and booleans are not numbers, although NumPy would convert them.
+    Walks the nesting without recursion; nesting deeper than :data:`MAX_DEPTH` is an error.
+    """
+    if isinstance(value, np.ndarray):
+        kind = value.dtype.kind
+        if kind in _NUMERIC_KINDS or value.size == 0:
+            return None
+        items = value.reshape(-1).tolist() if kind in "bUSc" else value.reshape(-1)
+        for i, leaf in enumerate(items):
+            why = _describe(leaf)
+            if why is not None:
+                return tuple(int(k) for k in np.unravel_index(i, value.shape)), why
+        return None
+    stack: list[tuple[tuple[int, ...], Any]] = [((), value)]
+    while stack:
+        index, node = stack.pop()
+        if isinstance(node, (list, tuple)):
+            if len(index) >= MAX_DEPTH:
+                raise InputError(field, f"nested deeper than {MAX_DEPTH} levels")
+            if all(type(x) is float or type(x) is int for x in node):
+                continue
+            stack.extend((index + (i,), x) for i, x in reversed(list(enumerate(node))))
+        else:
+            why = _describe(node)
+            if why is not None:
+                return index, why
+    return None
+
+
+def as_array(field: str, value: Any, shape: tuple[int | None, ...]) -> np.ndarray:
+    """Convert ``value`` to a finite float64 array of the given shape (``None`` = any length).
+
+    Entries must be numbers: strings (``"1.0"``), booleans and complex numbers are refused
+    rather than converted.
+    """
+    bad = non_numeric_entry(field, value)
+    if bad is not None:
+        index, why = bad
+        if index:
+            raise InputError(field, f"not a numeric array: entry {index} is {why}")
+        raise InputError(field, f"not a numeric array or number: got {why}")
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise InputError(field, f"not a numeric array ({exc})") from None
+    if arr.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, arr.shape)):
+        want = "x".join("*" if s is None else str(s) for s in shape) or "scalar"
+        got = "x".join(str(a) for a in arr.shape) or "scalar"
+        raise InputError(field, f"wrong shape: expected {want}, got {got}")
+    if not np.all(np.isfinite(arr)):
+        if arr.ndim == 0:
+            raise InputError(field, f"is NaN or infinity ({float(arr)!r})")
+        bad = np.argwhere(~np.isfinite(arr))[0]
+        raise InputError(field, f"contains NaN or infinity (first at index {tuple(int(i) for i in bad)})")
+    return arr
