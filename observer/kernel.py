@@ -1121,40 +1121,52 @@ def _advance_loop(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupl
                 # the observer's summary, written here: as a call (or an inlined helper) it cost
                 # ~36 reference counts per observer step, ~190 ns of 240 (double_mass)
                 kg = k + 1
-                V = 0.0
-                damping = 0.0
-                for f in range(3):          # ½vᵀMv, then −h v̄ᵀCv̄, then ½eᵀKe (_quad's sums)
-                    o = n if f == 1 else 0
+                for i in range(n):                                # v, v̄ (wv[:n], wv[n:2n])
+                    vi = us[s, i] - us[0, i]
+                    wv[i] = vi
+                    wv[n + i] = 0.5 * (vi + vprev[s, i])
+                    vprev[s, i] = vi
+                qM = 0.0                                          # vᵀMv, v̄ᵀCv̄, then eᵀKe: _quad's sums
+                qC = 0.0
+                qK = 0.0
+                if dense:
                     for i in range(n):
-                        if f == 0:
-                            wv[i] = us[s, i] - us[0, i]
-                        elif f == 1:
-                            wv[n + i] = 0.5 * (wv[i] + vprev[s, i])             # v̄
-                            vprev[s, i] = wv[i]
-                        else:
-                            wv[i] = qs[s, i] - qs[0, i]
-                    acc = 0.0
-                    if dense:
-                        for i in range(n):
-                            ri = 0.0
-                            for j in range(n):
-                                ri += (Mq[i, j] if f == 0 else Cq[i, j] if f == 1 else Kq[i, j]) * wv[o + j]
-                            acc += wv[o + i] * ri
-                    else:
+                        rM = 0.0
+                        rC = 0.0
                         for j in range(n):
-                            acc += (Mq[0, j] if f == 0 else Cq[0, j] if f == 1 else Kq[0, j]) * wv[o + j] * wv[o + j]
-                            for dd in range(1, bw + 1):
-                                i = j + dd
-                                if i >= n:
-                                    break
-                                acc += 2.0 * (Mq[dd, j] if f == 0 else Cq[dd, j] if f == 1 else Kq[dd, j]) \
-                                    * wv[o + i] * wv[o + j]
-                    if f == 0:
-                        V = 0.5 * acc
-                    elif f == 1:
-                        damping = -h * acc
-                    else:
-                        V += 0.5 * acc
+                            rM += Mq[i, j] * wv[j]
+                            rC += Cq[i, j] * wv[n + j]
+                        qM += wv[i] * rM
+                        qC += wv[n + i] * rC
+                else:
+                    for j in range(n):
+                        qM += Mq[0, j] * wv[j] * wv[j]
+                        qC += Cq[0, j] * wv[n + j] * wv[n + j]
+                        for dd in range(1, bw + 1):
+                            i = j + dd
+                            if i >= n:
+                                break
+                            qM += 2.0 * Mq[dd, j] * wv[i] * wv[j]
+                            qC += 2.0 * Cq[dd, j] * wv[n + i] * wv[n + j]
+                for i in range(n):
+                    wv[i] = qs[s, i] - qs[0, i]                   # e
+                if dense:
+                    for i in range(n):
+                        rK = 0.0
+                        for j in range(n):
+                            rK += Kq[i, j] * wv[j]
+                        qK += wv[i] * rK
+                else:
+                    for j in range(n):
+                        qK += Kq[0, j] * wv[j] * wv[j]
+                        for dd in range(1, bw + 1):
+                            i = j + dd
+                            if i >= n:
+                                break
+                            qK += 2.0 * Kq[dd, j] * wv[i] * wv[j]
+                V = 0.5 * qM
+                damping = -h * qC
+                V += 0.5 * qK
                 impulse = 0.0                                     # (Wᵀv̄)ᵀ(P_s − P_m)
                 for j in range(m):
                     wv[2 * n + j] = -Pfull_m[j]
