@@ -801,7 +801,9 @@ def _quad(structure, A, x, o, n, bw):
 
 @njit(**JIT, inline="always")
 def _summary_sample(kg, V, s, summ, k_on, k_off, rhos):
-    """Fold the sample V(t_kg) of observer s into its summary row."""
+    """Fold the sample V(t_kg) of observer s into its summary row (the first sample,
+    :func:`summary_start`; the step loop :func:`_advance_loop` does the same operations in
+    place, since a call there costs reference counts per observer step)."""
     nr = rhos.shape[0]
     summ[s, F_VEND] = V
     if kg < k_on or kg > k_off:
