@@ -897,7 +897,7 @@ def _impact(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int, n_imp
         run.history.clear()
     landing = run.tiny_hops(t, x, key, new_persistent) if key else []
     cluster = joint_due(run, key, t, x, new_persistent, landing) if key else None
-    if cluster is not None and len(cluster) > len(key):
+    if cluster is not None and (len(cluster) > len(key) or new_persistent):
         jt = joint_tail(run, t, x, new_persistent, cluster, key)
         if jt is not None:             # other contacts land within the tail of key
             out = run.joint_accumulate(jt, t, x, new_persistent, cluster, key, gm[

@@ -227,16 +227,18 @@ def two_contact_zeno(draw) -> dict:
     the other's impacts, or one is re-launched by the other's impacts and accumulates again
     between them — and resolve by joint tails (:mod:`observer.event.tails`)."""
     n = 2
+    tidy = lambda x: 0.0 if abs(x) < 1e-6 else x  # noqa: E731  (no subnormal entries)
+    fl = lambda lo, hi: st.floats(lo, hi).map(tidy)  # noqa: E731
     M = np.diag([draw(st.floats(0.5, 2.0)) for _ in range(n)])
     K = np.diag([draw(st.one_of(st.just(0.0), st.floats(0.1, 2.0))) for _ in range(n)])
     C = np.diag([draw(st.one_of(st.just(0.0), st.floats(1e-3, 0.5))) for _ in range(n)])
-    W = np.eye(n) + np.array([[0.0, draw(st.floats(-0.2, 0.2))], [draw(st.floats(-0.2, 0.2)), 0.0]])
-    q0 = np.array([draw(st.floats(-1.0, 1.0)) for _ in range(n)])
+    W = np.eye(n) + np.array([[0.0, draw(fl(-0.2, 0.2))], [draw(fl(-0.2, 0.2)), 0.0]])
+    q0 = np.array([draw(fl(-1.0, 1.0)) for _ in range(n)])
     h = draw(st.floats(0.002, 0.01))
     g0 = np.array([h, h * (1.0 + draw(st.floats(0.01, 0.3)))])
     f = -10.0 * np.diag(M) + K @ q0
     return dict(M=M, K=K, C=C, W=W, q0=q0, u0=np.zeros(n), nu=g0 - W.T @ q0, f=f,
-                a=0.1 * np.array([draw(st.floats(-1.0, 1.0)) for _ in range(n)]),
+                a=0.1 * np.array([draw(fl(-1.0, 1.0)) for _ in range(n)]),
                 w=draw(st.floats(0.5, 8.0)), phi=draw(st.floats(0.0, 6.0)),
                 e=draw(st.floats(0.3, 0.5)))
 
@@ -259,7 +261,7 @@ def fast_impacts(res, T: float = 0.0, alpha: float = 1.0, beta: float = 1.0):
     return ev["contact"].to_numpy()[fast], (ev["time"].to_numpy(dtype=float)[fast] - T) / beta
 
 
-@settings(max_examples=60, deadline=None, derandomize=True, database=None, phases=NO_SHRINK)
+@settings(max_examples=40, deadline=None, derandomize=True, database=None, phases=NO_SHRINK)
 @given(two_contact_zeno(), st.data())
 def test_two_contact_zeno_tails_are_invariant_under_translation_time_shift_and_units(p, data):
     """Overlapping accumulations of two contacts (:func:`two_contact_zeno`), one transformation
