@@ -30,7 +30,8 @@ Zeno: a run of impacts of one contact set whose intervals shrink geometrically (
 ratios equal within :data:`ZENO_RATIO_SPREAD`) is stopped once the impact velocity has
 fallen by :data:`ZENO_VELOCITY_RATIO`, or the intervals reach the time resolution, or the
 hops reach the gap's round-off, or (one contact) resolving more impacts would put more of
-the gap's representation error than ZENO_TAIL_RTOL ulps of the elapsed time into t_∞ (:func:`tail_noise_limit`); the accumulation time
+the gap's representation error than ZENO_TAIL_RTOL ulps of the elapsed time into t_∞
+(:func:`tail_noise_limit`); the accumulation time
 t_∞ is extrapolated from the velocity γ⁺ after the last resolved impact and the exact
 contact acceleration and its rate (:meth:`_Run.velocity_tail`: ``2γ⁺/(α(1 − e))`` for a
 constant acceleration α, exact for the ball, THEORY §7.1; several contacts: geometric,
@@ -40,15 +41,15 @@ force.
 
 Overlapping tails: when, after an impact of a set ``key``, other open contacts land within
 a few tail lengths of it (two bodies landing together, a contact re-launched by the other's
-impacts and accumulating again between them) and one contact of key is resolved as far as
+impacts and accumulating again between them), or key bounces on a held set (the chain's
+blocks settling on each other), and one contact of key is resolved as far as
 its gap's representation allows (next hop within :data:`ZENO_HOP_ROUNDOFF` round-offs, or
 :func:`tail_noise_limit` reached), the cluster's **joint tail** (:mod:`observer.event.tails`)
 resolves it by exact hops of every contact relative to its contact point until all of them
 are held; each contact's ``accumulation`` row is at the time it was last held (its own t_∞)
-and its note says ``joint tail of contacts …``. Impacts that do not qualify (one contact
-bouncing on a held set, as the chain's blocks settling on each other), or a joint tail that
-does not converge or would skip another contact's event, are resolved by their hops: an impact after
-which a contact's next hop ``γ⁺²/(2|γ̇|)`` is within :data:`ZENO_HOP_ROUNDOFF` round-offs of
+and its note says ``joint tail of contacts …``. A joint tail that does not converge or would
+skip another contact's event is not taken; the impacts are then resolved by their hops: an
+impact after which a contact's next hop ``γ⁺²/(2|γ̇|)`` is within :data:`ZENO_HOP_ROUNDOFF` round-offs of
 its gap lands that contact there (:meth:`_Run.land`: kind ``accumulation``, tail time 0),
 and the acceleration LCP decides whether it stays closed.
 """
@@ -899,7 +900,7 @@ def _impact(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int, n_imp
     cluster = joint_due(run, key, t, x, new_persistent, landing) if key else None
     if cluster is not None and (len(cluster) > len(key) or new_persistent):
         jt = joint_tail(run, t, x, new_persistent, cluster, key)
-        if jt is not None:             # other contacts land within the tail of key
+        if jt is not None:             # others land within key's tail, or key bounces on a held set
             out = run.joint_accumulate(jt, t, x, new_persistent, cluster, key, gm[
                 [A.index(c) for c in key]], n_impacts)
             run.history.clear()

@@ -8,6 +8,9 @@ the hops reach the gap's round-off (:meth:`~observer.event.master._Run.land`) pu
 accumulation time where the coordinates' round-off (|q| + |ν|) cuts the sequence: up to
 1e-5 s apart under a translation of coordinates.
 
+The same holds for one contact bouncing on a held set (a ball whose neighbour already rests,
+the chain's blocks), which was landed likewise.
+
 What the engine does instead (:func:`joint_tail`): once one of the impacting contacts is
 resolved as far as its gap's representation allows (its next hop below ZENO_HOP_ROUNDOFF
 round-offs, or the gap's round-off over its speed above ZENO_TAIL_RTOL ulps of the elapsed time:
