@@ -30,7 +30,8 @@ Zeno: a run of impacts of one contact set whose intervals shrink geometrically (
 ratios equal within :data:`ZENO_RATIO_SPREAD`) is stopped once the impact velocity has
 fallen by :data:`ZENO_VELOCITY_RATIO`, or the intervals reach the time resolution, or the
 hops reach the gap's round-off, or (one contact) resolving more impacts would put more of
-the gap's representation error than :data:`ZENO_TAIL_RTOL` ulps of t into t_∞; the accumulation time
+the gap's representation error than ZENO_TAIL_RTOL ulps of the elapsed time into t_∞
+(:func:`tail_noise_limit`); the accumulation time
 t_∞ is extrapolated from the velocity γ⁺ after the last resolved impact and the exact
 contact acceleration and its rate (:meth:`_Run.velocity_tail`: ``2γ⁺/(α(1 − e))`` for a
 constant acceleration α, exact for the ball, THEORY §7.1; several contacts: geometric,
@@ -38,12 +39,19 @@ constant acceleration α, exact for the ball, THEORY §7.1; several contacts: ge
 contacts switch to persistent contact there if the acceleration LCP gives them a positive
 force.
 
-A cluster of impacts that alternate between contacts (the chain's blocks settling on each
-other: the impacting set changes at every impact, so no run of one set is geometric) is
-resolved by its hops: an impact after which a contact's next hop ``γ⁺²/(2|γ̇|)`` is within
-:data:`ZENO_HOP_ROUNDOFF` round-offs of its gap (the cut-off of the geometric tails) lands
-that contact there (:meth:`_Run.land`: kind ``accumulation``, tail time 0), and the
-acceleration LCP decides whether it stays closed.
+Overlapping tails: when, after an impact of a set ``key``, other open contacts land within
+a few tail lengths of it (two bodies landing together, a contact re-launched by the other's
+impacts and accumulating again between them), or key bounces on a held set (the chain's
+blocks settling on each other), and one contact of key is resolved as far as
+its gap's representation allows (next hop within :data:`ZENO_HOP_ROUNDOFF` round-offs, or
+:func:`tail_noise_limit` reached), the cluster's **joint tail** (:mod:`observer.event.tails`)
+resolves it by exact hops of every contact relative to its contact point until all of them
+are held; each contact's ``accumulation`` row is at the time it was last held (its own t_∞)
+and its note says ``joint tail of contacts …``. A joint tail that does not converge or would
+skip another contact's event is not taken; the impacts are then resolved by their hops: an
+impact after which a contact's next hop ``γ⁺²/(2|γ̇|)`` is within :data:`ZENO_HOP_ROUNDOFF` round-offs of
+its gap lands that contact there (:meth:`_Run.land`: kind ``accumulation``, tail time 0),
+and the acceleration LCP decides whether it stays closed.
 """
 
 from __future__ import annotations
@@ -58,6 +66,7 @@ from observer.contact import get_solver
 from observer.event.flow import Flow, flow_for
 from observer.event.roots import (FLOOR_FACTOR, NonFiniteFlow, RootIsolationError, first_zero,
                                   motion_tolerance, tolerance)
+from observer.event.tails import JointTail, joint_due, joint_tail
 from observer.impact import ImpactLaw, impact
 from observer.scenario import Scenario
 
@@ -90,20 +99,29 @@ which re-injects ≈ 1e-19 into the exact observers' V at every landing (a floor
 
 ZENO_TAIL_RTOL = 2.0 ** 22
 """A geometric run of one contact is also extrapolated once the representation error of its
-gap would put more than this many ulps of max(|t|, τ) (``np.spacing``: 2^22 ulp ∈
-(4.7e-10, 9.3e-10]·max(|t|, τ)) into t_∞ (:meth:`_Run.noisy_tail`). The time differences
-the run forms (hops, t_∞ − t) are resolved to ulp(t), a property of the float
-representation of t: the cut is exactly the same under any shift of the time origin that
-keeps max(|t|, τ) in its binade [2^k, 2^{k+1}), and moves by at most a factor 2 of its
-threshold beyond. Where the run is cut depends on the coordinates, t_∞ does not
+gap would put more than ZENO_TAIL_RTOL ulps of max(t − t0, τ) into t_∞ (the run's elapsed
+time: 2^22 ulp ∈ (4.7e-10, 9.3e-10]·max(t − t0, τ); :func:`tail_noise_limit`,
+:meth:`_Run.noisy_tail`); a cluster's joint tail starts there too
+(:func:`observer.event.tails.joint_due`). The elapsed time, not t: a shift of the time
+origin changes no decision. (It was ulp(max(|t|, τ)): a time origin at 1e3 let 2^13 times
+more of the gap's round-off into t_∞, and composed with a translation by 100 moved t_∞ by up
+to 6e-9.) Where the run is cut depends on the coordinates, t_∞ does not
 (:meth:`_Run.hop_tail`)."""
+
+
+def tail_noise_limit(t: float, t0: float, tau: float) -> float:
+    """ZENO_TAIL_RTOL·ulp(max(t − t0, τ)): the most of the gap's representation error a Zeno
+    tail may carry into t_∞ (:data:`ZENO_TAIL_RTOL`), from the run's elapsed time t − t0 (the
+    same under any shift of the time origin; on a run from t0 = 0 the same as ulp(max(t, τ)))."""
+    return ZENO_TAIL_RTOL * time_ulp(float(t) - float(t0), tau)
+
 
 def time_ulp(t: float, tau: float) -> float:
     """ulp(max(|t|, τ)) (``np.spacing``): the resolution of the time differences a Zeno run
     forms (its intervals, t_∞ − t), a property of the float representation of t. The Zeno
-    cut-offs (:data:`ZENO_MIN_INTERVAL`, :data:`ZENO_TAIL_RTOL`) are multiples of it, so
-    they depend on the time origin only through the binade [2^k, 2^{k+1}) of max(|t|, τ):
-    a shift within it changes no decision, one across it scales the thresholds by 2."""
+    cut-off :data:`ZENO_MIN_INTERVAL` is a multiple of it, so it depends on the time origin
+    only through the binade [2^k, 2^{k+1}) of max(|t|, τ): a shift within it changes no
+    decision, one across it scales the threshold by 2."""
     return float(np.spacing(max(abs(float(t)), float(tau))))
 
 
@@ -519,11 +537,10 @@ class _Run:
         The gap is evaluated with an absolute error δg ≈ eps·Σ|r z| (its representation: it
         grows with |q| and |ν|), so an impact at speed v is located to δg/v and its
         γ⁺ to |γ̇|δg/v; the velocity tail (:meth:`velocity_tail`) then errs by about
-        ``(1 + 2/(1 − e))·δg/γ⁺``. Once that reaches ZENO_TAIL_RTOL ulps of max(|t|, τ)
-        (the resolution of the time differences the run forms; a cut there, not earlier,
-        keeps the tail, which the observers treat as closed, short), the run is extrapolated
-        from the current (still accurate) impact. The decision depends on t only through
-        ulp(max(|t|, τ)): a time shift within the binade does not change it."""
+        ``(1 + 2/(1 − e))·δg/γ⁺``. Once that reaches :func:`tail_noise_limit` (ZENO_TAIL_RTOL
+        ulps of the elapsed time max(t − t0, τ); a cut there, not earlier, keeps the tail,
+        which the observers treat as closed, short), the run is extrapolated from the current
+        (still accurate) impact. A shift of the time origin does not change the decision."""
         if len(key) != 1 or not self.law.definition.single_contact_is_newton:
             return False
         e = float(self.law.restitution[key[0]])
@@ -531,7 +548,7 @@ class _Run:
             return False
         dg = float(np.finfo(float).eps * (np.abs(fl.gap_rows[idx]) @ np.abs(z))[0])
         v = max(float(v_plus[0]), np.finfo(float).tiny)
-        return (1.0 + 2.0 / (1.0 - e)) * dg / v >= ZENO_TAIL_RTOL * time_ulp(t, self.tau)
+        return (1.0 + 2.0 / (1.0 - e)) * dg / v >= tail_noise_limit(t, self.t0, self.tau)
 
     def velocity_tail(self, key: tuple, v_plus: np.ndarray, accel: np.ndarray,
                       jerk: np.ndarray) -> float | None:
@@ -643,6 +660,45 @@ class _Run:
                     self.event(t_inf, c, "liftoff", 0.0, 0.0, 0.0)
                 self.open(c, t_inf)
         return self.project(t_inf, x_inf, stick), tuple(stick)
+
+    def joint_accumulate(self, jt: JointTail, t: float, x: np.ndarray, held: tuple,
+                         cluster: list, key: tuple, gm: np.ndarray, impacts: int):
+        """Carry the state to the common accumulation time of a joint tail
+        (:func:`observer.event.tails.joint_tail`) resolved from the impact of ``key`` at t:
+        the cluster is densely closed from t (as in :meth:`accumulate`), the tail's impulses
+        (impacts and held forces) go to the sample interval of t, ``accumulation`` rows at
+        t_∞ say how the tail was resolved, and the acceleration LCP decides which contacts
+        stay closed. Returns (x, held set), or None if t_∞ ≥ t_end (the run ends)."""
+        for c in cluster:
+            if self.intervals[c] and self.intervals[c][-1] == (t, t):
+                self.intervals[c].pop()
+            self.closed_since.setdefault(c, t)
+        setp = tuple(sorted(set(jt.held) | set(held)))
+        self.add_impulse(t, list(range(self.m)), jt.impulse)
+        self.fill(flow_for(self.system, jt.held), t, self.project(t, x, list(jt.held)),
+                  min(jt.t_inf, self.t_end), include_end=jt.t_inf >= self.t_end)
+        if jt.t_inf >= self.t_end:
+            return None
+        note = (f"joint tail of contacts {tuple(cluster)}: {jt.hops} impacts resolved by exact "
+                f"hops from the contact points")
+        e = np.asarray(self.law.restitution, dtype=float)
+        stick = self.sticking(jt.t_inf, jt.x, list(setp))
+        for t_c, c in sorted((jt.settled.get(c, jt.t_inf), c) for c in cluster):
+            speed = float(gm[key.index(c)]) * e[c] if c in key else 0.0
+            self.event(t_c, c, "accumulation", speed, 0.0, jt.impulse[c], note=note)
+            self.zeno.append({"contact": c, "t_inf": t_c, "impacts_resolved": impacts + jt.hops,
+                              "tail_time": t_c - t, "tail_impulse": float(jt.impulse[c]),
+                              "ratio": None, "joint": tuple(cluster)})
+            if c in stick and c not in held:
+                self.event(t_c, c, "stick", 0.0, 0.0, 0.0)
+        for c in setp:
+            if c in stick:
+                self.close(c, jt.t_inf)
+            else:
+                if c in held:
+                    self.event(jt.t_inf, c, "liftoff", 0.0, 0.0, 0.0)
+                self.open(c, jt.t_inf)
+        return self.project(jt.t_inf, jt.x, stick), tuple(stick)
 
     def tiny_hops(self, t: float, x: np.ndarray, contacts, persistent: tuple) -> list[int]:
         """Contacts of ``contacts`` falling back (γ̇ < 0 on the flow that holds ``persistent``)
@@ -841,6 +897,16 @@ def _impact(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int, n_imp
     else:
         run.history.clear()
     landing = run.tiny_hops(t, x, key, new_persistent) if key else []
+    cluster = joint_due(run, key, t, x, new_persistent, landing) if key else None
+    if cluster is not None and (len(cluster) > len(key) or new_persistent):
+        jt = joint_tail(run, t, x, new_persistent, cluster, key)
+        if jt is not None:             # others land within key's tail, or key bounces on a held set
+            out = run.joint_accumulate(jt, t, x, new_persistent, cluster, key, gm[
+                [A.index(c) for c in key]], n_impacts)
+            run.history.clear()
+            if out is None:
+                return run.t_end, x, new_persistent, 0, True
+            return jt.t_inf, out[0], out[1], 0, False
     if not landing:
         return t, x, new_persistent, n_impacts, False
     # one contact bouncing alone, nothing held: its tail is extrapolated from γ⁺ (where the

@@ -56,9 +56,8 @@ def build(p: dict, c=None, T: float = 0.0, alpha: float = 1.0, beta: float = 1.0
 def systems(draw, zeno: bool = False) -> dict:
     """Random systems; ``zeno``: one body and one contact (a ball, or a block on a spring,
     damped and weakly forced, on a wall) dropped from 2–10 mm with restitution 0.3–0.5, so
-    that its impacts accumulate (t∞) well within T_END and it then rests. (Two contacts whose
-    tails overlap are not yet invariant: an accumulation whose tail holds another contact's
-    event is landed with tail time 0, and where round-off cuts each run differs.)"""
+    that its impacts accumulate (t∞) well within T_END and it then rests (two contacts whose
+    tails overlap: :func:`two_contact_zeno`)."""
     n = m = draw(st.integers(1, 1 if zeno else 4))  # W must have independent columns
     # no subnormal entries: the scenario refuses a matrix entry whose inverse overflows
     fl = st.floats(-1.0, 1.0, allow_nan=False).map(lambda x: 0.0 if abs(x) < 1e-6 else x)
@@ -168,7 +167,7 @@ def test_zeno_accumulations_are_invariant_under_translation_time_shift_and_units
     four; each of (a)–(c) on about a third of the 200 examples): the impacts above V_TAIL, the
     accumulation times t∞ (to T_INF_TOL) and the trajectory outside the tails agree; every
     drawn system comes to rest on a wall (a stick at t∞). (Composed, a translation by 100 and
-    a time shift by 1e3 can be 6e-9 apart: see the README.)"""
+    a time shift by 1e3: :func:`test_translation_and_time_shift_composed_move_t_inf_by_less_than_1e9`.)"""
     base = comparable(run_master(build(p)))
     assert base[2].size >= 1                                 # a Zeno accumulation ended
     scale = motion_scale(p)
@@ -218,3 +217,116 @@ def test_t_end_a_few_ulp_from_a_boundary_makes_and_loses_no_event(p, ulps, where
     np.testing.assert_allclose(res.events["time"].to_numpy(dtype=float), times[:k], rtol=0,
                                atol=1e-12)
     assert (times[:k] <= t_end + 1e-12).all()
+
+
+@st.composite
+def two_contact_zeno(draw) -> dict:
+    """Two masses (weak springs, damping, weak harmonic forcing) on two coupled contacts
+    (W = I + off-diagonal entries up to 0.2), dropped from 2–10 mm and from a height up to 30 %
+    higher (at least 1 % higher): their accumulations overlap — one contact's tail holds
+    the other's impacts, or one is re-launched by the other's impacts and accumulates again
+    between them — and resolve by joint tails (:mod:`observer.event.tails`)."""
+    n = 2
+    tidy = lambda x: 0.0 if abs(x) < 1e-6 else x  # noqa: E731  (no subnormal entries)
+    fl = lambda lo, hi: st.floats(lo, hi).map(tidy)  # noqa: E731
+    M = np.diag([draw(st.floats(0.5, 2.0)) for _ in range(n)])
+    K = np.diag([draw(st.one_of(st.just(0.0), st.floats(0.1, 2.0))) for _ in range(n)])
+    C = np.diag([draw(st.one_of(st.just(0.0), st.floats(1e-3, 0.5))) for _ in range(n)])
+    W = np.eye(n) + np.array([[0.0, draw(fl(-0.2, 0.2))], [draw(fl(-0.2, 0.2)), 0.0]])
+    q0 = np.array([draw(fl(-1.0, 1.0)) for _ in range(n)])
+    h = draw(st.floats(0.002, 0.01))
+    g0 = np.array([h, h * (1.0 + draw(st.floats(0.01, 0.3)))])
+    f = -10.0 * np.diag(M) + K @ q0
+    return dict(M=M, K=K, C=C, W=W, q0=q0, u0=np.zeros(n), nu=g0 - W.T @ q0, f=f,
+                a=0.1 * np.array([draw(fl(-1.0, 1.0)) for _ in range(n)]),
+                w=draw(st.floats(0.5, 8.0)), phi=draw(st.floats(0.0, 6.0)),
+                e=draw(st.floats(0.3, 0.5)))
+
+
+def rest_times(res, T: float = 0.0, beta: float = 1.0) -> dict:
+    """Per contact, the time it last came to rest (its last ``stick`` row), in the original
+    time."""
+    ev = res.events
+    t = (ev["time"].to_numpy(dtype=float) - T) / beta
+    stick = (ev["kind"] == "stick").to_numpy()
+    contact = ev["contact"].to_numpy()
+    return {int(c): float(t[stick & (contact == c)].max()) for c in set(contact[stick])}
+
+
+def fast_impacts(res, T: float = 0.0, alpha: float = 1.0, beta: float = 1.0):
+    """Contacts and times (original units and time origin) of the impacts with |γ⁻| ≥ V_TAIL."""
+    ev = res.events
+    fast = (ev["kind"] == "impact").to_numpy() & (
+        np.abs(ev["gamma_minus"].to_numpy(dtype=float)) * beta / alpha >= V_TAIL)
+    return ev["contact"].to_numpy()[fast], (ev["time"].to_numpy(dtype=float)[fast] - T) / beta
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "open (issue 19): in coupled Zeno sequences of Zeno sequences with a spring, damping or "
+    "forcing (e.g. K = diag(0.43, 0), W10 = 0.12; or C = diag(0, 0.5), W01 = 0.14, forced) the "
+    "joint tail of the last re-launched accumulation does not converge, the contacts are "
+    "landed at round-off (tail time 0) and their rest times move by 1.8e-6 to 1.4e-5 s under "
+    "a translation by 100"))
+@settings(max_examples=40, deadline=None, derandomize=True, database=None, phases=NO_SHRINK)
+@given(two_contact_zeno(), st.data())
+def test_two_contact_zeno_tails_are_invariant_under_translation_time_shift_and_units(p, data):
+    """Overlapping accumulations of two contacts (:func:`two_contact_zeno`), one transformation
+    drawn per example as in the one-contact property: both contacts come to rest, at the same
+    times to T_INF_TOL, with the same fast impacts (|γ⁻| ≥ V_TAIL; how many slow impacts are
+    resolved before a joint tail starts depends on the coordinates' round-off)."""
+    base = run_master(build(p))
+    rest = rest_times(base)
+    assert base.status == "ok" and set(rest) == {0, 1}
+    kind = data.draw(st.sampled_from(["translation", "time shift", "units"]))
+    T, alpha, beta, c = 0.0, 1.0, 1.0, None
+    if kind == "translation":
+        c = np.array([data.draw(st.sampled_from([-100.0, -7.5, 3.25, 100.0])) for _ in range(2)])
+        moved = run_master(build(p, c=c))
+    elif kind == "time shift":
+        T = data.draw(st.sampled_from([0.1, 1.0, 37.5, 1e3]))
+        moved = run_master(build(p, T=T), t0=T, t_end=T + T_END)
+    else:
+        alpha = data.draw(st.sampled_from([1e-3, 1e3, 2.0 ** 10]))
+        beta = data.draw(st.sampled_from([1e-3, 1e3, 0.1]))
+        moved = run_master(build(p, alpha=alpha, beta=beta))
+    assert moved.status == "ok"
+    other = rest_times(moved, T, beta)
+    assert set(other) == {0, 1}
+    for k in (0, 1):
+        assert abs(other[k] - rest[k]) <= T_INF_TOL, (kind, k, other[k], rest[k])
+    ca, ta = fast_impacts(base)
+    cb, tb = fast_impacts(moved, T, alpha, beta)
+    assert ca.tolist() == cb.tolist()
+    np.testing.assert_allclose(tb, ta, rtol=0, atol=1e-7 * T_END)
+
+
+BLOCK = dict(M=np.array([[0.6723989499213578]]), K=np.zeros((1, 1)),
+             C=np.array([[0.48399516877239857]]), W=np.eye(1),
+             q0=np.array([-0.9705873900692614]), u0=np.array([0.09623900801326886]),
+             nu=np.array([0.008909120721964606 + 0.9705873900692614]),
+             f=np.array([-10.0 * 0.6723989499213578]), a=np.array([0.09144203592219272]),
+             w=1.6157300917437343, phi=5.8357728829377296, e=0.47798711114410414)
+"""A damped, forced block dropped 8.9 mm onto a wall (t∞ ≈ 0.1318 s), the worst of 12 random
+ones for the composed translation and time shift."""
+
+
+def _stick_time(res, T: float = 0.0) -> float:
+    ev = res.events
+    return float(ev.loc[ev["kind"] == "stick", "time"].iloc[0]) - T
+
+
+@pytest.mark.parametrize("old_rule", [False, True])
+def test_translation_and_time_shift_composed_move_t_inf_by_less_than_1e9(old_rule, monkeypatch):
+    """Translated by 100 and with the time origin at 1e3, the block's t∞ − T is within 1e-9 of
+    the original's (measured 6.5e-10; each alone 7.5e-10 and 2.4e-11). The noisy-tail cut is
+    a multiple of ulp of the run's elapsed time max(t − t0, τ); with the old rule, ulp of
+    max(|t|, τ), the origin at 1e3 let 2^13 times more of the translated gap's round-off into
+    t∞: 6.2e-9 (the check fails it)."""
+    import observer.event.master as master
+    if old_rule:
+        monkeypatch.setattr(master, "tail_noise_limit",
+                            lambda t, t0, tau: master.ZENO_TAIL_RTOL * master.time_ulp(t, tau))
+    base = _stick_time(run_master(build(BLOCK)))
+    T = 1e3
+    both = _stick_time(run_master(build(BLOCK, c=np.array([100.0]), T=T), t0=T, t_end=T + T_END), T)
+    assert (abs(both - base) <= 1e-9) != old_rule, abs(both - base)

@@ -1,0 +1,250 @@
+"""Joint Zeno tails: several contacts accumulating impacts at the same time (issue 19).
+
+A run of impacts that alternates between contacts (a flat body settling on two supports,
+two bodies landing together, a contact re-launched by the other's impacts and accumulating
+again between them) has no geometric run of one contact set, so
+:meth:`observer.event.master._Run.zeno_check` never extrapolates it, and resolving it until
+the hops reach the gap's round-off (:meth:`~observer.event.master._Run.land`) puts the
+accumulation time where the coordinates' round-off (|q| + |ν|) cuts the sequence: up to
+1e-5 s apart under a translation of coordinates.
+
+The same holds for one contact bouncing on a held set (a ball whose neighbour already rests,
+the chain's blocks), which was landed likewise.
+
+What the engine does instead (:func:`joint_tail`): once one of the impacting contacts is
+resolved as far as its gap's representation allows (its next hop below ZENO_HOP_ROUNDOFF
+round-offs, or the gap's round-off over its speed above ZENO_TAIL_RTOL ulps of the elapsed time:
+:func:`joint_due`), the tail of the whole cluster — that contact and every open contact
+landing within a few of its tail lengths — is resolved by **exact hops relative to the
+contact points**: each contact carries its own gap ``d_c`` (0 exactly after its impact, the
+gap's value at the start for the others), advanced by the Taylor polynomial of its
+increment ``Σ_{k≥1} g_c^{(k)} Δ^k/k!`` (degree :data:`HOP_ORDER`, the flow's exact
+derivatives, which do not carry |q| or |ν|), never re-read from the coordinates. The
+first landing is an impact of the run's law on the held set and the landing contact(s);
+a held contact that the impact lifts re-enters the cluster at d = 0; a contact whose next
+hop is below the time resolution ``TIME_RTOL·max(|t|, τ)`` is held (its remaining tail is
+below it too) if the acceleration LCP keeps its force positive. When every contact of the
+cluster is held, their common accumulation time t_∞ is reached: the event rows at t_∞ are
+``accumulation`` rows whose note says ``joint tail of contacts …: N impacts resolved from
+the contact points``. Its error is the gaps' round-off at the start over the cluster's
+speeds, which the trigger keeps ≤ 2^22 ulp(max(t − t0, τ)) (≤ 9.3e-10·max(t − t0, τ)).
+If a tail does not converge (a hop that is not a falling-back arc, a held force that
+vanishes, more than :data:`TAIL_HOPS` hops) or another contact's event falls inside it,
+:func:`joint_tail` returns None and the sequence is resolved, and landed, as before.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from observer.event.flow import Flow, flow_for
+from observer.event.roots import RootIsolationError, first_zero, resolution, tolerance
+from observer.impact import impact
+
+HOP_ORDER = 8
+"""Degree of the Taylor polynomial of a hop (hops are ≪ τ: the truncation is (Δ/τ)^9)."""
+
+TAIL_HOPS = 20_000
+"""Hops after which a joint tail that has not converged is abandoned (None)."""
+
+CLUSTER_REACH = 4.0
+"""An open contact joins the cluster if it lands within this many tail lengths
+``2γ⁺/(α(1 − e))`` of the impacting contact (the hop sum of a constant acceleration)."""
+
+TAIL_SPAN = 0.25
+"""A joint tail longer than this fraction of the time scale τ is not a Zeno tail (None)."""
+
+
+@dataclass
+class JointTail:
+    """A converged joint tail: the time every contact of the cluster is held (t_∞), the state
+    there (held set projected), the held set, the impulse of each contact over the tail
+    (impacts and held forces), the count of impacts resolved by hops, and the time each
+    contact of the cluster was held for the last time (its own accumulation time)."""
+
+    t_inf: float
+    x: np.ndarray
+    held: tuple
+    impulse: np.ndarray
+    hops: int
+    settled: dict
+
+
+def _rows(flow: Flow, c: int) -> np.ndarray:
+    """Rows of g_c', g_c'', …, g_c^(HOP_ORDER) on ``flow`` (cached on the flow)."""
+    cache = flow.__dict__.setdefault("_hop_rows", {})
+    if c not in cache:
+        R = [flow.velocity_rows[c]]
+        for _ in range(HOP_ORDER - 1):
+            R.append(R[-1] @ flow.A)
+        cache[c] = np.array(R)
+    return cache[c]
+
+
+_FACT = np.cumprod(np.arange(1, HOP_ORDER + 1, dtype=float))
+
+
+def landing(d: float, D: np.ndarray) -> float:
+    """First Δ > 0 with ``p(Δ) = d + Σ_k D_k Δ^k/k! = 0`` (D = g', g'', …; d ≥ 0): Newton
+    from the parabola's root (on p(Δ)/Δ when d = 0: the contact point itself is no root);
+    inf if the arc does not come back, nan if Newton leaves the arc."""
+    co = D / _FACT[:D.size]
+    if d <= 0.0:
+        if D[0] <= 0.0:
+            return np.nan                              # at the contact point, not leaving
+        if D[1] >= 0.0:
+            return np.inf
+        poly, dt = co, -2.0 * D[0] / D[1]
+    else:                                          # stable root of d + D₀s + D₁s²/2
+        disc = D[0] * D[0] - 2.0 * D[1] * d
+        den = -D[0] + np.sqrt(disc) if disc >= 0.0 else 0.0
+        if den <= 0.0:
+            return np.inf
+        poly, dt = np.concatenate([[d], co]), 2.0 * d / den
+    dpoly = poly[1:] * np.arange(1, poly.size)
+    for _ in range(40):
+        step = np.polyval(poly[::-1], dt) / np.polyval(dpoly[::-1], dt)
+        dt -= step
+        if not np.isfinite(dt) or dt <= 0.0:
+            return np.nan
+        if abs(step) <= 4e-16 * dt:
+            break
+    return float(dt)
+
+
+def advance(d: float, D: np.ndarray, dt: float) -> float:
+    """The relative gap ``d + Σ_k D_k dt^k/k!`` after a flight of dt."""
+    return float(d + dt * np.polyval((D / _FACT)[::-1], dt))
+
+
+def joint_due(run, key: tuple, t: float, x: np.ndarray, held: tuple, tiny: list) -> list | None:
+    """The cluster whose joint tail starts after the impact of ``key`` at t (state x, held
+    set ``held``), or None if it is not due: due once a contact of key is resolved as far as
+    its gap's representation allows (``tiny``: its next hop is within ZENO_HOP_ROUNDOFF
+    round-offs, :meth:`~observer.event.master._Run.tiny_hops`; or the gap's round-off δg over
+    its speed γ⁺ puts more than ZENO_TAIL_RTOL ulps of the elapsed time into the tail,
+    ``(1 + 2/(1 − e))·δg/γ⁺``, as :meth:`~observer.event.master._Run.noisy_tail`). The cluster
+    is key and every open contact landing within :data:`CLUSTER_REACH` tail lengths
+    ``2γ⁺/(α(1 − e))`` (parabolic estimate)."""
+    from observer.event.master import tail_noise_limit
+    fl = flow_for(run.system, held)
+    z = fl.z(t, x)
+    g, v = fl.gap_rows @ z, fl.velocity_rows @ z
+    a = (fl.velocity_rows @ fl.A) @ z
+    dg = tolerance(fl.gap_rows, z) / 64.0                  # eps·Σ|r z|: the representation
+    e = np.asarray(run.law.restitution, dtype=float)
+    reach, due = 0.0, bool(tiny)
+    for c in key:
+        if not (a[c] < 0.0 and v[c] > 0.0 and 0.0 <= e[c] < 1.0):
+            return None
+        due |= (1.0 + 2.0 / (1.0 - e[c])) * dg[c] / v[c] >= tail_noise_limit(t, run.t0, run.tau)
+        reach = max(reach, CLUSTER_REACH * 2.0 * v[c] / (-a[c] * (1.0 - e[c])))
+    if not due:
+        return None
+    cluster = list(key)
+    for b in range(run.m):
+        if b in key or b in held:
+            continue
+        s = landing(max(g[b], 0.0), np.array([v[b], a[b]]))
+        if s <= reach or (g[b] <= 0.0 and np.isnan(s)):
+            cluster.append(b)
+    return sorted(cluster)
+
+
+def joint_tail(run, t: float, x: np.ndarray, held: tuple, cluster: list, key: tuple
+               ) -> JointTail | None:
+    """Resolve the tail of ``cluster`` after the impact of ``key`` at t (state x after it,
+    contacts ``held`` held) by exact hops relative to the contact points (module docstring):
+    the JointTail once every contact of the cluster is held, None if it does not converge or
+    another contact's event falls inside it."""
+    g0 = flow_for(run.system, held).gaps(t, x)
+    d = {c: (0.0 if c in key else max(float(g0[c]), 0.0)) for c in cluster if c not in held}
+    held = held0 = tuple(sorted(held))
+    x0 = x
+    impulse = np.zeros(run.m)
+    res = resolution(t, run.tau)
+    tail, hops, settled = 0.0, 0, {}
+    while hops < TAIL_HOPS:
+        if all(c in held for c in cluster):
+            out = JointTail(t + tail, x, held, impulse, hops, settled)
+            return out if _clear(run, t, x0, held0, cluster, out.t_inf) else None
+        fl = flow_for(run.system, held)
+        z = fl.z(t + tail, x)
+        if held and np.any(fl.force_rows @ z <= 0.0):
+            return None                                     # a held force vanishes: not a tail
+        D = {c: _rows(fl, c) @ z for c in d}
+        s = {c: landing(d[c], D[c]) for c in d}
+        if not d or any(np.isnan(v) for v in s.values()):
+            return None
+        dt = min(s.values())
+        if not np.isfinite(dt) or tail + dt > TAIL_SPAN * run.tau:
+            return None
+        if held:                                            # ∫λ dt of the held forces
+            impulse[list(held)] += fl.force_rows @ fl.integral(dt, z)
+        x = fl.x_of(fl.propagate(t + tail, z, dt))
+        tail += dt
+        landed = [c for c in d if s[c] - dt <= res]
+        for c in d:
+            d[c] = 0.0 if c in landed else max(advance(d[c], D[c], dt), 0.0)
+        x, new = _hop_impact(run, t + tail, x, held, landed, d, impulse, res)
+        if x is None:
+            return None
+        settled.update({c: t + tail for c in new if c not in held})
+        held = new
+        hops += 1
+    return None
+
+
+def _hop_impact(run, t: float, x: np.ndarray, held: tuple, landed: list, d: dict,
+                impulse: np.ndarray, res: float):
+    """The impact of the law at a landing of ``landed`` on the held set (generalized Newton,
+    eq. (5), on A = held ∪ landed); held contacts it lifts re-enter d at 0; a landed contact
+    whose next hop ``2γ⁺/α`` is below the time resolution ``res`` is held if the acceleration
+    LCP keeps its force. Returns (x, held), or (None, None) if the state is not a tail."""
+    A = sorted(set(held) | set(landed))
+    idx = np.array(A, dtype=int)
+    gm = run.free_flow.velocities(t, x)[idx]
+    if not np.any(gm < 0.0):
+        return None, None
+    lam = np.maximum(impact(run.law, run.delassus(A), gm, idx, run.solve), 0.0)
+    x = x.copy()
+    x[run.n:] += run.Minv @ run.system.W[:, A] @ lam
+    impulse[A] += lam
+    gp = run.free_flow.velocities(t, x)[idx]
+    small = 1e3 * np.finfo(float).eps * float(np.max(np.abs(gm)))
+    keep = [c for c, v, l in zip(A, gp, lam) if c in held and (l > 0.0 or v <= small)]
+    for c in held:
+        if c not in keep:
+            d[c] = 0.0                                      # lifted by the impact
+    fl = flow_for(run.system, tuple(keep))
+    z = fl.z(t, x)
+    v = fl.velocity_rows @ z
+    a = (fl.velocity_rows @ fl.A) @ z
+    at_contact = sorted(set(landed) | {c for c in d if d[c] == 0.0})   # lifted ones too
+    settle = [c for c in at_contact if v[c] <= small or (a[c] < 0.0 and 2.0 * v[c] <= -a[c] * res)]
+    if settle:
+        stick = run.sticking(t, x, sorted(set(keep) | set(settle)))
+        if not set(settle) <= set(stick):
+            return None, None
+        keep = stick
+    for c in keep:
+        d.pop(c, None)
+    return run.project(t, x, list(keep)), tuple(sorted(keep))
+
+
+def _clear(run, t: float, x: np.ndarray, held: tuple, cluster: list, t_inf: float) -> bool:
+    """No event of a contact outside the cluster and the held set in ``[t, t_∞]`` (searched on
+    the flow holding them from the tail's start: the tail's hops are below resolution there)."""
+    others = [j for j in range(run.m) if j not in held and j not in cluster]
+    if not others or t_inf <= t:
+        return True
+    fl = flow_for(run.system, held)
+    xp = run.project(t, x, list(held))
+    try:
+        zero, _, _ = first_zero(fl, fl.gap_rows[others], t, fl.z(t, xp), min(t_inf, run.t_end),
+                                tau=run.tau)
+    except RootIsolationError:
+        return False
+    return zero is None

@@ -1,0 +1,50 @@
+"""Root isolation (observer/event/roots.py): named regressions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from observer.event.flow import flow_for
+from observer.event.roots import first_zero, resolution
+from observer.scenario import Scenario
+
+OMEGA, AMP, V1, GAP1 = 2.0, 0.05, 0.7, 0.14
+
+
+def graze_and_approach() -> Scenario:
+    """Two decoupled contacts: an oscillator x₀ = −A cos ωt whose gap g₀ = x₀ + A touches
+    zero exactly at t = 0 (a graze: g₀ = A(1 − cos ωt) ≥ 0), and a free mass approaching its
+    wall at V1 from GAP1 away (g₁ = GAP1 − V1 t)."""
+    doc = {"scenario": {"name": "graze-and-approach"},
+           "system": {"M": [[1.0, 0.0], [0.0, 1.0]], "C": [[0.0, 0.0], [0.0, 0.0]],
+                      "K": [[OMEGA ** 2, 0.0], [0.0, 0.0]], "W": [[1.0, 0.0], [0.0, 1.0]],
+                      "forcing": {"constant": [0.0, 0.0]}, "gap": {"offset": [AMP, 0.0]}},
+           "impact": {"law": "newton", "restitution": 0.5},
+           "initial": {"q": [-AMP, GAP1], "u": [0.0, -V1]},
+           "simulation": {"t_end": 1.0, "h": 0.01}}
+    return Scenario.from_dict(doc)
+
+
+@pytest.mark.parametrize("reach", [0.5, 2.0])
+def test_right_after_a_graze_an_open_contact_far_away_is_not_taken_as_the_zero(reach):
+    """Regression of b3b82ce (``_unresolved``). Right after contact 0's graze, certified
+    positive for less than the time resolution, the safe step falls below the resolution and
+    the zero is "unresolved": the old rule took the approaching functional with the smallest
+    first-order time to zero, here contact 1, GAP1 = 0.14 away, as a crossing at the graze
+    instant (an impact of an open contact). Now only functionals vanishing near t qualify:
+    up to ``reach`` × GAP1/V1 there is no zero before it, and the first zero is contact 1's,
+    at GAP1/V1 (closed form)."""
+    sc = graze_and_approach()
+    fl = flow_for(sc.system, ())
+    x0 = np.concatenate([sc.q0, sc.u0])
+    z0 = fl.z(0.0, x0)
+    tau = fl.time_scale
+    certified = {0: 0.25 * resolution(0.0, tau)}       # the graze's certificate ends within res
+    t_hit = GAP1 / V1
+    zero, t, _ = first_zero(fl, fl.gap_rows, 0.0, z0, reach * t_hit, certified, tau)
+    if reach < 1.0:
+        assert zero is None and t == reach * t_hit
+    else:
+        assert zero is not None and zero.index == 1 and zero.kind == "cross"
+        assert abs(zero.t - t_hit) <= 1e-14
