@@ -367,13 +367,15 @@ def test_compile_time_warms_each_specialization_once(monkeypatch):
 @pytest.mark.parametrize("record_every", [1, 3])
 def test_failed_steps_of_master_and_observer_are_recorded_as_the_reference_engine(record_every):
     """A step the kernel refuses (the nearly redundant contacts: a singular Delassus matrix),
-    for the master and for an observer, is re-solved by the reference solver and written
-    into every record at its row (thinned rows included): the compiled run's positions,
-    velocities, generalized impulses W·P (the split of P between two parallel contacts is
-    not unique), closed sets, multipliers, observer signal and V are the python engine's."""
+    for the master and for an observer (coupled, started elsewhere), is re-solved by the
+    reference solver and written into every record at its row (thinned rows included): the
+    compiled run's positions, velocities, generalized impulses W·P (the split of P between
+    two parallel contacts is not unique), closed sets, multipliers, observer signal and V are
+    the python engine's."""
     sc = nearly_redundant_contacts(0.4)
-    py = observer.simulate(sc, engine="python", observers=("nojump",), record_every=record_every)
-    co = observer.simulate(sc, engine="compiled", observers=("nojump",), record_every=record_every)
+    obs = [Slave("nojump", False, sc.q0 + np.array([0.05, 0.0]), sc.u0 + np.array([0.3, 0.0]))]
+    py = observer.simulate(sc, engine="python", observers=obs, record_every=record_every)
+    co = observer.simulate(sc, engine="compiled", observers=obs, record_every=record_every)
     assert {f["system"] for f in co.metadata["fallback_steps"]} == {0, 1}
     W = sc.system.W
     for a, b in ((co, py), (co.slaves["nojump"], py.slaves["nojump"])):
