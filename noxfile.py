@@ -100,7 +100,15 @@ MUTATION_TARGETS: dict[str, tuple[list[str], list[str]]] = {
     # drivers and the event engine, each against small cases
     # the fingerprint test (4000 steps per scenario and variant) is too slow as plain Python
     "kernel": (["observer/kernel.py"], ["tests/observer/test_kernel.py", "-k", "not bitwise_those_of_main"]),
-    "loop": (["observer/loop.py"], ["tests/observer/test_kernel.py", "-k", "not bitwise_those_of_main"]),
+    # loop.py: the kernel's tests (both engines, short horizons) and the fast tests of
+    # test_loop.py (its every-builtin and long-horizon tests take minutes each as plain Python)
+    "loop": (["observer/loop.py"], ["tests/observer/test_kernel.py",
+                                    *(f"tests/observer/test_loop.py::{t}" for t in (
+                                        "test_specialization_selection", "test_loop_times_are_the_grid",
+                                        "test_summary_store_refuses_the_python_engine",
+                                        "test_compile_time_warms_each_specialization_once",
+                                        "test_failed_steps_of_master_and_observer_are_recorded_as_the_reference_engine")),
+                                    "-k", "not bitwise_those_of_main"]),
     "event": (["observer/event/*"], ["tests/observer/event/test_master.py", "tests/observer/event/test_master_exact.py",
                                      "tests/observer/event/test_observers.py", "tests/observer/test_simulate_event.py",
                                      "tests/observer/event/test_nonfinite.py",

@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import json
+import time
 
 import numpy as np
 import pandas as pd
@@ -333,3 +334,58 @@ def test_one_kernel_specialization_with_and_without_summary():
     observer.simulate(sc, observers=tuple(OBSERVER_DESIGNS), store="summary")
     observer.simulate(sc, observers=tuple(OBSERVER_DESIGNS))
     assert {f: len(getattr(kernel, f).signatures) for f in before} == before
+
+
+# --- mutation kills (loop)
+
+def test_compile_time_warms_each_specialization_once(monkeypatch):
+    """``compile_time`` runs the three kernel specializations (general with the summary and
+    pre-projection rows, lean, scalar) once each as warm-up runs over the whole two-step
+    horizon, then marks the kernel compiled; a second call runs nothing."""
+    import observer.loop as loop
+
+    monkeypatch.setattr(loop, "_COMPILED", False)
+    specs, runs = [], []
+    real_spec, real_run = loop.specialization, loop._run_compiled
+    monkeypatch.setattr(loop, "specialization", lambda *a: specs.append(real_spec(*a)) or specs[-1])
+
+    def spy(inp, *args, **kw):
+        out = real_run(inp, *args, **kw)
+        runs.append((inp.q0.shape, kw.get("warm"), out))
+        return out
+
+    monkeypatch.setattr(loop, "_run_compiled", spy)
+    before = time.perf_counter()
+    seconds = loop.compile_time()
+    assert 0.0 <= seconds <= time.perf_counter() - before      # the seconds it took
+    assert specs == ["general", "lean", "scalar"]
+    assert [(shape, warm) for shape, warm, _ in runs] == [((2, 2), True), ((1, 2), True), ((1, 1), True)]
+    for _, _, out in runs:                      # each ran its whole horizon (t_end / h = 2 steps)
+        assert out.q.shape[1] == 3 and np.isfinite(out.q).all() and np.isfinite(out.u).all()
+    assert runs[0][2].q_pre is not None and runs[0][2].summary is not None
+    assert loop._COMPILED is True
+    assert loop.compile_time() >= 0.0 and len(runs) == 3   # compiled: nothing runs again
+
+
+@pytest.mark.parametrize("record_every", [1, 3])
+def test_failed_steps_of_master_and_observer_are_recorded_as_the_reference_engine(record_every):
+    """A step the kernel refuses (the nearly redundant contacts: a singular Delassus matrix),
+    for the master and for an observer (coupled, started elsewhere), is re-solved by the
+    reference solver and written into every record at its row (thinned rows included): the
+    compiled run's positions, velocities, generalized impulses W·P (the split of P between
+    two parallel contacts is not unique), closed sets, multipliers, observer signal and V are
+    the python engine's."""
+    sc = nearly_redundant_contacts(0.4)
+    obs = [Slave("nojump", False, sc.q0 + np.array([0.05, 0.0]), sc.u0 + np.array([0.3, 0.0]))]
+    py = observer.simulate(sc, engine="python", observers=obs, record_every=record_every)
+    co = observer.simulate(sc, engine="compiled", observers=obs, record_every=record_every)
+    assert {f["system"] for f in co.metadata["fallback_steps"]} == {0, 1}
+    W = sc.system.W
+    for a, b in ((co, py), (co.slaves["nojump"], py.slaves["nojump"])):
+        np.testing.assert_allclose(a.q, b.q, rtol=0, atol=1e-8)
+        np.testing.assert_allclose(a.u, b.u, rtol=0, atol=1e-8)
+        np.testing.assert_allclose(a.P @ W.T, b.P @ W.T, rtol=0, atol=1e-8)
+        assert np.array_equal(a.sigma, b.sigma)
+    assert np.array_equal(co.active, py.active) and np.array_equal(co.chi, py.chi)
+    assert co.active.any(axis=0).all()                  # both contacts closed at some row
+    np.testing.assert_allclose(co.slaves["nojump"].V, py.slaves["nojump"].V, rtol=0, atol=1e-12)
