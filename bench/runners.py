@@ -439,8 +439,9 @@ def run_robustness(case: Case, ctx: Context) -> list[dict]:
 
 
 # ------------------------------------------------------------------------------- ensembles
-ENSEMBLE_WORKERS = None
-"""Threads of one ensemble case (:func:`observer.ensemble`'s ``workers``; None: the machine's cores)."""
+ENSEMBLE_WORKERS = 1
+"""Threads of one ensemble case (:func:`observer.ensemble`'s ``workers``): one, since a suite
+already runs one case per core (Dask workers) and every extra thread re-runs the master."""
 
 
 def _ensemble_scenario(case: Case, ctx: Context):

@@ -19,7 +19,7 @@ from observer.scenarios import SCENARIOS
 DESIGNS = ("jump", "nojump", "jump_mass", "jump_identity")
 
 
-@pytest.mark.parametrize("suite,members,systems", [("quick", 100, 3), ("full", 1000, 50)])
+@pytest.mark.parametrize("suite,members,systems", [("quick", 100, 2), ("full", 1000, 50)])
 def test_suites_hold_ensembles_of_every_builtin_and_design(suite, members, systems):
     cases = get_suite(suite).of_kind("ensemble")
     assert set(DESIGNS) <= set(OBSERVER_DESIGNS)

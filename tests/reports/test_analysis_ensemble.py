@@ -147,7 +147,7 @@ def test_claims_carry_numbers_cis_and_at_most_eight_rows():
     assert 0 < len(claims) <= MAX_CLAIMS
     assert set(claims["kind"]) <= {"speed", "failure", "k_metric", "artifact"}
     speed = claims[claims["kind"] == "speed"]
-    assert len(speed) == 3 and np.allclose(speed["value"], 2.0) and (speed["n"] == 60).all()
+    assert len(speed) == 2 and np.allclose(speed["value"], 2.0) and (speed["n"] == 60).all()
     assert all("2× sooner" in t and "95 % CI" in t for t in speed["text"])
     km = claims.set_index("claim_id")
     assert km.loc["k_metric:rises:jump_mass", "value"] == 0.5
