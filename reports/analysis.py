@@ -960,3 +960,48 @@ def ensemble_claims(paired: pd.DataFrame, rises: pd.DataFrame, *, rho: float = 1
     for r in rows:
         r["anchor"] = anchors[r["kind"]]
     return pd.DataFrame(rows[:MAX_CLAIMS], columns=CLAIM_COLUMNS)
+
+
+MATERIAL_RISE = 1e-3
+"""A one-step rise of V above 0.1 % of V: far above round-off and the O(h) slack of the discrete
+impulse term (≲ 1e-6·V per step, THEORY §1), the threshold of the K-metric finding."""
+
+
+def k_metric_summary(members: pd.DataFrame, rho: float = 1e-6, threshold: float = MATERIAL_RISE, *,
+                     n_resamples: int = 2000, rng=None) -> pd.DataFrame:
+    """The K-metric question (issue 22 item 6), pooled per family (built-in / random), master
+    (plain / projected: :data:`MATCHED` in the label) and jump design.
+
+    Returns
+    -------
+    DataFrame
+        One row per (family, master, design): ``ensembles``, ``n`` members, ``rising`` and
+        ``frac_rising`` (members whose V rises by more than ``threshold``·V in one step) with
+        its Clopper–Pearson 95 % interval, ``rise_median`` of ``max_rise_rel``, ``never``
+        (fraction not settling below ρ·V(t_on)), and ``ratio_median`` of the paired settling
+        time t_design / t_jump over the members where one of the two settles, with its
+        percentile-bootstrap 95 % CI (members resampled across the pooled ensembles).
+    """
+    rng = np.random.default_rng(rng)
+    df = members.assign(family=np.where(members["scenario"] == "random_system", "random", "built-in"),
+                        master=np.where(members["label"].astype(str).str.contains(MATCHED, regex=False),
+                                        "projected", "plain"))
+    col, rows = SETTLE[rho], []
+    for (family, master), g in df.groupby(["family", "master"], sort=True):
+        k_rows = g[g["design"] == "jump"][["label", "member", col]]
+        for design, d in g[g["design"].isin(["jump", "jump_mass", "jump_identity"])].groupby("design"):
+            x = d["max_rise_rel"].to_numpy(float)
+            k = int(np.sum(x > threshold))
+            lo, hi = proportion_ci(k, x.size)
+            both = d[["label", "member", col]].merge(k_rows, on=["label", "member"], suffixes=("", "_k"))
+            r = paired_ratio(both[f"{col}_k"].to_numpy(float), both[col].to_numpy(float))
+            r = r[~np.isnan(r)]
+            ci = _median_ci(r, 0.95, n_resamples, rng) if r.size >= 2 else (np.nan, np.nan)
+            rows.append({"family": family, "master": master, "design": design,
+                         "ensembles": int(d["label"].nunique()), "n": int(x.size), "rising": k,
+                         "frac_rising": k / x.size, "frac_ci_low": lo, "frac_ci_high": hi,
+                         "rise_median": float(np.median(x)),
+                         "never": float(np.mean(np.isinf(d[col].to_numpy(float)))),
+                         "ratio_median": float(np.median(r)) if r.size else np.nan,
+                         "ratio_ci_low": ci[0], "ratio_ci_high": ci[1]})
+    return pd.DataFrame(rows)

@@ -155,3 +155,27 @@ def test_claims_carry_numbers_cis_and_at_most_eight_rows():
     assert km.loc["k_metric:speed:jump_mass", "value"] == pytest.approx(2.0)
     assert "jump_identity" not in " ".join(claims["claim_id"])   # no rows, no claim
     assert claims["anchor"].astype(bool).all()
+
+
+def test_k_metric_summary_pools_by_family_and_master():
+    rng = np.random.default_rng(9)
+    frames = []
+    for label, scenario in (("toy", "toy"), ("toy (projected master)", "toy"),
+                            ("random_system (seed 0)", "random_system")):
+        tb = rng.uniform(1, 3, 40)
+        rise = np.where(np.arange(40) < 10, 2.0, 1e-8)                 # 10 of 40 rise by 2·V
+        df = members(tb, 2 * tb, base="jump", cand="jump_mass", rise_cand=rise, label=label)
+        frames.append(df.assign(scenario=scenario))
+    out = analysis.k_metric_summary(pd.concat(frames, ignore_index=True), rho=RHOS[0], rng=0,
+                                    n_resamples=200)
+    out = out.set_index(["family", "master", "design"])
+    assert set(out.index) == {(f, m, d) for f, m in (("built-in", "plain"), ("built-in", "projected"),
+                                                    ("random", "plain")) for d in ("jump", "jump_mass")}
+    for key in out.index:
+        r = out.loc[key]
+        assert r["n"] == 40 and r["ensembles"] == 1 and r["never"] == 0.0
+        if key[2] == "jump":
+            assert r["rising"] == 0 and r["ratio_median"] == 1.0
+        else:
+            assert r["rising"] == 10 and r["frac_ci_low"] < 0.25 < r["frac_ci_high"]
+            assert r["ratio_median"] == pytest.approx(2.0) and r["ratio_ci_low"] <= 2.0 <= r["ratio_ci_high"]
