@@ -70,7 +70,7 @@ def test_quick_and_full_cover_every_kind_and_the_issue_grid(name):
     suite = SUITES[name]
     full = name == "full"
     kinds = Counter(c.kind for c in suite.cases)
-    expected = {"observers", "work_precision", "robustness", "scaling", "checks", "hard"}
+    expected = {"observers", "work_precision", "robustness", "scaling", "checks", "hard", "ensemble"}
     assert set(kinds) == (expected | {"peers"} if full else expected)
     assert suite.micro is not None
     obs = {c.name for c in suite.of_kind("observers")}
