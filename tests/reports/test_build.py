@@ -563,9 +563,9 @@ def test_observer_ratios_are_settling_time_ratios(synthetic_report):
 
 
 def test_observer_headline_uses_settling_times_at_the_deepest_common_rho(synthetic_report):
-    """The headline (ratio table, observer-section list, key numbers, scenario paragraph) is
-    the settling ratio at the deepest ρ both observers settle below: 'dm' 12.0/8.0 = 1.50 at
-    1e−9, not the first-passage 4.80."""
+    """The headline (ratio table, observer-section list, the collapsed list of all key numbers)
+    is the settling ratio at the deepest ρ both observers settle below: 'dm' 12.0/8.0 = 1.50 at
+    1e−9, not the first-passage 4.80; no scenario repeats it in a paragraph of its own."""
     page, _ = synthetic_report
     tn, tj = _settle("dm", "nojump", 1e-9), _settle("dm", "jump", 1e-9)
     expected = f"settling-time ratio nojump/jump = {tn / tj:.2f} at ρ = 1e−9"
@@ -576,9 +576,8 @@ def test_observer_headline_uses_settling_times_at_the_deepest_common_rho(synthet
     assert _nums(head.split("(")[1])[:2] == pytest.approx([tn, tj], rel=5e-3)
     obs_items = page.sections["observers"].items
     assert any(i.startswith(f"dm: {expected}") for i in obs_items), obs_items
-    assert any(i.startswith(f"dm: {expected}") for i in page.sections["key-numbers"].items)
-    assert any(f"Headline (settling times): {expected}" in p
-               for p in page.sections["scn-dm"].paragraphs)
+    assert any(i.startswith(f"dm: {expected}") for i in page.sections["all-key-numbers"].items)
+    assert not any(expected in p for p in page.sections["scn-dm"].paragraphs)
     stuck = next(i for i in obs_items if i.startswith("stuck:"))
     assert "never settles below ρ = 1e−3" in stuck
     assert f"settles below ρ = 1e−6 after {fmt(_settle('stuck', 'jump', 1e-6))} s" in stuck
@@ -847,9 +846,10 @@ def test_micro_speedups_are_recomputed(synthetic_report):
 def test_proof_check_matrix_is_coloured_by_evidence_with_the_witness_on_hover(synthetic_report, tmp_path):
     """Scenario × check: each cell is the row's evidence level with its class and a hover text
     naming check, scenario, status, verdict and witness (HTML-escaped); "—" where a scenario has
-    no row for a check; the full table sits in a <details> block."""
+    no row for a check; it is shown with the evidence of the claims; the full table sits in a
+    <details> block of the proof-check section."""
     page, _ = synthetic_report
-    m = page.table("proof-checks", "Proof-check matrix").dicts()
+    m = page.table("ensemble", "Proof-check matrix").dicts()
     checks = list(dict.fromkeys(c[1] for c in CHECKS))
     assert [r["scenario"] for r in m] == list(dict.fromkeys(c[0] for c in CHECKS))
     rows = {r["scenario"]: r for r in m}
@@ -870,7 +870,7 @@ def test_proof_check_matrix_is_coloured_by_evidence_with_the_witness_on_hover(sy
     assert [(r["evidence"], r["verdict"]) for r in table] == [
         (CHECK_EVIDENCE[c][0], CHECK_EVIDENCE[c][1] or "—") for _, c, *_ in CHECKS]
     assert "Proof-step evidence: 1 proved, 0 bounded, 0 sampled, 1 violated, 1 n/a." in \
-        "\n".join(page.sections["key-numbers"].items)
+        "\n".join(page.sections["all-key-numbers"].items)
 
 
 @pytest.mark.parametrize("status,evidence,cell,cls", [

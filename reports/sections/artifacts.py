@@ -1,0 +1,220 @@
+"""Discrete artifacts: where V of an observer with position jumps rises in discrete time, why
+(the time-stepped master penetrates, so the slave's projection adds ½‖g_m⁻‖²_{L_I⁻¹} to V;
+THEORY §6.6, the ``projection_unprojected_gap`` part of the proof checks' decomposition of
+ΔV, eq. (17)), how large the effect is, and the remedy side by side: the same run with a
+projected master and event-driven.
+
+Sources: the observer runs (kind "observers": one row per design and master variant, with
+their downsampled trajectory) and the ensemble rise distribution per integrator
+(:func:`reports.analysis.rise_distribution`). The claims of the first screen that touch a
+rising design carry :func:`caveats`.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pandas as pd
+
+from reports import figures, registry
+from reports.blocks import Section
+from reports.context import ReportContext, load_trajectory
+from reports.tables import Table, fmt, fmt_int, fmt_pct, fmt_rho, fmt_time, text
+
+TITLE = "Discrete artifacts: where V rises in discrete time, why, and the remedy"
+ID = "discrete-artifacts"
+VARIANTS = ("time-stepping", "projected master", "event-driven")
+"""Master variants, in the order shown."""
+RISE_FACTOR = 2.0
+"""A recorded sample with V more than this times the previous one counts as a jump up of V."""
+GAP_KEY = "projection_unprojected_gap"
+"""Name of the master-penetration term in the proof checks' witnesses."""
+CAUSE = ("the time-stepped master penetrates its constraints (g_m < 0 by O(h|γ|) after a "
+         "closing step), and the observer's projection onto the master's closed set then adds "
+         "½‖g_m⁻‖²_{L_I⁻¹} to V (eq. (17): the jump part is ≤ 0 only when master and observer "
+         "are both on the constraint)")
+
+
+def variant(r: pd.Series) -> str:
+    """The master variant of an observer row: event-driven, projected master or time-stepping."""
+    if text(r.get("integrator")).startswith("event"):
+        return "event-driven"
+    params = text(r.get("params")) + " " + text(r.get("name"))
+    if re.search(r"master_projection\W*(=|,|:)?\W*(true|1)\b|projected master", params, re.I):
+        return "projected master"
+    return "time-stepping"
+
+
+def base_name(name: str) -> str:
+    """The run's name without its master variant suffix (" · event", " · projected master")."""
+    return str(name).split(" · ")[0]
+
+
+def jump_designs(names) -> list[str]:
+    """The registered designs with position jumps among ``names`` (registry order)."""
+    return [d for d in registry.in_registry_order(names)
+            if d in registry.designs() and registry.design(d).position_jumps]
+
+
+def rises(v: np.ndarray, factor: float = RISE_FACTOR) -> tuple[int, float]:
+    """(number of recorded samples with V > factor·previous, largest ratio V_k+1 / V_k)."""
+    v = np.asarray(v, dtype=float)
+    prev, nxt = v[:-1], v[1:]
+    ok = (prev > 0) & np.isfinite(prev) & np.isfinite(nxt)
+    ratio = nxt[ok] / prev[ok]
+    if ratio.size == 0:
+        return 0, math.nan
+    return int(np.sum(ratio > factor)), float(ratio.max())
+
+
+def _traj_v(r: pd.Series, design: str):
+    traj = load_trajectory(r)
+    col = f"V_{design}"
+    if traj is None or col not in traj:
+        return None
+    return traj["t"].to_numpy(dtype=float), traj[col].to_numpy(dtype=float)
+
+
+def artifact_runs(obs: pd.DataFrame, deepest: float) -> pd.DataFrame:
+    """Per (run, design, master variant) of the scenarios run under more than one variant: final
+    and smallest V / V(t_on), recorded jumps up of V, settling time at ``deepest``."""
+    obs = obs[obs["status"] == "ok"].assign(
+        base=obs["name"].map(base_name), variant=obs.apply(variant, axis=1))
+    settle = registry.settle_column(deepest)
+    out = []
+    for base, g in obs.groupby("base", sort=False):
+        if g["variant"].nunique() < 2:
+            continue
+        for _, r in g.iterrows():
+            tv = _traj_v(r, r["observer"])
+            n_up, worst = rises(tv[1]) if tv is not None else (math.nan, math.nan)
+            out.append({"base": base, "design": r["observer"], "variant": r["variant"],
+                        "h": r["h"], "t_end": r["t_end"], "V_end_rel": r.get("V_end_rel"),
+                        "V_min_rel": r.get("V_min") / r.get("V_on") if r.get("V_on") else math.nan,
+                        "jumps_up": n_up, "largest_rise": worst, "settle": r.get(settle, math.nan)})
+    return pd.DataFrame(out, columns=["base", "design", "variant", "h", "t_end", "V_end_rel",
+                                      "V_min_rel", "jumps_up", "largest_rise", "settle"])
+
+
+def measured_gap(ch: pd.DataFrame, scenario: str) -> float:
+    """The largest master-penetration term / V the proof checks measured on ``scenario``
+    (``max_projection_unprojected_gap/V`` in a witness), NaN when no check reports it."""
+    if ch.empty or "witness" not in ch:
+        return math.nan
+    vals = []
+    for w in ch.loc[ch["scenario"].astype(str) == scenario, "witness"].map(text):
+        for m in re.finditer(re.escape(GAP_KEY) + r"/V\W{0,4}([-+]?[0-9.]+(?:e[-+]?\d+)?)", w):
+            vals.append(float(m.group(1)))
+    return max(vals) if vals else math.nan
+
+
+def side_by_side_table(runs: pd.DataFrame, deepest: float) -> Table:
+    """One row per (run, design): each variant's final V / V(t_on), recorded jumps up and
+    settling time side by side."""
+    present = [v for v in VARIANTS if (runs["variant"] == v).any()]
+    t = Table("V of each design under the time-stepped master, the projected master and "
+              "event-driven (same system, same initial error)",
+              ["run", "design"] + [f"{v}: V_end / V(t_on) · jumps up · settles below {fmt_rho(deepest)}"
+                                   for v in present],
+              note=f"jumps up: recorded samples where V exceeds {fmt(RISE_FACTOR)}× the previous "
+                   "one (largest factor in brackets); the trajectories are downsampled, so this is "
+                   "a lower bound of the steps where V rises.")
+    for (base, design), g in runs.groupby(["base", "design"], sort=False):
+        cells = []
+        for v in present:
+            r = g[g["variant"] == v]
+            if r.empty:
+                cells.append("n/a (not run)")
+                continue
+            r = r.iloc[0]
+            up = "n/a (no trajectory)" if pd.isna(r["jumps_up"]) else (
+                f"{fmt_int(r['jumps_up'])} (×{fmt(r['largest_rise'])})")
+            cells.append(f"{fmt(r['V_end_rel'])} · {up} · {fmt_time(r['settle'])}")
+        t.add([base, registry.label(design), *cells])
+    return t
+
+
+def caveats(view, obs_runs: pd.DataFrame | None = None) -> dict[str, str]:
+    """Per design whose V rises in the time-stepped ensembles: one sentence with the share of
+    members, the largest rise and the cause (for the claims that name the design)."""
+    r = view.rises
+    if r is None or r.empty or "frac_rising" not in r:
+        return {}
+    out = {}
+    ts = r[~r["integrator"].astype(str).str.startswith("event")]
+    for design, g in ts.groupby("design", sort=False):
+        frac = float(g["frac_rising"].max())
+        if not frac > 0:
+            continue
+        ev = r[r["integrator"].astype(str).str.startswith("event") & (r["design"] == design)]
+        remedy = (f"; event-driven: {fmt_pct(ev['frac_rising'].max())} of the members"
+                  if len(ev) else "")
+        out[str(design)] = (f"V of {registry.label(design)} rises in up to {fmt_pct(frac)} of the "
+                            f"time-stepped members (largest rise {fmt(g['rise_max'].max())}·V){remedy}; "
+                            "cause: the time-stepped master penetrates, the projection adds "
+                            "½‖g_m⁻‖²_{L_I⁻¹}.")
+    return out
+
+
+def rise_table(rises_df: pd.DataFrame) -> Table:
+    """The ensemble rise distribution per scenario, integrator and design."""
+    t = Table("Rises of V in the ensembles per scenario, integrator and design",
+              ["scenario", "integrator", "design", "n", "members where V rises", "median rise",
+               "90 % quantile", "largest rise"],
+              note="rise: the largest relative increase of V over one step of a member "
+                   "(max_rise_rel); a member 'rises' above the round-off threshold of "
+                   "reports.analysis.rise_distribution.")
+    for _, r in rises_df.iterrows():
+        t.add([text(r.get("label")), text(r.get("integrator")), registry.label(r["design"]),
+               fmt_int(r["n"]), fmt_pct(r["frac_rising"]), fmt(r["rise_median"]),
+               fmt(r["rise_q90"]), fmt(r["rise_max"])])
+    return t
+
+
+def _figure_of(obs: pd.DataFrame, runs: pd.DataFrame):
+    """V of the first design with position jumps of the first run shown, under each variant."""
+    base, design = runs["base"].iloc[0], jump_designs(runs["design"])[0]
+    ok = obs[(obs["status"] == "ok") & (obs["observer"] == design)
+             & (obs["name"].map(base_name) == base)]
+    curves = {variant(r): _traj_v(r, design) for _, r in ok.iterrows()}
+    return figures.artifact_figure(curves, f"{base}: V of {registry.label(design)}")
+
+
+def _prose(runs: pd.DataFrame, ch: pd.DataFrame, obs: pd.DataFrame) -> str:
+    parts = []
+    for base, g in runs.groupby("base", sort=False):
+        scen = str(obs.loc[obs["name"].map(base_name) == base, "scenario"].iloc[0])
+        gap = measured_gap(ch, scen)
+        ts = g[(g["variant"] == "time-stepping") & g["design"].isin(jump_designs(g["design"]))]
+        worst = ts["largest_rise"].max() if len(ts) else math.nan
+        if not (worst > RISE_FACTOR or gap > 0):
+            continue
+        parts.append(f"{base}: under plain time-stepping V jumps up by up to ×{fmt(worst)} in one "
+                     "recorded sample" + (f"; the proof checks measure the master-penetration term "
+                                          f"at up to {fmt(gap)}·V" if gap == gap else ""))
+    return "; ".join(parts)
+
+
+def build(ctx: ReportContext) -> Section:
+    """The discrete-artifact section (its id is the target of the claims' caveats)."""
+    sec = Section(ID, TITLE)
+    sec.p(f"Where a design with position jumps sees V rise in discrete time, the cause is {CAUSE}. "
+          "It vanishes as h → 0; a projected master or the event-driven integrator removes it.")
+    obs = ctx.rows("observers") if "kind" in ctx.df else pd.DataFrame()
+    deepest = min(registry.rhos())
+    runs = artifact_runs(obs, deepest) if len(obs) else pd.DataFrame()
+    if runs.empty or not jump_designs(runs["design"]):
+        sec.p("These results hold no run of one system under two master variants "
+              "(time-stepping, projected master, event-driven): no side-by-side comparison.")
+    else:
+        measured = _prose(runs, ctx.rows("checks"), obs)
+        if measured:
+            sec.p("Measured: " + measured + ".")
+        sec.figure(_figure_of(obs, runs), "No trajectory stored for these runs.")
+        sec.table(side_by_side_table(runs, deepest))
+    view = ctx.ensemble()
+    if view.rises is not None and len(view.rises):
+        sec.table(rise_table(view.rises))
+    return sec

@@ -1,0 +1,71 @@
+"""Claims: the page's answer, on its first screen — at most :data:`MAX_CLAIMS` sentences from
+:func:`reports.analysis.ensemble_claims`, each with its number, 95 % confidence interval and n,
+a link to its evidence, and, where it names a design whose V rises in discrete time, the
+cause and a link to the remedy (:func:`reports.sections.artifacts.caveats`)."""
+
+from __future__ import annotations
+
+import re
+
+import pandas as pd
+
+from reports import registry
+from reports.blocks import Block, Section
+from reports.context import ReportContext
+from reports.sections import artifacts
+from reports.tables import fmt, fmt_int
+
+TITLE = "Claims (ensembles of initial errors, 95 % confidence intervals)"
+MAX_CLAIMS = 8
+"""At most this many claims on the first screen."""
+CI_MARK = "CI"
+
+
+def named_designs(sentence: str) -> list[str]:
+    """Registered designs a claim names (by name or label; "jump" is not found inside
+    "jump_mass")."""
+    out = []
+    for d in registry.designs():
+        pats = [rf"(?<![\w-]){re.escape(d)}(?![\w-])", re.escape(registry.label(d))]
+        if any(re.search(p, sentence) for p in pats):
+            out.append(d)
+    return out
+
+
+def claim_text(r: pd.Series) -> str:
+    """The claim's sentence; its CI and n appended when the sentence does not state them."""
+    sentence = str(r["text"]).strip()
+    if CI_MARK not in sentence:
+        sentence = (sentence.rstrip(".") + f" (95 % CI {fmt(r['ci_low'])}–{fmt(r['ci_high'])}, "
+                    f"n = {fmt_int(r['n'])}).")
+    return sentence
+
+
+def claim_items(claims: pd.DataFrame, notes: dict[str, str]) -> list[dict]:
+    """Rendered claims: text, evidence anchor, and the discrete-time caveat of the designs it
+    names (every claim of kind "artifact" gets the caveats of its designs, or the cause)."""
+    items = []
+    for _, r in claims.head(MAX_CLAIMS).iterrows():
+        sentence = claim_text(r)
+        caveat = " ".join(notes[d] for d in named_designs(str(r["text"])) if d in notes)
+        if not caveat and r.get("kind") == "artifact":
+            caveat = f"cause: {artifacts.CAUSE}."
+        items.append({"text": sentence, "anchor": str(r["anchor"]), "caveat": caveat,
+                      "kind": str(r.get("kind", ""))})
+    return items
+
+
+def build(ctx: ReportContext) -> Section:
+    """The claims section (shown first, before the page's header)."""
+    sec = Section("claims", TITLE, lead=True)
+    view = ctx.ensemble()
+    if view.claims is None or view.claims.empty:
+        sec.p(f"No claims: {view.reason}. The evidence sections below show the single runs.")
+        return sec
+    n = view.members.groupby(["label", "design"]).size()
+    sec.blocks.append(Block("claims", claim_items(view.claims, artifacts.caveats(view))))
+    sec.p(f"Each claim is a statistic over an ensemble of initial errors ({fmt_int(n.min())}–"
+          f"{fmt_int(n.max())} members per scenario and design, the same members for every "
+          "design); bootstrap 95 % confidence intervals. Evidence: the settling matrix, the "
+          "proof-check matrix and the paired statistics below.")
+    return sec
