@@ -4,6 +4,7 @@ Public API (a contract relied on by the benchmarks, reports and users):
 
 * :func:`load_scenario` — a built-in scenario by name or a TOML file, with overrides;
 * :func:`simulate` — Moreau–Jean simulation of the master and its observers;
+* :func:`ensemble` — n observers per design from n initial errors against one master run;
 * :data:`SCENARIOS`, :data:`OBSERVER_DESIGNS`, :data:`IMPACT_LAWS`, :data:`CONTACT_SOLVERS`, :data:`ENGINES` —
   registries (add an entry, and it runs everywhere);
 * :class:`LinearSystem`, :class:`ImpactLaw`, :class:`Scenario`, :class:`MoreauJean`,
@@ -12,6 +13,7 @@ Public API (a contract relied on by the benchmarks, reports and users):
 
 from observer.contact import CONTACT_SOLVERS
 from observer.engines import ENGINES
+from observer.ensemble import ensemble
 from observer.errors import ContactSolverError, InputError
 from observer.impact import IMPACT_LAWS, ImpactLaw
 from observer.model import Harmonic, LinearSystem
@@ -25,4 +27,4 @@ from observer.version import __version__
 
 __all__ = ["CONTACT_SOLVERS", "ContactSolverError", "ENGINES", "Harmonic", "IMPACT_LAWS", "ImpactLaw", "InputError",
            "LinearSystem", "MoreauJean", "OBSERVER_DESIGNS", "ObserverDesign", "SCENARIOS", "Scenario", "SimulationResult",
-           "Slave", "load_scenario", "lyapunov", "read_frame", "read_result", "simulate", "__version__"]
+           "Slave", "ensemble", "load_scenario", "lyapunov", "read_frame", "read_result", "simulate", "__version__"]

@@ -1,4 +1,4 @@
-"""Command line: ``python -m observer {scenarios, show, run, plot}``.
+"""Command line: ``python -m observer {scenarios, show, run, ensemble, log, plot}``.
 
 Errors in input exit with status 2 and one line on stderr (``error: FIELD: PROBLEM``),
 never a traceback.
@@ -79,6 +79,25 @@ def cmd_run(args) -> int:
     if res.metadata.get("stopped"):
         print(f"error: {res.status.reason}; {path} holds every step up to there", file=sys.stderr)
     return exit_status(res)
+
+
+def cmd_ensemble(args) -> int:
+    """``ensemble``: n members per design (:func:`observer.ensemble.ensemble`) to a Parquet file."""
+    from observer.ensemble import ensemble
+    from observer.scenario import load_scenario
+    check_output_path("--out", args.out, (".parquet",))
+    sc = load_scenario(args.scenario, parse_pairs(args.set))
+    designs = [d.strip() for d in args.designs.split(",") if d.strip()]
+    df = ensemble(sc, designs=designs, n=args.n, seed=args.seed, initial_errors=args.initial_errors,
+                  V0=args.V0, h=args.h, t_end=args.t_end, integrator=args.integrator, paths=args.paths,
+                  workers=args.workers, out=args.out)
+    meta = df.attrs["metadata"]
+    print(f"{sc.name}: {args.n} members x {len(designs)} designs ({meta['integrator']}) in "
+          f"{meta['wall_time_s']:.2f} s; median settling times (inf = never):")
+    cols = [c for c in df.columns if c.startswith("t_settle")]
+    print(df.groupby("design", sort=False)[cols].median().to_string(float_format=lambda x: f"{x:.3g}"))
+    print(f"wrote {args.out}")
+    return 0
 
 
 def observer_list(text: str | None):
@@ -199,6 +218,25 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override (param.NAME for builder parameters, else dotted TOML key)")
     s.add_argument("--out", required=True, help="output file (.csv or .parquet)")
     s.set_defaults(func=cmd_run)
+    s = sub.add_parser("ensemble", help="n observers per design from sampled initial errors, "
+                                        "one row per (design, member), to a Parquet file")
+    s.add_argument("scenario", help="built-in name or .toml path")
+    s.add_argument("--n", type=int, default=1000, help="members per design (default 1000)")
+    s.add_argument("--designs", default="jump,nojump", help="comma-separated observer designs")
+    s.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
+    s.add_argument("--initial-errors", choices=["energy_sphere", "box"], default="energy_sphere",
+                   help="sampler of the initial errors (default energy_sphere)")
+    s.add_argument("--V0", type=float, default=None, help="level of the energy sphere (default: "
+                                                          "V of the scenario's observer error)")
+    s.add_argument("--h", type=float, help="step size")
+    s.add_argument("--t-end", type=float, help="final time")
+    s.add_argument("--integrator", choices=["timestepping", "event"], default="timestepping")
+    s.add_argument("--paths", type=int, default=0, help="keep V(t) of the first K members per design")
+    s.add_argument("--workers", type=int, default=None, help="threads (default: the machine's cores)")
+    s.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override (param.NAME for builder parameters, else dotted TOML key)")
+    s.add_argument("--out", required=True, help="output file (.parquet)")
+    s.set_defaults(func=cmd_ensemble)
     s = sub.add_parser("log", help="write the closing log (contact,t_close,t_open) of a run, "
                                    "the input of --source log")
     s.add_argument("result", help="result file written by run")
