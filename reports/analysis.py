@@ -584,3 +584,328 @@ def check_matrix(ch: pd.DataFrame) -> tuple[list[str], list[str], dict]:
     checks = list(dict.fromkeys(ch["check"].astype(str)))
     cells = {(str(r["scenario"]), str(r["check"])): r for _, r in ch.iterrows()}
     return scenarios, checks, cells
+
+
+# ------------------------------------------------------------------------------ ensembles
+# Statistics over ensembles of initial errors (issue 22): the members' rows of
+# :func:`observer.ensemble` (one row per design and member, the same member ids paired across
+# designs). Settling times are seconds from t_on, ``inf`` = V never stays below ρ·V(t_on)
+# within the window.
+DEFAULT_PAIRS: tuple[tuple[str, str], ...] = (("nojump", "jump"), ("jump", "jump_mass"),
+                                              ("jump", "jump_identity"))
+"""Declared (baseline, candidate) pairs of the ensemble statistics."""
+
+CI_METHOD = ("percentile bootstrap (scipy.stats.bootstrap) of the median of the per-member "
+             "ratio t_candidate / t_baseline, members resampled (the pairing kept)")
+"""How :func:`paired_settling` computes its confidence interval (stated in its rows)."""
+
+MIN_WILCOXON = 5
+"""Fewest members settling under both designs for which :func:`paired_settling` reports a
+Wilcoxon p-value."""
+
+RISE_ROUNDOFF = 1e-10
+"""A member's V "rises" when its largest one-step relative increase ``max_rise_rel`` exceeds
+this: round-off of V = ½eᵀKe + ½vᵀMv is ≈ 1e-16 relative per step, and the O(h) slack of the
+discrete impulse term (THEORY §1: ≲ 1e-6 relative per step) is counted as a rise."""
+
+GROUP_KEYS = ("label", "integrator")
+"""Columns an ensemble's statistics are grouped by (those present; ``label`` falls back to
+``scenario``)."""
+
+
+def _groups(members: pd.DataFrame):
+    """``((label, integrator), frame)`` per ensemble in first-seen order."""
+    df = members
+    if "label" not in df:
+        df = df.assign(label=df["scenario"] if "scenario" in df else "")
+    if "integrator" not in df:
+        df = df.assign(integrator="")
+    return df.groupby(list(GROUP_KEYS), sort=False)
+
+
+def paired_ratio(t_base: np.ndarray, t_cand: np.ndarray) -> np.ndarray:
+    """Per member the settling-time ratio t_cand / t_base with "never" (inf) made explicit:
+    finite / finite (0/0 = 1), ``inf`` when only the baseline settles, ``0`` when only the
+    candidate does, NaN when neither (undefined; such members are counted in
+    ``never_baseline`` and ``never_candidate`` instead)."""
+    tb, tc = np.asarray(t_base, float), np.asarray(t_cand, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = tc / tb
+    r = np.where((tb == 0) & (tc == 0), 1.0, r)
+    r = np.where(np.isinf(tc) & np.isfinite(tb), np.inf, r)
+    r = np.where(np.isinf(tb) & np.isfinite(tc), 0.0, r)
+    return np.where(np.isinf(tb) & np.isinf(tc), np.nan, r)
+
+
+def _quantile(x: np.ndarray, q: float) -> float:
+    """Quantile by the inverted empirical CDF (no interpolation, so ``inf`` members stay
+    ``inf`` instead of making NaN)."""
+    return float(np.quantile(x, q, method="inverted_cdf")) if x.size else float("nan")
+
+
+def _median_ci(ratios: np.ndarray, confidence: float, n_resamples: int, rng) -> tuple[float, float]:
+    """Percentile-bootstrap CI of the median of ``ratios`` (may hold ``inf``)."""
+    from scipy import stats
+
+    with np.errstate(invalid="ignore"):              # inf members: scipy's standard error is NaN
+        res = stats.bootstrap((ratios,), np.median, n_resamples=n_resamples, method="percentile",
+                              confidence_level=confidence, rng=rng)
+    return float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+
+def _wilcoxon(tb: np.ndarray, tc: np.ndarray) -> tuple[float, str]:
+    """Two-sided Wilcoxon signed-rank p-value of log t_cand − log t_base over the members that
+    settle (t > 0) under both designs, and why it is NaN when undefined."""
+    from scipy import stats
+
+    both = np.isfinite(tb) & np.isfinite(tc) & (tb > 0) & (tc > 0)
+    d = np.log(tc[both]) - np.log(tb[both])
+    if both.sum() < MIN_WILCOXON:
+        return float("nan"), f"Wilcoxon: fewer than {MIN_WILCOXON} members settle under both designs"
+    if not np.any(d != 0):
+        return float("nan"), "Wilcoxon: every paired difference is zero"
+    return float(stats.wilcoxon(d).pvalue), ""
+
+
+def _pair_stats(tb: np.ndarray, tc: np.ndarray, confidence: float, n_resamples: int, rng) -> dict:
+    """The statistics of one (pair, ρ) of one ensemble (:func:`paired_settling`)."""
+    r = paired_ratio(tb, tc)
+    defined = r[~np.isnan(r)]
+    rec = {"n": int(tb.size), "n_ratio": int(defined.size),
+           "ratio_median": float(np.median(defined)) if defined.size else float("nan"),
+           "ratio_q10": _quantile(defined, 0.1), "ratio_q90": _quantile(defined, 0.9),
+           "ci_low": float("nan"), "ci_high": float("nan"),
+           "frac_candidate_first": float(np.mean(tc < tb)) if tb.size else float("nan"),
+           "never_baseline": float(np.mean(np.isinf(tb))) if tb.size else float("nan"),
+           "never_candidate": float(np.mean(np.isinf(tc))) if tb.size else float("nan"),
+           "ci_method": CI_METHOD}
+    reasons = []
+    if defined.size >= 2:
+        rec["ci_low"], rec["ci_high"] = _median_ci(defined, confidence, n_resamples, rng)
+    else:
+        reasons.append("no CI: fewer than 2 members settle under either design")
+    rec["wilcoxon_p"], why = _wilcoxon(tb, tc)
+    rec["reason"] = "; ".join(reasons + ([why] if why else []))
+    return rec
+
+
+PAIRED_COLUMNS = ["label", "integrator", "baseline", "candidate", "rho", "n", "n_ratio",
+                  "ratio_median", "ratio_q10", "ratio_q90", "ci_low", "ci_high",
+                  "frac_candidate_first", "never_baseline", "never_candidate", "wilcoxon_p",
+                  "reason", "ci_method"]
+
+
+def paired_settling(members: pd.DataFrame, pairs=DEFAULT_PAIRS, rhos=RHOS, *,
+                    confidence: float = 0.95, n_resamples: int = 2000, rng=None) -> pd.DataFrame:
+    """Paired settling-time statistics of ensembles (issue 22 item 2).
+
+    Parameters
+    ----------
+    members : DataFrame
+        One row per (design, member) (:func:`observer.ensemble`): columns ``design``,
+        ``member``, ``t_settle_ρ`` for each ρ, and ``label`` (else ``scenario``) and
+        ``integrator`` when several ensembles are stacked.
+    pairs : sequence of (baseline, candidate)
+        Design pairs; a pair is reported where both designs have rows. Members are matched by
+        their ``member`` id (never by row order).
+    rhos : sequence of float
+        Thresholds ρ (settling below ρ·V(t_on), :func:`observer.metrics.settling_time`).
+    confidence, n_resamples : float, int
+        Of the bootstrap confidence interval (:data:`CI_METHOD`).
+    rng : numpy.random.Generator or int, optional
+        Seed of the bootstrap resampling (explicit for reproducible intervals).
+
+    Returns
+    -------
+    DataFrame
+        :data:`PAIRED_COLUMNS`, one row per (label, integrator, baseline, candidate, ρ):
+        ``n`` paired members, ``n_ratio`` of them with a defined ratio (:func:`paired_ratio`:
+        at least one design settles), the median and 10/90 % quantiles of t_cand / t_base
+        (``inf`` where only the baseline settles), its bootstrap CI (NaN, with ``reason``,
+        when fewer than 2 ratios), the fraction of members where the candidate settles
+        strictly first, the fractions that never settle per design, and the Wilcoxon
+        signed-rank p-value on the log-times of the members settling under both.
+    """
+    rng = np.random.default_rng(rng)
+    rows = []
+    for (label, integ), g in _groups(members):
+        for base, cand in pairs:
+            b, c = g[g["design"] == base], g[g["design"] == cand]
+            if b.empty or c.empty:
+                continue
+            both = b.merge(c, on="member", how="inner", suffixes=("_b", "_c"), sort=True)
+            for rho in rhos:
+                col = SETTLE[rho]
+                tb, tc = (both[f"{col}_{s}"].to_numpy(float) for s in "bc")
+                rows.append({"label": label, "integrator": integ, "baseline": base,
+                             "candidate": cand, "rho": rho,
+                             **_pair_stats(tb, tc, confidence, n_resamples, rng)})
+    return pd.DataFrame(rows, columns=PAIRED_COLUMNS)
+
+
+def proportion_ci(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Clopper–Pearson (exact binomial) interval of a fraction k / n (NaNs when n = 0)."""
+    from scipy import stats
+
+    if n == 0:
+        return float("nan"), float("nan")
+    ci = stats.binomtest(int(k), int(n)).proportion_ci(confidence, method="exact")
+    return float(ci.low), float(ci.high)
+
+
+RISE_COLUMNS = ["label", "integrator", "design", "n", "rising", "frac_rising", "frac_ci_low",
+                "frac_ci_high", "rise_median", "rise_q90", "rise_max", "threshold"]
+
+
+def rise_distribution(members: pd.DataFrame, threshold: float = RISE_ROUNDOFF) -> pd.DataFrame:
+    """How often, and by how much, V rises during the coupling window, per ensemble and design.
+
+    Theorem 1 of the paper (V non-increasing) is proved for the K-metric jump; this measures
+    it per member from ``max_rise_rel`` (largest one-step increase of V relative to the V
+    before it, over the window, as the kernel's summary records it).
+
+    Returns
+    -------
+    DataFrame
+        :data:`RISE_COLUMNS`, one row per (label, integrator, design): ``n`` members,
+        ``rising`` = how many have ``max_rise_rel > threshold`` (:data:`RISE_ROUNDOFF`), their
+        fraction with its Clopper–Pearson 95 % interval, and the median, 90 % quantile and
+        maximum of ``max_rise_rel`` over all members.
+    """
+    rows = []
+    for (label, integ), g in _groups(members):
+        for design, d in g.groupby("design", sort=False):
+            x = d["max_rise_rel"].to_numpy(float)
+            k = int(np.sum(x > threshold))
+            lo, hi = proportion_ci(k, x.size)
+            rows.append({"label": label, "integrator": integ, "design": design, "n": int(x.size),
+                         "rising": k, "frac_rising": k / x.size if x.size else float("nan"),
+                         "frac_ci_low": lo, "frac_ci_high": hi,
+                         "rise_median": float(np.median(x)) if x.size else float("nan"),
+                         "rise_q90": _quantile(x, 0.9),
+                         "rise_max": float(x.max()) if x.size else float("nan"),
+                         "threshold": threshold})
+    return pd.DataFrame(rows, columns=RISE_COLUMNS)
+
+
+CLAIM_COLUMNS = ["claim_id", "text", "value", "ci_low", "ci_high", "n", "anchor", "kind"]
+MAX_CLAIMS = 8
+CLAIM_ANCHORS = {"speed": "ensemble-matrix", "failure": "ensemble-matrix", "k_metric": "k-metric",
+                 "artifact": "artifacts"}
+"""Default HTML ids of the evidence of each kind of claim (the report's sections)."""
+
+
+def _design_label(design: str) -> str:
+    from observer.observers import OBSERVER_DESIGNS
+
+    d = OBSERVER_DESIGNS.get(design)
+    return d.label if d is not None else design
+
+
+def _speed_claims(paired: pd.DataFrame, pair, rho: float, limit: int) -> list[dict]:
+    """"The candidate settles k× sooner" per ensemble (value = t_base / t_cand, the inverse of
+    the median ratio; its CI inverted likewise)."""
+    sel = paired[(paired["baseline"] == pair[0]) & (paired["candidate"] == pair[1])
+                 & np.isclose(paired["rho"], rho) & np.isfinite(paired["ci_low"])]
+    out = []
+    for _, r in sel.head(limit).iterrows():
+        with np.errstate(divide="ignore"):
+            v, lo, hi = 1 / r["ratio_median"], 1 / r["ci_high"], 1 / r["ci_low"]
+        where = f"{r['label']}" + (f", {r['integrator']}" if r["integrator"] else "")
+        out.append({"claim_id": f"speed:{pair[1]}/{pair[0]}:{where}", "kind": "speed",
+                    "value": v, "ci_low": lo, "ci_high": hi, "n": int(r["n"]),
+                    "text": (f"{_design_label(pair[1])} brings V to {rho:g}·V(t_on) {v:.3g}× sooner "
+                             f"than {_design_label(pair[0])} (median over {int(r['n'])} initial errors, "
+                             f"95 % CI {lo:.3g}–{hi:.3g}; sooner in "
+                             f"{100 * r['frac_candidate_first']:.0f} % of them) on {where}.")})
+    return out
+
+
+def _failure_claim(paired: pd.DataFrame, rho: float) -> list[dict]:
+    """The (ensemble, design) that most often never settles below ρ·V(t_on), if any does."""
+    sel = paired[np.isclose(paired["rho"], rho)]
+    best = None
+    for _, r in sel.iterrows():
+        for design, col in ((r["baseline"], "never_baseline"), (r["candidate"], "never_candidate")):
+            if r[col] > 0 and (best is None or r[col] > best[0]):
+                best = (r[col], design, r)
+    if best is None:
+        return []
+    frac, design, r = best
+    n = int(r["n"])
+    lo, hi = proportion_ci(round(frac * n), n)
+    where = f"{r['label']}" + (f", {r['integrator']}" if r["integrator"] else "")
+    return [{"claim_id": f"failure:{design}:{where}", "kind": "failure", "value": frac,
+             "ci_low": lo, "ci_high": hi, "n": n,
+             "text": (f"{_design_label(design)} never settles below {rho:g}·V(t_on) in "
+                      f"{100 * frac:.0f} % of {n} initial errors on {where} "
+                      f"(95 % CI {100 * lo:.0f}–{100 * hi:.0f} %).")}]
+
+
+def _pooled_rises(rises: pd.DataFrame, design: str) -> tuple[int, int, float]:
+    d = rises[rises["design"] == design]
+    return int(d["rising"].sum()), int(d["n"].sum()), float(d["rise_max"].max()) if len(d) else float("nan")
+
+
+def _k_metric_claims(paired: pd.DataFrame, rises: pd.DataFrame, rho: float, k_pairs) -> list[dict]:
+    """Per non-K metric: how often V rises (pooled over the ensembles, against the K metric),
+    and its settling time relative to the K metric's (the range of the ensembles' medians)."""
+    out = []
+    k_rising, k_n, _ = _pooled_rises(rises, "jump")
+    for base, cand in k_pairs:
+        k, n, biggest = _pooled_rises(rises, cand)
+        if n:
+            lo, hi = proportion_ci(k, n)
+            kf = f"{100 * k_rising / k_n:.0f} %" if k_n else "n/a"
+            out.append({"claim_id": f"k_metric:rises:{cand}", "kind": "k_metric", "value": k / n,
+                        "ci_low": lo, "ci_high": hi, "n": n,
+                        "text": (f"{_design_label(cand)} raises V in {100 * k / n:.0f} % of {n} members "
+                                 f"(95 % CI {100 * lo:.0f}–{100 * hi:.0f} %; largest one-step rise "
+                                 f"{biggest:.3g}·V) against {kf} for the K metric, over "
+                                 f"{rises['label'].nunique()} ensembles.")})
+        sel = paired[(paired["baseline"] == base) & (paired["candidate"] == cand)
+                     & np.isclose(paired["rho"], rho) & np.isfinite(paired["ci_low"])]
+        if len(sel):
+            med = float(np.median(sel["ratio_median"]))
+            out.append({"claim_id": f"k_metric:speed:{cand}", "kind": "k_metric", "value": med,
+                        "ci_low": float(sel["ci_low"].min()), "ci_high": float(sel["ci_high"].max()),
+                        "n": int(sel["n"].sum()),
+                        "text": (f"{_design_label(cand)} takes {med:.3g}× the K metric's time to settle "
+                                 f"below {rho:g}·V(t_on) (median of {len(sel)} ensembles' medians, "
+                                 f"from {sel['ratio_median'].min():.3g} to {sel['ratio_median'].max():.3g}; "
+                                 f"their 95 % CIs span {sel['ci_low'].min():.3g}–{sel['ci_high'].max():.3g}; "
+                                 f"n = {int(sel['n'].sum())} paired members).")})
+    return out
+
+
+def ensemble_claims(paired: pd.DataFrame, rises: pd.DataFrame, *, rho: float = 1e-6,
+                    speed_pair: tuple[str, str] = DEFAULT_PAIRS[0], k_pairs=DEFAULT_PAIRS[1:],
+                    max_speed: int = 3, anchors: dict | None = None) -> pd.DataFrame:
+    """At most :data:`MAX_CLAIMS` one-sentence claims, each with its number, CI and n.
+
+    Parameters
+    ----------
+    paired, rises : DataFrame
+        :func:`paired_settling` and :func:`rise_distribution` of the same members.
+    rho : float
+        The threshold the claims speak of (must be one of the rows' ρ).
+    speed_pair, k_pairs : (baseline, candidate)
+        The pair of the speed claims (one per ensemble, at most ``max_speed``) and the pairs of
+        the K-metric question (K metric first: jump vs jump_mass, jump vs jump_identity).
+    anchors : dict, optional
+        Kind → HTML id of the evidence (default :data:`CLAIM_ANCHORS`).
+
+    Returns
+    -------
+    DataFrame
+        :data:`CLAIM_COLUMNS`, kinds in the order speed, failure, k_metric. ``value`` is a
+        speed-up (t_base / t_cand) for "speed", a fraction for "failure" and for the K-metric
+        rises, a time ratio t_cand / t_base for the K-metric speed (its CI: the span of the
+        ensembles' CIs).
+    """
+    anchors = {**CLAIM_ANCHORS, **(anchors or {})}
+    rows = (_speed_claims(paired, speed_pair, rho, max_speed) + _failure_claim(paired, rho)
+            + _k_metric_claims(paired, rises, rho, k_pairs))
+    for r in rows:
+        r["anchor"] = anchors[r["kind"]]
+    return pd.DataFrame(rows[:MAX_CLAIMS], columns=CLAIM_COLUMNS)
