@@ -27,6 +27,12 @@ BAND_Q = (0.1, 0.9)
 """Quantiles of the bands (10–90 %)."""
 BOOTSTRAP_SEED = 0
 """Seed of the bootstrap resamples (the page is reproducible)."""
+BOOTSTRAP_RESAMPLES = 1000
+"""Bootstrap resamples per confidence interval (the page must build in seconds)."""
+ANCHORS = {"speed": "settling-matrix", "failure": "settling-matrix", "k_metric": "k-metric",
+           "artifact": "discrete-artifacts"}
+"""HTML id of the evidence of each kind of claim (ids of :mod:`reports.sections.ensemble` and
+:mod:`reports.sections.artifacts`)."""
 GROUP = ["label", "integrator", "design"]
 """A cell of the settling matrix: scenario variant, integrator, design."""
 
@@ -92,9 +98,10 @@ def ensemble_view(df: pd.DataFrame) -> EnsembleView:
     pairs = getattr(analysis, "DEFAULT_PAIRS", registry.ratio_pairs())
     present = set(members["design"].astype(str))
     pairs = tuple(p for p in pairs if set(p) <= present)
-    paired = paired_settling(members, pairs, rng=np.random.default_rng(BOOTSTRAP_SEED))
+    paired = paired_settling(members, pairs, n_resamples=BOOTSTRAP_RESAMPLES,
+                             rng=np.random.default_rng(BOOTSTRAP_SEED))
     rises = rise_distribution(members)
-    claims = ensemble_claims(paired, rises)
+    claims = ensemble_claims(paired, rises, anchors=ANCHORS)
     reason = "" if len(claims) else "the ensemble statistics support no claim on these results"
     return EnsembleView(members, paired, rises, claims.reset_index(drop=True), reason)
 

@@ -22,14 +22,16 @@ CI_MARK = "CI"
 
 
 def named_designs(sentence: str) -> list[str]:
-    """Registered designs a claim names (by name or label; "jump" is not found inside
-    "jump_mass")."""
-    out = []
-    for d in registry.designs():
-        pats = [rf"(?<![\w-]){re.escape(d)}(?![\w-])", re.escape(registry.label(d))]
-        if any(re.search(p, sentence) for p in pats):
-            out.append(d)
-    return out
+    """Registered designs a claim names by their label (the claims' sentences use labels; a
+    label inside a longer word does not count)."""
+    return [d for d in registry.designs()
+            if re.search(rf"(?<![\w-]){re.escape(registry.label(d))}(?![\w-])", sentence)]
+
+
+def event_only(sentence: str) -> bool:
+    """The claim is about event-driven ensembles only (it names the event integrator and not
+    time-stepping): no discrete-time caveat applies."""
+    return bool(re.search(r"\bevent\b", sentence)) and not re.search(r"time-?stepping", sentence)
 
 
 def claim_text(r: pd.Series) -> str:
@@ -47,7 +49,8 @@ def claim_items(claims: pd.DataFrame, notes: dict[str, str]) -> list[dict]:
     items = []
     for _, r in claims.head(MAX_CLAIMS).iterrows():
         sentence = claim_text(r)
-        caveat = " ".join(notes[d] for d in named_designs(str(r["text"])) if d in notes)
+        caveat = ("" if event_only(str(r["text"])) else
+                  " ".join(notes[d] for d in named_designs(str(r["text"])) if d in notes))
         if not caveat and r.get("kind") == "artifact":
             caveat = f"cause: {artifacts.CAUSE}."
         items.append({"text": sentence, "anchor": str(r["anchor"]), "caveat": caveat,
@@ -62,10 +65,11 @@ def build(ctx: ReportContext) -> Section:
     if view.claims is None or view.claims.empty:
         sec.p(f"No claims: {view.reason}. The evidence sections below show the single runs.")
         return sec
-    n = view.members.groupby(["label", "design"]).size()
+    n = view.members.groupby(["label", "integrator", "design"]).size()
+    size = fmt_int(n.min()) if n.min() == n.max() else f"{fmt_int(n.min())}–{fmt_int(n.max())}"
     sec.blocks.append(Block("claims", claim_items(view.claims, artifacts.caveats(view))))
-    sec.p(f"Each claim is a statistic over an ensemble of initial errors ({fmt_int(n.min())}–"
-          f"{fmt_int(n.max())} members per scenario and design, the same members for every "
-          "design); bootstrap 95 % confidence intervals. Evidence: the settling matrix, the "
-          "proof-check matrix and the paired statistics below.")
+    sec.p(f"Each claim is a statistic over an ensemble of initial errors ({size} members per "
+          "scenario, integrator and design, the same members for every design); bootstrap 95 % "
+          "confidence intervals. Evidence: the settling matrix, the proof-check matrix and the "
+          "paired statistics below.")
     return sec

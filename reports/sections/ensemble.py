@@ -11,6 +11,7 @@ from reports import figures, registry
 from reports.blocks import Section, slug
 from reports.context import ReportContext
 from reports.ensemble_view import load_paths, path_band, settling_matrix
+from reports.sections.artifacts import rise_table
 from reports.sections.proof_checks import EVIDENCE_TEXT, matrix_table
 from reports.tables import Table, fmt, fmt_int, fmt_pct, fmt_rho, fmt_time, text
 
@@ -19,6 +20,7 @@ ID = "ensemble"
 MATRIX_ID = "settling-matrix"
 CHECKS_ID = "check-matrix"
 PAIRED_ID = "paired-statistics"
+K_METRIC_ID = "k-metric"
 
 
 def matrix_csv_table(mat: pd.DataFrame) -> Table:
@@ -105,8 +107,11 @@ def build(ctx: ReportContext) -> Section:
     if len(view.paired):
         sec.details(f"Paired statistics: {len(view.paired)} rows (scenario × integrator × pair × ρ)",
                     paired_table(view.paired), write_csv(ctx, view.paired, "paired_settling.csv"))
+    sec.anchor(K_METRIC_ID)
     if len(view.rises):
-        write_csv(ctx, view.rises, "rise_distribution.csv")
+        sec.details(f"Rises of V per scenario, integrator and design ({len(view.rises)} rows; the "
+                    "K-metric question)", rise_table(view.rises),
+                    write_csv(ctx, view.rises, "rise_distribution.csv"))
     if not members.empty:
         sec.subsections += band_subsections(members)
     return sec
