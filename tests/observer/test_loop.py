@@ -328,7 +328,7 @@ def test_one_kernel_specialization_with_and_without_summary():
 
     sc = observer.load_scenario("double_mass", {"simulation.t_end": 0.01})
     observer.simulate(sc)
-    before = {f: len(getattr(kernel, f).signatures) for f in ("_advance_loop", "_summary_step")}
+    before = {f: len(getattr(kernel, f).signatures) for f in ("_advance_loop", "summary_start")}
     observer.simulate(sc, store="summary")
     observer.simulate(sc, observers=tuple(OBSERVER_DESIGNS), store="summary")
     observer.simulate(sc, observers=tuple(OBSERVER_DESIGNS))

@@ -1,0 +1,81 @@
+"""Benchmark (pytest-benchmark): an ensemble in one pass against separate runs.
+
+The acceptance case of issue 22: double_mass, :data:`MEMBERS` initial errors (energy sphere,
+seed 0) × {jump, nojump}, 10 s at h = 2e-4 (50 000 steps):
+
+* ``test_ensemble_one_pass`` — :func:`observer.ensemble` (``store="summary"``), the members
+  in one chunk per core (threads, each with its own copy of the master);
+* ``test_separate_calls[summary]`` / ``[full]`` — one :func:`observer.simulate` per member with
+  its two observers (the same initial states), in the same process, ``store="summary"`` (the
+  same summary per call) or the default ``store="full"``.
+
+The kernel is compiled (or loaded from numba's cache) before timing; :data:`ROUNDS` rounds,
+the median is the figure (``extra_info["observer_steps"]``: observers × steps per round). The
+speed-up is the ratio of the medians. Each benchmark checks its answer: the ensemble's V(end),
+V_max and settling times of 5 sampled members equal those of a single run of that member
+(≤ 1e-12 relative in V, the acceptance's equality); the separate runs' V(end) are finite.
+
+With ``--benchmark-disable`` the case shrinks to :data:`SMOKE` (a correctness run)::
+
+    python -m pytest bench/micro/test_ensemble.py --benchmark-only --benchmark-json=ensemble.json
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import observer
+from observer.ensemble import member_slaves, sample_errors
+from observer.loop import compile_time
+from observer.metrics import RHOS, settle_column
+
+MEMBERS, H, T_END = 1000, 2e-4, 10.0
+SMOKE = {"n": 6, "t_end": 0.2}
+ROUNDS = 3
+DESIGNS = ("jump", "nojump")
+SAMPLED = (0, 1, 2, 3, 4)
+
+
+def _case(benchmark) -> tuple[int, float]:
+    return (SMOKE["n"], SMOKE["t_end"]) if benchmark.disabled else (MEMBERS, T_END)
+
+
+def _single(sc, X, i: int, t_end: float, store: str):
+    return observer.simulate(sc, h=H, t_end=t_end, observers=member_slaves(sc, DESIGNS, X, [i]), store=store)
+
+
+def test_ensemble_one_pass(benchmark):
+    n, t_end = _case(benchmark)
+    compile_time()
+    sc = observer.load_scenario("double_mass")
+    df = benchmark.pedantic(observer.ensemble, args=("double_mass",),
+                            kwargs={"designs": DESIGNS, "n": n, "seed": 0, "h": H, "t_end": t_end},
+                            rounds=1 if benchmark.disabled else ROUNDS, iterations=1)
+    benchmark.extra_info.update(observer_steps=2 * n * round(t_end / H), members=n,
+                                workers=df.attrs["metadata"]["workers"])
+    X, _ = sample_errors(sc, n, "energy_sphere", np.random.default_rng(0), None)
+    for i in SAMPLED[:n]:
+        alone = _single(sc, X, i, t_end, "summary").summary.set_index("observer")
+        for d in DESIGNS:
+            row = df[(df.design == d) & (df.member == i)].iloc[0]
+            ref = alone.loc[f"{d}#{i}"]
+            for c in ("V_end", "V_max", "V_on"):
+                assert abs(row[c] - ref[c]) <= 1e-12 * abs(ref[c]), (d, i, c)
+            for rho in RHOS:
+                assert row[settle_column(rho)] == ref[settle_column(rho)]
+
+
+@pytest.mark.parametrize("store", ["summary", "full"])
+def test_separate_calls(benchmark, store):
+    n, t_end = _case(benchmark)
+    compile_time()
+    sc = observer.load_scenario("double_mass")
+    X, _ = sample_errors(sc, n, "energy_sphere", np.random.default_rng(0), None)
+
+    def separate():
+        return [_single(sc, X, i, t_end, store).slaves[f"jump#{i}"].V[-1] for i in range(n)]
+
+    ends = benchmark.pedantic(separate, rounds=1 if benchmark.disabled else ROUNDS, iterations=1)
+    benchmark.extra_info.update(observer_steps=2 * n * round(t_end / H), members=n, store=store)
+    assert np.all(np.isfinite(ends)) and len(ends) == n
