@@ -154,7 +154,7 @@ def run_case(case: Case, ctx: Context) -> list[dict]:
     """Run one case; return its rows (environment and date included)."""
     runner = {"observers": run_observers, "work_precision": run_work_precision,
               "robustness": run_robustness, "scaling": run_scaling, "checks": run_checks,
-              "peers": run_peers, "hard": run_hard}[case.kind]
+              "peers": run_peers, "hard": run_hard, "ensemble": run_ensemble}[case.kind]
     return _finish(runner(case, ctx), ctx)
 
 
@@ -436,6 +436,53 @@ def run_robustness(case: Case, ctx: Context) -> list[dict]:
                      "steps_per_s": steps / cpu if cpu > 0 else float("nan"),
                      "cpu_scope": "master + both observers"})
     return rows
+
+
+# ------------------------------------------------------------------------------- ensembles
+ENSEMBLE_WORKERS = None
+"""Threads of one ensemble case (:func:`observer.ensemble`'s ``workers``; None: the machine's cores)."""
+
+
+def _ensemble_scenario(case: Case, ctx: Context):
+    """The case's scenario, and for a perturbed χ (``case.perturbation``) the same scenario with
+    its observers driven by the master's closing log perturbed with the case's seed
+    (:func:`bench.perturb.perturb_log`, written beside the results)."""
+    sc = observer.load_scenario(case.scenario, case.overrides())
+    if case.perturbation == "none":
+        return sc
+    base = _base_log(sc, ctx, ("log", case.scenario, case.params, case.law, case.h, case.t_end))
+    log = perturb_log(base, case.perturbation, case.size, rng=np.random.default_rng(case.seed),
+                      m=sc.system.m, t_min=0.0, t_max=float(sc.t_end), h=sc.h)
+    path = ctx.artefacts / "logs" / f"{safe_name(case.case_id)}.csv"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    log.to_csv(path, index=False, float_format="%.17g")
+    return sc.with_overrides({"observer.source": "log", "observer.log": str(path)})
+
+
+def run_ensemble(case: Case, ctx: Context) -> list[dict]:
+    """One ensemble (:func:`observer.ensemble`): ``case.members`` initial errors per design on
+    the energy sphere of the scenario's own initial error (or of ``case.slave_offset`` where
+    the scenario has no ``[observer]`` table), seeded by ``case.seed``; one row per (design,
+    member). Designs that do not apply (the K-metric jump where K is singular) are left out
+    and the note says so; ``cpu_time_s`` covers the whole ensemble (every design and member)."""
+    from observer.ensemble import energy_metric
+
+    sc = _ensemble_scenario(case, ctx)
+    definite = sc.system.is_stiffness_definite()
+    designs = tuple(d for d in case.observers if definite or not OBSERVER_DESIGNS[d].needs_spd_K)
+    skipped = sorted(set(case.observers) - set(designs))
+    V0 = None
+    if case.slave_offset is not None:
+        x = np.concatenate([np.asarray(a, dtype=float) for a in case.slave_offset])
+        V0 = 0.5 * float(x @ energy_metric(sc) @ x)
+    df, cpu, wall = _timed(observer.ensemble, sc, designs, n=case.members, seed=case.seed, V0=V0,
+                           integrator=case.integrator, label=case.name, workers=ENSEMBLE_WORKERS)
+    base = {**base_row(case, sc), "members": case.members, "perturbation": case.perturbation,
+            "size": case.size, "cpu_time_s": cpu, "wall_time_s": wall,
+            "cpu_scope": f"whole ensemble: {len(designs)} designs × {case.members} members",
+            "note": f"not applicable (K singular): {', '.join(skipped)}" if skipped else ""}
+    return [{**rec, **base, "status": str(rec["status"])}     # base: the case's seed, n, name
+            for rec in df.to_dict("records")]
 
 
 # ---------------------------------------------------------------------------------- scaling

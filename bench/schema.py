@@ -82,9 +82,15 @@ ROWS: dict[str, Columns] = {
                "passed": (bool, type(None)), "margin": float, "tolerance": float, "witness": str,
                "reason": str, "check_elapsed_s": float, "evidence": str, "verdict": str},
     "hard": {**CASE, **TIMING, **HARD},
+    "ensemble": {**CASE, **TIMING, "label": str, "design": str, "member": int, "members": int,
+                 "integrator": str, "perturbation": str, "size": float, "V_on": float,
+                 "V_max": float, "V_end": float, "rises": int, "max_rise_rel": float,
+                 **{c(r): float for r in RHOS for c in (settle_column, sync_column)}},
 }
 """Kind → the columns of its rows and their types (``peers`` rows are declared by
-:mod:`bench.peers`, whose columns depend on the peer's run)."""
+:mod:`bench.peers`, whose columns depend on the peer's run). An ``ensemble`` row is one
+(design, member) of :func:`observer.ensemble` (its members' initial errors ``dq0_j``, ``du0_j``
+as extra columns)."""
 
 OPTIONAL: dict[str, frozenset] = {
     "observers": frozenset(SYNC) | frozenset(ENGINE) | frozenset(

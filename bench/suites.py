@@ -11,7 +11,10 @@ Running the suite is :func:`bench.run.run_suite`; the kinds of cases are
 ``scaling``         the master of ``rocking_chain`` for one N: CPU time per step, memory;
 ``checks``          the proof-step checks of :mod:`proofs_checks` on one scenario;
 ``peers``           one problem in Siconos and in the toolkit (:mod:`bench.peers`): time per
-                    step of both, their ratio, the largest trajectory difference.
+                    step of both, their ratio, the largest trajectory difference;
+``ensemble``        n initial errors per design against one master (:func:`observer.ensemble`),
+                    one row per (design, member): the built-ins, the random-system family and
+                    robustness to a perturbed χ with both the perturbation and the errors sampled.
 
 ``quick`` is a first look (measured: 36 s of CPU in one process once the kernel is compiled,
 156 cases), ``full`` the real numbers (measured: 11 min of CPU, Siconos peers and the
@@ -33,7 +36,7 @@ from observer.metrics import RHOS  # noqa: F401  (the one threshold list; rows h
 from observer.observers import OBSERVER_DESIGNS
 from observer.scenarios import SCENARIOS, info
 
-KINDS = ("observers", "work_precision", "robustness", "scaling", "checks", "hard", "peers")
+KINDS = ("observers", "work_precision", "robustness", "scaling", "checks", "hard", "ensemble", "peers")
 
 
 @dataclass(frozen=True)
@@ -81,6 +84,8 @@ class Case:
         robustness: size of the perturbation (s, fraction or 1/s).
     memory : bool
         scaling: also measure the peak traced memory (a second, traced run).
+    members : int
+        ensemble: initial errors per design (the same for every design: paired).
     """
 
     kind: str
@@ -101,6 +106,7 @@ class Case:
     perturbation: str = "none"
     size: float = 0.0
     memory: bool = True
+    members: int = 0
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -425,6 +431,96 @@ def check_cases(full: bool = True) -> list[Case]:
     return [Case("checks", s, observers=()) for s in check_scenarios(full)]
 
 
+# ------------------------------------------------------------------------------ ensembles
+ENSEMBLE_MEMBERS = {"quick": 100, "full": 1000}
+"""Initial errors per design of every built-in scenario's ensemble (issue 22)."""
+ENSEMBLE_PARAMS = {"rocking_chain": {"quick": (("param.N", 4),), "full": (("param.N", 4),)}}
+"""Builder overrides of the ensembles where the observers case's own are too costly for n
+members per design: the chain with N = 4 blocks (8 DOF, 8 contacts) instead of 10 (≈ 6× less
+per member)."""
+PROJECTED = ("double_mass", "random_system")
+"""Scenarios whose ensembles are also run with the projected master (THEORY §6.6: the matched
+master of the jump observers, whose discrete V has no floor from the master's penetration):
+the evidence of the K-metric question without the discretisation artifact."""
+RANDOM_SYSTEMS = {"quick": 3, "full": 50}
+"""Random systems (seeds 0, 1, …) of the ``random_system`` family per suite."""
+RANDOM_MEMBERS = {"quick": 100, "full": 100}
+RANDOM_SETTINGS = (5e-4, 10.0)
+"""(h, t_end) of the random systems' ensembles."""
+ENSEMBLE_ROBUSTNESS = {
+    "quick": {"levels": {"jitter": (1e-3,), "missed": (0.1,)}, "seeds": 1, "members": 100},
+    "full": {"levels": {k: v for k, v in ROBUSTNESS_LEVELS["full"].items() if k != "false"},
+             "seeds": 3, "members": 100},
+}
+"""Robustness to an imperfect χ as ensembles (double_mass, coupled from t = 0, jump and
+nojump): per level and seed one perturbed closing log (``perturb_log`` seeded by the case's
+seed) and the members' initial errors (sampled from the same seed)."""
+
+
+def random_family(count: int) -> list[tuple[int, int, int]]:
+    """(seed, dof, contacts) of the first ``count`` random systems: dof cycles through 2…8,
+    contacts through 1…min(4, dof)."""
+    out = []
+    for seed in range(count):
+        dof = 2 + seed % 7
+        out.append((seed, dof, 1 + seed % min(4, dof)))
+    return out
+
+
+def _ensemble_spec_cases(name: str, spec: dict, key: str, designs) -> list[Case]:
+    h, T = _pick(spec.get("h"), False), _pick(spec.get("t_end"), False)    # quick's, in both suites
+    params = tuple({**dict(spec.get("params", ())), **dict(ENSEMBLE_PARAMS.get(name, {}).get(key, ()))}.items())
+    label = spec.get("label", "") or (name if name not in ENSEMBLE_PARAMS else
+                                      name + " (" + ", ".join(f"{k.split('.')[-1]} = {v}"
+                                                              for k, v in ENSEMBLE_PARAMS[name][key]) + ")")
+    out = [Case("ensemble", name, label=label, params=params, observers=designs, h=h, t_end=T,
+                slave_offset=spec.get("slave_offset"), members=ENSEMBLE_MEMBERS[key])]
+    if name in PROJECTED and not spec.get("label"):
+        out.append(Case("ensemble", name, label=f"{label} (projected master)",
+                        params=params + (("simulation.master_projection", True),), observers=designs,
+                        h=h, t_end=T, slave_offset=spec.get("slave_offset"), members=ENSEMBLE_MEMBERS[key]))
+    return out
+
+
+def ensemble_cases(full: bool) -> list[Case]:
+    """Ensembles of initial errors (issue 22), every registered design, time-stepping:
+
+    * every built-in scenario's declared observers settings (``SUITE["observers"]``; h and
+      t_end of the quick suite in both: double_mass's full h = 1e-4 over 20 s would cost 4×
+      per member; the chain with :data:`ENSEMBLE_PARAMS`), with :data:`ENSEMBLE_MEMBERS` members (100; full: 1000) sampled on the energy sphere of the
+      scenario's own initial error, those of :data:`PROJECTED` also with the projected master;
+    * :data:`RANDOM_SYSTEMS` systems of the ``random_system`` family (3; full: 50), 100 members
+      each, the first also with the projected master;
+    * robustness to a perturbed χ (:data:`ENSEMBLE_ROBUSTNESS`).
+    """
+    key = "full" if full else "quick"
+    designs = tuple(OBSERVER_DESIGNS)
+    cases: list[Case] = []
+    for name in SCENARIOS:
+        if name == "random_system":
+            continue
+        for spec in info(name).suite.get("observers") or ():
+            cases += _ensemble_spec_cases(name, spec, key, designs)
+    h, T = RANDOM_SETTINGS
+    for seed, dof, m in random_family(RANDOM_SYSTEMS[key]):
+        params = (("param.seed", seed), ("param.dof", dof), ("param.contacts", m))
+        label = f"random_system (seed {seed}, {dof} DOF, {m} contact{'s' if m > 1 else ''})"
+        cases.append(Case("ensemble", "random_system", label=label, params=params, observers=designs,
+                          h=h, t_end=T, members=RANDOM_MEMBERS[key]))
+        if seed == 0:
+            cases.append(Case("ensemble", "random_system", label=label + " (projected master)",
+                              params=params + (("simulation.master_projection", True),),
+                              observers=designs, h=h, t_end=T, members=RANDOM_MEMBERS[key]))
+    rob = ENSEMBLE_ROBUSTNESS[key]
+    for kind, sizes in rob["levels"].items():
+        for size in sizes:
+            for seed in range(rob["seeds"] if kind in RANDOM_KINDS else 1):
+                cases.append(Case("ensemble", "double_mass", label="double_mass (perturbed χ)",
+                                  h=2e-4, t_end=8.0, perturbation=kind, size=size, seed=seed,
+                                  members=rob["members"]))
+    return cases
+
+
 # --------------------------------------------------------------------------------- micro
 MICRO_QUICK = ("--benchmark-min-rounds=5", "--benchmark-max-time=0.02", "--benchmark-warmup=on",
                "--benchmark-warmup-iterations=1", "-k", "(compiled and not rocking_chain) or pivoting")
@@ -475,13 +571,21 @@ def _settings(full: bool) -> dict:
                   if full else "not in this suite (python -m bench run peers)"),
         "micro-benchmarks": " ".join(MICRO_FULL if full else MICRO_QUICK),
         "hard cases": "; ".join(f"{c.name}: h = {c.h:g} s, T = {c.t_end:g} s" for c in hard_cases(full)),
+        "ensembles": (f"{ENSEMBLE_MEMBERS[key]} initial errors per design on the energy sphere of "
+                      f"each built-in's own error (projected master too: {', '.join(PROJECTED)}); "
+                      f"{RANDOM_SYSTEMS[key]} random systems × {RANDOM_MEMBERS[key]} members "
+                      f"(h = {RANDOM_SETTINGS[0]:g} s, T = {RANDOM_SETTINGS[1]:g} s); perturbed χ: "
+                      + ", ".join(f"{k} {v}" for k, v in ENSEMBLE_ROBUSTNESS[key]["levels"].items())
+                      + f" × {ENSEMBLE_ROBUSTNESS[key]['seeds']} seeds × "
+                        f"{ENSEMBLE_ROBUSTNESS[key]['members']} members"),
     }
 
 
 def _suite(name: str, description: str, full: bool, kinds: tuple[str, ...], micro: bool) -> Suite:
     builders = {"observers": observer_cases, "work_precision": work_precision_cases,
                 "robustness": robustness_cases, "scaling": scaling_cases,
-                "checks": check_cases, "hard": hard_cases, "peers": lambda full: peer_cases()}
+                "checks": check_cases, "hard": hard_cases, "ensemble": ensemble_cases,
+                "peers": lambda full: peer_cases()}
     cases: list[Case] = []
     for k in kinds:
         cases += builders[k](full)

@@ -29,7 +29,7 @@ from typing import Any, Callable
 
 from observer.errors import InputError
 from observer.scenarios import (bouncing_ball, double_mass, grazing, impact_oscillator,
-                                rocking_chain)
+                                random_system, rocking_chain)
 
 SCENARIOS: dict[str, ModuleType] = {
     "double_mass": double_mass,
@@ -37,6 +37,7 @@ SCENARIOS: dict[str, ModuleType] = {
     "bouncing_ball": bouncing_ball,
     "impact_oscillator": impact_oscillator,
     "grazing": grazing,
+    "random_system": random_system,
 }
 
 

@@ -142,7 +142,7 @@ def test_scenarios_lists_builtins_with_descriptions(cli):
     proc = res["scenarios"]
     assert_ok(proc)
     lines = proc.stdout.splitlines()
-    assert len(lines) == len(SCENARIOS) == 5
+    assert len(lines) == len(SCENARIOS) == 6
     for line, (name, module) in zip(lines, SCENARIOS.items()):
         got_name, desc = line.split(None, 1)
         assert got_name == name

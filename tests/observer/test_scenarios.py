@@ -182,7 +182,7 @@ def test_chain_symmetric_layout_rotations_stay_zero(N):
 # ---------------------------------------------------------------------------------------
 def test_builtin_registry():
     assert list(SCENARIOS) == ["double_mass", "rocking_chain", "bouncing_ball",
-                               "impact_oscillator", "grazing"]
+                               "impact_oscillator", "grazing", "random_system"]
 
 
 @pytest.mark.parametrize("name", list(SCENARIOS))
@@ -541,3 +541,54 @@ def test_chain_runs_with_lemke_solver():
         res = simulate("rocking_chain", h=1e-3, t_end=1.0, solver="lemke")
     assert res.metadata["solver_fallbacks"] == 0
     assert res.metadata["max_contact_residual"] <= 1e-9
+
+
+# ---------------------------------------------------------------------------------------
+# random_system: the seeded family of random systems (issue 22)
+# ---------------------------------------------------------------------------------------
+RANDOM_SIZES = [(2, 1), (5, 3), (8, 4)]
+
+
+@pytest.mark.parametrize("dof,contacts", RANDOM_SIZES)
+def test_random_system_is_deterministic_per_seed_and_valid(dof, contacts):
+    params = {"param.dof": dof, "param.contacts": contacts}
+    a, b = (load_scenario("random_system", {**params, "param.seed": 7}) for _ in range(2))
+    assert a.to_dict() == b.to_dict()
+    c = load_scenario("random_system", {**params, "param.seed": 8})
+    assert not np.array_equal(a.system.K, c.system.K) and not np.array_equal(a.system.W, c.system.W)
+    s = a.system
+    M, K, C, W = (np.asarray(x, float) for x in (s.M, s.K, s.C, s.W))
+    assert (s.n, s.m) == (dof, contacts)
+    for A, lowest in ((M, 1.0), (K, 100.0), (C, 2.0)):            # scale·(I + BBᵀ/n) ⪰ scale·I
+        assert np.array_equal(A, A.T) and np.linalg.eigvalsh(A)[0] >= lowest * (1 - 1e-12)
+    assert np.allclose(np.linalg.norm(W, axis=0), 1.0) and np.linalg.matrix_rank(W) == contacts
+    g0 = W.T @ a.q0 + np.asarray(a.to_dict()["system"]["gap"]["offset"])
+    assert np.all(g0 >= 0.005) and np.all(g0 <= 0.01)              # feasible: clearances s
+    forcing = a.to_dict()["system"]["forcing"]
+    static = W.T @ np.linalg.solve(K, np.asarray(forcing["amplitude"]))
+    np.testing.assert_allclose(static, -2.0 * 0.01, rtol=1e-10)     # lowers every gap by push·s_max
+    omega1 = np.sqrt(sla.eigh(K, M, eigvals_only=True)[0])
+    assert forcing["omega"] == pytest.approx(0.8 * omega1, rel=1e-14)
+
+
+def test_random_system_runs_both_observers_and_hits_every_contact():
+    sc = load_scenario("random_system", {"param.seed": 3, "param.dof": 4, "param.contacts": 3})
+    res = simulate(sc, t_end=3.0, observers=("jump", "nojump"))
+    assert res.active[1:].any(axis=0).all()                         # every contact closes
+    assert res.g.min() >= -0.01 * 0.01                              # penetration ≤ 1 % of s_max
+    for name in ("jump", "nojump"):
+        V = res.slaves[name].V
+        assert np.all(np.isfinite(V)) and V[-1] < 0.1 * V[0]      # C ⪰ 2I, M: rate ≳ 1/s
+
+
+@pytest.mark.parametrize("key,value", [("param.dof", 9), ("param.dof", 1), ("param.contacts", 5),
+                                       ("param.contacts", 0), ("param.seed", -1), ("param.dof", 2.5)])
+def test_random_system_rejects_sizes_outside_the_family(key, value):
+    with pytest.raises(InputError) as err:
+        load_scenario("random_system", {key: value})
+    assert key in str(err.value)
+
+
+def test_random_system_contacts_at_most_dof():
+    with pytest.raises(InputError, match="param.contacts"):
+        load_scenario("random_system", {"param.dof": 2, "param.contacts": 3})

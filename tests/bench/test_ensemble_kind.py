@@ -1,0 +1,89 @@
+"""The bench's ``ensemble`` case kind (issue 22): suites sized for ensembles, the runner's
+rows (one per design and member, paired, schema-checked) and robustness as ensembles."""
+
+from __future__ import annotations
+
+from collections import Counter
+
+import numpy as np
+import pytest
+
+import observer
+from bench.runners import Context, run_case
+from bench.schema import check_row
+from bench.suites import Case, get_suite, random_family
+from observer.ensemble import energy_metric
+from observer.observers import OBSERVER_DESIGNS
+from observer.scenarios import SCENARIOS
+
+DESIGNS = ("jump", "nojump", "jump_mass", "jump_identity")
+
+
+@pytest.mark.parametrize("suite,members,systems", [("quick", 100, 3), ("full", 1000, 50)])
+def test_suites_hold_ensembles_of_every_builtin_and_design(suite, members, systems):
+    cases = get_suite(suite).of_kind("ensemble")
+    assert set(DESIGNS) <= set(OBSERVER_DESIGNS)
+    plain = [c for c in cases if c.perturbation == "none" and c.scenario != "random_system"]
+    assert {c.scenario for c in plain} == set(SCENARIOS) - {"random_system"}
+    for c in plain:
+        assert c.members >= members and set(DESIGNS) <= set(c.observers)
+    family = {dict(c.params)["param.seed"] for c in cases if c.scenario == "random_system"}
+    assert len(family) >= systems
+    assert all(c.members >= 100 for c in cases)
+    perturbed = Counter(c.perturbation for c in cases if c.perturbation != "none")
+    assert perturbed and all(c.members >= 100 for c in cases if c.perturbation != "none")
+
+
+def test_random_family_stays_inside_the_builder_ranges():
+    fam = random_family(50)
+    assert [s for s, _, _ in fam] == list(range(50))
+    assert {d for _, d, _ in fam} == set(range(2, 9))
+    assert all(1 <= m <= min(4, d) for _, d, m in fam)
+    assert {m for _, _, m in fam} == {1, 2, 3, 4}
+
+
+def _ctx(tmp_path):
+    return Context("t", tmp_path, {}, cache={})
+
+
+def test_ensemble_rows_are_paired_checked_and_on_the_energy_sphere(tmp_path):
+    case = Case("ensemble", "double_mass", observers=DESIGNS, h=1e-3, t_end=1.0, members=6, seed=3)
+    rows = run_case(case, _ctx(tmp_path))
+    assert len(rows) == 6 * len(DESIGNS)
+    assert Counter((r["design"]) for r in rows) == {d: 6 for d in DESIGNS}
+    for r in rows:
+        check_row(r)
+        assert r["kind"] == "ensemble" and r["seed"] == 3 and r["members"] == 6 and r["status"] == "ok"
+    sc = observer.load_scenario("double_mass")
+    A = energy_metric(sc)
+    x_own = np.concatenate([np.asarray(sc.observer["q"]) - sc.q0, np.asarray(sc.observer["u"]) - sc.u0])
+    V0 = 0.5 * x_own @ A @ x_own
+    by_member = {}
+    for r in rows:
+        x = np.array([r["dq0_0"], r["dq0_1"], r["du0_0"], r["du0_1"]])
+        by_member.setdefault(r["member"], []).append(x)
+        assert 0.5 * x @ A @ x == pytest.approx(V0, rel=1e-12)     # V(0) = V0 on the sphere
+        assert r["V_on"] == pytest.approx(V0, rel=1e-12)          # coupled from t = 0
+    assert all(np.array_equal(xs[0], x) for xs in by_member.values() for x in xs)   # paired
+    assert len({tuple(xs[0]) for xs in by_member.values()}) == 6   # distinct members
+
+
+def test_k_singular_leaves_the_k_jump_out_and_says_so(tmp_path):
+    case = Case("ensemble", "bouncing_ball", observers=DESIGNS, h=1e-3, t_end=0.5, members=3,
+                slave_offset=((0.2,), (-1.0,)))
+    rows = run_case(case, _ctx(tmp_path))
+    assert {r["design"] for r in rows} == set(DESIGNS) - {"jump"}
+    assert all("jump" in r["note"] and "K singular" in r["note"] for r in rows)
+
+
+def test_perturbed_chi_samples_the_log_and_the_errors(tmp_path):
+    ctx = _ctx(tmp_path)
+    kw = dict(observers=("jump", "nojump"), h=1e-3, t_end=2.0, members=4)
+    clean = run_case(Case("ensemble", "double_mass", **kw), ctx)
+    a, b = (run_case(Case("ensemble", "double_mass", perturbation="missed", size=0.5, seed=s, **kw), ctx)
+            for s in (0, 1))
+    assert len(list((tmp_path / "t" / "logs").glob("*.csv"))) == 2
+    err = lambda rows: [r["dq0_0"] for r in rows]
+    assert err(a) != err(b) and err(a) == err(clean)             # errors follow the seed
+    settle = lambda rows: [r["V_end"] for r in rows]
+    assert settle(a) != settle(clean)                            # the χ the observers saw differs
