@@ -810,7 +810,7 @@ def _speed_claims(paired: pd.DataFrame, pair, rho: float, limit: int) -> list[di
     out = []
     for _, r in sel.head(limit).iterrows():
         with np.errstate(divide="ignore"):
-            v, lo, hi = 1 / r["ratio_median"], 1 / r["ci_high"], 1 / r["ci_low"]
+            v, lo, hi = (np.float64(1.0) / np.float64(r[c]) for c in ("ratio_median", "ci_high", "ci_low"))
         where = f"{r['label']}" + (f", {r['integrator']}" if r["integrator"] else "")
         out.append({"claim_id": f"speed:{pair[1]}/{pair[0]}:{where}", "kind": "speed",
                     "value": v, "ci_low": lo, "ci_high": hi, "n": int(r["n"]),

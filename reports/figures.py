@@ -309,12 +309,10 @@ def settling_matrix_figure(mat: pd.DataFrame) -> Figure | None:
     rows = list(dict.fromkeys(mat["row"]))
     cols = list(dict.fromkeys(mat["design"]))
     grid = np.full((len(rows), len(cols)), np.nan)
-    finite = mat["median"].replace(np.inf, np.nan)
-    vmax = float(np.nanmax(finite)) if finite.notna().any() else 1.0
     fig, ax = plt.subplots(figsize=(2.2 + 1.9 * len(cols), 0.9 + 0.75 * len(rows)))
     for _, r in mat.iterrows():
         i, j = rows.index(r["row"]), cols.index(r["design"])
-        grid[i, j] = vmax * 1.5 if np.isinf(r["median"]) else r["median"]
+        grid[i, j] = np.nan if np.isinf(r["median"]) else r["median"]
         ax.text(j, i, _matrix_label(r), ha="center", va="center", fontsize=7.5)
         if r["never"] > 0:
             ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, hatch="///",
@@ -331,7 +329,8 @@ def settling_matrix_figure(mat: pd.DataFrame) -> Figure | None:
     return Figure(to_data_uri(fig), "settling matrix: median settling time per scenario and design",
                   "Each cell: median settling time (s) over the ensemble's initial errors, its "
                   "10–90 % band in brackets (∞: those members never settle within the window); "
-                  "hatched red: some members never settle (share given).")
+                  "hatched red: some members never settle (share given); white: the median "
+                  "member never settles.")
 
 
 def ensemble_band_figure(band: pd.DataFrame, title: str) -> Figure | None:

@@ -49,6 +49,19 @@ def variant(r: pd.Series) -> str:
     return "time-stepping"
 
 
+PROJECTED_MARK = "projected master"
+"""How a suite names a run or ensemble with the projected master (in its name or label)."""
+
+
+def label_variant(label: str, integrator: str) -> tuple[str, str]:
+    """(base label, master variant) of an ensemble: event-driven by its integrator, projected
+    master by its label ("double_mass (projected master)")."""
+    base = re.sub(r"\s*\(" + PROJECTED_MARK + r"\)\s*", "", str(label)).strip()
+    if str(integrator).startswith("event"):
+        return base, "event-driven"
+    return base, PROJECTED_MARK if PROJECTED_MARK in str(label) else "time-stepping"
+
+
 def base_name(name: str) -> str:
     """The run's name without its master variant suffix (" · event", " · projected master")."""
     return str(name).split(" · ")[0]
@@ -138,35 +151,77 @@ def side_by_side_table(runs: pd.DataFrame, deepest: float) -> Table:
     return t
 
 
-def _share(r: pd.DataFrame, design: str, event: bool) -> pd.DataFrame:
-    ev = r["integrator"].astype(str).str.startswith("event")
-    return r[(ev if event else ~ev) & (r["design"] == design)]
+def _variant_rises(r: pd.DataFrame) -> pd.DataFrame:
+    """The rise distribution with each row's master variant (:func:`label_variant`)."""
+    v = [label_variant(lab, integ) for lab, integ in zip(r["label"], r["integrator"])]
+    return r.assign(base=[b for b, _ in v], variant=[x for _, x in v])
+
+
+def _share_text(g: pd.DataFrame) -> str:
+    return f"{fmt_pct(g['frac_rising'].max())}, largest {fmt(g['rise_max'].max())}·V"
 
 
 def caveats(view) -> dict[str, str]:
-    """Per design whose V rises in the time-stepped ensembles: one sentence with the share of
-    members, the largest rise and, event-driven, the same share. For the K metric (V
-    non-increasing in continuous time, Theorem 1) the rise is a discretisation artifact and
-    the sentence names its cause; for another metric the event-driven share is the metric's
-    own effect."""
+    """Per design with position jumps whose V rises in the time-stepped ensembles: one sentence
+    with the share of members, the largest rise and the same with the remedies (projected
+    master, event-driven) where the suite ran them. For the K metric (V non-increasing in
+    continuous time, Theorem 1) the rise is a discretisation artifact and the sentence names its
+    cause; for another metric the remedies' share is the metric's own effect."""
     r = view.rises
     if r is None or r.empty or "frac_rising" not in r:
         return {}
+    r = _variant_rises(r)
     out = {}
     for design in dict.fromkeys(r["design"].astype(str)):
-        ts, ev = _share(r, design, False), _share(r, design, True)
-        if ts.empty or not ts["frac_rising"].max() > 0:
-            continue
         d = registry.design(design) if design in registry.designs() else None
+        ts = r[(r["design"] == design) & (r["variant"] == "time-stepping")]
+        if d is None or not d.position_jumps or ts.empty or not ts["frac_rising"].max() > 0:
+            continue
         head = (f"V of {registry.label(design)} rises in up to {fmt_pct(ts['frac_rising'].max())} of "
                 f"the time-stepped members (largest one-step rise {fmt(ts['rise_max'].max())}·V")
-        event = f"; event-driven: {fmt_pct(ev['frac_rising'].max())})" if len(ev) else ")"
-        if d is not None and d.position_jumps and d.metric == K_METRIC:
-            out[design] = (head + event + ": an artifact, the time-stepped master penetrates and "
-                           "the projection adds ½‖g_m⁻‖²_{L_I⁻¹}.")
+        for v in VARIANTS[1:]:
+            g = r[(r["design"] == design) & (r["variant"] == v)]
+            head += f"; {v}: {_share_text(g)}" if len(g) else ""
+        if d.metric == K_METRIC:
+            out[design] = (head + "): an artifact, the time-stepped master penetrates and the "
+                           "projection adds ½‖g_m⁻‖²_{L_I⁻¹}.")
         else:
-            out[design] = head + event + "."
+            out[design] = head + ")."
     return out
+
+
+def ensemble_variant_table(view, deepest: float) -> Table | None:
+    """Per ensemble run under several master variants and design with position jumps: the share
+    of members whose V rises, the largest rise and the median settling time, side by side."""
+    from reports.ensemble_view import settling_matrix
+
+    if view.rises is None or view.rises.empty:
+        return None
+    r = _variant_rises(view.rises)
+    mat = settling_matrix(view.members, deepest)
+    med = {(lab, integ, des): (m, rho) for lab, integ, des, m, rho in
+           zip(mat["label"], mat["integrator"], mat["design"], mat["median"], mat["rho"])}
+    bases = [b for b, g in r.groupby("base", sort=False) if g["variant"].nunique() > 1]
+    if not bases:
+        return None
+    t = Table("Ensembles: rises of V and median settling time under each master variant",
+              ["scenario", "design"] + [f"{v}: members rising · largest rise · median settling"
+                                        for v in VARIANTS],
+              note="members rising: share of members whose V rises above round-off in one step; "
+                   f"median settling below {fmt_rho(mat['rho'].iloc[0]) if len(mat) else '?'}·V(t_on).")
+    for base in bases:
+        for design in jump_designs(r.loc[r["base"] == base, "design"]):
+            cells = []
+            for v in VARIANTS:
+                g = r[(r["base"] == base) & (r["design"] == design) & (r["variant"] == v)]
+                if g.empty:
+                    cells.append("n/a (not run)")
+                    continue
+                x = g.iloc[0]
+                m = med.get((x["label"], x["integrator"], design), (math.nan, 0))[0]
+                cells.append(f"{fmt_pct(x['frac_rising'])} · {fmt(x['rise_max'])}·V · {fmt_time(m)}")
+            t.add([base, registry.label(design), *cells])
+    return t
 
 
 def rise_table(rises_df: pd.DataFrame) -> Table:
@@ -209,24 +264,36 @@ def _prose(runs: pd.DataFrame, ch: pd.DataFrame, obs: pd.DataFrame) -> str:
     return "; ".join(parts)
 
 
+def _single_runs(sec: Section, ctx: ReportContext, deepest: float) -> bool:
+    """The single runs' side-by-side figure and table (False when no system ran under two
+    master variants)."""
+    obs = ctx.rows("observers") if "kind" in ctx.df else pd.DataFrame()
+    runs = artifact_runs(obs, deepest) if len(obs) else pd.DataFrame()
+    if runs.empty or not jump_designs(runs["design"]):
+        return False
+    measured = _prose(runs, ctx.rows("checks"), obs)
+    if measured:
+        sec.p("Measured: " + measured + ".")
+    sec.figure(_figure_of(obs, runs), "No trajectory stored for these runs.")
+    sec.table(side_by_side_table(runs, deepest))
+    return True
+
+
 def build(ctx: ReportContext) -> Section:
     """The discrete-artifact section (its id is the target of the claims' caveats)."""
     sec = Section(ID, TITLE)
     sec.p(f"Where a design with position jumps sees V rise in discrete time, the cause is {CAUSE}. "
           "It vanishes as h → 0; a projected master or the event-driven integrator removes it.")
-    obs = ctx.rows("observers") if "kind" in ctx.df else pd.DataFrame()
     deepest = min(registry.rhos())
-    runs = artifact_runs(obs, deepest) if len(obs) else pd.DataFrame()
-    if runs.empty or not jump_designs(runs["design"]):
+    shown = _single_runs(sec, ctx, deepest)
+    view = ctx.ensemble()
+    ens = ensemble_variant_table(view, deepest) if len(view.members) else None
+    if ens is not None:
+        sec.table(ens)
+    if not shown and ens is None:
         sec.p("These results hold no run of one system under two master variants "
               "(time-stepping, projected master, event-driven): no side-by-side comparison.")
-    else:
-        measured = _prose(runs, ctx.rows("checks"), obs)
-        if measured:
-            sec.p("Measured: " + measured + ".")
-        sec.figure(_figure_of(obs, runs), "No trajectory stored for these runs.")
-        sec.table(side_by_side_table(runs, deepest))
-    notes = caveats(ctx.ensemble())
+    notes = caveats(view)
     if notes:
         sec.p("In the ensembles (rises of V per member, the K-metric evidence): "
               + " ".join(notes.values()))
