@@ -333,6 +333,16 @@ def settling_matrix_figure(mat: pd.DataFrame) -> Figure | None:
                   "member never settles.")
 
 
+def _finish_v_axes(fig, ax, ylabel: str, title: str) -> None:
+    """Labels, grid, legend and title of a one-panel V(t) figure."""
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, loc="upper right")
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+
+
 def ensemble_band_figure(band: pd.DataFrame, title: str) -> Figure | None:
     """V/V(t_0) of an ensemble per design: the median (line) and the 10–90 % band (shaded)
     over the stored members (:func:`reports.ensemble_view.path_band`)."""
@@ -345,12 +355,7 @@ def ensemble_band_figure(band: pd.DataFrame, title: str) -> Figure | None:
         ax.semilogy(t, _positive(g["median"]), color=lk.color, ls=lk.linestyle, lw=1.2,
                     label=f"{lk.label}: median")
         ax.fill_between(t, _positive(g["q10"]), _positive(g["q90"]), color=lk.color, alpha=0.18)
-    ax.set_xlabel("t (s)")
-    ax.set_ylabel("V / V(t₀)")
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8, loc="upper right")
-    ax.set_title(title, fontsize=10)
-    fig.tight_layout()
+    _finish_v_axes(fig, ax, "V / V(t₀)", title)
     return Figure(to_data_uri(fig), f"{title}: ensemble band of V",
                   "Line: median over the stored members of V divided by its first sample; "
                   "shaded: 10–90 % of the members.")
@@ -368,12 +373,7 @@ def artifact_figure(curves: dict, title: str) -> Figure | None:
     for variant, (t, v) in curves.items():
         color, ls = styles.get(variant, ("0.4", "-"))
         ax.semilogy(t, _positive(v), color=color, ls=ls, lw=1.0, label=variant)
-    ax.set_xlabel("t (s)")
-    ax.set_ylabel("V (J)")
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8, loc="upper right")
-    ax.set_title(title, fontsize=10)
-    fig.tight_layout()
+    _finish_v_axes(fig, ax, "V (J)", title)
     return Figure(to_data_uri(fig), f"{title}: V under time-stepping, projected master and event-driven",
                   "The same observer design and system under the three masters: a rise of V "
                   "under plain time-stepping that the projected master and the event-driven "

@@ -60,22 +60,26 @@ def write_csv(ctx: ReportContext, frame: pd.DataFrame, name: str) -> str:
     return name
 
 
-def band_subsections(members: pd.DataFrame) -> list[Section]:
-    """Per scenario: the ensemble's V(t) band (10–90 %) and median per integrator, from the
-    stored paths."""
-    paths = load_paths(members)
+def band_subsections(paths: pd.DataFrame) -> list[Section]:
+    """Per scenario with stored paths: the ensemble's V(t) band (10–90 %) and median per
+    integrator."""
     subs = []
-    for label, g in members.groupby("label", sort=False):
+    for label, p in paths.groupby("label", sort=False):
         sub = Section(f"ens-{slug(str(label))}", str(label))
-        p = paths[paths["label"] == label] if len(paths) else paths
-        for integ, gp in (p.groupby("integrator", sort=False) if len(p) else ()):
+        for integ, gp in p.groupby("integrator", sort=False):
             sub.figure(figures.ensemble_band_figure(path_band(gp), f"{label} · {integ}"),
                        f"{integ}: no V(t) to draw.")
-        if not len(p):
-            sub.p(f"{fmt_int(g['member'].nunique())} members per design; no V(t) paths stored "
-                  "for this scenario (settling statistics only).")
         subs.append(sub)
     return subs
+
+
+def _bands(sec: Section, members: pd.DataFrame) -> None:
+    paths = load_paths(members)
+    if paths.empty:
+        sec.p("No V(t) paths are stored with these ensembles (settling statistics only); the "
+              "single runs' V(t) are in the scenario section.")
+        return
+    sec.subsections += band_subsections(paths)
 
 
 def _checks_block(ctx: ReportContext, sec: Section) -> None:
@@ -113,5 +117,5 @@ def build(ctx: ReportContext) -> Section:
                     "K-metric question)", rise_table(view.rises),
                     write_csv(ctx, view.rises, "rise_distribution.csv"))
     if not members.empty:
-        sec.subsections += band_subsections(members)
+        _bands(sec, members)
     return sec

@@ -18,7 +18,7 @@ from reports.analysis import paired_settling, rise_distribution
 from reports.browser import check_page, find_chromium
 from reports.build import build_report
 from reports.context import load_rows
-from reports.ensemble_view import BAND_Q, member_rows, settling_matrix
+from reports.ensemble_view import BAND_Q, member_rows, path_band, settling_matrix
 from reports.sections import artifacts, claims
 from reports.sections.key_numbers import MAX_ITEMS, headlines
 from tests.reports.test_build import _parse, _rows_file, _synthetic_rows
@@ -92,6 +92,17 @@ def _artifact_rows(out) -> list[tuple[str, list[dict]]]:
     return cases
 
 
+PATH_RATES = {"jump": (2.0, 3.0, 4.0, 5.0), "nojump": (1.0, 1.5, 2.0, 2.5)}
+"""Stored V(t) paths: member i of a design decays as V_i(0)·exp(−rate_i t)."""
+
+
+def _paths(out, name: str) -> None:
+    t = np.linspace(0.0, 5.0, 51)
+    rows = [pd.DataFrame({"design": d, "member": i, "t": t, "V": (i + 1) * 0.1 * np.exp(-k * t)})
+            for d, rates in PATH_RATES.items() for i, k in enumerate(rates)]
+    pd.concat(rows).to_parquet(out / name)
+
+
 def _checks_row() -> tuple[str, list[dict]]:
     return ("checks:dm", [{"kind": "checks", "scenario": "double_mass", "name": "double_mass",
                            "check": "lyapunov_decrease", "equation": "(17)", "check_status": "PASS",
@@ -105,6 +116,9 @@ def _cases(out) -> list[tuple[str, list[dict]]]:
     ens = []
     for label, integ in ENSEMBLES:
         ens.append((f"ensemble:{label}:{integ}", _member_rows(label, integ, rng)))
+    _paths(out, "paths_dm.parquet")
+    for row in ens[0][1]:
+        row["paths"] = "paths_dm.parquet"
     return _synthetic_rows() + ens + _artifact_rows(out) + [_checks_row()]
 
 
