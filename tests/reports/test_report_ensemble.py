@@ -279,6 +279,25 @@ def test_ensemble_artifact_table_puts_the_master_variants_side_by_side(ensemble_
     pc = next(r for r in table if (r["scenario"], r["design"]) == ("persistent contact", "jump (K metric)"))
     assert pc[f"{artifacts.VARIANTS[1]}: members rising · largest rise · median settling"] == "n/a (not run)"
 
+
+def test_ensemble_band_is_the_quantiles_of_the_stored_paths(ensemble_report):
+    """The scenario with stored paths gets its V(t) band figure; path_band's median and 10–90 %
+    at a time are those of V_i(t)/V_i(0) = exp(−rate_i t) over the members."""
+    index, page, _, _ = ensemble_report
+    html = index.read_text(encoding="utf-8")
+    assert 'id="ens-double-mass"' in html
+    assert 'alt="double_mass · time-stepping: ensemble band of V"' in html
+    assert 'id="ens-persistent-contact"' not in html            # no paths stored there
+    paths = pd.read_parquet(index.parent.parent / "paths_dm.parquet")
+    band = path_band(paths)
+    for design, rates in PATH_RATES.items():
+        at = band[(band["design"] == design) & np.isclose(band["t"], 2.0)].iloc[0]
+        rel = np.exp(-np.array(rates) * 2.0)
+        assert at["median"] == pytest.approx(np.median(rel), rel=1e-12)
+        assert (at["q10"], at["q90"]) == pytest.approx(tuple(np.quantile(rel, BAND_Q)), rel=1e-12)
+
+
+def test_artifact_rises_count_jumps_up():
     assert artifacts.rises(np.array([1.0, 0.5, 4.0, 3.0, 30.0])) == (2, 10.0)
     assert artifacts.rises(np.array([1.0, 0.9, 0.8]))[0] == 0
 
