@@ -1,5 +1,6 @@
 """The pieces a report section is made of: :class:`Block` (paragraph, list, table, figure,
-details, preformatted text) and :class:`Section` (a titled list of blocks and subsections)."""
+details, preformatted text, claims, anchor) and :class:`Section` (a titled list of blocks and
+subsections; a ``lead`` section is shown before the page's header, on its first screen)."""
 
 from __future__ import annotations
 
@@ -13,11 +14,14 @@ from reports.tables import Table
 
 @dataclass
 class Block:
-    """One piece of a section: ``kind`` in {"p", "list", "table", "figure", "details", "pre"}."""
+    """One piece of a section: ``kind`` in {"p", "list", "table", "figure", "details",
+    "details-list", "pre", "claims", "anchor"}; ``href``: a file beside the page (the CSV of a
+    collapsible table)."""
 
     kind: str
     content: Any
     summary: str = ""
+    href: str = ""
 
 
 @dataclass
@@ -28,6 +32,7 @@ class Section:
     title: str
     blocks: list = field(default_factory=list)
     subsections: list = field(default_factory=list)
+    lead: bool = False
 
     def p(self, text: str) -> None:
         self.blocks.append(Block("p", text))
@@ -44,8 +49,17 @@ class Section:
         else:
             self.blocks.append(Block("figure", f))
 
-    def details(self, summary: str, t: Table) -> None:
-        self.blocks.append(Block("details", t, summary))
+    def details(self, summary: str, t: Table, href: str = "") -> None:
+        """A collapsible table (with a link to its CSV ``href`` when given)."""
+        self.blocks.append(Block("details", t, summary, href))
+
+    def details_list(self, summary: str, items: list[str]) -> None:
+        """A collapsible list."""
+        self.blocks.append(Block("details-list", items, summary))
+
+    def anchor(self, html_id: str) -> None:
+        """An empty element with ``id`` (a link target inside a section)."""
+        self.blocks.append(Block("anchor", html_id))
 
     def pre(self, text: str) -> None:
         self.blocks.append(Block("pre", text))

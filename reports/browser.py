@@ -50,6 +50,9 @@ class PageCheck:
     console_errors: list = field(default_factory=list)
     screenshot: Path | None = None
     script_ran: bool = False
+    attrs: dict = field(default_factory=dict)
+    """Every ``data-*`` attribute of ``<body>`` after the page's scripts ran (a page may add its
+    own, e.g. where an element ends on the first screen)."""
 
     @property
     def ok(self) -> bool:
@@ -104,6 +107,8 @@ def check_page(html: str | Path, screenshot: str | Path, *, chromium: str | None
         shot = subprocess.run([*base, f"--screenshot={screenshot}", url], capture_output=True,
                               text=True, timeout=timeout)
     page = dom.stdout
+    bodies = re.findall(r"<body[^>]*>", page)          # the last one is the element (not text)
+    out.attrs = dict(re.findall(r'\s(data-[\w-]+)="([^"]*)"', bodies[-1])) if bodies else {}
     out.script_ran = _attr(page, "data-check") == "done"
     out.images_total = int(_attr(page, "data-images-total") or 0)
     out.images_ok = int(_attr(page, "data-images-ok") or 0)

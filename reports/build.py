@@ -39,21 +39,24 @@ def build_report(result_files: Iterable[str | Path], out_dir: str | Path, *,
     title : str, optional
     """
     ctx = load_context(result_files, out_dir, micro_files=micro_files, command=command)
-    sections = build_sections(ctx)
     ctx.out_dir.mkdir(parents=True, exist_ok=True)
+    sections = build_sections(ctx)
     page = render(title=title or f"Observer toolkit benchmark report: {', '.join(ctx.suites)}",
-                  header=header_table(ctx), sections=sections, command=ctx.command)
+                  header=header_table(ctx), sections=[s for s in sections if not s.lead],
+                  command=ctx.command, lead=[s for s in sections if s.lead])
     path = ctx.out_dir / "index.html"
     path.write_text(page, encoding="utf-8")
     return path
 
 
-def render(*, title: str, header: Table, sections: list[Section], command: str) -> str:
-    """Render the jinja2 template ``templates/report.html``."""
+def render(*, title: str, header: Table, sections: list[Section], command: str,
+           lead: list[Section] | None = None) -> str:
+    """Render the jinja2 template ``templates/report.html``; the ``lead`` sections come first,
+    before the header (the page's first screen)."""
     import jinja2
 
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)),
                              autoescape=jinja2.select_autoescape(["html"]), trim_blocks=True,
                              lstrip_blocks=True, undefined=jinja2.StrictUndefined)
     return env.get_template("report.html").render(title=title, header=header, sections=sections,
-                                                  command=command)
+                                                  command=command, lead=lead or [])

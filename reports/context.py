@@ -159,6 +159,8 @@ class ReportContext:
         Output folder of the page.
     key_numbers : list of str
         Lines for the "Key numbers" section, appended by the sections as they are built.
+    key_groups : list of (str, list of str)
+        The same lines grouped by the section that added them.
     """
 
     df: pd.DataFrame
@@ -169,6 +171,16 @@ class ReportContext:
     command: str
     out_dir: Path
     key_numbers: list = field(default_factory=list)
+    key_groups: list = field(default_factory=list)
+    """(section id, its key-number lines) in build order (:func:`reports.sections.build_sections`)."""
+    _ensemble: object = None
+
+    def ensemble(self):
+        """The page's :class:`reports.ensemble_view.EnsembleView` (computed once)."""
+        if self._ensemble is None:
+            from reports.ensemble_view import ensemble_view
+            self._ensemble = ensemble_view(self.df)
+        return self._ensemble
 
     def rows(self, kind: str, ok_only: bool = False) -> pd.DataFrame:
         """The rows of one case kind, with every column :mod:`bench.schema` declares for it

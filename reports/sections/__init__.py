@@ -13,9 +13,9 @@ from typing import Callable
 
 from reports.blocks import Section
 from reports.context import ReportContext
-from reports.sections import (hard_cases, integrators, key_numbers, limitations, micro, observers,
-                              peers, proof_checks, reproduce, robustness, scaling, scenarios,
-                              settings, work_precision)
+from reports.sections import (artifacts, claims, ensemble, hard_cases, integrators, key_numbers,
+                              limitations, micro, more_numbers, observers, peers, proof_checks,
+                              reproduce, robustness, scaling, scenarios, settings, work_precision)
 
 
 @dataclass(frozen=True)
@@ -28,8 +28,12 @@ class SectionSpec:
 
 
 SECTIONS: tuple[SectionSpec, ...] = (
+    SectionSpec("claims", claims.build),
     SectionSpec("key-numbers", key_numbers.build, after_others=True),
+    SectionSpec("ensemble", ensemble.build),
+    SectionSpec("discrete-artifacts", artifacts.build),
     SectionSpec("scenarios", scenarios.build),
+    SectionSpec("all-key-numbers", more_numbers.build, after_others=True),
     SectionSpec("observers", observers.build),
     SectionSpec("work-precision", work_precision.build),
     SectionSpec("integrators", integrators.build),
@@ -47,10 +51,15 @@ SECTIONS: tuple[SectionSpec, ...] = (
 
 
 def build_sections(ctx: ReportContext, specs: tuple[SectionSpec, ...] = SECTIONS) -> list[Section]:
-    """Build every section of ``specs`` (page order), the ``after_others`` ones last."""
+    """Build every section of ``specs`` (page order), the ``after_others`` ones last; the
+    key-number lines each section adds are recorded in ``ctx.key_groups`` (when ``ctx`` has it)."""
     built: dict[int, Section] = {}
+    groups = getattr(ctx, "key_groups", None)
     for late in (False, True):
         for i, spec in enumerate(specs):
             if spec.after_others == late:
+                before = len(ctx.key_numbers) if groups is not None else 0
                 built[i] = spec.build(ctx)
+                if groups is not None and not late:
+                    groups.append((spec.id, list(ctx.key_numbers[before:])))
     return [built[i] for i in range(len(specs))]

@@ -237,9 +237,9 @@ def build(ctx: ReportContext) -> Section:
     sec.table(pivot_table(obs))
     sec.table(observer_table(obs))
     sec.table(design_table(obs))
+    ctx.key_numbers.append(designs_key(obs))
     for rec in ratios:
         ctx.key_numbers.append(f"{rec['name']}: {rec['headline']}; {rec['pair'][0]} {rec['verdict']}.")
-    ctx.key_numbers.append(designs_key(obs))
     return sec
 
 

@@ -141,8 +141,8 @@ def build(ctx: ReportContext) -> Section:
     if levels.astype(bool).any():
         ctx.key_numbers.append("Proof-step evidence: " + ", ".join(
             f"{int((levels == lv).sum())} {lv}" for lv in EVIDENCE_ORDER) + ".")
-    sec.p(EVIDENCE_TEXT)
-    sec.table(matrix_table(ch))
+    sec.p("The proof-check matrix (scenario × check, coloured by evidence level, the verdict "
+          "and witness on hover) is shown with the evidence of the claims, above.")
     named = "design" in ch and ch["design"].map(text).astype(bool).any()
     sec.table(design_counts_table(counts, named))
     sec.details(f"Witnesses: all {len(ch)} check rows (status, evidence, margin, tolerance, verdict and witness)",

@@ -1,5 +1,6 @@
 """Scenarios: per scenario the paper's figure (a gap, a coordinate and log V of every observer
-that ran), the settings of the run, its observer table and the headline of each declared pair."""
+that ran), the settings of the run and its observer table (the declared pairs' headlines are
+in the observer section's ratio table, not repeated per scenario)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import pandas as pd
 from reports import figures, registry
 from reports.blocks import Section, slug
 from reports.context import ReportContext, load_trajectory
-from reports.sections.observers import observer_table, ratio_rows
+from reports.sections.observers import observer_table
 from reports.tables import fmt, fmt_window, text
 
 TITLE = "Scenarios: trajectories and Lyapunov function (the paper's figures)"
@@ -49,8 +50,8 @@ def _figure(name: str, scen: str, ok: pd.DataFrame, r0: pd.Series):
     return figures.scenario_figure(traj, str(name), observers, window, coord, gap)
 
 
-def scenario_subsection(name: str, g: pd.DataFrame, ratios: list[dict]) -> Section:
-    """One scenario's subsection (figure, settings, observer table, headlines)."""
+def scenario_subsection(name: str, g: pd.DataFrame) -> Section:
+    """One scenario's subsection (figure, settings, observer table)."""
     scen = g["scenario"].iloc[0]
     sub = Section(f"scn-{slug(str(name))}", str(name))
     ok = g[g["status"] == "ok"]
@@ -58,9 +59,6 @@ def scenario_subsection(name: str, g: pd.DataFrame, ratios: list[dict]) -> Secti
     sub.p(_intro(scen, r0, len(ok) > 0))
     sub.figure(_figure(name, scen, ok, r0), "No trajectory file for this scenario (rerun the suite).")
     sub.table(observer_table(g, f"Synchronization of the observers on {name}"))
-    for rec in (r for r in ratios if r["name"] == name):
-        sub.p(f"Headline (settling times): {rec['headline']}. Baseline {rec['pair'][0]}: "
-              f"{rec['verdict']}.")
     return sub
 
 
@@ -75,7 +73,6 @@ def build(ctx: ReportContext) -> Section:
           "(same grid) inside the shaded window. "
           + "; ".join(f"{registry.label(d)}: {registry.look(d).description}"
                       for d in (registry.MASTER, *designs)) + ".")
-    ratios = ratio_rows(obs)
     for name, g in obs.groupby("name", sort=False):
-        sec.subsections.append(scenario_subsection(name, g, ratios))
+        sec.subsections.append(scenario_subsection(name, g))
     return sec

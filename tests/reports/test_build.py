@@ -563,9 +563,9 @@ def test_observer_ratios_are_settling_time_ratios(synthetic_report):
 
 
 def test_observer_headline_uses_settling_times_at_the_deepest_common_rho(synthetic_report):
-    """The headline (ratio table, observer-section list, key numbers, scenario paragraph) is
-    the settling ratio at the deepest ρ both observers settle below: 'dm' 12.0/8.0 = 1.50 at
-    1e−9, not the first-passage 4.80."""
+    """The headline (ratio table, observer-section list, the collapsed list of all key numbers)
+    is the settling ratio at the deepest ρ both observers settle below: 'dm' 12.0/8.0 = 1.50 at
+    1e−9, not the first-passage 4.80; no scenario repeats it in a paragraph of its own."""
     page, _ = synthetic_report
     tn, tj = _settle("dm", "nojump", 1e-9), _settle("dm", "jump", 1e-9)
     expected = f"settling-time ratio nojump/jump = {tn / tj:.2f} at ρ = 1e−9"
@@ -576,9 +576,8 @@ def test_observer_headline_uses_settling_times_at_the_deepest_common_rho(synthet
     assert _nums(head.split("(")[1])[:2] == pytest.approx([tn, tj], rel=5e-3)
     obs_items = page.sections["observers"].items
     assert any(i.startswith(f"dm: {expected}") for i in obs_items), obs_items
-    assert any(i.startswith(f"dm: {expected}") for i in page.sections["key-numbers"].items)
-    assert any(f"Headline (settling times): {expected}" in p
-               for p in page.sections["scn-dm"].paragraphs)
+    assert any(i.startswith(f"dm: {expected}") for i in page.sections["all-key-numbers"].items)
+    assert not any(expected in p for p in page.sections["scn-dm"].paragraphs)
     stuck = next(i for i in obs_items if i.startswith("stuck:"))
     assert "never settles below ρ = 1e−3" in stuck
     assert f"settles below ρ = 1e−6 after {fmt(_settle('stuck', 'jump', 1e-6))} s" in stuck
@@ -657,7 +656,7 @@ def test_work_precision_orders_are_recomputed_from_the_points(synthetic_report):
     assert f"double_mass poisson (h/16 run reference) p = {p_dm:.2f}" in text
     jump = wp[(wp["target"] == "jump")]
     assert any(f"poisson {_fitted(jump['h'], jump['err_mean']):.2f}" in i
-               for i in page.sections["key-numbers"].items)
+               for i in page.sections["all-key-numbers"].items)
 
 
 def test_solver_comparison_totals_are_recomputed(synthetic_report):
@@ -695,7 +694,7 @@ def test_scaling_exponents_are_recomputed(synthetic_report):
         assert _num(table[q]["exponent p"]) == pytest.approx(p, abs=0.006)
     assert table["CPU time per step (N ≥ 10)"]["N range"] == "10 … 1000"
     assert table["CPU time per step (N ≥ 50)"]["N range"] == "50 … 1000"
-    key = next(i for i in page.sections["key-numbers"].items if i.startswith("Chain scaling"))
+    key = next(i for i in page.sections["all-key-numbers"].items if i.startswith("Chain scaling"))
     assert key.startswith(f"Chain scaling: CPU time per step ∝ N^{p10:.2f} from N = 10 to 1000")
     assert f"all N from 5: N^{expected['CPU time per step']:.2f}" in key
     assert f"; N ≥ 50: N^{expected['CPU time per step (N ≥ 50)']:.2f})" in key
@@ -741,7 +740,7 @@ def test_robustness_median_and_band_are_recomputed(synthetic_report):
             assert cell.startswith("not reached")
         else:
             assert _num(cell) == pytest.approx(med, rel=5e-3)
-    key = next(i for i in page.sections["key-numbers"].items if i.startswith("Robustness ("))
+    key = next(i for i in page.sections["all-key-numbers"].items if i.startswith("Robustness ("))
     assert key.startswith(f"Robustness ({ROB_SEEDS} seeds per random perturbation")
     assert "10–90 % band" in page.sections["robustness"].paragraphs[0]
 
@@ -769,7 +768,7 @@ def test_peers_section_ratios_are_recomputed(synthetic_report):
         assert _num(c["ratio run() / simulate"]) == pytest.approx(
             r["siconos_run_ns_per_step"] / r["toolkit_ns_per_step"], rel=5e-3)
         assert _num(c["max |Δu|"]) == pytest.approx(r["max_abs_diff_u"], rel=5e-3, abs=1e-300)
-    key = next(i for i in page.sections["key-numbers"].items if i.startswith("Peers ("))
+    key = next(i for i in page.sections["all-key-numbers"].items if i.startswith("Peers ("))
     for prob, r in pe.iterrows():
         ratio = r["siconos_ns_per_step"] / r["toolkit_ns_per_step"]
         loop = r["siconos_ns_per_step"] / r["toolkit_loop_ns_per_step"]
@@ -804,7 +803,7 @@ def test_peers_section_without_siconos(tmp_path, monkeypatch):
     text = page.sections["peers"].text()
     assert "Siconos was not available when the suite ran" in text and peers.HOW_TO_GET in text
     assert "peers:impact_oscillator" in text and page.sections["peers"].tables == []
-    assert any(i.startswith("Peers: no Siconos results") for i in page.sections["key-numbers"].items)
+    assert any(i.startswith("Peers: no Siconos results") for i in page.sections["all-key-numbers"].items)
     unavailable_path("absent", tmp_path).unlink()
     page = _parse(build_report([path], tmp_path / "r2"))
     text = page.sections["peers"].text()
@@ -825,7 +824,7 @@ def test_loop_micro_benchmarks_per_step_are_recomputed(synthetic_report):
         assert _num(table[case]["python (µs/step)"]) == pytest.approx(py / steps * 1e6, rel=5e-3)
         assert _num(table[case]["speed-up"]) == pytest.approx(py / comp, rel=5e-3)
         assert table[case]["rounds (compiled / python)"] == "10 / 5"
-    key = next(i for i in page.sections["key-numbers"].items if i.startswith("Time per step"))
+    key = next(i for i in page.sections["all-key-numbers"].items if i.startswith("Time per step"))
     assert "compile/cache load 0.8 s, not included" in key
 
 
@@ -840,16 +839,17 @@ def test_micro_speedups_are_recomputed(synthetic_report):
             assert r[f"speed-up {solver}"].endswith("×")
             assert _num(r[f"speed-up {solver}"]) == pytest.approx(speedup, rel=5e-3)
             assert _num(r[f"{solver} (µs)"]) == pytest.approx(MICRO_MEANS[(m, solver)] * 1e6, rel=5e-3)
-    key = next(i for i in page.sections["key-numbers"].items if i.startswith("Fast contact solver"))
+    key = next(i for i in page.sections["all-key-numbers"].items if i.startswith("Fast contact solver"))
     assert _nums(key)[:2] == pytest.approx([MICRO_MEANS[(1, "reference")] / MICRO_MEANS[(1, "pivoting")], 1])
 
 
 def test_proof_check_matrix_is_coloured_by_evidence_with_the_witness_on_hover(synthetic_report, tmp_path):
     """Scenario × check: each cell is the row's evidence level with its class and a hover text
     naming check, scenario, status, verdict and witness (HTML-escaped); "—" where a scenario has
-    no row for a check; the full table sits in a <details> block."""
+    no row for a check; it is shown with the evidence of the claims; the full table sits in a
+    <details> block of the proof-check section."""
     page, _ = synthetic_report
-    m = page.table("proof-checks", "Proof-check matrix").dicts()
+    m = page.table("ensemble", "Proof-check matrix").dicts()
     checks = list(dict.fromkeys(c[1] for c in CHECKS))
     assert [r["scenario"] for r in m] == list(dict.fromkeys(c[0] for c in CHECKS))
     rows = {r["scenario"]: r for r in m}
@@ -870,7 +870,7 @@ def test_proof_check_matrix_is_coloured_by_evidence_with_the_witness_on_hover(sy
     assert [(r["evidence"], r["verdict"]) for r in table] == [
         (CHECK_EVIDENCE[c][0], CHECK_EVIDENCE[c][1] or "—") for _, c, *_ in CHECKS]
     assert "Proof-step evidence: 1 proved, 0 bounded, 0 sampled, 1 violated, 1 n/a." in \
-        "\n".join(page.sections["key-numbers"].items)
+        "\n".join(page.sections["all-key-numbers"].items)
 
 
 @pytest.mark.parametrize("status,evidence,cell,cls", [
@@ -907,7 +907,7 @@ def test_proof_check_table_lists_every_check_row(synthetic_report):
     assert text.startswith(f"{len(CHECKS)} checks on 2 scenarios: {counts['PASS']} PASS, "
                            f"{counts['FAIL']} FAIL, {counts['n/a']} n/a.")
     assert f"Proof-step checks: {counts['PASS']} PASS, {counts['FAIL']} FAIL" in \
-        "\n".join(page.sections["key-numbers"].items)
+        "\n".join(page.sections["all-key-numbers"].items)
     # these rows do not say which design a check concerns: every design listed, no counts claimed
     per_design = page.table("proof-checks", "Proof checks per observer design").dicts()
     assert [r["design"] for r in per_design] == list(OBSERVER_DESIGNS)
@@ -1238,7 +1238,7 @@ def test_event_driven_sweeps_are_not_compared_as_contact_solvers():
 def test_design_key_number_is_the_median_final_v_of_each_design(synthetic_report):
     page, rows = synthetic_report
     obs = rows[(rows["kind"] == "observers") & (rows["status"] == "ok")]
-    key = next(i for i in page.sections["key-numbers"].items if i.startswith("Observer designs, median"))
+    key = next(i for i in page.sections["all-key-numbers"].items if i.startswith("Observer designs, median"))
     for name, g in obs.groupby("observer"):
         label = OBSERVER_DESIGNS[name].label
         assert f"{label} {fmt(float(np.median(g['V_end_rel'])))} ({len(g)} runs)" in key

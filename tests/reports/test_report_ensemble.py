@@ -1,0 +1,335 @@
+"""The report's first screen and its evidence, built from a quick-suite-like result set with
+ensemble rows (synthetic, known answers): claims with CIs first (also in a headless Chromium
+screenshot at 1400×1000), at most 8 key numbers, the settling matrix, the proof-check matrix,
+collapsible tables with their CSV beside the page, and the discrete artifact with its remedy.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from reports.analysis import paired_settling, rise_distribution
+from reports.browser import check_page, find_chromium
+from reports.build import build_report
+from reports.context import load_rows
+from reports.ensemble_view import BAND_Q, member_rows, path_band, settling_matrix
+from reports.sections import artifacts, claims
+from reports.sections.key_numbers import MAX_ITEMS, headlines
+from tests.reports.test_build import _parse, _rows_file, _synthetic_rows
+
+N = 60
+"""Members per design and ensemble."""
+RHO_COLS = {1e-3: "0.001", 1e-5: "1e-05", 1e-6: "1e-06", 1e-9: "1e-09"}
+SPEEDUP = 2.0
+"""nojump's settling times are SPEEDUP × jump's (times a member-wise noise)."""
+NEVER = 7
+"""Members 0..NEVER−1 of nojump never settle below 1e-9."""
+ENSEMBLES = (("double_mass", "time-stepping"), ("double_mass", "event"),
+             ("double_mass (projected master)", "time-stepping"),
+             ("persistent contact", "time-stepping"), ("persistent contact", "event"))
+"""(label, integrator) of the synthetic ensembles: jump's V rises only time-stepped with the
+plain master."""
+GAP = 3.2e-5
+"""The proof checks' master-penetration term / V in the synthetic witness."""
+
+
+def _member_rows(label: str, integrator: str, rng) -> list[dict]:
+    base = rng.uniform(1.0, 4.0, N)
+    rows = []
+    for design, scale in (("jump", 1.0), ("nojump", SPEEDUP), ("jump_mass", 1.3)):
+        noise = rng.lognormal(0.0, 0.05, N)
+        for m in range(N):
+            row = {"kind": "ensemble", "scenario": "double_mass", "label": label, "design": design,
+                   "member": m, "integrator": integrator, "h": 2e-4, "t_end": 10.0, "seed": 0,
+                   "status": "ok", "V_on": 0.5, "V_max": 0.5, "V_end": 1e-12, "rises": 0,
+                   "max_rise_rel": 0.0}
+            for i, (rho, key) in enumerate(RHO_COLS.items()):
+                t = base[m] * scale * noise[m] * (1 + i)
+                if design == "nojump" and rho == 1e-9 and m < NEVER:
+                    t = math.inf
+                row[f"t_settle_{key}"] = t
+                row[f"t_sync_{key}"] = t
+            if integrator == "time-stepping" and "projected" not in label and design == "jump" \
+                    and m % 3 == 0:
+                row["max_rise_rel"] = 7000.0 if m == 0 else 2.5
+            if design == "jump_mass" and m % 2 == 0:
+                row["max_rise_rel"] = 0.4
+            rows.append(row)
+    return rows
+
+
+def _trajectory(out, name: str, rises: bool) -> str:
+    """V of the jump design falling exponentially, with jumps up once per second when ``rises``."""
+    t = np.linspace(0.0, 10.0, 501)
+    v = 0.5 * np.exp(-3.0 * t)
+    if rises:
+        v = np.where((t % 1.0 < 0.015) & (t > 0.5), v * 7000.0, v)      # once per second
+    path = out / f"{name}.parquet"
+    pd.DataFrame({"t": t, "master_q": np.sin(t), "master_g": np.abs(np.sin(t)), "jump_q": np.sin(t),
+                  "jump_g": np.abs(np.sin(t)), "V_jump": v}).to_parquet(path)
+    return path.name
+
+
+def _artifact_rows(out) -> list[tuple[str, list[dict]]]:
+    cases = []
+    for integ, params, name, rises in (("time-stepping", "", "dm20", True),
+                                       ("time-stepping", "simulation.master_projection=True",
+                                        "dm20 · projected master", False),
+                                       ("event", "", "dm20", False)):
+        row = {"kind": "observers", "scenario": "double_mass", "name": name, "observer": "jump",
+               "status": "ok", "note": "", "h": 1e-4, "t_end": 20.0, "t_on": 1.0, "t_off": 20.0,
+               "law": "newton", "solver": "pivoting", "params": params, "V_on": 0.5,
+               "V_min": 1e-25, "V_end_rel": 5e-9 if rises else 1e-24, "integrator": integ,
+               "trajectory": _trajectory(out, f"traj_{integ}_{len(params)}", rises),
+               "t_settle_1e-09": 19.6 if rises else 9.0}
+        cases.append((f"observers:artifact:{integ}:{params}", [row]))
+    return cases
+
+
+PATH_RATES = {"jump": (2.0, 3.0, 4.0, 5.0), "nojump": (1.0, 1.5, 2.0, 2.5)}
+"""Stored V(t) paths: member i of a design decays as V_i(0)·exp(−rate_i t)."""
+
+
+def _paths(out, name: str) -> None:
+    t = np.linspace(0.0, 5.0, 51)
+    rows = [pd.DataFrame({"design": d, "member": i, "t": t, "V": (i + 1) * 0.1 * np.exp(-k * t)})
+            for d, rates in PATH_RATES.items() for i, k in enumerate(rates)]
+    pd.concat(rows).to_parquet(out / name)
+
+
+def _checks_row() -> tuple[str, list[dict]]:
+    return ("checks:dm", [{"kind": "checks", "scenario": "double_mass", "name": "double_mass",
+                           "check": "lyapunov_decrease", "equation": "(17)", "check_status": "PASS",
+                           "margin": 0.0, "tolerance": 1e-9, "status": "ok", "reason": "",
+                           "witness": f"steps=12; max_{artifacts.GAP_KEY}/V={GAP:g}; max_impulse_slack/V=1e-7",
+                           "evidence": "bounded", "verdict": "holds up to an O(h) slack"}])
+
+
+def _cases(out) -> list[tuple[str, list[dict]]]:
+    rng = np.random.default_rng(22)
+    ens = []
+    for label, integ in ENSEMBLES:
+        ens.append((f"ensemble:{label}:{integ}", _member_rows(label, integ, rng)))
+    _paths(out, "paths_dm.parquet")
+    for row in ens[0][1]:
+        row["paths"] = "paths_dm.parquet"
+    return _synthetic_rows() + ens + _artifact_rows(out) + [_checks_row()]
+
+
+@pytest.fixture(scope="module")
+def ensemble_report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ens")
+    path = _rows_file(out / "quicklike.cases", _cases(out))
+    start, cpu = time.perf_counter(), time.process_time()
+    index = build_report([path], out / "report")
+    build_s = time.perf_counter() - start
+    print(f"\npage build (measured, reported; not asserted): {build_s:.1f} s wall, "
+          f"{time.process_time() - cpu:.1f} s CPU")
+    return index, _parse(index), load_rows([path]), build_s
+
+
+def test_claims_come_first_with_their_ci_and_a_link_to_existing_evidence(ensemble_report):
+    """The claims are the first section of the page, before the header table and contents; at
+    most 8, each with a 95 % CI and an evidence link whose id exists on the page."""
+    index, page, _, _ = ensemble_report
+    html = index.read_text(encoding="utf-8")
+    first = html.index('<section id="claims"')
+    assert first < html.index('class="header-table"') and first < html.index("<nav>")
+    items = page.sections["claims"].items
+    assert 3 <= len(items) <= claims.MAX_CLAIMS
+    assert all("95 % CI" in i for i in items), items
+    block = html[first:html.index("</section>", first)]
+    anchors = re.findall(r'<a href="#([^"]+)">evidence</a>', block)
+    assert len(anchors) == len(items)
+    for a in set(anchors):
+        assert f'id="{a}"' in html, a
+
+
+def test_speed_claim_is_the_paired_median_with_its_bootstrap_ci(ensemble_report):
+    """The speed claim's number is t_nojump / t_jump (median over the members, recomputed here
+    from the rows), inside its CI."""
+    _, page, rows, _ = ensemble_report
+    m = rows[(rows["kind"] == "ensemble") & (rows["label"] == "double_mass")
+             & (rows["integrator"] == "time-stepping")]
+    tj = m[m["design"] == "jump"].sort_values("member")["t_settle_1e-06"].to_numpy()
+    tn = m[m["design"] == "nojump"].sort_values("member")["t_settle_1e-06"].to_numpy()
+    speed = 1 / np.median(tj / tn)
+    assert speed == pytest.approx(SPEEDUP, rel=0.05)
+    item = next(i for i in page.sections["claims"].items if "sooner" in i and "double_mass" in i)
+    nums = [float(x) for x in re.findall(r"(\d+\.\d+)×", item)]
+    assert nums and nums[0] == pytest.approx(speed, rel=2e-3)
+    lo, hi = (float(x) for x in re.search(r"CI (\d+\.?\d*)–(\d+\.?\d*)", item).groups())
+    assert lo <= nums[0] <= hi
+
+
+def test_claims_touching_a_rising_k_metric_design_say_why_and_link_the_remedy(ensemble_report):
+    """jump (K metric) rises in a third of the time-stepped members, never event-driven: every
+    claim naming it on a time-stepped ensemble carries the cause (master penetration,
+    ½‖g_m⁻‖²) and the event-driven share; a claim on an event-driven ensemble does not."""
+    index, page, _, _ = ensemble_report
+    items = [i for i in page.sections["claims"].items if "jump (K metric)" in i]
+    stepped = [i for i in items if "time-stepping" in i]
+    assert stepped and len(stepped) < len(items)
+    for i in stepped:
+        assert "master penetrates" in i and "½‖g_m⁻‖²_{L_I⁻¹}" in i
+        assert "up to 33 % of the time-stepped members" in i
+        assert "projected master: 0 %, largest 0·V; event-driven: 0 %, largest 0·V" in i
+        assert "largest one-step rise 7000·V" in i
+    for i in set(items) - set(stepped):
+        assert "master penetrates" not in i
+    assert 'href="#discrete-artifacts">cause and remedy' in index.read_text(encoding="utf-8")
+
+
+def test_key_numbers_are_at_most_eight_and_all_lines_are_kept_collapsed(ensemble_report):
+    index, page, _, _ = ensemble_report
+    shown, every = page.sections["key-numbers"].items, page.sections["all-key-numbers"].items
+    assert 1 <= len(shown) <= MAX_ITEMS < len(every)
+    assert set(shown) <= set(every)
+    html = index.read_text(encoding="utf-8")
+    sec = html[html.index('<section id="all-key-numbers">'):]
+    assert sec.index("<details>") < sec.index("<li>")
+    assert html.index('id="all-key-numbers"') > html.index('id="scenarios"')   # below the figures
+
+
+def test_headlines_take_each_sections_first_line_then_round_robin():
+    groups = [("a", ["a1", "a2", "a3"]), ("b", []), ("c", ["c1"]), ("d", ["d1", "d2"])]
+    assert headlines(groups, 4) == ["a1", "c1", "d1", "a2"]
+    assert headlines(groups, 10) == ["a1", "c1", "d1", "a2", "d2", "a3"]
+
+
+def test_settling_matrix_is_recomputed_and_written_beside_the_page(ensemble_report):
+    """The CSV beside the page holds, per (scenario, integrator, design), the median and the
+    10/90 % quantiles of the settling times (inf kept) and the never-settling share."""
+    index, page, rows, _ = ensemble_report
+    csv = pd.read_csv(index.parent / "settling_matrix.csv")
+    m = rows[rows["kind"] == "ensemble"]
+    assert len(csv) == m.groupby(["label", "integrator", "design"]).ngroups == 3 * len(ENSEMBLES)
+    for _, r in csv.iterrows():
+        t = m[(m["label"] == r["label"]) & (m["integrator"] == r["integrator"])
+              & (m["design"] == r["design"])]["t_settle_1e-06"].to_numpy()
+        assert r["median"] == pytest.approx(np.sort(t)[(len(t) - 1) // 2], rel=1e-12)
+        assert r["q10"] == pytest.approx(np.sort(t)[math.ceil(BAND_Q[0] * len(t)) - 1], rel=1e-12)
+        assert r["never"] == 0.0
+    html = index.read_text(encoding="utf-8")
+    for name in ("settling_matrix.csv", "paired_settling.csv", "rise_distribution.csv"):
+        assert f'<a href="{name}">' in html and (index.parent / name).exists()
+    assert page.table("ensemble", "Proof-check matrix").rows
+    assert any(img["alt"].startswith("settling matrix")
+               for img in re.findall(r'<img [^>]*alt="([^"]+)"', html) for img in [{"alt": img}])
+
+
+def test_settling_matrix_counts_members_that_never_settle():
+    rows = pd.DataFrame([{"kind": "ensemble", "scenario": "s", "design": "d", "member": i,
+                          "t_settle_1e-06": math.inf if i < 3 else float(i)} for i in range(10)])
+    mat = settling_matrix(member_rows(rows))
+    assert mat["never"].iloc[0] == pytest.approx(0.3) and mat["q90"].iloc[0] == math.inf
+    assert mat["median"].iloc[0] == 7.0 and mat["q10"].iloc[0] == 3.0     # sorted 3..9, ∞, ∞, ∞
+
+
+def test_paired_csv_is_the_analysis_of_the_member_rows(ensemble_report):
+    index, _, rows, _ = ensemble_report
+    members = member_rows(rows)
+    csv = pd.read_csv(index.parent / "paired_settling.csv")
+    ref = paired_settling(members, (("nojump", "jump"), ("jump", "jump_mass")),
+                          rng=np.random.default_rng(1), n_resamples=200)
+    merged = csv.merge(ref, on=["label", "integrator", "baseline", "candidate", "rho"])
+    assert len(merged) == len(ref) == 2 * len(ENSEMBLES) * len(RHO_COLS)
+    assert np.allclose(merged["ratio_median_x"], merged["ratio_median_y"], rtol=1e-12)
+    rises = pd.read_csv(index.parent / "rise_distribution.csv")
+    assert rises["frac_rising"].tolist() == pytest.approx(rise_distribution(members)["frac_rising"].tolist())
+
+
+def test_discrete_artifact_shows_the_remedy_side_by_side(ensemble_report):
+    """The artifact section: V jumps up under time-stepping (×7000 in one recorded sample), not
+    with a projected master nor event-driven; the proof checks' penetration term is quoted."""
+    index, page, _, _ = ensemble_report
+    sec = page.sections["discrete-artifacts"]
+    table = sec.tables[0]
+    assert [c.split(":")[0] for c in table.columns[2:]] == list(artifacts.VARIANTS)
+    row = table.dicts()[0]
+    ts, proj, ev = (row[c] for c in table.columns[2:])
+    jumps, factor = 10, 7000.0 * np.exp(-3.0 * 0.02)         # t = 1..10 s; V decays one sample
+    assert ts.startswith(f"5.00e−9 · {jumps} (×{factor:.0f})")
+    assert proj.startswith("1.00e−24 · 0 (×0.942)") and ev.startswith("1.00e−24 · 0 (×0.942)")
+    assert "19.6 s" in ts and "9 s" in proj
+    text = sec.text()
+    assert "master-penetration term at up to 3.20e−5·V" in text and "master penetrates" in text
+    html = index.read_text(encoding="utf-8")
+    assert 'alt="dm20: V of jump (K metric): V under time-stepping' in html
+
+
+def test_ensemble_artifact_table_puts_the_master_variants_side_by_side(ensemble_report):
+    """double_mass: time-stepped, projected master and event-driven ensembles in one row per
+    design with jumps; the rising shares are those of the member rows."""
+    _, page, rows, _ = ensemble_report
+    table = page.table("discrete-artifacts", "Ensembles: rises of V").dicts()
+    row = next(r for r in table if (r["scenario"], r["design"]) == ("double_mass", "jump (K metric)"))
+    ts, proj, ev = (row[f"{v}: members rising · largest rise · median settling"] for v in artifacts.VARIANTS)
+    m = rows[(rows["kind"] == "ensemble") & (rows["label"] == "double_mass") & (rows["design"] == "jump")
+             & (rows["integrator"] == "time-stepping")]
+    share = (m["max_rise_rel"] > 1e-10).mean()
+    assert ts.startswith(f"{100 * share:.0f} % · 7000·V") and proj.startswith("0 % · 0·V")
+    assert ev.startswith("0 % · 0·V")
+    pc = next(r for r in table if (r["scenario"], r["design"]) == ("persistent contact", "jump (K metric)"))
+    assert pc[f"{artifacts.VARIANTS[1]}: members rising · largest rise · median settling"] == "n/a (not run)"
+
+
+def test_ensemble_band_is_the_quantiles_of_the_stored_paths(ensemble_report):
+    """The scenario with stored paths gets its V(t) band figure; path_band's median and 10–90 %
+    at a time are those of V_i(t)/V_i(0) = exp(−rate_i t) over the members."""
+    index, page, _, _ = ensemble_report
+    html = index.read_text(encoding="utf-8")
+    assert 'id="ens-double-mass"' in html
+    assert 'alt="double_mass · time-stepping: ensemble band of V"' in html
+    assert 'id="ens-persistent-contact"' not in html            # no paths stored there
+    paths = pd.read_parquet(index.parent.parent / "paths_dm.parquet")
+    band = path_band(paths)
+    for design, rates in PATH_RATES.items():
+        at = band[(band["design"] == design) & np.isclose(band["t"], 2.0)].iloc[0]
+        rel = np.exp(-np.array(rates) * 2.0)
+        assert at["median"] == pytest.approx(np.median(rel), rel=1e-12)
+        assert (at["q10"], at["q90"]) == pytest.approx(tuple(np.quantile(rel, BAND_Q)), rel=1e-12)
+
+
+def test_artifact_rises_count_jumps_up():
+    assert artifacts.rises(np.array([1.0, 0.5, 4.0, 3.0, 30.0])) == (2, 10.0)
+    assert artifacts.rises(np.array([1.0, 0.9, 0.8]))[0] == 0
+
+
+def test_no_ensemble_rows_says_so(tmp_path):
+    path = _rows_file(tmp_path / "plain.cases", _synthetic_rows()[:3])
+    page = _parse(build_report([path], tmp_path / "r"))
+    assert page.sections["claims"].paragraphs[0].startswith("No claims: no ensemble results")
+    assert page.sections["claims"].items == []
+
+
+@pytest.mark.skipif(find_chromium() is None, reason="chromium is not installed (apt-get install chromium)")
+def test_first_screen_in_headless_chromium_holds_the_claims(ensemble_report, tmp_path):
+    """At 1400×1000 the screenshot's first screen shows the claims: the browser reports the
+    bottom of the claims list above 1000 px, and the screenshot is not blank there."""
+    from PIL import Image
+
+    index, page, _, _ = ensemble_report
+    probe = index.read_text(encoding="utf-8").replace(
+        "</body>", "<script>window.addEventListener('load', function () {"
+        "var r = document.querySelector('ol.claims').getBoundingClientRect();"
+        "document.body.setAttribute('data-claims-bottom', String(r.bottom));"
+        "document.body.setAttribute('data-claims-items', String("
+        "document.querySelectorAll('ol.claims li').length));});</script></body>")
+    probe_path = index.parent / "probe.html"
+    probe_path.write_text(probe, encoding="utf-8")
+    res = check_page(probe_path, tmp_path / "first.png", width=1400, height=1000)
+    assert res.script_ran and not res.page_errors, res.text()
+    assert res.screenshot is not None
+    img = np.asarray(Image.open(res.screenshot).convert("L"), dtype=float)
+    assert img.shape == (1000, 1400)
+    bottom = float(res.attrs["data-claims-bottom"])
+    assert int(res.attrs["data-claims-items"]) == len(page.sections["claims"].items)
+    assert 0 < bottom < 1000
+    assert (img[:int(bottom)] < 128).mean() > 0.01      # text drawn where the claims are
