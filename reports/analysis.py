@@ -591,8 +591,7 @@ def check_matrix(ch: pd.DataFrame) -> tuple[list[str], list[str], dict]:
 # :func:`observer.ensemble` (one row per design and member, the same member ids paired across
 # designs). Settling times are seconds from t_on, ``inf`` = V never stays below ρ·V(t_on)
 # within the window.
-DEFAULT_PAIRS: tuple[tuple[str, str], ...] = (("nojump", "jump"), ("jump", "jump_mass"),
-                                              ("jump", "jump_identity"))
+DEFAULT_PAIRS: tuple[tuple[str, str], ...] = registry.ratio_pairs()
 """Declared (baseline, candidate) pairs of the ensemble statistics."""
 
 CI_METHOD = ("percentile bootstrap (scipy.stats.bootstrap) of the median of the per-member "
@@ -876,7 +875,7 @@ def _k_metric_claims(paired: pd.DataFrame, rises: pd.DataFrame, rho: float, k_pa
     rises, how = _matched(rises)
     paired, _ = _matched(paired)
     thr = float(rises["threshold"].iloc[0]) if len(rises) else RISE_ROUNDOFF
-    k_rising, k_n, _ = _pooled_rises(rises, "jump")
+    k_rising, k_n, _ = _pooled_rises(rises, registry.k_metric_design())
     for base, cand in k_pairs:
         k, n, biggest = _pooled_rises(rises, cand)
         if n:
@@ -912,7 +911,7 @@ def _artifact_claim(rises: pd.DataFrame) -> list[dict]:
     """With the plain (time-stepped, penetrating) master the K-metric jump's V rises too: the
     discretisation floor of THEORY §6.6, stated beside the K-metric claims."""
     sel = ~rises["label"].astype(str).str.contains(MATCHED, regex=False)
-    k, n, biggest = _pooled_rises(rises[sel], "jump")
+    k, n, biggest = _pooled_rises(rises[sel], registry.k_metric_design())
     if not n or not k:
         return []
     lo, hi = proportion_ci(k, n)
@@ -988,8 +987,8 @@ def k_metric_summary(members: pd.DataFrame, rho: float = 1e-6, threshold: float 
                                         "projected", "plain"))
     col, rows = SETTLE[rho], []
     for (family, master), g in df.groupby(["family", "master"], sort=True):
-        k_rows = g[g["design"] == "jump"][["label", "member", col]]
-        for design, d in g[g["design"].isin(["jump", "jump_mass", "jump_identity"])].groupby("design"):
+        k_rows = g[g["design"] == registry.k_metric_design()][["label", "member", col]]
+        for design, d in g[g["design"].isin(registry.jump_designs())].groupby("design"):
             x = d["max_rise_rel"].to_numpy(float)
             k = int(np.sum(x > threshold))
             lo, hi = proportion_ci(k, x.size)

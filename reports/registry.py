@@ -97,6 +97,16 @@ def ratio_pairs() -> tuple[tuple[str, str], ...]:
     return tuple(RATIOS)
 
 
+def k_metric_design() -> str:
+    """The design the paper analyses: position jumps projected in the metric of K."""
+    return next(n for n, d in OBSERVER_DESIGNS.items() if d.position_jumps and d.metric == "K")
+
+
+def jump_designs() -> tuple[str, ...]:
+    """Designs with position jumps (any projection metric), in registry order."""
+    return tuple(n for n, d in OBSERVER_DESIGNS.items() if d.position_jumps)
+
+
 def contact_solvers() -> tuple[str, ...]:
     """Registered contact solvers, in registry order."""
     return tuple(CONTACT_SOLVERS)

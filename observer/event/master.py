@@ -530,6 +530,11 @@ class _Run:
         the extrapolated t_∞ does not (:meth:`velocity_tail` from an accurate impact)."""
         return tolerance(fl.gap_rows[idx], z)
 
+    def tail_noise(self, t: float) -> float:
+        """:func:`tail_noise_limit` at t for this run (its t0 and τ): what the joint tails of
+        :mod:`observer.event.tails` compare with, without importing this module."""
+        return tail_noise_limit(t, self.t0, self.tau)
+
     def noisy_tail(self, key: tuple, fl: Flow, idx: list, z: np.ndarray, v_plus: np.ndarray,
                    t: float) -> bool:
         """True once resolving more impacts would make the extrapolated t_∞ less accurate.

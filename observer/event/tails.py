@@ -125,10 +125,9 @@ def joint_due(run, key: tuple, t: float, x: np.ndarray, held: tuple, tiny: list)
     its gap's representation allows (``tiny``: its next hop is within ZENO_HOP_ROUNDOFF
     round-offs, :meth:`~observer.event.master._Run.tiny_hops`; or the gap's round-off δg over
     its speed γ⁺ puts more than ZENO_TAIL_RTOL ulps of the elapsed time into the tail,
-    ``(1 + 2/(1 − e))·δg/γ⁺``, as :meth:`~observer.event.master._Run.noisy_tail`). The cluster
+    ``(1 + 2/(1 − e))·δg/γ⁺``, as :meth:`~observer.event.master._Run.noisy_tail`; ``run.tail_noise(t)``). The cluster
     is key and every open contact landing within :data:`CLUSTER_REACH` tail lengths
     ``2γ⁺/(α(1 − e))`` (parabolic estimate)."""
-    from observer.event.master import tail_noise_limit
     fl = flow_for(run.system, held)
     z = fl.z(t, x)
     g, v = fl.gap_rows @ z, fl.velocity_rows @ z
@@ -139,7 +138,7 @@ def joint_due(run, key: tuple, t: float, x: np.ndarray, held: tuple, tiny: list)
     for c in key:
         if not (a[c] < 0.0 and v[c] > 0.0 and 0.0 <= e[c] < 1.0):
             return None
-        due |= (1.0 + 2.0 / (1.0 - e[c])) * dg[c] / v[c] >= tail_noise_limit(t, run.t0, run.tau)
+        due |= (1.0 + 2.0 / (1.0 - e[c])) * dg[c] / v[c] >= run.tail_noise(t)
         reach = max(reach, CLUSTER_REACH * 2.0 * v[c] / (-a[c] * (1.0 - e[c])))
     if not due:
         return None
