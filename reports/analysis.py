@@ -821,10 +821,17 @@ def _speed_claims(paired: pd.DataFrame, pair, rho: float, limit: int) -> list[di
                    f"{1 / hi:.3g}–{1 / lo:.3g}")
             text = (f"{cand} brings V to {rho:g}·V(t_on) {how}; sooner in "
                     f"{100 * r['frac_candidate_first']:.0f} % of them) on {where}.")
-        else:
-            text = (f"{cand} settles below {rho:g}·V(t_on) in {100 * (1 - r['never_candidate']):.0f} % "
-                    f"of {n} initial errors, {base} in {100 * (1 - r['never_baseline']):.0f} % "
-                    f"(sooner in {100 * r['frac_candidate_first']:.0f} %) on {where}.")
+        else:                       # no finite ratio: the settled fractions, with their own CIs
+            k_c = int(round(n * (1 - r["never_candidate"])))
+            k_b = int(round(n * (1 - r["never_baseline"])))
+            (lo, hi), (lo_b, hi_b) = proportion_ci(k_c, n), proportion_ci(k_b, n)
+            v = k_c / n
+            text = (f"{cand} settles below {rho:g}·V(t_on) in {100 * v:.0f} % of {n} initial errors "
+                    f"(95 % CI {100 * lo:.0f}–{100 * hi:.0f} %), {base} in {100 * k_b / n:.0f} % "
+                    f"(95 % CI {100 * lo_b:.0f}–{100 * hi_b:.0f} %; the candidate sooner in "
+                    f"{100 * r['frac_candidate_first']:.0f} %) on {where}.")
+            lo, hi = 100 * lo, 100 * hi
+            v = 100 * v
         out.append({"claim_id": f"speed:{pair[1]}/{pair[0]}:{where}", "kind": "speed",
                     "value": v, "ci_low": lo, "ci_high": hi, "n": n, "text": text})
     return out

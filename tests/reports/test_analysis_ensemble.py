@@ -179,3 +179,21 @@ def test_k_metric_summary_pools_by_family_and_master():
         else:
             assert r["rising"] == 10 and r["frac_ci_low"] < 0.25 < r["frac_ci_high"]
             assert r["ratio_median"] == pytest.approx(2.0) and r["ratio_ci_low"] <= 2.0 <= r["ratio_ci_high"]
+
+
+def test_a_speed_claim_without_a_finite_ratio_states_both_settled_fractions_with_their_cis():
+    """The candidate settles in every member, the baseline in 30 of 100: the median ratio is 0
+    (t_base = inf), so the claim gives the settled fractions with Clopper–Pearson intervals
+    (here 100 % [96.4, 100] and 30 % [21.2, 40.0]) instead of an infinite ratio and CI."""
+    tb = np.full(100, np.inf)
+    tb[:30] = 2.0
+    df = members(tb, np.full(100, 1.0))
+    paired = paired_settling(df, pairs=[("nojump", "jump")], rng=0, n_resamples=200)
+    claims = ensemble_claims(paired, rise_distribution(df))
+    speed = claims[claims["kind"] == "speed"]
+    assert len(speed)
+    for text, lo, hi in zip(speed["text"], speed["ci_low"], speed["ci_high"]):
+        assert "∞" not in text and "inf" not in text
+        assert "in 100 % of 100 initial errors (95 % CI 96–100 %)" in text
+        assert "in 30 % (95 % CI 21–40 %" in text
+        assert lo == pytest.approx(96.378, abs=1e-3) and hi == 100.0
