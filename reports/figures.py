@@ -321,7 +321,7 @@ def settling_matrix_figure(mat: pd.DataFrame) -> Figure | None:
     norm = matplotlib.colors.LogNorm(vmin=pos.min(), vmax=pos.max()) if pos.size and pos.min() < pos.max() else None
     im = ax.imshow(np.where(grid > 0, grid, np.nan), cmap="YlGnBu", norm=norm, aspect="auto", alpha=0.75)
     fig.colorbar(im, ax=ax, label="median settling time (s)", shrink=0.8)
-    ax.set_xticks(range(len(cols)), [look(c).label for c in cols], fontsize=8)
+    ax.set_xticks(range(len(cols)), [look(c).label.replace(" (", "\n(") for c in cols], fontsize=8)
     ax.set_yticks(range(len(rows)), rows, fontsize=8)
     rho = float(mat["rho"].iloc[0])
     ax.set_title(f"Settling time below {rho:g}·V(t_on): median [10 %, 90 %] over the members", fontsize=9)
