@@ -146,17 +146,21 @@ def motion_scale(p) -> float:
 @SETTINGS
 @given(systems(), st.data())
 def test_event_tables_and_trajectories_are_invariant_under_translation_time_shift_and_units(p, data):
+    """Translation, time shift and units on the same drawn system; accumulation times (where a
+    drawn system's impacts accumulate) to T_INF_TOL as in the Zeno property below (a 4-contact
+    system translated by (−100, −7.5, −7.5, −7.5) moved t∞ by 2.035e-9)."""
     base = comparable(run_master(build(p)))
     scale = motion_scale(p)
     n = p["M"].shape[0]
     c = np.array([data.draw(st.sampled_from([-100.0, -7.5, 3.25, 100.0])) for _ in range(n)])
-    assert_same(base, comparable(run_master(build(p, c=c)), c=c), scale, rtol=1e-6)
+    assert_same(base, comparable(run_master(build(p, c=c)), c=c), scale, rtol=1e-6, t_inf_tol=T_INF_TOL)
     T = data.draw(st.sampled_from([0.1, 1.0, 37.5, 1e3]))
-    assert_same(base, comparable(run_master(build(p, T=T), t0=T, t_end=T + T_END), T=T), scale)
+    assert_same(base, comparable(run_master(build(p, T=T), t0=T, t_end=T + T_END), T=T), scale,
+                t_inf_tol=T_INF_TOL)
     alpha = data.draw(st.sampled_from([1e-3, 1e3, 2.0 ** 10]))
     beta = data.draw(st.sampled_from([1e-3, 1e3, 0.1]))
     assert_same(base, comparable(run_master(build(p, alpha=alpha, beta=beta)), alpha=alpha,
-                                 beta=beta), scale)
+                                 beta=beta), scale, t_inf_tol=T_INF_TOL)
 
 
 @SETTINGS
