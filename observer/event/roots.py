@@ -35,6 +35,7 @@ and not searched; zeros closer than it are taken by their time to zero and noted
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -431,6 +432,29 @@ class FunctionalSet:
         return val - width, val + width
 
 
+FUNCTIONAL_SETS = 64
+"""Functional sets kept per flow by :func:`functional_set` (least recently used dropped)."""
+
+
+def functional_set(flow: Flow, rows: np.ndarray, tau: float) -> FunctionalSet:
+    """The :class:`FunctionalSet` of ``rows`` along ``flow`` with time scale τ, built once per
+    flow and reused by every search of the same functionals (a run searches the same gaps
+    and forces of a contact set at every event): its derivative rows, their certified
+    errors and the proved norms ``‖r_3 T‖`` are constants of the flow. Deterministic, so a
+    reused set gives the same bits as a new one."""
+    cache = flow.__dict__.setdefault("_functional_sets", OrderedDict())
+    rows = np.ascontiguousarray(rows, dtype=float)
+    key = (rows.shape, rows.tobytes(), float(tau))
+    hit = cache.get(key)
+    if hit is None:
+        hit = cache[key] = FunctionalSet(flow, rows, tau)
+        if len(cache) > FUNCTIONAL_SETS:
+            cache.popitem(last=False)
+    else:
+        cache.move_to_end(key)
+    return hit
+
+
 def _refine(fs: FunctionalSet, i: int, k: int, a: float, za: np.ndarray, lo: float, hi: float,
             tau: float) -> float:
     """Zero of the k-th derivative of ψ_i on the bracket ``[lo, hi]`` (offsets from a), where
@@ -551,16 +575,21 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, tols,
         near_touch = (s_min <= w) & (d0 - d1 * d1 / (2.0 * d2) <= 2.0 * band)
     quick = (d0 > tol) & ~near_touch & (
         l0 + np.minimum(l1, 0.0) * w + np.minimum(l2, 0.0) * w * w / 2 - bound * w ** 3 / 6 > 0.0)
-    for i in np.flatnonzero(~quick):
-        i = int(i)
+    todo = np.flatnonzero(~quick).tolist()
+    if not todo:
+        return step, found
+    # per-functional work on Python floats (the same IEEE values; no numpy scalar dispatch)
+    D0, D1, D2, T0, T1, T2 = (v.tolist() for v in (d0, d1, d2, tol, tol1, tol2))
+    L0, L1, L2, BD, E2, NT = (v.tolist() for v in (l0, l1, l2, bound, err[2], near_touch))
+    for i in todo:
         until = certified.get(i, -np.inf)
         if until > a:
             step = min(step, until - a)
             continue
-        leaving = d1[i] > tol1[i] or (abs(d1[i]) <= tol1[i] and d2[i] > tol2[i])
-        convex = d1[i] < 0.0 < d2[i]
-        if d0[i] <= tol[i] and not leaving:
-            res = _convex_minimum(fs, i, a, za, d0[i], d1[i], d2[i], bound[i], w, err[2, i]) \
+        leaving = D1[i] > T1[i] or (abs(D1[i]) <= T1[i] and D2[i] > T2[i])
+        convex = D1[i] < 0.0 < D2[i]
+        if D0[i] <= T0[i] and not leaving:
+            res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i]) \
                 if convex else None
             if res is None:
                 found.append(_zero_now(fs, i, a, za, d))
@@ -570,9 +599,9 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, tols,
             else:
                 found.append(res[1])
             continue
-        s = first_cubic_zero(max(l0[i], 0.0), l1[i], l2[i], bound[i], w)
-        if (s < w or near_touch[i]) and convex:
-            res = _convex_minimum(fs, i, a, za, d0[i], d1[i], d2[i], bound[i], w, err[2, i])
+        s = first_cubic_zero(max(L0[i], 0.0), L1[i], L2[i], BD[i], w)
+        if (s < w or NT[i]) and convex:
+            res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i])
             if res is not None:
                 if res[0] != "positive":
                     found.append(res[1])
@@ -625,7 +654,7 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     if rows.shape[0] == 0 or t_end - a <= resolution(t_end, tau):
         z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
         return None, t_end, z
-    fs = FunctionalSet(flow, rows, tau)
+    fs = functional_set(flow, rows, tau)
     certified = dict(certified or {})
     window = WINDOW / max(flow.norm_bound, 1e-300)
     growth = exp_upper(up(flow.certified_norm * window * (1.0 + 2.0 * _U)))  # ≥ e^{‖T⁻¹AT‖₂ w}
