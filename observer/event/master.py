@@ -510,9 +510,11 @@ class _Run:
                 return tail + (2.0 * max(d[0], 0.0) / -d[1] / (1.0 - e) if d[1] < 0.0 else 0.0)
             co = d / fact                                   # (g(t_k + Δ) − 0)/Δ = Σ co_j Δ^j
             dt = -2.0 * d[0] / d[1]
+            high = co[::-1].tolist()                        # np.polyval's Horner, on floats
+            dhigh = (co[1:] * np.arange(1, HOP_ORDER))[::-1].tolist()
             for _ in range(30):
-                P = np.polyval(co[::-1], dt)
-                dP = np.polyval((co[1:] * np.arange(1, HOP_ORDER))[::-1], dt)
+                P = _horner(high, dt)
+                dP = _horner(dhigh, dt)
                 step = P / dP if dP != 0.0 else 0.0
                 dt -= step
                 if abs(step) <= 4e-16 * dt:
@@ -754,6 +756,15 @@ class _Run:
             else:
                 self.touch(c, t)
         return self.project(t, x, stick), tuple(stick)
+
+
+def _horner(coefficients: list, x: float) -> float:
+    """``np.polyval(coefficients, x)`` for a float x (highest degree first): the same Horner
+    recurrence ``y = y·x + c`` from y = 0, on Python floats (no array per call)."""
+    y = 0.0
+    for c in coefficients:
+        y = y * x + c
+    return y
 
 
 def _oscillator_block(flow: Flow, t: np.ndarray) -> np.ndarray:
