@@ -66,7 +66,7 @@ from observer.contact import get_solver
 from observer.event.flow import Flow, flow_for
 from observer.event.roots import (FLOOR_FACTOR, NonFiniteFlow, RootIsolationError, first_zero,
                                   motion_tolerance, tolerance)
-from observer.event.tails import JointTail, joint_due, joint_tail
+from observer.event.tails import JointTail, horner, joint_due, joint_tail
 from observer.impact import ImpactLaw, impact
 from observer.scenario import Scenario
 
@@ -513,8 +513,8 @@ class _Run:
             high = co[::-1].tolist()                        # np.polyval's Horner, on floats
             dhigh = (co[1:] * np.arange(1, HOP_ORDER))[::-1].tolist()
             for _ in range(30):
-                P = _horner(high, dt)
-                dP = _horner(dhigh, dt)
+                P = horner(high, dt)
+                dP = horner(dhigh, dt)
                 step = P / dP if dP != 0.0 else 0.0
                 dt -= step
                 if abs(step) <= 4e-16 * dt:
@@ -756,15 +756,6 @@ class _Run:
             else:
                 self.touch(c, t)
         return self.project(t, x, stick), tuple(stick)
-
-
-def _horner(coefficients: list, x: float) -> float:
-    """``np.polyval(coefficients, x)`` for a float x (highest degree first): the same Horner
-    recurrence ``y = y·x + c`` from y = 0, on Python floats (no array per call)."""
-    y = 0.0
-    for c in coefficients:
-        y = y * x + c
-    return y
 
 
 def _oscillator_block(flow: Flow, t: np.ndarray) -> np.ndarray:
