@@ -213,8 +213,10 @@ class Flow:
 
     # -- augmented state -------------------------------------------------------------------
     def oscillators(self, t: float) -> np.ndarray:
-        """Oscillator block ``(cos ω_k t, sin ω_k t)_k`` at time t."""
+        """Oscillator block ``(cos ω_k t, sin ω_k t)_k`` at time t (empty without harmonics)."""
         w = self._freq_array
+        if not w.size:
+            return np.empty(0)
         out = np.empty(2 * len(w))
         out[0::2] = np.cos(w * t)
         out[1::2] = np.sin(w * t)
