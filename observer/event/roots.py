@@ -354,7 +354,7 @@ class FunctionalSet:
         third = (np.abs(self.d[3]) + self.err[3]) * flow.scale   # ≥ |r_3 T| entrywise
         self.third_norm = np.array([_row_norm(r) for r in third])
         self.abs_d = [np.abs(r) for r in self.d[:3]]
-        # per-step rows (:meth:`step_quantities`) as 3-D stacks: the derivative rows r̂_0..r̂_3,
+        # per-step rows (:meth:`derivatives`, :meth:`sums`) as 3-D stacks: the derivative rows r̂_0..r̂_3,
         # then |r̂_0..2| (floors) and err_k + γ_N|r̂_k| (errors). A stacked matmul computes each
         # slice as its own matrix-vector product (bit-identical to ``rows_k @ z``; a 2-D
         # ``vstack`` is not: BLAS blocks the rows differently)
