@@ -51,17 +51,32 @@ def expm_pade13(A: np.ndarray) -> np.ndarray:
     nrm = float(np.abs(A).sum(axis=0).max())
     s = 0 if nrm <= _THETA13 else int(np.ceil(np.log2(nrm / _THETA13)))
     A = A / (2.0 ** s)
-    I = np.eye(N)
+    b1I, b0I = _identity_terms(N)
     A2 = A @ A
     A4 = A2 @ A2
     A6 = A4 @ A2
     b = _PADE13
-    U = A @ (A6 @ (b[13] * A6 + b[11] * A4 + b[9] * A2) + b[7] * A6 + b[5] * A4 + b[3] * A2 + b[1] * I)
-    V = A6 @ (b[12] * A6 + b[10] * A4 + b[8] * A2) + b[6] * A6 + b[4] * A4 + b[2] * A2 + b[0] * I
+    U = A @ (A6 @ (b[13] * A6 + b[11] * A4 + b[9] * A2) + b[7] * A6 + b[5] * A4 + b[3] * A2 + b1I)
+    V = A6 @ (b[12] * A6 + b[10] * A4 + b[8] * A2) + b[6] * A6 + b[4] * A4 + b[2] * A2 + b0I
     E = np.linalg.solve(V - U, V + U)
     for _ in range(s):
         E = E @ E
     return E
+
+
+_IDENTITY_TERMS: dict = {}
+
+
+def _identity_terms(N: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(b_1 I, b_0 I)`` of :func:`expm_pade13` for size N, built once (read-only)."""
+    hit = _IDENTITY_TERMS.get(N)
+    if hit is None:
+        I = np.eye(N)
+        hit = (_PADE13[1] * I, _PADE13[0] * I)
+        for arr in hit:
+            arr.flags.writeable = False
+        _IDENTITY_TERMS[N] = hit
+    return hit
 
 
 def _frequencies(*signals: Harmonic) -> list[float]:
@@ -141,6 +156,7 @@ class Flow:
         n, m = system.n, system.m
         self.n, self.m = n, m
         self.freqs = _frequencies(system.forcing, system.gap)
+        self._freq_array = np.asarray(self.freqs, dtype=float)
         F = len(self.freqs)
         N = 2 * n + 2 * F + 1
         self.N = N
@@ -197,8 +213,10 @@ class Flow:
 
     # -- augmented state -------------------------------------------------------------------
     def oscillators(self, t: float) -> np.ndarray:
-        """Oscillator block ``(cos ω_k t, sin ω_k t)_k`` at time t."""
-        w = np.asarray(self.freqs, dtype=float)
+        """Oscillator block ``(cos ω_k t, sin ω_k t)_k`` at time t (empty without harmonics)."""
+        w = self._freq_array
+        if not w.size:
+            return np.empty(0)
         out = np.empty(2 * len(w))
         out[0::2] = np.cos(w * t)
         out[1::2] = np.sin(w * t)
@@ -328,8 +346,9 @@ _U = np.finfo(float).eps / 2.0
 
 def up(x: float, ulps: int = 1) -> float:
     """``x`` moved ``ulps`` floats towards +∞ (an outward rounding)."""
+    x = float(x)
     for _ in range(ulps):
-        x = float(np.nextafter(x, np.inf))
+        x = math.nextafter(x, math.inf)
     return x
 
 

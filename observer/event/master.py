@@ -66,7 +66,7 @@ from observer.contact import get_solver
 from observer.event.flow import Flow, flow_for
 from observer.event.roots import (FLOOR_FACTOR, NonFiniteFlow, RootIsolationError, first_zero,
                                   motion_tolerance, tolerance)
-from observer.event.tails import JointTail, joint_due, joint_tail
+from observer.event.tails import JointTail, horner, joint_due, joint_tail
 from observer.impact import ImpactLaw, impact
 from observer.scenario import Scenario
 
@@ -510,9 +510,11 @@ class _Run:
                 return tail + (2.0 * max(d[0], 0.0) / -d[1] / (1.0 - e) if d[1] < 0.0 else 0.0)
             co = d / fact                                   # (g(t_k + Δ) − 0)/Δ = Σ co_j Δ^j
             dt = -2.0 * d[0] / d[1]
+            high = co[::-1].tolist()                        # np.polyval's Horner, on floats
+            dhigh = (co[1:] * np.arange(1, HOP_ORDER))[::-1].tolist()
             for _ in range(30):
-                P = np.polyval(co[::-1], dt)
-                dP = np.polyval((co[1:] * np.arange(1, HOP_ORDER))[::-1], dt)
+                P = horner(high, dt)
+                dP = horner(dhigh, dt)
                 step = P / dP if dP != 0.0 else 0.0
                 dt -= step
                 if abs(step) <= 4e-16 * dt:

@@ -35,9 +35,12 @@ and not searched; zeros closer than it are taken by their time to zero and noted
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
+
+from numba import njit
 
 from observer.event.flow import Flow, exp_upper, norm_upper, up
 
@@ -191,6 +194,27 @@ def motion_scale(derivs, tau: float) -> np.ndarray:
     return out
 
 
+def _scale_coefficients(tau: float) -> tuple[float, ...]:
+    """The weights ``τ^k/k!``, k = 0..3, of :func:`motion_scale`, computed as it does."""
+    out, fac, tk = [1.0], 1.0, 1.0
+    for k in range(1, 4):
+        fac *= k
+        tk *= tau
+        out.append(tk / fac)
+    return tuple(out)
+
+
+def _motion_scales(ad: np.ndarray, coefs) -> np.ndarray:
+    """:func:`motion_scale` of ``(ψ, ψ′, ψ″, ψ‴)``, of ``(ψ′, ψ″, ψ‴)`` and of ``(ψ″, ψ‴)`` at
+    once, shape (3, p), from ``ad = |(ψ, ψ′, ψ″, ψ‴)|`` (shape (4, p)) and the weights
+    ``coefs`` (:func:`_scale_coefficients`): the same sums in the same order, vectorised."""
+    out = ad[:3].copy()                              # 0 + |ψ^(k)|·1, exactly
+    out += ad[1:] * coefs[1]
+    out[:2] += ad[2:] * coefs[2]
+    out[:1] += ad[3:] * coefs[3]
+    return out
+
+
 def motion_tolerance(rows: np.ndarray, A: np.ndarray, z: np.ndarray, tau: float, t: float
                      ) -> np.ndarray:
     """Zero tolerance of the functionals ``rows @ z`` of a flow with generator A at time t:
@@ -221,36 +245,75 @@ def first_cubic_zero(d0: float, d1: float, d2: float, bound: float, width: float
 
     ``d0 ≥ 0`` is assumed (a leaving functional at zero: d0 = 0 with L increasing first).
     L is split at its critical points into monotone pieces; the first piece whose end is
-    not positive holds the zero, isolated by bisection keeping ``L(lo) > 0``.
+    not positive holds the zero, isolated by regula falsi keeping ``L(lo) > 0``
+    (:func:`_cubic_zero`, compiled: the same float64 operations in the same order).
     """
-    if d0 + min(d1, 0.0) * width + min(d2, 0.0) * width * width / 2 - bound * width ** 3 / 6 > 0.0:
+    width = float(width)
+    return float(_cubic_zero(float(d0), float(d1), float(d2), float(bound), width, width ** 3))
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _cubic_zero(d0: float, d1: float, d2: float, bound: float, width: float, width3: float
+                ) -> float:  # pragma: no cover - compiled (numba); covered through its wrapper
+    """Compiled body of :func:`first_cubic_zero` (``width3 = width ** 3``, Python's pow): a hot
+    loop (tens of thousands of calls per run, ~15 regula falsi steps each), so one function
+    over the pieces of L and no Python-level dispatch; IEEE operations only (no fast-math,
+    no contraction), so results are those of the Python arithmetic bit for bit."""
+    m1 = d1 if not 0.0 < d1 else 0.0                  # Python's min(d1, 0.0)
+    m2 = d2 if not 0.0 < d2 else 0.0
+    if d0 + m1 * width + m2 * width * width / 2 - bound * width3 / 6 > 0.0:
         return width
     a3, a2, a1 = -bound / 6.0, d2 / 2.0, d1
-
-    def L(x: float) -> float:
-        return ((a3 * x + a2) * x + a1) * x + d0
-
-    crit = [c for c in _quadratic_roots(3.0 * a3, 2.0 * a2, a1) if 0.0 < c < width]
+    # critical points: roots of 3·a3 x² + 2·a2 x + a1 (numerically stable form)
+    A, B, C = 3.0 * a3, 2.0 * a2, a1
+    r0, r1, nr = 0.0, 0.0, 0
+    if A == 0.0:
+        if B != 0.0:
+            r0, nr = -C / B, 1
+    else:
+        disc = B * B - 4.0 * A * C
+        if not disc < 0.0:
+            q = -0.5 * (B + np.copysign(np.sqrt(disc), B))
+            if q != 0.0:
+                r0, r1, nr = q / A, C / q, 2
+            else:
+                r0, nr = 0.0, 1
+    c0, c1, nc = 0.0, 0.0, 0
+    for k in range(nr):
+        c = r0 if k == 0 else r1
+        if 0.0 < c < width:
+            if nc == 0:
+                c0 = c
+            else:
+                c1 = c
+            nc += 1
+    if nc == 2 and c1 < c0:                          # sorted(crit)
+        c0, c1 = c1, c0
     lo = 0.0
-    for hi in sorted(crit) + [width]:
-        f_hi = L(hi)
+    for k in range(nc + 1):
+        hi = c0 if k == 0 and nc > 0 else (c1 if k == 1 and nc > 1 else width)
+        f_hi = ((a3 * hi + a2) * hi + a1) * hi + d0
         if f_hi <= 0.0:
-            return _illinois(L, lo, hi, L(lo), f_hi)
+            f_lo = ((a3 * lo + a2) * lo + a1) * lo + d0
+            return _illinois_cubic(a3, a2, a1, d0, lo, hi, f_lo, f_hi)
         lo = hi
     return width
 
 
-def _illinois(L, lo: float, hi: float, f_lo: float, f_hi: float) -> float:
-    """Regula falsi (Illinois variant) on a monotone piece with ``L(lo) ≥ 0 ≥ L(hi)``; returns
-    the left end ``lo`` (L(lo) > 0 kept, or lo = the start) once ``hi − lo ≤ 1e-13·hi``."""
+@njit(cache=True, error_model="numpy", nogil=True)
+def _illinois_cubic(a3: float, a2: float, a1: float, d0: float, lo: float, hi: float, f_lo: float,
+                    f_hi: float) -> float:  # pragma: no cover - compiled (numba)
+    """Regula falsi (Illinois variant) on a monotone piece of ``L(x) = ((a3 x + a2) x + a1) x
+    + d0`` with ``L(lo) ≥ 0 ≥ L(hi)``; returns the left end ``lo`` (L(lo) > 0 kept, or lo = the
+    start) once ``hi − lo ≤ 1e-13·hi``. Compiled: the inner loop of :func:`_cubic_zero`."""
     side = 0
     for _ in range(200):
         if hi - lo <= 1e-13 * hi:
             break
         x = (lo * f_hi - hi * f_lo) / (f_hi - f_lo) if f_hi != f_lo else 0.5 * (lo + hi)
-        if not lo < x < hi:
+        if not (lo < x and x < hi):
             x = 0.5 * (lo + hi)
-        fx = L(x)
+        fx = ((a3 * x + a2) * x + a1) * x + d0
         if fx > 0.0:
             lo, f_lo = x, fx
             if side == -1:
@@ -262,17 +325,6 @@ def _illinois(L, lo: float, hi: float, f_lo: float, f_hi: float) -> float:
                 f_lo *= 0.5
             side = 1
     return lo
-
-
-def _quadratic_roots(A: float, B: float, C: float) -> list[float]:
-    """Real roots of ``A x² + B x + C`` (numerically stable form)."""
-    if A == 0.0:
-        return [-C / B] if B != 0.0 else []
-    disc = B * B - 4.0 * A * C
-    if disc < 0.0:
-        return []
-    q = -0.5 * (B + np.copysign(np.sqrt(disc), B))
-    return [q / A, C / q] if q != 0.0 else [0.0]
 
 
 class FunctionalSet:
@@ -302,6 +354,26 @@ class FunctionalSet:
         third = (np.abs(self.d[3]) + self.err[3]) * flow.scale   # ≥ |r_3 T| entrywise
         self.third_norm = np.array([_row_norm(r) for r in third])
         self.abs_d = [np.abs(r) for r in self.d[:3]]
+        # per-step rows (:meth:`derivatives`, :meth:`sums`) as 3-D stacks: the derivative rows r̂_0..r̂_3,
+        # then |r̂_0..2| (floors) and err_k + γ_N|r̂_k| (errors). A stacked matmul computes each
+        # slice as its own matrix-vector product (bit-identical to ``rows_k @ z``; a 2-D
+        # ``vstack`` is not: BLAS blocks the rows differently)
+        self._d4 = np.stack(self.d[:4])
+        self._abs_rows = np.stack(self.abs_d + [self._ecoef(k) for k in range(3)])
+
+    def _ecoef(self, k: int) -> np.ndarray:
+        """Rows ``err_k + γ_N |r̂_k|`` of the certified error of ``r̂_k·z`` (:meth:`errors`)."""
+        return self.err[k] + self.gamma * np.abs(self.d[k])
+
+    def derivatives(self, z: np.ndarray) -> np.ndarray:
+        """``ψ^{(k)} = r̂_k·z`` for k = 0..3, all functionals, shape (4, p): one stacked product."""
+        return self._d4 @ z
+
+    def sums(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``Σ_j |r̂_kj z_j|`` (the representation floors before ROUNDOFF) and the certified
+        errors of :meth:`errors` (kmax = 2), k = 0..2, shape (3, p) each: one stacked product."""
+        both = self._abs_rows @ np.abs(z)
+        return both[:3], self._inflate * both[3:]
 
     def _extend(self, k: int) -> None:
         """Derivative rows and their error bounds up to order k."""
@@ -323,8 +395,7 @@ class FunctionalSet:
         shape (kmax + 1, p) (z taken as exact data; gradual underflow, below 1e-300, aside)."""
         self._extend(kmax)
         az = np.abs(z)
-        return np.array([self._inflate * ((self.err[k] + self.gamma * np.abs(self.d[k])) @ az)
-                         for k in range(kmax + 1)])
+        return np.array([self._inflate * (self._ecoef(k) @ az) for k in range(kmax + 1)])
 
     def enclose(self, i: int, j: int, z: np.ndarray, s: float) -> tuple[float, float]:
         """Certified enclosure ``[lo, hi]`` of ``ψ_i^{(j)}(a + s)`` for the exact flow from the
@@ -359,6 +430,29 @@ class FunctionalSet:
         g3k = 3.0 * K * u / (1.0 - 3.0 * K * u)
         width = 2.0 * (err + g3k * mag + remainder) + np.finfo(float).tiny
         return val - width, val + width
+
+
+FUNCTIONAL_SETS = 64
+"""Functional sets kept per flow by :func:`functional_set` (least recently used dropped)."""
+
+
+def functional_set(flow: Flow, rows: np.ndarray, tau: float) -> FunctionalSet:
+    """The :class:`FunctionalSet` of ``rows`` along ``flow`` with time scale τ, built once per
+    flow and reused by every search of the same functionals (a run searches the same gaps
+    and forces of a contact set at every event): its derivative rows, their certified
+    errors and the proved norms ``‖r_3 T‖`` are constants of the flow. Deterministic, so a
+    reused set gives the same bits as a new one."""
+    cache = flow.__dict__.setdefault("_functional_sets", OrderedDict())
+    rows = np.ascontiguousarray(rows, dtype=float)
+    key = (rows.shape, rows.tobytes(), float(tau))
+    hit = cache.get(key)
+    if hit is None:
+        hit = cache[key] = FunctionalSet(flow, rows, tau)
+        if len(cache) > FUNCTIONAL_SETS:
+            cache.popitem(last=False)
+    else:
+        cache.move_to_end(key)
+    return hit
 
 
 def _refine(fs: FunctionalSet, i: int, k: int, a: float, za: np.ndarray, lo: float, hi: float,
@@ -481,16 +575,21 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, tols,
         near_touch = (s_min <= w) & (d0 - d1 * d1 / (2.0 * d2) <= 2.0 * band)
     quick = (d0 > tol) & ~near_touch & (
         l0 + np.minimum(l1, 0.0) * w + np.minimum(l2, 0.0) * w * w / 2 - bound * w ** 3 / 6 > 0.0)
-    for i in np.flatnonzero(~quick):
-        i = int(i)
+    todo = np.flatnonzero(~quick).tolist()
+    if not todo:
+        return step, found
+    # per-functional work on Python floats (the same IEEE values; no numpy scalar dispatch)
+    D0, D1, D2, T0, T1, T2 = (v.tolist() for v in (d0, d1, d2, tol, tol1, tol2))
+    L0, L1, L2, BD, E2, NT = (v.tolist() for v in (l0, l1, l2, bound, err[2], near_touch))
+    for i in todo:
         until = certified.get(i, -np.inf)
         if until > a:
             step = min(step, until - a)
             continue
-        leaving = d1[i] > tol1[i] or (abs(d1[i]) <= tol1[i] and d2[i] > tol2[i])
-        convex = d1[i] < 0.0 < d2[i]
-        if d0[i] <= tol[i] and not leaving:
-            res = _convex_minimum(fs, i, a, za, d0[i], d1[i], d2[i], bound[i], w, err[2, i]) \
+        leaving = D1[i] > T1[i] or (abs(D1[i]) <= T1[i] and D2[i] > T2[i])
+        convex = D1[i] < 0.0 < D2[i]
+        if D0[i] <= T0[i] and not leaving:
+            res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i]) \
                 if convex else None
             if res is None:
                 found.append(_zero_now(fs, i, a, za, d))
@@ -500,9 +599,9 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, tols,
             else:
                 found.append(res[1])
             continue
-        s = first_cubic_zero(max(l0[i], 0.0), l1[i], l2[i], bound[i], w)
-        if (s < w or near_touch[i]) and convex:
-            res = _convex_minimum(fs, i, a, za, d0[i], d1[i], d2[i], bound[i], w, err[2, i])
+        s = first_cubic_zero(max(L0[i], 0.0), L1[i], L2[i], BD[i], w)
+        if (s < w or NT[i]) and convex:
+            res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i])
             if res is not None:
                 if res[0] != "positive":
                     found.append(res[1])
@@ -555,33 +654,33 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     if rows.shape[0] == 0 or t_end - a <= resolution(t_end, tau):
         z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
         return None, t_end, z
-    fs = FunctionalSet(flow, rows, tau)
+    fs = functional_set(flow, rows, tau)
     certified = dict(certified or {})
     window = WINDOW / max(flow.norm_bound, 1e-300)
     growth = exp_upper(up(flow.certified_norm * window * (1.0 + 2.0 * _U)))  # ≥ e^{‖T⁻¹AT‖₂ w}
     t_ok, z_ok = a, za                                # the last search point with finite values
+    coefs = _scale_coefficients(tau)
     for _ in range(MAX_STEPS):
         if t_end - a <= resolution(t_end, tau):          # a remainder of a few ulp: flow
             z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
             _check_finite(t_end, z, np.zeros((1, 1)), t_ok, z_ok)
             return None, t_end, z
         w = min(window, t_end - a)
-        d = np.array([fs.d[k] @ za for k in range(4)])
+        d = fs.derivatives(za)
         _check_finite(a, za, d, t_ok, z_ok)           # overflow: a stop (NonFiniteFlow)
         t_ok, z_ok = a, za
-        az = np.abs(za)
-        floor = [ROUNDOFF * (r @ az) + np.finfo(float).tiny for r in fs.abs_d]
+        sums, errs = fs.sums(za)
+        floor = ROUNDOFF * sums + np.finfo(float).tiny
         res = resolution(a, tau)
-        tol = floor[0] + ROUNDOFF * motion_scale(d, tau) + np.abs(d[1]) * res
-        tol1 = floor[1] + ROUNDOFF * motion_scale(d[1:], tau) + np.abs(d[2]) * res
-        tol2 = floor[2] + ROUNDOFF * motion_scale(d[2:], tau) + np.abs(d[3]) * res
+        ad = np.abs(d)
+        tol, tol1, tol2 = floor + ROUNDOFF * _motion_scales(ad, coefs) + ad[1:] * res
         band = touch_band(d[2], d[3], floor[0], tau)
         bound = np.nextafter(fs.third_norm * (growth * norm_upper(za / flow.scale))
                              * (1.0 + 4.0 * _U), np.inf)
         if not np.isfinite(bound).all():              # the certified bound overflows: no search
             i = int(np.flatnonzero(~np.isfinite(bound))[0])
             raise NonFiniteFlow(a, a, za, ("bound", 3, i), float(bound[i]))
-        tols = (tol, tol1, tol2, band, fs.errors(za))
+        tols = (tol, tol1, tol2, band, errs)
         step, found = _safe_step(fs, a, za, d, tols, bound, w, certified)
         # no functional without a found zero vanishes in (a, a + step): the earliest found zero
         # within that reach is the first zero; one beyond it is recomputed later

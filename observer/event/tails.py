@@ -103,9 +103,10 @@ def landing(d: float, D: np.ndarray) -> float:
         if den <= 0.0:
             return np.inf
         poly, dt = np.concatenate([[d], co]), 2.0 * d / den
-    dpoly = poly[1:] * np.arange(1, poly.size)
+    dpoly = (poly[1:] * np.arange(1, poly.size))[::-1].tolist()
+    poly = poly[::-1].tolist()
     for _ in range(40):
-        step = np.polyval(poly[::-1], dt) / np.polyval(dpoly[::-1], dt)
+        step = np.float64(horner(poly, dt)) / horner(dpoly, dt)   # numpy's division: 0 → inf
         dt -= step
         if not np.isfinite(dt) or dt <= 0.0:
             return np.nan
@@ -116,7 +117,16 @@ def landing(d: float, D: np.ndarray) -> float:
 
 def advance(d: float, D: np.ndarray, dt: float) -> float:
     """The relative gap ``d + Σ_k D_k dt^k/k!`` after a flight of dt."""
-    return float(d + dt * np.polyval((D / _FACT)[::-1], dt))
+    return float(d + dt * horner((D / _FACT)[::-1].tolist(), dt))
+
+
+def horner(coefficients: list, x: float) -> float:
+    """``np.polyval(coefficients, x)`` for a float x (highest degree first): the same Horner
+    recurrence ``y = y·x + c`` from y = 0, on Python floats (no array per call)."""
+    y = 0.0
+    for c in coefficients:
+        y = y * x + c
+    return y
 
 
 def joint_due(run, key: tuple, t: float, x: np.ndarray, held: tuple, tiny: list) -> list | None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import Phase, given, settings
+from hypothesis import Phase, example, given, settings
 from hypothesis import strategies as st
 
 from observer.event.flow import Flow
@@ -265,6 +265,31 @@ def fast_impacts(res, T: float = 0.0, alpha: float = 1.0, beta: float = 1.0):
     return ev["contact"].to_numpy()[fast], (ev["time"].to_numpy(dtype=float)[fast] - T) / beta
 
 
+@st.composite
+def transformations(draw, n: int = 2) -> tuple:
+    """One of (a)–(c), drawn as the one-contact property draws it: ``("translation", c)``,
+    ``("time shift", T)`` or ``("units", (α, β))``."""
+    kind = draw(st.sampled_from(["translation", "time shift", "units"]))
+    if kind == "translation":
+        return kind, tuple(draw(st.sampled_from([-100.0, -7.5, 3.25, 100.0])) for _ in range(n))
+    if kind == "time shift":
+        return kind, draw(st.sampled_from([0.1, 1.0, 37.5, 1e3]))
+    return kind, (draw(st.sampled_from([1e-3, 1e3, 2.0 ** 10])),
+                  draw(st.sampled_from([1e-3, 1e3, 0.1])))
+
+
+OPEN_TWO_CONTACT = dict(
+    M=np.diag([0.8, 0.8703055993029942]), K=np.diag([0.42553138192489104, 0.0]),
+    C=np.zeros((2, 2)), W=np.array([[1.0, 0.0], [0.12052136511845828, 1.0]]),
+    q0=np.array([0.1849652912031005, 0.05]), u0=np.zeros(2),
+    nu=np.array([-0.18899135945902343, -0.04798]),
+    f=np.array([-7.921291464026205, -8.703055993029942]),
+    a=np.array([0.0008108378130396705, 0.024932071164894196]), w=0.5, phi=0.05, e=0.3)
+"""A member of the open class (drawn by :func:`two_contact_zeno`): K = diag(0.43, 0),
+W10 = 0.12, forced; translated by (−100, 3.25) the rest time of contact 0 moves by 1.4e-5 s
+(0.0413289 s against 0.0413428 s)."""
+
+
 @pytest.mark.xfail(strict=True, reason=(
     "open (issue 19): in coupled Zeno sequences of Zeno sequences with a spring, damping or "
     "forcing (e.g. K = diag(0.43, 0), W10 = 0.12; or C = diag(0, 0.5), W01 = 0.14, forced) the "
@@ -272,26 +297,29 @@ def fast_impacts(res, T: float = 0.0, alpha: float = 1.0, beta: float = 1.0):
     "landed at round-off (tail time 0) and their rest times move by 1.8e-6 to 1.4e-5 s under "
     "a translation by 100"))
 @settings(max_examples=40, deadline=None, derandomize=True, database=None, phases=NO_SHRINK)
-@given(two_contact_zeno(), st.data())
-def test_two_contact_zeno_tails_are_invariant_under_translation_time_shift_and_units(p, data):
+@given(two_contact_zeno(), transformations())
+@example(p=OPEN_TWO_CONTACT, tr=("translation", (-100.0, 3.25)))
+def test_two_contact_zeno_tails_are_invariant_under_translation_time_shift_and_units(p, tr):
     """Overlapping accumulations of two contacts (:func:`two_contact_zeno`), one transformation
     drawn per example as in the one-contact property: both contacts come to rest, at the same
     times to T_INF_TOL, with the same fast impacts (|γ⁻| ≥ V_TAIL; how many slow impacts are
-    resolved before a joint tail starts depends on the coordinates' round-off)."""
+    resolved before a joint tail starts depends on the coordinates' round-off). The open
+    class's known member (:data:`OPEN_TWO_CONTACT`) runs first as an explicit example: while
+    it fails, the strict xfail costs one example (it costs ~16 drawn ones otherwise, and which
+    ones are drawn is not stable); once it passes, the 40 drawn examples run."""
     base = run_master(build(p))
     rest = rest_times(base)
     assert base.status == "ok" and set(rest) == {0, 1}
-    kind = data.draw(st.sampled_from(["translation", "time shift", "units"]))
+    kind, arg = tr
     T, alpha, beta, c = 0.0, 1.0, 1.0, None
     if kind == "translation":
-        c = np.array([data.draw(st.sampled_from([-100.0, -7.5, 3.25, 100.0])) for _ in range(2)])
+        c = np.array(arg)
         moved = run_master(build(p, c=c))
     elif kind == "time shift":
-        T = data.draw(st.sampled_from([0.1, 1.0, 37.5, 1e3]))
+        T = arg
         moved = run_master(build(p, T=T), t0=T, t_end=T + T_END)
     else:
-        alpha = data.draw(st.sampled_from([1e-3, 1e3, 2.0 ** 10]))
-        beta = data.draw(st.sampled_from([1e-3, 1e3, 0.1]))
+        alpha, beta = arg
         moved = run_master(build(p, alpha=alpha, beta=beta))
     assert moved.status == "ok"
     other = rest_times(moved, T, beta)
