@@ -619,18 +619,29 @@ def applied_residual(Wp, Wi, Wv, act, a, du, bvec, z):
 
 
 @njit(**JIT)
-def impulse_one(k, s, us, uf, j, Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats, du, u1, P):
+def impulse_one(k, s, us, uf, j, Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats, u1, P):
     """:func:`contact_impulse` on the one closed contact j, in closed form.
 
     Newton's and Poisson's maps agree on one contact: ``P = max(0, −b/Ĝ_jj)`` with
-    ``b = γ_free + e_j γ_k``; the same operations as the general path, bit for bit. Written
-    without a branch around any array access (the status is decided on scalars, the work
-    buffers are written whatever it is): each array argument is then last used in the one
-    exit block, and numba prunes its reference counts.
+    ``b = γ_free + e_j γ_k``; the same operations as the general path, bit for bit
+    (``δu_i = 0 + (Â⁻¹W)_ji P`` is recomputed where the applied residual reads it instead of
+    being stored). Free of reference counts (checked in its compiled code by
+    ``tests/observer/test_kernel.py``): no helper is inlined (each inlined array argument is a
+    new variable), every array is read outside any branch, the status is decided on scalars
+    before ``stats``, the last array written, is touched: numba then prunes every argument's
+    increment and decrement (an array used in two loops, or written inside a branch, keeps
+    them: 9 pairs per call before, ~10 ns).
     """
     n = uf.shape[0]
-    gk = _wt_row(Wp, Wi, Wv, us, s, j) + nu_dot[k, j]
-    gc = _wt(Wp, Wi, Wv, uf, j) + nu_dot[k + 1, j]                          # γ_free
+    p0, p1 = Wp[j], Wp[j + 1]
+    gk = 0.0                                                                # (Wᵀu_k)_j
+    for p in range(p0, p1):
+        gk += Wv[p] * us[s, Wi[p]]
+    gk = gk + nu_dot[k, j]
+    gc = 0.0                                                                # γ_free
+    for p in range(p0, p1):
+        gc += Wv[p] * uf[Wi[p]]
+    gc = gc + nu_dot[k + 1, j]
     g = Ghat[j, j]
     b = gc + e[j] * gk
     x = -b / g if b < 0.0 else 0.0
@@ -641,26 +652,26 @@ def impulse_one(k, s, us, uf, j, Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats
         r = v
     res = r / max(abs(b) if abs(b) > 0.0 else 0.0, abs(gx) if abs(gx) > 0.0 else 0.0, TINY)
     for i in range(n):
-        du[i] = 0.0 + AinvWT[j, i] * x
-    for i in range(n):
-        u1[i] = uf[i] + du[i]
+        u1[i] = uf[i] + (0.0 + AinvWT[j, i] * x)                            # u_free + δu
     P[0] = x
-    d = _wt(Wp, Wi, Wv, du, j)                                              # applied_residual
+    d = 0.0                                                                 # (Wᵀδu)_j: applied_residual
+    for p in range(p0, p1):
+        d += Wv[p] * (0.0 + AinvWT[j, Wi[p]] * x)
     r = 0.0
     v = abs(min(x, b + d))
     if v > r:
         r = v
     applied = r / max(abs(b) if abs(b) > 0.0 else 0.0, abs(d) if abs(d) > 0.0 else 0.0, TINY)
     solved = res <= tol
-    worst, last = stats[2], stats[7]
-    if solved:
-        last = applied
-        if res > worst:
-            worst = res
+    status = OK if solved and applied <= tol else (LCP_FAILED if not solved else RESIDUAL_EXCEEDED)
+    worst = stats[2]
+    last = stats[7]
+    worst = res if solved and res > worst else worst
+    last = applied if solved else last
     stats[0] += 1
     stats[2] = worst
     stats[7] = last
-    return OK if solved and applied <= tol else (LCP_FAILED if not solved else RESIDUAL_EXCEEDED)
+    return status
 
 
 @njit(**JIT)
@@ -1266,7 +1277,7 @@ def _advance_loop(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupl
                                               sol, G, Gs, Lf, basic, infeas, du, u1, P, col)
                 elif a == 1:
                     status = impulse_one(kl, s, us, uf, act[0], Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol,
-                                         stats, du, u1, P)
+                                         stats, u1, P)
                 elif a > 1:
                     status = contact_impulse(kl, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, AinvWT, Ghat,
                                              e, tol, stats, gk, bvec, x, lc, le, gc, rhs, sol, G, Gs, Lf,
@@ -1483,7 +1494,7 @@ def _advance_scalar_loop(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, 
     fb = (1.0 - theta) * f_c[0] + theta * f_c[0]
     n0 = n1 = nu_c[0]
     d0 = d1 = 0.0
-    ufa, du, u1a, P = np.empty(1), np.empty(1), np.empty(1), np.zeros(1)
+    ufa, u1a, P = np.empty(1), np.empty(1), np.zeros(1)
     nu_dot = np.zeros((2, 1))
     gmin, gstep = stats[3], stats[4]
     times = rec_t.shape[0] > 0
@@ -1526,8 +1537,7 @@ def _advance_scalar_loop(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, 
             qs[0, 0], us[0, 0] = q, u
             ufa[0] = uf
             nu_dot[0, 0], nu_dot[1, 0] = d0, d1
-            status = impulse_one(0, 0, us, ufa, 0, Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats, du,
-                                 u1a, P)
+            status = impulse_one(0, 0, us, ufa, 0, Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats, u1a, P)
             if stats[7] > stats[5]:
                 stats[5] = stats[7]
                 stats[6] = k + 1
