@@ -803,3 +803,28 @@ def test_the_one_contact_calls_hold_no_reference_counts():
     for ir in (imp, proj):
         assert "@NRT_incref" not in ir and "@NRT_decref" not in ir
     assert "fdiv double" in imp                  # the body is the function's (its −b/Ĝ_jj)
+
+
+@pytest.mark.parametrize("k0,k1", [(0, 0), (5, 5), (127, 128), (0, 16_383), (300, 1_000), (16_384, 32_767),
+                                   (1_000_001, 1_000_900)])
+def test_compiled_waves_are_grid_wave_bit_for_bit(k0, k1):
+    """:func:`observer.loop.wave_table` (anchors by numpy, combined by the compiled
+    :func:`kernel.fill_waves`) holds :func:`observer.model.grid_wave`'s values bit for bit, for
+    every function, on windows inside one block, across blocks and far from t = 0; and they
+    are the waves (to the rounding bound of grid_wave's docstring)."""
+    from observer.loop import wave_table
+    from observer.model import grid_wave
+
+    rng = np.random.default_rng(k0 + 7 * k1)
+    t0, h = float(rng.uniform(-1.0, 1.0)), float(rng.choice([1e-4, 2e-4, 1e-3]))
+    omega = np.concatenate([rng.uniform(0.0, 60.0, 5), [0.0]])
+    phase = rng.uniform(-3.0, 3.0, 6)
+    function = np.array([kernel.WAVE_COS, kernel.WAVE_SIN, kernel.WAVE_MINUS_SIN, kernel.WAVE_SIN,
+                         kernel.WAVE_COS, kernel.WAVE_MINUS_SIN])
+    tab = wave_table(t0, h, k0, k1, omega, phase, function)
+    assert tab.shape == (6, k1 - k0 + 1)
+    want = np.stack([grid_wave(t0, h, k0, k1, w, ph, kernel.WAVE_NAMES[f]) for w, ph, f in zip(omega, phase, function)])
+    np.testing.assert_array_equal(tab.view(np.int64), want.view(np.int64))
+    x = np.multiply.outer(omega, t0 + np.arange(k0, k1 + 1) * h) + phase[:, None]
+    direct = np.stack([[np.cos, np.sin, lambda z: -np.sin(z)][f](x[p]) for p, f in enumerate(function)])
+    assert np.abs(tab - direct).max() <= 4.0 * (60.0 * (abs(t0) + (k1 + 128) * h) + 4.0) * np.finfo(float).eps
