@@ -973,12 +973,15 @@ def fill_waves(ca, sa, cb, sb, function, k0, out):
             x = ca[p, a - a0]
             y = sa[p, a - a0]
             o = a * B - k0
-            for j in range(max(k0 - a * B, 0), min(k1 - a * B, B - 1) + 1):
-                if fn == WAVE_COS:
+            j0, j1 = max(k0 - a * B, 0), min(k1 - a * B, B - 1) + 1
+            if fn == WAVE_COS:                      # the function chosen per block, not per point
+                for j in range(j0, j1):
                     out[p, o + j] = x * cb[p, j] - y * sb[p, j]
-                elif fn == WAVE_SIN:
+            elif fn == WAVE_SIN:
+                for j in range(j0, j1):
                     out[p, o + j] = y * cb[p, j] + x * sb[p, j]
-                else:
+            else:
+                for j in range(j0, j1):
                     out[p, o + j] = -(y * cb[p, j] + x * sb[p, j])
 
 
