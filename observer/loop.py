@@ -899,14 +899,20 @@ def specialization(S: int, structure: int, summary: bool, record_pre: bool, mast
 def wave_table(t0: float, h: float, k0: int, k1: int, omega: np.ndarray, phase: np.ndarray,
                function: np.ndarray) -> np.ndarray:
     """The waves of :func:`signal_tables` at the grid points k0..k1: shape (waves, k1 − k0 + 1),
-    entry ``[p, k − k0] = function_p(ω_p t_k + phase_p)`` from :func:`observer.model.grid_wave`
-    (the values of :meth:`observer.model.Harmonic.on_grid`, bit for bit)."""
-    from observer.kernel import WAVE_NAMES
-    from observer.model import grid_wave
+    entry ``[p, k − k0] = function_p(ω_p t_k + phase_p)``, the values of
+    :func:`observer.model.grid_wave` (so of :meth:`observer.model.Harmonic.on_grid`) bit for
+    bit: its anchors (:func:`observer.model.grid_anchors`, numpy) combined by the compiled
+    :func:`observer.kernel.fill_waves`."""
+    from observer.kernel import fill_waves
+    from observer.model import grid_anchors
 
-    out = np.empty((omega.size, k1 - k0 + 1))
-    for p, (w, ph, fn) in enumerate(zip(omega, phase, function)):
-        out[p] = grid_wave(t0, h, k0, k1, w, ph, WAVE_NAMES[fn])
+    P = omega.size
+    out = np.empty((P, k1 - k0 + 1))
+    if P == 0:
+        return out
+    anchors = [grid_anchors(t0, h, k0, k1, w, ph) for w, ph in zip(omega, phase)]
+    ca, sa, cb, sb = (np.ascontiguousarray([a[i] for a in anchors], dtype=np.float64) for i in range(4))
+    fill_waves(ca, sa, cb, sb, np.ascontiguousarray(function, dtype=np.int64), int(k0), out)
     return out
 
 

@@ -30,6 +30,20 @@ GRID_BLOCK = 128
 windows, :data:`observer.loop.WINDOW`, hold whole blocks)."""
 
 
+def grid_anchors(t0: float, h: float, k0: int, k1: int, omega: float,
+                 phase: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The anchors of :func:`grid_wave` for the grid points k0..k1: ``cos A_a``, ``sin A_a`` of
+    the blocks a = k0 // B .. k1 // B and ``cos β_j``, ``sin β_j``, j = 0..B − 1 (B =
+    :data:`GRID_BLOCK`; also combined in compiled code, :func:`observer.kernel.fill_waves`)."""
+    B = GRID_BLOCK
+    a0, a1 = k0 // B, k1 // B
+    ta = np.multiply(np.arange(a0 * B, a1 * B + 1, B), h, dtype=float)    # the anchors' t_k
+    ta += t0
+    A = omega * ta + phase
+    beta = omega * np.multiply(np.arange(B), h, dtype=float)
+    return np.cos(A), np.sin(A), np.cos(beta), np.sin(beta)
+
+
 def grid_wave(t0: float, h: float, k0: int, k1: int, omega: float, phase: float, function: str) -> np.ndarray:
     """``function(ω t_k + phase)`` at the grid points ``t_k = t0 + k·h``, k = k0..k1, by angle
     addition from anchors: two trigonometric calls per :data:`GRID_BLOCK` points instead of one
@@ -50,13 +64,8 @@ def grid_wave(t0: float, h: float, k0: int, k1: int, omega: float, phase: float,
     extended precision, and that the two evaluations agree to it). ``function`` is ``"cos"``,
     ``"sin"`` or ``"-sin"``.
     """
-    B = GRID_BLOCK
-    a0, a1 = k0 // B, k1 // B
-    ta = np.multiply(np.arange(a0 * B, a1 * B + 1, B), h, dtype=float)    # the anchors' t_k
-    ta += t0
-    A = omega * ta + phase
-    beta = omega * np.multiply(np.arange(B), h, dtype=float)
-    ca, sa, cb, sb = np.cos(A), np.sin(A), np.cos(beta), np.sin(beta)
+    a0 = k0 // GRID_BLOCK
+    ca, sa, cb, sb = grid_anchors(t0, h, k0, k1, omega, phase)
     if function == "cos":
         v = np.multiply.outer(ca, cb)
         v -= np.multiply.outer(sa, sb)
@@ -65,7 +74,7 @@ def grid_wave(t0: float, h: float, k0: int, k1: int, omega: float, phase: float,
         v += np.multiply.outer(ca, sb)
         if function == "-sin":
             np.negative(v, out=v)
-    return v.ravel()[k0 - a0 * B:k1 - a0 * B + 1]
+    return v.ravel()[k0 - a0 * GRID_BLOCK:k1 - a0 * GRID_BLOCK + 1]
 
 
 @dataclass(frozen=True)
