@@ -42,11 +42,19 @@ def compiled():
     compile_time()
 
 
+AGREE_STEPS = 20_000
+"""Longest horizon (steps) of the engines' agreement run: double_mass (200 000 steps by
+default) and the chain (80 000) are cut to their first 2 s, which hold impacts, closed
+contacts and coupled observers (asserted below); the numpy engine's full runs took ~1 min."""
+
+
 @pytest.mark.parametrize("name", list(SCENARIOS))
 def test_engines_agree_on_every_builtin(name):
     sc = observer.load_scenario(name)
     obs = tuple(sc.observer.get("observers", ())) if sc.observer else ()
-    a, b = (observer.simulate(sc, observers=obs, engine=e) for e in ("python", "compiled"))
+    t_end = min(sc.t_end, AGREE_STEPS * sc.h)
+    a, b = (observer.simulate(sc, t_end=t_end, observers=obs, engine=e) for e in ("python", "compiled"))
+    assert a.active.any()                                   # the run holds closed contacts
     tol = 2e-13 if name == "rocking_chain" else 1e-13
     assert a.metadata["engine"] == "python" and b.metadata["engine"] == "compiled"
     assert np.array_equal(a.t, b.t) and np.array_equal(a.active, b.active)
@@ -57,7 +65,7 @@ def test_engines_agree_on_every_builtin(name):
         assert rel(a.slaves[k].q, b.slaves[k].q) <= tol
         assert rel(a.slaves[k].u, b.slaves[k].u) <= tol
     if obs:
-        assert np.array_equal(a.chi, b.chi)
+        assert np.array_equal(a.chi, b.chi) and a.chi.any()
 
 
 def siconos_scenario(name: str) -> tuple[Scenario, pd.DataFrame]:
