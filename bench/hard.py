@@ -145,7 +145,7 @@ class HardCase:
     reference : str
         ``"closed form"``, ``"event solution"`` or ``"none: <reason>"``.
     quick : bool
-        In the ``quick`` suite (the quick cases together take < 2 s of CPU).
+        In the ``quick`` suite (the quick cases: ≈ 1.3 s of CPU in all, measured warm; the bench reports it).
     description : str
         What makes the case hard (and how to read its error).
     kind, solver, seed, observers, law, integrator

@@ -145,8 +145,8 @@ WARM_UP_STEPS = 20
 
 def warm_up_scenarios() -> None:
     """Run each built-in scenario for :data:`WARM_UP_STEPS` steps on the compiled engine, the
-    master alone and with the observers its suite cases use, so that numba compiles (or loads)
-    every specialization before a case is timed."""
+    master alone and with the observers its suite cases use, and the ball briefly on the event
+    engine, so that numba compiles (or loads) every specialization before a case is timed."""
     import observer
     from observer.scenarios import SCENARIOS
 
@@ -156,6 +156,8 @@ def warm_up_scenarios() -> None:
         observer.simulate(sc, observers=(), engine="compiled")
         if sc.observer:
             observer.simulate(sc, engine="compiled")
+    # the event engine's compiled root finders (numba, ≈ 0.9 s to import and load)
+    observer.simulate("bouncing_ball", t_end=WARM_UP_STEPS * 1e-3, integrator="event")
 
 
 def execute_case(case: Case, suite: str, out_dir: str | Path, env: dict,
