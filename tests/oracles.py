@@ -28,3 +28,27 @@ def oracle(*parts: str) -> Path:
             pytest.fail(message, pytrace=False)
         pytest.skip(message)
     return path
+
+
+def siconos_generated(name: str, t_end: float | None = None, label: str | None = None):
+    """A generated Siconos oracle (``siconos/generated/NAME.json``: its exact input) as a
+    Scenario named ``label`` (default NAME; horizon ``t_end``, default the oracle's own T), with
+    the oracle's trajectory."""
+    import json
+
+    import pandas as pd
+
+    from observer.scenario import Scenario
+
+    spec = json.loads(oracle("siconos", "generated", f"{name}.json").read_text())
+    ref = pd.read_csv(oracle("siconos", "generated", f"{name}.csv"))
+    f = spec["forcing"]
+    doc = {"system": {"M": spec["M"], "C": spec["C"], "K": spec["K"], "W": spec["W"],
+                      "forcing": {"constant": f["constant"], "amplitude": f["amplitude"],
+                                  "omega": f["omega"], "phase": f["phase"]},
+                      "gap": {"offset": spec["gap_offset"]}},
+           "impact": {"law": "newton", "restitution": spec["restitution"]},
+           "initial": {"q": spec["q0"], "u": spec["u0"]},
+           "simulation": {"h": spec["h"], "t_end": spec["T"] if t_end is None else t_end,
+                          "theta": spec["theta"]}}
+    return Scenario.from_dict(doc, label or name), ref

@@ -23,11 +23,10 @@ from observer.scenarios import SCENARIOS
 
 from kernel_fingerprint import PATH, result_digest, variants
 import numpy as np
-import pandas as pd
 import observer
 from observer.observers import Slave
 from observer.scenario import Scenario
-from oracles import oracle
+from oracles import siconos_generated
 from cases import nearly_redundant_contacts
 
 STORED = json.loads(PATH.read_text())
@@ -202,17 +201,7 @@ def test_engines_agree_self_switching():
 
 
 def siconos_two_contact(theta: str, t_end: float):
-    spec = json.loads(oracle("siconos", "generated", f"two_contact_theta{theta}.json").read_text())
-    ref = pd.read_csv(oracle("siconos", "generated", f"two_contact_theta{theta}.csv"))
-    f = spec["forcing"]
-    doc = {"system": {"M": spec["M"], "C": spec["C"], "K": spec["K"], "W": spec["W"],
-                      "forcing": {"constant": f["constant"], "amplitude": f["amplitude"],
-                                  "omega": f["omega"], "phase": f["phase"]},
-                      "gap": {"offset": spec["gap_offset"]}},
-           "impact": {"law": "newton", "restitution": spec["restitution"]},
-           "initial": {"q": spec["q0"], "u": spec["u0"]},
-           "simulation": {"h": spec["h"], "t_end": t_end, "theta": spec["theta"]}}
-    return Scenario.from_dict(doc, "two_contact"), ref
+    return siconos_generated(f"two_contact_theta{theta}", t_end, label="two_contact")
 
 
 @pytest.mark.parametrize("theta", ["0.5", "1.0"])

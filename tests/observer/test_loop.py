@@ -16,7 +16,6 @@
 
 from __future__ import annotations
 
-import json
 import time
 
 import numpy as np
@@ -29,7 +28,7 @@ from observer.observers import Slave
 from observer.scenario import Scenario
 from observer.scenarios import SCENARIOS
 
-from oracles import oracle
+from oracles import oracle, siconos_generated
 from cases import nearly_redundant_contacts
 
 
@@ -70,17 +69,7 @@ def test_engines_agree_on_every_builtin(name):
 
 def siconos_scenario(name: str) -> tuple[Scenario, pd.DataFrame]:
     """A generated Siconos oracle (``generated/NAME.json``: exact input) as a Scenario."""
-    spec = json.loads(oracle("siconos", "generated", f"{name}.json").read_text())
-    ref = pd.read_csv(oracle("siconos", "generated", f"{name}.csv"))
-    f = spec["forcing"]
-    doc = {"system": {"M": spec["M"], "C": spec["C"], "K": spec["K"], "W": spec["W"],
-                      "forcing": {"constant": f["constant"], "amplitude": f["amplitude"],
-                                  "omega": f["omega"], "phase": f["phase"]},
-                      "gap": {"offset": spec["gap_offset"]}},
-           "impact": {"law": "newton", "restitution": spec["restitution"]},
-           "initial": {"q": spec["q0"], "u": spec["u0"]},
-           "simulation": {"h": spec["h"], "t_end": spec["T"], "theta": spec["theta"]}}
-    return Scenario.from_dict(doc, name), ref
+    return siconos_generated(name)
 
 
 @pytest.mark.parametrize("name", ["impact_oscillator_theta1", "two_contact_theta0.5",
