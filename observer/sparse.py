@@ -27,7 +27,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from observer.arrays import as_array
+from observer.arrays import PATTERN_KEYS, as_array, periodic_vector  # noqa: F401  (PATTERN_KEYS re-exported)
 from observer.errors import InputError
 
 DENSE_MAX_N = 512
@@ -94,11 +94,6 @@ tail = [...]}`` (:data:`PATTERN_KEYS`); with ``symmetric = true`` (optional) onl
 are given and mirrored. At most one value per stored entry and no indices
 (:func:`banded_document`)."""
 
-PATTERN_KEYS = ("pattern", "head", "tail")
-"""A periodic diagonal: ``head``, then ``pattern`` repeated (and cut) to fill, then ``tail``
-(``head`` and ``tail`` optional, default empty): a chain of identical blocks stores its
-diagonals in O(block size) whatever its length (:func:`periodic_form`)."""
-
 PATTERN_MAX_PERIOD = 8
 """Longest period :func:`periodic_form` looks for."""
 
@@ -133,19 +128,20 @@ def periodic_form(d: np.ndarray, plain: bool = True) -> dict | None:
 def _diagonal(field: str, d: Any, size: int) -> np.ndarray:
     """One diagonal of a banded table (a number, a list of ``size`` values, a periodic table)."""
     if isinstance(d, dict):
-        unknown = sorted(set(d) - set(PATTERN_KEYS))
-        if unknown or "pattern" not in d:
-            raise InputError(f"{field}.{unknown[0] if unknown else 'pattern'}",
-                             f"a periodic diagonal has the keys {', '.join(PATTERN_KEYS)} (pattern required)")
-        pat = as_array(f"{field}.pattern", d["pattern"], (None,))
-        head = as_array(f"{field}.head", d.get("head", []), (None,))
-        tail = as_array(f"{field}.tail", d.get("tail", []), (None,))
-        fill = size - head.size - tail.size
-        if pat.size == 0 or fill < 0:
-            raise InputError(f"{field}.pattern", f"must be non-empty, with head and tail at most {size} values")
-        return np.concatenate([head, np.resize(pat, fill), tail])
+        return periodic_vector(field, d, size, PATTERN_KEYS)
     d = as_array(field, d, () if np.ndim(d) == 0 else (size,))
     return np.full(size, float(d)) if d.ndim == 0 else d
+
+
+def vector_document(x: Any) -> Any:
+    """Vector ``x`` as a scenario document writes it: a compact periodic table
+    (:data:`observer.arrays.VECTOR_KEYS`, ``{n, pattern, head, tail}``) when it is longer than
+    :data:`DENSE_MAX_N` and :func:`periodic_form` finds one (at most a quarter of its values
+    stored), else a list — as before for every system of at most 512 entries. Read back bit
+    for bit by :func:`observer.arrays.as_array`."""
+    x = np.asarray(x, dtype=float)
+    form = periodic_form(x) if x.ndim == 1 and x.size > DENSE_MAX_N else None
+    return {"n": int(x.size), **form} if form is not None else x.tolist()
 
 
 def banded_document(A: Any, plain: bool = True) -> dict:
