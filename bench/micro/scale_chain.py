@@ -35,6 +35,7 @@ chain's K has condition number 5·10¹², which the K-metric projection refuses,
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 
@@ -96,11 +97,14 @@ def big(N: int = 100_000, **params) -> dict:
     res = observer.simulate(sc, h=1e-3, t_end=1.0, observers=["jump", "nojump"], store="summary",
                             coupling=(0.0, 1.0))
     health = res.metadata["health"]
-    return {"N": N, "params": params, "wall_s": time.perf_counter() - w0, "cpu_s": time.process_time() - c0,
+    return {"N": N, "params": params, "load_average": os.getloadavg(),
+            "wall_s": time.perf_counter() - w0, "cpu_s": time.process_time() - c0,
             "load_wall_s": load, "loop_wall_s": res.stats.wall_time_s, "peak_rss_mb": peak_rss_mb(),
             "status": str(res.status.state.value), "contact_solves": res.stats.contact_solves,
             "max_abs_sigma_jump": float(np.abs(res.slaves["jump"].sigma).max()),
-            "h_omega_max": health["h_omega_max"], "omega_max_by": health["computed_by"]["omega_max"],
+            "h_omega_max": health["h_omega_max"], "omega_max": health["h_omega_max"] / 1e-3,
+            "omega_max_by": health["computed_by"]["omega_max"],
+            "K_definite_by": health["computed_by"].get("K_definite"), "min_eig_L": health["min_eig_L"],
             "warnings": list(health["warnings"])}
 
 
