@@ -105,7 +105,9 @@ def big(N: int = 100_000, **params) -> dict:
             "h_omega_max": health["h_omega_max"], "omega_max": health["h_omega_max"] / 1e-3,
             "omega_max_by": health["computed_by"]["omega_max"],
             "K_definite_by": health["computed_by"].get("K_definite"), "min_eig_L": health["min_eig_L"],
-            "warnings": list(health["warnings"])}
+            "warnings": list(health["warnings"]),
+            "summary": {r["observer"]: {k: r[k] for k in ("V_on", "V_end", "sum_projection", "sum_impulse")}
+                        for r in res.summary.to_dict("records")}}
 
 
 if __name__ == "__main__":
