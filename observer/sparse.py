@@ -424,8 +424,8 @@ def verified_definite(A: Any) -> tuple[bool, str] | None:
     ``λ_min(A) ≥ c − (those bounds) = c·(1 − 1/1.01) > 0``. Every diagonal entry must be
     positive (else A is not positive definite).
 
-    The test refuses a positive definite A whose λ_min is below c (a near miss: ``A − cI`` is
-    indefinite and its factorization breaks down), so c/max a_ii ≈ (2w+1)(w+2)·u is the
+    The test cannot prove a positive definite A whose λ_min is below c (a near miss:
+    ``A − cI`` is indefinite and its factorization breaks down, up to round-off), so c/max a_ii ≈ (2w+1)(w+2)·u is the
     smallest λ_min/max a_ii it can accept: 2.35e-15 for w = 2 (a chain of blocks). The default
     rocking chain of 10⁵ blocks (cond(K) = 2.5e12, λ_min = 3.16e-9, max K_ii = 4000) passes
     with λ_min = 335·c; its λ_min falls like 1/N², so it passes up to N ≈ 1.8·10⁶ blocks.
