@@ -19,7 +19,14 @@ Measured (issue 23, 2 cores shared by several processes; wall times scale with t
 times do not):
 
 * sweep N = 10 … 10⁴: whole call CPU 0.009 s (N = 10) … 0.26 s (10³) … 2.23 s (10⁴); fitted
-  exponents 0.77 (CPU), 0.78 (wall), 1.09 (the loop's own wall time) (load 9–16);
+  exponents 0.77 (CPU), 0.78 (wall), 1.09 (the loop's own wall time) (load 9–16); again with
+  the verified definiteness and compact vectors (load 10–10.7): 0.008 s … 0.21 s … 2.31 s,
+  exponents 0.78 (CPU), 0.78 (wall), 1.13 (loop wall);
+* the scaling suite's full list (``python -m bench run scaling``, N = 5 … 10⁵, master alone,
+  4000 steps, 14 cases in 1448 s of wall time at 28 % of a core, load 9–11): CPU time per step
+  ∝ N^0.99 (N ≥ 10: 0.99, N ≥ 50: 0.97), the loop's wall time per step N^1.03, the whole call's
+  CPU time N^0.91; N = 10⁵: 18.1 ms of CPU per step, whole call 78 s of CPU, 560 MB of
+  traced memory;
 * big N = 10⁵, the default chain (cond(K) = 2.5·10¹², K ≻ 0 verified by the banded Cholesky of
   K − cI, :func:`observer.sparse.verified_definite`), master + jump + nojump coupled over the
   1000 steps, summary storage: 55 s of CPU (116 s wall at load 7.7–8.0; 57 s CPU and 235 s wall
