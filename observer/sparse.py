@@ -425,9 +425,9 @@ def verified_definite(A: Any) -> tuple[bool, str] | None:
     positive (else A is not positive definite).
 
     The test cannot prove a positive definite A whose λ_min is below c (a near miss:
-    ``A − cI`` is indefinite and its factorization breaks down, up to round-off), so c/max a_ii ≈ (2w+1)(w+2)·u is the
-    smallest λ_min/max a_ii it can accept: 2.35e-15 for w = 2 (a chain of blocks). The default
-    rocking chain of 10⁵ blocks (cond(K) = 2.5e12, λ_min = 3.16e-9, max K_ii = 4000) passes
+    ``A − cI`` is indefinite and its factorization breaks down, up to round-off), so
+    c/max a_ii ≈ (2w+1)(w+2)·u is the smallest λ_min/max a_ii it can accept: 2.35e-15 for
+    w = 2 (a chain of blocks). The default rocking chain of 10⁵ blocks (cond(K) = 2.5e12, λ_min = 3.16e-9, max K_ii = 4000) passes
     with λ_min = 335·c; its λ_min falls like 1/N², so it passes up to N ≈ 1.8·10⁶ blocks.
     """
     if not (A.shape[0] == A.shape[1] and is_narrowly_banded(A) and exactly_symmetric(A)):
