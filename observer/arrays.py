@@ -63,12 +63,54 @@ def non_numeric_entry(field: str, value: Any) -> tuple[tuple[int, ...], str] | N
     return None
 
 
+PATTERN_KEYS = ("pattern", "head", "tail")
+"""A periodic vector: ``head``, then ``pattern`` repeated (and cut) to fill, then ``tail``
+(``head`` and ``tail`` optional, default empty): a chain of identical blocks stores its
+periodic vectors and its matrices' diagonals in O(block size) whatever its length
+(:func:`observer.sparse.periodic_form` writes it)."""
+
+VECTOR_KEYS = ("n",) + PATTERN_KEYS
+"""A compact vector in a scenario document: ``{n = N, pattern = [...], head = [...],
+tail = [...]}``, the periodic form (:data:`PATTERN_KEYS`) with its length ``n``, required
+(``{n = 400000, pattern = [0.0]}`` is 400 000 zeros); :func:`as_array` expands it, bit for
+bit, wherever a vector is read (initial state, forcing, gaps, observers, restitution)."""
+
+
+def periodic_vector(field: str, value: dict, size: int | None, keys: tuple[str, ...] = VECTOR_KEYS) -> np.ndarray:
+    """Expand a periodic table (``keys``: :data:`VECTOR_KEYS` for a vector, with its length
+    ``n``; :data:`PATTERN_KEYS` for a banded matrix's diagonal, whose length ``size`` the matrix
+    gives) into ``head + pattern repeated + tail``; errors name ``field.KEY``."""
+    unknown = sorted(set(value) - set(keys))
+    if unknown or "pattern" not in value or ("n" in keys and "n" not in value):
+        missing = "pattern" if "pattern" not in value else "n"
+        raise InputError(f"{field}.{unknown[0] if unknown else missing}",
+                         f"a periodic table has the keys {', '.join(keys)} ({'n and ' if 'n' in keys else ''}"
+                         "pattern required)")
+    if "n" in keys:
+        n = value["n"]
+        if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 1 or (size is not None and n != size):
+            want = f"the length {size}" if size is not None else "a positive integer"
+            raise InputError(f"{field}.n", f"must be {want}, got {n!r}")
+        size = n
+    pat = as_array(f"{field}.pattern", value["pattern"], (None,))
+    head = as_array(f"{field}.head", value.get("head", []), (None,))
+    tail = as_array(f"{field}.tail", value.get("tail", []), (None,))
+    fill = size - head.size - tail.size
+    if pat.size == 0 or fill < 0:
+        raise InputError(f"{field}.pattern", f"must be non-empty, with head and tail at most {size} values")
+    body = np.tile(pat, -(-fill // pat.size))[:fill]     # (np.resize concatenates fill/p copies: slow)
+    return np.concatenate([head, body, tail])
+
+
 def as_array(field: str, value: Any, shape: tuple[int | None, ...]) -> np.ndarray:
     """Convert ``value`` to a finite float64 array of the given shape (``None`` = any length).
 
     Entries must be numbers: strings (``"1.0"``), booleans and complex numbers are refused
-    rather than converted.
+    rather than converted. A vector (one-dimensional ``shape``) may also be a compact periodic
+    table (:data:`VECTOR_KEYS`, :func:`periodic_vector`).
     """
+    if isinstance(value, dict) and len(shape) == 1:
+        return periodic_vector(field, value, shape[0])
     bad = non_numeric_entry(field, value)
     if bad is not None:
         index, why = bad

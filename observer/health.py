@@ -37,7 +37,8 @@ Every run of :func:`observer.loop.run` gets a :class:`Health` record (issue 12, 
     How the spectral quantities were computed: ``omega_max`` (dense ``eigh``, or Lanczos with
     its tolerance for a large sparse system) and the model's checks of M, C, K, W
     (:attr:`observer.model.LinearSystem.check_methods`: dense eigenvalues and SVD, or banded
-    Cholesky and Lanczos).
+    Cholesky and Lanczos) and, when a K-metric projection needed K ≻ 0, how that was
+    established (``K_definite``: a verified banded Cholesky of K − cI, or eigenvalues).
 
 ``warnings`` lists one line per check outside its bound; :func:`emit` sends them to stderr
 (``warnings.warn`` with :class:`RunHealthWarning`).
@@ -238,7 +239,18 @@ def assess(inp, record_every: int, q: np.ndarray, u: np.ndarray, active: np.ndar
                   stats.get("residual_source", "applied"), pen,
                   float(st.time(gap_step)) if gap_step >= 0 and pen > 0 else None, ell,
                   float(pen_rel), lam, how, growth, bound, tuple(msgs),
-                  {"omega_max": omega_max_method(sys_), **getattr(sys_, "check_methods", {})})
+                  computed_by(sys_))
+
+
+def computed_by(system) -> dict:
+    """How the spectral quantities of ``system`` were computed: ``omega_max``, the model's
+    checks (``check_M`` ...) and, once a K-metric projection asked, ``K_definite``: how K ≻ 0
+    was established (a verified banded Cholesky of K − cI for a large banded K, else eigenvalues;
+    :meth:`observer.model.LinearSystem.stiffness_definiteness`)."""
+    out = {"omega_max": omega_max_method(system), **getattr(system, "check_methods", {})}
+    if "_K_definite" in system.__dict__:
+        out["K_definite"] = system.stiffness_definiteness()[1]
+    return out
 
 
 def projected_sets(inp, record_every: int, active: np.ndarray, chi: np.ndarray) -> list:

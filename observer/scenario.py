@@ -258,9 +258,12 @@ class Scenario:
                 return A
             return sps.sparse_document(A) if sps.is_sparse(A) else A.tolist()
 
+        def vec(x):              # long periodic vectors compact ({n, pattern, ...}), else lists
+            return sps.vector_document(x) if plain else x
+
         def harmonic(hm: Harmonic, const_key: str) -> dict:
-            d: dict = {const_key: hm.constant.tolist()}
-            terms = hm.terms()
+            d: dict = {const_key: vec(hm.constant)}
+            terms = [{k: vec(v) if isinstance(v, list) else v for k, v in t.items()} for t in hm.terms()]
             if terms:
                 d.update(terms[0])
                 if len(terms) > 1:
@@ -271,14 +274,17 @@ class Scenario:
             "scenario": {"name": self.name, "description": self.description},
             "system": {"M": mat(s.M), "C": mat(s.C), "K": mat(s.K), "W": mat(s.W),
                        "forcing": harmonic(s.forcing, "constant"), "gap": harmonic(s.gap, "offset")},
-            "impact": {"law": self.law.law, "restitution": self.law.restitution.tolist()
+            "impact": {"law": self.law.law, "restitution": vec(self.law.restitution.tolist())
                        if not self.law.is_global else float(self.law.restitution[0])},
-            "initial": {"q": mat(self.q0), "u": mat(self.u0)},
+            "initial": {"q": vec(self.q0), "u": vec(self.u0)},
             "simulation": {"t_end": self.t_end, "h": self.h, "theta": self.theta,
                            "solver": self.solver, "master_projection": self.master_projection},
         }
         if self.observer:
             doc["observer"] = copy.deepcopy(self.observer)
+            for key in ("q", "u"):
+                if isinstance(doc["observer"].get(key), (list, np.ndarray)):
+                    doc["observer"][key] = vec(doc["observer"][key])
         return doc
 
     def with_overrides(self, overrides: dict[str, Any]) -> "Scenario":

@@ -111,8 +111,9 @@ def as_scalar(field: str, value: Any, *, positive: bool = False, low: float | No
 
 
 def broadcast_vector(field: str, value: Any, length: int) -> np.ndarray:
-    """Accept a scalar or a vector of ``length`` entries; return a vector."""
-    if np.ndim(value) == 0:
+    """Accept a scalar or a vector of ``length`` entries (a list, or a compact periodic table:
+    :data:`observer.arrays.VECTOR_KEYS`); return a vector."""
+    if np.ndim(value) == 0 and not isinstance(value, dict):
         return np.full(length, as_scalar(field, value))
     return as_array(field, value, (length,))
 

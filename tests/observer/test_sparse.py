@@ -204,6 +204,8 @@ def test_sparse_and_dense_systems_run_the_same_trajectory():
     for x, y in [(a.q, b.q), (a.u, b.u)] + [(a.slaves[k].q, b.slaves[k].q) for k in a.slaves]:
         assert np.max(np.abs(x - y)) <= 1e-13 * max(1.0, np.max(np.abs(y)))
     assert a.metadata["health"]["computed_by"]["omega_max"].startswith("Lanczos")
+    assert a.metadata["health"]["computed_by"]["K_definite"].startswith("verified")     # banded K − cI
+    assert b.metadata["health"]["computed_by"]["K_definite"].startswith("eigenvalues")  # a dense K
     assert a.metadata["health"]["h_omega_max"] == pytest.approx(b.metadata["health"]["h_omega_max"], rel=1e-3)
 
 
