@@ -922,9 +922,11 @@ def _impact(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int, n_imp
         run.history.clear()
     landing = run.tiny_hops(t, x, key, new_persistent) if key else []
     cluster = joint_due(run, key, t, x, new_persistent, landing) if key else None
-    if cluster is not None and (len(cluster) > 1 or new_persistent):
+    relaunched = set(key) & set(persistent)         # held contacts this impact lifted
+    if cluster is not None and (len(cluster) > len(key) or new_persistent or relaunched):
         jt = joint_tail(run, t, x, new_persistent, cluster, key)
-        if jt is not None:             # others land within key's tail, or key bounces on a held set
+        if jt is not None:             # others land within key's tail, key bounces on a held
+            # set, or key re-launched a held contact (a Zeno sequence of Zeno sequences)
             out = run.joint_accumulate(jt, t, x, new_persistent, cluster, key, gm[
                 [A.index(c) for c in key]], n_impacts)
             run.history.clear()
