@@ -417,18 +417,21 @@ class _Run:
     def simultaneous_band(self, t: float, z: np.ndarray, gam: np.ndarray,
                           tol_g: np.ndarray) -> np.ndarray:
         """The gaps within which an open contact is impacted together with the one that
-        triggered an impact at t (:meth:`collide`): FLOOR_FACTOR motion tolerances of the gap,
-        or what CONTACT_TOL time resolutions hide at its approach speed ``|γ|·δt``, and never
-        more than ``tol_g`` (CONTACT_TOL motion tolerances, the band of persistent contact).
+        triggered an impact at t (:meth:`collide`): FLOOR_FACTOR round-offs of the gap's
+        representation ``ROUNDOFF·Σ|r z|`` (what float64 cannot tell from zero in these
+        coordinates), or what CONTACT_TOL time resolutions hide at its approach speed
+        ``|γ|·δt``; never more than ``tol_g`` (CONTACT_TOL motion tolerances, the band of
+        persistent contact).
 
-        Not CONTACT_TOL motion tolerances themselves: a contact in flight whose hop lasts
-        ≫ δt can sit that close to its contact point (a contact re-launched by another's
-        impacts, landing 4e-6 s later 9e-11 m away, was impacted early: its accumulation
-        time moved 5e-6 s, issue 19). Both terms are properties of the motion (invariant
-        under translation and time shift, scaled by a change of units)."""
-        tol1 = tol_g / CONTACT_TOL
+        Not CONTACT_TOL motion tolerances themselves: a contact in flight can sit that close
+        to its contact point long (≫ δt) before it lands (issue 19: a contact re-launched by
+        another's impacts, 9e-11 m above its contact point and landing 4e-6 s later, was
+        impacted early and its accumulation time moved by 5e-6 s; two contacts landing 5.5e-8 s
+        apart, 3e-12 m, were merged and t∞ moved by 1.6e-6 s)."""
+        fl = self.free_flow
+        floor = tolerance(fl.gap_rows, z)
         hidden = CONTACT_TOL * resolution(t - self.t0, self.tau) * np.abs(gam)
-        return np.minimum(tol_g, np.maximum(FLOOR_FACTOR * tol1, hidden))
+        return np.minimum(tol_g, np.maximum(FLOOR_FACTOR * floor, hidden))
 
     # -- Zeno ------------------------------------------------------------------------------
     def zeno_check(self, key: tuple, t: float, x: np.ndarray, gm: np.ndarray,
