@@ -41,7 +41,7 @@ class Reference:
     """The exact flow of ``system`` (a :class:`observer.model.LinearSystem` with constant ν)
     with restitution e (per contact), from q0, u0 at t0; :meth:`run` lists the events."""
 
-    def __init__(self, system, e, q0, u0, t0=0.0, v_hold=1e-12, dps=DPS):
+    def __init__(self, system, e, q0, u0, t0=0.0, v_hold=1e-12, dps=DPS, held=()):
         self.dps = dps
         with mp.workdps(dps):
             if np.any(np.asarray(system.gap.amplitude) != 0.0):
@@ -62,7 +62,7 @@ class Reference:
             self.z = np.array(list(_m(q0)) + list(_m(u0)) + osc + [mp.mpf(1)], dtype=object)
             self.N = self.z.size
             self.v_hold = mp.mpf(v_hold)
-            self.held: list[int] = []
+            self.held: list[int] = sorted(held)
             self._A: dict = {}
 
     # -- the flow ----------------------------------------------------------------------------
@@ -156,8 +156,8 @@ class Reference:
         s0, hs, V, cap = mp.mpf(0), hmax / 64, None, 0
         while True:
             left = t_end - self.t - s0
-            if left <= 0:
-                self.z, self.t = self._at(A, self.z, t_end - self.t), t_end
+            if left <= 0:                                 # z is at t + s0 = t_end
+                self.t = t_end
                 return None
             if V is None or hs > cap:
                 cap = min(2 * hs, hmax)
@@ -258,6 +258,22 @@ class Reference:
         self.z[:n] = self.z[:n] - self.Minv @ WP @ _solve(G, g)
         self.z[n:2 * n] = self.z[n:2 * n] - self.Minv @ WP @ _solve(G, v)
 
+    def _rest(self, rest, v, j):
+        """Hold ``rest`` after an impact of j that left it bouncing at v ≤ v_hold (None: no
+        tail): the remaining Zeno tail of j, ``2v/(α(1 − e))`` for its contact acceleration
+        −α on the flow before the hold (THEORY §7.1; its error O(α̇/α·tail²) is far below
+        ROOT_TOL for v ≤ 1e-9), is flown on the held flow."""
+        tail = mp.mpf(0)
+        if v is not None and v > 0:
+            alpha = -(self.vel_rows()[j] @ (self.A(self.held) @ self.z))
+            if alpha > 0:
+                tail = 2 * v / (alpha * (1 - self.e[j]))
+        self._project(rest)
+        if tail > 0:
+            self.z = self._at(self.A(rest), self.z, tail)
+            self.t += tail
+            self._project(rest)
+
     def run(self, t_end, max_events=10_000):
         """Events ``(t, kind, contact, γ⁻, γ⁺)`` (mpf) until t_end; kinds ``impact``,
         ``stick`` (held from then on), ``liftoff``. The state stays in :attr:`z`."""
@@ -286,7 +302,8 @@ class Reference:
                         out.append((self.t, "liftoff", c, a, b))
                 rest = [c for c, b in zip(A, gp) if b <= self.v_hold * scale]
                 if rest and self._positive_forces(rest):
-                    self._project(rest)
+                    self._rest(rest, gp[A.index(j)] if rest == sorted(set(self.held) | {j})
+                               else None, j)
                     out += [(self.t, "stick", c, mp.mpf(0), mp.mpf(0))
                             for c in rest if c not in self.held]
                     self.held = rest
