@@ -21,10 +21,12 @@ is a graze with zero impulse (the run continues past it); its row carries ``dept
 a note stating the enclosure, δ and the guaranteed crossing depth δ* = δ + its width.
 A crossing with ``|γ⁻| ≤`` CONTACT_TOL motion
 tolerances of γ is labelled a graze too, and its (tiny) impulse is applied. A minimum above
-the touch band is a miss: no event. Contacts count as closed together (simultaneous impact)
-when their gaps are within CONTACT_TOL motion tolerances
-(:func:`observer.event.roots.motion_tolerance`), which do not shrink with the gap when the
-contact sits at the coordinate origin (ν = 0).
+the touch band is a miss: no event. An open contact is impacted together with the one
+that triggers an impact (simultaneous impact) when its gap is within FLOOR_FACTOR round-offs
+of its representation or what CONTACT_TOL time resolutions hide at its speed, and never
+beyond CONTACT_TOL motion tolerances (:func:`observer.event.roots.motion_tolerance`, which do
+not shrink with the gap when the contact sits at the coordinate origin, ν = 0):
+:meth:`_Run.simultaneous_band`.
 
 Zeno: a run of impacts of one contact set whose intervals shrink geometrically (consecutive
 ratios equal within :data:`ZENO_RATIO_SPREAD`) is stopped once the impact velocity has
@@ -41,10 +43,12 @@ force.
 
 Overlapping tails: when, after an impact of a set ``key``, other open contacts land within
 a few tail lengths of it (two bodies landing together, a contact re-launched by the other's
-impacts and accumulating again between them), or key bounces on a held set (the chain's
+impacts and accumulating again between them), or key's impact re-launches a held contact, or
+key bounces on a held set (the chain's
 blocks settling on each other), and one contact of key is resolved as far as
 its gap's representation allows (next hop within :data:`ZENO_HOP_ROUNDOFF` round-offs, or
-:func:`tail_noise_limit` reached), the cluster's **joint tail** (:mod:`observer.event.tails`)
+:func:`tail_noise_limit` reached; several contacts: a hop within
+:data:`observer.event.tails.MERGE_HOPS` motion tolerances), the cluster's **joint tail** (:mod:`observer.event.tails`)
 resolves it by exact hops of every contact relative to its contact point until all of them
 are held; each contact's ``accumulation`` row is at the time it was last held (its own t_∞)
 and its note says ``joint tail of contacts …``. A joint tail that does not converge or would

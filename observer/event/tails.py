@@ -56,11 +56,14 @@ CLUSTER_REACH = 4.0
 MERGE_HOPS = 1e3
 """A joint tail of several contacts is also due once a hop height ``γ⁺²/(2|γ̇|)`` of one of
 them is within MERGE_HOPS motion tolerances (:func:`observer.event.roots.motion_tolerance`
-without its representation floor: a property of the motion, the same in any coordinates):
-from there on the gaps are within the band where the engine's impacts treat contacts as
-closed together (:data:`observer.event.master.CONTACT_TOL`), so resolving them event by event
-would merge a hop into the other contact's impact (issue 19: a contact re-launched by the
-other's impacts, merged 6.6e-13 m above its contact point, moved t∞ by 4.3e-7 s)."""
+without its representation floor: a property of the motion, the same in any coordinates).
+Below it the engine's event-by-event decisions, which use CONTACT_TOL motion tolerances
+(:data:`observer.event.master.CONTACT_TOL`: persistent contact, sticking, the velocity band),
+no longer follow the exact flow, and where they go wrong depends on the coordinates' round-off;
+the joint tail, resolved from the contact points, does not (issue 19: without this trigger a
+damped pair of contacts whose accumulations interleave rests 4.4e-8 s early at c = 0 and
+1.2e-9 s off translated by 100; a hop merged 6.6e-13 m above its contact point, under the
+older band of simultaneous impacts, moved t∞ by 4.3e-7 s)."""
 
 TAIL_SPAN = 0.25
 """A joint tail longer than this fraction of the time scale τ is not a Zeno tail (None)."""
