@@ -140,7 +140,7 @@ class Reference:
     def next_event(self, t_end, skip):
         """Advance to the first downward zero before t_end (→ (kind, contact)) or to t_end
         (→ None). ``skip``: rows (kind, contact) at a zero at the start: no root counted on
-        their first ``s_min`` (where their Taylor model is below 10⁶ round-offs)."""
+        their first ``s_min`` (where their Taylor model is below 100 round-offs)."""
         A = self.A(self.held)
         rows = self._rows()
         norm = max(sum(abs(a) for a in row) for row in A) + 1
