@@ -11,8 +11,11 @@ of the series' remaining terms over it, or when the function is monotone there (
 the bound of its change) without a downward sign change; a bracketed root is refined by
 bisection-safeguarded Newton to ``ROOT_TOL`` relative. Impacts: generalized Newton
 (eq. (5)) by enumeration of the LCP on the held set and the landing contact; a contact whose
-γ⁺ and gap are below ``v_hold`` (relative to the motion) is held if the acceleration LCP
-gives the held set positive forces (its remaining Zeno tail is ≤ 2·v_hold/(|γ̇|(1 − e)) s).
+γ⁺ is below ``v_hold`` (relative to the motion) is held if the acceleration LCP gives the
+held set positive forces, after its remaining Zeno tail ``2γ⁺/(α(1 − e))`` (THEORY §7.1)
+flown on the held flow (≤ 2·v_hold/(α(1 − e)) s, error O(α̇/α·tail²)). Keep v_hold ≤ 1e-12
+where two contacts' accumulations interleave (a contact held while the other still bounces
+re-launches: 1e-9 made the reference penetrate on one such system).
 """
 
 from __future__ import annotations
