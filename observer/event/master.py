@@ -21,10 +21,12 @@ is a graze with zero impulse (the run continues past it); its row carries ``dept
 a note stating the enclosure, δ and the guaranteed crossing depth δ* = δ + its width.
 A crossing with ``|γ⁻| ≤`` CONTACT_TOL motion
 tolerances of γ is labelled a graze too, and its (tiny) impulse is applied. A minimum above
-the touch band is a miss: no event. Contacts count as closed together (simultaneous impact)
-when their gaps are within CONTACT_TOL motion tolerances
-(:func:`observer.event.roots.motion_tolerance`), which do not shrink with the gap when the
-contact sits at the coordinate origin (ν = 0).
+the touch band is a miss: no event. An open contact is impacted together with the one
+that triggers an impact (simultaneous impact) when its gap is within FLOOR_FACTOR round-offs
+of its representation or what CONTACT_TOL time resolutions hide at its speed, and never
+beyond CONTACT_TOL motion tolerances (:func:`observer.event.roots.motion_tolerance`, which do
+not shrink with the gap when the contact sits at the coordinate origin, ν = 0):
+:meth:`_Run.simultaneous_band`.
 
 Zeno: a run of impacts of one contact set whose intervals shrink geometrically (consecutive
 ratios equal within :data:`ZENO_RATIO_SPREAD`) is stopped once the impact velocity has
@@ -41,10 +43,12 @@ force.
 
 Overlapping tails: when, after an impact of a set ``key``, other open contacts land within
 a few tail lengths of it (two bodies landing together, a contact re-launched by the other's
-impacts and accumulating again between them), or key bounces on a held set (the chain's
+impacts and accumulating again between them), or key's impact re-launches a held contact, or
+key bounces on a held set (the chain's
 blocks settling on each other), and one contact of key is resolved as far as
 its gap's representation allows (next hop within :data:`ZENO_HOP_ROUNDOFF` round-offs, or
-:func:`tail_noise_limit` reached), the cluster's **joint tail** (:mod:`observer.event.tails`)
+:func:`tail_noise_limit` reached; several contacts: a hop within
+:data:`observer.event.tails.MERGE_HOPS` motion tolerances), the cluster's **joint tail** (:mod:`observer.event.tails`)
 resolves it by exact hops of every contact relative to its contact point until all of them
 are held; each contact's ``accumulation`` row is at the time it was last held (its own t_∞)
 and its note says ``joint tail of contacts …``. A joint tail that does not converge or would
@@ -65,7 +69,7 @@ import numpy as np
 from observer.contact import get_solver
 from observer.event.flow import Flow, flow_for
 from observer.event.roots import (FLOOR_FACTOR, NonFiniteFlow, RootIsolationError, first_zero,
-                                  motion_tolerance, tolerance)
+                                  motion_tolerance, resolution, tolerance)
 from observer.event.tails import JointTail, horner, joint_due, joint_tail
 from observer.impact import ImpactLaw, impact
 from observer.scenario import Scenario
@@ -381,7 +385,8 @@ class _Run:
         g, gam = fl.gap_rows @ z, fl.velocity_rows @ z
         tol_g = CONTACT_TOL * self.tol(fl.gap_rows, z, t)
         tol_v = CONTACT_TOL * self.tol(fl.velocity_rows, z, t)
-        closing = {j for j in range(self.m) if abs(g[j]) <= tol_g[j] and gam[j] < tol_v[j]}
+        near = self.simultaneous_band(t, z, gam, tol_g)
+        closing = {j for j in range(self.m) if abs(g[j]) <= near[j] and gam[j] < tol_v[j]}
         A = sorted(set(persistent) | set(trigger) | closing)
         idx = np.array(A, dtype=int)
         G = self.delassus(A)
@@ -412,6 +417,25 @@ class _Run:
                 self.touch(c, t)
         self.add_impulse(t, A, lam)
         return x, tuple(stick), A, gm, lam
+
+    def simultaneous_band(self, t: float, z: np.ndarray, gam: np.ndarray,
+                          tol_g: np.ndarray) -> np.ndarray:
+        """The gaps within which an open contact is impacted together with the one that
+        triggered an impact at t (:meth:`collide`): FLOOR_FACTOR round-offs of the gap's
+        representation ``ROUNDOFF·Σ|r z|`` (what float64 cannot tell from zero in these
+        coordinates), or what CONTACT_TOL time resolutions hide at its approach speed
+        ``|γ|·δt``; never more than ``tol_g`` (CONTACT_TOL motion tolerances, the band of
+        persistent contact).
+
+        Not CONTACT_TOL motion tolerances themselves: a contact in flight can sit that close
+        to its contact point long (≫ δt) before it lands (issue 19: a contact re-launched by
+        another's impacts, 9e-11 m above its contact point and landing 4e-6 s later, was
+        impacted early and its accumulation time moved by 5e-6 s; two contacts landing 5.5e-8 s
+        apart, 3e-12 m, were merged and t∞ moved by 1.6e-6 s)."""
+        fl = self.free_flow
+        floor = tolerance(fl.gap_rows, z)
+        hidden = CONTACT_TOL * resolution(t - self.t0, self.tau) * np.abs(gam)
+        return np.minimum(tol_g, np.maximum(FLOOR_FACTOR * floor, hidden))
 
     # -- Zeno ------------------------------------------------------------------------------
     def zeno_check(self, key: tuple, t: float, x: np.ndarray, gm: np.ndarray,
@@ -905,9 +929,11 @@ def _impact(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int, n_imp
         run.history.clear()
     landing = run.tiny_hops(t, x, key, new_persistent) if key else []
     cluster = joint_due(run, key, t, x, new_persistent, landing) if key else None
-    if cluster is not None and (len(cluster) > len(key) or new_persistent):
+    relaunched = set(key) & set(persistent)         # held contacts this impact lifted
+    if cluster is not None and (len(cluster) > len(key) or new_persistent or relaunched):
         jt = joint_tail(run, t, x, new_persistent, cluster, key)
-        if jt is not None:             # others land within key's tail, or key bounces on a held set
+        if jt is not None:             # others land within key's tail, key bounces on a held
+            # set, or key re-launched a held contact (a Zeno sequence of Zeno sequences)
             out = run.joint_accumulate(jt, t, x, new_persistent, cluster, key, gm[
                 [A.index(c) for c in key]], n_impacts)
             run.history.clear()
