@@ -282,6 +282,10 @@ def _chunks(n: int, workers: int) -> list[range]:
 def run_members(sc: Scenario, designs, X, integrator, store, engine, paths, workers):
     """Every (design, member) in ``workers`` chunks of members, each chunk one run (in a
     thread when more than one). Returns (rows by (design, member), paths frame or None)."""
+    if integrator == "time-stepping" and store == "summary":
+        fast = _members_after_one_master(sc, designs, X, engine, paths, workers)
+        if fast is not None:
+            return fast
     chunks = _chunks(X.shape[0], workers)
     if integrator == "time-stepping" and len(chunks) > 1:
         from observer.loop import compile_time
@@ -304,6 +308,30 @@ def run_members(sc: Scenario, designs, X, integrator, store, engine, paths, work
         return rows, None
     import pandas as pd
 
+    return rows, pd.concat(frames, ignore_index=True)
+
+
+def _members_after_one_master(sc: Scenario, designs, X, engine, paths: int, workers: int):
+    """:func:`run_members` by :func:`observer.members.member_summaries` (one master run, then
+    every member alone over the grid); None when that path does not cover the run."""
+    from observer.members import member_summaries
+    from observer.result import RunState
+
+    n = X.shape[0]
+    keys = [(d, i) for d in designs for i in range(n)]
+    wanted = tuple(j for j, (d, i) in enumerate(keys) if i < paths)
+    done = member_summaries(sc, member_slaves(sc, designs, X, range(n)), engine, workers, wanted)
+    if done is None:
+        return None
+    table, traces = done
+    rows = {key: {"status": RunState.OK.value, **{c: r[c] for c in SUMMARY_COLUMNS}, "rises": int(r["rises"])}
+            for key, r in zip(keys, table)}
+    if not traces:
+        return rows, None
+    import pandas as pd
+
+    frames = [pd.DataFrame({"design": keys[j][0], "member": keys[j][1], "t": t, "V": V})
+              for j, (t, V) in traces.items()]
     return rows, pd.concat(frames, ignore_index=True)
 
 
