@@ -34,8 +34,8 @@ import numpy as np
 from numba import njit
 
 from observer.kernel import (CONTACTS_DENSE, F_DAMP, F_IMP, F_KON, F_MAXIMP, F_MAXINC, F_NINC, F_PROJ,
-                             F_VEND, F_VMAX, F_VON, JIT, OK, STATS_SIZE, STRUCTURE_DENSE, SUMMARY_FIELDS,
-                             contact_impulse, impulse_one, project_one, project_positions)
+                             F_VEND, F_VMAX, F_VON, JIT, LCP_FAILED, OK, PROJECTION_FAILED, RESIDUAL_EXCEEDED,
+                             STATS_SIZE, STRUCTURE_DENSE, SUMMARY_FIELDS, TINY, contact_impulse, project_positions)
 
 MASTER_VALUES = 1 << 25
 """Most values the per-step tables of the master may hold (q, u, P, χ, f̄, ν, ν̇ per step:
@@ -177,9 +177,34 @@ def advance_members(n_, m_, r_, j0, j1, steps, QM, UM, PM, CHI, COUP, FB, NU, NU
                     u1[i] = ufi
                     q1[i] = qs[s, i] + h * ((1.0 - theta) * us[s, i] + theta * ufi)
             if a > 0:                                       # the impulse, the positions
-                if a == 1:
-                    status = impulse_one(k, s, us, uf, act[0], Wp, Wi, Wv, NUD, AinvWT, Ghat, e, tol, stats,
-                                         u1, P)
+                if a == 1:                                  # impulse_one's operations, inline
+                    j = act[0]
+                    gk1 = 0.0
+                    for p in range(Wp[j], Wp[j + 1]):
+                        gk1 += Wv[p] * us[s, Wi[p]]
+                    gk1 = gk1 + NUD[k, j]
+                    gc1 = 0.0
+                    for p in range(Wp[j], Wp[j + 1]):
+                        gc1 += Wv[p] * uf[Wi[p]]
+                    gc1 = gc1 + NUD[k + 1, j]
+                    gjj = Ghat[j, j]
+                    b1 = gc1 + e[j] * gk1
+                    x1 = -b1 / gjj if b1 < 0.0 else 0.0
+                    gx = 0.0 + gjj * x1
+                    v1 = abs(min(x1, gx + b1))
+                    res = (v1 if v1 > 0.0 else 0.0) / max(abs(b1) if abs(b1) > 0.0 else 0.0,
+                                                      abs(gx) if abs(gx) > 0.0 else 0.0, TINY)
+                    for i in range(n):
+                        u1[i] = uf[i] + (0.0 + AinvWT[j, i] * x1)
+                    P[0] = x1
+                    d1 = 0.0
+                    for p in range(Wp[j], Wp[j + 1]):
+                        d1 += Wv[p] * (0.0 + AinvWT[j, Wi[p]] * x1)
+                    v1 = abs(min(x1, b1 + d1))
+                    applied = (v1 if v1 > 0.0 else 0.0) / max(abs(b1) if abs(b1) > 0.0 else 0.0,
+                                                          abs(d1) if abs(d1) > 0.0 else 0.0, TINY)
+                    status = OK if res <= tol and applied <= tol else (
+                        LCP_FAILED if not res <= tol else RESIDUAL_EXCEEDED)
                 else:
                     status = contact_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, NUD, AinvWT, Ghat, e, tol,
                                              stats, gk, bvec, x, lc, le, gc, rhs, sol, G, Gs, Lf, basic, infeas,
@@ -189,8 +214,17 @@ def advance_members(n_, m_, r_, j0, j1, steps, QM, UM, PM, CHI, COUP, FB, NU, NU
                 for i in range(n):
                     q1[i] = qs[s, i] + h * ((1.0 - theta) * us[s, i] + theta * u1[i])
                 if project:
-                    if a == 1:
-                        status = project_one(k + 1, act[0], slots[s], Wp, Wi, Wv, NU, KinvWT, L, q1, sig)
+                    if a == 1:                              # project_one's operations, inline
+                        j = act[0]
+                        g = 0.0
+                        for p in range(Wp[j], Wp[j + 1]):
+                            g += Wv[p] * q1[Wi[p]]
+                        g = g + NU[k + 1, j]
+                        l00 = L[slots[s], j, j]
+                        s1 = -g / l00 if l00 > 0.0 else 0.0
+                        for i in range(n):
+                            q1[i] += KinvWT[slots[s], j, i] * s1
+                        status = OK if l00 > 0.0 else PROJECTION_FAILED
                     else:
                         status = project_positions(k + 1, act, a, slots[s], Wp, Wi, Wv, NU, KinvWT, L, q1, sig,
                                                    gp, sp_, Gp, Lf)
@@ -249,7 +283,7 @@ def advance_members(n_, m_, r_, j0, j1, steps, QM, UM, PM, CHI, COUP, FB, NU, NU
                 summ[s, F_DAMP] += damping
                 summ[s, F_IMP] += impulse
                 summ[s, F_PROJ] += dV - damping - impulse
-                if Vp > 0.0 and impulse / Vp > summ[s, F_MAXIMP]:
+                if impulse > 0.0 and Vp > 0.0 and impulse / Vp > summ[s, F_MAXIMP]:   # the field is ≥ 0
                     summ[s, F_MAXIMP] = impulse / Vp
             Vprev[s] = V
             summ[s, F_VEND] = V
