@@ -59,21 +59,23 @@ def signal_tables_on_grid(inp, signals, steps: int) -> tuple[np.ndarray, np.ndar
     from observer.loop import WINDOW, wave_table
 
     st = inp.stepper
-    n, m = st.system.n, st.system.m
-    F = np.empty((steps + 1, n))
+    n, m, theta = st.system.n, st.system.m, float(st.theta)
+    FB = np.empty((steps, n))
     NU = np.empty((steps + 1, m))
-    NUD = np.zeros((steps + 1, m))
-    F[:] = signals.f_c
-    NU[:] = signals.nu_c
+    NUD = np.empty((steps + 1, m))
     e_ptr, cols, coef, wave = signals.e_ptr, signals.e_col, signals.e_coef, signals.e_wave
     for kb in range(0, max(steps, 1), WINDOW):
         k1 = min(steps, kb + WINDOW)
         waves = wave_table(st.t0, st.h, kb, k1, signals.omega, signals.phase, signals.function)
-        for out, lo, hi in ((F, e_ptr[0], e_ptr[1]), (NU, e_ptr[1], e_ptr[2]), (NUD, e_ptr[2], e_ptr[3])):
+        F = np.empty((k1 - kb + 1, n))
+        F[:] = signals.f_c
+        NU[kb:k1 + 1] = signals.nu_c
+        NUD[kb:k1 + 1] = 0.0
+        for out, lo, hi in ((F, e_ptr[0], e_ptr[1]), (NU[kb:k1 + 1], e_ptr[1], e_ptr[2]),
+                            (NUD[kb:k1 + 1], e_ptr[2], e_ptr[3])):
             for i in range(lo, hi):
-                out[kb:k1 + 1, cols[i]] += coef[i] * waves[wave[i]]
-    theta = float(st.theta)
-    FB = np.ascontiguousarray((1.0 - theta) * F[:-1] + theta * F[1:])
+                out[:, cols[i]] += coef[i] * waves[wave[i]]
+        FB[kb:k1] = (1.0 - theta) * F[:-1] + theta * F[1:]
     return FB, NU, NUD
 
 
