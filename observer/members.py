@@ -11,18 +11,22 @@ system's work per step; chunks of members run in threads (``nogil``).
 
 :func:`advance_members` performs, per observer step, the operations of the observer branch
 of :func:`observer.kernel._advance_loop` in the same order on the same values (dense
-structure and contact data, the streaming summary), and calls the kernel's own contact and
-projection functions (:func:`~observer.kernel.impulse_one`,
-:func:`~observer.kernel.contact_impulse`, :func:`~observer.kernel.project_one`,
-:func:`~observer.kernel.project_positions`): member i's summary is bitwise that of a single
-:func:`observer.simulate` of that member (``tests/observer/test_ensemble*.py``). The master
-alone takes the kernel's lean specialization, whose trajectory is bitwise the general loop's
+structure and contact data, the streaming summary): the kernel's own functions for several
+closed contacts (:func:`~observer.kernel.contact_impulse`,
+:func:`~observer.kernel.project_positions`) and, for one, the operations of
+:func:`~observer.kernel.impulse_one` and :func:`~observer.kernel.project_one` written inline
+(a call with their array arguments cost ~150 ns per contact step, a third of the loop's time
+on double_mass). Member i's summary is bitwise that of a single :func:`observer.simulate` of
+that member (``tests/observer/test_ensemble_members.py`` checks every branch against single
+runs: a change to the kernel's observer step must be made here too). The master alone takes
+the kernel's lean specialization, whose trajectory is bitwise the general loop's
 (:func:`observer.loop.specialization`).
 
 A run this path does not cover returns None, and :mod:`observer.ensemble` takes the kernel's
 run of the chunk instead (:func:`applicable` says which): banded or factored structure, a
 master that stops or needs the reference solver, a member whose contact step fails or whose
-state or summary is not finite (the kernel's run then reports it the way a single run does).
+state or summary is not finite (:class:`observer.loop.FiniteGuard`; the kernel's run then
+reports it the way a single run does).
 """
 
 from __future__ import annotations
@@ -127,8 +131,9 @@ def advance_members(n_, m_, r_, j0, j1, steps, QM, UM, PM, CHI, COUP, FB, NU, NU
     not advanced) over steps 0..steps−1; ``n_``, ``m_``, ``r_`` are tuples of n, m and
     ``len(rhos)`` zeros, so that these sizes are compile-time constants of the specialization
     (its loops unrolled: 70 → 45 ns per step of double_mass, min CPU time on a loaded
-    machine), or empty for n and m taken from the arrays (:func:`sizes`); returns the first observer whose step failed and the
-    step, as ``(s, k, status)`` (``status == OK``: all done).
+    machine), or empty for n and m taken from the arrays (:func:`sizes`). Returns the first
+    observer whose step failed and the step, as ``(s, k, status)`` (``status == OK``: all
+    done).
 
     Per observer step, the operations of the observer branch of
     :func:`observer.kernel._advance_loop` on a dense system in the same order: the closed set
@@ -211,7 +216,7 @@ def advance_members(n_, m_, r_, j0, j1, steps, QM, UM, PM, CHI, COUP, FB, NU, NU
                     gx = 0.0 + gjj * x1
                     v1 = abs(min(x1, gx + b1))
                     res = (v1 if v1 > 0.0 else 0.0) / max(abs(b1) if abs(b1) > 0.0 else 0.0,
-                                                      abs(gx) if abs(gx) > 0.0 else 0.0, TINY)
+                                                          abs(gx) if abs(gx) > 0.0 else 0.0, TINY)
                     for i in range(n):
                         u1[i] = uf[i] + (0.0 + AinvWT[j, i] * x1)
                     P[0] = x1
@@ -327,17 +332,39 @@ def advance_members(n_, m_, r_, j0, j1, steps, QM, UM, PM, CHI, COUP, FB, NU, NU
 def _member_input(sc, slaves, engine):
     """The run's loop input (master first, then ``slaves``) as :func:`observer.simulate` builds
     it, or None when the compiled engine would not take the run."""
+    import dataclasses
+
     from observer.engines import choose, describe
     from observer.engines.timestepping import loop_input
     from observer.stepping import MoreauJean
 
-    run = describe(sc, "time-stepping", slaves, None, "scenario", None, 1e-9, None, "summary", None)
+    first = {}
+    for s in slaves:                        # describe() checks each slave: one per design here
+        first.setdefault(id(s.design), s)
+    run = describe(sc, "time-stepping", list(first.values()), None, "scenario", None, 1e-9, None, "summary", None)
+    if not _finite_energies(sc.system, slaves):
+        return None                         # the kernel's chunks raise describe()'s error
+    run = dataclasses.replace(run, slaves=tuple(slaves))
     chosen, _ = choose(run, engine)
     if chosen.name != "compiled":
         return None
     stepper = MoreauJean(sc.system, sc.law, sc.h, sc.t_end, sc.theta, solver=sc.solver,
                          residual_tol=run.residual_tol, structure=chosen.structure)
     return loop_input(run, stepper)
+
+
+def _finite_energies(system, slaves) -> bool:
+    """Every slave's ½uᵀMu, ½qᵀKq and gaps finite (:func:`observer.scenario.check_finite_energy`,
+    all at once)."""
+    from observer.sparse import dense
+
+    Q = np.array([s.q0 for s in slaves], dtype=float)
+    U = np.array([s.u0 for s in slaves], dtype=float)
+    with np.errstate(over="ignore", invalid="ignore"):
+        kinetic = np.einsum("si,si->s", U, U @ dense(system.M))
+        elastic = np.einsum("si,si->s", Q, Q @ dense(system.K))
+        gaps = Q @ dense(system.W)
+    return bool(np.all(np.isfinite(kinetic)) and np.all(np.isfinite(elastic)) and np.all(np.isfinite(gaps)))
 
 
 def member_summaries(sc, slaves, engine, workers: int, paths: tuple = ()):
@@ -350,8 +377,8 @@ def member_summaries(sc, slaves, engine, workers: int, paths: tuple = ()):
     not one this path covers (module docstring), the master or a member failed, or a result is
     not finite. ``workers`` threads advance contiguous chunks of the members.
     """
-    from observer.loop import (law_bundle, observer_bundle, signal_tables, state_bundle, summary_bundle,
-                               summary_frame, system_bundle)
+    from observer.loop import (FiniteGuard, law_bundle, observer_bundle, signal_tables, state_bundle,
+                               summary_bundle, summary_frame, system_bundle)
     from observer.kernel import summary_start
     from observer.metrics import RHOS
 
@@ -381,10 +408,10 @@ def member_summaries(sc, slaves, engine, workers: int, paths: tuple = ()):
             tally.Cq, law.code, system.h, system.theta, system.Bu, system.Bq, system.Bf, system.Wp, system.Wi,
             system.Wv, system.AinvWT, system.Ghat, obs.KinvWT, obs.L, law.e, law.tol, path_row, every, rec_V)
     bounds = np.linspace(1, S, min(workers, S - 1) + 1).round().astype(int)
+    chunk = lambda j: advance_members(n_, m_, r_, bounds[j], bounds[j + 1], *args)  # noqa: E731
     with ThreadPoolExecutor(max_workers=len(bounds) - 1) as pool:
-        done = list(pool.map(lambda j: advance_members(n_, m_, r_, bounds[j], bounds[j + 1], *args), range(len(bounds) - 1)))
-    if any(status != OK for *_, status in done) or not (np.all(np.isfinite(state.qs)) and np.all(
-            np.isfinite(state.us)) and np.all(np.isfinite(tally.summ))):
+        done = list(pool.map(chunk, range(len(bounds) - 1)))
+    if any(status != OK for *_, status in done) or not FiniteGuard(inp).state_ok(state.qs, state.us, tally.summ):
         return None
     out = types.SimpleNamespace(summary={"fields": tally.summ, "k_on": tally.k_on, "k_off": tally.k_off,
                                          "rhos": tuple(RHOS)})
