@@ -164,8 +164,15 @@ def advance_members(n_, m_, r_, j0, j1, steps, QM, UM, PM, CHI, COUP, FB, NU, NU
     du = np.empty(n)
     basic, infeas = np.zeros(m, np.bool_), np.zeros(m, np.bool_)
     stats = np.zeros(STATS_SIZE)
+    marks = np.empty(2 * nr)
     for s in range(j0, j1):
         prow = path_row[s]
+        Vlast = Vprev[s]                        # the summary row in registers, written back below
+        von, vmax, vend, kon = summ[s, F_VON], summ[s, F_VMAX], summ[s, F_VEND], summ[s, F_KON]
+        ninc, maxinc, maximp = summ[s, F_NINC], summ[s, F_MAXINC], summ[s, F_MAXIMP]
+        damp, imp, proj = summ[s, F_DAMP], summ[s, F_IMP], summ[s, F_PROJ]
+        for i in range(2 * nr):
+            marks[i] = summ[s, SUMMARY_FIELDS + i]
         for k in range(steps):
             if COUP[k]:                                     # the closed set A = act[:a]
                 a = 0
@@ -296,36 +303,42 @@ def advance_members(n_, m_, r_, j0, j1, steps, QM, UM, PM, CHI, COUP, FB, NU, NU
                     for p in range(Wp[j], Wp[j + 1]):
                         g += Wv[p] * wv[n + Wi[p]]
                     impulse += g * dP
-            Vp = Vprev[s]
+            Vp = Vlast
             dV = V - Vp
             if kg - 1 >= k_on and kg <= k_off:
                 if dV > 0.0:
-                    summ[s, F_NINC] += 1
-                    if Vp > 0.0 and dV / Vp > summ[s, F_MAXINC]:
-                        summ[s, F_MAXINC] = dV / Vp
-                summ[s, F_DAMP] += damping
-                summ[s, F_IMP] += impulse
-                summ[s, F_PROJ] += dV - damping - impulse
-                if impulse > 0.0 and Vp > 0.0 and impulse / Vp > summ[s, F_MAXIMP]:   # the field is ≥ 0
-                    summ[s, F_MAXIMP] = impulse / Vp
-            Vprev[s] = V
-            summ[s, F_VEND] = V
+                    ninc += 1
+                    if Vp > 0.0 and dV / Vp > maxinc:
+                        maxinc = dV / Vp
+                damp += damping
+                imp += impulse
+                proj += dV - damping - impulse
+                if impulse > 0.0 and Vp > 0.0 and impulse / Vp > maximp:   # maximp ≥ 0
+                    maximp = impulse / Vp
+            Vlast = V
+            vend = V
             if kg >= k_on and kg <= k_off:
                 if kg == k_on:
-                    summ[s, F_VON] = V
-                    summ[s, F_KON] = kg
-                    summ[s, F_VMAX] = V
-                if V > summ[s, F_VMAX]:
-                    summ[s, F_VMAX] = V
-                V0 = summ[s, F_VON]
+                    von = V
+                    kon = kg
+                    vmax = V
+                if V > vmax:
+                    vmax = V
+                V0 = von
                 for i in range(nr):
                     below = V <= rhos[i] * V0
-                    if below and summ[s, SUMMARY_FIELDS + i] < 0:
-                        summ[s, SUMMARY_FIELDS + i] = kg
+                    if below and marks[i] < 0:
+                        marks[i] = kg
                     if not below:
-                        summ[s, SUMMARY_FIELDS + nr + i] = kg
+                        marks[nr + i] = kg
             if prow >= 0 and kg % every == 0:
                 rec_V[prow, kg // every] = V
+        Vprev[s] = Vlast
+        summ[s, F_VON], summ[s, F_VMAX], summ[s, F_VEND], summ[s, F_KON] = von, vmax, vend, kon
+        summ[s, F_NINC], summ[s, F_MAXINC], summ[s, F_MAXIMP] = ninc, maxinc, maximp
+        summ[s, F_DAMP], summ[s, F_IMP], summ[s, F_PROJ] = damp, imp, proj
+        for i in range(2 * nr):
+            summ[s, SUMMARY_FIELDS + i] = marks[i]
     return j1, steps, OK
 
 
