@@ -139,9 +139,10 @@ def advance_members(n_, m_, r_, j0, j1, steps, QM, UM, PM, CHI, COUP, FB, NU, NU
     :func:`observer.kernel._advance_loop` on a dense system in the same order: the closed set
     (χ_k of ``CHI`` while ``COUP[k]``, projected when ``jumps[s]``; else the observer's own
     predicted set with ν(t_k), ν̇(t_k), projected when ``master_projection``), u_free, the
-    impulse (:func:`~observer.kernel.impulse_one`, :func:`~observer.kernel.contact_impulse`),
-    the positions and their jump (:func:`~observer.kernel.project_one`,
-    :func:`~observer.kernel.project_positions`, metric slot ``slots[s]``), then the streaming
+    impulse (one contact: :func:`~observer.kernel.impulse_one`'s operations inline; several:
+    :func:`~observer.kernel.contact_impulse`), the positions and their jump (one contact:
+    :func:`~observer.kernel.project_one`'s operations inline; several:
+    :func:`~observer.kernel.project_positions`; metric slot ``slots[s]``), then the streaming
     summary (:data:`observer.kernel.SUMMARY_FIELDS`) against the master's state and impulse
     after the step (``QM``, ``UM``, ``PM`` rows k + 1, :func:`master_tables`); the signals
     are the tables of :func:`signal_tables_on_grid` read at the global step (the kernel's
