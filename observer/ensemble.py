@@ -2,16 +2,18 @@
 
 :func:`ensemble` samples n initial errors ``x = (e, v) = (q̂(0) − q(0), û(0) − u(0))`` (or takes
 them as an array), builds one :class:`~observer.observers.Slave` per (design, member) started
-from the master's initial state plus that member's error, and runs them all with the master
-in the compiled kernel's streaming summary (``store="summary"``): the observers of one run are
-independent given χ (paper eqs. (7)-(11)), so the ensemble is a dimension of the observers'
-bundle, not a second loop. The same n errors are used for every design (paired), and member i
-of a design is, step for step, the observer of a single :func:`~observer.simulate.simulate`
-started from that member's state.
+from the master's initial state plus that member's error, and computes every member's
+streaming summary (``store="summary"``) against one master run: the observers of one run are
+independent given χ (paper eqs. (7)-(11)). The same n errors are used for every design
+(paired), and member i of a design is, step for step, the observer of a single
+:func:`~observer.simulate.simulate` started from that member's state.
 
-With ``workers > 1`` the members are split into contiguous chunks, each run in its own thread
-with its own copy of the master (the kernel releases the GIL, ``nogil``): the master is
-re-run per chunk, bitwise the same, and every observer's arithmetic is unchanged.
+The time-stepped summary runs the master once and then each member alone over the whole grid
+(:mod:`observer.members`), the members in ``workers`` contiguous chunks, one thread each (the
+compiled loop releases the GIL, ``nogil``). Runs that path does not cover (banded systems,
+a failing step, V(t) paths with ``store="full"``, the event integrator) run the master with
+a chunk of members in the kernel (:func:`observer.simulate`), one chunk per thread, each with
+its own copy of the master, bitwise the same.
 """
 
 from __future__ import annotations
@@ -280,8 +282,14 @@ def _chunks(n: int, workers: int) -> list[range]:
 
 
 def run_members(sc: Scenario, designs, X, integrator, store, engine, paths, workers):
-    """Every (design, member) in ``workers`` chunks of members, each chunk one run (in a
-    thread when more than one). Returns (rows by (design, member), paths frame or None)."""
+    """Every (design, member): the time-stepped summary after one master run
+    (:func:`_members_after_one_master`) when :mod:`observer.members` covers the run, else in
+    ``workers`` chunks of members, each chunk one run (in a thread when more than one).
+    Returns (rows by (design, member), paths frame or None)."""
+    if integrator == "time-stepping" and store == "summary":
+        fast = _members_after_one_master(sc, designs, X, engine, paths, workers)
+        if fast is not None:
+            return fast
     chunks = _chunks(X.shape[0], workers)
     if integrator == "time-stepping" and len(chunks) > 1:
         from observer.loop import compile_time
@@ -304,6 +312,30 @@ def run_members(sc: Scenario, designs, X, integrator, store, engine, paths, work
         return rows, None
     import pandas as pd
 
+    return rows, pd.concat(frames, ignore_index=True)
+
+
+def _members_after_one_master(sc: Scenario, designs, X, engine, paths: int, workers: int):
+    """:func:`run_members` by :func:`observer.members.member_summaries` (one master run, then
+    every member alone over the grid); None when that path does not cover the run."""
+    from observer.members import member_summaries
+    from observer.result import RunState
+
+    n = X.shape[0]
+    keys = [(d, i) for d in designs for i in range(n)]
+    wanted = tuple(j for j, (d, i) in enumerate(keys) if i < paths)
+    done = member_summaries(sc, member_slaves(sc, designs, X, range(n)), engine, workers, wanted)
+    if done is None:
+        return None
+    table, traces = done
+    rows = {key: {"status": RunState.OK.value, **{c: r[c] for c in SUMMARY_COLUMNS}, "rises": int(r["rises"])}
+            for key, r in zip(keys, table)}
+    if not traces:
+        return rows, None
+    import pandas as pd
+
+    frames = [pd.DataFrame({"design": keys[j][0], "member": keys[j][1], "t": t, "V": V})
+              for j, (t, V) in traces.items()]
     return rows, pd.concat(frames, ignore_index=True)
 
 
@@ -357,8 +389,8 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
     paths : int
         Keep V(t) of members 0..paths−1 of every design (``df.attrs["paths"]``, long format).
     workers : int, optional
-        Threads, each running the master with a contiguous chunk of the members (default: the
-        machine's cores).
+        Threads, each advancing a contiguous chunk of the members (default: the machine's
+        cores).
     out : str or Path, optional
         A ``.parquet`` file for the rows (and ``<stem>.paths.parquet`` with ``paths``).
     label : str, optional
@@ -402,18 +434,16 @@ def _frame(sc, label, designs, X, rows, integrator, seed):
     """The tidy rows, design-major: identification, the run's summary, the member's error."""
     import pandas as pd
 
-    nd = sc.system.n
-    records = []
-    for d in designs:
-        for i in range(X.shape[0]):
-            rec = {"scenario": sc.name, "label": label, "design": d, "member": i, "integrator": integrator,
-                   "h": sc.h, "t_end": sc.t_end, "seed": seed, **rows[d, i]}
-            rec.update({f"dq0_{j}": X[i, j] for j in range(nd)})
-            rec.update({f"du0_{j}": X[i, nd + j] for j in range(nd)})
-            records.append(rec)
-    df = pd.DataFrame(records)
-    df["seed"] = df["seed"].astype("Int64")
-    return df
+    nd, n = sc.system.n, X.shape[0]
+    keys = [(d, i) for d in designs for i in range(n)]
+    df = pd.DataFrame({"scenario": sc.name, "label": label, "design": [d for d, _ in keys],
+                       "member": [i for _, i in keys], "integrator": integrator, "h": sc.h,
+                       "t_end": sc.t_end, "seed": pd.array([seed] * len(keys), dtype="Int64")})
+    first = rows[keys[0]]
+    summary = pd.DataFrame({c: [rows[k][c] for k in keys] for c in first})
+    errors = pd.DataFrame(np.tile(X, (len(designs), 1)),
+                          columns=[f"dq0_{j}" for j in range(nd)] + [f"du0_{j}" for j in range(nd)])
+    return pd.concat([df, summary, errors], axis=1)
 
 
 def _metadata(sc, designs, n, seed, initial_errors, V0, integrator, engine, store, workers, wall) -> dict:
