@@ -494,6 +494,9 @@ def run_ensemble(case: Case, ctx: Context) -> list[dict]:
             for rec in df.to_dict("records")]
 
 
+SUMMARY_EVERY_STEP = 40_000
+"""Below this many steps an ensemble's summary run with paths records every step
+(:func:`observer.ensemble`'s sampling keeps at most 20 000 rows)."""
 PATH_POINTS = 250
 """Samples of V(t) kept per stored member (evenly spaced in steps, the first and last
 included): enough for a band on a log axis, ≈ 40 kB of Parquet per design."""
@@ -517,7 +520,11 @@ def ensemble_paths(case: Case, ctx: Context, sc, designs: tuple[str, ...], df: p
     nd = sc.system.n
     first = df[df["design"] == designs[0]].sort_values("member").head(case.paths)
     X = first[[f"dq0_{j}" for j in range(nd)] + [f"du0_{j}" for j in range(nd)]].to_numpy(dtype=float)
-    run = observer.ensemble(sc, designs, n=len(X), initial_errors=X, paths=len(X),
+    # a summary run of fewer than 40 000 steps keeps every step anyway, and then computes the
+    # per-step parts of ΔV, which need the pre-jump states only a "full" run keeps (with K
+    # singular the K-metric fallback fails: bouncing_ball); "full" stores the same rows
+    store = "full" if sc.t_end / sc.h < SUMMARY_EVERY_STEP else "summary"
+    run = observer.ensemble(sc, designs, n=len(X), initial_errors=X, paths=len(X), store=store,
                             integrator=case.integrator, label=case.name, workers=ENSEMBLE_WORKERS)
     paths = thin_paths(run.attrs["paths"])
     paths["member"] = first["member"].to_numpy()[paths["member"].to_numpy()]

@@ -9,9 +9,14 @@ from __future__ import annotations
 
 import base64
 import io
+import multiprocessing
+import pickle
 import textwrap
 from functools import partial
-from dataclasses import dataclass
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
+from typing import Any
 
 import matplotlib
 
@@ -28,9 +33,10 @@ DPI = 96
 
 @dataclass(frozen=True)
 class Figure:
-    """An inline image: ``src`` is a ``data:image/png;base64,...`` URI."""
+    """An inline image: ``src`` is a ``data:image/png;base64,...`` URI (a :class:`Pending`
+    one while :func:`parallel_rendering` renders it)."""
 
-    src: str
+    src: str | Pending
     alt: str
     caption: str = ""
 
@@ -83,14 +89,8 @@ def fixed_layout(fig, left: float = 0.85, right: float = 0.2, top: float = 0.4, 
                         hspace=hspace / ax_h, wspace=wspace / ax_w)
 
 
-def to_data_uri(fig, fit: bool = True) -> str:
-    """Render a matplotlib figure as a base64 PNG data URI and close it.
-
-    One draw: the log axes' labels are set (:func:`_tidy_log_axes`), the layout fitted once
-    (``tight_layout``; not with ``fit=False``, a figure placed by :func:`fixed_layout`, nor
-    one with its own layout engine, e.g. ``"constrained"``) and the canvas saved as it is (no
-    ``bbox_inches="tight"``, which draws the figure twice).
-    """
+def _render(fig, fit: bool) -> str:
+    """The PNG data URI of ``fig`` (closed after): one draw (:func:`to_data_uri`)."""
     _tidy_log_axes(fig.axes)
     if fit and fig.get_layout_engine() is None:
         fig.tight_layout()
@@ -98,6 +98,65 @@ def to_data_uri(fig, fit: bool = True) -> str:
     fig.savefig(buf, format="png", dpi=DPI, pil_kwargs=PNG_OPTIONS)
     plt.close(fig)
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _render_pickled(data: bytes, fit: bool) -> str:
+    """:func:`_render` of a pickled figure (in a worker process of :func:`parallel_rendering`)."""
+    return _render(pickle.loads(data), fit)
+
+
+_POOL: list = []
+"""The process pool of the enclosing :func:`parallel_rendering` (empty outside it)."""
+
+
+@dataclass(frozen=True)
+class Pending:
+    """A figure being rendered in :func:`parallel_rendering`'s pool; ``str()`` waits for its
+    data URI (:func:`resolve` replaces it in the figures before the page is written)."""
+
+    future: Any
+
+    def __str__(self) -> str:
+        return self.future.result()
+
+
+def to_data_uri(fig, fit: bool = True) -> str | Pending:
+    """Render a matplotlib figure as a base64 PNG data URI and close it.
+
+    One draw: the log axes' labels are set (:func:`_tidy_log_axes`), the layout fitted once
+    (``tight_layout``; not with ``fit=False``, a figure placed by :func:`fixed_layout`, nor
+    one with its own layout engine, e.g. ``"constrained"``) and the canvas saved as it is (no
+    ``bbox_inches="tight"``, which draws the figure twice). Inside :func:`parallel_rendering`
+    the figure is pickled and rendered in a worker process: a :class:`Pending` is returned.
+    """
+    if not _POOL:
+        return _render(fig, fit)
+    data = pickle.dumps(fig)
+    plt.close(fig)
+    return Pending(_POOL[0].submit(_render_pickled, data, fit))
+
+
+@contextmanager
+def parallel_rendering(workers: int):
+    """Within the block, :func:`to_data_uri` renders in ``workers`` forked processes (none
+    with ``workers`` ≤ 1: each figure is rendered at once), while the caller goes on building
+    the page; the figures' layout, drawing and PNG encoding are ≈ half of a page's CPU time.
+    Pass every figure made inside through :func:`resolve` before leaving the block."""
+    if workers <= 1:
+        yield
+        return
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"))
+    _POOL.append(pool)
+    try:
+        yield
+    finally:
+        _POOL.clear()
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def resolve(figure: Figure) -> Figure:
+    """``figure`` with its data URI (waiting for a :class:`Pending` one)."""
+    return figure if isinstance(figure.src, str) else replace(figure, src=str(figure.src))
 
 
 def _positive(x: np.ndarray) -> np.ndarray:
@@ -342,6 +401,11 @@ def _matrix_label(r: pd.Series) -> str:
     return text + (f"\n✗ {100 * r['never']:.0f} % never" if r["never"] > 0 else "")
 
 
+def _seconds_label(x: float, _pos=None) -> str:
+    """Colour-bar tick label of the settling matrix: 1, 2 and 5 × 10ᵏ s as ``0.5``, ``20``."""
+    return f"{x:g}" if f"{x:.0e}"[0] in "125" else ""
+
+
 MATRIX_LABEL_CHARS = 44
 """Row labels of the settling matrix wrap at this many characters (the figure is sized to them)."""
 
@@ -371,7 +435,7 @@ def settling_matrix_figure(mat: pd.DataFrame) -> Figure | None:
     norm = matplotlib.colors.LogNorm(vmin=pos.min(), vmax=pos.max()) if pos.size and pos.min() < pos.max() else None
     im = ax.imshow(np.where(grid > 0, grid, np.nan), cmap="YlGnBu", norm=norm, aspect="auto", alpha=0.75)
     cb = fig.colorbar(im, ax=ax, label="median settling time (s)", shrink=0.8)
-    seconds = FuncFormatter(lambda x, _: f"{x:g}" if f"{x:.0e}"[0] in "125" else "")
+    seconds = FuncFormatter(_seconds_label)
     cb.ax.yaxis.set_major_formatter(seconds)
     cb.ax.yaxis.set_minor_formatter(seconds)
     ax.set_xticks(range(len(cols)), [look(c).label.replace(" (", "\n(") for c in cols], fontsize=8)

@@ -111,3 +111,14 @@ def test_stored_paths_are_the_members_own_thinned_runs(tmp_path):
         assert g["V"].iloc[0] == pytest.approx(row["V_on"], rel=1e-12)
         assert g["V"].iloc[-1] == pytest.approx(row["V_end"], rel=1e-12)
     assert p.groupby("design")["V"].apply(lambda v: v.nunique()).min() > 2 * PATH_POINTS  # distinct members
+
+
+def test_paths_of_a_singular_k_scenario(tmp_path):
+    """bouncing_ball (K = 0, the K-metric jump left out) keeps its paths too."""
+    import pandas as pd
+
+    case = Case("ensemble", "bouncing_ball", observers=DESIGNS, h=1e-3, t_end=0.5, members=3,
+                slave_offset=((0.2,), (-1.0,)), paths=2)
+    rows = run_case(case, _ctx(tmp_path))
+    p = pd.read_parquet(tmp_path / rows[0]["paths"])
+    assert set(p["design"]) == set(DESIGNS) - {"jump"} and set(p["member"]) == {0, 1}
