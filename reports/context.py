@@ -29,7 +29,7 @@ def plain_strings(df: pd.DataFrame) -> pd.DataFrame:
     selection of an Arrow column is a separate ``take`` (measured: a third of the page's
     table-building time); values and missing entries (NaN) are unchanged."""
     text = [c for c, t in df.dtypes.items() if isinstance(t, pd.StringDtype)]
-    return df.astype({c: object for c in text}) if text else df
+    return df.astype({c: object for c in text}).copy() if text else df     # copy: one block per dtype
 
 
 def suite_results(suite: str, folder: str | Path) -> Path:
