@@ -674,7 +674,7 @@ _SUITE_BUILDERS: dict[str, Callable[[], Suite]] = {
                                 "design (1000 members), 50 random systems, perturbed χ (full "
                                 "settings)", True, ("ensemble",), False),
     "k_metric": lambda: Suite("k_metric", "the K-metric question: built-ins (100 members per "
-                              "design) and 34 random systems, plain and projected master",
+                              "design) and 50 random systems, plain and projected master",
                               tuple(k_metric_cases()), None, _settings(False)),
     "hard": lambda: _suite("hard", "hard cases: status, NaN, residual and error against the "
                            "reference (issue 12 item 5)", True, ("hard",), False),
