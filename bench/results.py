@@ -98,8 +98,7 @@ def _read_case(path: Path):
     stored = (table.schema.metadata or {}).get(CHECKSUM_KEY)
     if stored is None:
         raise DamagedCase(path, "has no checksum (written before checksums, or not by bench)")
-    table = table.replace_schema_metadata(None)
-    if content_digest(table) != stored.decode("ascii", "replace"):
+    if content_digest(table.replace_schema_metadata(None)) != stored.decode("ascii", "replace"):
         raise DamagedCase(path, "checksum does not match its rows (altered)")
     if "case_rows" not in table.column_names or table.num_rows == 0 \
             or table.column("case_rows")[0].as_py() != table.num_rows:
@@ -153,13 +152,17 @@ class CaseStore:
         cached = self._verified.get(path)
         if cached is not None and cached[:2] == stamp:
             return cached[2]
+        return self._read(path, stamp)[1]
+
+    def _read(self, path: Path, stamp: tuple) -> tuple:
+        """``(table or None, reason or None)`` of the case file ``path`` (:func:`_read_case`),
+        its verdict remembered under ``stamp``."""
         try:
-            _read_case(path)
-            reason = None
+            table, reason = _read_case(path), None
         except DamagedCase as exc:
-            reason = exc.reason
+            table, reason = None, exc.reason
         self._verified[path] = (*stamp, reason)
-        return reason
+        return table, reason
 
     def good_files(self) -> list[Path]:
         """The case files that are whole (they open, their checksum matches)."""
@@ -234,8 +237,15 @@ class CaseStore:
         """All rows of the done cases, one DataFrame (cases in file-name order)."""
         import pandas as pd
 
-        frames = [pd.read_parquet(f) for f in self.good_files()]
-        frames = [f for f in frames if len(f)]
+        frames = []
+        for f in self.files():              # each file read once: verified, then converted
+            try:
+                st = f.stat()
+            except FileNotFoundError:
+                continue
+            table, _ = self._read(f, (st.st_mtime_ns, st.st_size))
+            if table is not None and table.num_rows:
+                frames.append(table.to_pandas())
         if not frames:
             return pd.DataFrame()
         return pd.concat(frames, ignore_index=True, sort=False)

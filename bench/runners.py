@@ -488,8 +488,50 @@ def run_ensemble(case: Case, ctx: Context) -> list[dict]:
             "size": case.size, "cpu_time_s": cpu, "wall_time_s": wall,
             "cpu_scope": f"whole ensemble: {len(designs)} designs × {case.members} members",
             "note": f"not applicable (K singular): {', '.join(skipped)}" if skipped else ""}
+    if case.paths:
+        base["paths"] = ensemble_paths(case, ctx, sc, designs, df)
     return [{**rec, **base, "status": str(rec["status"])}     # base: the case's seed, n, name
             for rec in df.to_dict("records")]
+
+
+SUMMARY_EVERY_STEP = 40_000
+"""Below this many steps an ensemble's summary run with paths records every step
+(:func:`observer.ensemble`'s sampling keeps at most 20 000 rows)."""
+PATH_POINTS = 250
+"""Samples of V(t) kept per stored member (evenly spaced in steps, the first and last
+included): enough for a band on a log axis, ≈ 40 kB of Parquet per design."""
+
+
+def thin_paths(paths: pd.DataFrame, points: int = PATH_POINTS) -> pd.DataFrame:
+    """The rows of ``paths`` (long format: design, member, t, V, every member on the same grid)
+    at ``points`` evenly spaced samples of the grid, the first and the last included."""
+    t = np.unique(paths["t"].to_numpy(dtype=float))
+    keep = t[np.unique(np.linspace(0, t.size - 1, min(points, t.size)).round().astype(int))]
+    return paths[paths["t"].isin(keep)].reset_index(drop=True)
+
+
+def ensemble_paths(case: Case, ctx: Context, sc, designs: tuple[str, ...], df: pd.DataFrame) -> str:
+    """V(t) of the first ``case.paths`` members of every design, for the report's bands: one more
+    :func:`observer.ensemble` run of the same master with those members' initial errors (read
+    from the rows ``df``; the members are independent given χ, so each path is the member's
+    own run), thinned by :func:`thin_paths` and written to ``<suite>/paths/<case>.parquet``.
+    Run after the timed ensemble (its ``cpu_time_s`` is not charged). Returns the file's path
+    relative to the results folder (the rows' ``paths`` column)."""
+    nd = sc.system.n
+    first = df[df["design"] == designs[0]].sort_values("member").head(case.paths)
+    X = first[[f"dq0_{j}" for j in range(nd)] + [f"du0_{j}" for j in range(nd)]].to_numpy(dtype=float)
+    # a summary run of fewer than 40 000 steps keeps every step anyway, and then computes the
+    # per-step parts of ΔV, which need the pre-jump states only a "full" run keeps (with K
+    # singular the K-metric fallback fails: bouncing_ball); "full" stores the same rows
+    store = "full" if sc.t_end / sc.h < SUMMARY_EVERY_STEP else "summary"
+    run = observer.ensemble(sc, designs, n=len(X), initial_errors=X, paths=len(X), store=store,
+                            integrator=case.integrator, label=case.name, workers=ENSEMBLE_WORKERS)
+    paths = thin_paths(run.attrs["paths"])
+    paths["member"] = first["member"].to_numpy()[paths["member"].to_numpy()]
+    path = ctx.artefacts / "paths" / f"{safe_name(case.case_id)}.parquet"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    paths.to_parquet(path, index=False)
+    return str(path.relative_to(ctx.out_dir))
 
 
 # ---------------------------------------------------------------------------------- scaling

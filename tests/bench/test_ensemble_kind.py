@@ -87,3 +87,38 @@ def test_perturbed_chi_samples_the_log_and_the_errors(tmp_path):
     assert err(a) != err(b) and err(a) == err(clean)             # errors follow the seed
     settle = lambda rows: [r["V_end"] for r in rows]
     assert settle(a) != settle(clean)                            # the χ the observers saw differs
+
+
+def test_stored_paths_are_the_members_own_thinned_runs(tmp_path):
+    """A case with ``paths`` keeps V(t) of its first members of every design, thinned to
+    PATH_POINTS samples from t = 0 to t_end; each path is that member's run: its first and
+    last samples are the member's row's V(t_on) (coupled from t = 0) and V_end."""
+    from bench.runners import PATH_POINTS
+    import pandas as pd
+
+    case = Case("ensemble", "double_mass", observers=("jump", "nojump"), h=1e-3, t_end=1.0, members=5,
+                seed=1, paths=3)
+    rows = run_case(case, _ctx(tmp_path))
+    rels = {r["paths"] for r in rows}
+    assert len(rels) == 1
+    p = pd.read_parquet(tmp_path / rels.pop())
+    assert set(p["design"]) == {"jump", "nojump"} and set(p["member"]) == {0, 1, 2}
+    for (d, i), g in p.groupby(["design", "member"]):
+        g = g.sort_values("t")
+        assert len(g) == PATH_POINTS
+        assert g["t"].iloc[0] == 0.0 and g["t"].iloc[-1] == pytest.approx(1.0, abs=1e-12)
+        row = next(r for r in rows if r["design"] == d and r["member"] == i)
+        assert g["V"].iloc[0] == pytest.approx(row["V_on"], rel=1e-12)
+        assert g["V"].iloc[-1] == pytest.approx(row["V_end"], rel=1e-12)
+    assert p.groupby("design")["V"].apply(lambda v: v.nunique()).min() > 2 * PATH_POINTS  # distinct members
+
+
+def test_paths_of_a_singular_k_scenario(tmp_path):
+    """bouncing_ball (K = 0, the K-metric jump left out) keeps its paths too."""
+    import pandas as pd
+
+    case = Case("ensemble", "bouncing_ball", observers=DESIGNS, h=1e-3, t_end=0.5, members=3,
+                slave_offset=((0.2,), (-1.0,)), paths=2)
+    rows = run_case(case, _ctx(tmp_path))
+    p = pd.read_parquet(tmp_path / rows[0]["paths"])
+    assert set(p["design"]) == set(DESIGNS) - {"jump"} and set(p["member"]) == {0, 1}
