@@ -59,7 +59,7 @@ class TimeStepping(Engine):
                              f"degrees of freedom; this system has n = {sc.system.n} (use \"jump\", the K metric)")
         inp = loop_input(run, stepper)
         out = run_loop(inp, engine=self.loop, record_every=record_every, store=run.store,
-                       record_pre=run.record_pre or (other_metric and run.store == "full"),
+                       record_pre=run.record_pre or (other_metric and (run.store == "full" or record_every == 1)),
                        on_chunk=run.on_chunk)
         return stepping_record(run, stepper, out, record_every)
 

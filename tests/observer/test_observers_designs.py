@@ -141,3 +141,26 @@ def test_design_registry_rejects_a_metric_without_jumps():
         ObserverDesign("x", False, "K", "x", "k")
     with pytest.raises(ValueError, match="metric"):
         dataclasses.replace(OBSERVER_DESIGNS["jump"], metric="euclid")
+
+
+@pytest.mark.parametrize("name", ["bouncing_ball", "random_system"])
+def test_summary_run_splits_dV_of_other_metrics_from_the_states_before_the_jump(name):
+    """A short summary run keeps every step and splits ΔV into its damping, impulse and jump
+    parts. In the mass metric the jump moves q by M⁻¹WΣ, not K⁻¹WΣ: the jump part must come from
+    the recorded pre-jump states (as in a full run), so the three parts add up to ΔV per step
+    to round-off. Before the fix a summary run used the K formula: a singular K (the ball)
+    failed with LinAlgError, an SPD one gave a jump part that did not add up."""
+    sc = observer.load_scenario(name, {"simulation.t_end": 0.5})
+    n = sc.system.n
+    rng = np.random.default_rng(3)
+    X = np.hstack([0.05 * rng.standard_normal(n), 0.05 * rng.standard_normal(n)])
+    slaves = [observer.Slave("jump_mass#0", True, sc.q0 + X[:n], sc.u0 + X[n:],
+                             OBSERVER_DESIGNS["jump_mass"])]
+    runs = {store: observer.simulate(sc, observers=slaves, store=store) for store in ("summary", "full")}
+    for store, res in runs.items():
+        s = res.slaves["jump_mass#0"]
+        resid = np.diff(s.V) - s.dV_damping[1:] - s.dV_impulse[1:] - s.dV_projection[1:]
+        assert np.abs(resid).max() <= 1e-12 * max(s.V.max(), 1e-300), (store, np.abs(resid).max())
+    assert np.any(runs["summary"].slaves["jump_mass#0"].dV_projection != 0.0) or name == "bouncing_ball"
+    np.testing.assert_allclose(runs["summary"].slaves["jump_mass#0"].dV_projection,
+                               runs["full"].slaves["jump_mass#0"].dV_projection, rtol=0, atol=1e-15)
