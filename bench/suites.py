@@ -659,7 +659,7 @@ _SUITE_BUILDERS: dict[str, Callable[[], Suite]] = {
                                      "settings)", True, ("work_precision",), False),
     "robustness": lambda: _suite("robustness", "observers under imperfect switching signals "
                                  "(full settings)", True, ("robustness",), False),
-    "scaling": lambda: _suite("scaling", "rocking_chain N = 5 … 1000: CPU time per step and "
+    "scaling": lambda: _suite("scaling", "rocking_chain N = 5 … 10⁵: CPU time per step and "
                               "memory", True, ("scaling",), False),
     "peers": lambda: _suite("peers", "Siconos and the toolkit on the same problems: time per "
                             "step, trajectory difference (needs python3-siconos)", True,

@@ -1242,3 +1242,23 @@ def test_design_key_number_is_the_median_final_v_of_each_design(synthetic_report
     for name, g in obs.groupby("observer"):
         label = OBSERVER_DESIGNS[name].label
         assert f"{label} {fmt(float(np.median(g['V_end_rel'])))} ({len(g)} runs)" in key
+
+
+def test_peak_memory_is_fitted_within_one_storage_mode():
+    """The full scaling suite stores every step up to N = 1000 and one row every 0.1 s beyond:
+    a single fit across the switch measures the switch. Synthetic rows: memory ∝ N in each mode,
+    with a 10× drop at the switch; each mode's fit gives 1, a fit across both would give ≈ 0.5."""
+    from reports.analysis import scaling_fits
+
+    N = np.array([10, 100, 1000, 2000, 20_000, 200_000], float)
+    sparse = N > 1000
+    mem = np.where(sparse, 0.01, 0.1) * N
+    rows = pd.DataFrame({"N": N, "cpu_per_step_s": 1e-6 * N, "peak_mem_mb": mem,
+                         "h_record": np.where(sparse, 0.1, np.nan)})
+    fits = scaling_fits(rows).set_index("quantity")["exponent"]
+    assert fits["peak memory (every step stored)"] == pytest.approx(1.0, abs=1e-12)
+    assert fits["peak memory (a row every 0.1 s)"] == pytest.approx(1.0, abs=1e-12)
+    assert "peak memory" not in fits
+    assert _fitted(N, mem) < 0.8                                  # what one fit across both says
+    one_mode = scaling_fits(rows.assign(h_record=np.nan)).set_index("quantity")["exponent"]
+    assert one_mode["peak memory"] == pytest.approx(_fitted(N, mem), abs=1e-12)
