@@ -325,6 +325,24 @@ def test_lcp_failure_goes_to_the_reference_solver():
     np.testing.assert_allclose(co.u, py.u, rtol=0, atol=1e-8)
 
 
+def test_a_one_contact_step_beyond_the_tolerance_stops_both_engines_at_the_same_step():
+    """The scalar loop's failure exit (n = m = 1): the ball of mass 3, e = 0.37, whose
+    closed-form impulse at its first impact leaves a round-off residual (≈1e-16) above a
+    tolerance of 1e-300. Both engines stop there with ContactSolverError naming that step, the
+    first grid step after the free fall's impact time √(2h₀/g) (the compiled one after the
+    reference solver of its fallback step failed too)."""
+    from observer import load_scenario
+    from observer.errors import ContactSolverError
+    sc = load_scenario("bouncing_ball", {"param.m": 3.0, "param.restitution": 0.37})
+    h = 1e-3
+    steps = {}
+    for engine in ("compiled", "python"):
+        with pytest.raises(ContactSolverError) as err:
+            observer.simulate(sc, h=h, t_end=0.5, residual_tol=1e-300, engine=engine)
+        steps[engine] = int(re.search(r"at step (\d+)", str(err.value)).group(1))
+    assert steps["compiled"] == steps["python"] == int(np.ceil(np.sqrt(2 * 1.0 / 9.81) / h))
+
+
 # ---------------------------------------------------------------------------------------
 # banded structure (the kernel's banded free velocity)
 # ---------------------------------------------------------------------------------------
