@@ -392,7 +392,8 @@ def test_engines_agree_on_a_log_driven_observer(tmp_path):
     """χ from a log (``source="log"``): a master run's closed set written as a log drives the
     jump observer; both engines sample the log on the grid (the python engine through the
     same window of χ as the compiled one) and record the same χ and the same observer
-    trajectory, to round-off, and χ is the master's own closed set of that run."""
+    trajectory, to round-off, and χ is the master's own closed set of that run; both report
+    the applied residual (no step fell back to a solver)."""
     from observer.switching import log_from_active
     sc = observer.load_scenario("double_mass")
     ref = observer.simulate(sc, h=1e-3, t_end=1.0)
@@ -401,6 +402,8 @@ def test_engines_agree_on_a_log_driven_observer(tmp_path):
     log_from_active(ref.t, ref.active).to_csv(path, index=False)
     runs = {engine: observer.simulate(sc, h=1e-3, t_end=1.0, observers=("jump",), source="log",
                                       log=path, engine=engine) for engine in ENGINES}
+    for e in ENGINES:                  # no step fell back to a solver: the applied residual
+        assert runs[e].metadata["health"]["residual_source"] == "applied"
     chi = [runs[e].chi for e in ENGINES]
     np.testing.assert_array_equal(chi[0], chi[1])
     np.testing.assert_array_equal(chi[0][1:], ref.active[1:])
