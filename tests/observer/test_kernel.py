@@ -298,6 +298,32 @@ def test_solve_lcp_complementarity(m):
         assert res <= 1e-14
 
 
+@pytest.mark.parametrize("scale", [1e-10, 1.0, 1e10])
+def test_solve_lcp_is_positively_homogeneous_in_b(scale):
+    """LCP(G, s·b) is solved by s·x for every s > 0. G = [[2, −1], [−1, 2]], b = s·(−1, 0.2):
+    the start basis {i : b_i < 0} = {0} leaves w_1 = −0.3 s < 0, so contact 1 must be flipped
+    in at every scale (the flip tolerance is relative, 16·a·eps·(|b_i| + (|G||x|)_i)); the
+    solution is x = −G⁻¹b = s·(0.6, 0.2), w = 0 (by hand: G⁻¹ = [[2, 1], [1, 2]]/3)."""
+    G = np.array([[2.0, -1.0], [-1.0, 2.0]])
+    b = scale * np.array([-1.0, 0.2])
+    x, basic, infeas, Gs, rhs, sol, Lf = lcp_buffers(2)
+    it, status, res = kernel.solve_lcp(G, b, 2, x, basic, infeas, Gs, rhs, sol, Lf, 100)
+    assert status == 0
+    np.testing.assert_allclose(x, scale * np.array([0.6, 0.2]), rtol=1e-14, atol=0)
+
+
+def test_solve_lcp_starts_from_the_contacts_with_negative_b():
+    """A start basis {i : b_i < 0} that is already the solution takes one iteration: G =
+    [[2, 1], [1, 2]], b = (0, −1) gives x = (0, 0.5), w = (0.5, 0). (A start basis that also
+    took b_0 = 0 would give x_0 = −1/3 < 0 and need a second iteration.)"""
+    G = np.array([[2.0, 1.0], [1.0, 2.0]])
+    b = np.array([0.0, -1.0])
+    x, basic, infeas, Gs, rhs, sol, Lf = lcp_buffers(2)
+    it, status, res = kernel.solve_lcp(G, b, 2, x, basic, infeas, Gs, rhs, sol, Lf, 100)
+    assert (it, status) == (1, 0)
+    assert x[0] == 0.0 and x[1] == pytest.approx(0.5, rel=1e-15)
+
+
 def test_lcp_residual_is_the_relative_natural_residual():
     G = np.array([[2.0, 0.5], [0.5, 1.0]])
     b = np.array([-1.0, 3.0])
@@ -323,6 +349,24 @@ def test_lcp_failure_goes_to_the_reference_solver():
     assert {f["step"] for f in fb} == both & pushed
     np.testing.assert_allclose(co.q, py.q, rtol=0, atol=1e-8)
     np.testing.assert_allclose(co.u, py.u, rtol=0, atol=1e-8)
+
+
+def test_a_one_contact_step_beyond_the_tolerance_stops_both_engines_at_the_same_step():
+    """The scalar loop's failure exit (n = m = 1): the ball of mass 3, e = 0.37, whose
+    closed-form impulse at its first impact leaves a round-off residual (≈1e-16) above a
+    tolerance of 1e-300. Both engines stop there with ContactSolverError naming that step, the
+    first grid step after the free fall's impact time √(2h₀/g) (the compiled one after the
+    reference solver of its fallback step failed too)."""
+    from observer import load_scenario
+    from observer.errors import ContactSolverError
+    sc = load_scenario("bouncing_ball", {"param.m": 3.0, "param.restitution": 0.37})
+    h = 1e-3
+    steps = {}
+    for engine in ("compiled", "python"):
+        with pytest.raises(ContactSolverError) as err:
+            observer.simulate(sc, h=h, t_end=0.5, residual_tol=1e-300, engine=engine)
+        steps[engine] = int(re.search(r"at step (\d+)", str(err.value)).group(1))
+    assert steps["compiled"] == steps["python"] == int(np.ceil(np.sqrt(2 * 1.0 / 9.81) / h))
 
 
 # ---------------------------------------------------------------------------------------

@@ -386,3 +386,47 @@ def test_failed_steps_of_master_and_observer_are_recorded_as_the_reference_engin
     assert np.array_equal(co.active, py.active) and np.array_equal(co.chi, py.chi)
     assert co.active.any(axis=0).all()                  # both contacts closed at some row
     np.testing.assert_allclose(co.slaves["nojump"].V, py.slaves["nojump"].V, rtol=0, atol=1e-12)
+
+
+def test_engines_agree_on_a_log_driven_observer(tmp_path):
+    """χ from a log (``source="log"``): a master run's closed set written as a log drives the
+    jump observer; both engines sample the log on the grid (the python engine through the
+    same window of χ as the compiled one) and record the same χ and the same observer
+    trajectory, to round-off, and χ is the master's own closed set of that run; both report
+    the applied residual (no step fell back to a solver)."""
+    from observer.switching import log_from_active
+    sc = observer.load_scenario("double_mass")
+    ref = observer.simulate(sc, h=1e-3, t_end=1.0)
+    assert ref.active.any()                                   # the log has contact intervals
+    path = tmp_path / "log.csv"
+    log_from_active(ref.t, ref.active).to_csv(path, index=False)
+    runs = {engine: observer.simulate(sc, h=1e-3, t_end=1.0, observers=("jump",), source="log",
+                                      log=path, engine=engine) for engine in ENGINES}
+    for e in ENGINES:                  # no step fell back to a solver: the applied residual
+        assert runs[e].metadata["health"]["residual_source"] == "applied"
+    chi = [runs[e].chi for e in ENGINES]
+    np.testing.assert_array_equal(chi[0], chi[1])
+    np.testing.assert_array_equal(chi[0][1:], ref.active[1:])
+    a, b = (runs[e].slaves["jump"] for e in ENGINES)
+    for x, y in [(a.q, b.q), (a.u, b.u)]:
+        assert np.max(np.abs(x - y)) <= 1e-12 * max(1.0, np.max(np.abs(y)))
+
+
+def test_positions_before_the_projection_are_the_same_on_both_engines():
+    """``record_pre=True`` (the proof checks build their known-bad integrators from it): the
+    jump observer of the double mass, started elsewhere, records its positions before the
+    projection; both engines record the same rows, which differ from the projected positions
+    exactly on the steps with a projection multiplier σ ≠ 0."""
+    from observer import loop
+    from observer.stepping import MoreauJean
+    sc = observer.load_scenario("double_mass")
+    st = MoreauJean(sc.system, sc.law, 1e-3, 1.0)
+    q0 = np.stack([sc.q0, sc.q0 + 0.05])
+    u0 = np.stack([sc.u0, sc.u0 - 0.2])
+    out = {engine: loop.run(loop.LoopInput(st, q0, u0, np.array([False, True]), False), engine,
+                            record_pre=True) for engine in ENGINES}
+    a, b = (out[e] for e in ENGINES)
+    assert np.max(np.abs(a.q_pre - b.q_pre)) <= 1e-12 * max(1.0, np.abs(b.q_pre).max())
+    moved = np.any(a.q_pre[1] != a.q[1], axis=1)
+    projected = np.any(a.sigma[1] != 0.0, axis=1)
+    assert projected.any() and np.array_equal(moved, projected)

@@ -210,3 +210,23 @@ def test_a_signal_during_the_event_observers_keeps_the_rows_every_system_reached
     assert ref.status.ok and ref.t.size == res.t.size
     np.testing.assert_allclose(res.to_frame().to_numpy(dtype=float), ref.to_frame().to_numpy(dtype=float),
                                rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("what,keys,text", [
+    (("state", 0), [], "q0 of the master (inf)"),
+    (("state", 3), [], "u1 of the master (inf)"),
+    (("state", 5), [], "exogenous state z5 of the master (inf)"),
+    (("derivative", 0, 1), [("g", 0), ("l", 1)], "contact force λ1 of the master (inf)"),
+    (("derivative", 2, 0), [("g", 0), ("l", 1)], "derivative 2 of the master's gap g0 (inf)"),
+    (("bound", 3, 1), [("g", 0), ("l", 1)],
+     "bound on derivative 3 of the master's contact force λ1 over the search window (inf)"),
+])
+def test_a_non_finite_flow_names_its_quantity(what, keys, text):
+    """The stop text of a non-finite flow names the quantity (n = 2): z = (q0, q1, u0, u1,
+    then the exogenous states), a gap g_j or a contact force λ_j (the functional's kind), its
+    derivative or the bound on its third derivative over the search window."""
+    from types import SimpleNamespace
+    from observer.event.master import _flow_quantity
+    from observer.event.roots import NonFiniteFlow
+    exc = NonFiniteFlow(1.0, 0.5, np.zeros(6), what, np.inf)
+    assert _flow_quantity(SimpleNamespace(n=2), keys, exc) == text

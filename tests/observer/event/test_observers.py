@@ -297,6 +297,10 @@ def test_bad_input_names_the_field(double_mass):
             run_observers(master, sc.with_overrides({"observer.coupling": window}), ("jump",))
     with pytest.raises(InputError, match="observer.coupling"):
         run_observers(master, sc, ("jump",), coupling=(5.0, 1.0))
+    from observer.event.observers import metric_matrix
+    with pytest.raises(InputError) as err:
+        metric_matrix(sc.system, "stiffness")
+    assert err.value.field == "observer.metric"
 
 
 def test_coupling_window_runs_uncoupled_before_t_on():
