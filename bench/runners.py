@@ -520,9 +520,8 @@ def ensemble_paths(case: Case, ctx: Context, sc, designs: tuple[str, ...], df: p
     nd = sc.system.n
     first = df[df["design"] == designs[0]].sort_values("member").head(case.paths)
     X = first[[f"dq0_{j}" for j in range(nd)] + [f"du0_{j}" for j in range(nd)]].to_numpy(dtype=float)
-    # a summary run of fewer than 40 000 steps keeps every step anyway, and then computes the
-    # per-step parts of ΔV, which need the pre-jump states only a "full" run keeps (with K
-    # singular the K-metric fallback fails: bouncing_ball); "full" stores the same rows
+    # a summary run of fewer than 40 000 steps keeps every step anyway: "full" stores the same
+    # rows (and the paths' ΔV parts); from 40 000 steps the summary's sampled V(t) suffices
     store = "full" if sc.t_end / sc.h < SUMMARY_EVERY_STEP else "summary"
     run = observer.ensemble(sc, designs, n=len(X), initial_errors=X, paths=len(X), store=store,
                             integrator=case.integrator, label=case.name, workers=ENSEMBLE_WORKERS)
