@@ -1217,13 +1217,15 @@ def test_impact_law_bad_restitution(restitution):
     assert str(info.value).startswith("impact.restitution:")
 
 
-@pytest.mark.parametrize("restitution", ["abc", {}])
-def test_impact_law_non_numeric_scalar_restitution(restitution):
+@pytest.mark.parametrize("restitution, field", [("abc", "impact.restitution"),
+                                                ({}, "impact.restitution.pattern")])
+def test_impact_law_non_numeric_scalar_restitution(restitution, field):
     """A non-numeric scalar restitution raises InputError naming ``impact.restitution`` (as a
-    non-numeric vector already does)."""
+    non-numeric vector already does); a table is read as a compact periodic vector
+    (``{n, pattern, head, tail}``), and an empty one is refused naming its missing key."""
     with pytest.raises(InputError) as info:
         ImpactLaw.build("newton", restitution, 3)
-    assert info.value.field == "impact.restitution"
+    assert info.value.field == field
 
 
 @pytest.mark.parametrize("law", ["Newton", "elastic", "", None, 0])
