@@ -113,6 +113,8 @@ MUTATION_TARGETS: dict[str, tuple[list[str], list[str]]] = {
     # silently: PYTEST_ARGS)
     "loop": (["observer/loop.py"], ["tests/observer/test_kernel.py", "tests/observer/test_loop_nonfinite.py",
                                     "tests/observer/test_sparse.py::test_factored_contact_data_run_the_dense_contact_datas_trajectory",
+                                    # the residual-exceeded stop of both engines
+                                    "tests/observer/test_health.py::test_residual_above_tolerance_stops_the_run",
                                     *(f"tests/observer/test_loop.py::{t}" for t in (
                                         "test_specialization_selection", "test_loop_times_are_the_grid",
                                         "test_summary_store_refuses_the_python_engine",
