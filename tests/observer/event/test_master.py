@@ -547,3 +547,19 @@ def test_rocking_chain_impacts_satisfy_newtons_law_recomputed_from_the_events():
         assert np.all(gp >= -1e-12 * scale)
     gaps = res.frame.filter(regex=r"^g\d+$").to_numpy()
     assert gaps.min() >= -1e-12
+
+
+@pytest.mark.parametrize("law", ["newton", "poisson"])
+def test_velocity_tail_is_the_balls_closed_form_for_one_contact_and_none_for_several(law):
+    """The tail model of one contact under constant acceleration (α₁ = 0) is THEORY §7.1's
+    geometric sum 2γ⁺/(α₀(1 − e)) (for one contact Poisson's law is Newton's); for a key of
+    several contacts there is no such model (None), whatever the law."""
+    from types import SimpleNamespace
+
+    from observer.event.master import _Run
+    from observer.impact import ImpactLaw
+    e, v, g = 0.5, 0.8, G0
+    run = SimpleNamespace(law=ImpactLaw.build(law, e, 2))
+    tail = _Run.velocity_tail(run, (1,), np.array([v]), np.array([-g]), np.array([0.0]))
+    assert tail == pytest.approx(2 * v / (g * (1 - e)), rel=1e-14)
+    assert _Run.velocity_tail(run, (0, 1), np.array([v, v]), np.array([-g, -g]), np.zeros(2)) is None
