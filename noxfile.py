@@ -113,13 +113,17 @@ MUTATION_TARGETS: dict[str, tuple[list[str], list[str]]] = {
     # silently: PYTEST_ARGS)
     "loop": (["observer/loop.py"], ["tests/observer/test_kernel.py", "tests/observer/test_loop_nonfinite.py",
                                     "tests/observer/test_sparse.py::test_factored_contact_data_run_the_dense_contact_datas_trajectory",
+                                    # the residual-exceeded stop of both engines
+                                    "tests/observer/test_health.py::test_residual_above_tolerance_stops_the_run",
                                     *(f"tests/observer/test_loop.py::{t}" for t in (
                                         "test_specialization_selection", "test_loop_times_are_the_grid",
                                         "test_summary_store_refuses_the_python_engine",
                                         "test_compile_time_warms_each_specialization_once",
                                         "test_failed_steps_of_master_and_observer_are_recorded_as_the_reference_engine",
                                         "test_engines_agree_on_a_log_driven_observer",
-                                        "test_positions_before_the_projection_are_the_same_on_both_engines")),
+                                        "test_positions_before_the_projection_are_the_same_on_both_engines",
+                                        "test_a_residual_equal_to_the_tolerance_does_not_stop_the_run",
+                                        "test_replaying_the_recorded_chi_reproduces_the_run")),
                                     "-k", "not bitwise_those_of_main and not hold_no_reference_counts"]),
     "event": (["observer/event/*"], ["tests/observer/event/test_master.py", "tests/observer/event/test_master_exact.py",
                                      "tests/observer/event/test_observers.py", "tests/observer/test_simulate_event.py",

@@ -430,3 +430,59 @@ def test_positions_before_the_projection_are_the_same_on_both_engines():
     moved = np.any(a.q_pre[1] != a.q[1], axis=1)
     projected = np.any(a.sigma[1] != 0.0, axis=1)
     assert projected.any() and np.array_equal(moved, projected)
+
+
+@pytest.mark.filterwarnings("ignore:mechanical energy grew")     # the broken scheme's, expected
+@pytest.mark.parametrize("engine", ["compiled", "python"])
+def test_a_residual_equal_to_the_tolerance_does_not_stop_the_run(engine):
+    """The residual tolerance is inclusive (a step stops the run only if its residual exceeds
+    ``residual_tol``): bouncing_ball with Â⁻¹W applied 1.5× (the broken scheme of
+    test_health's residual test, residuals ≈ 1/3) run with its own largest residual r as the
+    tolerance runs to the end with the same records; with the next double below r it stops
+    at a step of residual r, its records the free run's up to that step."""
+    import dataclasses
+
+    from observer.loop import LoopInput
+    from observer.stepping import MoreauJean
+
+    sc = observer.load_scenario("bouncing_ball", {"simulation.t_end": 1.0})
+
+    def run(tol):
+        st = MoreauJean(sc.system, sc.law, sc.h, sc.t_end, sc.theta, residual_tol=tol)
+        st.S = dataclasses.replace(st.S, AinvW=1.5 * st.S.AinvW)
+        st._slices.clear()
+        inp = LoopInput(st, sc.q0[None, :], sc.u0[None, :], np.array([False]), False)
+        return observer.loop.run(inp, engine=engine)
+
+    free = run(1.0)
+    r = free.health.max_residual
+    assert free.stopped_at is None and 0.1 < r < 1.0
+    at = run(r)
+    assert at.stopped_at is None and at.health.max_residual == r
+    assert np.array_equal(at.q, free.q) and np.array_equal(at.u, free.u)
+    below = run(float(np.nextafter(r, 0.0)))
+    k = below.stopped_at
+    assert k is not None and "complementarity residual" in below.stop_reason
+    assert below.health.max_residual == r and np.array_equal(below.q, free.q[:, :k + 1])   # r stopped it
+
+
+@pytest.mark.parametrize("engine", ["compiled", "python"])
+def test_replaying_the_recorded_chi_reproduces_the_run(engine):
+    """double_mass with a jump and a no-jump observer: the χ each step used (the master's
+    closed set, recorded in ``chi``) given back as an explicit χ array (``LoopInput.chi``,
+    row k = step k) runs the same steps: every record equal, on either engine."""
+    import dataclasses
+
+    from observer.loop import LoopInput
+    from observer.stepping import MoreauJean
+
+    sc = observer.load_scenario("double_mass", {"simulation.t_end": 0.15})
+    st = MoreauJean(sc.system, sc.law, sc.h, sc.t_end, sc.theta)
+    obs_q, obs_u = np.asarray(sc.observer["q"], float), np.asarray(sc.observer["u"], float)
+    inp = LoopInput(st, np.stack([sc.q0, obs_q, obs_q]), np.stack([sc.u0, obs_u, obs_u]),
+                    np.array([False, True, False]), False)
+    ref = observer.loop.run(inp, engine=engine)
+    assert ref.chi[1:].any() and not ref.chi[1:].all()          # contacts open and close
+    again = observer.loop.run(dataclasses.replace(inp, chi=ref.chi[1:].copy()), engine=engine)
+    for name in ("q", "u", "P", "sigma", "active", "chi"):
+        assert np.array_equal(getattr(again, name), getattr(ref, name)), name

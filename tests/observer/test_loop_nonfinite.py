@@ -10,6 +10,9 @@ the named quantity non-finite. Both engines and the three compiled specializatio
 
 from __future__ import annotations
 
+import os
+import signal
+
 import numpy as np
 import pytest
 
@@ -145,6 +148,32 @@ def test_the_summary_store_stops_with_a_finite_summary(monkeypatch):
     assert out.stopped_at == full.stopped_at
     assert np.all(np.isfinite(out.summary["fields"])) and np.all(np.isfinite(out.V))
     _assert_rows_finite(out)
+
+
+
+@pytest.mark.parametrize("engine", ["compiled", "python"])
+def test_a_streamed_run_reports_a_signal_only_when_one_stopped_it(monkeypatch, engine):
+    """A streamed run (``on_chunk``: the SIGINT/SIGTERM handler installed) stopped by the
+    overflow reports no signal (``stop_signal is None``, not an empty name); the same run with
+    SIGINT sent from its first chunk stops after that window and names SIGINT."""
+    monkeypatch.setattr(loop, "WINDOW", 1000)
+    monkeypatch.setattr(loop, "PYTHON_CHUNK", 1000)
+    inp = _input(1, 80.0)
+    out = loop.run(inp, engine=engine, on_chunk=lambda c: None)
+    assert out.stopped_at is not None and out.stop_reason.startswith("non-finite u0")
+    assert out.stop_signal is None
+    sent = []
+
+    def on_chunk(c):
+        if not sent:
+            sent.append(int(c.rows[-1]))
+            os.kill(os.getpid(), signal.SIGINT)
+
+    before = signal.getsignal(signal.SIGINT)
+    out = loop.run(inp, engine=engine, on_chunk=on_chunk)
+    assert signal.getsignal(signal.SIGINT) is before
+    assert out.stop_signal == "SIGINT" and out.stopped_at == sent[0] == 1000
+    assert out.stop_reason.startswith(f"SIGINT at t = {inp.stepper.time(1000):.9g}")
 
 
 def test_the_numpy_stepper_refuses_a_non_finite_free_velocity():

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import re
 
 import mpmath as mp
 import numpy as np
@@ -124,6 +125,18 @@ def test_two_coupled_contacts_accumulating_together_reach_t_inf_within_1e9_anywh
         assert abs(got[k] - ref[k]) <= 1e-9, (k, got[k], ref[k])
     last = res.events[res.events["kind"] == "accumulation"].iloc[-2:]
     assert last["note"].str.startswith("joint tail of contacts (0, 1)").all()
+    # the joint tail's Zeno records: one per contact of the cluster, at its accumulation
+    # time; impacts_resolved counts every impact event since the start (no landing resets it
+    # here: the earlier accumulations are contact 0's own extrapolated tails) plus the tail's
+    # exact hops (named in the accumulation rows' note)
+    joint = [z for z in res.zeno if "joint" in z]
+    assert sorted(z["contact"] for z in joint) == [0, 1] and all(z["joint"] == (0, 1) for z in joint)
+    hops = int(re.search(r": (\d+) impacts resolved by exact hops", last["note"].iloc[-1]).group(1))
+    impacts = res.events[res.events["kind"] == "impact"]["time"].to_numpy()
+    for z in joint:
+        assert z["t_inf"] == got[z["contact"]]
+        start = z["t_inf"] - z["tail_time"]                    # the impact that began the tail
+        assert z["impacts_resolved"] == np.count_nonzero(impacts <= start * (1 + 1e-14)) + hops
     n = 2
     x = res.state(max(got.values()))                  # both held: g = γ = 0 there
     Wc = np.array(W)

@@ -8,6 +8,8 @@ and Siconos' event-driven reference outputs (``BouncingBallED.ref``, ``LinearOsc
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.optimize import brentq
@@ -547,3 +549,43 @@ def test_rocking_chain_impacts_satisfy_newtons_law_recomputed_from_the_events():
         assert np.all(gp >= -1e-12 * scale)
     gaps = res.frame.filter(regex=r"^g\d+$").to_numpy()
     assert gaps.min() >= -1e-12
+
+
+@pytest.mark.parametrize("law", ["newton", "poisson"])
+def test_velocity_tail_is_the_balls_closed_form_for_one_contact_and_none_for_several(law):
+    """The tail model of one contact under constant acceleration (α₁ = 0) is THEORY §7.1's
+    geometric sum 2γ⁺/(α₀(1 − e)) (for one contact Poisson's law is Newton's); for a key of
+    several contacts there is no such model (None), whatever the law."""
+    from types import SimpleNamespace
+
+    from observer.event.master import _Run
+    from observer.impact import ImpactLaw
+    e, v, g = 0.5, 0.8, G0
+    run = SimpleNamespace(law=ImpactLaw.build(law, e, 2))
+    tail = _Run.velocity_tail(run, (1,), np.array([v]), np.array([-g]), np.array([0.0]))
+    assert tail == pytest.approx(2 * v / (g * (1 - e)), rel=1e-14)
+    assert _Run.velocity_tail(run, (0, 1), np.array([v, v]), np.array([-g, -g]), np.zeros(2)) is None
+
+
+def test_a_hop_under_zero_acceleration_has_no_tail():
+    """A ball leaving its contact at γ⁺ = 0.8 with no force on it (g'' ≡ 0) never falls back:
+    :meth:`_Run.hop_tail` adds no tail (0, the state after the hop the state itself), not the
+    falling-back formula 2γ⁺/(|γ̇|(1 − e)), which has no meaning (and divides by zero) at
+    γ̇ = 0."""
+    from types import SimpleNamespace
+
+    from observer.event.master import HOP_ORDER, _Run
+    from observer.impact import ImpactLaw
+    from observer.model import Harmonic
+    sc = siconos_ball(1.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], 0.5, 1.0)
+    system = dataclasses.replace(sc.system, forcing=Harmonic.build("system.forcing", 3))
+    held = flow_for(system, ())
+    x = np.array([0.0, 0.0, 0.0, 0.8, 0.0, 0.0])
+    z = held.z(0.0, x)
+    Minv = np.linalg.inv(system.M)
+    run = SimpleNamespace(law=ImpactLaw.build("newton", 0.5, 1), n=3, Minv=Minv, system=system,
+                          delassus=lambda idx: system.W[:, idx].T @ Minv @ system.W[:, idx])
+    assert HOP_ORDER >= 2 and (held.velocity_rows[0] @ held.A) @ z == 0.0     # g''(0) = 0
+    assert _Run.hop_tail(run, 0, 0.0, z, held, guess=1.0) == 0.0
+    c, t, t_end, x_end = run.hop_end
+    assert (c, t, t_end) == (0, 0.0, 0.0) and np.array_equal(x_end, x)
