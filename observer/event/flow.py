@@ -180,22 +180,25 @@ class Flow:
         gap_rows[:, osc] = nu_osc
         gap_rows[:, N - 1] = nu_const
         W_I = system.W[:, list(self.active)]
+        cancelled = np.zeros(A.shape, dtype=bool)
         if self.active:
             G_I = W_I.T @ Minv @ W_I
             free_accel = (gap_rows @ A @ A)[list(self.active)]          # (γ̇_I) of the free flow
             force_rows = -np.linalg.solve(G_I, free_accel)
             A = A.copy()
-            A[n:2 * n, :] += Minv @ W_I @ force_rows
+            push = Minv @ W_I @ force_rows
+            size = np.abs(A[n:2 * n, :]) + np.abs(Minv @ W_I) @ np.abs(force_rows)
+            A[n:2 * n, :] += push
+            cancelled[n:2 * n, :] = np.abs(A[n:2 * n, :]) <= CANCELLED * size
         else:
             force_rows = np.zeros((0, N))
+        cancelled |= np.abs(A) < np.finfo(float).tiny        # subnormal: no scale information
         self.A = A
         self.gap_rows = gap_rows
         self.velocity_rows = gap_rows @ A
         self.force_rows = force_rows
-        B, T = sla.matrix_balance(A, permute=False)
-        self.scale = np.diag(T).copy()
-        self._balanced = B
-        self.norm_bound = float(np.linalg.norm(B, 2))
+        self.scale, self._balanced = balance(A, cancelled)
+        self.norm_bound = float(np.linalg.norm(self._balanced, 2))
         free = None if not self.active else flow_for(system, ())
         self.time_scale, self.intrinsic = ((_time_scale(system, self.freqs, self.norm_bound),
                                             _has_rates(system, self.freqs)) if free is None
@@ -380,6 +383,29 @@ def exp_upper(x: float) -> float:
     if x == -np.inf:
         return 0.0
     return up(float(flint.arb(float(x)).exp().upper()), 1)
+
+
+CANCELLED = 64.0 * np.finfo(float).eps
+"""An entry of a held flow's generator within this fraction of the terms that made it
+(``A[n:2n] + M⁻¹W_I F_I``) is zero but for round-off: the balancing ignores it, and any
+subnormal entry (a harmonic phase of 1e-309 gives its sine terms 1e-310)."""
+
+
+def balance(A: np.ndarray, cancelled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Diagonal similarity ``B = T⁻¹AT`` (T = diag(scale), powers of two) that balances A
+    (``scipy.linalg.matrix_balance``), computed with the entries ``cancelled`` (zero but for
+    round-off) set to zero; B is A's own (exact: scaling by powers of two).
+
+    With them, the velocities of the DOFs a held contact set fixes (their rows and columns
+    of A are ~1e-17 where the constraint force cancels the free acceleration) drove their
+    scales to 1e-77 and 1e-164; a state's round-off in those components, divided by them,
+    made the certified third-derivative bound 1e116, and the root search after both contacts
+    of a 2-DOF system were held took steps of 1e-54 s and stalled (issue 19). A row whose
+    only nonzero entry was subnormal (4.9e-324, a forcing phase of 2.2e-309) was scaled by
+    2.2e-162 likewise. Returns (scale, B)."""
+    _, T = sla.matrix_balance(np.where(cancelled, 0.0, A), permute=False)
+    scale = np.diag(T).copy()
+    return scale, A * scale[None, :] / scale[:, None]
 
 
 def spectral_norm_upper(A: np.ndarray, scale: np.ndarray) -> float:

@@ -697,9 +697,12 @@ class _Run:
         """Carry the state to the common accumulation time of a joint tail
         (:func:`observer.event.tails.joint_tail`) resolved from the impact of ``key`` at t:
         the cluster is densely closed from t (as in :meth:`accumulate`), the tail's impulses
-        (impacts and held forces) go to the sample interval of t, ``accumulation`` rows at
-        t_∞ say how the tail was resolved, and the acceleration LCP decides which contacts
-        stay closed. Returns (x, held set), or None if t_∞ ≥ t_end (the run ends)."""
+        (impacts and held forces) go to the sample interval of t, the tail's events
+        (:attr:`~observer.event.tails.JointTail.rows`: its impacts, lift-offs and holds, note
+        "exact hop") are listed, ``accumulation`` rows at each contact's last hold say how
+        the tail was resolved, and the acceleration LCP decides which contacts stay closed.
+        Returns (x, held set), or None if t_∞ ≥ t_end (the run ends; the tail's events
+        before t_end are listed)."""
         for c in cluster:
             if self.intervals[c] and self.intervals[c][-1] == (t, t):
                 self.intervals[c].pop()
@@ -708,7 +711,12 @@ class _Run:
         self.add_impulse(t, list(range(self.m)), jt.impulse)
         self.fill(flow_for(self.system, jt.held), t, self.project(t, x, list(jt.held)),
                   min(jt.t_inf, self.t_end), include_end=jt.t_inf >= self.t_end)
+        hop_note = f"joint tail of contacts {tuple(cluster)}: exact hop"
+        rows = [(*row, hop_note) for row in jt.rows]    # the tail's own events
         if jt.t_inf >= self.t_end:
+            for row in rows:
+                if row[0] < self.t_end:
+                    self.event(*row[:6], note=row[6])
             return None
         note = (f"joint tail of contacts {tuple(cluster)}: {jt.hops} impacts resolved by exact "
                 f"hops from the contact points")
@@ -716,12 +724,14 @@ class _Run:
         stick = self.sticking(jt.t_inf, jt.x, list(setp))
         for t_c, c in sorted((jt.settled.get(c, jt.t_inf), c) for c in cluster):
             speed = float(gm[key.index(c)]) * e[c] if c in key else 0.0
-            self.event(t_c, c, "accumulation", speed, 0.0, jt.impulse[c], note=note)
+            rows.append((t_c, c, "accumulation", speed, 0.0, jt.impulse[c], note))
             self.zeno.append({"contact": c, "t_inf": t_c, "impacts_resolved": impacts + jt.hops,
                               "tail_time": t_c - t, "tail_impulse": float(jt.impulse[c]),
                               "ratio": None, "joint": tuple(cluster)})
             if c in stick and c not in held:
-                self.event(t_c, c, "stick", 0.0, 0.0, 0.0)
+                rows.append((t_c, c, "stick", 0.0, 0.0, 0.0, ""))
+        for row in sorted(rows, key=lambda r: r[0]):    # in time order (stable: a contact's
+            self.event(*row[:6], note=row[6])            # last hop before its accumulation)
         for c in setp:
             if c in stick:
                 self.close(c, jt.t_inf)

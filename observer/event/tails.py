@@ -24,10 +24,17 @@ first landing is an impact of the run's law on the held set and the landing cont
 a held contact that the impact lifts re-enters the cluster at d = 0; a contact whose next
 hop is below the time resolution ``TIME_RTOL·max(|t|, τ)`` is held (its remaining tail is
 below it too) if the acceleration LCP keeps its force positive. When every contact of the
-cluster is held, their common accumulation time t_∞ is reached: the event rows at t_∞ are
-``accumulation`` rows whose note says ``joint tail of contacts …: N impacts resolved from
-the contact points``. Its error is the gaps' round-off at the start over the cluster's
-speeds, which the trigger keeps ≤ 2^22 ulp(max(t − t0, τ)) (≤ 9.3e-10·max(t − t0, τ)).
+cluster is held, their common accumulation time t_∞ is reached. The tail lists what it
+resolves, as the event loop would: each impact, a held contact lifted by a hop above the
+time resolution (``liftoff``), each hold (``stick``), note ``joint tail of contacts …: exact
+hop``; each contact's last hold is an ``accumulation`` row and its ``stick`` row, the note
+saying ``joint tail of contacts …: N impacts resolved by exact hops from the contact
+points``. A tail that runs past t_end lists its events before t_end. Where the tail starts
+depends on the coordinates (the trigger reads the gap's round-off); what it lists does not.
+Its error is the gaps' round-off at the start over the cluster's speeds, which the trigger
+keeps ≤ 2^22 ulp(max(t − t0, τ)) (≤ 9.3e-10·max(t − t0, τ)) for one contact and
+1/:data:`CLUSTER_NOISE` of it for several; interleaved accumulations of coupled contacts
+can amplify it (each landing decides the other's re-launch).
 If a tail does not converge (a hop that is not a falling-back arc, a held force that
 vanishes, more than :data:`TAIL_HOPS` hops) or another contact's event falls inside it,
 :func:`joint_tail` returns None and the sequence is resolved, and landed, as before.
@@ -65,6 +72,15 @@ damped pair of contacts whose accumulations interleave rests 4.4e-8 s early at c
 1.2e-9 s off translated by 100; a hop merged 6.6e-13 m above its contact point, under the
 older band of simultaneous impacts, moved t∞ by 4.3e-7 s)."""
 
+CLUSTER_NOISE = 16.0
+"""A cluster of several contacts starts its joint tail once the gap's round-off would put
+1/CLUSTER_NOISE of the one-contact budget (:func:`observer.event.master.tail_noise_limit`)
+into t_∞: resolved by the event loop, the last impacts of interleaved contacts carry their
+location errors δg/γ into each other's flights (issue 19: 1.2e-9 s at the last loop impact
+of a pair translated by (−100, 3.25), 5.8e-9 s in t_∞ against the 30-digit reference);
+resolved by the joint tail from there on, each contact's gap is relative to its contact
+point and the error stays at its start's."""
+
 TAIL_SPAN = 0.25
 """A joint tail longer than this fraction of the time scale τ is not a Zeno tail (None)."""
 
@@ -74,7 +90,9 @@ class JointTail:
     """A converged joint tail: the time every contact of the cluster is held (t_∞), the state
     there (held set projected), the held set, the impulse of each contact over the tail
     (impacts and held forces), the count of impacts resolved by hops, and the time each
-    contact of the cluster was held for the last time (its own accumulation time)."""
+    contact of the cluster was held for the last time (its own accumulation time; a held
+    contact that an impact lifts by a hop below the time resolution is held again at once,
+    and rests from there: every impact of another contact that re-launches it counts)."""
 
     t_inf: float
     x: np.ndarray
@@ -82,6 +100,10 @@ class JointTail:
     impulse: np.ndarray
     hops: int
     settled: dict
+    rows: list
+    """The tail's events in order, ``(time, contact, kind, γ⁻, γ⁺, impulse)``: every impact
+    it resolves, a held contact lifted by a hop it resolves (``liftoff``), a contact held
+    (``stick``) but for its last hold (``settled``), which the accumulation rows state."""
 
 
 def _rows(flow: Flow, c: int) -> np.ndarray:
@@ -158,15 +180,11 @@ def joint_due(run, key: tuple, t: float, x: np.ndarray, held: tuple, tiny: list)
     dg = floor / 64.0                                      # eps·Σ|r z|: the representation
     motion = run.tol(fl.gap_rows, z, t, fl) - floor        # ROUNDOFF·S + |g'|δt: no |q|, |ν|
     e = np.asarray(run.law.restitution, dtype=float)
-    reach, due = 0.0, bool(tiny)
+    reach = 0.0
     for c in key:
         if not (a[c] < 0.0 and v[c] > 0.0 and 0.0 <= e[c] < 1.0):
             return None
-        due |= (1.0 + 2.0 / (1.0 - e[c])) * dg[c] / v[c] >= run.tail_noise(t)
-        due |= len(key) > 1 and v[c] * v[c] <= 2.0 * -a[c] * MERGE_HOPS * motion[c]
         reach = max(reach, CLUSTER_REACH * 2.0 * v[c] / (-a[c] * (1.0 - e[c])))
-    if not due:
-        return None
     cluster = list(key)
     for b in range(run.m):
         if b in key or b in held:
@@ -174,7 +192,12 @@ def joint_due(run, key: tuple, t: float, x: np.ndarray, held: tuple, tiny: list)
         s = landing(max(g[b], 0.0), np.array([v[b], a[b]]))
         if s <= reach or (g[b] <= 0.0 and np.isnan(s)):
             cluster.append(b)
-    return sorted(cluster)
+    budget = run.tail_noise(t) / (CLUSTER_NOISE if len(cluster) > 1 else 1.0)
+    due = bool(tiny)
+    for c in key:
+        due |= (1.0 + 2.0 / (1.0 - e[c])) * dg[c] / v[c] >= budget
+        due |= len(key) > 1 and v[c] * v[c] <= 2.0 * -a[c] * MERGE_HOPS * motion[c]
+    return sorted(cluster) if due else None
 
 
 def joint_tail(run, t: float, x: np.ndarray, held: tuple, cluster: list, key: tuple
@@ -189,10 +212,12 @@ def joint_tail(run, t: float, x: np.ndarray, held: tuple, cluster: list, key: tu
     x0 = x
     impulse = np.zeros(run.m)
     res = resolution(t, run.tau)
-    tail, hops, settled = 0.0, 0, {}
+    tail, hops, settled, rows = 0.0, 0, {}, []
     while hops < TAIL_HOPS:
         if all(c in held for c in cluster):
-            out = JointTail(t + tail, x, held, impulse, hops, settled)
+            last = {(s, c) for c, s in settled.items()}        # stated by the accumulation rows
+            rows = [r for r in rows if not (r[2] == "stick" and (r[0], r[1]) in last)]
+            out = JointTail(t + tail, x, held, impulse, hops, settled, rows)
             return out if _clear(run, t, x0, held0, cluster, out.t_inf) else None
         fl = flow_for(run.system, held)
         z = fl.z(t + tail, x)
@@ -212,26 +237,32 @@ def joint_tail(run, t: float, x: np.ndarray, held: tuple, cluster: list, key: tu
         landed = [c for c in d if s[c] - dt <= res]
         for c in d:
             d[c] = 0.0 if c in landed else max(advance(d[c], D[c], dt), 0.0)
-        x, new = _hop_impact(run, t + tail, x, held, landed, d, impulse, res)
+        x, new, lifted = _hop_impact(run, t + tail, x, held, landed, d, impulse, res, rows)
         if x is None:
             return None
-        settled.update({c: t + tail for c in new if c not in held})
+        # held from here on: contacts that landed, and held ones the impact lifted by a hop
+        # below the time resolution (held again at once: they rest from here, not from before)
+        settled.update({c: t + tail for c in new if c not in held or c in lifted})
         held = new
         hops += 1
     return None
 
 
 def _hop_impact(run, t: float, x: np.ndarray, held: tuple, landed: list, d: dict,
-                impulse: np.ndarray, res: float):
+                impulse: np.ndarray, res: float, rows: list):
     """The impact of the law at a landing of ``landed`` on the held set (generalized Newton,
     eq. (5), on A = held ∪ landed); held contacts it lifts re-enter d at 0; a landed contact
     whose next hop ``2γ⁺/α`` is below the time resolution ``res`` is held if the acceleration
-    LCP keeps its force. Returns (x, held), or (None, None) if the state is not a tail."""
+    LCP keeps its force. Appends the impact's events to ``rows`` (the landed contacts'
+    impacts, ``liftoff`` of a held contact lifted by a hop above the resolution, ``stick`` of a
+    contact held now; a held contact lifted and held again at once, by a hop below the
+    resolution, has none). Returns (x, held, lifted: the held contacts the impact lifted), or
+    (None, None, None) if the state is not a tail."""
     A = sorted(set(held) | set(landed))
     idx = np.array(A, dtype=int)
     gm = run.free_flow.velocities(t, x)[idx]
     if not np.any(gm < 0.0):
-        return None, None
+        return None, None, None
     lam = np.maximum(impact(run.law, run.delassus(A), gm, idx, run.solve), 0.0)
     x = x.copy()
     x[run.n:] += run.Minv @ run.system.W[:, A] @ lam
@@ -239,9 +270,9 @@ def _hop_impact(run, t: float, x: np.ndarray, held: tuple, landed: list, d: dict
     gp = run.free_flow.velocities(t, x)[idx]
     small = 1e3 * np.finfo(float).eps * float(np.max(np.abs(gm)))
     keep = [c for c, v, l in zip(A, gp, lam) if c in held and (l > 0.0 or v <= small)]
-    for c in held:
-        if c not in keep:
-            d[c] = 0.0                                      # lifted by the impact
+    lifted = [c for c in held if c not in keep]
+    for c in lifted:
+        d[c] = 0.0                                          # lifted by the impact
     fl = flow_for(run.system, tuple(keep))
     z = fl.z(t, x)
     v = fl.velocity_rows @ z
@@ -251,11 +282,20 @@ def _hop_impact(run, t: float, x: np.ndarray, held: tuple, landed: list, d: dict
     if settle:
         stick = run.sticking(t, x, sorted(set(keep) | set(settle)))
         if not set(settle) <= set(stick):
-            return None, None
+            return None, None, None
         keep = stick
     for c in keep:
         d.pop(c, None)
-    return run.project(t, x, list(keep)), tuple(sorted(keep))
+    x = run.project(t, x, list(keep))
+    gp = run.free_flow.velocities(t, x)[idx]
+    for c, before, after, lc in zip(A, gm, gp, lam):
+        if c in landed:
+            rows.append((t, c, "impact", before, after, lc))
+        elif c in lifted and c not in keep:
+            rows.append((t, c, "liftoff", before, after, lc))
+        if c in keep and c not in held:
+            rows.append((t, c, "stick", after, after, 0.0))
+    return x, tuple(sorted(keep)), lifted
 
 
 def _clear(run, t: float, x: np.ndarray, held: tuple, cluster: list, t_inf: float) -> bool:

@@ -6,8 +6,9 @@ harmonic forcing) and runs each
 (b) with the time origin shifted, t → t + T (harmonic phases φ → φ − ωT);
 (c) in other units, lengths × α and times × β (M kept: K/β², C/β, f·α/β², ω/β, ν·α, u·α/β);
 
-and compares the event tables (kinds, contacts, times, velocities, impulses) and the
-trajectories on the output grid with the original run's. A last property samples t_end at a
+and compares the event tables (kinds, contacts, times, velocities, impulses of the rows
+:func:`comparable` keeps) and the trajectories on the output grid with the original run's;
+two contacts whose accumulations interleave: :func:`two_contact_zeno`. A last property samples t_end at a
 few ulp from a window boundary or an event time: no event is made or lost.
 """
 
@@ -89,16 +90,26 @@ accumulation time t∞ and everything after it are."""
 
 def comparable(res, c=None, T: float = 0.0, alpha: float = 1.0, beta: float = 1.0):
     """Events and trajectory mapped back to the original coordinates, and the Zeno tails
-    ``[first impact slower than V_TAIL, t∞]``; the stick times (t∞ of an accumulation, or of
-    a sequence resolved until the contact sticks) are compared to 1e-8·T_END."""
+    ``[first impact slower than V_TAIL, t∞]`` (to the end of the run if t∞ lies beyond it:
+    one run may still resolve hops at t_end while the other holds the contact).
+
+    Compared: the impacts not slower than V_TAIL, the lift-offs (a force crossing zero, or a
+    re-launch by another contact's impact not slower than V_TAIL) and each contact's last
+    rest (its last ``stick``: t∞ of its last accumulation, or of a sequence resolved until it
+    sticks; to T_INF_TOL). Not compared: what a Zeno tail resolves before it is extrapolated
+    or held — its slow impacts, and the holds and slow re-launches of a contact that another
+    contact's impacts keep lifting (the event loop lists an accumulation and a stick for each
+    of them, a joint tail a stick; how many are resolved depends on the coordinates'
+    round-off and on the time resolution)."""
     ev = res.events
     col = lambda name: ev[name].to_numpy(dtype=float)  # noqa: E731  (float also when empty)
     t = (col("time") - T) / beta
     gm = col("gamma_minus") * beta / alpha
-    tab = np.column_stack([t, gm, col("gamma_plus") * beta / alpha,
-                           col("impulse") * beta / alpha])
+    gp = col("gamma_plus") * beta / alpha
+    tab = np.column_stack([t, gm, gp, col("impulse") * beta / alpha])
     kinds = ev[KINDS_COMPARED].to_numpy()
     slow = (kinds[:, 0] == "impact") & (np.abs(gm) < V_TAIL)
+    relaunch = (kinds[:, 0] == "liftoff") & (np.abs(gp) > 0.0) & (np.abs(gp) < V_TAIL)
     tails, start = [], None
     for k in range(len(t)):
         if slow[k] and start is None:
@@ -106,8 +117,12 @@ def comparable(res, c=None, T: float = 0.0, alpha: float = 1.0, beta: float = 1.
         if kinds[k, 0] == "accumulation" and start is not None:
             tails.append((start, t[k]))
             start = None
-    keep = ~slow & (kinds[:, 0] != "accumulation")
-    acc = t[kinds[:, 0] == "stick"]        # a Zeno run ends at t∞ by a stick (extrapolated or not)
+    if start is not None:                   # a tail still open at t_end (its t∞ lies beyond)
+        tails.append((start, np.inf))
+    stick = kinds[:, 0] == "stick"
+    keep = ~slow & ~relaunch & ~stick & (kinds[:, 0] != "accumulation")
+    resting = sorted(set(kinds[stick, 1].tolist()))
+    acc = np.array([[j, t[stick & (kinds[:, 1] == j)].max()] for j in resting]).reshape(-1, 2)
     fr = res.frame
     n = res.scenario.system.n
     q = fr[[f"q{j}" for j in range(n)]].to_numpy() / alpha
@@ -355,65 +370,239 @@ WEAK_RELAUNCH = dict(
 """Drawn by :func:`two_contact_zeno` (fresh-clone CI of 5a0a900, values rounded to 8 digits):
 contact 1's impact at t = 0.0888 s re-launches the held contact 0 through the weak coupling
 W01 = 1e-6 (lift-off speed ~1e-6 m/s, hops of ~1e-13 m), and both are resolved by one joint
-tail. Shifted by T = 1e3 s the joint tail resolves 77 impacts instead of 182 and contact 0
-rests 3.4e-7 s earlier (0.0943131066 s against 0.0943134424 s; contact 1 and every earlier
-event agree to 2e-13 s); shifted by 37.5 s, 4.3e-9 s; by 0.1 and 1 s, 1e-15 s."""
+tail. Shifted by T = 1e3 s the joint tail resolves 77 impacts instead of 182 (its time
+resolution is 1e4 times coarser), and contact 0 rested 3.4e-7 s earlier (0.0943131066 s
+against 0.0943134424 s): a re-launch below the time resolution held contact 0 again at once,
+and its rest time stayed at its last resolved hold. Every impact of contact 1 re-launches it
+until both rest: a contact lifted and held again at once rests from there."""
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "open (issue 19): a contact re-launched through a weak coupling (W01 = 1e-6) by the other's "
-    "impacts makes hops of ~1e-13 m; under a time shift by 1e3 s the joint tail stops resolving "
-    "them earlier and its rest time moves by 3.4e-7 s"))
 def test_weakly_relaunched_contact_rests_at_the_same_time_under_a_time_shift_by_1000():
+    """Both contacts of :data:`WEAK_RELAUNCH` rest at the same time, shifted by 1e3 s or not
+    (measured: 1.9e-13 s apart; 3.4e-7 s before the rule)."""
     base = rest_times(run_master(build(WEAK_RELAUNCH)))
     T = 1e3
     moved = rest_times(run_master(build(WEAK_RELAUNCH, T=T), t0=T, t_end=T + T_END), T, 1.0)
     assert set(base) == set(moved) == {0, 1}
+    assert abs(base[0] - base[1]) <= 1e-12 and abs(moved[0] - moved[1]) <= 1e-12
     for k in (0, 1):
         assert abs(moved[k] - base[k]) <= T_INF_TOL, (k, moved[k], base[k])
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "open (issue 19): drawn examples still fail, differently from draw to draw: WEAK_RELAUNCH "
-    "shifted by 1e3 s (rest time moved 3.4e-7 s); a damped pair translated by (-100, 100) whose "
-    "impact at 0.0703 s is resolved singly at c = 0 and inside a joint tail when translated "
-    "(rest times agree to 2e-11 s, the fast-impact lists differ)"))
+def _pair(M, K, C, W, q0, nu, f, a, w, phi, e) -> dict:
+    """A member of :func:`two_contact_zeno` (2 DOF, u0 = 0) from its drawn values."""
+    return dict(M=np.diag(M), K=np.diag(K), C=np.diag(C), W=np.array(W), q0=np.array(q0),
+                u0=np.zeros(2), nu=np.array(nu), f=np.array(f), a=np.array(a), w=w, phi=phi, e=e)
+
+
+HELD_PAIR = _pair(M=[1.5461177469773209, 1.0946232513459302],
+                  K=[1.3191394593315386, 1.3226569922713385],
+                  C=[0.18981061917638706, 0.19038113269455376],
+                  W=[[1.0, 0.0], [0.06790583415511037, 1.0]], q0=[0.0, -0.7842233913288017],
+                  nu=[0.06306484769851957, 0.7961040674081138],
+                  f=[-15.461177469773208, -11.983491065503085],
+                  a=[-0.08987162701973617, -0.05794407163037251], w=5.476349113029197,
+                  phi=3.8900019717906355e-233, e=0.38054161322110996)
+"""Drawn by :func:`two_contact_zeno`: both contacts of the 2-DOF system come to rest together
+at 0.10829 s. The flow that holds both has no free DOF: the rows and columns of its
+generator for the held velocities cancel to ~1e-17, the balancing scaled them by 1e-77 and
+1e-164, the certified bound of the forces' third derivative was 1e116, and the root search
+stalled 1.7e-11 s after t∞ (200 000 safe steps of 1e-54 s): the run stopped."""
+
+
+SUBNORMAL_PHASE = _pair(M=[0.5000000000000001, 1.5], K=[0.0, 0.0], C=[0.0, 0.0],
+                        W=[[1.0, -0.16689740300328354], [-0.10806561221950861, 1.0]],
+                        q0=[-0.5266993444660549, -0.2463215821090292],
+                        nu=[0.503921785644615, 0.16290344107828977], f=[-5.000000000000001, -15.0],
+                        a=[0.01679827928990424, 0.05044486879050334], w=0.5,
+                        phi=2.225073858507203e-309, e=0.3191947463497382)
+"""Drawn by :func:`two_contact_zeno`: a forcing phase of 2.2e-309 gives the sine terms of the
+generator subnormal entries (4.9e-324 in the held flow, whose other entries of that row
+cancel): balanced by 2.2e-162, the search after both contacts rest stalled (65 s of CPU)."""
+
+
+@pytest.mark.parametrize("p", [HELD_PAIR, SUBNORMAL_PHASE], ids=["cancelled", "subnormal"])
+def test_a_flow_that_holds_every_dof_is_searched_in_ordinary_steps(p):
+    """Both contacts held: the run goes on to t_end, resting on both (the balancing ignores
+    the generator's cancelled and subnormal entries, :func:`observer.event.flow.balance`)."""
+    from observer.event.flow import flow_for
+    sc = build(p)
+    held = flow_for(sc.system, (0, 1))
+    assert np.all(held.scale >= 2.0 ** -20) and np.all(held.scale <= 2.0 ** 20)
+    res = run_master(sc)
+    assert res.status == "ok" and not res.frame.isna().to_numpy().any()
+    assert res.frame["t"].iloc[-1] == T_END
+    rest = rest_times(res)
+    assert set(rest) == {0, 1} and max(rest.values()) < T_END
+    last = res.frame.iloc[-1]
+    q, u = last[["q0", "q1"]].to_numpy(dtype=float), last[["u0", "u1"]].to_numpy(dtype=float)
+    np.testing.assert_allclose(sc.system.W.T @ q + sc.system.gap.constant, 0.0, atol=1e-14)
+    np.testing.assert_allclose(sc.system.W.T @ u, 0.0, atol=1e-14)
+
+
+LATE_PAIR = _pair(M=[0.7068326092333448, 1.3228038143369], K=[1.3163240201328912, 0.0],
+                  C=[0.3320101143938919, 0.19107771296598863],
+                  W=[[1.0, 0.19107771296598863], [-0.006683345574146099, 1.0]],
+                  q0=[0.0, 0.19107771296598863], nu=[0.008340019177338157, -0.1822542712413328],
+                  f=[-7.068326092333448, -13.228038143369002],
+                  a=[-0.02188593929099565, 0.07950877736630378], w=2.00001,
+                  phi=0.05868698420324982, e=0.5)
+"""Drawn by :func:`two_contact_zeno`: contact 0 keeps bouncing, re-launching contact 1, which
+accumulates again after each of its impacts, the last time at 0.19992 s, 80 µs before t_end.
+Translated by (100, 100) the last cycle is one joint tail that runs past t_end; its events
+were not listed, and contact 1's last rest was 0.19462 s."""
+
+SWALLOWED = _pair(M=[1.3500996484075087, 1.1], K=[0.0, 0.0], C=[0.0, 0.0],
+                  W=[[1.0, 0.18158659543731942], [-0.0666578921923606, 1.0]], q0=[-0.01, 0.004],
+                  nu=[0.014089423813120413, 0.0024994654383741497], f=[-13.500996484075088, -11.0],
+                  a=[0.06836695076541326, 0.0], w=3.861470580871234, phi=1.5491721499767115,
+                  e=0.3990006536890809)
+"""Drawn by :func:`two_contact_zeno`: translated by (−100, 100), the joint tail starts before
+contact 1's impact at 0.06726 s (|γ⁻| = 0.05 m/s) and resolves it; it was not listed."""
+
+
+@pytest.mark.parametrize("p, c", [(LATE_PAIR, (100.0, 100.0)), (SWALLOWED, (-100.0, 100.0))])
+def test_a_joint_tail_lists_the_impacts_it_resolves_up_to_the_end_of_the_run(p, c):
+    """Where the joint tail starts depends on the coordinates (the gap's round-off); what it
+    resolves does not: its impacts, lift-offs and holds are rows (note "exact hop"), also
+    when it runs past t_end. The impacts faster than V_TAIL and the rest times agree
+    (measured 1.2e-11 and 1.3e-11 s)."""
+    c = np.array(c)
+    base, moved = run_master(build(p)), run_master(build(p, c=c))
+    assert base.status == moved.status == "ok"
+    assert moved.events["note"].str.endswith("exact hop").any()
+    for res in (base, moved):                   # one table in time order, tails' rows merged
+        assert (np.diff(res.events["time"].to_numpy(dtype=float)) >= 0.0).all()
+    ca, ta = fast_impacts(base)
+    cb, tb = fast_impacts(moved)
+    assert ca.tolist() == cb.tolist()
+    np.testing.assert_allclose(tb, ta, rtol=0, atol=1e-9)
+    rest_a, rest_b = rest_times(base), rest_times(moved)
+    assert set(rest_a) == set(rest_b)
+    for k in rest_a:
+        assert abs(rest_a[k] - rest_b[k]) <= 1e-9, (k, rest_a[k], rest_b[k])
+
+
+INTERLEAVED = _pair(M=[0.5, 0.5832297231040848], K=[0.0, 0.0], C=[0.0, 0.0],
+                    W=[[1.0, 0.0], [0.007363149116057202, 1.0]], q0=[0.0, 0.007363149116057202],
+                    nu=[0.001945784035094706, -0.005343149116057202], f=[-5.0, -5.832297231040848],
+                    a=[0.0007363149116057202, 0.029854389869287675], w=0.5,
+                    phi=0.7051671172256166, e=0.3)
+"""Drawn by :func:`two_contact_zeno`: the two contacts' impacts interleave from 1e-3 m/s down;
+the 30-digit reference (:mod:`mp_exact`, 2 s of CPU) rests both at INTERLEAVED_T_INF."""
+
+INTERLEAVED_T_INF = 0.03747446322866563
+
+
+@pytest.mark.parametrize("c", [None, (-100.0, 3.25)])
+def test_interleaved_accumulations_rest_at_the_30_digit_t_inf_translated_by_100(c):
+    """Translated by (−100, 3.25), the event loop located each impact to the translated gap's
+    round-off over its speed (~1e-13 m / 1e-4 m/s), and the interleaved contacts carried
+    those errors into each other's flights: t∞ was 5.8e-9 s late. A cluster's joint tail now
+    starts at 1/CLUSTER_NOISE of the one-contact budget (:data:`observer.event.tails.CLUSTER_NOISE`):
+    within 1e-9 s of the reference (measured 2e-13 s at c = 0, 1.2e-10 s translated)."""
+    c = None if c is None else np.array(c)
+    rest = rest_times(run_master(build(INTERLEAVED, c=c)))
+    assert set(rest) == {0, 1}
+    for k in (0, 1):
+        assert abs(rest[k] - INTERLEAVED_T_INF) <= 1e-9, (k, rest[k])
+
+
+def transformed(p: dict, kind: str, arg) -> tuple:
+    """The run of ``p`` under one of (a)–(c) and the map back, ``(result, T, α, β)``."""
+    if kind == "translation":
+        return run_master(build(p, c=np.array(arg))), 0.0, 1.0, 1.0
+    if kind == "time shift":
+        return run_master(build(p, T=arg), t0=arg, t_end=arg + T_END), arg, 1.0, 1.0
+    return run_master(build(p, alpha=arg[0], beta=arg[1])), 0.0, arg[0], arg[1]
+
+
+PAIR_TOL = 2e-8
+"""Rest times of two coupled contacts whose accumulations interleave, in other coordinates:
+each landing decides the other's re-launch and amplifies the round-off of the state (a
+joint tail continued by the 30-digit reference from the engine's own float64 start state
+rested 1.0e-8 s away from the engine's t∞; scans of 1700 drawn pairs on the final code
+moved rest times by up to 9.8e-9 s under translations: one pair whose rest times at every
+translation agreed within 3.5e-9 s sat 6e-9 to 9.8e-9 s from the untranslated run's)."""
+
+PROBE = 2.0 ** -7
+"""Relative change of a transformation's parameter for the conditioning probes."""
+
+PROBE_FACTOR = 4.0
+"""An ill-conditioned accumulation is compared to PROBE_FACTOR times its probes' spread."""
+
+
+def conditioned_tolerance(p: dict, kind: str, arg, moved: dict) -> float:
+    """PAIR_TOL, or PROBE_FACTOR times the spread of the rest times ``moved`` under the same
+    kind of transformation with its parameter changed by ±PROBE (the same round-off, another
+    realisation of it), whichever is larger.
+
+    Interleaved accumulations of two coupled contacts can be ill-conditioned: the 30-digit
+    reference (:mod:`mp_exact`) continued from the float64 state at the start of a joint tail
+    rests 1.2e-7 s away from its own t∞ for a pair translated by (3.25, 3.25), whose state
+    there carried 1.9e-14 m of accumulated round-off (40 ulp of 3.25): each contact's landing
+    decides the other's re-launch, and a phase error doubles per cycle. No float64 run is
+    closer to t∞ than its round-off allows; a transformation that moves t∞ by more than the
+    round-off of its own kind does (a coordinate-dependent decision: a hold at a time
+    resolution that depends on |t|, a swallowed impact) is still caught: its probes share it."""
+    spread = 0.0
+    for f in (1.0 + PROBE, 1.0 - PROBE):
+        arg_f = tuple(f * a for a in arg) if isinstance(arg, tuple) else f * arg
+        res, T, _, beta = transformed(p, kind, arg_f)
+        other = rest_times(res, T, beta)
+        if set(other) != set(moved):
+            return PAIR_TOL
+        spread = max(spread, *(abs(other[k] - moved[k]) for k in moved))
+    return max(PAIR_TOL, PROBE_FACTOR * spread)
+
+
 @settings(max_examples=200, deadline=None, derandomize=True, database=None, phases=NO_SHRINK)
 @given(two_contact_zeno(), transformations())
 @example(p=WEAK_RELAUNCH, tr=("time shift", 1e3))
+@example(p=LATE_PAIR, tr=("translation", (100.0, 100.0)))
 def test_two_contact_zeno_tails_are_invariant_under_translation_time_shift_and_units(p, tr):
     """Overlapping accumulations of two contacts (:func:`two_contact_zeno`), one transformation
-    drawn per example as in the one-contact property: both contacts come to rest, at the same
-    times to T_INF_TOL, with the same fast impacts (|γ⁻| ≥ V_TAIL). Open (strict xfail): the
-    known failing member :data:`WEAK_RELAUNCH` runs first as an explicit example, so the xfail
-    costs one example; once it passes, the 200 drawn ones run (≈ 0.4 s of CPU each, 2 runs:
-    one draw of them passed all 200 on the branch that fixed :data:`OPEN_TWO_CONTACT`, the
-    next draw, after an edit of this file, failed on :data:`WEAK_RELAUNCH`, a third on a
-    translated damped pair). :data:`OPEN_TWO_CONTACT` and :data:`MERGED`, the members this
-    property failed on before, pass their own named tests against the 30-digit reference."""
+    drawn per example as in the one-contact property: the same contacts come to rest (in
+    most draws both; :data:`LATE_PAIR`'s contact 0 still bounces at T_END), at the same times
+    to PAIR_TOL (or, for a worse-conditioned accumulation, to the spread of its
+    :func:`conditioned_tolerance` probes), with the same fast impacts (|γ⁻| ≥ V_TAIL).
+    :data:`WEAK_RELAUNCH` and :data:`LATE_PAIR`, members it failed on, run first."""
     base = run_master(build(p))
     rest = rest_times(base)
-    assert base.status == "ok" and set(rest) == {0, 1}
+    assert base.status == "ok" and rest
     kind, arg = tr
-    T, alpha, beta, c = 0.0, 1.0, 1.0, None
-    if kind == "translation":
-        c = np.array(arg)
-        moved = run_master(build(p, c=c))
-    elif kind == "time shift":
-        T = arg
-        moved = run_master(build(p, T=T), t0=T, t_end=T + T_END)
-    else:
-        alpha, beta = arg
-        moved = run_master(build(p, alpha=alpha, beta=beta))
+    moved, T, alpha, beta = transformed(p, kind, arg)
     assert moved.status == "ok"
     other = rest_times(moved, T, beta)
-    assert set(other) == {0, 1}
-    for k in (0, 1):
-        assert abs(other[k] - rest[k]) <= T_INF_TOL, (kind, k, other[k], rest[k])
+    assert set(other) == set(rest)
     ca, ta = fast_impacts(base)
     cb, tb = fast_impacts(moved, T, alpha, beta)
     assert ca.tolist() == cb.tolist()
     np.testing.assert_allclose(tb, ta, rtol=0, atol=1e-7 * T_END)
+    worst = max(abs(other[k] - rest[k]) for k in rest)
+    if worst > PAIR_TOL:
+        tol = conditioned_tolerance(p, kind, arg, other)
+        assert worst <= tol, (kind, arg, worst, tol, other, rest)
+
+
+def test_the_conditioning_probes_do_not_excuse_a_coordinate_dependent_rest_time(monkeypatch):
+    """The near miss of :func:`conditioned_tolerance`: with the hold rule of before (a contact
+    re-launched below the time resolution, which grows with |t|, kept its earlier rest time)
+    :data:`WEAK_RELAUNCH` shifted by 1e3 s rests 3.4e-7 s early, and its probes (shifted by
+    1e3·(1 ± 2^-7) s) share the error: the tolerance stays far below it."""
+    import observer.event.tails as tails
+    real = tails._hop_impact
+
+    def old_rule(*args):
+        x, held, _ = real(*args)
+        return x, held, []                       # no re-launch counted: the old rest time
+    monkeypatch.setattr(tails, "_hop_impact", old_rule)
+    rest = rest_times(run_master(build(WEAK_RELAUNCH)))
+    moved, T, _, beta = transformed(WEAK_RELAUNCH, "time shift", 1e3)
+    other = rest_times(moved, T, beta)
+    worst = max(abs(other[k] - rest[k]) for k in (0, 1))
+    assert worst > 1e-7
+    assert conditioned_tolerance(WEAK_RELAUNCH, "time shift", 1e3, other) < worst / 10
 
 
 BLOCK = dict(M=np.array([[0.6723989499213578]]), K=np.zeros((1, 1)),
