@@ -189,7 +189,10 @@ class Flow:
             push = Minv @ W_I @ force_rows
             size = np.abs(A[n:2 * n, :]) + np.abs(Minv @ W_I) @ np.abs(force_rows)
             A[n:2 * n, :] += push
-            cancelled[n:2 * n, :] = np.abs(A[n:2 * n, :]) <= CANCELLED * size
+            # zero to round-off: within CANCELLED of the row's largest term (the sum carries
+            # that much of its terms' rounding; a harmonic phase of 1e-176 gives 1e-189 terms)
+            cancelled[n:2 * n, :] = (np.abs(A[n:2 * n, :])
+                                     <= CANCELLED * np.max(size, axis=1, keepdims=True))
         else:
             force_rows = np.zeros((0, N))
         cancelled |= np.abs(A) < np.finfo(float).tiny        # subnormal: no scale information
@@ -386,8 +389,8 @@ def exp_upper(x: float) -> float:
 
 
 CANCELLED = 64.0 * np.finfo(float).eps
-"""An entry of a held flow's generator within this fraction of the terms that made it
-(``A[n:2n] + M⁻¹W_I F_I``) is zero but for round-off: the balancing ignores it, and any
+"""An entry of a held flow's accelerations ``A[n:2n] + M⁻¹W_I F_I`` within this fraction of
+the largest term of its row is zero but for round-off: the balancing ignores it, and any
 subnormal entry (a harmonic phase of 1e-309 gives its sine terms 1e-310)."""
 
 
