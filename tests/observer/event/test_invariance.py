@@ -8,8 +8,8 @@ harmonic forcing) and runs each
 
 and compares the event tables (kinds, contacts, times, velocities, impulses of the rows
 :func:`comparable` keeps) and the trajectories on the output grid with the original run's;
-two contacts whose accumulations interleave: :func:`two_contact_zeno`. A last property samples t_end at a
-few ulp from a window boundary or an event time: no event is made or lost.
+two contacts whose accumulations interleave: :func:`two_contact_zeno`. A last property
+samples t_end at a few ulp from a window boundary or an event time: no event is made or lost.
 """
 
 from __future__ import annotations
@@ -513,8 +513,8 @@ def test_interleaved_accumulations_rest_at_the_30_digit_t_inf_translated_by_100(
     """Translated by (−100, 3.25), the event loop located each impact to the translated gap's
     round-off over its speed (~1e-13 m / 1e-4 m/s), and the interleaved contacts carried
     those errors into each other's flights: t∞ was 5.8e-9 s late. A cluster's joint tail now
-    starts at 1/CLUSTER_NOISE of the one-contact budget (:data:`observer.event.tails.CLUSTER_NOISE`):
-    within 1e-9 s of the reference (measured 2e-13 s at c = 0, 1.2e-10 s translated)."""
+    starts at 1/CLUSTER_NOISE of the one-contact budget
+    (:data:`observer.event.tails.CLUSTER_NOISE`): within 1e-9 s of the reference (measured 2e-13 s at c = 0, 1.2e-10 s translated)."""
     c = None if c is None else np.array(c)
     rest = rest_times(run_master(build(INTERLEAVED, c=c)))
     assert set(rest) == {0, 1}
