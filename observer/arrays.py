@@ -6,6 +6,7 @@ reads the banded and triplet tables) both use it, so neither imports the other f
 
 from __future__ import annotations
 
+import datetime
 from typing import Any
 
 import numpy as np
@@ -27,18 +28,29 @@ def _describe(leaf: Any) -> str | None:
         return f"the string {leaf!r}"
     if isinstance(leaf, (complex, np.complexfloating)):
         return f"the complex number {leaf!r}"
+    if isinstance(leaf, (np.datetime64, np.timedelta64, datetime.date, datetime.time,
+                         datetime.timedelta)):
+        return (f"the {type(leaf).__name__} {str(leaf)!r}: a date or a duration is not a number "
+                "(give seconds as a float)")
     return None
 
 
 def non_numeric_entry(field: str, value: Any) -> tuple[tuple[int, ...], str] | None:
     """The index and description of the first entry of ``value`` (a number or nested lists of
-    numbers) that is a string, a boolean or a complex number, or None.
+    numbers) that is a string, a boolean, a complex number, a date or a duration (NumPy's
+    ``datetime64`` / ``timedelta64`` too), or a masked entry of a masked array, or None.
 
     TOML strings (``"1.0"``) and booleans are not numbers, although NumPy would convert them.
     Walks the nesting without recursion; nesting deeper than :data:`MAX_DEPTH` is an error.
     """
+    if np.ma.isMaskedArray(value) and np.ma.is_masked(value):
+        i = int(np.flatnonzero(np.ma.getmaskarray(value))[0])
+        return (tuple(int(k) for k in np.unravel_index(i, np.shape(value))),
+                "masked: a masked entry has no value (fill the array first, e.g. .filled(0.0))")
     if isinstance(value, np.ndarray):
         kind = value.dtype.kind
+        if kind in "mM" and value.size:
+            return (tuple(0 for _ in value.shape), _describe(value.reshape(-1)[0]))
         if kind in _NUMERIC_KINDS or value.size == 0:
             return None
         items = value.reshape(-1).tolist() if kind in "bUSc" else value.reshape(-1)
@@ -61,6 +73,33 @@ def non_numeric_entry(field: str, value: Any) -> tuple[tuple[int, ...], str] | N
             if why is not None:
                 return index, why
     return None
+
+
+def ragged_row(value: Any) -> str | None:
+    """Where nested lists have rows of unequal length (``[[1, 0], [0]]``), said as ``row 1 has
+    1 entry, expected 2`` (rows and indices count from 0, as in ``entry (0, 1)``), or None.
+
+    Level by level without recursion (the nesting is already bounded by :data:`MAX_DEPTH`);
+    a row that is a number among lists, or a list among numbers, is ragged too."""
+    level: list[tuple[tuple[int, ...], Any]] = [((), value)]
+    while level:
+        lists = [(i, x) for i, x in level if isinstance(x, (list, tuple))]
+        if not lists:
+            return None
+        if len(lists) != len(level):
+            index = next(i for i, x in level if not isinstance(x, (list, tuple)))
+            return f"{_row_name(index)} is a number where its siblings are rows"
+        want = len(lists[0][1])
+        for index, x in lists:
+            if len(x) != want:
+                return (f"{_row_name(index)} has {len(x)} entr{'y' if len(x) == 1 else 'ies'}, "
+                        f"expected {want}")
+        level = [(i + (k,), y) for i, x in lists for k, y in enumerate(x)]
+    return None
+
+
+def _row_name(index: tuple[int, ...]) -> str:
+    return "the array" if not index else f"row {index[0]}" if len(index) == 1 else f"entry {index}"
 
 
 PATTERN_KEYS = ("pattern", "head", "tail")
@@ -120,6 +159,9 @@ def as_array(field: str, value: Any, shape: tuple[int | None, ...]) -> np.ndarra
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError, OverflowError) as exc:
+        ragged = ragged_row(value)          # walked only once NumPy has refused the value
+        if ragged is not None:
+            raise InputError(field, f"not a numeric array: {ragged}") from None
         raise InputError(field, f"not a numeric array ({exc})") from None
     if arr.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, arr.shape)):
         want = "x".join("*" if s is None else str(s) for s in shape) or "scalar"

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from observer.cli_common import Parser, guarded, parse_pairs
 from observer.engines import ENGINES
-from observer.errors import InputError
+from observer.errors import InputError, printable
 from observer.validation import check_output_path
 
 _Parser = Parser
@@ -34,7 +34,7 @@ def cmd_show(args) -> int:
     from observer.scenario import load_scenario
     from observer.tomlio import dumps
     sc = load_scenario(args.scenario, parse_pairs(args.set))
-    header = f"{sc.name}: {sc.description}\n"
+    header = f"{printable(sc.name)}: {printable(sc.description)}\n"
     module_doc = ""
     from observer.scenarios import SCENARIOS
     if args.scenario in SCENARIOS:
@@ -62,7 +62,7 @@ def cmd_run(args) -> int:
         write_events(res, args.events)
     meta = res.metadata
     if meta.get("integrator") == "event":
-        print(f"{sc.name}: exact event-driven run, {meta['events']} master events, sampled every "
+        print(f"{printable(sc.name)}: exact event-driven run, {meta['events']} master events, sampled every "
               f"h = {meta['h']:g} ({meta['steps']} rows); status {res.status.state.value}"
               + (f": {res.status.reason}" if res.status.reason else ""))
     else:
@@ -87,12 +87,12 @@ def cmd_ensemble(args) -> int:
     from observer.scenario import load_scenario
     check_output_path("--out", args.out, (".parquet",))
     sc = load_scenario(args.scenario, parse_pairs(args.set))
-    designs = [d.strip() for d in args.designs.split(",") if d.strip()]
+    designs = split_names("--designs", args.designs)
     df = ensemble(sc, designs=designs, n=args.n, seed=args.seed, initial_errors=args.initial_errors,
                   V0=args.V0, h=args.h, t_end=args.t_end, integrator=args.integrator, paths=args.paths,
                   workers=args.workers, out=args.out)
     meta = df.attrs["metadata"]
-    print(f"{sc.name}: {args.n} members x {len(designs)} designs ({meta['integrator']}) in "
+    print(f"{printable(sc.name)}: {args.n} members x {len(designs)} designs ({meta['integrator']}) in "
           f"{meta['wall_time_s']:.2f} s; median settling times (inf = never):")
     cols = [c for c in df.columns if c.startswith("t_settle")]
     print(df.groupby("design", sort=False)[cols].median().to_string(float_format=lambda x: f"{x:.3g}"))
@@ -107,7 +107,17 @@ def observer_list(text: str | None):
         return "scenario"
     if text.strip().lower() == "none":
         return []
-    return [o.strip() for o in text.split(",") if o.strip()]
+    return split_names("--observers", text)
+
+
+def split_names(flag: str, text: str) -> list[str]:
+    """A comma-separated list of names (``--observers``, ``--designs``); an empty item
+    (``jump,``, ``jump,,nojump``, ``""``) is an error naming ``flag``."""
+    names = [o.strip() for o in text.split(",")]
+    if not all(names):
+        raise InputError(flag, f"empty item in {text!r}: give comma-separated names such as "
+                               "jump,nojump")
+    return names
 
 
 def _integrator_options(args) -> dict:
@@ -141,7 +151,7 @@ def write_events(res, path: str) -> None:
 def _stepping_message(sc, res) -> str:
     """One line on a time-stepped run: steps, speed, engine, closed steps, residual, fallbacks."""
     meta = res.metadata
-    return (f"{sc.name}: {meta['steps']} steps of h = {meta['h']:g} in {meta['wall_time_s']:.2f} s "
+    return (f"{printable(sc.name)}: {meta['steps']} steps of h = {meta['h']:g} in {meta['wall_time_s']:.2f} s "
             f"({meta['steps_per_second']:.0f} steps/s, {meta['engine']} engine"
             + (f", compiled in {meta['compile_time_s']:.1f} s" if meta['compile_time_s'] > 0.05 else "")
             + f"), {int(res.active[1:].any(axis=1).sum())} "

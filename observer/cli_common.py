@@ -9,6 +9,7 @@ A neutral module below the command lines: ``observer.cli``, ``proofs_checks.cli`
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 
 from observer.errors import ContactSolverError, InputError, is_numerical_failure, one_line
@@ -25,8 +26,21 @@ def parse_pairs(items: list[str] | None, flag: str = "--set") -> dict[str, str]:
     return out
 
 
+NEGATIVE_NUMBER = re.compile(r"^-(\d[\d_]*\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$",
+                             re.IGNORECASE)
+"""What argparse takes for a negative number rather than an option: ``-3``, ``-1e-4``, ``-.5``,
+``-2.5E+3``, ``-inf`` (its own pattern knows neither exponents nor infinity, so ``--h -1e-4``
+was "expected one argument"); the value then reaches the field's own check (``simulation.h:
+must be > 0``)."""
+
+
 class Parser(argparse.ArgumentParser):
-    """argparse with one-line errors (``error: ...``, exit status 2), like every other input error."""
+    """argparse with one-line errors (``error: ...``, exit status 2), like every other input
+    error, and negative numbers (:data:`NEGATIVE_NUMBER`) accepted as option values."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_NUMBER
 
     def error(self, message: str):
         self.exit(2, f"error: {message} (see --help)\n")

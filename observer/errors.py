@@ -28,11 +28,21 @@ LINE_BREAKS = {c: repr(chr(c))[1:-1] for c in (0x0A, 0x0B, 0x0C, 0x0D, 0x1C, 0x1
                                                 0x2028, 0x2029)}
 """The characters :meth:`str.splitlines` breaks at, mapped to their escapes (``\\n``, ...)."""
 
+CONTROLS = {**{c: f"\\x{c:02x}" for c in (*range(0x00, 0x09), *range(0x0B, 0x20), *range(0x7F, 0xA0))},
+            **LINE_BREAKS}
+"""Every C0 and C1 control character but the tab (BEL, ESC, DEL, the line breaks...), mapped
+to its escape: a terminal would act on it (ring, move the cursor, recolour) rather than show it."""
+
 
 def one_line(text: str) -> str:
-    """``text`` with every line break escaped (``\\n``, ``\\r``, ``\\x0b``...), so that an error
-    message stays on one line even when it quotes a path or a value containing one."""
-    return text.translate(LINE_BREAKS)
+    """``text`` with every line break and control character escaped (``\\n``, ``\\r``,
+    ``\\x07``, ``\\x1b``...), so that an error message stays on one line and shows what it
+    quotes (a path, a value, a scenario name) rather than letting a terminal act on it."""
+    return text.translate(CONTROLS)
+
+
+printable = one_line
+"""The same escaping for a name echoed on a normal output line (``observer run``'s summary)."""
 
 
 class ContactSolverError(RuntimeError):

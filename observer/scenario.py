@@ -208,6 +208,7 @@ class Scenario:
         if M.shape != (n, n) or n == 0:
             raise InputError("system.M", f"must be a non-empty square matrix, got shape "
                              f"{M.shape[0]}x{M.shape[1]}")
+        check_dimensions(sysd, n)
         W = as_matrix("system.W", sysd["W"], (n, None))
         m = W.shape[1]
         if m == 0:
@@ -300,6 +301,38 @@ class Scenario:
                 "theta": self.theta, "t_end": self.t_end, "law": self.law.law,
                 "restitution": self.law.restitution.tolist(), "solver": self.solver,
                 "master_projection": self.master_projection}
+
+
+def _rows(value: Any) -> int | None:
+    """The row count of a system matrix as the document gives it (a nested list, an array, a
+    sparse matrix or a sparse table), without converting it; None when it has none."""
+    if isinstance(value, Mapping):
+        shape = value.get("shape")
+        return shape[0] if isinstance(shape, (list, tuple)) and shape and isinstance(shape[0], int) else None
+    if sps.is_sparse(value) or isinstance(value, np.ndarray):
+        return int(value.shape[0]) if np.ndim(value) else None
+    return len(value) if isinstance(value, (list, tuple)) else None
+
+
+def check_dimensions(sysd: dict, n: int) -> None:
+    """Raise unless C, K and W have the n rows of the n×n M, naming the matrices that disagree
+    (a 2×2 M with a 3×3 K and C is an M of the wrong size, not a W of the wrong shape)."""
+    rows = {"system.M": n, **{f"system.{k}": _rows(sysd[k]) for k in ("C", "K", "W")}}
+    off = {f: r for f, r in rows.items() if r is not None and r != n}
+    if not off:
+        return
+    counts = {r: sum(v == r for v in rows.values()) for r in set(rows.values()) if r is not None}
+    common = max(counts, key=lambda r: (counts[r], r == n))
+    wrong = [f for f, r in rows.items() if r is not None and r != common]
+    agree = [f for f, r in rows.items() if r == common]
+
+    def size(f):
+        return f"{rows[f]} rows" if f == "system.W" else f"{rows[f]}x{rows[f]}"
+    raise InputError(wrong[0], f"the system matrices disagree on the number of coordinates n: "
+                     + ", ".join(f"{f} {'has' if f == 'system.W' else 'is'} {size(f)}" for f in wrong)
+                     + " but "
+                     + ", ".join(f"{f} {'has' if f == 'system.W' else 'is'} {size(f)}" for f in agree)
+                     + " (M, C, K are n×n, W has n rows)")
 
 
 def check_finite_energy(prefix: str, system: LinearSystem, q: np.ndarray, u: np.ndarray) -> None:

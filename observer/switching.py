@@ -31,13 +31,16 @@ LOG_COLUMNS = ("contact", "t_close", "t_open")
 
 
 def read_log(path: str | Path, m: int) -> pd.DataFrame:
-    """Read and validate a closing log (CSV with columns contact, t_close, t_open).
+    """Read and validate a closing log (CSV with columns contact, t_close, t_open), or validate
+    one given as a :class:`pandas.DataFrame` with those columns.
 
     Errors name the file, the row and the problem: unknown contact index, NaN,
     ``t_open < t_close``, intervals of one contact not sorted or overlapping.
     """
     import pandas as pd
 
+    if isinstance(path, pd.DataFrame):           # the log itself, with the log's columns
+        return validate_log(path, m, f"the DataFrame given as the log ({len(path)} rows)")
     if not isinstance(path, (str, Path)) or not str(path).strip():
         raise InputError("observer.log", f"must be a file path, got {path!r}")
     path = Path(path)
@@ -69,12 +72,12 @@ def validate_log(df: pd.DataFrame, m: int, where: str = "log") -> pd.DataFrame:
     bad = np.flatnonzero((c != np.round(c)) | (c < 0) | (c >= m))
     if bad.size:
         raise InputError("observer.log", f"{where}: row {bad[0] + 1}: unknown contact index "
-                         f"{df['contact'].iloc[bad[0]]!r} (the system has contacts 0..{m - 1})")
+                         f"{_number(df['contact'].iloc[bad[0]])} (the system has contacts 0..{m - 1})")
     df["contact"] = df["contact"].astype(int)
     bad = np.flatnonzero(df["t_close"].to_numpy() < 0.0)
     if bad.size:
         raise InputError("observer.log", f"{where}: row {bad[0] + 1}: t_close = "
-                         f"{df['t_close'].iloc[bad[0]]!r} < 0 (runs start at t = 0)")
+                         f"{_number(df['t_close'].iloc[bad[0]])} < 0 (runs start at t = 0)")
     bad = np.flatnonzero(df["t_open"].to_numpy() < df["t_close"].to_numpy())
     if bad.size:
         raise InputError("observer.log", f"{where}: row {bad[0] + 1}: t_open < t_close")
@@ -90,6 +93,12 @@ def validate_log(df: pd.DataFrame, m: int, where: str = "log") -> pd.DataFrame:
             raise InputError("observer.log", f"{where}: row {rows[overlap[0] + 1] + 1}: interval of "
                              f"contact {j} overlaps the previous one")
     return df.reset_index(drop=True)
+
+
+def _number(x) -> str:
+    """A log entry as the file has it (``2``, ``0.5``), never NumPy's ``np.int64(2)``."""
+    x = x.item() if isinstance(x, np.generic) else x
+    return str(int(x)) if isinstance(x, float) and x.is_integer() else repr(x)
 
 
 def sample_log(log: pd.DataFrame, t: np.ndarray, m: int) -> np.ndarray:

@@ -177,7 +177,7 @@ def describe(sc: Scenario, integrator: str, observers, source, coupling, log, re
             check_finite_energy("observer", system, s.q0, s.u0)
         source = source or cfg.source
         coupling = cfg.coupling if coupling == "scenario" else coupling
-        log = log or cfg.log
+        log = cfg.log if log is None else log      # (a DataFrame has no truth value)
         for s in slaves:
             if s.position_jumps and s.metric == "K":
                 system.require_definite_stiffness(f"the observer {s.name!r} (position jumps in the K metric)")
@@ -188,6 +188,8 @@ def describe(sc: Scenario, integrator: str, observers, source, coupling, log, re
         if log is None:
             raise InputError("observer.log", "source = \"log\" needs a log file")
         log_frame = read_log(log, sc.system.m)
+        if not isinstance(log, (str, Path)):          # a DataFrame: the metadata says so
+            log = f"DataFrame ({len(log_frame)} intervals)"
     return RunDescription(sc, integrator, tuple(slaves), source,
                           None if coupling == "scenario" else coupling, log, log_frame,
                           residual_tol, record_every, store, on_chunk)
