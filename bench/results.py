@@ -332,7 +332,8 @@ def load_results(paths: Iterable[str | Path]):
         elif not p.exists():
             raise FileNotFoundError(f"{p}: no such results folder or file")
         else:
-            raise ValueError(f"{p}: not a results folder or file (expected OUT/<suite>{CASES_SUFFIX}, "
+            from observer.errors import InputError      # (a ValueError: one line at a CLI)
+            raise InputError(str(p), f"not a results folder or file (expected OUT/<suite>{CASES_SUFFIX}, "
                              ".csv or .parquet)")
         if len(df):
             df["results_dir"] = str(p.parent)

@@ -153,6 +153,10 @@ def _count(field: str, value: Any, low: int) -> int:
     return int(value)
 
 
+SEED_MAX = 2 ** 63 - 1
+"""Largest seed: the rows' ``seed`` column is a 64-bit integer (pandas ``Int64``)."""
+
+
 def _generator(seed: Any, rng: Any) -> tuple[np.random.Generator, int | None]:
     """The generator and the seed recorded in the rows (None when a Generator was given)."""
     if rng is not None:
@@ -162,6 +166,9 @@ def _generator(seed: Any, rng: Any) -> tuple[np.random.Generator, int | None]:
     if isinstance(seed, np.random.Generator):
         return seed, None
     seed = _count("seed", seed, 0)
+    if seed > SEED_MAX:
+        raise InputError("seed", f"must be at most 2^63 - 1 = {SEED_MAX} (the rows record it as a "
+                                 f"64-bit integer), got {seed}")
     return np.random.default_rng(seed), seed
 
 

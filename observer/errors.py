@@ -54,12 +54,37 @@ NUMERICAL_MODULES = ("numpy", "scipy", "numba", "llvmlite", "tomllib")
 never reach a user: :func:`is_numerical_failure` picks them out."""
 
 
+CALLBACK_NOTE = "raised by the {name} callback given to the toolkit (the user's code), not by the toolkit"
+"""The note :func:`user_callback` adds to an exception of a user's callback."""
+
+
+def user_callback(name: str, func):
+    """``func`` wrapped so that an exception it raises leaves unchanged (the user's own type,
+    to catch as such) but noted as the callback's (:data:`CALLBACK_NOTE`, shown under its
+    traceback): :func:`is_numerical_failure` then never reports it as the toolkit's failure
+    (a ``ZeroDivisionError`` in an ``on_chunk`` was "the computation failed ... please report
+    this input")."""
+    def call(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except Exception as exc:           # noqa: BLE001  (re-raised, only annotated)
+            exc.add_note(CALLBACK_NOTE.format(name=name))
+            raise
+    return call
+
+
+def is_callback_failure(exc: BaseException) -> bool:
+    """Whether ``exc`` was raised by a user's callback (:func:`user_callback`)."""
+    return any(n.startswith("raised by the ") and n.endswith(", not by the toolkit")
+               for n in getattr(exc, "__notes__", ()))
+
+
 def is_numerical_failure(exc: BaseException) -> bool:
     """Whether ``exc`` is an arithmetic failure (overflow, division by zero, recursion too
     deep) or an exception raised by one of :data:`NUMERICAL_MODULES` rather than by the
     toolkit: the command line and :func:`observer.simulate` turn it into one error naming
     the scenario."""
-    if isinstance(exc, MemoryError):    # NumPy's too: a run too large, said as such elsewhere
+    if isinstance(exc, MemoryError) or is_callback_failure(exc):   # a run too large; the user's code
         return False
     if isinstance(exc, (ArithmeticError, RecursionError)):
         return True

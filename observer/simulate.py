@@ -15,7 +15,7 @@ from typing import Iterable
 from observer.engines import ENGINES, INTEGRATORS, choose, describe
 from observer.engines.base import scenario_observers  # noqa: F401  (re-exported)
 from observer.engines.timestepping import result_events, stepping_events  # noqa: F401  (re-exported)
-from observer.errors import InputError, is_numerical_failure
+from observer.errors import InputError, is_numerical_failure, user_callback
 from observer.loop import check_record_every
 from observer.observers import Slave, check_coupling, make_slaves  # noqa: F401  (make_slaves re-exported)
 from observer.result import SimulationResult
@@ -78,7 +78,7 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     sc = _scenario(scenario, h=h, t_end=t_end, solver=solver, theta=theta,
                    master_projection=master_projection)
     run = describe(sc, integrator, observers, source, coupling, log, residual_tol, record_every,
-                   store, on_chunk)
+                   store, None if on_chunk is None else user_callback("on_chunk", on_chunk))
     chosen, note = choose(run, engine)
     record = chosen.run(run)
     if note:

@@ -338,8 +338,14 @@ def cholesky_condition_estimate(A: np.ndarray) -> float:
     return float(1.0 / rcond) if info == 0 and rcond > 0.0 else float("inf")
 
 
+H_MIN = float(np.sqrt(np.finfo(float).tiny))
+"""Smallest accepted step size (≈ 1.49e-154): below, h² is subnormal or 0, so the iteration
+matrix ``M + hθC + h²θ²K`` drops K and a least-squares fit over t (the decay rate) divides by
+an underflowed ‖t‖ (h = 1e-200 failed inside NumPy's SVD, 1e-310 at an integer conversion)."""
+
+
 def check_step_parameters(h: Any, theta: Any) -> tuple[float, float]:
-    """Validate the step size h > 0 and the Moreau–Jean θ ∈ [½, 1]; return them as floats.
+    """Validate the step size h ≥ :data:`H_MIN` and the Moreau–Jean θ ∈ [½, 1]; return them as floats.
 
     Raises
     ------
@@ -347,6 +353,10 @@ def check_step_parameters(h: Any, theta: Any) -> tuple[float, float]:
         Naming ``simulation.h`` or ``simulation.theta``.
     """
     h = as_scalar("simulation.h", h, positive=True)
+    if h < H_MIN:
+        raise InputError("simulation.h", f"h = {h!r} is below {H_MIN:.3g} = √(smallest normal float): "
+                         "h² underflows (the step matrix M + hθC + h²θ²K loses K, and the run's "
+                         "time fits square t)")
     theta = as_scalar("simulation.theta", theta, low=0.5, high=1.0)
     return h, theta
 

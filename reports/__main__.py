@@ -44,8 +44,13 @@ def main(argv: list[str] | None = None) -> int:
         files.append(path)
     out = Path(args.out) if args.out else Path("reports/out") / files[0].name.split(".")[0]
     from reports.build import build_report
+    from observer.errors import InputError
     t0 = time.perf_counter()
-    index = build_report(files, out, micro_files=args.micro, command=args.command)
+    try:
+        index = build_report(files, out, micro_files=args.micro, command=args.command)
+    except InputError as exc:            # results that are not results, or hold no rows
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     print(f"report: {index} ({index.stat().st_size / 1e6:.1f} MB, built in "
           f"{time.perf_counter() - t0:.1f} s)")
     if args.check:

@@ -251,7 +251,9 @@ def load_context(result_files: Iterable[str | Path], out_dir: str | Path, *,
         raise FileNotFoundError(f"results file(s) not found: {', '.join(missing)}")
     df = load_rows(files)
     if df.empty:
-        raise ValueError("the results files contain no rows")
+        from observer.errors import InputError          # (a ValueError: one line at the CLI)
+        raise InputError(", ".join(map(str, files)), "the results files contain no rows; run "
+                         "`python -m bench run SUITE` first")
     micro_paths = [Path(p) for p in micro_files] if micro_files is not None else discover_micro(files)
     micro, micro_meta = load_micro(micro_paths)
     suites = list(dict.fromkeys(df["suite"].astype(str)))
