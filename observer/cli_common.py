@@ -9,6 +9,7 @@ A neutral module below the command lines: ``observer.cli``, ``proofs_checks.cli`
 from __future__ import annotations
 
 import argparse
+import codecs
 import re
 import sys
 
@@ -56,11 +57,37 @@ def _os_error_file(exc: OSError, args: tuple) -> str:
     return " or ".join(outs) or "output file"
 
 
+def _escape_unencodable(err: UnicodeEncodeError) -> tuple[str, int]:
+    """A character the terminal's encoding lacks (``§``, ``≻`` under ``LANG=C``) as its
+    ``\\uXXXX`` escape, which a TOML string reads back as the same character."""
+    text = err.object[err.start:err.end]
+    return "".join(f"\\u{ord(c):04x}" if ord(c) <= 0xFFFF else f"\\U{ord(c):08x}" for c in text), err.end
+
+
+ESCAPE_ERRORS = "observer-escape"
+codecs.register_error(ESCAPE_ERRORS, _escape_unencodable)
+
+
+def escape_unencodable_output() -> None:
+    """Let stdout and stderr write what their encoding cannot (an ASCII terminal under
+    ``LANG=C``) as ``\\uXXXX`` escapes instead of dying with ``UnicodeEncodeError``."""
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        encoding = getattr(stream, "encoding", None) or "ascii"
+        if reconfigure is not None and not codecs.lookup(encoding).name.startswith("utf"):
+            try:
+                reconfigure(errors=ESCAPE_ERRORS)
+            except (ValueError, OSError):      # a stream that cannot change now: left as it is
+                pass
+
+
 def guarded(func, *args) -> int:
     """Call ``func(*args)``; turn input, solver, file and out-of-memory errors, and a numerical
     library's own exception (:func:`~observer.errors.is_numerical_failure`), into one
     ``error:`` line on stderr and exit status 2 (130 on Ctrl-C). Shared by every command line
-    of the toolkit."""
+    of the toolkit. Characters the output streams cannot encode are written as escapes
+    (:func:`escape_unencodable_output`)."""
+    escape_unencodable_output()
     try:
         return func(*args)
     except (InputError, ContactSolverError) as exc:

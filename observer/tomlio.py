@@ -80,6 +80,12 @@ def nesting_depth(value: Any) -> int:
     return deepest
 
 
+STRING_ESCAPES = {**{c: f"\\u{c:04x}" for c in (*range(0x00, 0x09), *range(0x0A, 0x20), *range(0x7F, 0xA0))},
+                  ord("\\"): "\\\\", ord('"'): '\\"', ord("\n"): "\\n"}
+"""A TOML basic string's escapes: backslash, quote, and every control character but the tab
+(TOML refuses them raw; a terminal would act on a BEL or an ESC of a scenario name)."""
+
+
 def _scalar(x: Any) -> str:
     if isinstance(x, bool):
         return "true" if x else "false"
@@ -90,7 +96,7 @@ def _scalar(x: Any) -> str:
             raise ValueError(f"cannot write non-finite float {x!r} to TOML")
         return repr(x)
     if isinstance(x, str):
-        return '"' + x.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+        return '"' + x.translate(STRING_ESCAPES) + '"'
     raise TypeError(f"cannot write {type(x).__name__} to TOML")
 
 
