@@ -24,6 +24,11 @@ class InputError(ValueError):
         super().__init__(f"{self.field}: {self.problem}")
 
 
+class InputWarning(UserWarning):
+    """Input the toolkit accepts but whose default the user may not have meant (a missing
+    ``[system.gap]`` offset: every contact closed at q = 0); the message names the field."""
+
+
 LINE_BREAKS = {c: repr(chr(c))[1:-1] for c in (0x0A, 0x0B, 0x0C, 0x0D, 0x1C, 0x1D, 0x1E, 0x85,
                                                 0x2028, 0x2029)}
 """The characters :meth:`str.splitlines` breaks at, mapped to their escapes (``\\n``, ...)."""

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import copy
 import tomllib
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from observer.errors import InputError
+from observer.errors import InputError, InputWarning
 from observer.impact import ImpactLaw
 from observer.model import Harmonic, LinearSystem
 from observer.solver_registry import solver_factory
@@ -213,6 +214,10 @@ class Scenario:
         m = W.shape[1]
         if m == 0:
             raise InputError("system.W", "needs at least one contact column")
+        if not isinstance(sysd.get("gap", {}), dict) or "offset" not in sysd.get("gap", {}):
+            warnings.warn(f"system.gap.offset: not given, so every contact's offset is 0: the "
+                          f"{m} contact(s) close where Wᵀq = 0 (a table [system.gap] with "
+                          f"offset = [...] sets the distances at q = 0)", InputWarning, stacklevel=3)
         forcing = _harmonic_doc("system.forcing", sysd.get("forcing", {}), n, "cos", "constant")
         gap = _harmonic_doc("system.gap", sysd.get("gap", {}), m, "sin", "offset")
         if system is None:
