@@ -777,3 +777,155 @@ def test_a_numerical_library_failure_in_the_api_is_an_input_error_naming_the_sce
         observer.simulate("double_mass", t_end=0.01)
     with pytest.raises(KeyError):
         observer.simulate("double_mass", t_end=0.01)
+
+
+# --- issue 36: inputs a user gets wrong, and hostile ones ---------------------------------------
+_THREE = "[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]"
+ENSEMBLE = ["ensemble", "double_mass", "--n", "2", "--t-end", "0.01", "--out", "{tmp}/e.parquet"]
+
+CASES += [
+    doc_case("matrices-disagree-on-n", {"system.K": _THREE, "system.C": _THREE,
+                                        "system.W": "[[1.0], [0.0], [0.0]]"}, "system.M",
+             "system.M is 2x2 but system.C is 3x3, system.K is 3x3, system.W has 3 rows"),
+    doc_case("K-ragged-row", {"system.K": "[[1.0, 0.0], [0.0]]"}, "system.K",
+             "row 1 has 1 entry, expected 2"),
+    doc_case("W-ragged-row", {"system.W": "[[1.0], []]"}, "system.W", "row 1 has 0 entries, expected 1"),
+    log_case("log-contact-index-as-written", "contact,t_close,t_open\n2,0.001,0.002\n",
+             "unknown contact index 2 (the system"),
+    log_case("log-negative-time-as-written", "contact,t_close,t_open\n0,-0.5,0.002\n", "t_close = -0.5 < 0"),
+    run_case("h-option-negative-own-word", {"h": -1e-4}, "simulation.h", "must be > 0, got -0.0001",
+             ["--h", "-1e-4"]),
+    run_case("t-end-option-negative-own-word", {"t_end": -2.5}, "simulation.t_end", "must be > 0",
+             ["--t-end", "-2.5E+0"]),
+    Bad("observers-empty-item", "--observers", "empty item in 'jump,'", None,
+        ["run", "double_mass", "--observers", "jump,", "--out", OUT], kind="cli"),
+    Bad("observers-empty-middle-item", "--observers", "empty item", None,
+        ["run", "double_mass", "--observers", "jump,,nojump", "--out", OUT], kind="cli"),
+    Bad("ensemble-designs-empty-item", "--designs", "empty item", None,
+        ENSEMBLE + ["--designs", "nojump,"], kind="cli"),
+    Bad("ensemble-seed-2-to-the-63", "seed", "at most 2^63 - 1",
+        lambda tmp: observer.ensemble("double_mass", n=2, seed=2 ** 63, t_end=0.01),
+        ENSEMBLE + ["--seed", str(2 ** 63)], kind="cli"),
+    api_case("ensemble-seed-2-to-the-200", lambda tmp: observer.ensemble(
+        "double_mass", n=2, seed=2 ** 200, t_end=0.01), "seed", "at most 2^63 - 1"),
+    run_case("h-subnormal", {"h": 5e-324}, "simulation.h", "h² underflows", ["--h", "5e-324"]),
+    run_case("h-1e-300-short-run", {"h": 1e-300, "t_end": 1e-299}, "simulation.h", "h² underflows",
+             ["--h", "1e-300", "--t-end", "1e-299"]),
+    run_case("h-1e-200-short-run", {"h": 1e-200, "t_end": 1e-199}, "simulation.h", "h² underflows",
+             ["--h", "1e-200", "--t-end", "1e-199"]),
+    api_case("M-datetime64", lambda tmp: _system(M=np.array([["2020-01-01", "2020-01-02"]] * 2,
+                                                             dtype="datetime64[D]")),
+             "system.M", "datetime64"),
+    api_case("K-timedelta64", lambda tmp: _system(K=np.eye(2).astype("timedelta64[s]")), "system.K",
+             "timedelta64"),
+    run_case("t-end-timedelta64", {"t_end": np.timedelta64(5, "s")}, "simulation.t_end",
+             "a date or a duration is not a number"),
+    api_case("M-masked-entry", lambda tmp: _system(M=np.ma.masked_array(np.eye(2), mask=[[0, 1], [0, 0]])),
+             "system.M", "entry (0, 1) is masked"),
+    api_case("initial-q-masked", lambda tmp: observer.load_scenario(
+        "double_mass", {"initial.q": np.ma.masked_array([0.0, 0.0], mask=[1, 0])}), "initial.q", "masked"),
+    api_case("log-dataframe-bad-contact", lambda tmp: observer.simulate(
+        "double_mass", t_end=0.01, observers=["jump"], source="log",
+        log=__import__("pandas").DataFrame({"contact": [3], "t_close": [0.001], "t_open": [0.002]})),
+        "observer.log", "DataFrame given as the log (1 rows): row 1: unknown contact index 3"),
+]
+
+
+def test_a_dataframe_log_runs_as_its_csv_file(tmp_path):
+    """A closing log given as a DataFrame with the log's columns is the same log as its CSV."""
+    import pandas as pd
+
+    log = pd.DataFrame({"contact": [0, 0], "t_close": [0.001, 0.004], "t_open": [0.002, 0.006]})
+    log.to_csv(tmp_path / "log.csv", index=False)
+    kw = dict(t_end=0.01, observers=["jump"], source="log", engine="python")
+    a = observer.simulate("double_mass", log=log, **kw).to_frame()
+    b = observer.simulate("double_mass", log=str(tmp_path / "log.csv"), **kw).to_frame()
+    assert a.equals(b)
+
+
+def test_a_masked_array_without_masked_entries_is_its_data():
+    sys_ = _system(M=np.ma.masked_array(2.0 * np.eye(2)))
+    assert np.array_equal(sys_.M, 2.0 * np.eye(2))
+
+
+def test_control_bytes_in_a_scenario_name_are_escaped_and_show_round_trips(tmp_path, capsys):
+    name = "bell\x07esc\x1b[31mred"
+    doc = builtin_document("double_mass")
+    doc["scenario"]["name"] = name
+    (tmp_path / "case.toml").write_text(dumps(doc))
+    assert cli.main(["run", str(tmp_path / "case.toml"), "--observers", "none", "--t-end", "0.01",
+                     "--out", str(tmp_path / "out.csv")]) == 0
+    out = capsys.readouterr().out
+    assert "\x07" not in out and "\x1b" not in out
+    assert out.startswith("bell\\x07esc\\x1b[31mred: ")
+    assert cli.main(["show", str(tmp_path / "case.toml")]) == 0
+    shown = capsys.readouterr().out
+    assert "\x07" not in shown and "\x1b" not in shown
+    assert load_scenario_text(shown, tmp_path).name == name
+
+
+def load_scenario_text(text: str, tmp: Path):
+    (tmp / "shown.toml").write_text(text)
+    return load_scenario(str(tmp / "shown.toml"))
+
+
+def test_an_error_line_escapes_control_bytes():
+    err = InputError("scenario", "'a\x07b\x1b[2J\x7f\x9b'")
+    assert str(err) == "scenario: 'a\\x07b\\x1b[2J\\x7f\\x9b'"
+
+
+def test_an_ascii_terminal_gets_escapes_not_unicode_errors(tmp_path):
+    """``LANG=C`` without UTF-8 coercion: stdout is ASCII; ``show`` writes ``§`` as ``\\u00a7``
+    (a TOML string reads it back as ``§``) and exits 0, and its output runs unchanged."""
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONIOENCODING", "PYTHONUTF8")}
+    env.update(PYTHONPATH=str(ROOT), LC_ALL="C", LANG="C", PYTHONCOERCECLOCALE="0", PYTHONUTF8="0")
+    proc = subprocess.run([sys.executable, "-m", "observer", "show", "double_mass"], env=env,
+                          capture_output=True, timeout=120)
+    assert proc.returncode == 0 and b"Traceback" not in proc.stderr, proc.stderr
+    assert max(proc.stdout) < 128 and b"\\u00a7" in proc.stdout
+    sc = load_scenario_text(proc.stdout.decode("ascii"), tmp_path)
+    assert sc.to_dict() == load_scenario("double_mass").to_dict()
+
+
+def test_a_missing_gap_offset_warns_naming_the_field_and_its_effect():
+    from observer.errors import InputWarning
+
+    doc = builtin_document("double_mass")
+    del doc["system"]["gap"]
+    doc["initial"]["q"] = [0.1, 0.2]
+    with pytest.warns(InputWarning, match=r"system.gap.offset: not given, so every contact's offset is 0"):
+        sc = observer.Scenario.from_dict(doc)
+    assert np.array_equal(sc.system.nu(0.0), [0.0])
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        observer.Scenario.from_dict(builtin_document("double_mass"))
+
+
+def test_an_on_chunk_callback_that_raises_is_reported_as_the_callbacks():
+    """The user's own exception, unchanged and noted as the callback's; never "the
+    computation failed ... please report this input"."""
+    def callback(chunk):
+        raise ZeroDivisionError("the user's bug")
+
+    for engine in ("python", "compiled"):
+        with pytest.raises(ZeroDivisionError, match="the user's bug") as info:
+            observer.simulate("double_mass", t_end=0.01, on_chunk=callback, engine=engine)
+        assert any("on_chunk callback" in n for n in info.value.__notes__)
+
+
+@pytest.mark.parametrize("what", ["toml-file", "empty-folder"])
+def test_reports_on_a_non_result_is_one_line_exit_2(what, tmp_path, capsys, monkeypatch):
+    from reports.__main__ import main as reports_main
+
+    monkeypatch.chdir(tmp_path)
+    if what == "toml-file":
+        (tmp_path / "x.toml").write_text("a = 1\n")
+        arg, field = "x.toml", "x.toml"
+    else:
+        (tmp_path / "empty").mkdir()
+        arg, field = "empty", "empty"
+    assert reports_main([arg, "--out", str(tmp_path / "page")]) == 2
+    out, err = capsys.readouterr()
+    assert err.splitlines() == [err.strip()] and err.startswith(f"error: {field}: ")
+    assert "Traceback" not in err and not (tmp_path / "page").exists()
