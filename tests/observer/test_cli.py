@@ -344,3 +344,28 @@ def test_events_without_an_event_table_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("error: --events:")
     assert not (tmp_path / "e.csv").exists()
+
+
+def test_run_reports_the_loop_time_apart_from_writing_the_output(tmp_path, capsys, monkeypatch):
+    """Issue 36, item 13: a slow output (here a writer that takes 0.5 s more to finish) is
+    said as writing time; the loop's time and speed do not include it."""
+    import re
+    import time
+
+    from observer import cli, stream
+
+    finish = stream.ChunkWriter.finish
+
+    def slow_finish(self, res):
+        time.sleep(0.5)
+        return finish(self, res)
+
+    monkeypatch.setattr(stream.ChunkWriter, "finish", slow_finish)
+    assert cli.main(["run", "double_mass", "--observers", "none", "--t-end", "0.05",
+                     "--out", str(tmp_path / "r.csv")]) == 0
+    line = capsys.readouterr().out.splitlines()[0]
+    m = re.search(r"500 steps of h = 0.0001 in ([0-9.]+) s \(([0-9.]+|inf) steps/s; writing the output "
+                  r"([0-9.]+) s;", line)
+    assert m, line
+    loop_s, write_s = float(m.group(1)), float(m.group(3))
+    assert write_s >= 0.5 and loop_s < 0.5, line
