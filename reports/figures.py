@@ -233,7 +233,8 @@ def work_precision_figure(wp: pd.DataFrame, orders: dict[str, float]) -> Figure 
             ls = "-" if law == "newton" else "--"
             fast = solver != REFERENCE_SOLVER
             marker, mfc, ms = ("o", color, 5) if fast else ("s", "none", 8)
-            label = f"{law} · {solver} (p = {orders.get(method, float('nan')):.2f})"
+            p = orders.get(method, float("nan"))
+            label = f"{law} · {solver} (p = {p:.2f})" if np.isfinite(p) else f"{law} · {solver} (p = —, no fit)"
             axes[i, 0].loglog(g["cpu_time_s"], g["err_mean"], ls=ls, marker=marker, color=color,
                               mfc=mfc, ms=ms, lw=1.1, label=label)
             axes[i, 1].loglog(g["h"], g["err_mean"], ls=ls, marker=marker, color=color, mfc=mfc,

@@ -21,6 +21,17 @@ INTRO = ("Every point is one run at one step size h; its error is measured again
          "error ∝ CPU^(−s).")
 
 
+NO_FIT = "—"
+"""Shown in place of a fitted order or slope that has fewer than two points (the fit's NaN)."""
+NO_FIT_LEGEND = (f"{NO_FIT}: no fitted order or slope: fewer than two usable points (one step size, "
+                 "or errors at zero), so there is no line to fit.")
+
+
+def fitted(x: float) -> str:
+    """A fitted order or slope to two decimals, or :data:`NO_FIT` where nothing was fitted."""
+    return f"{x:.2f}" if np.isfinite(x) else NO_FIT
+
+
 def _solver_cell(r: pd.Series) -> str:
     """The contact solver, or the integrator when it is not the suite's default one."""
     integ = r.get("integrator")
@@ -35,9 +46,11 @@ def orders_table(orders: pd.DataFrame) -> Table:
                "CPU at smallest error (s)"])
     for _, r in orders.iterrows():
         t.add([r["scenario"], r["target"], r["law"], _solver_cell(r), r["reference"], str(r["points"]),
-               f"{fmt(r['h_min'])} … {fmt(r['h_max'])}", f"{r['order']:.2f}",
-               f"{r['order_max']:.2f}", f"{r['work_slope']:.2f}", fmt(r["best_err"]),
+               f"{fmt(r['h_min'])} … {fmt(r['h_max'])}", fitted(r['order']),
+               fitted(r['order_max']), fitted(r['work_slope']), fmt(r["best_err"]),
                fmt(r["best_cpu"])])
+    if any(NO_FIT in row for row in t.rows):
+        t.note = NO_FIT_LEGEND
     return t
 
 
@@ -49,12 +62,12 @@ def master_sentence(orders: pd.DataFrame) -> str | None:
     closed = master[master["reference"].str.startswith("closed form")]
     parts = []
     if len(closed):
-        parts.append(f"against closed forms p = {closed['order'].min():.2f} … "
-                     f"{closed['order'].max():.2f} ({', '.join(dict.fromkeys(closed['scenario']))})")
+        parts.append(f"against closed forms p = {fitted(closed['order'].min())} … "
+                     f"{fitted(closed['order'].max())} ({', '.join(dict.fromkeys(closed['scenario']))})")
     other = master[~master.index.isin(closed.index)]
     for (scen, law), g in other.groupby(["scenario", "law"], sort=False):
         ref = g["reference"].iloc[0].split(" (")[0]
-        parts.append(f"{scen} {law} ({ref} reference) p = {g['order'].iloc[0]:.2f}")
+        parts.append(f"{scen} {law} ({ref} reference) p = {fitted(g['order'].iloc[0])}")
     return "Master with impacts: " + "; ".join(parts)
 
 
@@ -101,7 +114,7 @@ def observer_key_numbers(orders: pd.DataFrame) -> list[str]:
     for target in registry.in_registry_order(t for t in fast["target"] if t != registry.MASTER):
         ot = fast[fast["target"] == target]
         lines.append(f"Observer {registry.label(target)}: fitted order "
-                     + ", ".join(f"{r['law']} {r['order']:.2f}" for _, r in ot.iterrows())
+                     + ", ".join(f"{r['law']} {fitted(r['order'])}" for _, r in ot.iterrows())
                      + f" (against {ot['reference'].iloc[0].split(' (')[0]}).")
     return lines
 
