@@ -52,6 +52,28 @@ def package_versions() -> dict[str, str]:
     return dict(_versions())
 
 
+def typed_command(argv: list[str] | None = None) -> str:
+    """The command of this process as a user types it, for result metadata (no machine path):
+    ``python -m observer run ...`` for a module run (``sys.argv[0]`` is then the absolute path
+    of ``__main__.py``), ``observer run ...`` for an installed console script (its absolute
+    path), ``python script.py ...`` for a script as given; the arguments quoted as a shell
+    reads them back (:func:`shlex.join`)."""
+    import shlex
+    argv = list(sys.argv if argv is None else argv)
+    if not argv:
+        return ""
+    head = Path(argv[0])
+    if head.name == "__main__.py":
+        first = ["python", "-m", head.parent.name]
+    elif head.is_absolute() and head.suffix != ".py":
+        first = [head.name]
+    elif argv[0] in ("-c", ""):
+        first = ["python", "-c"] if argv[0] == "-c" else ["python"]
+    else:
+        first = ["python", argv[0]]
+    return shlex.join([*first, *argv[1:]])
+
+
 @dataclass
 class SlaveTrajectory:
     """One observer's trajectory and its error Lyapunov function.
@@ -551,5 +573,5 @@ def run_metadata(scenario, stepper, out) -> dict:
                 stopped=out.stop_info(stepper),
                 steps_per_second=done / out.run_time_s if out.run_time_s > 0 else float("nan"),
                 versions=package_versions(), platform=platform.platform(),
-                argv=" ".join(sys.argv))
+                argv=typed_command())
     return meta

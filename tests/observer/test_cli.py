@@ -369,3 +369,20 @@ def test_run_reports_the_loop_time_apart_from_writing_the_output(tmp_path, capsy
     assert m, line
     loop_s, write_s = float(m.group(1)), float(m.group(3))
     assert write_s >= 0.5 and loop_s < 0.5, line
+
+
+def test_result_metadata_records_the_command_as_typed(tmp_path):
+    """Issue 36, item 14: ``argv`` in a result is the command a user types (``python -m
+    observer run ...``), never the interpreter's or the package's absolute path."""
+    from observer.result import read_frame, typed_command
+
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    proc = subprocess.run([sys.executable, "-m", "observer", "run", "double_mass", "--observers", "none",
+                           "--engine", "python", "--t-end", "0.001", "--out", "r.parquet"],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    argv = read_frame(tmp_path / "r.parquet").attrs["argv"]
+    assert argv == ("python -m observer run double_mass --observers none --engine python "
+                    "--t-end 0.001 --out r.parquet")
+    assert typed_command(["/opt/venv/bin/observer", "run", "a b.toml"]) == "observer run 'a b.toml'"
+    assert typed_command(["examples/my_system.py", "--x"]) == "python examples/my_system.py --x"
