@@ -412,8 +412,25 @@ def check_builder_parameters(name: str, params: dict[str, Any]) -> dict[str, Any
                 if value != int(value):
                     raise InputError(field_name, f"must be an integer, got {value!r}")
                 value = int(value)
+        check_build_memory(name, key, value)
         out[key] = value
     return out
+
+
+def check_build_memory(name: str, key: str, value: Any) -> None:
+    """Raise before building when a size parameter's memory estimate exceeds the memory
+    available: a scenario module's ``MEMORY_PER_UNIT`` maps a parameter (the chain's ``N``) to
+    the bytes its build takes per unit (measured, with a margin); none, no check. Without it
+    a huge ``param.N`` was killed by the kernel (exit 137, nothing said)."""
+    from observer.scenarios import SCENARIOS
+    from observer.validation import available_memory
+    per = getattr(SCENARIOS[name], "MEMORY_PER_UNIT", {}).get(key)
+    avail = available_memory()
+    if per is None or avail is None or value * per <= avail:
+        return
+    raise InputError(f"param.{key}", f"{key} = {value} needs about {value * per / 2 ** 30:.3g} GiB to "
+                     f"build scenario {name!r} ({per} bytes per unit, estimated) but "
+                     f"{avail / 2 ** 30:.3g} GiB are available")
 
 
 def builtin_scenario_document(name: str, params: dict[str, Any] | None = None) -> dict:

@@ -381,6 +381,22 @@ def check_step_count(h: float, t_end: float, t0: float = 0.0) -> float:
     return steps
 
 
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (Linux ``MemAvailable``, else the free
+    physical pages), or None where the system does not say."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
 def check_output_path(field: str, path: Any, suffixes: tuple[str, ...]) -> Path:
     """Validate an output file path before any work is done; return it as a :class:`Path`.
 

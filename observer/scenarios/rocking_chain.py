@@ -34,6 +34,11 @@ PARAMETERS = dict(N=10, m=1.0, b=0.1, H=0.1, a=0.08, k=1000.0, c=5.0, g0=9.81, s
                   t_end=8.0, t_on=4.0, t_off=8.0, slave_offset=1e-6)
 """Defaults (SI units). ``slave_offset`` perturbs φ1 and y_N of the observers' initial state."""
 
+MEMORY_PER_UNIT = {"N": 5000}
+"""Bytes per block that building the chain takes (its document, sparse matrices and their
+checks): measured 2.4 kB per block (peak RSS of ``load_scenario`` at N = 2000 and 20 000),
+doubled as a margin; ``param.N`` beyond the available memory is refused before building."""
+
 
 def sparse_matrices(N: int, m: float, b: float, H: float, a: float, k: float, c: float):
     """Return M, C, K, W of the chain (n = m = 2N) as CSR matrices, assembled from triplets in

@@ -590,6 +590,8 @@ CASES += [
              "system.M", "entry (0, 1) is masked"),
     api_case("initial-q-masked", lambda tmp: observer.load_scenario(
         "double_mass", {"initial.q": np.ma.masked_array([0.0, 0.0], mask=[1, 0])}), "initial.q", "masked"),
+    param_case("param-N-beyond-memory", "rocking_chain", {"param.N": str(10 ** 15)}, "param.N",
+               "GiB to build scenario 'rocking_chain'"),
     api_case("log-dataframe-bad-contact", lambda tmp: observer.simulate(
         "double_mass", t_end=0.01, observers=["jump"], source="log",
         log=__import__("pandas").DataFrame({"contact": [3], "t_close": [0.001], "t_open": [0.002]})),
