@@ -238,11 +238,25 @@ def write_frame(df: pd.DataFrame, path: str | Path) -> Path:
     return path
 
 
+SIDECAR_MAX_BYTES = 16 * 1024 * 1024
+"""Largest sidecar read (16 MiB, as a scenario file: a run's metadata is a few kB); a larger
+or endless one (a link to ``/dev/zero``) is refused after reading at most this much."""
+
+
 def _load_json(path: Path, what: str) -> dict:
+    if not path.is_file():                       # a device (a link to /dev/zero), a FIFO
+        raise InputError(str(path), f"{what} is not a regular file")
+    with path.open("rb") as fh:
+        data = fh.read(SIDECAR_MAX_BYTES + 1)
+    if len(data) > SIDECAR_MAX_BYTES:
+        raise InputError(str(path), f"{what} is larger than {SIDECAR_MAX_BYTES // 2 ** 20} MiB: "
+                         "not a sidecar written by the toolkit")
     try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
+        meta = json.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, ValueError) as exc:
         raise InputError(str(path), f"{what} is damaged: not JSON ({exc})") from None
+    except RecursionError:
+        raise InputError(str(path), f"{what} is damaged: nested too deep to be a sidecar") from None
     if not isinstance(meta, dict):
         raise InputError(str(path), f"{what} is not a JSON object")
     return meta
@@ -411,6 +425,8 @@ def read_result(path: str | Path, partial: bool = False) -> tuple[pd.DataFrame, 
     import pandas as pd
 
     path = Path(path)
+    if path.exists() and not path.is_file():     # a device (a link to /dev/zero), a FIFO: endless
+        raise InputError(str(path), "not a regular file: a result is a file written by run")
     df, meta = _read_checked(path, partial)
     if "t" not in df.columns:
         raise InputError(str(path), "not a result file (no column 't')")

@@ -931,3 +931,35 @@ def test_reports_on_a_non_result_is_one_line_exit_2(what, tmp_path, capsys, monk
     out, err = capsys.readouterr()
     assert err.splitlines() == [err.strip()] and err.startswith(f"error: {field}: ")
     assert "Traceback" not in err and not (tmp_path / "page").exists()
+
+
+def _result_with_sidecar(tmp: Path) -> Path:
+    assert cli.main(["run", "double_mass", "--observers", "none", "--engine", "python", "--t-end", "0.001",
+                     "--out", str(tmp / "r.csv")]) == 0
+    return tmp / "r.csv"
+
+
+@pytest.mark.parametrize("what", ["sidecar-nested-100000-deep", "sidecar-link-to-dev-zero",
+                                  "result-link-to-dev-zero"])
+def test_a_hostile_sidecar_or_result_is_one_line_naming_the_file(what, tmp_path, capsys):
+    """Issue 36, item 20: read at most a bounded amount, never recurse without bound, and
+    name the file (was a RecursionError "computation failed", or the kernel's kill at /dev/zero)."""
+    result = _result_with_sidecar(tmp_path)
+    capsys.readouterr()
+    side = tmp_path / "r.json"
+    if what == "sidecar-nested-100000-deep":
+        side.write_text("[" * 100_000 + "]" * 100_000)
+        name, hint = side, "nested too deep"
+    elif what == "sidecar-link-to-dev-zero":
+        side.unlink()
+        side.symlink_to("/dev/zero")
+        name, hint = side, "not a regular file"
+    else:
+        result = tmp_path / "z.csv"
+        result.symlink_to("/dev/zero")
+        name, hint = result, "not a regular file"
+    code = cli.main(["log", str(result), "--out", str(tmp_path / "closings.csv")])
+    out, err = capsys.readouterr()
+    assert code == 2 and err.splitlines() == [err.rstrip("\n")], err
+    assert err.startswith(f"error: {name}: ") and hint in err, err
+    assert not (tmp_path / "closings.csv").exists() and out == ""
