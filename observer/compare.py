@@ -95,19 +95,22 @@ def run_master(sc, designs, n: int, seed: int, integrator: str, engine, workers,
     X = np.vstack([X, np.zeros((1, X.shape[1]))])          # member n: no error (the floor)
     df = ensemble(sc, designs=designs, n=n + 1, initial_errors=X, integrator=integrator, engine=engine,
                   paths=n + 1, workers=workers)
+    paths = df.attrs.pop("paths")           # out of attrs first: pandas deep-copies attrs on every operation
+    pd_member = paths["member"].to_numpy()
+    pd_t, pd_V = paths["t"].to_numpy(), paths["V"].to_numpy()
     t_on, t_off = window_of(sc)
     zero = df[df["member"] == n]
     floors = pd.DataFrame({"cluster": cluster, "design": zero["design"].to_numpy(),
                            "floor": zero["V_max"].to_numpy(dtype=float)})
     floor = float(floors["floor"].max())
-    paths = df.attrs["paths"]
     keep = df[df["member"] < n]
     parts = []
     for d in designs:
         rows = keep[keep["design"] == d].sort_values("member")
-        p = paths[(paths["design"] == d) & (paths["member"] < n)].sort_values(["member", "t"], kind="stable")
-        t = p[p["member"] == 0]["t"].to_numpy()
-        V = p["V"].to_numpy().reshape(n, t.size)
+        sel = np.flatnonzero((paths["design"] == d).to_numpy(dtype=bool) & (pd_member < n))
+        sel = sel[np.lexsort((pd_t[sel], pd_member[sel]))]
+        t = pd_t[sel[pd_member[sel] == 0]]
+        V = pd_V[sel].reshape(n, t.size)
         fit = stats.decay_rates(t, V, t_on, t_off, stats.fit_levels(rows["V_on"].to_numpy(), floor))
         cols = ["design", "member", "status", "V_on", "V_end", *[settle_column(r) for r in RHOS]]
         parts.append(pd.concat([rows[cols].reset_index(drop=True), fit], axis=1))
