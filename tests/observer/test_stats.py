@@ -42,6 +42,8 @@ def test_never_settling_never_enters_as_zero_or_infinity():
     assert np.isfinite(s.loc["a", "median"]) and s.loc["a", "median"] > 0.0
     o = stats.settle_order(df, "t", "a", "b").iloc[0]
     assert (o["a_first"], o["b_first"], o["ties"]) == (n, 0, 0)
+    o = stats.settle_order(df, "t", "b", "a").iloc[0]               # never is later, from either side
+    assert (o["a_first"], o["b_first"], o["ties"]) == (0, n, 0)
     rates = df.assign(rate=[1.0] * n + [0.0] * n)
     rr = stats.rate_ratio(rates, "a", "b").iloc[0]
     assert np.isnan(rr["estimate"]) and rr["status"].startswith("undefined")
