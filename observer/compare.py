@@ -408,6 +408,8 @@ def add_parser(sub) -> None:
     s.add_argument("--masters", type=int, default=5, help="master trajectories (default 5)")
     s.add_argument("--rho", type=float, default=1e-6, help=f"settling threshold, one of {list(RHOS)}")
     s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--V0", type=float, default=None, help="level of the members' energy sphere (default: "
+                                                          "V of the scenario's observer error)")
     s.add_argument("--h", type=float, help="step size")
     s.add_argument("--t-end", type=float, help="final time")
     s.add_argument("--integrator", choices=["timestepping", "event"], default="timestepping")
@@ -435,7 +437,7 @@ def cmd_compare(args) -> int:
     designs = [d.strip() for d in args.designs.split(",") if d.strip()]
     res = compare(args.scenario, designs, n=args.n, masters=args.masters, rho=args.rho, seed=args.seed,
                   overrides=parse_pairs(args.set) or None, h=args.h, t_end=args.t_end, integrator=args.integrator,
-                  spread=args.spread, grid_jitter=args.grid_jitter, workers=args.workers, scheduler=args.scheduler)
+                  spread=args.spread, grid_jitter=args.grid_jitter, V0=args.V0, workers=args.workers, scheduler=args.scheduler)
     for line in res.lines():
         print(line)
     if args.json is not None:

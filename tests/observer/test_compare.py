@@ -109,3 +109,23 @@ def test_installed_package_outside_the_clone(tmp_path):
             "n_resamples=49); print(json.dumps(r.to_dict()['pairs'][0]['rate_ratio']))")
     out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, check=True)
     assert set(json.loads(out.stdout.strip().splitlines()[-1])) >= {"estimate", "low", "high"}
+
+
+def test_zeno_ball_reports_position_error_beside_v():
+    """K = 0: nojump's V settles, yet its position error at the window's end stays large; the
+    comparison says K is singular and reports the position error (recomputed here from a
+    single run of member 0)."""
+    from observer.ensemble import member_name, member_slaves, sample_errors
+    from observer.scenario import load_scenario
+
+    res = observer.compare("bouncing_ball", designs=("jump_mass", "nojump"), n=3, masters=1, V0=0.5,
+                           n_resamples=49)
+    assert any(w.startswith("K is singular") for w in res.warnings)
+    pos = res.positions.set_index("design")
+    sc = load_scenario("bouncing_ball")
+    X, _ = sample_errors(sc, 3, "energy_sphere", np.random.default_rng(
+        int(np.random.SeedSequence(0).spawn(2)[1].generate_state(1)[0])), 0.5)
+    run = observer.simulate(sc, observers=member_slaves(sc, ("nojump",), X, range(3)))
+    e_end = [abs(run.slaves[member_name("nojump", i)].q[-1, 0] - run.q[-1, 0]) for i in range(3)]
+    assert pos.loc["nojump", "median_end"] == pytest.approx(float(np.median(e_end)), rel=1e-9)
+    assert pos.loc["nojump", "median_end"] > 0.1
