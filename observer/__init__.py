@@ -5,12 +5,14 @@ Public API (a contract relied on by the benchmarks, reports and users):
 * :func:`load_scenario` — a built-in scenario by name or a TOML file, with overrides;
 * :func:`simulate` — Moreau–Jean simulation of the master and its observers;
 * :func:`ensemble` — n observers per design from n initial errors against one master run;
+* :func:`compare` — paired designs against several masters: rate ratio, censored settling, floors;
 * :data:`SCENARIOS`, :data:`OBSERVER_DESIGNS`, :data:`IMPACT_LAWS`, :data:`CONTACT_SOLVERS`, :data:`ENGINES` —
   registries (add an entry, and it runs everywhere);
 * :class:`LinearSystem`, :class:`ImpactLaw`, :class:`Scenario`, :class:`MoreauJean`,
   :class:`SimulationResult`, :class:`Slave`.
 """
 
+from observer.compare import compare
 from observer.contact import CONTACT_SOLVERS
 from observer.engines import ENGINES
 from observer.ensemble import ensemble
@@ -27,4 +29,4 @@ from observer.version import __version__
 
 __all__ = ["CONTACT_SOLVERS", "ContactSolverError", "ENGINES", "Harmonic", "IMPACT_LAWS", "ImpactLaw", "InputError",
            "LinearSystem", "MoreauJean", "OBSERVER_DESIGNS", "ObserverDesign", "SCENARIOS", "Scenario", "SimulationResult",
-           "Slave", "ensemble", "load_scenario", "lyapunov", "read_frame", "read_result", "simulate", "__version__"]
+           "Slave", "compare", "ensemble", "load_scenario", "lyapunov", "read_frame", "read_result", "simulate", "__version__"]

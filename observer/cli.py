@@ -1,4 +1,4 @@
-"""Command line: ``python -m observer {scenarios, show, run, ensemble, log, plot}``.
+"""Command line: ``python -m observer {scenarios, show, run, ensemble, compare, log, plot}``.
 
 Errors in input exit with status 2 and one line on stderr (``error: FIELD: PROBLEM``),
 never a traceback.
@@ -270,6 +270,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override (param.NAME for builder parameters, else dotted TOML key)")
     s.add_argument("--out", required=True, help="output file (.parquet)")
     s.set_defaults(func=cmd_ensemble)
+    from observer.compare import add_parser as add_compare
+    add_compare(sub)
     s = sub.add_parser("log", help="write the closing log (contact,t_close,t_open) of a run, "
                                    "the input of --source log")
     s.add_argument("result", help="result file written by run")
