@@ -9,6 +9,8 @@
 * ``bench -- SUITE``: run a benchmark suite only (rows appended to ``bench/results/SUITE.jsonl``).
 * ``checks``: the proof checks on every built-in scenario.
 * ``run -- SCENARIO``: simulate one scenario with both observers and plot it.
+* ``docs``: build the documentation site into ``docs/_build/html`` (warnings are errors,
+  nitpicky cross-references, the gallery's examples run).
 """
 
 from __future__ import annotations
@@ -372,6 +374,17 @@ def report(session: nox.Session) -> None:
     suite = session.posargs[0] if session.posargs else "quick"
     session.run("python", "-m", "bench", "run", suite, success_codes=[0, 1])
     session.run("python", "-m", "reports", suite, "--out", f"reports/out/{suite}", *session.posargs[1:])
+
+
+@nox.session
+def docs(session: nox.Session) -> None:
+    """Build the documentation site: ``docs/_build/html/index.html`` (Sphinx, warnings as
+    errors, nitpicky; the gallery runs the examples with ``--quick``)."""
+    session.install("-c", CONSTRAINTS, "-e", ".[docs]")
+    shutil.rmtree(ROOT / "docs" / "_build", ignore_errors=True)
+    shutil.rmtree(ROOT / "docs" / "api" / "generated", ignore_errors=True)
+    session.run("python", "-m", "sphinx", "-W", "-n", "--keep-going", "-b", "html", "docs",
+                "docs/_build/html", *session.posargs, env={**SINGLE_THREAD_BLAS, "MPLBACKEND": "Agg"})
 
 
 if __name__ == "__main__":

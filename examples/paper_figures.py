@@ -1,4 +1,7 @@
-"""Reproduce Figures 2 and 3 of Baumann & Leine (the double-mass impact oscillator, Example 1).
+"""The paper's Figures 2 and 3
+===========================
+
+Reproduce Figures 2 and 3 of Baumann & Leine (the double-mass impact oscillator, Example 1).
 
 Figure 2: the error Lyapunov function V = ½vᵀMv + ½eᵀKe (paper eq. (16)) of the observer
 with position jumps (blue, the paper's design) and without (red, the earlier design of
@@ -19,6 +22,7 @@ The first run of the toolkit compiles its numba kernel (~20-40 s once, cached on
 """
 
 import argparse
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -33,8 +37,8 @@ import observer  # noqa: E402
 STYLE = {"master": ("black", "master"), "jump": ("tab:blue", "with position jumps"),
          "nojump": ("tab:red", "without position jumps")}
 
-parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-parser.add_argument("--out", default=Path(__file__).parent / "out", type=Path, help="output directory")
+parser = argparse.ArgumentParser(description=(__doc__ or "").partition("\n")[0])
+parser.add_argument("--out", default=Path(sys.argv[0]).parent / "out", type=Path, help="output directory")
 parser.add_argument("--quick", action="store_true", help="h = 1e-3 s and 10 s instead of the defaults")
 args = parser.parse_args()
 args.out.mkdir(parents=True, exist_ok=True)

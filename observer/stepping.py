@@ -403,7 +403,7 @@ class MoreauJean:
     MAX_CACHED_SETS = 4096
     """Active sets whose matrix slices are kept (cleared when full)."""
     MAX_FACTORED_SETS = 16
-    """The same with factored contact data, whose slices are n × |A| each (bounded memory)."""
+    """The same with factored contact data, whose slices are ``n × |A|`` each (bounded memory)."""
 
     def _active_slices(self, active: np.ndarray) -> tuple:
         """Slices of the precomputed matrices for one active set (cached by the set).
