@@ -447,7 +447,7 @@ ENSEMBLE_PARAMS = {"rocking_chain": {"quick": (("param.N", 4),), "full": (("para
 members per design: the chain with N = 4 blocks (8 DOF, 8 contacts) instead of 10 (≈ 6× less
 per member)."""
 PROJECTED = ("double_mass", "random_system")
-"""Scenarios whose ensembles are also run with the projected master (THEORY §6.6: the matched
+"""Scenarios whose ensembles are also run with the projected master (docs/theory/scheme.md §6: the matched
 master of the jump observers, whose discrete V has no floor from the master's penetration):
 the evidence of the K-metric question without the discretisation artifact."""
 ENSEMBLE_PATHS = 20

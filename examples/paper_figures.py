@@ -9,7 +9,7 @@ the paper's ref. [4]), on a log scale.
 Figure 3: position q₁ and velocity u₁ of the first (lower) mass: master black, observer
 with jumps blue, without red. The first mass hits the ground at g = q₁ + d₀ = 0.
 
-Both use the built-in scenario ``double_mass`` with its default parameters (THEORY.md §3:
+Both use the built-in scenario ``double_mass`` with its default parameters (docs/theory/models.md §1:
 F = 5 N, Ω = 6 rad/s, Poisson law with ε = 0.8, h = 1e-4 s, 20 s; the observers start
 from q_m(0) + (0.02, −0.01), u = (0.1, −0.1) and see χ, the master's closed contacts).
 
@@ -53,7 +53,7 @@ t = df["t"].to_numpy()
 # 2. Figure 2: log V of each observer (V is measured against the master, eq. (16)).
 #    The observer with jumps levels off near 1e-9 at h = 1e-4 (1e-7 at 1e-3): the master's
 #    closed contacts penetrate by O(h) while the observer is projected to g = 0 exactly,
-#    a floor ∝ h² of the discretisation (THEORY.md §6.6), not of the observer.
+#    a floor ∝ h² of the discretisation (docs/theory/scheme.md §6), not of the observer.
 fig, ax = plt.subplots(figsize=(7, 3.5))
 for name in ("jump", "nojump"):
     V = df[f"V_{name}"].to_numpy()

@@ -11,7 +11,7 @@ Boolean signal χ (paper eqs. (7)-(11)). Both designs share the master's step
   ``q ← q − K⁻¹W_I L_I⁻¹ g_I`` (eqs. (13)-(14)); needs K ≻ 0.
 
 The error Lyapunov function is ``V = ½vᵀMv + ½eᵀKe`` (paper (16) with the ½ on both
-terms; THEORY §2 erratum 2), e = q_s − q_m, v = u_s − u_m.
+terms; docs/theory/index.md §2 erratum 2), e = q_s − q_m, v = u_s − u_m.
 """
 
 from __future__ import annotations

@@ -63,7 +63,7 @@ REQUIRED = ("system.M", "system.C", "system.K", "system.W", "impact.law", "impac
 FIELDS: dict[str, tuple[str, str, str, str]] = {
     # dotted key (``[]`` marks an array of tables) -> (type, unit, default, meaning); the
     # documentation's TOML reference is generated from SCHEMA, REQUIRED and this table
-    # (tests/docs/test_reference.py keeps the three in step)
+    # (tests/docs/test_docs.py keeps the three in step)
     "scenario.name": ("string", "", "the file's stem", "name shown in results and reports"),
     "scenario.description": ("string", "", '""', "one line of prose"),
     "system.M": ("n×n matrix", "kg (or kg·m²)", "required", "mass matrix, M = Mᵀ ≻ 0"),

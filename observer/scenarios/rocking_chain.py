@@ -1,4 +1,4 @@
-"""Chain of N rocking blocks on a harmonically moving ground (paper, Example 2; THEORY §4).
+"""Chain of N rocking blocks on a harmonically moving ground (paper, Example 2; docs/theory/models.md §2).
 
 Block i = 1..N (1 = lowest) is a rectangle of width 2b, height H, mass m_i and centroidal
 inertia J = m(4b² + H²)/12; it translates vertically (y_i) and rotates (φ_i):
