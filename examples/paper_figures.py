@@ -18,7 +18,7 @@ Run from the project root::
     python examples/paper_figures.py                 # PNGs in examples/out/
     python examples/paper_figures.py --out figs --quick   # h = 1e-3, 10 s: a few seconds
 
-The first run of the toolkit compiles its numba kernel (~20-40 s once, cached on disk).
+The first run of the toolkit compiles its numba kernel (once, then cached on disk).
 """
 
 import argparse

@@ -79,8 +79,8 @@ STRUCTURES = ("dense", "banded", "auto")
 
 BANDED_MIN_N = 32
 """Smallest n for which a banded structure is used (smaller systems stay dense): measured on the
-chain, banded wins from N = 20 blocks (n = 40: 1.9 µs against 3.5 µs per step in the kernel)
-and loses slightly at N = 10 (n = 20: 1.07 against 1.00 µs)."""
+chain, banded wins from N = 20 blocks (n = 40) and loses slightly at N = 10 (n = 20), per step
+in the kernel."""
 
 
 FACTORED_MIN_N = sps.DENSE_MAX_N + 1

@@ -44,8 +44,8 @@ def expm_pade13(A: np.ndarray) -> np.ndarray:
     """Matrix exponential by scaling and squaring with the [13/13] Padé approximant (Higham 2005).
 
     A small-matrix numpy version of ``scipy.linalg.expm`` (same algorithm, degree 13
-    always): scipy's compiled routine costs tens of milliseconds per call on a loaded
-    machine, this one about 0.1 ms for the toolkit's N ≤ 20.
+    always): scipy's compiled routine can cost much more per call on a loaded
+    machine than this one for the toolkit's N ≤ 20.
     """
     N = A.shape[0]
     nrm = float(np.abs(A).sum(axis=0).max())

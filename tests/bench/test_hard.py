@@ -1,5 +1,5 @@
 """The hard cases as a benchmark kind (:mod:`bench.hard`) and their report section
-(:mod:`reports.sections.hard_cases`), on the quick cases (about 1 s of CPU)."""
+(:mod:`reports.sections.hard_cases`), on the quick cases (the cheap ones)."""
 
 from __future__ import annotations
 
