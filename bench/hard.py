@@ -145,7 +145,7 @@ class HardCase:
     reference : str
         ``"closed form"``, ``"event solution"`` or ``"none: <reason>"``.
     quick : bool
-        In the ``quick`` suite (the quick cases: ≈ 1.3 s of CPU in all, measured warm; the bench reports it).
+        In the ``quick`` suite (the quick cases; their CPU time is in the bench results).
     description : str
         What makes the case hard (and how to read its error).
     kind, solver, seed, observers, law, integrator
@@ -230,7 +230,7 @@ HARD_CASES: tuple[HardCase, ...] = (
                    "200-contact case)"),
     HardCase("200 contacts at once", "bed", (("param.n", 200),), 1e-3, 0.2, "event solution",
              False, "200 masses land on 200 stops in the same step (its event reference: about "
-                    "3000 events, 14 s of CPU)"),
+                    "3000 events)"),
     HardCase("Zeno e = 0.99", "bouncing_ball", (("impact.restitution", 0.99),), 1e-3, 3.0,
              "closed form", True, "restitution 0.99: nearly elastic bounces; the impacts "
                                   "accumulate (rest) only at t_∞ = 89.9 s"),

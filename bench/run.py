@@ -124,7 +124,7 @@ def kernel_ready() -> float:
     scenario for a few steps on the compiled engine, master alone and with its observers
     (:func:`warm_up_scenarios`): the kernel's warm-up system does not reach every
     specialization (measured in a fresh clone: the first master-only double_mass run after
-    it still took 7.2 s of compiling). Return the seconds it all took the first time (NaN
+    it still spent seconds compiling). Return the seconds it all took the first time (NaN
     when the toolkit has no compiled engine)."""
     if not _KERNEL_TIME:
         try:
@@ -156,7 +156,7 @@ def warm_up_scenarios() -> None:
         observer.simulate(sc, observers=(), engine="compiled")
         if sc.observer:
             observer.simulate(sc, engine="compiled")
-    # the event engine's compiled root finders (numba, ≈ 0.9 s to import and load)
+    # the event engine's compiled root finders (numba: importing and loading them is timed apart)
     observer.simulate("bouncing_ball", t_end=WARM_UP_STEPS * 1e-3, integrator="event")
 
 
@@ -284,8 +284,8 @@ would inflate."""
 
 RUN_ORDER = ("observers", "checks", "peers", "scaling", "work_precision", "robustness")
 """Kinds in the order their cases are handed out, the longest first, so that no worker of a
-cluster is left alone with a long case at the end (measured on ``quick``: an exact
-observers case 1–5 s, the checks of double_mass 2.6 s, most other cases < 0.5 s). Kinds
+cluster is left alone with a long case at the end (the order measured on ``quick``: the exact
+observers cases, then the checks of double_mass, then the rest). Kinds
 not listed (registered later, cost unknown) go first."""
 
 
@@ -386,7 +386,7 @@ QUIET_WORKERS = {"distributed.worker.profile.enabled": False,
                  "distributed.admin.system-monitor.gil.enabled": False}
 """Dask settings of the local cluster's workers: no statistical profiler (a thread sampling
 the running case's stack every 10 ms) and no GIL monitor (polling every 1 ms) — both run
-beside the timed cases and cost CPU (measured: ≈ 1.5 s of 30 s on quick's work-precision
+beside the timed cases and cost CPU (a few per cent of quick's work-precision
 cases)."""
 
 

@@ -114,7 +114,7 @@ def base_row(case: Case, sc) -> dict[str, Any]:
 
 def _timed(fn, *args, **kwargs):
     """``(fn(...), CPU seconds, wall seconds)``. (No ``gc.collect()`` before: with cvxpy and
-    pandas loaded a full collection costs ≈ 0.1 s, more than most runs.)"""
+    pandas loaded a full collection costs more than most runs.)"""
     c0, w0 = time.process_time(), time.perf_counter()
     out = fn(*args, **kwargs)
     return out, time.process_time() - c0, time.perf_counter() - w0

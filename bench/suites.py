@@ -16,8 +16,8 @@ Running the suite is :func:`bench.run.run_suite`; the kinds of cases are
                     one row per (design, member): the built-ins, the random-system family and
                     robustness to a perturbed χ with both the perturbation and the errors sampled.
 
-``quick`` is a first look (measured: 179 cases in 119.9 s of wall time on a local 2-worker
-cluster from a fresh clone, 56 s of it the first compile and warm-up; ensembles included), ``full`` the real numbers (measured: 11 min of CPU, Siconos peers and the
+``quick`` is a first look (minutes on a laptop, the first compile and warm-up included; the
+report gives its measured time and machine), ``full`` the real numbers (several times longer, Siconos peers and the
 micro-benchmarks included), ``peers`` the Siconos comparison alone, ``smoke`` a seconds-long
 grid for the tests. Suites also say whether and how to run the pytest-benchmark micro-benchmarks
 of ``bench/micro``. Every time loop runs on the compiled engine (the default of
@@ -238,7 +238,7 @@ WP_SIZES = {"quick": {"pivoting": 5, "reference": 3, "event solution": 5, "event
             "full": {"pivoting": 12, "reference": 7, "event solution": 13, "event solution reference": 5}}
 """Step sizes per sweep (halving). ``full``: the compiled runs go from 2e-3 s (1-DOF) and
 4e-3 s (double_mass) down to 2e-3/2¹¹ = 4e-3/2¹² ≈ 9.8e-7 s; the cvxpy/OSQP reference solver
-(~1 ms per contact solve, and the numpy engine's ≈ 25 µs per step) stops earlier: 7 and 5
+(orders of magnitude slower per step than the compiled engine) stops earlier: 7 and 5
 sizes in ``full``, the 3 largest steps in ``quick``."""
 
 H_RECORD = {"closed form": 2e-3 / 2 ** 6, "event solution": 4e-3 / 2 ** 9}
@@ -422,7 +422,7 @@ def peer_cases() -> list[Case]:
 def check_scenarios(full: bool = True) -> tuple[str, ...]:
     """Scenarios whose proof checks a suite runs: those declaring ``SUITE["checks"]`` as
     ``"quick"`` (every suite) or ``"full"`` (the full suite only: the chain's A3 search and PSD
-    checks enumerate many active sets, ≈ 20 s of CPU)."""
+    checks enumerate many active sets, the longest of the checks)."""
     levels = ("quick", "full") if full else ("quick",)
     return tuple(n for n in SCENARIOS if info(n).suite.get("checks") in levels)
 
@@ -447,7 +447,7 @@ ENSEMBLE_PARAMS = {"rocking_chain": {"quick": (("param.N", 4),), "full": (("para
 members per design: the chain with N = 4 blocks (8 DOF, 8 contacts) instead of 10 (≈ 6× less
 per member)."""
 PROJECTED = ("double_mass", "random_system")
-"""Scenarios whose ensembles are also run with the projected master (THEORY §6.6: the matched
+"""Scenarios whose ensembles are also run with the projected master (docs/theory/scheme.md §6: the matched
 master of the jump observers, whose discrete V has no floor from the master's penetration):
 the evidence of the K-metric question without the discretisation artifact."""
 ENSEMBLE_PATHS = 20
@@ -561,7 +561,7 @@ MICRO_QUICK = ("--benchmark-min-rounds=5", "--benchmark-max-time=0.02", "--bench
                "--benchmark-warmup-iterations=1", "-k", "(compiled and not rocking_chain) or pivoting")
 MICRO_FULL = ("--benchmark-min-rounds=20", "--benchmark-max-time=0.5", "--benchmark-warmup=on")
 """pytest arguments of the micro-benchmarks. ``quick`` times the compiled loops of the small
-scenarios (the chain's take ≈ 4 s) and the pivoting contact solver (each benchmark warms up
+scenarios (the chain's take longest) and the pivoting contact solver (each benchmark warms up
 first: compile and caches excluded); ``full``
 every benchmark (both engines, every solver) with ≥ 5 rounds (the loop benchmarks fix
 their own rounds, :data:`bench.micro` ``LOOP_ROUNDS``)."""
@@ -666,10 +666,10 @@ _SUITE_BUILDERS: dict[str, Callable[[], Suite]] = {
                             ("peers",), False),
     "micro": lambda: Suite("micro", "pytest-benchmark: time loops on both engines, contact "
                            "solves", (), MICRO_FULL, {"micro-benchmarks": " ".join(MICRO_FULL)}),
-    "quick": lambda: _suite("quick", "first look: small version of every suite (≈ 36 s of "
-                            "CPU once the kernel is compiled)", False, KINDS[:-1], True),
+    "quick": lambda: _suite("quick", "first look: small version of every suite (minutes "
+                            "once the kernel is compiled)", False, KINDS[:-1], True),
     "full": lambda: _suite("full", "every suite with the real numbers, Siconos peers included "
-                           "(≈ 11 min of CPU)", True, KINDS, True),
+                           "(several times quick)", True, KINDS, True),
     "ensembles": lambda: _suite("ensembles", "ensembles of initial errors: every built-in and "
                                 "design (1000 members), 50 random systems, perturbed χ (full "
                                 "settings)", True, ("ensemble",), False),

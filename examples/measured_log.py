@@ -1,8 +1,12 @@
-"""Compare the two observers when χ comes from a measured contact log, not from the master.
+"""Observers driven by a measured contact log
+==========================================
+
+Compare the two observers when χ comes from a measured contact log, not from the master.
 
 In an experiment the observer sees a log of contact closings written by a sensor
 (CSV columns ``contact, t_close, t_open``; an impact is a zero-length interval), with
-timing errors. This script
+timing errors. This script:
+
 1. simulates the observed system (the master of ``double_mass``) and writes its closings
    as a log, at the step midpoints where the scheme decides them (an exact log),
 2. makes "measured" logs from it: every interval endpoint moved by a Gaussian timing
@@ -23,6 +27,7 @@ The timing errors also set the level V ends at ("floor", median of V/V(0) over t
 """
 
 import argparse
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -34,8 +39,8 @@ import pandas as pd  # noqa: E402
 
 import observer  # noqa: E402
 
-parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-parser.add_argument("--out", default=Path(__file__).parent / "out", type=Path, help="output directory")
+parser = argparse.ArgumentParser(description=(__doc__ or "").partition("\n")[0])
+parser.add_argument("--out", default=Path(sys.argv[0]).parent / "out", type=Path, help="output directory")
 parser.add_argument("--quick", action="store_true", help="h = 1e-3 s and 10 s instead of 1e-4 s and 20 s")
 parser.add_argument("--seed", type=int, default=0, help="seed of the timing errors")
 args = parser.parse_args()

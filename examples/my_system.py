@@ -1,10 +1,14 @@
-"""Simulate a system of your own from a TOML file and check the paper's proof steps on it.
+"""A system of your own
+====================
+
+Simulate a system of your own from a TOML file and check the paper's proof steps on it.
 
 ``my_system.toml`` (next to this script) describes three masses between two walls with a
 stop on mass 0 and a clearance between masses 1 and 2: copy it and edit the matrices, the
 contacts (columns of W and the gap offsets), the impact law and the initial states.
 
-The script
+The script:
+
 1. loads the file and prints the system (n, m, the law),
 2. simulates the master with every registered observer design (with position jumps in the
    K metric, the paper's; without; jumps in other metrics), plots the master's gaps and
@@ -32,9 +36,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import observer  # noqa: E402
 import proofs_checks  # noqa: E402
 
-parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-parser.add_argument("toml", nargs="?", default=Path(__file__).with_name("my_system.toml"), type=Path)
-parser.add_argument("--out", default=Path(__file__).parent / "out", type=Path, help="output directory")
+parser = argparse.ArgumentParser(description=(__doc__ or "").partition("\n")[0])
+parser.add_argument("toml", nargs="?", default=Path(sys.argv[0]).with_name("my_system.toml"), type=Path)
+parser.add_argument("--out", default=Path(sys.argv[0]).parent / "out", type=Path, help="output directory")
 parser.add_argument("--quick", action="store_true", help="h = 1e-3 s and 3 s: a few seconds")
 args = parser.parse_args()
 args.out.mkdir(parents=True, exist_ok=True)
@@ -89,4 +93,5 @@ failed = table.loc[table["status"] == "FAIL", "check"].tolist()
 for row in table[table["status"] == "FAIL"].itertuples():
     print(f"FAIL {row.check}: {row.witness}")                        # reason, then witness
 print(f"{len(table) - len(failed)} of {len(table)} checks without failure; failed: {failed or 'none'}")
-sys.exit(1 if failed else 0)
+if failed:
+    sys.exit(1)             # exit status 0 otherwise (the end of the script)

@@ -1,4 +1,7 @@
-"""Reproduce Figures 2 and 3 of Baumann & Leine (the double-mass impact oscillator, Example 1).
+"""The paper's Figures 2 and 3
+===========================
+
+Reproduce Figures 2 and 3 of Baumann & Leine (the double-mass impact oscillator, Example 1).
 
 Figure 2: the error Lyapunov function V = ½vᵀMv + ½eᵀKe (paper eq. (16)) of the observer
 with position jumps (blue, the paper's design) and without (red, the earlier design of
@@ -6,7 +9,7 @@ the paper's ref. [4]), on a log scale.
 Figure 3: position q₁ and velocity u₁ of the first (lower) mass: master black, observer
 with jumps blue, without red. The first mass hits the ground at g = q₁ + d₀ = 0.
 
-Both use the built-in scenario ``double_mass`` with its default parameters (THEORY.md §3:
+Both use the built-in scenario ``double_mass`` with its default parameters (docs/theory/models.md §1:
 F = 5 N, Ω = 6 rad/s, Poisson law with ε = 0.8, h = 1e-4 s, 20 s; the observers start
 from q_m(0) + (0.02, −0.01), u = (0.1, −0.1) and see χ, the master's closed contacts).
 
@@ -15,10 +18,11 @@ Run from the project root::
     python examples/paper_figures.py                 # PNGs in examples/out/
     python examples/paper_figures.py --out figs --quick   # h = 1e-3, 10 s: a few seconds
 
-The first run of the toolkit compiles its numba kernel (~20-40 s once, cached on disk).
+The first run of the toolkit compiles its numba kernel (once, then cached on disk).
 """
 
 import argparse
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -33,8 +37,8 @@ import observer  # noqa: E402
 STYLE = {"master": ("black", "master"), "jump": ("tab:blue", "with position jumps"),
          "nojump": ("tab:red", "without position jumps")}
 
-parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-parser.add_argument("--out", default=Path(__file__).parent / "out", type=Path, help="output directory")
+parser = argparse.ArgumentParser(description=(__doc__ or "").partition("\n")[0])
+parser.add_argument("--out", default=Path(sys.argv[0]).parent / "out", type=Path, help="output directory")
 parser.add_argument("--quick", action="store_true", help="h = 1e-3 s and 10 s instead of the defaults")
 args = parser.parse_args()
 args.out.mkdir(parents=True, exist_ok=True)
@@ -49,7 +53,7 @@ t = df["t"].to_numpy()
 # 2. Figure 2: log V of each observer (V is measured against the master, eq. (16)).
 #    The observer with jumps levels off near 1e-9 at h = 1e-4 (1e-7 at 1e-3): the master's
 #    closed contacts penetrate by O(h) while the observer is projected to g = 0 exactly,
-#    a floor ∝ h² of the discretisation (THEORY.md §6.6), not of the observer.
+#    a floor ∝ h² of the discretisation (docs/theory/scheme.md §6), not of the observer.
 fig, ax = plt.subplots(figsize=(7, 3.5))
 for name in ("jump", "nojump"):
     V = df[f"V_{name}"].to_numpy()

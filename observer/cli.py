@@ -263,7 +263,9 @@ def build_parser() -> argparse.ArgumentParser:
                                                           "V of the scenario's observer error)")
     s.add_argument("--h", type=float, help="step size")
     s.add_argument("--t-end", type=float, help="final time")
-    s.add_argument("--integrator", choices=["timestepping", "event"], default="timestepping")
+    s.add_argument("--integrator", choices=["time-stepping", "event", "timestepping"], default="time-stepping",
+                   help="Moreau–Jean time-stepping (default) or the exact event-driven integrator "
+                        "('timestepping': old spelling, deprecated)")
     s.add_argument("--paths", type=int, default=0, help="keep V(t) of the first K members per design")
     s.add_argument("--workers", type=int, default=None, help="threads (default: the machine's cores)")
     s.add_argument("--set", action="append", metavar="KEY=VALUE",

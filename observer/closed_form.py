@@ -1,6 +1,6 @@
 """Closed-form solutions of the built-in scenarios' masters (their ``reference`` metadata).
 
-* :func:`ball_position` — the Zeno bouncing ball (THEORY §7.1): piecewise parabolas between
+* :func:`ball_position` — the Zeno bouncing ball (docs/theory/oracles.md §1): piecewise parabolas between
   the closed-form impact times, q = 0 after the accumulation time t_∞.
 * :class:`ExactImpactOscillator` — the undamped forced impact oscillator
   ``ẍ + x = A cos(ωt + φ)`` for ``x ≤ σ`` with ``ẋ⁺ = −r ẋ⁻``: free flight in closed form,

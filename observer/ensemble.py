@@ -36,8 +36,11 @@ from observer.validation import as_scalar, check_output_path
 SAMPLERS = ("energy_sphere", "box")
 """Named samplers of the initial errors (else an array of shape (n, 2·dof))."""
 
-INTEGRATOR_NAMES = {"timestepping": "time-stepping", "time-stepping": "time-stepping", "event": "event"}
-"""Accepted spellings of ``integrator`` and the :func:`observer.simulate` integrator each means."""
+INTEGRATOR_NAMES = {"time-stepping": "time-stepping", "event": "event"}
+"""Accepted values of ``integrator`` (the :func:`observer.simulate` integrator each means)."""
+
+DEPRECATED_INTEGRATOR_NAMES = {"timestepping": "time-stepping"}
+"""Old spellings of ``integrator``: accepted with a :class:`DeprecationWarning`."""
 
 PATH_VALUES = 1 << 24
 """Most recorded state values a chunk keeps when ``paths > 0`` (its rows of q, u, P and σ of
@@ -174,6 +177,12 @@ def _generator(seed: Any, rng: Any) -> tuple[np.random.Generator, int | None]:
 
 def _check_options(integrator, store, paths, n, workers, out):
     """Normalize integrator, store, paths, workers, out; InputError naming the keyword."""
+    if isinstance(integrator, str) and integrator in DEPRECATED_INTEGRATOR_NAMES:
+        import warnings
+        new = DEPRECATED_INTEGRATOR_NAMES[integrator]
+        warnings.warn(f"integrator {integrator!r} is spelled {new!r}; the old spelling will be removed",
+                      DeprecationWarning, stacklevel=3)
+        integrator = new
     if not isinstance(integrator, str) or integrator not in INTEGRATOR_NAMES:
         raise InputError("integrator", f"must be one of {sorted(INTEGRATOR_NAMES)}, got {integrator!r}")
     integrator = INTEGRATOR_NAMES[integrator]
@@ -359,7 +368,7 @@ def _path_frame(res, design: str, i: int):
 def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int = 1000, *, seed=0,
              rng: np.random.Generator | None = None, initial_errors: Any = "energy_sphere",
              V0: float | None = None, h: float | None = None, t_end: float | None = None,
-             integrator: str = "timestepping", engine: str | None = None, store: str = "summary",
+             integrator: str = "time-stepping", engine: str | None = None, store: str = "summary",
              paths: int = 0, workers: int | None = None, out: str | Path | None = None,
              label: str | None = None):
     """Run n observers per design from n initial errors against one master; one row per
@@ -385,7 +394,7 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
         The sphere's level (default: V of the scenario's own ``[observer]`` initial error).
     h, t_end : float, optional
         Override the scenario's step and horizon.
-    integrator : {"timestepping", "event"}
+    integrator : {"time-stepping", "event"}
         Moreau–Jean time-stepping (the compiled kernel's streaming summary) or the exact
         event-driven engine (every member's V on the grid t_k = k·h, summarized here).
     engine : str, optional

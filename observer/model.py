@@ -178,7 +178,7 @@ class Harmonic:
         return out
 
     def bound(self) -> np.ndarray:
-        """Componentwise sup |x(t)| over all t (exact upper bound: |c| + Σ|a|)."""
+        """Componentwise sup ``|x(t)|`` over all t (exact upper bound: ``|c| + Σ|a|``)."""
         return np.abs(self.constant) + np.abs(self.amplitude).sum(axis=0)
 
     def terms(self) -> list[dict]:

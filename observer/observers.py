@@ -11,7 +11,7 @@ Boolean signal χ (paper eqs. (7)-(11)). Both designs share the master's step
   ``q ← q − K⁻¹W_I L_I⁻¹ g_I`` (eqs. (13)-(14)); needs K ≻ 0.
 
 The error Lyapunov function is ``V = ½vᵀMv + ½eᵀKe`` (paper (16) with the ½ on both
-terms; THEORY §2 erratum 2), e = q_s − q_m, v = u_s − u_m.
+terms; docs/theory/index.md §2 erratum 2), e = q_s − q_m, v = u_s − u_m.
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ class ObserverDesign:
 
 OBSERVER_DESIGNS: dict[str, ObserverDesign] = {d.name: d for d in (
     ObserverDesign("jump", True, "K", "jump (K metric)", "tab:blue"),
-    ObserverDesign("nojump", False, None, "no jump", "tab:red", "--"),
+    ObserverDesign("nojump", False, None, "no-jump", "tab:red", "--"),
     ObserverDesign("jump_mass", True, "mass", "jump (M metric)", "tab:green", "-."),
     ObserverDesign("jump_identity", True, "identity", "jump (identity metric)", "tab:purple", ":"),
 )}
@@ -144,7 +144,7 @@ class ObserverConfig:
         names = table.get("observers", DEFAULT_OBSERVERS)
         if not isinstance(names, (list, tuple)):
             raise InputError("observer.observers", f"must be an array of design names, got {names!r}")
-        names = tuple(names)
+        names = tuple(design_name(name) for name in names)
         for name in names:
             check_observer_name(name)
         return ObserverConfig(q0, u0, coupling, source, log, names)
@@ -157,6 +157,24 @@ def check_coupling(value: Any) -> tuple[float, float]:
     if c[1] < c[0]:
         raise InputError("observer.coupling", f"t_off = {c[1]} < t_on = {c[0]}")
     return float(c[0]), float(c[1])
+
+
+DESIGN_ALIASES = {"no_jump": "nojump", "no-jump": "nojump", "no jump": "nojump", "jumps": "jump"}
+"""Old or prose spellings of design names that a user may have written: accepted with a
+:class:`DeprecationWarning` and read as the registered name (one name per concept)."""
+
+
+def design_name(name: Any, field: str = "observer.observers") -> Any:
+    """The registered spelling of a design name: an alias of :data:`DESIGN_ALIASES` becomes its
+    design's name, with a :class:`DeprecationWarning` naming ``field``; anything else is
+    returned unchanged (and validated by :func:`check_observer_name`)."""
+    if isinstance(name, str) and name not in OBSERVER_DESIGNS and name in DESIGN_ALIASES:
+        import warnings
+        new = DESIGN_ALIASES[name]
+        warnings.warn(f"{field}: observer design {name!r} is spelled {new!r}; the old spelling "
+                      "will be removed", DeprecationWarning, stacklevel=3)
+        return new
+    return name
 
 
 def check_observer_name(name: Any) -> None:
@@ -224,6 +242,7 @@ def make_slaves(cfg: ObserverConfig, observers: list) -> list[Slave]:
         if isinstance(ob, Slave):
             out.append(ob)
             continue
+        ob = design_name(ob)
         check_observer_name(ob)
         design = OBSERVER_DESIGNS[ob]
         out.append(Slave(ob, design.position_jumps, cfg.q0, cfg.u0, design))

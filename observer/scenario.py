@@ -61,6 +61,70 @@ SCHEMA: dict = {
 REQUIRED = ("system.M", "system.C", "system.K", "system.W", "impact.law", "impact.restitution",
             "initial.q", "initial.u", "simulation.t_end", "simulation.h")
 
+FIELDS: dict[str, tuple[str, str, str, str]] = {
+    # dotted key (``[]`` marks an array of tables) -> (type, unit, default, meaning); the
+    # documentation's TOML reference is generated from SCHEMA, REQUIRED and this table
+    # (tests/docs/test_docs.py keeps the three in step)
+    "scenario.name": ("string", "", "the file's stem", "name shown in results and reports"),
+    "scenario.description": ("string", "", '""', "one line of prose"),
+    "system.M": ("n×n matrix", "kg (or kg·m²)", "required", "mass matrix, M = Mᵀ ≻ 0"),
+    "system.C": ("n×n matrix", "N·s/m", "required", "damping matrix, ½(C + Cᵀ) ≻ 0"),
+    "system.K": ("n×n matrix", "N/m", "required", "stiffness matrix, K = Kᵀ ≻ 0"),
+    "system.W": ("n×m matrix", "1", "required",
+                 "contact directions: column j is w_j, gap g_j = w_jᵀq + ν_j(t)"),
+    "system.forcing.constant": ("n-vector or scalar", "N", "0", "constant part c of f(t)"),
+    "system.forcing.amplitude": ("n-vector or scalar", "N", "0", "amplitude a of a∘cos(ωt + φ)"),
+    "system.forcing.omega": ("number ≥ 0", "rad/s", "0", "angular frequency ω of the forcing"),
+    "system.forcing.phase": ("n-vector or scalar", "rad", "0", "phase φ of the forcing"),
+    "system.forcing.harmonics[].amplitude": ("n-vector or scalar", "N", "0", "amplitude of one more cos term"),
+    "system.forcing.harmonics[].omega": ("number ≥ 0", "rad/s", "0", "its angular frequency"),
+    "system.forcing.harmonics[].phase": ("n-vector or scalar", "rad", "0", "its phase"),
+    "system.gap.offset": ("m-vector or scalar", "m", "0", "constant part o of ν(t)"),
+    "system.gap.amplitude": ("m-vector or scalar", "m", "0", "amplitude a of a∘sin(ωt + φ)"),
+    "system.gap.omega": ("number ≥ 0", "rad/s", "0", "angular frequency ω of the gap motion"),
+    "system.gap.phase": ("m-vector or scalar", "rad", "0", "phase φ of the gap motion"),
+    "system.gap.harmonics[].amplitude": ("m-vector or scalar", "m", "0", "amplitude of one more sin term"),
+    "system.gap.harmonics[].omega": ("number ≥ 0", "rad/s", "0", "its angular frequency"),
+    "system.gap.harmonics[].phase": ("m-vector or scalar", "rad", "0", "its phase"),
+    "impact.law": ('"newton" or "poisson"', "", "required", "impact law (a key of IMPACT_LAWS)"),
+    "impact.restitution": ("m-vector or scalar in [0, 1]", "1", "required", "restitution coefficients"),
+    "initial.q": ("n-vector", "m (or rad)", "required", "master's initial position, g(q0, 0) ≥ 0"),
+    "initial.u": ("n-vector", "m/s (or rad/s)", "required", "master's initial velocity"),
+    "simulation.t_end": ("number > 0", "s", "required", "end of the run (at least one step)"),
+    "simulation.h": ("number > 0", "s", "required", "time step"),
+    "simulation.theta": ("number in [0.5, 1]", "1", "0.5", "Moreau–Jean θ"),
+    "simulation.solver": ("string", "", '"pivoting"', "contact solver (a key of CONTACT_SOLVERS)"),
+    "simulation.master_projection": ("boolean", "", "false",
+                                     "project the master's positions on its own closed set"),
+    "observer.q": ("n-vector", "m (or rad)", "initial.q", "observers' initial position"),
+    "observer.u": ("n-vector", "m/s (or rad/s)", "initial.u", "observers' initial velocity"),
+    "observer.coupling": ("[t_on, t_off]", "s", "the whole run", "interval in which the observers are coupled"),
+    "observer.source": ('"master", "log" or "self"', "", '"master"', "where the switching signal χ comes from"),
+    "observer.log": ("file path", "", "none (required with source = \"log\")",
+                     "closing log (contact, t_close, t_open), relative to the TOML file"),
+    "observer.observers": ("array of design names", "", '["jump", "nojump"]',
+                           "observer designs to run (keys of OBSERVER_DESIGNS)"),
+}
+"""The documented fields of a scenario document: every leaf of :data:`SCHEMA`, with its type,
+unit, default and meaning (``required`` for the keys of :data:`REQUIRED`)."""
+
+
+def schema_fields(schema: Any = None, prefix: str = "") -> list[str]:
+    """The dotted keys of every leaf of ``schema`` (default :data:`SCHEMA`), in document order;
+    an array of tables contributes ``KEY[].FIELD``."""
+    schema = SCHEMA if schema is None else schema
+    keys: list[str] = []
+    for key, sub in schema.items():
+        name = f"{prefix}.{key}" if prefix else key
+        if sub is None:
+            keys.append(name)
+        elif isinstance(sub, list):
+            keys += schema_fields(sub[0], name + "[]")
+        else:
+            keys += schema_fields(sub, name)
+    return keys
+
+
 INITIAL_GAP_TOL = 1e-9
 """Largest accepted initial penetration, relative to max(1, max|ν(0)|, max|Wᵀq0|)."""
 

@@ -79,8 +79,8 @@ STRUCTURES = ("dense", "banded", "auto")
 
 BANDED_MIN_N = 32
 """Smallest n for which a banded structure is used (smaller systems stay dense): measured on the
-chain, banded wins from N = 20 blocks (n = 40: 1.9 µs against 3.5 µs per step in the kernel)
-and loses slightly at N = 10 (n = 20: 1.07 against 1.00 µs)."""
+chain, banded wins from N = 20 blocks (n = 40) and loses slightly at N = 10 (n = 20), per step
+in the kernel."""
 
 
 FACTORED_MIN_N = sps.DENSE_MAX_N + 1
@@ -403,7 +403,7 @@ class MoreauJean:
     MAX_CACHED_SETS = 4096
     """Active sets whose matrix slices are kept (cleared when full)."""
     MAX_FACTORED_SETS = 16
-    """The same with factored contact data, whose slices are n × |A| each (bounded memory)."""
+    """The same with factored contact data, whose slices are ``n × |A|`` each (bounded memory)."""
 
     def _active_slices(self, active: np.ndarray) -> tuple:
         """Slices of the precomputed matrices for one active set (cached by the set).

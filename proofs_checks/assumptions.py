@@ -1,7 +1,7 @@
 """Model assumptions of section 2 and of the proof of Theorem 1.
 
 * M = Mᵀ ≻ 0 and K = Kᵀ ≻ 0 (section 2; K ≻ 0 because K is the metric of the kinematic
-  equation (7) and K⁻¹ appears in L_I = W_IᵀK⁻¹W_I, THEORY §2 erratum 6);
+  equation (7) and K⁻¹ appears in L_I = W_IᵀK⁻¹W_I, docs/theory/index.md §2 erratum 6);
 * the symmetric part C̄ = ½(C + Cᵀ) ≻ 0 (the proof of Theorem 1 needs ‖v‖²_C̄ > 0 for
   v ≠ 0 after eq. (20));
 * the columns w_i of W are linearly independent (section 2; used after eq. (21)).
@@ -139,7 +139,7 @@ def check_stiffness_spd(K: np.ndarray, *, rcond_min: float = RCOND_MIN) -> Check
     """
     return _definite("stiffness_spd", "K", K, "section 2: K = Kᵀ ≻ 0; eq. (7)", symmetric=True,
                      semidefinite_ok_reason="free rigid-body mode; the position jumps (K-metric), "
-                     "eqs. (13)-(14) and Theorem 1 need K ≻ 0 (THEORY §2 erratum 6)",
+                     "eqs. (13)-(14) and Theorem 1 need K ≻ 0 (docs/theory/index.md §2 erratum 6)",
                      rcond_min=rcond_min)
 
 

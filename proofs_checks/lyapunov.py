@@ -1,6 +1,6 @@
 """Eq. (17), dV ≤ 0 along the error of every pair the toolkit runs, and Theorem 1 (V → 0).
 
-Lyapunov function (16) with the ½ on both terms (THEORY §2 erratum 2)::
+Lyapunov function (16) with the ½ on both terms (docs/theory/index.md §2 erratum 2)::
 
     V(e, v) = ½ vᵀMv + ½ eᵀKe,    e = q₁ − q₂,  v = u₁ − u₂.
 

@@ -45,7 +45,7 @@ violation.
 This is the *continuous* impact map of eqs. (5)/(9). Its discrete twin, the impulse term
 of the Moreau–Jean step, is checked along runs by :func:`proofs_checks.lyapunov.check_lyapunov_decrease`.
 
-Known theory (THEORY.md §5): Newton with a global e and the simple Poisson law are
+Known theory (docs/theory/models.md §3): Newton with a global e and the simple Poisson law are
 monotone; the inequality Poisson law has no proof (property-tested). With per-contact
 coefficients the map can be non-monotone on coupled contacts (e.g. e = (0.1, 0.95)).
 """

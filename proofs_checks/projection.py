@@ -1,12 +1,12 @@
 """Eqs. (13)-(14): the constraint forces of the switched geometric constraints in closed form,
 and the positive semi-definiteness of ``P_I L_I⁻¹ P_Iᵀ`` for every active set.
 
-From the proof of Proposition 1 (with the erratum I(t) = {i | χ_i = 1}, THEORY §2)::
+From the proof of Proposition 1 (with the erratum I(t) = {i | χ_i = 1}, docs/theory/index.md §2)::
 
     σ = −P_I L_I⁻¹ P_Iᵀ γ_s     (13)        Σ = −P_I L_I⁻¹ P_Iᵀ g_s⁻     (14)
     L_I = W_Iᵀ K⁻¹ W_I,  and the position jump is q⁺ − q⁻ = K⁻¹ W Σ.
 
-Discrete form (THEORY §6.3): the time-stepper realizes both by one K-metric projection per
+Discrete form (docs/theory/scheme.md §3): the time-stepper realizes both by one K-metric projection per
 step onto ``{g_I(q, t_{k+1}) = 0}``: ``q_{k+1} = q⁻_{k+1} + K⁻¹WΣ_k`` with
 ``Σ_k = −P_I L_I⁻¹ P_Iᵀ g⁻_{k+1}`` (eq. (14) exactly). When every contact of I was already
 projected in the previous step (g⁺_{k,I} = 0), ``g⁻_{k+1,I} = h γ̄_I + O(h³)`` and the

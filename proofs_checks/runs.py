@@ -257,6 +257,6 @@ def rerun(run: Run, h: float) -> Run:
 
 def lyapunov_pair(system: LinearSystem, a: Trajectory, b: Trajectory, pre: bool = False) -> np.ndarray:
     """V = ½vᵀMv + ½eᵀKe between two trajectories (paper (16) with the ½ on both terms;
-    THEORY §2 erratum 2); with ``pre`` the position error uses the pre-projection states."""
+    docs/theory/index.md §2 erratum 2); with ``pre`` the position error uses the pre-projection states."""
     qa, qb = (a.q_pre, b.q_pre) if pre else (a.q, b.q)
     return lyapunov(system, qa, a.u, qb, b.u)

@@ -24,7 +24,7 @@ Discrete form checked here, on the time-stepping grid of a run (row k+1 = step k
    (it fails for a position-projected master, whose gap jumps to zero).
 
 ``margin``: for 1. minus the fraction of mismatched steps (tolerance 0); when 1. holds,
-for 2. minus the largest unexplained jump of g relative to max |g|.
+for 2. minus the largest unexplained jump of g relative to ``max |g|``.
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ def check_switching_generated(run: Run, *, chi: np.ndarray | None = None,
     chi : ndarray of bool, shape (N+1, m), optional
         A switching signal to check instead of the run's (e.g. one read from a log).
     jump_tolerance : float
-        Accepted unexplained gap jump, relative to max |g|.
+        Accepted unexplained gap jump, relative to ``max |g|``.
 
     Returns
     -------

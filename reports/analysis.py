@@ -622,7 +622,7 @@ Wilcoxon p-value."""
 RISE_ROUNDOFF = 1e-10
 """A member's V "rises" when its largest one-step relative increase ``max_rise_rel`` exceeds
 this: round-off of V = ½eᵀKe + ½vᵀMv is ≈ 1e-16 relative per step, and the O(h) slack of the
-discrete impulse term (THEORY §1: ≲ 1e-6 relative per step) is counted as a rise."""
+discrete impulse term (docs/theory/index.md §1: ≲ 1e-6 relative per step) is counted as a rise."""
 
 GROUP_KEYS = ("label", "integrator")
 """Columns an ensemble's statistics are grouped by (those present; ``label`` falls back to
@@ -881,7 +881,7 @@ def _pooled_rises(rises: pd.DataFrame, design: str) -> tuple[int, int, float]:
 
 
 MATCHED = "projected master"
-"""Label mark of the ensembles run with the projected master (THEORY §6.6: the jump observers'
+"""Label mark of the ensembles run with the projected master (docs/theory/scheme.md §6: the jump observers'
 matched master, without the discrete floor); the K-metric claims use them when present."""
 
 
@@ -933,7 +933,7 @@ def _k_metric_claims(paired: pd.DataFrame, rises: pd.DataFrame, rho: float, k_pa
 
 def _artifact_claim(rises: pd.DataFrame) -> list[dict]:
     """With the plain (time-stepped, penetrating) master the K-metric jump's V rises too: the
-    discretisation floor of THEORY §6.6, stated beside the K-metric claims."""
+    discretisation floor of docs/theory/scheme.md §6, stated beside the K-metric claims."""
     sel = ~rises["label"].astype(str).str.contains(MATCHED, regex=False)
     k, n, biggest = _pooled_rises(rises[sel], registry.k_metric_design())
     if not n or not k:
@@ -945,7 +945,7 @@ def _artifact_claim(rises: pd.DataFrame) -> list[dict]:
              "text": (f"With the plain time-stepped master the K-metric jump's V also rises by more than "
                       f"{thr:g}·V in one step in {100 * k / n:.0f} % of {n} members (95 % CI "
                       f"{100 * lo:.0f}–{100 * hi:.0f} %; largest {biggest:.3g}·V): the master penetrates by "
-                      f"O(h·|γ|) and the projection to g = 0 re-injects it (THEORY §6.6), a discretisation "
+                      f"O(h·|γ|) and the projection to g = 0 re-injects it (docs/theory/scheme.md §6), a discretisation "
                       f"artifact that the projected master removes.")}]
 
 
@@ -987,7 +987,7 @@ def ensemble_claims(paired: pd.DataFrame, rises: pd.DataFrame, *, rho: float = 1
 
 MATERIAL_RISE = 1e-3
 """A one-step rise of V above 0.1 % of V: far above round-off and the O(h) slack of the discrete
-impulse term (≲ 1e-6·V per step, THEORY §1), the threshold of the K-metric finding."""
+impulse term (≲ 1e-6·V per step, docs/theory/index.md §1), the threshold of the K-metric finding."""
 
 
 def k_metric_summary(members: pd.DataFrame, rho: float = 1e-6, threshold: float = MATERIAL_RISE, *,

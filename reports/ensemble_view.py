@@ -61,7 +61,8 @@ class EnsembleView:
 
 def member_rows(df: pd.DataFrame) -> pd.DataFrame:
     """The ensemble member rows of the page's rows (a ``label`` column filled from the
-    scenario where missing; ``integrator`` "timestepping" where missing)."""
+    scenario where missing; ``integrator`` "time-stepping" where missing or spelled the old way,
+    "timestepping")."""
     if df.empty or "kind" not in df:
         return pd.DataFrame()
     m = df[df["kind"] == KIND].copy()
@@ -72,8 +73,8 @@ def member_rows(df: pd.DataFrame) -> pd.DataFrame:
     m["label"] = m["label"].where(m["label"].astype(str).str.len() > 0, m["scenario"])
     m["label"] = m["label"].fillna(m["scenario"]).astype(str)
     if "integrator" not in m:
-        m["integrator"] = "timestepping"
-    m["integrator"] = m["integrator"].fillna("timestepping").astype(str)
+        m["integrator"] = "time-stepping"
+    m["integrator"] = m["integrator"].fillna("time-stepping").astype(str).replace("timestepping", "time-stepping")
     return m.dropna(axis=1, how="all").reset_index(drop=True)
 
 

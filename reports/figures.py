@@ -42,7 +42,7 @@ class Figure:
 
 
 PNG_OPTIONS = {"compress_level": 3}
-"""Pillow's PNG settings: level 3 encodes ≈ 2× faster than the default 6 for ≈ 10 % more bytes."""
+"""Pillow's PNG settings: level 3 encodes faster than the default 6 for a few per cent more bytes."""
 _SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 
 

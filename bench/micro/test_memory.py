@@ -18,7 +18,7 @@ a summary run that never reads ``result.summary`` loads neither pandas nor pyarr
 that what the run itself adds (it must not grow with the horizon) is told apart from the
 fixed cost of the imports.
 
-The 1e8-step measurement takes about 10 s of CPU and is not part of any suite: run it with ::
+The 1e8-step measurement takes seconds of CPU and is not part of any suite: run it with ::
 
     OBSERVER_BENCH_RSS=1 python -m pytest bench/micro/test_memory.py -q -s
     python bench/micro/test_memory.py [steps]          # prints the measurement as JSON
@@ -110,7 +110,7 @@ def _check_run(r: dict) -> None:
 
 
 @pytest.mark.skipif(not os.environ.get("OBSERVER_BENCH_RSS"),
-                    reason="10 s of CPU: set OBSERVER_BENCH_RSS=1 to run it")
+                    reason="seconds of CPU: set OBSERVER_BENCH_RSS=1 to run it")
 def test_summary_run_peak_rss():
     """1e8 steps with ``store="summary"``: peak resident memory under the acceptance bound."""
     r = measure(RSS_STEPS)

@@ -11,7 +11,7 @@ is exact (up to the round-off of ``scipy.linalg.expm``) for singular K too (the 
 ball: A is then nilpotent on (q, u, 1)). The oscillator components are always set from t
 analytically (``z(t, x)``), so no phase error accumulates over long runs.
 
-With a set I of contacts held closed (persistent contact, THEORY §6.5), the contact force
+With a set I of contacts held closed (persistent contact, docs/theory/scheme.md §5), the contact force
 λ_I keeps ``γ̇_I = 0``: ``γ̇_I = (γ̇_I)_free + G_I λ_I`` with the Delassus matrix
 ``G_I = W_Iᵀ M⁻¹ W_I``, so ``λ_I = −G_I⁻¹ (γ̇_I)_free`` is an exact linear function of z
 (a row matrix ``Λ``), and the constrained flow has the generator
@@ -44,8 +44,8 @@ def expm_pade13(A: np.ndarray) -> np.ndarray:
     """Matrix exponential by scaling and squaring with the [13/13] Padé approximant (Higham 2005).
 
     A small-matrix numpy version of ``scipy.linalg.expm`` (same algorithm, degree 13
-    always): scipy's compiled routine costs tens of milliseconds per call on a loaded
-    machine, this one about 0.1 ms for the toolkit's N ≤ 20.
+    always): scipy's compiled routine can cost much more per call on a loaded
+    machine than this one for the toolkit's N ≤ 20.
     """
     N = A.shape[0]
     nrm = float(np.abs(A).sum(axis=0).max())

@@ -36,7 +36,7 @@ the gap's representation error than ZENO_TAIL_RTOL ulps of the elapsed time into
 (:func:`tail_noise_limit`); the accumulation time
 t_∞ is extrapolated from the velocity γ⁺ after the last resolved impact and the exact
 contact acceleration and its rate (:meth:`_Run.velocity_tail`: ``2γ⁺/(α(1 − e))`` for a
-constant acceleration α, exact for the ball, THEORY §7.1; several contacts: geometric,
+constant acceleration α, exact for the ball, docs/theory/oracles.md §1; several contacts: geometric,
 :meth:`_Run.tail_time`), the state is carried to t_∞ by the constrained flow, and the
 contacts switch to persistent contact there if the acceleration LCP gives them a positive
 force.
@@ -590,7 +590,7 @@ class _Run:
         A hop leaving with speed v at t flies ``Δ = 2v/α − 4α₁v²/(3α³)`` and lands with
         speed ``v + 2α₁v²/(3α²)`` (Taylor to second order in v), which Newton's law (eq. (5))
         returns multiplied by e; the hops are summed until they vanish. For α₁ = 0 the sum is
-        ``2γ⁺/(α₀(1 − e))``, exact for a constant acceleration (THEORY §7.1); the error is
+        ``2γ⁺/(α₀(1 − e))``, exact for a constant acceleration (docs/theory/oracles.md §1); the error is
         O(tail³·α₁²/α₀², …). None for several contacts or another law (for one contact
         Poisson’s law, eq. (6), is Newton’s).
         """
@@ -617,7 +617,7 @@ class _Run:
 
         Several contacts: geometric with the last ratio ρ, ``d_last ρ/(1 − ρ)``. One contact:
         as the hops vanish the contact acceleration is frozen and the ratio tends to the
-        restitution e (THEORY §7.1); the deviation ρ − e is proportional to the interval, so
+        restitution e (docs/theory/oracles.md §1); the deviation ρ − e is proportional to the interval, so
         the tail is summed with ``ρ_i = e + c Δ_i``, c fitted to the last ratio (error
         O(Δ²) instead of O(Δ)).
         """

@@ -2,7 +2,7 @@
 
 1 DOF, q = height, M = m, C = K = 0 (a free rigid mode: simulation only; the observer
 with position jumps needs K ≻ 0), f = −m g0, g = q ≥ 0, Newton restitution e.
-Closed form (THEORY §7.1): first impact t1 = sqrt(2h0/g0), impact times
+Closed form (docs/theory/oracles.md §1): first impact t1 = sqrt(2h0/g0), impact times
 t_k = t1 + (2v1/g0) e(1 − e^{k−1})/(1 − e), accumulation time
 t_∞ = sqrt(2h0/g0)(1 + e)/(1 − e) = 4.0637 s for h0 = 1 m, e = 0.8; then persistent
 contact with λ = m g0.
@@ -19,7 +19,7 @@ PARAMETERS = dict(m=1.0, g0=9.81, h0=1.0, restitution=0.8, law="newton", h=1e-3,
 PLOT = dict(dof=0, contact=0, labels=("height q (m)", "gap (m)"))
 NOTES = ("K = 0: only the no-jump observer applies; Zeno accumulation of impacts, then "
          "persistent contact.")
-REFERENCE_TEXT = "closed form (THEORY §7.1: impact times, parabolic flights)"
+REFERENCE_TEXT = "closed form (docs/theory/oracles.md §1: impact times, parabolic flights)"
 SUITE = {
     "observers": [dict(label="bouncing_ball (Zeno)", h=(1e-3, 1e-4), t_end=(6.0, 6.0),
                        slave_offset=((0.2,), (-1.0,)))],
@@ -29,7 +29,7 @@ SUITE = {
 
 
 def reference(scenario, t):
-    """The closed form of THEORY §7.1 (:func:`observer.scenarios.exact.ball_reference`)."""
+    """The closed form of docs/theory/oracles.md §1 (:func:`observer.scenarios.exact.ball_reference`)."""
     return ball_reference(scenario, t)
 
 

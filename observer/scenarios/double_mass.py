@@ -1,4 +1,4 @@
-"""Double-mass impact oscillator (paper, Example 1; parameters ours, THEORY.md §3).
+"""Double-mass impact oscillator (paper, Example 1; parameters ours, docs/theory/models.md §1).
 
 Mass 1 (lower) can hit the ground; mass 2 (upper) hangs from a fixed support by the
 spring–damper (k2, c2) and carries the harmonic force F cos(Ωt); masses 1 and 2 are
@@ -29,7 +29,7 @@ PARAMETERS = dict(m1=1.0, m2=1.0, k1=100.0, k2=100.0, c1=1.0, c2=1.0, g0=9.81, d
 
 
 def static_equilibrium(M, K, W, f_grav, nu0):
-    """Static contact equilibrium under gravity for one contact (THEORY §7.5).
+    """Static contact equilibrium under gravity for one contact (docs/theory/oracles.md §5).
 
     Returns (q*, λ_s): q_s = K⁻¹f_grav; if g(q_s) < 0, λ_s = −g_s/(wᵀK⁻¹w) and
     q* = q_s + K⁻¹wλ_s, else λ_s = 0 and q* = q_s.

@@ -1,9 +1,9 @@
 """Harmonically forced 1-DOF impact oscillator (Shaw–Holmes; non-dimensional form).
 
 ``ẍ + 2ζẋ + x = A cos(ωt)`` for ``x ≤ σ`` with restitution r at the wall x = σ
-(THEORY §7.2). In the toolkit's convention q = x, M = 1, K = 1, C = 2ζ, f = A cos ωt,
+(docs/theory/oracles.md §2). In the toolkit's convention q = x, M = 1, K = 1, C = 2ζ, f = A cos ωt,
 g = σ − q ≥ 0 (W = [−1], ν = σ). Defaults ω = 2.8, r = 0.8, σ = 0: the (1,1) periodic
-orbit has impact velocity V = 0.336177 (THEORY §7.2).
+orbit has impact velocity V = 0.336177 (docs/theory/oracles.md §2).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ PARAMETERS = dict(zeta=0.0, A=1.0, omega=2.8, sigma=0.0, restitution=0.8, law="n
                   q0=-0.5, u0=0.0, h=1e-3, t_end=20.0)
 
 
-NOTES = "isolated impacts on a periodic orbit: the (1,1) orbit of THEORY §7.2."
+NOTES = "isolated impacts on a periodic orbit: the (1,1) orbit of docs/theory/oracles.md §2."
 REFERENCE_TEXT = "closed form (event-driven: exact free flight, impacts by brentq)"
 SUITE = {
     "observers": [dict(h=(1e-3, 1e-4), t_end=(20.0, 20.0), slave_offset=((0.1,), (0.0,)))],

@@ -1,4 +1,4 @@
-"""Chain of N rocking blocks on a harmonically moving ground (paper, Example 2; THEORY §4).
+"""Chain of N rocking blocks on a harmonically moving ground (paper, Example 2; docs/theory/models.md §2).
 
 Block i = 1..N (1 = lowest) is a rectangle of width 2b, height H, mass m_i and centroidal
 inertia J = m(4b² + H²)/12; it translates vertically (y_i) and rotates (φ_i):
@@ -124,7 +124,7 @@ SUITE = {
     # smallest interval between impacts:
     # N = 5 over 2 s (intervals down to 2.6e-6 s) has error ≈ 1e-3 for every h from 1e-3 to
     # 2e-6, then 4.9e-7 at 1e-6 and 1.0e-7 at 2.5e-7; N = 10 over 2 s (down to 1.5e-8 s) is
-    # out of reach (its event run: 8 s of motion in ≈ 32 s of CPU). The error jumps with
+    # out of reach (its event run takes longer than the suites allow). The error jumps with
     # where the impacts fall on the grid, so the order is fitted over 11 halvings
     # (4e-3 … 3.9e-6 s; full: 13, to 9.8e-7 s)
     "work_precision": dict(h0=4e-3, t_end=1.5, params=(("param.N", 4),), targets=("master",),

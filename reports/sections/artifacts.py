@@ -1,6 +1,6 @@
 """Discrete artifacts: where V of an observer with position jumps rises in discrete time, why
 (the time-stepped master penetrates, so the slave's projection adds ½‖g_m⁻‖²_{L_I⁻¹} to V;
-THEORY §6.6, the ``projection_unprojected_gap`` part of the proof checks' decomposition of
+docs/theory/scheme.md §6, the ``projection_unprojected_gap`` part of the proof checks' decomposition of
 ΔV, eq. (17)), how large the effect is, and the remedy side by side: the same run with a
 projected master and event-driven.
 

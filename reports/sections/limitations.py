@@ -58,7 +58,7 @@ def thresholds_item(ctx: ReportContext) -> str:
     return ("Suites with coarser steps and shorter horizons (quick) give numbers that differ from "
             f"the full suite's (see Settings); the deepest threshold ({fmt_rho(min(RHOS))}) can sit "
             "below the discretization floor of an observer with position jumps (the floor scales "
-            "like h², THEORY §6.6).")
+            "like h², docs/theory/scheme.md §6).")
 
 
 def work_precision_items(ctx: ReportContext) -> list[str]:

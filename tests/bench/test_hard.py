@@ -1,5 +1,5 @@
 """The hard cases as a benchmark kind (:mod:`bench.hard`) and their report section
-(:mod:`reports.sections.hard_cases`), on the quick cases (about 1 s of CPU)."""
+(:mod:`reports.sections.hard_cases`), on the quick cases (the cheap ones)."""
 
 from __future__ import annotations
 
@@ -99,7 +99,7 @@ def test_quick_cases_record_their_cpu_time_apart_from_the_reference(quick_rows):
 
 
 def test_ball_error_recomputed_from_the_closed_form(quick_rows):
-    """The row's error at h = 1e-3, recomputed here: the ball's closed form (THEORY §7.1)
+    """The row's error at h = 1e-3, recomputed here: the ball's closed form (docs/theory/oracles.md §1)
     on the run's grid, max and trapezoid time average of |q − q_exact|; and first order:
     err_max ≤ 20·h (20 ≈ twice the impact speed √(2 g h0) = 4.4 m/s, a step's mistiming)."""
     r = _row(quick_rows, "ball h = 0.001")

@@ -525,7 +525,7 @@ def test_ball_closed_form():
 
 
 def test_exact_impact_oscillator_reproduces_the_periodic_orbit():
-    """THEORY §7.2: ω = 2.8, r = 0.8, σ = 0 has the (1,1) orbit V = 0.336177, t0 = 1.092635,
+    """docs/theory/oracles.md §2: ω = 2.8, r = 0.8, σ = 0 has the (1,1) orbit V = 0.336177, t0 = 1.092635,
     T = 2π/ω. Started just after an impact on it, the exact solution hits again after T
     with the same velocity."""
     om, r, V, t0 = 2.8, 0.8, 0.336177, 1.092635

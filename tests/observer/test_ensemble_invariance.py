@@ -2,7 +2,7 @@
 (issue 22): double_mass (2 DOF, 1 contact, 6 s at h = 1e-3, 16 members × the four designs on
 the energy sphere), run
 
-(a) translated, q → q + c with ν → ν − Wᵀc and f → f + Kc (the same motion, THEORY §7.5);
+(a) translated, q → q + c with ν → ν − Wᵀc and f → f + Kc (the same motion, docs/theory/oracles.md §5);
 (b) in other units, lengths × α and times × β (M kept: K/β², C/β, f·α/β², ω/β, ν·α, u·α/β,
     h·β), so that V (an energy, paper (16)) scales by α²/β² and times by β;
 

@@ -127,7 +127,7 @@ def chain_run():
 def test_rocking_chain_jump_observer_twice_as_fast(chain_run):
     """Chain N = 10, coupled 4 ≤ t ≤ 8: V_jump falls below 1e-5·V(4) inside the window at
     least twice as fast as V_nojump (measured 2.37 s; the no-jump observer never does) and
-    its floor (the plain master's discretisation floor, THEORY §6.6; measured 6.1e-6·V(4))
+    its floor (the plain master's discretisation floor, docs/theory/scheme.md §6; measured 6.1e-6·V(4))
     stays below that level."""
     res = chain_run
     t_jump = sync_time(res.t, res.slaves["jump"].V, 1e-5, 4.0, 8.0)

@@ -1,7 +1,7 @@
 """Built-in scenarios: the rocking-chain builder, invariances, show/run round trips,
 overrides and result I/O.
 
-External numbers come from /work/shared/docs/THEORY.md (§3.2 double mass, §4.3/§4.4 chain).
+External numbers come from docs/theory/models.md (§1.2 double mass, §2.3/§2.4 chain).
 All runs are short (t_end ≤ 2 s at h = 1e-3, or 0.05 s at the scenario's own h).
 """
 
@@ -52,7 +52,7 @@ def test_chain_matrices_structure(N):
     for A in (M, C, K, W):
         assert A.shape == (n, n)
 
-    # interface matrices: symmetric pair at ±a gives diag(2k, 2k a²) = diag(2000, 12.8) (THEORY §4.4)
+    # interface matrices: symmetric pair at ±a gives diag(2k, 2k a²) = diag(2000, 12.8) (docs/theory/models.md §2.4)
     np.testing.assert_allclose(K_int, np.diag([2 * k, 2 * k * a * a]), rtol=1e-15, atol=0)
     np.testing.assert_allclose(K_int, np.diag([2000.0, 12.8]), rtol=1e-14, atol=0)
     np.testing.assert_allclose(C_int, np.diag([10.0, 0.064]), rtol=1e-14, atol=0)
@@ -104,7 +104,7 @@ def test_chain_matrices_structure(N):
 
 
 def test_chain_default_numbers_match_theory():
-    """THEORY §4.3/§4.4: ω from 6.68 to 109.6 rad/s, G_(1L,1R) = -1.4, static y_s from
+    """docs/theory/models.md §2.3/§4.4: ω from 6.68 to 109.6 rad/s, G_(1L,1R) = -1.4, static y_s from
     -0.049 to -0.270 m, unloaded clearances g⁰_L from 0.0511 to 0.0069 m, g⁰_R = g⁰_L + 1 mm."""
     M, C, K, W, _, _ = chain_matrices(10)
     omega = np.sqrt(sla.eigh(K, M, eigvals_only=True))
@@ -156,7 +156,7 @@ def _symmetric_run(N, solver=None, t_end=2.0):
 
 @pytest.mark.parametrize("N", [3, 10])
 def test_chain_symmetric_layout_rotations_stay_zero(N):
-    """φ ≡ 0 is invariant (THEORY §4.3). Measured: the rotations are not bitwise zero but
+    """φ ≡ 0 is invariant (docs/theory/models.md §2.3). Measured: the rotations are not bitwise zero but
     round-off (N=10: max|φ| = 8.7e-17 rad, max|φ̇| = 2.7e-15 rad/s; N=3: 2.7e-18, 2.2e-16),
     first non-zero in the step of a simultaneous L/R impact (block_principal_pivoting solves
     the symmetric 2x2 LCP with LU, which rounds the two equal impulses differently).
@@ -314,9 +314,9 @@ def test_double_mass_initial_state_is_static_contact_equilibrium():
     s = sc.system
     g = s.gaps(sc.q0, 0.0)
     assert abs(g[0]) <= 1e-12
-    np.testing.assert_allclose(sc.q0, [-0.25, -0.17405], rtol=0, atol=5e-6)   # THEORY §3.2
+    np.testing.assert_allclose(sc.q0, [-0.25, -0.17405], rtol=0, atol=5e-6)   # docs/theory/models.md §1.2
     assert np.all(sc.u0 == 0.0)
-    # K q* = f_grav + w λ_s with λ_s = 2.215 N (THEORY §3.2, §7.5)
+    # K q* = f_grav + w λ_s with λ_s = 2.215 N (docs/theory/models.md §1.2, §7.5)
     f_grav = s.forcing.constant
     lam = (s.K @ sc.q0 - f_grav) @ s.W[:, 0]
     np.testing.assert_allclose(s.K @ sc.q0 - f_grav, s.W[:, 0] * lam, rtol=0, atol=1e-12)
@@ -327,7 +327,7 @@ def test_double_mass_initial_state_is_static_contact_equilibrium():
 
 
 def test_double_mass_unforced_rests_with_preload_impulse():
-    """F = 0: the static equilibrium persists and P_k/h = λ_s (THEORY §7.5)."""
+    """F = 0: the static equilibrium persists and P_k/h = λ_s (docs/theory/oracles.md §5)."""
     sc = load_scenario("double_mass", {"param.F": 0.0})
     res = simulate(sc, h=1e-3, t_end=0.2)
     assert res.active[1:].all()

@@ -17,7 +17,7 @@ def test_event_run_through_simulate_matches_the_closed_form_ball():
     assert res.status.ok and res.metadata["integrator"] == "event"
     assert tuple(res.events.columns) == EVENT_COLUMNS
     imp = res.events[res.events.kind == "impact"].time.to_numpy()
-    ref = impact_times(1.0, 9.81, 0.8, 30)          # THEORY §7.1 closed form
+    ref = impact_times(1.0, 9.81, 0.8, 30)          # docs/theory/oracles.md §1 closed form
     np.testing.assert_allclose(imp[:30], ref, rtol=0, atol=1e-12)
     acc = res.events[res.events.kind == "accumulation"].time.to_numpy()
     assert acc.size == 1 and abs(acc[0] - accumulation_time(1.0, 9.81, 0.8)) <= 1e-9

@@ -1,4 +1,4 @@
-"""Moreau–Jean time stepping against exact oracles (THEORY.md §6, §7, §10).
+"""Moreau–Jean time stepping against exact oracles (docs/theory/scheme.md, §7, §10).
 
 External oracle data is resolved by ``tests/oracles.py`` (``../shared/oracles`` from the
 project root; a missing oracle fails under ``CI`` and skips otherwise).
@@ -15,12 +15,12 @@ Oracles used here:
 * Siconos runs generated for this project (``siconos/generated/``: the forced impact
   oscillator at θ = 1, and a 3-DOF system with two coupled contacts at θ = ½, ¾, 1),
   reproduced step by step from their JSON input through the public API;
-* the closed-form Zeno bouncing ball (THEORY §7.1, ``observer.scenarios.bouncing_ball``);
+* the closed-form Zeno bouncing ball (docs/theory/oracles.md §1, ``observer.scenarios.bouncing_ball``);
 * an event-driven closed-form solution of the undamped forced impact oscillator
-  ``ẍ + x = A cos ωt``, ``x ≤ σ``, ``ẋ⁺ = −r ẋ⁻`` written in this file (THEORY §7.2);
-* the matrix exponential for contact-free motion (THEORY §7.5);
-* the single-impact and static-preload identities of THEORY §5 and §7.5;
-* the exact discrete energy balance of the θ = ½ scheme (THEORY §1, stepping.py docstring).
+  ``ẍ + x = A cos ωt``, ``x ≤ σ``, ``ẋ⁺ = −r ẋ⁻`` written in this file (docs/theory/oracles.md §2);
+* the matrix exponential for contact-free motion (docs/theory/oracles.md §5);
+* the single-impact and static-preload identities of docs/theory/models.md §3 and §7.5;
+* the exact discrete energy balance of the θ = ½ scheme (docs/theory/index.md §1, stepping.py docstring).
 """
 
 from __future__ import annotations
@@ -91,7 +91,7 @@ def fit_order(hs, errs) -> float:
 
 
 def periodic_orbit_11(omega, r, sigma, A=1.0):
-    """(1,1) orbit of the non-dimensional impact oscillator (THEORY §7.2): (V, t0, T)."""
+    """(1,1) orbit of the non-dimensional impact oscillator (docs/theory/oracles.md §2): (V, t0, T)."""
     T = 2.0 * np.pi / omega
     gf = A / (1.0 - omega ** 2)
     kappa = 0.5 * (1.0 + r) / np.tan(np.pi / omega)
@@ -361,13 +361,13 @@ def exact_last_time_above(h0, g, e, level):
 
 @pytest.mark.parametrize("law", LAWS)
 def test_ball_last_time_above_1mm(law):
-    """The last time q > 1e-3 m matches the closed form 3.9277 s (THEORY §7.1) at h = 1e-4
+    """The last time q > 1e-3 m matches the closed form 3.9277 s (docs/theory/oracles.md §1) at h = 1e-4
     to 10h (impact-time error ≤ 5h, plus the sensitivity 0.34 s/(m/s) of the crossing of
     the low 15th apex (1.24 mm) to an O(g h) rebound-speed error); both laws, since for
     one contact the discrete Poisson step is Newton's."""
     h, g, h0, e = 1e-4, BALL["g0"], BALL["h0"], BALL["e"]
     k, t_exact = exact_last_time_above(h0, g, e, 1e-3)
-    # THEORY §7.1 quotes 3.9278 s; the series gives 3.92770 s (t_15 = 3.90485 s + 22.85 ms)
+    # docs/theory/oracles.md §1 quotes 3.9278 s; the series gives 3.92770 s (t_15 = 3.90485 s + 22.85 ms)
     assert k == 15 and t_exact == pytest.approx(3.9277, abs=5e-5)
     res = ball_run(law, h, 4.0)
     t_last = res.t[np.flatnonzero(res.q[:, 0] > 1e-3)[-1]]
@@ -382,7 +382,7 @@ OSC = dict(A=1.0, omega=2.8, sigma=0.0, r=0.8)
 
 def test_exact_oscillator_reproduces_periodic_orbit():
     """The event-driven oracle itself: started just after an impact of the (1,1) orbit of
-    THEORY §7.2 (ω = 2.8, r = 0.8, σ = 0: V = 0.336177, t0 = 1.092635, T = 2.243995) it
+    docs/theory/oracles.md §2 (ω = 2.8, r = 0.8, σ = 0: V = 0.336177, t0 = 1.092635, T = 2.243995) it
     returns impacts at t0 + nT with velocity V (the orbit is unstable, so the agreement
     degrades by ~3× per period from round-off), and x < σ strictly inside each period."""
     V, t0, T = periodic_orbit_11(OSC["omega"], OSC["r"], OSC["sigma"])

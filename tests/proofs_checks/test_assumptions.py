@@ -68,7 +68,7 @@ def test_stiffness_semidefinite_reason_and_witness():
     assert r.passed is None and math.isnan(r.margin) and math.isnan(r.tolerance)
     assert r.reason.startswith("K is only positive semi-definite (λ_min = ") and r.evidence == "n/a"
     assert r.reason.endswith("): free rigid-body mode; the position jumps (K-metric), eqs. (13)-(14) and "
-                             "Theorem 1 need K ≻ 0 (THEORY §2 erratum 6)")
+                             "Theorem 1 need K ≻ 0 (docs/theory/index.md §2 erratum 6)")
     assert r.witness["lambda_max"] == pytest.approx(5.0) and r.equation == "section 2: K = Kᵀ ≻ 0; eq. (7)"
     x = r.witness["exact_vector"]
     assert np.all(np.array([[1.0, 2.0], [2.0, 4.0]]) @ x == 0) and np.any(x != 0) and r.witness["exact_xAx"] == 0

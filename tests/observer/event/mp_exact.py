@@ -12,7 +12,7 @@ the bound of its change) without a downward sign change; a bracketed root is ref
 bisection-safeguarded Newton to ``ROOT_TOL`` relative. Impacts: generalized Newton
 (eq. (5)) by enumeration of the LCP on the held set and the landing contact; a contact whose
 γ⁺ is below ``v_hold`` (relative to the motion) is held if the acceleration LCP gives the
-held set positive forces, after its remaining Zeno tail ``2γ⁺/(α(1 − e))`` (THEORY §7.1)
+held set positive forces, after its remaining Zeno tail ``2γ⁺/(α(1 − e))`` (docs/theory/oracles.md §1)
 flown on the held flow (≤ 2·v_hold/(α(1 − e)) s, error O(α̇/α·tail²)). Keep v_hold ≤ 1e-12
 where two contacts' accumulations interleave (a contact held while the other still bounces
 re-launches: 1e-9 made the reference penetrate on one such system).
@@ -264,7 +264,7 @@ class Reference:
     def _rest(self, rest, v, j):
         """Hold ``rest`` after an impact of j that left it bouncing at v ≤ v_hold (None: no
         tail): the remaining Zeno tail of j, ``2v/(α(1 − e))`` for its contact acceleration
-        −α on the flow before the hold (THEORY §7.1; its error O(α̇/α·tail²) is far below
+        −α on the flow before the hold (docs/theory/oracles.md §1; its error O(α̇/α·tail²) is far below
         ROOT_TOL for v ≤ 1e-9), is flown on the held flow."""
         tail = mp.mpf(0)
         if v is not None and v > 0:

@@ -310,7 +310,7 @@ impacted together with contact 1 (within 1000 motion tolerances)."""
 
 OPEN_T_INF = 0.041348324655931
 """Its accumulation time (both contacts), from the 30-digit reference :mod:`mp_exact`
-(contacts held below γ⁺ = 1e-12 m/s: the remaining tail is < 1e-13 s; 14 s of CPU)."""
+(contacts held below γ⁺ = 1e-12 m/s: the remaining tail is < 1e-13 s)."""
 
 MERGED = dict(
     M=np.diag([1.11784164, 1.9]), K=np.zeros((2, 2)), C=np.diag([1.0 / 3.0, 0.05307361]),
@@ -418,7 +418,7 @@ SUBNORMAL_PHASE = _pair(M=[0.5000000000000001, 1.5], K=[0.0, 0.0], C=[0.0, 0.0],
                         phi=2.225073858507203e-309, e=0.3191947463497382)
 """Drawn by :func:`two_contact_zeno`: a forcing phase of 2.2e-309 gives the sine terms of the
 generator subnormal entries (4.9e-324 in the held flow, whose other entries of that row
-cancel): balanced by 2.2e-162, the search after both contacts rest stalled (65 s of CPU)."""
+cancel): balanced by 2.2e-162, the search after both contacts rest stalled."""
 
 
 TINY_PHASE = _pair(M=[1.7061716986606097, 1.1], K=[1.7098978604619472, 0.0], C=[0.001, 0.0],
@@ -428,7 +428,7 @@ TINY_PHASE = _pair(M=[1.7061716986606097, 1.1], K=[1.7098978604619472, 0.0], C=[
                    w=2.273894586042595, phi=3.2541865008425024e-176, e=0.322836174451987)
 """Drawn by :func:`two_contact_zeno`, run in mm and 0.1 s (α = 1000, β = 0.1): once both
 contacts rest, the held velocities' rows keep terms of 1e-189 (the sine terms of a phase of
-3e-176, not a cancellation of them): balanced by 3e-95, the search stalled (53 s of CPU)."""
+3e-176, not a cancellation of them): balanced by 3e-95, the search stalled."""
 
 
 @pytest.mark.parametrize("p, units", [(HELD_PAIR, (1.0, 1.0)), (SUBNORMAL_PHASE, (1.0, 1.0)),
@@ -503,7 +503,7 @@ INTERLEAVED = _pair(M=[0.5, 0.5832297231040848], K=[0.0, 0.0], C=[0.0, 0.0],
                     a=[0.0007363149116057202, 0.029854389869287675], w=0.5,
                     phi=0.7051671172256166, e=0.3)
 """Drawn by :func:`two_contact_zeno`: the two contacts' impacts interleave from 1e-3 m/s down;
-the 30-digit reference (:mod:`mp_exact`, 2 s of CPU) rests both at INTERLEAVED_T_INF."""
+the 30-digit reference (:mod:`mp_exact`) rests both at INTERLEAVED_T_INF."""
 
 INTERLEAVED_T_INF = 0.03747446322866563
 

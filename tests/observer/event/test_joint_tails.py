@@ -1,7 +1,7 @@
 """Issue 19: several contacts accumulating impacts at the same time (overlapping Zeno tails)
 — their accumulation times are a property of the motion, the same to 1e-9 s under a
 translation of coordinates (q → q + c, ν → ν − Wᵀc), against an independent 30-digit
-event-driven reference (mpmath) or the closed form of the ball (THEORY §7.1)."""
+event-driven reference (mpmath) or the closed form of the ball (docs/theory/oracles.md §1)."""
 
 from __future__ import annotations
 
@@ -145,7 +145,7 @@ def test_two_coupled_contacts_accumulating_together_reach_t_inf_within_1e9_anywh
 
 
 def ball_t_inf(h: float, e: float) -> float:
-    """THEORY §7.1: t∞ = √(2h/g)(1 + e)/(1 − e) (50 digits)."""
+    """docs/theory/oracles.md §1: t∞ = √(2h/g)(1 + e)/(1 − e) (50 digits)."""
     with mp.workdps(50):
         return float(mp.sqrt(2 * mp.mpf(h) / G) * (1 + mp.mpf(e)) / (1 - mp.mpf(e)))
 

@@ -1,7 +1,7 @@
 """Exact event-driven master (issue 11, items 1, 2 and 4): flow, root isolation, event loop.
 
 Every expected value is computed here independently of :mod:`observer.event`: closed forms
-(THEORY §7.1 bouncing ball, §7.2 impact oscillator, §7.5 static contact), the analytic
+(docs/theory/oracles.md §1 bouncing ball, §7.2 impact oscillator, §7.5 static contact), the analytic
 solution of the grazing oscillator, an analytic one-period map with ``scipy.optimize.brentq``,
 and Siconos' event-driven reference outputs (``BouncingBallED.ref``, ``LinearOscillatorED.ref``).
 """
@@ -86,7 +86,7 @@ def test_free_flow_with_singular_stiffness_is_the_parabola():
 
 
 def test_constrained_flow_force_is_the_static_preload():
-    """double_mass at rest on the ground: λ_s = −g_s/(wᵀK⁻¹w) (THEORY §7.5), held for F = 0."""
+    """double_mass at rest on the ground: λ_s = −g_s/(wᵀK⁻¹w) (docs/theory/oracles.md §5), held for F = 0."""
     sc = observer.load_scenario("double_mass", {"param.F": 0.0})
     K, W = sc.system.K, sc.system.W[:, 0]
     q_s = np.linalg.solve(K, sc.system.forcing.constant)
@@ -223,7 +223,7 @@ def test_linear_oscillator_matches_siconos_up_to_accumulation_then_persistent_co
     assert np.allclose(after["P0"] / 1e-2, data[-1, 6], rtol=1e-6)
 
 
-# -- acceptance: forced impact oscillator (THEORY §7.2) ----------------------------------------
+# -- acceptance: forced impact oscillator (docs/theory/oracles.md §2) ----------------------------------------
 
 def one_period_map(t_a: float, v_plus: float, w: float, r: float) -> tuple[float, float]:
     """Analytic next impact of x'' + x = cos ωt (x ≤ 0) from x(t_a) = 0, x'(t_a) = v_plus."""
@@ -239,7 +239,7 @@ def one_period_map(t_a: float, v_plus: float, w: float, r: float) -> tuple[float
 
 
 def test_impact_oscillator_one_one_orbit():
-    """ω = 2.8, r = 0.8, σ = 0: V from THEORY §7.2's quadratic, the period T = 2π/ω.
+    """ω = 2.8, r = 0.8, σ = 0: V from docs/theory/oracles.md §2's quadratic, the period T = 2π/ω.
 
     The (1,1) orbit is unstable: the multiplier of the analytic one-period map is
     λ ≈ −2.958, so a round-off deviation of ~3e-15 reaches 1e-10 after ten periods, for any
@@ -324,7 +324,7 @@ def test_a_near_miss_is_no_graze_and_a_shallow_crossing_is_an_impact():
 def test_flat_bar_hits_two_supports_at_once_and_comes_to_rest_on_both(law):
     """A bar (y, φ) dropped flat onto supports at x = ±b: both gaps close together, the
     multi-contact law gives γ⁺ = −eγ⁻ on both (G's row sums are equal), the bounces are
-    the ball's (THEORY §7.1 with h0 = d), then both contacts carry λ = m g/2 and φ ≡ 0."""
+    the ball's (docs/theory/oracles.md §1 with h0 = d), then both contacts carry λ = m g/2 and φ ≡ 0."""
     m, b, H, d, e = 1.0, 0.1, 0.1, 0.05, 0.5
     J = m * (4 * b * b + H * H) / 12
     doc = {"scenario": {"name": "flat_bar"},
@@ -519,7 +519,7 @@ def test_double_mass_lifts_off_when_the_contact_force_of_the_pinned_system_vanis
     sol = solve_ivp(rhs, (0.0, 0.5), [sc.q0[1], 0.0], method="DOP853", rtol=1e-13, atol=1e-15,
                     dense_output=True)
     lam = lambda t: m1 * G0 + k1 * (q1 - sol.sol(t)[0]) - c1 * sol.sol(t)[1]   # noqa: E731
-    assert lam(0.0) == pytest.approx(2.215, abs=1e-3)          # THEORY §7.5 preload
+    assert lam(0.0) == pytest.approx(2.215, abs=1e-3)          # docs/theory/oracles.md §5 preload
     s = np.linspace(0.0, 0.5, 5001)
     k = np.flatnonzero(np.array([lam(t) for t in s]) <= 0.0)[0]
     t_liftoff = brentq(lam, s[k - 1], s[k], xtol=1e-14)
@@ -553,7 +553,7 @@ def test_rocking_chain_impacts_satisfy_newtons_law_recomputed_from_the_events():
 
 @pytest.mark.parametrize("law", ["newton", "poisson"])
 def test_velocity_tail_is_the_balls_closed_form_for_one_contact_and_none_for_several(law):
-    """The tail model of one contact under constant acceleration (α₁ = 0) is THEORY §7.1's
+    """The tail model of one contact under constant acceleration (α₁ = 0) is docs/theory/oracles.md §1's
     geometric sum 2γ⁺/(α₀(1 − e)) (for one contact Poisson's law is Newton's); for a key of
     several contacts there is no such model (None), whatever the law."""
     from types import SimpleNamespace

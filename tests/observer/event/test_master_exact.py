@@ -214,7 +214,7 @@ def test_t_end_at_ulps_from_an_impact_time_adds_no_event(ulps):
 @pytest.mark.parametrize("nu", [0.0, 1.0, 100.0, -100.0])
 def test_zeno_limit_to_1e9_for_any_gap_offset(nu):
     """Ball dropped from gap 1 m over a ground at offset ν: t∞ (50-digit closed form,
-    THEORY §7.1) to 1e-9 whatever ν is."""
+    docs/theory/oracles.md §1) to 1e-9 whatever ν is."""
     e = 0.5
     res = run_master(ball(1.0, nu=nu, e=e, t_end=2.0))
     assert res.status == "ok" and len(res.zeno) == 1

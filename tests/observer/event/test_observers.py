@@ -1,6 +1,6 @@
 """Exact event-driven observers (issue 11, item 3): ``observer.event.observers``.
 
-Oracles: closed-form solutions of the constrained linear systems (THEORY §7.7, the
+Oracles: closed-form solutions of the constrained linear systems (docs/theory/oracles.md §7, the
 persistent-constraint test, solved by hand below), invariants recomputed from the returned
 states (g_I = 0 for the jump observer, γ_I ≥ 0 and the sign of the contact force while
 χ = 1, the impact law on every impact row), and the paper's Theorem 1 / Proposition 1
@@ -19,7 +19,7 @@ from observer.event.observers import (Exosystem, expm, run_observers, run_schedu
                                       switching_schedule)
 from observer.observers import lyapunov
 
-# -- the double-mass oscillator at rest on the ground (THEORY §3, §7.7: F = 0, χ ≡ 1) ---------
+# -- the double-mass oscillator at rest on the ground (docs/theory/models.md §1, §7.7: F = 0, χ ≡ 1) ---------
 K1 = K2 = 100.0
 C1 = C2 = 1.0
 OMEGA_N2 = (K1 + K2) / 1.0                          # mass 2 with mass 1 held: ω² = (k1+k2)/m2
@@ -46,7 +46,7 @@ def persistent(sc, t, dq, jumps):
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])
 def test_jump_observer_persistent_constraint_closed_form(resting, sign):
-    """THEORY §7.7: the K-metric projection of q1's offset d (eq. (14): Σ = −d/L,
+    """docs/theory/oracles.md §7: the K-metric projection of q1's offset d (eq. (14): Σ = −d/L,
     L = (k1+k2)/(k1k2), Δq = K⁻¹wΣ = −d (1, k1/(k1+k2))) leaves e = (0, −d/2); then mass 1
     is held and e2 rings down as a damped oscillator: the trajectory to 1e-12 m, and V reaches
     1e-17·V(t_on) by t = 20 s (the constrained damping rate 2/s: e^{−40} ≈ 4e-18)."""
@@ -66,7 +66,7 @@ def test_jump_observer_persistent_constraint_closed_form(resting, sign):
 
 
 def test_nojump_observer_stalls_under_persistent_constraint(resting):
-    """THEORY §7.7: the kinematic observer cannot move along W; mass 1 stays 0.01 m off, e2
+    """docs/theory/oracles.md §7: the kinematic observer cannot move along W; mass 1 stays 0.01 m off, e2
     settles at k1·e1/(k1+k2) (closed form), and V stalls at ½eᵀKe = 2.5e-3."""
     sc, t = resting
     run = persistent(sc, t, (0.01, 0.0), jumps=False)
