@@ -12,7 +12,7 @@ Public API (a contract relied on by the benchmarks, reports and users):
   :class:`SimulationResult`, :class:`Slave`.
 """
 
-from observer.compare import compare
+from observer.compare import Comparison, compare
 from observer.contact import CONTACT_SOLVERS
 from observer.engines import ENGINES
 from observer.ensemble import ensemble
@@ -29,4 +29,4 @@ from observer.version import __version__
 
 __all__ = ["CONTACT_SOLVERS", "ContactSolverError", "ENGINES", "Harmonic", "IMPACT_LAWS", "ImpactLaw", "InputError",
            "LinearSystem", "MoreauJean", "OBSERVER_DESIGNS", "ObserverDesign", "SCENARIOS", "Scenario", "SimulationResult",
-           "Slave", "compare", "ensemble", "load_scenario", "lyapunov", "read_frame", "read_result", "simulate", "__version__"]
+           "Slave", "Comparison", "compare", "ensemble", "load_scenario", "lyapunov", "read_frame", "read_result", "simulate", "__version__"]
