@@ -1,6 +1,7 @@
 """nox sessions.
 
-* ``tests`` (default): the pytest suite, dependencies pinned by ``constraints.txt``.
+* ``tests`` (default): the pytest suite on two pytest-xdist workers, dependencies pinned by
+  ``constraints.txt``; see ``docs/guide/testing.md``.
 * ``tests_latest``: the same suite against the latest releases of every dependency.
 * ``mutants -- [MODULE ...]``: mutation testing (mutmut) of the core modules, each against
   its own tests (:data:`MUTATION_TARGETS`); see ``tests/mutants/README.md``.
@@ -39,12 +40,23 @@ SINGLE_THREAD_BLAS = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_
 ``lu_solve`` of a 2×2 took orders of magnitude longer with threaded OpenBLAS on busy cores)."""
 
 
+WARM_KERNEL = "from observer.loop import compile_time; print(f'kernel compiled or loaded in {compile_time():.1f} s')"
+"""Compile the kernel once (numba's on-disk cache, ``__pycache__``) before the test workers
+start: the workers then only load it, so no two of them compile (and write) the same entry."""
+
+PARALLEL = ["-n", "2", "--durations=50"]
+"""pytest-xdist over the two cores of CI, with the 50 slowest tests listed; replaced by
+whatever follows ``--`` (``nox -s tests -- -n 0 tests/observer`` runs serially)."""
+
+
 @nox.session
 def tests(session: nox.Session) -> None:
     """Install the package with its test extras, every version pinned by ``constraints.txt``,
-    and run pytest (pass pytest args after --)."""
+    warm the compiled kernel's cache, and run pytest on two workers (pass pytest args after
+    --: they replace :data:`PARALLEL`)."""
     session.install("-c", CONSTRAINTS, "-e", ".[test]")
-    session.run("python", "-m", "pytest", *session.posargs, env=SINGLE_THREAD_BLAS)
+    session.run("python", "-c", WARM_KERNEL, env=SINGLE_THREAD_BLAS)
+    session.run("python", "-m", "pytest", *(session.posargs or PARALLEL), env=SINGLE_THREAD_BLAS)
 
 
 @nox.session

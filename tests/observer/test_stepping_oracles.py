@@ -6,8 +6,10 @@ project root; a missing oracle fails under ``CI`` and skips otherwise).
 Floating-point results are compared with a stated round-off tolerance (they depend on the
 BLAS and library versions); bitwise equality is asserted only where it is the property
 (structural zeros of an inactive contact, one code path driven two ways). The external
-oracles are run with both engines of :func:`observer.simulate` (the numba kernel and the
-numpy reference stepper of ``observer/stepping.py``), each checked on its own.
+oracles of the scheme (Siconos) are run on every engine that takes a time-stepping case (the
+``engine`` fixture of tests/conftest.py: the numba kernel, the numpy reference stepper of
+``observer/stepping.py``, the toy engine; the event engine refuses them), each checked on its
+own with its tolerance.
 
 Oracles used here:
 
@@ -36,7 +38,6 @@ import scipy.linalg as sla
 import observer
 from observer.closed_form import ExactImpactOscillator
 from observer.scenario import Scenario
-from observer.loop import ENGINES
 from observer.scenarios import bouncing_ball as bb
 from observer.stepping import MoreauJean
 from oracles import oracle
@@ -124,7 +125,6 @@ def custom_scenario(M, C, K, W, *, q0, u0, h, t_end, theta=0.5, law="newton", e=
 # ---------------------------------------------------------------------------------------
 # 1. Siconos BouncingBallTS
 # ---------------------------------------------------------------------------------------
-@pytest.mark.parametrize("engine", ENGINES)
 def test_siconos_bouncing_ball_reference(engine):
     """The 3-DOF Siconos ball (tests/data/siconos_bouncing_ball.toml) reproduces
     BouncingBallTS.ref with either engine: t, q[0], v[0], impulse p(1)[0] and λ(1)[0] agree
@@ -135,10 +135,10 @@ def test_siconos_bouncing_ball_reference(engine):
     ref = np.loadtxt(path, skiprows=1)
     assert ref.shape == (rows, cols) == (2001, 5)
 
-    res = observer.simulate(str(SICONOS_TOML), engine=engine)
+    res = engine.simulate(str(SICONOS_TOML), integrator="time-stepping")
     assert res.t.shape == (rows,)
     assert res.q.shape == (rows, 3) and res.P.shape == (rows, 1)
-    tol = 1e-10
+    tol = engine.tol.same_scheme
     assert np.max(np.abs(res.t - ref[:, 0])) <= tol
     assert np.max(np.abs(res.q[:, 0] - ref[:, 1])) <= tol
     assert np.max(np.abs(res.u[:, 0] - ref[:, 2])) <= tol
@@ -186,17 +186,23 @@ def siconos_scenario(spec: dict) -> Scenario:
 
 
 @functools.lru_cache(maxsize=None)
-def generated_run(name: str, engine: str = ENGINES[0]):
-    """(input, Siconos columns by header name, our run with ``engine``) of a generated
-    Siconos oracle."""
+def generated_oracle(name: str):
+    """(input, Siconos columns by header name) of a generated Siconos oracle."""
     if name in CLOSED_GENERATED:
         spec_path, csv_path = DATA / "siconos" / f"{name}.json", DATA / "siconos" / f"{name}.csv.gz"
     else:
         folder = oracle("siconos", "generated")
         spec_path, csv_path = folder / f"{name}.json", folder / f"{name}.csv"
     spec = json.loads(spec_path.read_text())
-    table = np.genfromtxt(csv_path, delimiter=",", names=True)
-    return spec, table, observer.simulate(siconos_scenario(spec), engine=engine)
+    return spec, np.genfromtxt(csv_path, delimiter=",", names=True)
+
+
+@functools.lru_cache(maxsize=None)
+def generated_run(name: str):
+    """(input, Siconos columns by header name, our run on the default engine) of a generated
+    Siconos oracle."""
+    spec, table = generated_oracle(name)
+    return spec, table, observer.simulate(siconos_scenario(spec))
 
 
 def siconos_columns(table, prefix: str, count: int) -> np.ndarray:
@@ -204,7 +210,6 @@ def siconos_columns(table, prefix: str, count: int) -> np.ndarray:
     return np.column_stack([table[f"{prefix}{i}"] for i in range(count)])
 
 
-@pytest.mark.parametrize("engine", ENGINES)
 @pytest.mark.parametrize("name", SHARED_GENERATED + CLOSED_GENERATED)
 def test_siconos_generated_runs(name, engine):
     """Each generated Siconos run (one Interaction per contact, MoreauJeanOSI(θ), Lemke) is
@@ -212,15 +217,16 @@ def test_siconos_generated_runs(name, engine):
     the impulse P of every step agree to :data:`GENERATED_TOL` (1e-10; measured ≤ 5.6e-14),
     on every one of the T/h + 1 rows. (θ = 1 catches θ and 1 − θ swapped in the position
     update, which θ = ½ cannot see.)"""
-    spec, ref, res = generated_run(name, engine)
+    spec, ref = generated_oracle(name)
+    res = engine.simulate(siconos_scenario(spec), integrator="time-stepping")
     n, m = np.shape(spec["W"])
     steps = int(round(spec["T"] / spec["h"]))
     assert ref.shape == (steps + 1,) and res.t.shape == (steps + 1,)
     assert res.metadata["theta"] == spec["theta"]
-    assert np.max(np.abs(res.t - ref["t"])) <= GENERATED_TOL
+    assert np.max(np.abs(res.t - ref["t"])) <= min(GENERATED_TOL, engine.tol.same_scheme)
     for ours, prefix, count in ((res.q, "q", n), (res.u, "u", n), (res.P, "P", m)):
         err = np.max(np.abs(ours - siconos_columns(ref, prefix, count)))
-        assert err <= GENERATED_TOL, (prefix, err)
+        assert err <= min(GENERATED_TOL, engine.tol.same_scheme), (prefix, err)
 
 
 def impact_count(P: np.ndarray) -> int:

@@ -198,7 +198,10 @@ def smoke_report(tmp_path_factory):
     out = tmp_path_factory.mktemp("results")
     summary = run_suite("smoke", out, progress=False)
     assert not summary.failed, summary.failed
-    env = {**os.environ, "PYTHONPATH": str(REPO), "OPENBLAS_NUM_THREADS": "1"}
+    # not an xdist worker's variables: pytest-benchmark would take the child for a worker
+    # and disable timing (which --benchmark-only refuses)
+    env = {**{k: v for k, v in os.environ.items() if not k.startswith("PYTEST_XDIST")},
+           "PYTHONPATH": str(REPO), "OPENBLAS_NUM_THREADS": "1"}
     res = subprocess.run([sys.executable, "-m", "pytest", "bench/micro", "-q", "-p", "no:cacheprovider",
                           "--benchmark-only", f"--benchmark-json={micro_path('smoke', out)}",
                           "--benchmark-min-rounds=2", "--benchmark-max-time=0.001",
