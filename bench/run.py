@@ -120,7 +120,7 @@ _KERNEL_TIME: list[float] = []
 
 def kernel_ready() -> float:
     """Compile the time-loop kernel, or load it from numba's on-disk cache, once per process,
-    before any case is timed (:func:`observer.loop.compile_time`), then run every built-in
+    before any case is timed (:func:`observer.engines.compiled.driver.compile_time`), then run every built-in
     scenario for a few steps on the compiled engine, master alone and with its observers
     (:func:`warm_up_scenarios`): the kernel's warm-up system does not reach every
     specialization (measured in a fresh clone: the first master-only double_mass run after
@@ -128,7 +128,7 @@ def kernel_ready() -> float:
     when the toolkit has no compiled engine)."""
     if not _KERNEL_TIME:
         try:
-            from observer.loop import compile_time
+            from observer.engines.compiled.driver import compile_time
         except ImportError:
             _KERNEL_TIME.append(float("nan"))
         else:

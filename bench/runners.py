@@ -6,7 +6,7 @@ Every row holds the case's declared fields, the metrics of its kind, the timing
 time from the result's metadata), ``status`` (``"ok"`` or ``"n/a"``), ``note`` and the
 environment of :func:`bench.results.environment` (versions, CPU, commit, and
 ``compile_time_s``: the kernel's compile or cache-load time, measured once per suite run by
-:func:`observer.loop.compile_time` before any case is timed, so no row pays it) plus ``date``.
+:func:`observer.engines.compiled.driver.compile_time` before any case is timed, so no row pays it) plus ``date``.
 
 Engines: every simulation runs on the compiled engine (the default of
 :func:`observer.simulate`), except cases whose contact solver the kernel does not have

@@ -27,6 +27,7 @@ have (``solver`` other than ``"pivoting"``: the numpy engine, :func:`engine_for`
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any, Callable, Iterator
@@ -158,16 +159,19 @@ def _canon(v: Any) -> str:
     return str(v)
 
 
-COMPILED_SOLVERS = ("pivoting",)
-"""Contact solvers the compiled kernel has (its exact closed form / block pivoting); the
-others (lemke, nnls, the cvxpy + OSQP reference) exist only in the numpy engine."""
-
-
+@functools.lru_cache(maxsize=None)
 def engine_for(solver: str) -> str:
-    """The engine a case with contact solver ``solver`` runs on: ``"compiled"`` (the default
-    of :func:`observer.simulate`) when the kernel has the solver, else ``"python"`` — the
-    kernel would silently solve with its own pivoting method."""
-    return "compiled" if solver in COMPILED_SOLVERS else "python"
+    """The engine a case with contact solver ``solver`` runs on: the one
+    :func:`observer.engines.choose` gives a time-stepping run of the built-in
+    ``impact_oscillator`` with that solver (the compiled engine when it has the solver, else
+    the numpy one: the kernel would silently solve with its own pivoting method). The
+    registry's own refusals decide it; no list of solvers or engines is kept here."""
+    from observer.engines import choose
+    from observer.engines.base import RunDescription
+    from observer.scenario import load_scenario
+
+    sc = load_scenario("impact_oscillator", {"simulation.solver": solver})
+    return choose(RunDescription(sc, "time-stepping"))[0].name
 
 
 @dataclass(frozen=True)

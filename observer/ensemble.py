@@ -248,7 +248,7 @@ def _run_chunk(sc: Scenario, designs, X, members, integrator, store, engine, pat
 
 def window_summary(t: np.ndarray, V: np.ndarray, t_on: float, t_off: float) -> dict:
     """The summary columns of one observer from V on the grid (the event integrator and
-    ``store="full"``), with the definitions of :func:`observer.loop.summary_frame`: V(t_on),
+    ``store="full"``), with the definitions of :func:`observer.engines.loop.summary_frame`: V(t_on),
     max V over the window, V at the end, the window steps with V_{k+1} > V_k and the largest
     relative rise (V_{k+1} − V_k)/V_k (0 without a rise), first-passage and settling times per ρ
     of :data:`observer.metrics.RHOS` (:mod:`observer.metrics`)."""
@@ -308,7 +308,7 @@ def run_members(sc: Scenario, designs, X, integrator, store, engine, paths, work
             return fast
     chunks = _chunks(X.shape[0], workers)
     if integrator == "time-stepping" and len(chunks) > 1:
-        from observer.loop import compile_time
+        from observer.engines.compiled.driver import compile_time
         compile_time()                      # once, before the threads
     run = lambda members: _run_chunk(sc, designs, X, members, integrator, store, engine, paths)  # noqa: E731
     if len(chunks) == 1:
@@ -332,9 +332,9 @@ def run_members(sc: Scenario, designs, X, integrator, store, engine, paths, work
 
 
 def _members_after_one_master(sc: Scenario, designs, X, engine, paths: int, workers: int):
-    """:func:`run_members` by :func:`observer.members.member_summaries` (one master run, then
+    """:func:`run_members` by :func:`observer.engines.compiled.members.member_summaries` (one master run, then
     every member alone over the grid); None when that path does not cover the run."""
-    from observer.members import member_summaries
+    from observer.engines.compiled.members import member_summaries
     from observer.result import RunState
 
     n = X.shape[0]

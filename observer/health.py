@@ -1,12 +1,12 @@
 """Health of a run: is it inside the regime where its numbers mean anything?
 
-Every run of :func:`observer.loop.run` gets a :class:`Health` record (issue 12, item 2):
+Every run of :meth:`observer.engines.timestepping.TimeStepping.advance` gets a :class:`Health` record (issue 12, item 2):
 
 ``max_residual``
     The largest complementarity residual of any contact step, *recomputed from the velocity
-    the step applied* (:func:`observer.kernel.applied_residual`: ``Wᵀ(u_{k+1} − u_free)`` in
+    the step applied* (:func:`observer.primitives.applied_residual`: ``Wᵀ(u_{k+1} − u_free)`` in
     place of the solver's ``ĜP``), relative like the solver's residual. A step above the
-    run's tolerance stops the run (:class:`~observer.loop.LoopOutput` ``stopped_at``).
+    run's tolerance stops the run (:class:`~observer.engines.loop.LoopOutput` ``stopped_at``).
     The python engine recomputes it on Newton steps and single-contact steps (one contact:
     the Poisson step is the Newton step); a Poisson step on several contacts contributes the
     solver's own residual there (``residual_source`` says which).
@@ -179,7 +179,7 @@ def energy_growth(system, q: np.ndarray, u: np.ndarray) -> float:
 
     The ratio does not change when q and u are divided by one number c (T, U and the scale
     by c², f_cᵀq by c, which only the ratio's forcing term feels): states so large that the
-    energies overflow (finite rows of a run its guard stopped, :class:`observer.loop.FiniteGuard`)
+    energies overflow (finite rows of a run its guard stopped, :class:`observer.engines.loop.FiniteGuard`)
     are divided by their largest entry first — for an unforced run, the only one assessed,
     the same ratio."""
     with np.errstate(over="ignore", invalid="ignore"):

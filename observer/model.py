@@ -27,14 +27,14 @@ TRIG = {"cos": np.cos, "sin": np.sin, "-sin": lambda x: -np.sin(x)}
 
 GRID_BLOCK = 128
 """Grid points per anchor of :func:`grid_wave` (a power of two, so that the compiled loop's
-windows, :data:`observer.loop.WINDOW`, hold whole blocks)."""
+windows, :data:`observer.engines.compiled.driver.WINDOW`, hold whole blocks)."""
 
 
 def grid_anchors(t0: float, h: float, k0: int, k1: int, omega: float,
                  phase: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The anchors of :func:`grid_wave` for the grid points k0..k1: ``cos A_a``, ``sin A_a`` of
     the blocks a = k0 // B .. k1 // B and ``cos β_j``, ``sin β_j``, j = 0..B − 1 (B =
-    :data:`GRID_BLOCK`; also combined in compiled code, :func:`observer.kernel.fill_waves`)."""
+    :data:`GRID_BLOCK`; also combined in compiled code, :func:`observer.engines.compiled.kernel.fill_waves`)."""
     B = GRID_BLOCK
     a0, a1 = k0 // B, k1 // B
     ta = np.multiply(np.arange(a0 * B, a1 * B + 1, B), h, dtype=float)    # the anchors' t_k
@@ -152,7 +152,7 @@ class Harmonic:
         ``(column, coefficient, ω, phase, function)`` in summation order, ``function`` one of
         ``"cos"``, ``"sin"``, ``"-sin"``: the value is the constant (zero for the derivative)
         plus, entry by entry, ``coefficient·function(ω t + phase)`` added to its column (the
-        compiled kernel evaluates the signals from these, :func:`observer.loop.signal_tables`)."""
+        compiled kernel evaluates the signals from these, :func:`observer.engines.compiled.bundles.signal_tables`)."""
         return [(int(j), float(c), float(w), float(ph), func)
                 for w, ph, func, cols, coefs in self._groups(derivative) for j, c in zip(cols, coefs)]
 
@@ -161,7 +161,7 @@ class Harmonic:
         k = k0..k1 (shape (k1 − k0 + 1, d)): the same sum in the same order, each wave from
         :func:`grid_wave` (anchored angle addition) instead of one trigonometric call per point.
         The time-stepping engines evaluate the signals so (:class:`observer.stepping.Grid`,
-        :func:`observer.loop.wave_table`)."""
+        :func:`observer.engines.compiled.bundles.wave_table`)."""
         return self._evaluate(np.empty(k1 - k0 + 1), derivative, (t0, h, k0, k1))
 
     def _evaluate(self, t: Any, derivative: bool, grid: tuple | None = None) -> np.ndarray:

@@ -371,7 +371,7 @@ class SimulationResult:
     slaves : dict[str, SlaveTrajectory]
     summary : DataFrame or None
         ``store="summary"`` runs: the kernel's per-observer metrics over every step
-        (:func:`observer.loop.summary_frame`). May be given as a :class:`LazyFrame`: it is
+        (:func:`observer.engines.loop.summary_frame`). May be given as a :class:`LazyFrame`: it is
         built on first read (pandas is imported then).
     status : RunStatus
         How the run ended (ok / fallback / stopped, with the reason); by default derived

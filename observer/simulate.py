@@ -16,7 +16,7 @@ from observer.engines import ENGINES, INTEGRATORS, choose, describe
 from observer.engines.base import scenario_observers  # noqa: F401  (re-exported)
 from observer.engines.timestepping import result_events, stepping_events  # noqa: F401  (re-exported)
 from observer.errors import InputError, is_numerical_failure, user_callback
-from observer.loop import check_record_every
+from observer.engines.loop import check_record_every
 from observer.observers import Slave, check_coupling, make_slaves  # noqa: F401  (make_slaves re-exported)
 from observer.result import SimulationResult
 from observer.scenario import (Scenario, check_finite_energy,  # noqa: F401  (re-exported:

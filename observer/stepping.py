@@ -88,7 +88,7 @@ FACTORED_MIN_N = sps.DENSE_MAX_N + 1
 factors of Â, M and K, from which each closed set's ``Â⁻¹W_A``, Ĝ_AA, ``K⁻¹W_A`` and L_AA
 are computed when it occurs (O(n·bw) per column), never the n × m ``Â⁻¹W``, ``K⁻¹W`` nor the
 m × m Ĝ, G₀, L (:attr:`BandedScheme.factored`; the compiled kernel's
-:data:`observer.kernel.CONTACTS_FACTORED`). Below it, the precomputed dense ones (every
+:data:`observer.primitives.CONTACTS_FACTORED`). Below it, the precomputed dense ones (every
 system of at most :data:`observer.sparse.DENSE_MAX_N` degrees of freedom runs as before, bit
 for bit)."""
 
@@ -301,7 +301,7 @@ class ClosedSetProjection:
 
 class NonFiniteState(ArithmeticError):
     """A step met a non-finite value (its free velocity): the loop stops before it
-    (:class:`observer.loop.FiniteGuard`), never writing a non-finite row."""
+    (:class:`observer.engines.loop.FiniteGuard`), never writing a non-finite row."""
 
 
 def grid_steps(h: float, t_end: float, t0: float = 0.0) -> int:
@@ -565,10 +565,10 @@ class MoreauJean:
 
         ``q⁺ = q − N⁻¹W_I L_I⁻¹ g_I`` with ``L_I = W_IᵀN⁻¹W_I``; returns (q⁺, Σ_I = −L_I⁻¹g_I).
         N is K, or the metric ``slot`` of ``stacks = ((N⁻¹W)ᵀ, WᵀN⁻¹W)`` stacked over metrics
-        (:func:`observer.loop.projection_slots`). Computed by the compiled kernel's own
-        projection (:func:`observer.kernel.project_closed`): one implementation for both engines.
+        (:func:`observer.engines.loop.projection_slots`). Computed by the compiled kernel's own
+        projection (:func:`observer.primitives.project_closed`): one implementation for both engines.
         """
-        from observer.kernel import OK, project_closed
+        from observer.primitives import OK, project_closed
 
         if active.size == 0:
             return q, np.zeros(0)
@@ -608,8 +608,8 @@ class MoreauJean:
 
     @cached_property
     def csc(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """W in the kernel's CSC storage (:func:`observer.kernel.csc_arrays`)."""
-        from observer.kernel import csc_arrays
+        """W in the kernel's CSC storage (:func:`observer.primitives.csc_arrays`)."""
+        from observer.primitives import csc_arrays
 
         if sp.issparse(self.S.W):
             W = sp.csc_matrix(self.S.W, dtype=np.float64, copy=True)

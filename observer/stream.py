@@ -1,7 +1,7 @@
 """Results written as the run produces them: a long run interrupted loses no finished step.
 
-:class:`ChunkWriter` is an ``on_chunk`` consumer of :func:`observer.loop.run` (through
-``simulate(..., on_chunk=writer)``): each :class:`~observer.loop.Chunk` of finished rows
+:class:`ChunkWriter` is an ``on_chunk`` consumer of :meth:`observer.engines.timestepping.TimeStepping.advance` (through
+``simulate(..., on_chunk=writer)``): each :class:`~observer.engines.loop.Chunk` of finished rows
 becomes rows of the result file at once, with the columns of
 :meth:`observer.SimulationResult.to_frame`:
 

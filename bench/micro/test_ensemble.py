@@ -11,7 +11,7 @@ seed 0) × {jump, nojump}, 10 s at h = 2e-4 (50 000 steps):
   same summary per call) or the default ``store="full"``.
 
 The kernel and the members' loop (its specialization for double_mass's sizes, which the
-full case takes: :data:`observer.members.SPECIALIZE_STEPS`) are compiled (or loaded from
+full case takes: :data:`observer.engines.compiled.members.SPECIALIZE_STEPS`) are compiled (or loaded from
 numba's cache) before timing; :data:`ROUNDS` rounds, the median is the figure
 (``extra_info["observer_steps"]``: observers × steps per round; ``extra_info["cpu_s"]``: the
 process's CPU time per round, every thread's). The speed-up is the ratio of the medians.
@@ -33,7 +33,7 @@ import pytest
 
 import observer
 from observer.ensemble import member_slaves, sample_errors
-from observer.loop import compile_time
+from observer.engines.compiled.driver import compile_time
 from observer.metrics import RHOS, settle_column
 
 MEMBERS, H, T_END = 1000, 2e-4, 10.0
@@ -49,7 +49,7 @@ def _case(benchmark) -> tuple[int, float]:
 
 def _warm() -> None:
     """Compile (or load) the kernel and both loops of :mod:`observer.members`."""
-    import observer.members as members
+    import observer.engines.compiled.members as members
 
     compile_time()
     saved = members.SPECIALIZE_STEPS

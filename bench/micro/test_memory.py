@@ -12,7 +12,7 @@ when numba's cache is stale (:func:`warm_kernel`), so that the measured run load
 kernel as every later run does (``compile_s`` says how long that load took).
 
 The child reports its peak resident memory after ``import observer``, after the compiled
-kernel is loaded (:func:`observer.loop.compile_time`: numba and LLVM) and at the end of the
+kernel is loaded (:func:`observer.engines.compiled.driver.compile_time`: numba and LLVM) and at the end of the
 run, with the run's wall and kernel time and which heavy modules are loaded (``modules``:
 a summary run that never reads ``result.summary`` loads neither pandas nor pyarrow), so
 that what the run itself adds (it must not grow with the horizon) is told apart from the
@@ -64,7 +64,7 @@ steps = int(sys.argv[1])
 t0 = time.perf_counter()
 import observer
 out = {"steps": steps, "import_s": time.perf_counter() - t0, "rss_import_mb": rss_mb()}
-from observer.loop import compile_time
+from observer.engines.compiled.driver import compile_time
 out["compile_s"] = compile_time()
 out["rss_kernel_mb"] = rss_mb()
 sc = observer.load_scenario("impact_oscillator", {"simulation.h": %(h)r,
@@ -87,7 +87,7 @@ print(json.dumps(out))
 def warm_kernel() -> None:
     """Load (and, when numba's cache is stale, compile and cache) the kernel in a process of
     its own, so that a measured run loads the cached kernel."""
-    subprocess.run([sys.executable, "-c", "from observer.loop import compile_time; compile_time()"],
+    subprocess.run([sys.executable, "-c", "from observer.engines.compiled.driver import compile_time; compile_time()"],
                    check=True, capture_output=True, timeout=3600)
 
 

@@ -111,7 +111,7 @@ SMOKE_STEPS = 200
 
 
 def loop_input(scenario: str, overrides: dict, observers: tuple, steps: int, engine: str):
-    """The :class:`observer.loop.LoopInput` of ``steps`` steps of a built-in scenario, built as
+    """The :class:`observer.engines.loop.LoopInput` of ``steps`` steps of a built-in scenario, built as
     :func:`observer.simulate` builds it (observers from the ``[observer]`` table, coupled over
     the whole window)."""
     from observer.loop import LoopInput
@@ -132,7 +132,7 @@ def loop_input(scenario: str, overrides: dict, observers: tuple, steps: int, eng
 @pytest.fixture(scope="module")
 def kernel_compiled():
     """Compile the kernel (or load it from numba's cache) before any loop is timed."""
-    from observer.loop import compile_time
+    from observer.engines.compiled.driver import compile_time
     return compile_time()
 
 

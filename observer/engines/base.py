@@ -82,7 +82,7 @@ class RunDescription:
         penetration computed in the kernel over every step, the trajectories kept only at
         the recorded rows (``result.summary``, a DataFrame built on first read).
     on_chunk : callable or None
-        Time-stepping: called with each :class:`observer.loop.Chunk` of finished rows (e.g.
+        Time-stepping: called with each :class:`observer.engines.loop.Chunk` of finished rows (e.g.
         an :class:`observer.stream.ChunkWriter`). While it is set SIGINT/SIGTERM stop the run
         (time-stepping: after the current window; event: between events or switchings) and
         the result's status says where (``metadata["stopped"]``); the event engine passes no

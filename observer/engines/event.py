@@ -59,9 +59,9 @@ class EventEngine(Engine):
     def run(self, run: RunDescription) -> RunRecord:
         """The master, then the observers, stoppable by a signal when ``run.on_chunk`` is set
         (the rows every system reached are kept, the status says where)."""
-        from observer.loop import _Stopper
+        from observer.engines.loop import Stopper
 
-        with _Stopper(run.on_chunk is not None) as stopper:
+        with Stopper(run.on_chunk is not None) as stopper:
             return _event_run(run, lambda: stopper.signal)
 
 

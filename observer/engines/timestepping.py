@@ -1,8 +1,9 @@
 """What the two Moreau–Jean engines share: the stepper, the loop's input, the record.
 
-:class:`TimeStepping` runs a :class:`~observer.engines.base.RunDescription` through
-:func:`observer.loop.run` with the loop named by :attr:`TimeStepping.loop`; the compiled and
-the numpy engine (:mod:`observer.engines.compiled`, :mod:`observer.engines.python`) differ in
+:class:`TimeStepping` runs a :class:`~observer.engines.base.RunDescription` through its
+:meth:`~TimeStepping.advance`, which checks the loop's options and calls the engine's own
+loop (:meth:`TimeStepping.loop`); the compiled and the numpy engine
+(:mod:`observer.engines.compiled`, :mod:`observer.engines.python`) differ in their loop, in
 what they accept and in the stepper's matrix structure.
 """
 
@@ -11,8 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from observer.engines.base import EXTRAS, Engine, RunDescription
-from observer.loop import LoopInput, check_record_every, summary_frame
-from observer.loop import run as run_loop
+from observer.engines.loop import STORES, LoopInput, LoopOutput, Stopper, check_record_every, summary_frame
 from observer.observers import lyapunov, lyapunov_decrements
 from observer.result import (LazyFrame, RunRecord, RunStatus, SimulationResult, SlaveTrajectory,
                              StepStats, records_frame, run_metadata)
@@ -35,13 +35,40 @@ def summary_record_every(steps: int, n: int, systems: int) -> int:
 
 
 class TimeStepping(Engine):
-    """A Moreau–Jean engine: the loop :attr:`loop` of :func:`observer.loop.run` on the
-    stepper of the scenario (matrix structure :attr:`structure`)."""
+    """A Moreau–Jean engine: its loop (:meth:`loop`) on the stepper of the scenario (matrix
+    structure :attr:`structure`)."""
 
     integrator = "time-stepping"
-    loop = "python"
     structure = "dense"
     extras = frozenset(EXTRAS)
+
+    def advance(self, inp: LoopInput, record_every: int = 1, record_pre: bool = False, store: str = "full",
+                rhos: tuple | None = None, on_chunk=None) -> LoopOutput:
+        """Advance the master and the observers of ``inp`` over the stepper's grid.
+
+        ``store="summary"`` (compiled engine) also computes, streaming over every step, what
+        the synchronization metrics need (:func:`~observer.engines.loop.summary_frame`; ``rhos``
+        its thresholds); with it the trajectories are kept only every ``record_every`` steps.
+        ``on_chunk(chunk)`` (optional) is called with each :class:`~observer.engines.loop.Chunk`
+        of finished rows, in order, the last one before returning; while it is set, SIGINT and
+        SIGTERM stop the run after the current window (``LoopOutput.stop_signal``) instead of
+        raising.
+
+        Raises
+        ------
+        InputError
+            Naming ``record_every`` or ``store``.
+        """
+        record_every = check_record_every(record_every)
+        if store not in STORES:
+            raise InputError("store", f"must be one of {list(STORES)}, got {store!r}")
+        with Stopper(on_chunk is not None) as stopper:
+            return self.loop(inp, record_every, record_pre, store, rhos, on_chunk, stopper)
+
+    def loop(self, inp: LoopInput, record_every: int, record_pre: bool, store: str, rhos: tuple | None,
+             on_chunk, stopper: Stopper) -> LoopOutput:
+        """The engine's loop over ``inp`` (options checked by :meth:`advance`)."""
+        raise NotImplementedError(f"engine {self.name!r} has no time-stepping loop")
 
     def run(self, run: RunDescription) -> RunRecord:
         """The master and the observers over the grid t_k = t0 + k·h."""
@@ -58,9 +85,9 @@ class TimeStepping(Engine):
             raise InputError("observers", f"a projection metric other than K needs n < {FACTORED_MIN_N} "
                              f"degrees of freedom; this system has n = {sc.system.n} (use \"jump\", the K metric)")
         inp = loop_input(run, stepper)
-        out = run_loop(inp, engine=self.loop, record_every=record_every, store=run.store,
-                       record_pre=run.record_pre or (other_metric and (run.store == "full" or record_every == 1)),
-                       on_chunk=run.on_chunk)
+        out = self.advance(inp, record_every=record_every, store=run.store,
+                           record_pre=run.record_pre or (other_metric and (run.store == "full" or record_every == 1)),
+                           on_chunk=run.on_chunk)
         return stepping_record(run, stepper, out, record_every)
 
 

@@ -408,11 +408,11 @@ def test_kernel_ready_leaves_nothing_to_compile_for_the_suites_runs():
     timed case pays numba's compile time. Checked in a fresh process (numba loads from its
     disk cache there; in this process other tests may have compiled everything already)."""
     script = """
-import json, observer, observer.kernel as K
+import json, observer, observer.engines.compiled.kernel as K, observer.primitives as P
 from bench.run import kernel_ready
 from observer.scenarios import SCENARIOS
 kernel_ready()
-count = lambda: {n: len(f.signatures) for n, f in vars(K).items() if hasattr(f, "signatures")}
+count = lambda: {n: len(f.signatures) for m in (K, P) for n, f in vars(m).items() if hasattr(f, "signatures")}
 before = count()
 for name in SCENARIOS:
     sc = observer.load_scenario(name)

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import observer.members as members
+import observer.engines.compiled.members as members
 from observer import load_scenario, simulate
 from observer.ensemble import ensemble, member_slaves, sample_errors
 from observer.loop import WINDOW

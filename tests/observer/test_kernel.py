@@ -818,7 +818,7 @@ def _own_ir(fn, args):
     fresh(*args)
     (ir,) = fresh.inspect_llvm().values()
     bodies = {re.search(r"@([\w.$]+)\(", b).group(1): b for b in ir.split("\ndefine ")[1:]}
-    own = [b for name, b in bodies.items() if name.startswith("_ZN8observer6kernel") and fn.__name__ in name]
+    own = [b for name, b in bodies.items() if name.startswith("_ZN8observer") and fn.__name__ in name]
     assert len(own) == 1
     return own[0]
 

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import observer
-from observer import kernel
+from observer import kernel, primitives
 from observer.scenarios import SCENARIOS
 
 
@@ -82,16 +82,16 @@ def test_applied_residual_is_its_definition(name):
 
 
 def test_the_numpy_engine_projects_with_the_kernel(monkeypatch):
-    """The python engine's position jumps go through :func:`observer.kernel.project_closed`
+    """The python engine's position jumps go through :func:`observer.primitives.project_closed`
     (a failing stand-in stops the run), in the K metric and in a design's own metric."""
     calls = []
-    real = kernel.project_closed
+    real = primitives.project_closed
 
     def spy(*args):
         calls.append(args[-1])
         return real(*args)
 
-    monkeypatch.setattr(kernel, "project_closed", spy)
+    monkeypatch.setattr(primitives, "project_closed", spy)
     sc = observer.load_scenario("double_mass", {"simulation.t_end": 0.5})
     py = observer.simulate(sc, observers=("jump",), master_projection=True, engine="python")
     co = observer.simulate(sc, observers=("jump",), master_projection=True, engine="compiled")

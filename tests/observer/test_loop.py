@@ -237,7 +237,7 @@ def test_lean_kernels_are_the_general_kernel_bitwise(name, monkeypatch):
     from observer.loop import specialization
     from observer.kernel import STRUCTURE_BANDED, STRUCTURE_DENSE
 
-    import observer.kernel as kernel
+    import observer.engines.compiled.kernel as kernel
 
     calls = []                          # the loop each kernel call took
     advance, advance_scalar = kernel.advance, kernel.advance_scalar
@@ -339,11 +339,11 @@ def test_compile_time_warms_each_specialization_once(monkeypatch):
     """``compile_time`` runs the three kernel specializations (general with the summary and
     pre-projection rows, lean, scalar) once each as warm-up runs over the whole two-step
     horizon, then marks the kernel compiled; a second call runs nothing."""
-    import observer.loop as loop
+    import observer.engines.compiled.driver as loop
 
     monkeypatch.setattr(loop, "_COMPILED", False)
     specs, runs = [], []
-    real_spec, real_run = loop.specialization, loop._run_compiled
+    real_spec, real_run = loop.specialization, loop.run_compiled
     monkeypatch.setattr(loop, "specialization", lambda *a: specs.append(real_spec(*a)) or specs[-1])
 
     def spy(inp, *args, **kw):
@@ -351,7 +351,7 @@ def test_compile_time_warms_each_specialization_once(monkeypatch):
         runs.append((inp.q0.shape, kw.get("warm"), out))
         return out
 
-    monkeypatch.setattr(loop, "_run_compiled", spy)
+    monkeypatch.setattr(loop, "run_compiled", spy)
     before = time.perf_counter()
     seconds = loop.compile_time()
     assert 0.0 <= seconds <= time.perf_counter() - before      # the seconds it took

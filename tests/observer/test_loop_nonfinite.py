@@ -17,6 +17,8 @@ import numpy as np
 import pytest
 
 from observer import loop
+from observer.engines import python as python_engine
+from observer.engines.compiled import driver
 from observer.cli import main
 from observer.io import read_result
 from observer.loop import LoopInput, specialization
@@ -75,7 +77,7 @@ def _next_state(inp: LoopInput, out) -> tuple[np.ndarray, np.ndarray]:
 @pytest.mark.parametrize("n, spec", [(1, "scalar"), (2, "lean")])
 @pytest.mark.parametrize("engine", ["compiled", "python"])
 def test_a_state_overflowing_mid_run_stops_at_the_last_finite_step(monkeypatch, n, spec, engine):
-    monkeypatch.setattr(loop, "WINDOW", 1000)                   # the stop is in window 8 of 8
+    monkeypatch.setattr(driver, "WINDOW", 1000)                   # the stop is in window 8 of 8
     inp = _input(n, 80.0)
     assert specialization(1, 0, False, False, False, n, 1) == spec
     out = loop.run(inp, engine=engine)
@@ -92,7 +94,7 @@ def test_a_state_overflowing_mid_run_stops_at_the_last_finite_step(monkeypatch, 
 
 
 def test_the_engines_stop_at_the_same_step(monkeypatch):
-    monkeypatch.setattr(loop, "WINDOW", 1000)
+    monkeypatch.setattr(driver, "WINDOW", 1000)
     inp = _input(1, 80.0)
     a, b = loop.run(inp, engine="compiled"), loop.run(inp, engine="python")
     assert a.stopped_at == b.stopped_at and a.stop_reason == b.stop_reason
@@ -112,7 +114,7 @@ def test_a_huge_but_finite_run_is_not_stopped():
 def test_an_observer_whose_V_overflows_stops_before_that_row(monkeypatch, engine):
     """The general loop (an observer): its states stay finite long after V = ½v² − ½κe²
     (v ≈ 10 sinh(10t), e = cosh(10t) from a unit offset) overflows at |v| ≈ 1.9e154."""
-    monkeypatch.setattr(loop, "WINDOW", 1000)
+    monkeypatch.setattr(driver, "WINDOW", 1000)
     inp = _input(1, 80.0, observers=1)
     out = loop.run(inp, engine=engine)
     k = out.stopped_at
@@ -130,7 +132,7 @@ def test_an_observer_whose_V_overflows_stops_before_that_row(monkeypatch, engine
 
 
 def test_record_every_keeps_only_finite_rows(monkeypatch):
-    monkeypatch.setattr(loop, "WINDOW", 1000)
+    monkeypatch.setattr(driver, "WINDOW", 1000)
     inp = _input(1, 80.0)
     full = loop.run(inp)
     out = loop.run(inp, record_every=7)
@@ -141,7 +143,7 @@ def test_record_every_keeps_only_finite_rows(monkeypatch):
 
 
 def test_the_summary_store_stops_with_a_finite_summary(monkeypatch):
-    monkeypatch.setattr(loop, "WINDOW", 1000)
+    monkeypatch.setattr(driver, "WINDOW", 1000)
     inp = _input(1, 80.0, observers=1)
     full = loop.run(inp)
     out = loop.run(inp, store="summary", record_every=10)
@@ -156,8 +158,8 @@ def test_a_streamed_run_reports_a_signal_only_when_one_stopped_it(monkeypatch, e
     """A streamed run (``on_chunk``: the SIGINT/SIGTERM handler installed) stopped by the
     overflow reports no signal (``stop_signal is None``, not an empty name); the same run with
     SIGINT sent from its first chunk stops after that window and names SIGINT."""
-    monkeypatch.setattr(loop, "WINDOW", 1000)
-    monkeypatch.setattr(loop, "PYTHON_CHUNK", 1000)
+    monkeypatch.setattr(driver, "WINDOW", 1000)
+    monkeypatch.setattr(python_engine, "PYTHON_CHUNK", 1000)
     inp = _input(1, 80.0)
     out = loop.run(inp, engine=engine, on_chunk=lambda c: None)
     assert out.stopped_at is not None and out.stop_reason.startswith("non-finite u0")

@@ -21,6 +21,8 @@ import pandas as pd
 import pytest
 
 import observer.loop as loop
+from observer.engines import python as python_engine
+from observer.engines.compiled import driver
 from observer.io import part_path, read_result
 from observer.loop import LoopInput
 from observer.simulate import simulate
@@ -61,8 +63,8 @@ def _assert_prefix(part: pd.DataFrame, full: pd.DataFrame) -> None:
 @pytest.mark.parametrize("suffix", [".parquet", ".csv"])
 def test_streamed_file_equals_the_run(tmp_path, monkeypatch, engine, suffix):
     """Several chunks (small windows), two observers: the file read back is the run."""
-    monkeypatch.setattr(loop, "WINDOW", 700)
-    monkeypatch.setattr(loop, "PYTHON_CHUNK", 700)
+    monkeypatch.setattr(driver, "WINDOW", 700)
+    monkeypatch.setattr(python_engine, "PYTHON_CHUNK", 700)
     inp = _loop_input("double_mass", 0.25, jumps=(True, False))
     path = tmp_path / f"run{suffix}"
     seen = []
@@ -83,8 +85,8 @@ def test_streamed_file_equals_the_run(tmp_path, monkeypatch, engine, suffix):
 def test_signal_stops_the_run_after_the_window(tmp_path, monkeypatch, engine, signame):
     """A signal during a streamed run: the loop stops after the current window, the records are
     the uninterrupted run's first rows (no unwritten row, no NaN), the stop is reported."""
-    monkeypatch.setattr(loop, "WINDOW", 500)
-    monkeypatch.setattr(loop, "PYTHON_CHUNK", 500)
+    monkeypatch.setattr(driver, "WINDOW", 500)
+    monkeypatch.setattr(python_engine, "PYTHON_CHUNK", 500)
     inp = _loop_input("impact_oscillator", 3.0)                 # 3000 steps
     full = loop.run(inp, engine=engine)
     sent = []
@@ -109,7 +111,7 @@ def test_signal_stops_the_run_after_the_window(tmp_path, monkeypatch, engine, si
 
 def test_without_on_chunk_a_signal_is_not_caught(monkeypatch):
     """The Python API keeps Ctrl-C: without a streamed output the loop installs no handler."""
-    monkeypatch.setattr(loop, "WINDOW", 200)
+    monkeypatch.setattr(driver, "WINDOW", 200)
     inp = _loop_input("impact_oscillator", 1.0)
     calls = []
 

@@ -821,7 +821,7 @@ def test_a_numerical_library_failure_in_the_api_is_an_input_error_naming_the_sce
     def breaks(*args, **kwargs):
         return next(failures)()
 
-    monkeypatch.setattr(sys.modules["observer.engines.timestepping"], "run_loop", breaks)
+    monkeypatch.setattr(sys.modules["observer.engines.timestepping"].TimeStepping, "advance", breaks)
     with pytest.raises(InputError) as info:
         observer.simulate("double_mass", t_end=0.01)
     assert str(info.value) == ("scenario: double_mass: the computation failed (LinAlgError: Singular "

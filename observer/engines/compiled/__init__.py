@@ -1,4 +1,11 @@
-"""The compiled time-stepping engine: the numba kernel (:mod:`observer.kernel`)."""
+"""The compiled time-stepping engine: Moreau–Jean in a numba kernel.
+
+The package owns its loop: :mod:`~observer.engines.compiled.driver` (the run, window by
+window), :mod:`~observer.engines.compiled.bundles` (the kernel's arguments by name),
+:mod:`~observer.engines.compiled.kernel` (the compiled step loops) and
+:mod:`~observer.engines.compiled.members` (an ensemble's members over one recorded master); the
+primitives it shares with the numpy engine are in :mod:`observer.primitives`.
+"""
 
 from __future__ import annotations
 
@@ -12,7 +19,6 @@ class CompiledEngine(TimeStepping):
     laws of :data:`observer.impact.KERNEL_LAWS`, banded matrices where they pay."""
 
     name = "compiled"
-    loop = "compiled"
     structure = "auto"
     description = "Moreau–Jean time-stepping in the compiled (numba) kernel"
 
@@ -30,3 +36,13 @@ class CompiledEngine(TimeStepping):
             return Refusal(f"impact law {law.name!r} does not declare single_contact_is_newton (the "
                            "compiled kernel computes every one-contact step by Newton's law)", "impact.law")
         return None
+
+    def loop(self, inp, record_every: int, record_pre: bool, store: str, rhos: tuple | None, on_chunk,
+             stopper):
+        """:func:`observer.engines.compiled.driver.run_compiled` (the kernel compiled or loaded on
+        first use; ``rhos``: the summary's thresholds, default :data:`observer.metrics.RHOS`)."""
+        from observer.engines.compiled.driver import run_compiled
+        from observer.metrics import RHOS
+
+        return run_compiled(inp, record_every, record_pre, store == "summary", tuple(RHOS if rhos is None else rhos),
+                            on_chunk=on_chunk, stopper=stopper)
