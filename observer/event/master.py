@@ -875,7 +875,10 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
             status = f"stopped: non-finite {_flow_quantity(run, keys, exc)} at t = {exc.t:.9g}"
             t = exc.t
             break
-        except RootIsolationError as exc:
+        except RootIsolationError as exc:             # a stall: the certified part is kept
+            if exc.t_ok is not None and exc.t_ok > t:
+                run.fill(flow, t, x, exc.t_ok, include_end=True)
+                t = exc.t_ok
             status = f"stopped: {exc}"
             break
         if zero is None:
