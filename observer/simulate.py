@@ -8,6 +8,7 @@ The engines and what each accepts are :mod:`observer.engines`; every engine retu
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from pathlib import Path
 from typing import Iterable
@@ -50,7 +51,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
              observers: Iterable[str | Slave] | str = (), source: str | None = None,
              coupling: tuple[float, float] | None | str = "scenario", log: str | Path | None = None,
              residual_tol: float = 1e-9, engine: str | None = None, record_every: int | None = None,
-             store: str = "full", integrator: str | None = None, on_chunk=None) -> SimulationResult:
+             store: str = "full", integrator: str | None = None, on_chunk=None,
+             t0: float = 0.0) -> SimulationResult:
     """Simulate the master and the observers of ``scenario`` on a registered engine.
 
     Parameters
@@ -67,6 +69,10 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         ``"time-stepping"`` or ``"event"``. Default: the first engine of the integrator that
         accepts the run (compiled; else python, and ``metadata["engine_note"]`` says why). An
         engine asked for that cannot take the run raises :class:`InputError` naming ``engine``.
+    t0 : float, optional
+        The time origin (default 0): the initial state is taken at t0, the grid is
+        t_k = t0 + k·h up to t_end, forcing and gap offsets at the absolute time; a time shift
+        is this keyword, not a launch delay. Only the event integrator takes t0 ≠ 0.
 
     Returns
     -------
@@ -79,6 +85,11 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
                    master_projection=master_projection)
     run = describe(sc, integrator, observers, source, coupling, log, residual_tol, record_every,
                    store, None if on_chunk is None else user_callback("on_chunk", on_chunk))
+    t0 = as_scalar("t0", t0)
+    if t0 != 0.0:
+        if not t0 <= sc.t_end:
+            raise InputError("t0", f"must be at most t_end = {sc.t_end!r}, got {t0!r}")
+        run = dataclasses.replace(run, t0=t0)
     chosen, note = choose(run, engine)
     record = chosen.run(run)
     if note:

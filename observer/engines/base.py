@@ -99,6 +99,10 @@ class RunDescription:
     record_pre : bool
         Keep the positions before each step's projection, :attr:`RunRecord.q_pre
         <observer.result.RunRecord.q_pre>` (an extra).
+    t0 : float
+        The time origin: the scenario's initial state is taken at t0 and the grid is
+        t_k = t0 + k·h up to t_end (forcing and gap offsets are evaluated at the absolute time).
+        Only an engine with :attr:`Engine.time_origin` takes t0 ≠ 0.
     """
 
     scenario: Scenario
@@ -116,6 +120,7 @@ class RunDescription:
     metric: Any = None
     metrics: tuple | None = None
     record_pre: bool = False
+    t0: float = 0.0
 
 
 class Engine:
@@ -132,6 +137,8 @@ class Engine:
     extras: frozenset = frozenset()
     """The fields of :data:`EXTRAS` this engine honours (a run setting another is refused,
     naming the field)."""
+    time_origin: bool = False
+    """True if the engine starts a run at :attr:`RunDescription.t0` (else it refuses t0 ≠ 0)."""
 
     def accepts(self, run: RunDescription) -> Refusal | None:
         """None when this engine takes ``run``, else why not (one line)."""
@@ -142,6 +149,9 @@ class Engine:
             value = getattr(run, extra)
             if value is not None and value is not False and extra not in self.extras:
                 return Refusal(f"the {self.name} engine does not provide {what}", extra)
+        if run.t0 != 0.0 and not self.time_origin:
+            return Refusal(f"the {self.name} engine starts at t = 0 (got t0 = {run.t0!r}): "
+                           "use integrator=\"event\"", "t0")
         return self.refuses(run)
 
     def refuses(self, run: RunDescription) -> Refusal | None:

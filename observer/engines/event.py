@@ -29,7 +29,8 @@ class EventEngine(Engine):
 
     name = "event"
     integrator = "event"
-    description = "exact event-driven integration, sampled on t_k = k·h"
+    description = "exact event-driven integration, sampled on t_k = t0 + k·h"
+    time_origin = True
 
     def refuses(self, run: RunDescription) -> Refusal | None:
         """Time-stepping options, another solver, a law it lacks, a self-driven χ, a system
@@ -78,11 +79,11 @@ def _event_run(run: RunDescription, signalled) -> RunRecord:
     from observer.event.master import run_master
 
     sc = run.scenario
-    master = run_master(sc, should_stop=signalled)   # overflow is a stop (status), silenced inside
+    master = run_master(sc, t0=run.t0, should_stop=signalled)   # overflow is a stop (status), silenced inside
     master_signal = signalled()
     t, q, u, P, active = master.t, master.q, master.u, master.P, master.active
     n, m = sc.system.n, sc.system.m
-    meta = {"scenario": sc.name, "integrator": "event", "h": sc.h, "t_end": sc.t_end,
+    meta = {"scenario": sc.name, "integrator": "event", "h": sc.h, "t_end": sc.t_end, "t0": run.t0,
             "n": n, "m": m, "law": sc.law.law, "restitution": sc.law.restitution.tolist(),
             "steps": int(t.size - 1), "master_status": master.status,
             "events": len(master.event_rows), "zeno": master.zeno,
@@ -116,8 +117,12 @@ def _event_run(run: RunDescription, signalled) -> RunRecord:
         meta["steps"] = int(t.size - 1)
         meta["stopped"] = {"step": int(t.size - 1), "t": float(t[-1]) if t.size else None,
                            "reason": status.reason, "signal": sig if sig and sig in status.reason else None}
-        if t.size:                          # the events of the rows kept
-            events = events.until(t[-1])
+        # the events before the stop: the master's stop time, or the last row kept when an
+        # observer ended the output earlier
+        cut = master.t_stop if bad is None and np.isfinite(master.t_stop) else \
+            (t[-1] if t.size else None)
+        if cut is not None:
+            events = events.until(cut)
             meta["events"] = len(events)
     return RunRecord("event", t, q, u, P, np.zeros_like(P), active, chi, slaves, status,
                      StepStats.from_metadata(meta), meta, events)

@@ -68,8 +68,8 @@ import numpy as np
 
 from observer.contact import get_solver
 from observer.event.flow import Flow, flow_for
-from observer.event.roots import (FLOOR_FACTOR, NonFiniteFlow, RootIsolationError, first_zero,
-                                  motion_tolerance, resolution, tolerance)
+from observer.event.roots import (FLOOR_FACTOR, ROUNDOFF, NonFiniteFlow, RootIsolationError,
+                                  first_zero, motion_tolerance, resolution, tolerance)
 from observer.event.tails import JointTail, horner, joint_due, joint_tail
 from observer.impact import ImpactLaw, impact
 from observer.scenario import Scenario
@@ -362,7 +362,13 @@ class _Run:
         tol = CONTACT_TOL * self.tol(rows[cand], z, t)
         G = self.delassus(cand)
         scale = np.abs(G) @ np.abs(lam) + tol
-        return [c for c, l, s in zip(cand, lam, scale) if l > CONTACT_TOL * 1e-13 * s]
+        # identically closed (issue 34): no force and no relative acceleration, w = Gλ + b
+        # zero within its evaluation round-off (touching bodies, bodies moving together):
+        # the contact stays closed; its force is then zero along the held flow, never a lift-off
+        w = G @ lam + b
+        w_floor = ROUNDOFF * (np.abs(G) @ np.abs(lam) + tolerance(rows[cand], z) / ROUNDOFF)
+        return [c for c, l, s, wc, wf in zip(cand, lam, scale, w, w_floor)
+                if l > CONTACT_TOL * 1e-13 * s or abs(wc) <= wf]
 
     def project(self, t: float, x: np.ndarray, idx: list[int]) -> np.ndarray:
         """M-metric projection of (q, u) onto g_idx = 0, γ_idx = 0 (a round-off correction)."""
@@ -864,8 +870,10 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
             break
         flow = flow_for(run.system, persistent)
         free = [j for j in range(run.m) if j not in persistent]
-        rows = np.vstack([flow.gap_rows[free], flow.force_rows])
-        keys = [("g", j) for j in free] + [("f", j) for j in persistent]
+        z_now = flow.z(t, x)
+        forced = [i for i in range(len(persistent)) if not _identically_zero(flow, flow.force_rows[i], z_now)]
+        rows = np.vstack([flow.gap_rows[free], flow.force_rows[forced]])
+        keys = [("g", j) for j in free] + [("f", persistent[i]) for i in forced]
         cert = {i: certified[k] for i, k in enumerate(keys) if k in certified}
         try:
             zero, t_stop, _ = first_zero(flow, rows, t, flow.z(t, x), t_end, cert, run.tau)
@@ -875,7 +883,10 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
             status = f"stopped: non-finite {_flow_quantity(run, keys, exc)} at t = {exc.t:.9g}"
             t = exc.t
             break
-        except RootIsolationError as exc:
+        except RootIsolationError as exc:             # a stall: the certified part is kept
+            if exc.t_ok is not None and exc.t_ok > t:
+                run.fill(flow, t, x, exc.t_ok, include_end=True)
+                t = exc.t_ok
             status = f"stopped: {exc}"
             break
         if zero is None:
@@ -970,6 +981,21 @@ def _impact(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int, n_imp
     if out is None:
         return run.t_end, x, persistent, 0, True
     return t + tail, out[0], out[1], 0, False
+
+
+def _identically_zero(flow: Flow, row: np.ndarray, z: np.ndarray) -> bool:
+    """True if the functional ``row·z(t)`` vanishes along ``flow`` from z: its derivatives
+    ``row A^k z``, k < N (N the augmented dimension; Cayley–Hamilton: then every derivative
+    vanishes), each zero within its evaluation round-off ``ROUNDOFF·Σ|(row A^k)_i z_i|``
+    (a held contact whose force is zero along the flow: touching bodies, never a lift-off)."""
+    r = np.asarray(row, dtype=float)
+    for _ in range(z.size):
+        if abs(float(r @ z)) > float(tolerance(r[None, :], z)[0]):
+            return False
+        r = r @ flow.A
+        if not np.any(r):
+            return True
+    return True
 
 
 def motion_time_scale(flow: Flow, t0: float, x: np.ndarray) -> float:

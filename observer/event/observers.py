@@ -861,7 +861,7 @@ def _uncoupled(scenario, q0: np.ndarray, u0: np.ndarray, t: np.ndarray) -> dict:
     from observer.event.master import run_master
     sc = scenario.with_overrides({"initial.q": q0.tolist(), "initial.u": u0.tolist(),
                                   "simulation.t_end": float(t[-1])})
-    res = run_master(sc)
+    res = run_master(sc, t0=float(t[0]))
     k = t.size
     if res.t.size < k or not np.array_equal(res.t[:k], t):
         raise InputError("observer.coupling", "the uncoupled phase's grid does not match the master's")

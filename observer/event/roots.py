@@ -88,7 +88,19 @@ MAX_STEPS = 200_000
 
 
 class RootIsolationError(RuntimeError):
-    """The safe advance stalled (more than :data:`MAX_STEPS` steps in one search)."""
+    """The safe advance stalled (more than :data:`MAX_STEPS` steps in one search).
+
+    Attributes
+    ----------
+    t_ok, z_ok : float or None, ndarray or None
+        How far the search got: every functional is certified nonzero on ``[t0, t_ok)``
+        and ``z_ok`` is the augmented state there (None when unknown), so that a stalled
+        run keeps the trajectory up to it.
+    """
+
+    def __init__(self, message: str, t_ok: float | None = None, z_ok: np.ndarray | None = None) -> None:
+        super().__init__(message)
+        self.t_ok, self.z_ok = t_ok, z_ok
 
 
 class NonFiniteFlow(RootIsolationError):
@@ -110,8 +122,8 @@ class NonFiniteFlow(RootIsolationError):
     """
 
     def __init__(self, t: float, t_ok: float, z_ok: np.ndarray, what: tuple, value: float) -> None:
-        super().__init__(f"non-finite flow at t = {t!r}")
-        self.t, self.t_ok, self.z_ok, self.what, self.value = t, t_ok, z_ok, what, value
+        super().__init__(f"non-finite flow at t = {t!r}", t_ok, z_ok)
+        self.t, self.what, self.value = t, what, value
 
 
 def _check_finite(a: float, za: np.ndarray, d: np.ndarray, t_ok: float, z_ok: np.ndarray) -> None:
@@ -695,7 +707,7 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
                 return zero, zero.t, zero.z
             step = min(res, w)                       # nothing approaches: time moves on
         a, za = a + step, _reset(flow, a + step, flow.expm(step) @ za)
-    raise RootIsolationError(f"root isolation stalled near t = {a!r} ({MAX_STEPS} safe steps)")
+    raise RootIsolationError(f"root isolation stalled near t = {a!r} ({MAX_STEPS} safe steps)", a, za)
 
 
 UNRESOLVED_REACH = 1e-3
