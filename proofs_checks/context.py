@@ -23,6 +23,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from observer.scenario import Scenario
+from proofs_checks.assumptions import jumps_runnable
 from proofs_checks.runs import Run, SlaveSpec, replay
 
 
@@ -89,7 +90,7 @@ class CheckContext:
         sc, sys_ = self.scenario, self.system
         rng = self.rng("slaves")
         n = sys_.n
-        jumps = sys_.is_stiffness_definite()
+        jumps = jumps_runnable(sys_.K)
         q_scale = max(float(np.max(np.abs(sc.q0))), float(np.max(np.abs(sys_.nu(0.0)))), 1e-3)
         dq = 0.02 * q_scale
         omega = 1.0

@@ -1217,7 +1217,7 @@ def test_stiffness_reason_relative_floor(eigs, applicable):
     if applicable:
         assert reason is None
     else:
-        assert reason.startswith("K is not positive definite") and reason.endswith("L_I = W_IᵀK⁻¹W_I need K ≻ 0")
+        assert reason.startswith(("K is singular (exact", "K is indefinite (exact", "K ≻ 0 holds (exact)"))
 
 
 def _K_W(L: np.ndarray, kdiag=(2.0, 3.0, 5.0)):
@@ -1279,11 +1279,18 @@ def test_projection_psd_indefinite_reason():
     assert r.reason == "L_I is indefinite: P_I L_I⁻¹ P_Iᵀ has a negative eigenvalue"
 
 
-@pytest.mark.parametrize("kdiag", [(1e-12, 1.0), (5e-10, 1e3), (0.0, 1.0)])
-def test_projection_psd_not_applicable_near_singular_K(kdiag):
+@pytest.mark.parametrize("kdiag", [(1e-12, 1.0), (5e-10, 1e3), (1e-20, 1.0)])
+def test_projection_psd_decided_for_an_exactly_definite_ill_conditioned_K(kdiag):
+    """Issue 36 item 2: a K that is exactly SPD but ill-conditioned is decided (W = I: L = K⁻¹,
+    exactly SPD), not called singular."""
     r = pj.check_projection_psd(np.diag(kdiag), np.eye(2), rng=np.random.default_rng(0))
+    assert r.passed is True and r.evidence == "proved" and "singular" not in r.reason
+
+
+def test_projection_psd_not_applicable_for_an_exactly_singular_K():
+    r = pj.check_projection_psd(np.diag([0.0, 1.0]), np.eye(2), rng=np.random.default_rng(0))
     assert r.passed is None and r.name == "projection_psd" and r.equation == PSD_EQ
-    assert r.reason.startswith("K is singular") and r.reason.endswith("does not exist (needs K ≻ 0)")
+    assert r.reason.startswith("K is singular (exact") and r.reason.endswith("(needs K nonsingular)")
 
 
 def test_projection_psd_small_K_is_applicable():

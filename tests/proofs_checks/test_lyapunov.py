@@ -709,11 +709,11 @@ def test_convergence_time_to_rho_zero_and_V_end_zero():
 def test_convergence_not_applicable_cases():
     K_semi = np.array([[1.0, 1.0], [1.0, 1.0]])
     r = ly.check_convergence(_conv_run(K=K_semi))
-    assert r.passed is None and r.reason.startswith("K is not positive definite (λ_min = ")
-    assert r.reason.endswith("): V is not a norm of the error; Theorem 1 needs K ≻ 0")
+    assert r.passed is None and r.reason.startswith("K is singular (exact")
+    assert r.reason.endswith(": V is not a norm of the error; Theorem 1 needs K ≻ 0")
     assert r.name == "convergence" and r.equation == "Theorem 1; eqs. (18)-(21)"
     r = ly.check_convergence(_conv_run(K=np.diag([-2.0, 5.0])))
-    assert r.passed is None and r.reason.startswith("K is not positive definite (λ_min = -2): ")
+    assert r.passed is None and r.reason.startswith("K is indefinite (exact")
     # scale-free floor: λ_min/λ_max against 1e-12 with λ_max = 5 ≠ 1
     assert ly.check_convergence(_conv_run(K=np.diag([5.0, 1.5e-11]))).passed is not None
     assert ly.check_convergence(_conv_run(K=np.diag([5.0, 0.5e-11]))).passed is None
@@ -721,11 +721,14 @@ def test_convergence_not_applicable_cases():
     assert ly.check_convergence(_conv_run(K=np.diag([0.2, 0.1]))).passed is not None        # λ_max < 1
     assert ly.check_convergence(_conv_run(K=np.diag([0.0, 0.0]))).passed is None
     assert ly.check_convergence(_conv_run(C=np.diag([5.0, 1.5e-11]))).passed is not None
-    assert ly.check_convergence(_conv_run(C=np.diag([5.0, 0.5e-11]))).passed is None
-    assert ly.check_convergence(_conv_run(C=np.diag([5.0, -5e-12]))).passed is None         # |λ_min| = floor
+    # C̄'s class is decided exactly: definite at any conditioning is applicable, an indefinite
+    # C̄ is checked (Theorem 1's hypothesis fails), only an exactly semi-definite one is n/a
+    assert ly.check_convergence(_conv_run(C=np.diag([5.0, 0.5e-11]))).passed is not None
+    assert ly.check_convergence(_conv_run(C=np.diag([5.0, -5e-12]))).passed is not None
     assert ly.check_convergence(_conv_run(C=np.diag([0.2, 0.1]))).passed is not None
     assert ly.check_convergence(_conv_run(C=np.diag([0.0, 0.0]))).passed is None
-    assert ly.check_convergence(_conv_run(C=np.diag([-1.0, 0.0]))).passed is None
+    assert ly.check_convergence(_conv_run(C=np.diag([5.0, 0.0]))).passed is None
+    assert ly.check_convergence(_conv_run(C=np.diag([-1.0, 0.0]))).passed is not None
     # near miss on the relative floor: λ_min = 2e-12·λ_max is applicable, 0.5e-12 is not
     assert ly.check_convergence(_conv_run(K=np.diag([1.0, 2e-12]))).passed is not None
     assert ly.check_convergence(_conv_run(K=np.diag([1.0, 0.5e-12]))).passed is None
