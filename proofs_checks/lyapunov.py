@@ -737,7 +737,7 @@ def check_lyapunov_decrease(run: Run, pairs: list[tuple[str, str, str]] | None =
     if order_note:
         reason = f"{reason}; {order_note}" if reason else order_note
     if not any(run.slaves[n].projected for n in run.slaves):
-        reason = (reason + "; " if reason else "") + "observers without position jumps (K not ≻ 0): no jump part"
+        reason = (reason + "; " if reason else "") + "observers without position jumps (no K-metric projection was run): no jump part"
     pen = witness.get("max_projection_unprojected_gap/V", 0.0)
     if isinstance(pen, (int, float)) and pen > 0:
         verdict += (f"; the plain master's penetration raises V by up to {pen:.3g}·V "

@@ -524,7 +524,7 @@ def test_projection_criterion_only_for_projected_members(monkeypatch):
     assert "the position jumps are not the K-metric projection" in r.reason
     r = _check_with(monkeypatch, p, projected=(False, False))
     assert r.witness["test pair: max_projection"] == -np.inf and r.passed is True
-    assert r.reason == "observers without position jumps (K not ≻ 0): no jump part"
+    assert r.reason == "observers without position jumps (no K-metric projection was run): no jump part"
     r = _check_with(monkeypatch, p, projected=(False, True))
     assert r.witness["test pair: max_projection"] == pytest.approx(0.05)
     assert "observers without position jumps" not in r.reason
@@ -998,7 +998,7 @@ def test_no_jump_note_follows_a_failure(monkeypatch):
     r = _check_with(monkeypatch, _fake_parts(damping=0.2), projected=(False, False))
     assert r.reason == ("damping term positive: +0.1·V at step 1 (t = 0.25) in the test pair: C̄ is not positive "
                         "semi-definite; the damping part −h v_θᵀC̄v_θ is positive: C̄ is not positive semi-definite "
-                        "(test pair); observers without position jumps (K not ≻ 0): no jump part")
+                        "(test pair); observers without position jumps (no K-metric projection was run): no jump part")
 
 
 def test_projection_parts_reversed_pair_and_set_mismatch(runs):
