@@ -44,6 +44,12 @@ from types import SimpleNamespace
 from proofs_checks import lyapunov as ly
 
 
+def sampler(*args, **kw):
+    """The float search of impact_monotone alone (``exact=False``): what these tests examine;
+    by default the check decides exactly first and skips it (issue 36 item 3)."""
+    return pc.check_impact_monotone(*args, exact=False, **kw)
+
+
 def verdict_head(r):
     """The verdict before the master's penetration clause (tested on its own)."""
     return r.verdict.split("; the plain master's penetration")[0]
@@ -302,7 +308,7 @@ def test_unbounded_or_overclaimed_forcing_fails(dm):
 # ----------------------------------------------------------------------------- A3
 @pytest.mark.parametrize("law", ["newton", "poisson"])
 def test_global_restitution_is_monotone(coupled_pair, law):
-    r = pc.check_impact_monotone(coupled_pair.system, ImpactLaw.build(law, 0.9, 2), rng=rng(1))
+    r = sampler(coupled_pair.system, ImpactLaw.build(law, 0.9, 2), rng=rng(1))
     assert r.passed is True, r.message()
     assert r.witness["sets_checked"] == 3 and r.witness["max_rho_impacting_pairs"] <= 1e-9
 
@@ -312,7 +318,7 @@ def test_per_contact_restitution_counterexample(coupled_pair, law):
     """e = (0.1, 0.95) on coupled contacts: the search finds the worst ratio of the
     all-active region, the largest generalized eigenvalue of −½ sym((1+E)G⁻¹(1−E)) vs G⁻¹."""
     lawobj = ImpactLaw.build(law, [0.1, 0.95], 2)
-    r = pc.check_impact_monotone(coupled_pair.system, lawobj, rng=rng(0))
+    r = sampler(coupled_pair.system, lawobj, rng=rng(0))
     assert r.passed is False and "per-contact" in r.reason
     G = delassus(coupled_pair.system, np.array([0, 1]))
     Gi, E, I = np.linalg.inv(G), np.diag([0.1, 0.95]), np.eye(2)
@@ -635,8 +641,8 @@ def test_run_checks_api_only_overrides_and_errors():
 
 def test_seeded_sampling_is_reproducible(coupled_pair):
     law = ImpactLaw.build("newton", [0.1, 0.95], 2)
-    a = pc.check_impact_monotone(coupled_pair.system, law, rng=rng(3), samples=8, adversarial_sets=1)
-    b = pc.check_impact_monotone(coupled_pair.system, law, rng=rng(3), samples=8, adversarial_sets=1)
+    a = sampler(coupled_pair.system, law, rng=rng(3), samples=8, adversarial_sets=1)
+    b = sampler(coupled_pair.system, law, rng=rng(3), samples=8, adversarial_sets=1)
     assert a.margin == b.margin and np.array_equal(a.witness["gamma1_minus"], b.witness["gamma1_minus"])
 
 
@@ -644,7 +650,7 @@ def test_seeded_sampling_is_reproducible(coupled_pair):
 def test_assert_helpers_raise_with_margin_and_witness(coupled_pair):
     law = ImpactLaw.build("newton", [0.1, 0.95], 2)
     with pytest.raises(AssertionError) as info:
-        pc.assert_impact_monotone(coupled_pair.system, law, rng=rng(), samples=12, adversarial_sets=2)
+        pc.assert_impact_monotone(coupled_pair.system, law, rng=rng(), samples=12, adversarial_sets=2, exact=False)
     text = str(info.value)
     assert "impact_monotone" in text and "margin" in text and "max_rho" in text and "gamma1_minus" in text
     ok = pc.assert_impact_monotone(coupled_pair.system, coupled_pair.law, rng=rng(), samples=8, adversarial_sets=1)
@@ -656,7 +662,7 @@ def test_assert_helpers_raise_with_margin_and_witness(coupled_pair):
     assert res.passed is None
     with pytest.raises(AssertionError, match="NOT APPLICABLE"):
         pc.assert_stiffness_spd("bouncing_ball", allow_not_applicable=False)
-    with pytest.raises(AssertionError, match="max_rho"):
+    with pytest.raises(AssertionError, match="exact_gamma1_minus"):
         pc.assert_impact_monotone("rocking_chain", samples=8, adversarial_sets=2,
                                   overrides={"param.N": 1, "impact.law": "newton",
                                              "impact.restitution": [0.1, 0.95]})
