@@ -92,3 +92,40 @@ def test_convergence_default_horizon_is_the_scenario_t_end():
     (r,) = pc.run_checks(sc, only="convergence")
     assert r.witness["horizon"] == pytest.approx(sc.t_end)
     assert "the scenario's t_end" in r.verdict
+
+
+# ----------------------------------------------------------------------------- item 3
+def _six_coupled_contacts():
+    from observer.model import Harmonic, LinearSystem
+    rng = np.random.default_rng(3)
+    n = 6
+    A = rng.standard_normal((n, n))
+    M = A @ A.T + n * np.eye(n)
+    M = (M + M.T) / 2
+    W = np.eye(n) + 0.3 * rng.standard_normal((n, n))          # G = WᵀM⁻¹W full: one component
+    return LinearSystem(M, np.eye(n), np.eye(n), W, Harmonic.build("f", n), Harmonic.build("g", n))
+
+
+def test_impact_monotone_decides_six_coupled_poisson_contacts_exactly_without_sampling():
+    """Poisson with a global e is monotone (every piece); on six coupled contacts the default
+    enumerates all 4⁶ pieces and runs no float search; with the enumeration limited below
+    4⁶ the sampled result says why and names the option."""
+    from observer.impact import ImpactLaw
+    sys6 = _six_coupled_contacts()
+    law = ImpactLaw("poisson", np.full(6, 0.5))
+    r = pc.check_impact_monotone(sys6, law, rng=np.random.default_rng(0))
+    assert r.evidence == "proved" and r.witness["evaluations"] == 0
+    assert r.witness["exact_pieces"] == {"poisson": 4 ** 6}
+    s = pc.check_impact_monotone(sys6, law, rng=np.random.default_rng(0), exact_max_pairs=1024, samples=2,
+                                 local_samples=4, adversarial_sets=0)
+    assert s.evidence == "sampled" and "impact_monotone.exact_max_pairs" in s.verdict
+
+
+def test_cli_refuses_a_one_ulp_asymmetric_M_naming_the_field_and_the_entry(capsys):
+    from proofs_checks.cli import main
+    off = np.nextafter(0.3, 1.0)
+    assert off != 0.3 and Fraction(repr(off)) == Fraction(off)
+    rc = main(["double_mass", "--only", "mass_spd", "--set", f"system.M=[[2.0, 0.3], [{off!r}, 1.0]]"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1
+    assert "system.M" in err and "[0, 1] = 0.3" in err and f"[1, 0] = {off!r}" in err
