@@ -73,8 +73,7 @@ def check_projection_closed_form(run: Run, *, slaves: tuple[str, ...] | None = N
         Accepted relative error of the jump, ``‖Δq − Δq_cf‖_K / (‖Δq_cf‖_K + r)`` with the
         round-off scale r = 1e-6·max‖q‖_K (eq. (14)): with the default tolerance the
         absolute allowance is 1e-14·max‖q‖_K, about 45 ulps of the positions, which is what
-        adding K⁻¹W_IΣ to q in floating point can leave (measured 1.2e-15·max‖q‖_K on the
-        chain with the compiled engine).
+        adding K⁻¹W_IΣ to q in floating point can leave.
     force_tolerance : float
         Accepted error of the continuous part, ``|Σ_k/h − σ_cf| / max|σ_cf|`` on steps whose
         whole set was closed before (eq. (13)); the O(h²) difference between

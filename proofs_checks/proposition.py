@@ -16,8 +16,7 @@ Discrete forms (THEORY §6.6, §7.6):
   g = 0). The continuous claim is the limit h → 0: the difference, measured as the RMS
   over the run of ‖(e, v)‖ = √(2V), must shrink with h at a fitted order ≥ min_order
   (least squares over h·(16, 4, 1); the difference is injected at contact events whose
-  number and velocities vary with h, so widely spaced steps are used; measured orders are
-  about 1 on the built-in scenarios).
+  number and velocities vary with h, so widely spaced steps are used).
 
 Both use :func:`observer.simulate`, the toolkit's own façade, coupled over the whole run.
 """
