@@ -332,6 +332,7 @@ def _exact_result(res: CheckResult, decisions: dict, law: ImpactLaw) -> CheckRes
              exact_Lambda1=_fl(d["Lambda1"]), exact_Lambda2=_fl(d["Lambda2"]),
              exact_inner_product=exact.to_float(d["inner"]), exact_inner_product_rational=str(d["inner"]),
              exact_rho=rho)
+    w.setdefault("max_rho", rho)           # no float search ran: the worst ρ known is the exact one
     reason = res.reason or ("per-contact restitution: the impact map is not monotone on coupled contacts"
                             if not law.is_global else "the impact map is not monotone")
     margin = -max(rho, w.get("max_rho", -np.inf))
