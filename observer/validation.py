@@ -18,8 +18,14 @@ from observer import sparse as sps
 from observer.arrays import MAX_DEPTH, as_array, non_numeric_entry  # noqa: F401  (re-exported)
 from observer.errors import InputError
 
-SYMMETRY_RTOL = 1e-10
-"""Relative tolerance on ``max|A - A^T|`` (scaled by ``max|A|``) for symmetric matrices."""
+SYMMETRY_RTOL = 0.0
+"""Accepted ``max|A - A^T|`` (relative to ``max|A|``) of M, C and K: none. They are the
+Hessians of the kinetic energy, the Rayleigh dissipation and the potential energy (paper
+eq. (1)), symmetric by definition; the equations use A itself (``Mu̇``, ``Kq``), not its
+symmetric part, so an asymmetric A defines another system, and the exact checks of
+:mod:`proofs_checks` would have to prove a statement about a matrix the run does not use.
+Round-off from assembling A is the user's to remove, with ``(A + Aᵀ)/2`` (exactly symmetric
+in floating point)."""
 
 PSD_RTOL = 1e-10
 """Smallest eigenvalue allowed for a PSD matrix, relative to its largest absolute eigenvalue."""
@@ -120,16 +126,20 @@ def broadcast_vector(field: str, value: Any, length: int) -> np.ndarray:
 
 def check_symmetric(field: str, A: np.ndarray) -> None:
     """Raise unless ``A``'s entries are in range (:func:`check_entry_range`) and ``A`` is
-    symmetric to :data:`SYMMETRY_RTOL`."""
+    exactly symmetric (:data:`SYMMETRY_RTOL`); the error names the first entry (row-major)
+    that differs from its transpose, both values printed exactly (``repr``)."""
     check_entry_range(field, A)
-    if sps.is_sparse(A):
-        scale = max(float(abs(A).max()), np.finfo(float).tiny)
-        asym = float(abs(A - A.T).max())
+    D = (A - A.T).tocoo() if sps.is_sparse(A) else None
+    if D is not None:
+        D.eliminate_zeros()
+        bad = sorted(zip(D.row.tolist(), D.col.tolist()))
     else:
-        scale = max(float(np.max(np.abs(A))), np.finfo(float).tiny)
-        asym = float(np.max(np.abs(A - A.T)))
-    if asym > SYMMETRY_RTOL * scale:
-        raise InputError(field, f"matrix is not symmetric (max |A - A^T| = {asym:.3g})")
+        bad = np.argwhere(A != A.T).tolist()
+    if bad:
+        i, j = bad[0]
+        a, b = float(A[i, j]), float(A[j, i])
+        raise InputError(field, f"matrix is not symmetric: entry [{i}, {j}] = {a!r} but [{j}, {i}] = {b!r} "
+                         "(exact symmetry required; (A + Aᵀ)/2 removes assembly round-off)")
 
 
 BANDED_EIG_MIN_N = 64

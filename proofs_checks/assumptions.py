@@ -6,7 +6,10 @@
   v ≠ 0 after eq. (20));
 * the columns w_i of W are linearly independent (section 2; used after eq. (21)).
 
-Definiteness is *decided* in exact rational arithmetic on the given float matrix (every
+Symmetry of M and K is decided exactly: an entry with ``A[i, j] ≠ A[j, i]`` (one ulp is
+enough) is a counterexample to ``A = Aᵀ``, reported ``violated`` with the entry and both
+values as witness (the statement is about A, which the equations use, not its symmetric
+part). Definiteness is *decided* in exact rational arithmetic on the given float matrix (every
 float is a dyadic rational): an exact LDLᵀ of the symmetric part over Q
 (:func:`proofs_checks.exact.classify_float`; verified ball arithmetic beyond
 :data:`proofs_checks.exact.EXACT_MAX_N` rows). Its certificate (positive pivots, or a
@@ -19,6 +22,10 @@ round-off gives it the wrong sign it is replaced by the exact certificate's rela
 decision, judged on the float eigenvalues (evidence ``bounded``). The independence of W is
 decided by its exact rank over Q; its condition number ``σ_max/σ_min`` (``inf`` when
 m > n) is compared with ``cond_max`` on top.
+
+The checks that need K ≻ 0 gate on the same exact decision (:func:`not_definite_reason`),
+so no check calls singular a K that ``stiffness_spd`` proves definite; a run-based check on a
+K ≻ 0 too ill-conditioned for the toolkit's float64 projection says exactly that.
 
 Not applicable: a stiffness (damping) matrix that is only positive *semi*-definite (e.g. the
 bouncing ball, K = C = 0) does not violate the mechanical model, but the paper's
@@ -36,8 +43,9 @@ from proofs_checks.result import CheckResult
 RCOND_MIN = 0.0
 """Default smallest accepted λ_min/λ_max on top of the exact decision (none)."""
 
-SYMMETRY_RTOL = 1e-10
-"""Largest accepted max|A − Aᵀ| / max|A| for a matrix required to be symmetric."""
+SYMMETRY_RTOL = 0.0
+"""Accepted max|A − Aᵀ| / max|A| for M and K: none, symmetry is decided exactly
+(:func:`asymmetric_entry`), as the loader requires (:data:`observer.validation.SYMMETRY_RTOL`)."""
 
 
 def _spectrum(A: np.ndarray) -> tuple[np.ndarray, float, float]:
@@ -49,14 +57,59 @@ def _spectrum(A: np.ndarray) -> tuple[np.ndarray, float, float]:
     return eig, scale, asym
 
 
-def not_definite_reason(K: np.ndarray, consequence: str) -> str | None:
-    """None if the symmetric part of K is positive definite (λ_min > 1e-12·λ_max, the rule of
-    :meth:`observer.model.LinearSystem.is_stiffness_definite`), else why not, and
-    ``consequence``: the one K-definiteness test of the run-based checks."""
-    eig = np.linalg.eigvalsh(0.5 * (K + K.T))
-    if eig[-1] <= 0 or eig[0] <= 1e-12 * abs(eig[-1]):
-        return f"K is not positive definite (λ_min = {eig[0]:.3g}): {consequence}"
+RUN_RCOND_MIN = 1e-12
+"""The toolkit's float64 rule for running the K-metric projection (λ_min > 1e-12·λ_max of K,
+:meth:`observer.model.LinearSystem.is_stiffness_definite`): an exactly definite K below it is
+still K ≻ 0, but the run-based checks cannot run an observer with position jumps on it."""
+
+_CLASS_CACHE: dict[bytes, exact.Definiteness] = {}
+
+
+def exact_class(A: np.ndarray) -> exact.Definiteness:
+    """The exact inertia class of the symmetric part of ``A``
+    (:func:`proofs_checks.exact.classify_float`), computed once per matrix: the one decision
+    every check that needs ``A ≻ 0`` gates on (one run, one answer)."""
+    A = np.ascontiguousarray(np.asarray(A, dtype=float))
+    key = A.shape[0].to_bytes(4, "little") + A.tobytes()
+    cert = _CLASS_CACHE.get(key)
+    if cert is None:
+        if len(_CLASS_CACHE) > 64:
+            _CLASS_CACHE.clear()
+        cert = _CLASS_CACHE[key] = exact.classify_float(A)
+    return cert
+
+
+def not_definite_reason(K: np.ndarray, consequence: str, *, run: bool = True) -> str | None:
+    """None if K ≻ 0 is *proved* (:func:`exact_class`) and, with ``run``, the toolkit can run
+    the K-metric projection on it (:data:`RUN_RCOND_MIN`); else why not, ending with
+    ``consequence``. The one K test of every check that needs K ≻ 0: a K that ``stiffness_spd``
+    proves definite is never called singular here."""
+    cert = exact_class(K)
+    if cert.status == "semidefinite":
+        return f"K is singular (exact: Kx = 0, x in stiffness_spd's witness): {consequence}"
+    if cert.status == "indefinite":
+        return f"K is indefinite (exact: xᵀKx < 0, x in stiffness_spd's witness): {consequence}"
+    if run:
+        eig = np.linalg.eigvalsh(0.5 * (K + K.T))
+        if not eig[0] > RUN_RCOND_MIN * abs(eig[-1]):
+            return (f"K ≻ 0 holds (exact), but float64 gives λ_min/λ_max = {eig[0] / abs(eig[-1]):.3g}, "
+                    f"below the toolkit's {RUN_RCOND_MIN:g} for the K-metric projection "
+                    "(LinearSystem.is_stiffness_definite): no observer with position jumps is run, so this "
+                    "run-based check has nothing to examine")
     return None
+
+
+def jumps_runnable(K: np.ndarray) -> bool:
+    """True when the run-based checks can run observers with position jumps
+    (:func:`not_definite_reason` is None)."""
+    return not_definite_reason(K, "") is None
+
+
+def asymmetric_entry(A: np.ndarray) -> tuple[int, int] | None:
+    """The first entry (i, j), row-major, with ``A[i, j] != A[j, i]`` (exact float comparison:
+    symmetry is decided exactly), or None when ``A = Aᵀ`` exactly."""
+    bad = np.argwhere(A != A.T)
+    return (int(bad[0][0]), int(bad[0][1])) if bad.size else None
 
 
 def _definite(name: str, label: str, A: np.ndarray, equation: str, *, symmetric: bool,
@@ -70,12 +123,18 @@ def _definite(name: str, label: str, A: np.ndarray, equation: str, *, symmetric:
     if symmetric:
         witness["asymmetry"] = asym
     keys = ("lambda_min", "lambda_max", "relative_lambda_min", "asymmetry")
-    if symmetric and asym > SYMMETRY_RTOL:
-        return CheckResult(name, False, -asym, SYMMETRY_RTOL, witness,
-                           f"{label} is not symmetric (max|A − Aᵀ|/max|A| = {asym:.3g})", equation,
-                           ("asymmetry",) + keys, evidence="violated",
-                           verdict=f"{label} ≠ {label}ᵀ")
-    cert = exact.classify_float(A)
+    bad = asymmetric_entry(A) if symmetric else None
+    if bad is not None:
+        i, j = bad
+        a, b = float(A[i, j]), float(A[j, i])
+        witness.update(entry=[i, j], entry_value=repr(a), transposed_value=repr(b))
+        margin = -asym if asym > 0 else -float(np.finfo(float).tiny)
+        return CheckResult(name, False, margin, SYMMETRY_RTOL, witness,
+                           f"{label} is not symmetric: {label}[{i}, {j}] = {a!r} but {label}[{j}, {i}] = {b!r} "
+                           f"(max|A − Aᵀ|/max|A| = {asym:.3g})", equation,
+                           ("entry", "entry_value", "transposed_value", "asymmetry") + keys, evidence="violated",
+                           verdict=f"{label} ≠ {label}ᵀ (exact): entry [{i}, {j}]")
+    cert = exact_class(A)
     diag = float(np.max(np.abs(np.diag(A)))) if A.size else 0.0
     witness.update(exact_class=cert.status, method=cert.method)
     if cert.pivots:

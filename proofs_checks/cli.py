@@ -71,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="keyword option of one check, e.g. impact_monotone.samples=200")
     p.add_argument("--seed", type=int, default=0, help="seed of all random sampling (default 0)")
     p.add_argument("--h", type=float, help="step of the run-based checks (default: the scenario's)")
-    p.add_argument("--t-end", type=float, help="horizon of the run-based checks (default: min(t_end, 40000 h))")
+    p.add_argument("--t-end", type=float, help="horizon of the run-based checks (default: min(t_end, 40000 h); convergence: the scenario's t_end within a memory budget)")
     p.add_argument("--json", metavar="FILE", help="write all results (with full witnesses) as JSON")
     p.add_argument("--list", action="store_true", help="list the checks and exit")
     return p

@@ -8,10 +8,11 @@ K ≻ 0) and two without (``nojump_a``, ``nojump_b``), ``*_a`` started from the 
 ``[observer]`` state (the report's observers), ``*_b`` from another state. The run is
 computed once, on first use.
 
-Horizons (defaults chosen to keep ``python -m proofs_checks SCENARIO`` under a minute):
-the run uses the scenario's h and ``t_end = min(scenario t_end, max_steps·h)``; the
-Proposition 1 runs use ``min(scenario t_end, short_steps·h)`` (the h-scaling with the
-steps h·(16, 4, 1)).
+Horizons: the run uses the scenario's h and ``t_end = min(scenario t_end, max_steps·h)``;
+Theorem 1's check (:attr:`CheckContext.convergence_run`) runs to the scenario's t_end unless
+that exceeds :data:`CONVERGENCE_BUDGET` (then it says the horizon it used); the Proposition 1
+runs use ``min(scenario t_end, short_steps·h)`` (the h-scaling with the steps h·(16, 4, 1)).
+``--t-end`` (:attr:`CheckSettings.t_end`) sets every horizon.
 """
 
 from __future__ import annotations
@@ -23,7 +24,13 @@ import numpy as np
 import scipy.linalg as sla
 
 from observer.scenario import Scenario
+from proofs_checks.assumptions import jumps_runnable
 from proofs_checks.runs import Run, SlaveSpec, replay
+
+
+CONVERGENCE_BUDGET = 2_000_000
+"""Largest steps·(n + m) of the convergence check's own run (its memory: about 50 bytes per
+value for the master and four observers); beyond, the horizon is capped and the verdict says so."""
 
 
 @dataclass(frozen=True)
@@ -63,6 +70,7 @@ class CheckContext:
         self.h = float(s.h or scenario.h)
         self.t_end = float(s.t_end or min(scenario.t_end, s.max_steps * self.h))
         self._run: Run | None = None
+        self._conv_run: Run | None = None
 
     @property
     def system(self):
@@ -89,7 +97,7 @@ class CheckContext:
         sc, sys_ = self.scenario, self.system
         rng = self.rng("slaves")
         n = sys_.n
-        jumps = sys_.is_stiffness_definite()
+        jumps = jumps_runnable(sys_.K)
         q_scale = max(float(np.max(np.abs(sc.q0))), float(np.max(np.abs(sys_.nu(0.0)))), 1e-3)
         dq = 0.02 * q_scale
         omega = 1.0
@@ -113,6 +121,33 @@ class CheckContext:
             self._run = replay(self.scenario, h=self.h, t_end=self.t_end, slaves=self.slave_specs(),
                                master_projection=self.scenario.master_projection)
         return self._run
+
+    def horizon_text(self, t_end: float) -> str:
+        """Where a run's horizon ``t_end`` comes from, and the option that changes it."""
+        if self.settings.t_end:
+            return f"--t-end {self.settings.t_end:g} (CheckSettings.t_end); the scenario's t_end = {self.scenario.t_end:g} s"
+        if t_end >= self.scenario.t_end:
+            return "the scenario's t_end; --t-end (CheckSettings.t_end) changes it"
+        return (f"capped at {round(t_end / self.h)} steps of h = {self.h:g} by the cost budget; the scenario's "
+                f"t_end = {self.scenario.t_end:g} s; --t-end (CheckSettings.t_end) sets the horizon")
+
+    @property
+    def convergence_run(self) -> Run:
+        """The run of Theorem 1's check: the scenario's whole horizon unless the user set
+        ``t_end`` or the run would exceed :data:`CONVERGENCE_BUDGET` values per trajectory
+        (steps·(n + m)); then the longer of the budget and the shared run (said in the
+        verdict, :meth:`horizon_text`)."""
+        if self._conv_run is None:
+            sc, s = self.scenario, self.settings
+            t_end = self.t_end
+            if not s.t_end:
+                steps = max(s.max_steps, CONVERGENCE_BUDGET // (self.system.n + self.system.m))
+                t_end = max(self.t_end, min(sc.t_end, steps * self.h))
+            run = self.run if t_end == self.t_end else replay(
+                sc, h=self.h, t_end=t_end, slaves=self.slave_specs(), master_projection=sc.master_projection)
+            run.settings["horizon_source"] = self.horizon_text(float(run.t[-1]) + 0.5 * self.h)
+            self._conv_run = run
+        return self._conv_run
 
     def visited_sets(self) -> list[np.ndarray]:
         """Distinct nonempty closed sets of the master in the shared run."""

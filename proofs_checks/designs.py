@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from observer.observers import OBSERVER_DESIGNS, ObserverDesign
+from proofs_checks.assumptions import not_definite_reason
 from proofs_checks.lyapunov import roundoff_allowance
 from proofs_checks.result import CheckResult
 from proofs_checks.runs import Run, SlaveSpec, lyapunov_pair, replay
@@ -74,10 +75,9 @@ def check_projection_energy(scenario, specs: list[SlaveSpec], *, h: float, t_end
         judge (no such design registered, or K not positive definite).
     """
     designs = OBSERVER_DESIGNS if designs is None else designs
-    if not scenario.system.is_stiffness_definite():
-        return CheckResult("projection_energy", None, float("nan"), tolerance, {},
-                           "K is not positive definite: ½‖e‖²_K is no norm and there is no "
-                           "K-metric projection", EQUATION)
+    why = not_definite_reason(scenario.system.K, "½‖e‖²_K is no norm and there is no K-metric projection")
+    if why:
+        return CheckResult("projection_energy", None, float("nan"), tolerance, {}, why, EQUATION)
     measured, metrics, margin, worst = {}, {}, np.inf, {}
     for name, d in designs.items():
         if not d.position_jumps:

@@ -270,7 +270,7 @@ def delassus_exact(M: np.ndarray, W: np.ndarray) -> flint.fmpq_mat:
 
 
 def decide_a3(law: str, M: np.ndarray, W: np.ndarray, restitution, sets: list, *,
-              max_pairs: int = 1024) -> dict:
+              max_pairs: int = 4096) -> dict:
     """Decide A3 for ``law`` on the given active sets (their maximal ones suffice).
 
     Returns
@@ -309,7 +309,7 @@ def decide_a3(law: str, M: np.ndarray, W: np.ndarray, restitution, sets: list, *
         elif law == "poisson":
             if 4 ** k > max_pairs:
                 return {"status": "undecided", "pieces": pieces, "method": "piece enumeration",
-                        "reason": f"{4 ** k} Poisson pieces on a set of {k} contacts exceed max_pairs = {max_pairs}"}
+                        "reason": f"{4 ** k} Poisson pieces on a set of {k} contacts exceed max_pairs = {max_pairs} (the option impact_monotone.exact_max_pairs)"}
             subsets = [c for r in range(k + 1) for c in itertools.combinations(range(k), r)]
             inv_cache = {J: _sub(G, J, J).inv() for J in subsets if J}
             pair = None

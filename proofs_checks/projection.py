@@ -45,7 +45,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from proofs_checks import exact
-from proofs_checks.assumptions import not_definite_reason
+from proofs_checks.assumptions import exact_class, not_definite_reason
 from proofs_checks.monotonicity import add_set, candidate_sets
 from proofs_checks.result import CheckResult
 from proofs_checks.runs import Run, Trajectory
@@ -73,8 +73,7 @@ def check_projection_closed_form(run: Run, *, slaves: tuple[str, ...] | None = N
         Accepted relative error of the jump, ``‖Δq − Δq_cf‖_K / (‖Δq_cf‖_K + r)`` with the
         round-off scale r = 1e-6·max‖q‖_K (eq. (14)): with the default tolerance the
         absolute allowance is 1e-14·max‖q‖_K, about 45 ulps of the positions, which is what
-        adding K⁻¹W_IΣ to q in floating point can leave (measured 1.2e-15·max‖q‖_K on the
-        chain with the compiled engine).
+        adding K⁻¹W_IΣ to q in floating point can leave.
     force_tolerance : float
         Accepted error of the continuous part, ``|Σ_k/h − σ_cf| / max|σ_cf|`` on steps whose
         whole set was closed before (eq. (13)); the O(h²) difference between
@@ -200,8 +199,16 @@ EXACT_EXHAUSTIVE_UP_TO = 10
 """Largest m for which every active set's L_I is factored exactly (2^m − 1 sets)."""
 
 
+def exact_metric(K: np.ndarray, W: np.ndarray) -> flint.fmpq_mat:
+    """``L = WᵀK⁻¹W`` exactly over Q from the float K and W (ZeroDivisionError when K is
+    exactly singular)."""
+    Kq, Wq = exact.to_fmpq_mat(K), exact.to_fmpq_mat(W)
+    return exact.sym_part(Wq.transpose() * Kq.solve(Wq))
+
+
 def exact_projection_psd(K: np.ndarray, W: np.ndarray, *,
-                         exhaustive_up_to: int = EXACT_EXHAUSTIVE_UP_TO) -> dict:
+                         exhaustive_up_to: int = EXACT_EXHAUSTIVE_UP_TO,
+                         L: flint.fmpq_mat | None = None) -> dict:
     """Exact decision of ``P_I L_I⁻¹ P_Iᵀ ⪰ 0`` for every nonempty I (module docstring).
 
     Returns
@@ -212,8 +219,7 @@ def exact_projection_psd(K: np.ndarray, W: np.ndarray, *,
         for L_I) and ``exact_vector`` z (floats of the exact vector, padded to m) with
         ``exact_zPz`` = zᵀ P_I L_I⁻¹ P_Iᵀ z < 0 (indefinite) or the kernel vector of L_I.
     """
-    Kq, Wq = exact.to_fmpq_mat(K), exact.to_fmpq_mat(W)
-    L = exact.sym_part(Wq.transpose() * Kq.solve(Wq))
+    L = exact_metric(K, W) if L is None else L
     m = L.nrows()
     if m <= exhaustive_up_to:
         sets = [list(c) for k in range(1, m + 1) for c in itertools.combinations(range(m), k)]
@@ -250,7 +256,7 @@ def check_projection_psd(K: np.ndarray, W: np.ndarray, *, rng: np.random.Generat
                          exact_exhaustive_up_to: int = EXACT_EXHAUSTIVE_UP_TO) -> CheckResult:
     """``P_I L_I⁻¹ P_Iᵀ ⪰ 0`` for every active set I (proof of Proposition 1, after eq. (14); eq. (17)).
 
-    ``L = WᵀK⁻¹W`` is formed with a solve of K; for every examined I the m×m matrix
+    ``L = WᵀK⁻¹W`` is formed exactly over Q and rounded once; for every examined I the m×m matrix
     ``P_I L_I⁻¹ P_Iᵀ`` is formed as ``P_I X`` with ``X = solve(L_I, P_Iᵀ)`` and symmetrized.
     Its eigenvalues are those of the I block plus exact zeros for the rows not in I, so
     the margin is taken on the block.
@@ -266,18 +272,20 @@ def check_projection_psd(K: np.ndarray, W: np.ndarray, *, rng: np.random.Generat
         PSD; its sign is the exact one); the witness has the worst set, its eigenvalues, the
         largest condition number of L_I and its set, how many sets were examined in floats
         (exhaustively or not), and the exact decision (``exact_method``,
-        ``exact_sets_proved`` or the failing set and exact vector). Not applicable when K
-        is singular.
+        ``exact_sets_proved`` or the failing set and exact vector). Not applicable only when K is exactly singular
+        (:func:`proofs_checks.assumptions.exact_class`): L is formed exactly, so an exactly
+        definite but ill-conditioned K is decided, and an indefinite nonsingular K is decided
+        on its own L (``violated`` where some L_I is not positive definite).
     """
     name, eq = "projection_psd", "P_I L_I⁻¹ P_Iᵀ ⪰ 0, after eq. (14); eq. (17)"
     K = np.asarray(K, dtype=float)
     W = np.asarray(W, dtype=float)
     eigK = np.linalg.eigvalsh(0.5 * (K + K.T))
-    if abs(eigK[0]) <= 1e-12 * max(abs(eigK[-1]), 1e-300) or not np.any(K):
-        return CheckResult.not_applicable(name, f"K is singular (λ_min = {eigK[0]:.3g}): L_I = W_IᵀK⁻¹W_I "
-                                          "does not exist (needs K ≻ 0)", eq)
-    L = W.T @ np.linalg.solve(K, W)
-    L = 0.5 * (L + L.T)
+    if exact_class(K).status == "semidefinite":
+        return CheckResult.not_applicable(name, "K is singular (exact: Kx = 0, x in stiffness_spd's witness): "
+                                          "L_I = W_IᵀK⁻¹W_I does not exist (needs K nonsingular)", eq)
+    Lq = exact_metric(K, W)              # exact, so the float margin below needs no solve with K
+    L = exact.to_array(Lq)
     m = W.shape[1]
     sets, exhaustive = _subsets(m, rng, exhaustive_up_to, samples, L)
     worst = (np.inf, None, None)
@@ -314,11 +322,7 @@ def check_projection_psd(K: np.ndarray, W: np.ndarray, *, rng: np.random.Generat
                "sets_examined": len(sets), "exhaustive": exhaustive, "m": m,
                "K_lambda_min": float(eigK[0])}
     keys = ("min_relative_eigenvalue", "worst_set", "max_condition_L_I", "sets_examined", "exhaustive")
-    try:
-        ex = exact_projection_psd(K, W, exhaustive_up_to=exact_exhaustive_up_to)
-    except ZeroDivisionError:                        # K exactly singular
-        return CheckResult.not_applicable(name, "K is exactly singular: L_I = W_IᵀK⁻¹W_I does not exist "
-                                          "(needs K ≻ 0)", eq)
+    ex = exact_projection_psd(K, W, exhaustive_up_to=exact_exhaustive_up_to, L=Lq)
     witness.update({f"exact_{k}": v for k, v in ex.items() if k != "holds"})
     margin = worst[0]
     if ex["holds"]:

@@ -16,8 +16,7 @@ Discrete forms (docs/theory/scheme.md §6, §7.6):
   g = 0). The continuous claim is the limit h → 0: the difference, measured as the RMS
   over the run of ‖(e, v)‖ = √(2V), must shrink with h at a fitted order ≥ min_order
   (least squares over h·(16, 4, 1); the difference is injected at contact events whose
-  number and velocities vary with h, so widely spaced steps are used; measured orders are
-  about 1 on the built-in scenarios).
+  number and velocities vary with h, so widely spaced steps are used).
 
 Both use :func:`observer.simulate`, the toolkit's own façade, coupled over the whole run.
 """
@@ -29,11 +28,18 @@ import numpy as np
 import observer
 from observer import Slave
 from observer.scenario import Scenario
+from proofs_checks.assumptions import jumps_runnable, not_definite_reason
 from proofs_checks.result import CheckResult
 
 
 def _k_definite(sc: Scenario) -> bool:
-    return sc.system.is_stiffness_definite()
+    """K ≻ 0 proved exactly and usable by the toolkit's projection (the one K test,
+    :func:`proofs_checks.assumptions.not_definite_reason`)."""
+    return jumps_runnable(sc.system.K)
+
+
+def _k_reason(sc: Scenario, consequence: str = "the pair needs the K-metric projection") -> str:
+    return not_definite_reason(sc.system.K, consequence) or ""
 
 
 class _Pair:
@@ -102,7 +108,7 @@ def check_proposition1_exact(scenario: Scenario, *, h: float | None = None,
     if _k_definite(scenario):
         pairs.append(("projected_master__jump_slave", True, True))
     else:
-        witness["projected_master__jump_slave"] = "not applicable: K is not positive definite"
+        witness["projected_master__jump_slave"] = "not applicable: " + _k_reason(scenario)
     first_bad = None
     for label, projection, jumps in pairs:
         res = _simulate(scenario, h, t_end, projection, jumps, chi_tolerance, slave_offset)
@@ -127,7 +133,7 @@ def check_proposition1_exact(scenario: Scenario, *, h: float | None = None,
     keys = tuple(k for k in witness if k.endswith("max_diff") or k.endswith("closed_steps"))
     reason = f"{first_bad}: the slave leaves the master's trajectory" if first_bad else ""
     if not _k_definite(scenario):
-        reason = (reason + "; " if reason else "") + "jump pair not applicable (K not ≻ 0)"
+        reason = (reason + "; " if reason else "") + "jump pair not applicable: " + _k_reason(scenario)
     # bitwise equality of the computed pairs is an exact statement about this run
     return CheckResult.from_margin(name, -worst, 0.0, witness, eq, keys, reason, evidence="proved",
                                    verdict="matched pairs bitwise identical on this run" if worst == 0 else None)
@@ -159,8 +165,8 @@ def check_proposition1_h_scaling(scenario: Scenario, *, h: float | None = None, 
     """
     name, eq = "proposition1_h_scaling", "Proposition 1 (continuous limit h → 0)"
     if not _k_definite(scenario):
-        return CheckResult.not_applicable(name, "K is not positive definite: both mismatched pairs "
-                                          "need the K-metric projection", eq)
+        return CheckResult.not_applicable(name, _k_reason(scenario, "both mismatched pairs need the "
+                                                          "K-metric projection"), eq)
     h0 = float(h or scenario.h)
     hs = np.array([h0 * f for f in factors])
     witness: dict = {"h": hs}

@@ -51,7 +51,7 @@ CHECKS: dict[str, Check] = {
     "proposition1_h_scaling": lambda c: check_proposition1_h_scaling(
         c.scenario, h=c.h, t_end=c.short_t_end, **c.options("proposition1_h_scaling")),
     "lyapunov_decrease": lambda c: check_lyapunov_decrease(c.run, **c.options("lyapunov_decrease")),
-    "convergence": lambda c: check_convergence(c.run, **c.options("convergence")),
+    "convergence": lambda c: check_convergence(c.convergence_run, **c.options("convergence")),
 }
 """Registry: stable check name → function of a :class:`CheckContext` returning a :class:`CheckResult`."""
 

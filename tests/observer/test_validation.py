@@ -131,14 +131,19 @@ def test_psd_stiffness_is_accepted_but_definite_needed_for_projection():
                  "simulation.master_projection", "true or false")
 
 
-def test_symmetry_tolerance_is_relative():
+@pytest.mark.parametrize("key", ["system.M", "system.K", "system.C"])
+def test_symmetry_is_exact_and_the_error_names_the_entry(key):
+    """Issue 36 item 1: M, C, K are energy Hessians, symmetric by definition; one ulp of
+    asymmetry in one entry is refused naming the field and the entry (it used to pass the
+    1e-10 relative test, and ``proofs_checks`` then "proved" M = Mᵀ ≻ 0)."""
     doc = doc_of()
-    M = np.eye(2) * 1e6
-    M[0, 1] = 1e-6                                      # 1e-12 relative: accepted
-    set_key(doc, "system.M", M.tolist())
-    Scenario.from_dict(doc)
-    M[0, 1] = 1.0                                       # 1e-6 relative: rejected
-    expect_error(set_key(doc, "system.M", M.tolist()), "system.M", "not symmetric")
+    A = np.array([[3.0, 0.1], [0.1, 2.0]])
+    set_key(doc, key, A.tolist())
+    Scenario.from_dict(doc)                             # exactly symmetric: accepted
+    A[1, 0] = np.nextafter(0.1, 1.0)                    # one ulp: A[1, 0] ≠ A[0, 1]
+    assert A[1, 0] != A[0, 1]
+    err = expect_error(set_key(doc, key, A.tolist()), key, "not symmetric")
+    assert "[0, 1] = 0.1" in str(err) and f"[1, 0] = {float(A[1, 0])!r}" in str(err)
 
 
 # ---------------------------------------------------------------------------------------

@@ -328,7 +328,8 @@ def test_cli_help_text(capsys):
             "--option CHECK.KEY=VALUE keyword option of one check, e.g. impact_monotone.samples=200",
             "--seed SEED seed of all random sampling (default 0)",
             "--h H step of the run-based checks (default: the scenario's)",
-            "--t-end T_END horizon of the run-based checks (default: min(t_end, 40000 h))",
+            "--t-end T_END horizon of the run-based checks (default: min(t_end, 40000 h); convergence: the "
+            "scenario's t_end within a memory budget)",
             "--json FILE write all results (with full witnesses) as JSON",
             "--list list the checks and exit"):
         assert piece in text, piece

@@ -48,13 +48,14 @@ def test_spd_witness_margin_and_texts(check, name, label, equation):
     else:
         assert check(A, rcond_min=0.3).passed is None
     assert check(A, rcond_min=0.2).passed is True
-    # not symmetric: the asymmetry is the (negative) margin, against SYMMETRY_RTOL
+    # not symmetric: decided exactly, the entry is the witness, the asymmetry the margin
     B = np.array([[1.0, 0.3], [0.0, 2.0]])
     r = check(B)
-    assert r.passed is False and r.margin == pytest.approx(-0.15) and r.tolerance == 1e-10
-    assert r.evidence == "violated"
-    assert r.reason == f"{label} is not symmetric (max|A − Aᵀ|/max|A| = 0.15)"
-    assert r.summary_keys[0] == "asymmetry" and r.equation == equation and r.name == name
+    assert r.passed is False and r.margin == pytest.approx(-0.15) and r.tolerance == 0.0
+    assert r.evidence == "violated" and r.witness["entry"] == [0, 1]
+    assert r.reason == (f"{label} is not symmetric: {label}[0, 1] = 0.3 but {label}[1, 0] = 0.0 "
+                        "(max|A − Aᵀ|/max|A| = 0.15)")
+    assert r.summary_keys[0] == "entry" and r.equation == equation and r.name == name
     # negative definite scale: λ_max < 0, relative λ_min = λ_min/max|λ|
     r = check(-_sym([2.0, 8.0]))
     assert r.witness["relative_lambda_min"] == pytest.approx(-1.0) and r.passed is False
@@ -269,23 +270,28 @@ def test_generic_forcing_with_a_claimed_bound_and_zero_signals():
 
 
 def test_not_definite_reason_relative_floor_and_text():
+    """The exact class decides singular/indefinite; an exactly definite K below the
+    toolkit's float64 floor (1e-12·λ_max) is called definite, never singular."""
     from proofs_checks.assumptions import not_definite_reason
     assert not_definite_reason(_sym([2.0, 8.0]), "why") is None
     assert not_definite_reason(np.diag([5.0, 1.0, 1.5e-11]), "why") is None       # 3e-12·λ_max
-    assert not_definite_reason(np.diag([5.0, 1.0, 5e-12]), "x") == "K is not positive definite (λ_min = 5e-12): x"
+    tiny = not_definite_reason(np.diag([5.0, 1.0, 5e-12]), "x")
+    assert tiny.startswith("K ≻ 0 holds (exact)") and "singular" not in tiny
+    assert not_definite_reason(np.diag([5.0, 1.0, 5e-12]), "x", run=False) is None
     assert not_definite_reason(np.diag([5.0, 1.0, 2e-12]), "x") is not None     # floor from λ_max = 5, not 1
     assert not_definite_reason(np.diag([0.2, 0.1]), "x") is None                 # λ_max < 1
-    assert not_definite_reason(np.diag([-3.0, -1.0]), "c") == "K is not positive definite (λ_min = -3): c"
-    assert not_definite_reason(np.zeros((2, 2)), "c") == "K is not positive definite (λ_min = 0): c"
-    # the symmetric part decides (a skew part is ignored; 0.5·(K + Kᵀ), not K + Kᵀ, in the text)
-    assert not_definite_reason(np.array([[1.0, 4.0], [-4.0, -2.0]]), "c") == "K is not positive definite (λ_min = -2): c"
+    assert not_definite_reason(np.diag([-3.0, -1.0]), "c").startswith("K is indefinite (exact")
+    assert not_definite_reason(np.zeros((2, 2)), "c").startswith("K is singular (exact")
+    assert not_definite_reason(np.zeros((2, 2)), "c").endswith(": c")
+    # the symmetric part decides (a skew part is ignored)
+    assert not_definite_reason(np.array([[1.0, 4.0], [-4.0, -2.0]]), "c").startswith("K is indefinite")
 
 
 def test_not_definite_reason_one_degree_of_freedom():
     """n = 1: the spectrum has a single entry (no eig[1] or eig[-2] to look at)."""
     from proofs_checks.assumptions import not_definite_reason
     assert not_definite_reason(np.array([[2.0]]), "x") is None
-    assert not_definite_reason(np.array([[0.0]]), "x") == "K is not positive definite (λ_min = 0): x"
+    assert not_definite_reason(np.array([[0.0]]), "x").startswith("K is singular (exact")
 
 
 def test_constraints_square_and_dependent_without_warnings():
@@ -301,19 +307,36 @@ def test_constraints_square_and_dependent_without_warnings():
         assert r.witness["condition_number"] == np.inf and r.margin == -np.inf
 
 
-def test_symmetry_tolerance_edges_and_input_types():
-    """max|A − Aᵀ|/max|A| = SYMMETRY_RTOL exactly is still symmetric; the ratio is relative
-    (a small matrix is judged by its own scale); the failure keeps its witness; boolean
-    matrices are read as numbers."""
+def test_symmetry_edges_and_input_types():
+    """Symmetry is exact (SYMMETRY_RTOL = 0): any asymmetry, however small relative to the
+    matrix's scale, is a counterexample; the failure keeps its witness; boolean matrices are
+    read as numbers."""
     from proofs_checks.assumptions import SYMMETRY_RTOL
-    edge = np.array([[1.0, SYMMETRY_RTOL], [0.0, 1.0]])
-    r = pc.check_mass_spd(edge)
-    assert r.witness["asymmetry"] == SYMMETRY_RTOL and r.passed is True
+    assert SYMMETRY_RTOL == 0.0
     small = 1e-3 * np.array([[1.0, 1e-9], [0.0, 1.0]])              # relative asymmetry 1e-9
     r = pc.check_mass_spd(small)
     assert r.passed is False and r.witness["asymmetry"] == pytest.approx(1e-9, rel=1e-12)
     assert r.witness["lambda_max"] == pytest.approx(1e-3, rel=1e-6) and r.margin == -r.witness["asymmetry"]
     assert pc.check_mass_spd(np.eye(2, dtype=bool)).passed is True
+
+
+@pytest.mark.parametrize("check,label", [(pc.check_mass_spd, "M"), (pc.check_stiffness_spd, "K")])
+def test_one_ulp_asymmetry_is_violated_exactly(check, label):
+    """Issue 36 item 1: an SPD matrix whose transpose differs by one ulp in one entry used to
+    pass as "M = Mᵀ ≻ 0 (exact)". Reference (independent of proofs_checks): the entries as
+    Fractions, A ≠ Aᵀ exactly at [2, 0]; the exactly symmetric original passes."""
+    from fractions import Fraction
+    A = np.array([[4.0, 1.0, 0.5], [1.0, 3.0, 0.25], [0.5, 0.25, 2.0]])
+    assert check(A).evidence == "proved"
+    A[2, 0] = np.nextafter(0.5, 1.0)
+    F = [[Fraction(float(x)) for x in row] for row in A]
+    asym = [(i, j) for i in range(3) for j in range(3) if F[i][j] != F[j][i]]
+    assert asym == [(0, 2), (2, 0)] and F[2][0] - F[0][2] == Fraction(1, 2**53)
+    r = check(A)
+    assert r.passed is False and r.evidence == "violated" and r.margin < 0
+    assert r.witness["entry"] == [0, 2]
+    assert Fraction(float(r.witness["transposed_value"])) == F[2][0]
+    assert r.verdict == f"{label} ≠ {label}ᵀ (exact): entry [0, 2]"
 
 
 # ----------------------------------------------------------------------------- A2 near misses

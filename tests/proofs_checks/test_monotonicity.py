@@ -25,6 +25,12 @@ from observer.model import Harmonic
 from observer.impact import newton_impact, poisson_impact
 from proofs_checks import monotonicity as mo
 
+
+def sampler(*args, **kw):
+    """The float search of impact_monotone alone (``exact=False``): what these tests examine;
+    by default the check decides exactly first and skips it (issue 36 item 3)."""
+    return pc.check_impact_monotone(*args, exact=False, **kw)
+
 EPS = np.finfo(float).eps
 E_BAD = np.array([0.1, 0.95])
 LEMKE = observer.contact.get_solver("lemke").solve
@@ -251,7 +257,7 @@ def test_local_pairs_three_contacts():
 # ----------------------------------------------------------------------------- the check
 @pytest.mark.parametrize("law", ["newton", "poisson"])
 def test_global_restitution_passes(pair, law):
-    r = pc.check_impact_monotone(pair, ImpactLaw.build(law, 0.7, 2), rng=rng(1), samples=8,
+    r = sampler(pair, ImpactLaw.build(law, 0.7, 2), rng=rng(1), samples=8,
                                  local_samples=8, adversarial_sets=1, starts=1, maxiter=40)
     assert r.passed is True and r.name == "impact_monotone" and r.equation == "A3, Definition 1, eq. (6)"
     assert r.witness["max_rho"] <= 1e-9 and r.margin == -r.witness["max_rho"]
@@ -309,16 +315,16 @@ def test_adversarial_search_goes_to_the_most_promising_set(pair):
     law = ImpactLaw.build("newton", E_BAD, 2)
     rho_star = analytic_rho(delassus_ref(pair, [0, 1]), E_BAD)
     kw = dict(active_sets=[[0], [1], [0, 1]], samples=4, local_samples=0)
-    r0 = pc.check_impact_monotone(pair, law, rng=rng(3), adversarial_sets=0, **kw)
+    r0 = sampler(pair, law, rng=rng(3), adversarial_sets=0, **kw)
     assert 0.0 < r0.witness["max_rho"] < 0.7 * rho_star and r0.witness["active_set"] == [0, 1]
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        r1 = pc.check_impact_monotone(pair, law, rng=rng(3), adversarial_sets=1, starts=1, maxiter=400, **kw)
+        r1 = sampler(pair, law, rng=rng(3), adversarial_sets=1, starts=1, maxiter=400, **kw)
     assert r1.witness["max_rho"] == pytest.approx(rho_star, rel=1e-6)
     assert r1.witness["found_by"] == "adversarial search" and r1.witness["active_set"] == [0, 1]
     # ranked by sampled ρ first, coupling second: here the contact-1 singleton sampled the
     # largest ρ (< 0), so the search goes there (not to the more strongly coupled pair)
-    r2 = pc.check_impact_monotone(pair, law, rng=rng(0), active_sets=[[0], [1], [0, 1]], samples=2,
+    r2 = sampler(pair, law, rng=rng(0), active_sets=[[0], [1], [0, 1]], samples=2,
                                   local_samples=0, adversarial_sets=1, starts=1, maxiter=400)
     assert r2.witness["active_set"] == [1] and r2.witness["found_by"] == "adversarial search"
     assert r2.witness["max_rho"] < 0.0
@@ -353,20 +359,23 @@ def test_default_search_budget(pair):
     """Called with its defaults the check runs the documented budget: the same search, pair
     for pair (same evaluation count), as with the values spelled out."""
     law = ImpactLaw.build("newton", 0.7, 2)
-    a = pc.check_impact_monotone(pair, law, rng=rng())
+    a = pc.check_impact_monotone(pair, law, rng=rng(), exact=False)
     b = pc.check_impact_monotone(pair, law, rng=rng(), samples=24, local_samples=48, adversarial_sets=6, starts=3,
                                  maxiter=300, exhaustive_up_to=10, tolerance=1e-9, solver="pivoting",
-                                 laws=("newton",))
+                                 laws=("newton",), exact=False)
     assert a.witness["evaluations"] == b.witness["evaluations"] > 1000
-    assert a.witness["max_rho"] == b.witness["max_rho"] and a.tolerance == 0.0     # decided exactly
-    c = pc.check_impact_monotone(pair, law, rng=rng(), exact=False)
-    assert c.tolerance == 1e-9 and c.evidence == "sampled" and c.witness["evaluations"] == a.witness["evaluations"]
+    assert a.witness["max_rho"] == b.witness["max_rho"] and a.tolerance == 1e-9 and a.evidence == "sampled"
+    assert a.verdict.endswith("not decided exactly: exact=False")
+    # issue 36 item 3: decided exactly first, the float search is not run at all
+    c = pc.check_impact_monotone(pair, law, rng=rng())
+    assert c.tolerance == 0.0 and c.evidence == "proved" and c.witness["evaluations"] == 0
+    assert c.witness["sampled_search"] == "skipped: decided exactly by piece enumeration"
 
 
 def test_only_impacting_pairs_count_as_impacting(pair):
     """Monotone map, sampling only: sup ρ = 0 comes from separating pairs (Λ₁ = Λ₂ = 0); the
     impacting pairs stay strictly below."""
-    r = pc.check_impact_monotone(pair, ImpactLaw.build("newton", 0.7, 2), rng=rng(0), samples=12, local_samples=4,
+    r = sampler(pair, ImpactLaw.build("newton", 0.7, 2), rng=rng(0), samples=12, local_samples=4,
                                  adversarial_sets=0)
     assert r.witness["max_rho"] == 0.0 and r.witness["inner_product"] == 0.0
     assert -1.0 < r.witness["max_rho_impacting_pairs"] < -1e-3
@@ -395,16 +404,16 @@ def test_adversarial_search_improves_a_poor_sample(pair):
     law = ImpactLaw.build("newton", E_BAD, 2)
     rho_star = analytic_rho(delassus_ref(pair, [0, 1]), E_BAD)
     kw = dict(rng=rng(7), active_sets=[np.array([0, 1])], samples=2, local_samples=0)
-    r0 = pc.check_impact_monotone(pair, law, adversarial_sets=0, **kw)
+    r0 = sampler(pair, law, adversarial_sets=0, **kw)
     kw["rng"] = rng(7)
-    r1 = pc.check_impact_monotone(pair, law, adversarial_sets=1, starts=2, maxiter=400, **kw)
+    r1 = sampler(pair, law, adversarial_sets=1, starts=2, maxiter=400, **kw)
     assert r0.witness["max_rho"] < 0.9 * rho_star
     assert r1.witness["found_by"] == "adversarial search"
     assert r1.witness["max_rho"] == pytest.approx(rho_star, rel=1e-3)
     assert r1.witness["evaluations"] > r0.witness["evaluations"] + 2 * 2 * 20
     # maxiter bounds the search
     kw["rng"] = rng(7)
-    r2 = pc.check_impact_monotone(pair, law, adversarial_sets=1, starts=1, maxiter=5, **kw)
+    r2 = sampler(pair, law, adversarial_sets=1, starts=1, maxiter=5, **kw)
     assert r2.witness["evaluations"] <= r0.witness["evaluations"] + 2 * (5 * 3 + 8)
 
 
@@ -413,15 +422,15 @@ def test_evaluation_count_follows_the_sampling_plan(pair, uncoupled):
     local pair (central differences, then ρ); k = 2 gets ``local_samples`` local pairs,
     k = 1 none; a diagonal G (every single contact) at most 8 random pairs and no local pairs."""
     law = ImpactLaw.build("newton", 0.5, 2)
-    r = pc.check_impact_monotone(pair, law, rng=rng(), samples=10, local_samples=6, adversarial_sets=0)
+    r = sampler(pair, law, rng=rng(), samples=10, local_samples=6, adversarial_sets=0)
     # the singletons are diagonal too: 8 pairs each; the coupled pair 10 random + 6 local
     assert r.witness["evaluations"] == 2 * 2 * 8 + 2 * 10 + 6 * (2 * 2 + 2)
-    r = pc.check_impact_monotone(uncoupled, law, rng=rng(), samples=10, local_samples=6, adversarial_sets=0)
+    r = sampler(uncoupled, law, rng=rng(), samples=10, local_samples=6, adversarial_sets=0)
     assert r.witness["evaluations"] == 3 * 2 * 8 and r.passed is True
-    r = pc.check_impact_monotone(uncoupled, law, rng=rng(), samples=5, local_samples=6, adversarial_sets=0)
+    r = sampler(uncoupled, law, rng=rng(), samples=5, local_samples=6, adversarial_sets=0)
     assert r.witness["evaluations"] == 3 * 2 * 5
     # the uncoupled map with per-contact restitution is a product of scalar maps: monotone
-    r = pc.check_impact_monotone(uncoupled, ImpactLaw.build("newton", E_BAD, 2), rng=rng(), samples=8,
+    r = sampler(uncoupled, ImpactLaw.build("newton", E_BAD, 2), rng=rng(), samples=8,
                                  adversarial_sets=1, starts=1, maxiter=30)
     assert r.passed is True and r.reason == ""
 
@@ -432,7 +441,7 @@ def test_evaluation_count_three_contacts():
     law = ImpactLaw.build("newton", 0.5, 3)
     full = [np.array([0, 1, 2])]
     for local, n in ((9, 6), (3, 4), (1, 4)):
-        r = pc.check_impact_monotone(sys3, law, rng=rng(), active_sets=full, samples=4,
+        r = sampler(sys3, law, rng=rng(), active_sets=full, samples=4,
                                      local_samples=local, adversarial_sets=0)
         assert r.witness["evaluations"] == 2 * 4 + n * (2 * 3 + 2), local
         assert r.witness["largest_set"] == 3
@@ -442,7 +451,7 @@ def test_several_laws_and_visited_sets(pair):
     law = ImpactLaw.build("newton", E_BAD, 2)
     rho_star = analytic_rho(delassus_ref(pair, [0, 1]), E_BAD)
     kw = dict(samples=4, local_samples=16, adversarial_sets=0)
-    r = pc.check_impact_monotone(pair, law, rng=rng(1), laws=("poisson", "newton"), visited=[np.array([1, 0])], **kw)
+    r = sampler(pair, law, rng=rng(1), laws=("poisson", "newton"), visited=[np.array([1, 0])], **kw)
     per = r.witness["max_rho_per_law"]
     assert set(per) == {"newton", "poisson"}
     assert r.witness["max_rho"] == max(per.values()) == per["newton"]
@@ -453,20 +462,20 @@ def test_several_laws_and_visited_sets(pair):
     one = 2 * 2 * 4 + 2 * 4 + 16 * (2 * 2 + 2)
     assert r.witness["evaluations"] == 2 * one
     # active_sets replaces the candidate and visited sets
-    r = pc.check_impact_monotone(pair, law, rng=rng(), active_sets=[[1]], samples=4, adversarial_sets=0,
+    r = sampler(pair, law, rng=rng(), active_sets=[[1]], samples=4, adversarial_sets=0,
                                  visited=[np.array([0, 1])])
     assert r.witness["sets_checked"] == 1 and r.witness["largest_set"] == 1 and r.passed is True
     assert r.witness["active_set"] == [1] and r.witness["restitution"] == [0.95]
-    f = pc.check_impact_monotone(pair, law, rng=rng(), active_sets=[np.array([1.0])], samples=4, adversarial_sets=0)
+    f = sampler(pair, law, rng=rng(), active_sets=[np.array([1.0])], samples=4, adversarial_sets=0)
     assert f.witness["active_set"] == [1] and f.witness["max_rho"] == r.witness["max_rho"]
 
 
 def test_solver_choice_and_unknown_solver(pair):
     law = ImpactLaw.build("newton", E_BAD, 2)
     kw = dict(rng=rng(), active_sets=[np.array([0, 1])], samples=4, local_samples=8, adversarial_sets=0)
-    a = pc.check_impact_monotone(pair, law, solver="lemke", **kw)
+    a = sampler(pair, law, solver="lemke", **kw)
     kw["rng"] = rng()
-    b = pc.check_impact_monotone(pair, law, **kw)
+    b = sampler(pair, law, **kw)
     assert a.witness["max_rho"] == pytest.approx(b.witness["max_rho"], rel=1e-9)
     with pytest.raises(Exception, match="nope"):
-        pc.check_impact_monotone(pair, law, solver="nope", **kw)
+        sampler(pair, law, solver="nope", **kw)

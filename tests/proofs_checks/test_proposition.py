@@ -84,13 +84,14 @@ def test_exact_detector_with_a_tolerance_and_no_K(dm):
                               bad.witness["projected_master__jump_slave_max_diff"])
     ball = pc.load("bouncing_ball", {"simulation.t_end": 1.5})
     r = pr.check_proposition1_exact(ball)
-    assert r.witness["projected_master__jump_slave"] == "not applicable: K is not positive definite"
+    assert r.witness["projected_master__jump_slave"].startswith("not applicable: K is singular (exact")
     assert "projected_master__jump_slave_max_diff" not in r.witness
-    assert r.passed is True and r.reason == "jump pair not applicable (K not ≻ 0)"
+    assert r.passed is True and r.reason.startswith("jump pair not applicable: K is singular (exact")
     assert r.witness["plain_master__nojump_slave_closed_steps"] > 0
     off = pr.check_proposition1_exact(ball, slave_offset=1e-9)
     assert off.reason == ("plain_master__nojump_slave: the slave leaves the master's trajectory; "
-                          "jump pair not applicable (K not ≻ 0)")
+                          "jump pair not applicable: K is singular (exact: Kx = 0, x in stiffness_spd's witness): "
+                          "the pair needs the K-metric projection")
 
 
 def _fit(hs, y):
@@ -146,8 +147,8 @@ def test_h_scaling_without_contact_and_without_K():
     assert r.summary_keys == ("plain_master__jump_slave_order", "projected_master__nojump_slave_order",
                               "plain_master__jump_slave_rms", "projected_master__nojump_slave_rms", "h")
     na = pr.check_proposition1_h_scaling(pc.load("bouncing_ball"))
-    assert na.passed is None and na.reason == ("K is not positive definite: both mismatched pairs need "
-                                               "the K-metric projection")
+    assert na.passed is None and na.reason == ("K is singular (exact: Kx = 0, x in stiffness_spd's witness): "
+                                               "both mismatched pairs need the K-metric projection")
     assert na.name == "proposition1_h_scaling" and na.equation == "Proposition 1 (continuous limit h → 0)"
 
 
