@@ -132,9 +132,12 @@ def simulate(sc, case: Case, **kwargs):
 
 def engine_kwargs(solver: str) -> dict[str, str]:
     """The engine keyword of a case with contact solver ``solver``: none (the engine
-    registry's first that accepts the run: compiled) when the kernel has the solver, else
-    ``engine="python"`` (:func:`bench.suites.engine_for`)."""
-    return {} if engine_for(solver) == "compiled" else {"engine": "python"}
+    registry's first that accepts the run) when the registry's first engine has the solver, else
+    the engine :func:`bench.suites.engine_for` names."""
+    from observer.engines import ENGINES
+
+    chosen = engine_for(solver)
+    return {} if chosen == next(iter(ENGINES)) else {"engine": chosen}
 
 
 def engine_columns(res) -> dict[str, Any]:

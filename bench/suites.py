@@ -159,7 +159,6 @@ def _canon(v: Any) -> str:
     return str(v)
 
 
-@functools.lru_cache(maxsize=None)
 def engine_for(solver: str) -> str:
     """The engine a case with contact solver ``solver`` runs on: the one
     :func:`observer.engines.choose` gives a time-stepping run of the built-in

@@ -27,9 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
-from observer import stats
 from observer.errors import InputError
 from observer.metrics import RHOS, settle_column
 
@@ -88,6 +86,8 @@ def run_master(sc, designs, n: int, seed: int, integrator: str, engine, workers,
     """One master's paired members plus its zero-error member: per member V_on, the settling
     times, the decay rate (:func:`observer.stats.decay_rates`); per design the floor. A plain
     function of picklable arguments (it runs on Dask workers)."""
+    import pandas as pd
+    from observer import stats
     from observer.ensemble import ensemble, sample_errors
 
     rng = np.random.default_rng(seed)
@@ -124,11 +124,13 @@ def run_master(sc, designs, n: int, seed: int, integrator: str, engine, workers,
 
 def _positions(sc, designs, X, integrator, cluster) -> pd.DataFrame:
     """Position errors q̂ − q at the window's start and end of the first members (K singular)."""
-    from observer.ensemble import INTEGRATOR_NAMES, member_name, member_slaves
+    import pandas as pd
+    from observer import stats
+    from observer.ensemble import member_name, member_slaves
     from observer.simulate import simulate
 
     res = simulate(sc, observers=member_slaves(sc, designs, X, range(X.shape[0])),
-                   integrator=INTEGRATOR_NAMES[integrator])
+                   integrator=integrator)
     t_on, t_off = window_of(sc)
     k_on = int(np.searchsorted(res.t, t_on - 1e-12))
     k_off = int(np.searchsorted(res.t, t_off + 1e-12)) - 1
@@ -237,6 +239,7 @@ class Comparison:
 
 
 def _t(x: float) -> str:
+    from observer import stats
     return stats.NOT_REACHED if not math.isfinite(x) else f"{x:.3g} s"
 
 
@@ -255,10 +258,10 @@ def _json_default(x):
 # ---------------------------------------------------------------------------------------
 def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5, *, rho: float = 1e-6,
             seed: int = 0, overrides: dict | None = None, h: float | None = None, t_end: float | None = None,
-            integrator: str = "timestepping", engine: str | None = None, spread: float = SPREAD,
+            integrator: str = "time-stepping", engine: str | None = None, spread: float = SPREAD,
             grid_jitter: float = 0.0, initial_errors: str = "energy_sphere", V0: float | None = None,
-            workers: int | None = None, scheduler: str | None = None, confidence: float = stats.CONFIDENCE,
-            n_resamples: int = stats.N_RESAMPLES) -> Comparison:
+            workers: int | None = None, scheduler: str | None = None, confidence: float | None = None,
+            n_resamples: int | None = None) -> Comparison:
     """Compare observer designs on ``scenario`` with paired members against several masters.
 
     Parameters
@@ -278,7 +281,7 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
         Seeds the masters and every master's errors.
     overrides : dict, optional
         Dotted-key overrides (``--set``); ``h``, ``t_end`` override the step and horizon.
-    integrator : {"timestepping", "event"}
+    integrator : {"time-stepping", "event"}
         The masters' and observers' integrator; ``"event"`` is the exact event-driven
         reference, free of discretization floors.
     spread, grid_jitter : float
@@ -297,10 +300,14 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
     InputError
         Naming the argument that is not valid.
     """
-    from observer.ensemble import _check_designs, _load
+    from observer import stats
+    from observer.ensemble import _check_designs, _load, integrator_name
 
+    confidence = stats.CONFIDENCE if confidence is None else confidence
+    n_resamples = stats.N_RESAMPLES if n_resamples is None else n_resamples
     t0 = time.perf_counter()
     designs = _check_designs(designs)
+    integrator = integrator_name(integrator)
     if len(designs) < 2:
         raise InputError("designs", "compare needs at least two designs")
     for name, value, low in (("n", n, 2), ("masters", masters, 1), ("seed", seed, 0)):
@@ -345,6 +352,8 @@ def _run_jobs(jobs, scheduler):
 
 
 def _assemble(sc, designs, rho, done, confidence, n_resamples, seed) -> Comparison:
+    import pandas as pd
+    from observer import stats
     members = pd.concat([d["members"] for d in done], ignore_index=True)
     floors = pd.concat([d["floors"] for d in done], ignore_index=True)
     positions = next((d["positions"] for d in done if d["positions"] is not None), None)
@@ -365,6 +374,7 @@ def _assemble(sc, designs, rho, done, confidence, n_resamples, seed) -> Comparis
 
 def _warnings(members, rr, settling, ff, bf, positions, rho) -> list[str]:
     """Why a reading of the estimands could be decided by a floor, a window or the grid."""
+    from observer import stats
     out = []
     for r in ff.to_dict("records"):
         if r["below_floor"]:
@@ -412,7 +422,7 @@ def add_parser(sub) -> None:
                                                           "V of the scenario's observer error)")
     s.add_argument("--h", type=float, help="step size")
     s.add_argument("--t-end", type=float, help="final time")
-    s.add_argument("--integrator", choices=["timestepping", "event"], default="timestepping")
+    s.add_argument("--integrator", choices=["time-stepping", "event"], default="time-stepping")
     s.add_argument("--spread", type=float, default=SPREAD, help="size of the masters' initial-state "
                                                                 "perturbations (default 0.05)")
     s.add_argument("--grid-jitter", type=float, default=0.0, help="masters' steps h·(1 ± this) (default 0)")
@@ -471,6 +481,7 @@ SELF_CHECK = """<script>
 
 def _figure(res: Comparison) -> str:
     """A PNG (base64): the rate ratios with their intervals, and the Kaplan–Meier curves."""
+    from observer import stats
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -506,6 +517,8 @@ def _figure(res: Comparison) -> str:
 
 
 def _table(frame: pd.DataFrame) -> str:
+    from observer import stats
+
     def cell(v):
         if isinstance(v, float):
             return stats.NOT_REACHED if not math.isfinite(v) else f"{v:.4g}"

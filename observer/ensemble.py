@@ -175,17 +175,24 @@ def _generator(seed: Any, rng: Any) -> tuple[np.random.Generator, int | None]:
     return np.random.default_rng(seed), seed
 
 
-def _check_options(integrator, store, paths, n, workers, out):
-    """Normalize integrator, store, paths, workers, out; InputError naming the keyword."""
+def integrator_name(integrator, stacklevel: int = 3) -> str:
+    """``integrator`` as :func:`observer.simulate` names it: an old spelling
+    (:data:`DEPRECATED_INTEGRATOR_NAMES`) with a :class:`DeprecationWarning`, anything else
+    not in :data:`INTEGRATOR_NAMES` an :class:`InputError` naming ``integrator``."""
     if isinstance(integrator, str) and integrator in DEPRECATED_INTEGRATOR_NAMES:
         import warnings
         new = DEPRECATED_INTEGRATOR_NAMES[integrator]
         warnings.warn(f"integrator {integrator!r} is spelled {new!r}; the old spelling will be removed",
-                      DeprecationWarning, stacklevel=3)
+                      DeprecationWarning, stacklevel=stacklevel + 1)
         integrator = new
     if not isinstance(integrator, str) or integrator not in INTEGRATOR_NAMES:
         raise InputError("integrator", f"must be one of {sorted(INTEGRATOR_NAMES)}, got {integrator!r}")
-    integrator = INTEGRATOR_NAMES[integrator]
+    return INTEGRATOR_NAMES[integrator]
+
+
+def _check_options(integrator, store, paths, n, workers, out):
+    """Normalize integrator, store, paths, workers, out; InputError naming the keyword."""
+    integrator = integrator_name(integrator, stacklevel=4)
     if store not in ("summary", "full"):
         raise InputError("store", f'must be "summary" or "full", got {store!r}')
     if integrator == "event":

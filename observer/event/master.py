@@ -845,8 +845,9 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
         return _run_master(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, should_stop)
 
 
-def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_ratio: float,
-                t0: float, should_stop) -> MasterEventResult:
+def _start(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_ratio: float,
+           t0: float, should_stop) -> tuple:
+    """The run's state at t0: ``(run, t_end, x, persistent)`` (the initial closed set decided)."""
     h = float(scenario.h if h is None else h)
     t_end = float(scenario.t_end if t_end is None else t_end)
     t0 = float(t0)
@@ -854,12 +855,19 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
         raise ValueError(f"t_end = {t_end!r} must be finite and ≥ t0 = {t0!r}")
     run = _Run(scenario, h, t_end, max_events, zeno_velocity_ratio, t0)
     run.should_stop = should_stop
-    status = "ok"
-    t = t0
     x = np.concatenate([scenario.q0, scenario.u0]).astype(float)
     if not run.free_flow.intrinsic:
         run.tau = motion_time_scale(run.free_flow, t0, x)
     x, persistent = _initial_contacts(run, x)
+    return run, t_end, x, persistent
+
+
+def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_ratio: float,
+                t0: float, should_stop) -> MasterEventResult:
+    run, t_end, x, persistent = _start(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, should_stop)
+    t0 = run.t0
+    status = "ok"
+    t = t0
     certified: dict[tuple[str, int], float] = {}
     n_events, same_time, t_last_event = 0, 0, -np.inf
     n_impacts = 0                                      # impacts since the last landing
