@@ -42,6 +42,26 @@ def _os_error_file(exc: OSError, args: tuple) -> str:
     return " or ".join(outs) or "output file"
 
 
+def _stdout_closed() -> bool:
+    """Whether standard output is a pipe its reader closed (``... | head``); if so, it is
+    pointed at ``/dev/null`` so that the interpreter's final flush stays silent."""
+    import os
+
+    try:
+        sys.stdout.flush()
+        return False
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return True
+    except (OSError, ValueError):
+        return False
+
+
+#: Exit status of a command whose standard output was closed by its reader (128 + SIGPIPE).
+BROKEN_PIPE_EXIT = 141
+
+
 def guarded(func, *args) -> int:
     """Call ``func(*args)``; turn input, solver, file and out-of-memory errors, and a numerical
     library's own exception (:func:`~observer.errors.is_numerical_failure`), into one
@@ -51,6 +71,14 @@ def guarded(func, *args) -> int:
         return func(*args)
     except (InputError, ContactSolverError) as exc:
         print(f"error: {one_line(str(exc))}", file=sys.stderr)
+        return 2
+    except BrokenPipeError as exc:
+        if exc.filename is None and _stdout_closed():
+            print("error: standard output was closed by its reader (broken pipe); the files "
+                  "written are not affected", file=sys.stderr)
+            return BROKEN_PIPE_EXIT
+        print(f"error: {one_line(_os_error_file(exc, args))}: {one_line(exc.strerror or str(exc))}",
+              file=sys.stderr)
         return 2
     except OSError as exc:
         print(f"error: {one_line(_os_error_file(exc, args))}: {one_line(exc.strerror or str(exc))}",

@@ -45,7 +45,12 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out) if args.out else Path("reports/out") / files[0].name.split(".")[0]
     from reports.build import build_report
     t0 = time.perf_counter()
-    index = build_report(files, out, micro_files=args.micro, command=args.command)
+    try:
+        index = build_report(files, out, micro_files=args.micro, command=args.command)
+    except OSError as exc:              # a read-only folder, a full disk: no partial index.html left
+        where = exc.filename or (out / "index.html")
+        print(f"error: {where}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     print(f"report: {index} ({index.stat().st_size / 1e6:.1f} MB, built in "
           f"{time.perf_counter() - t0:.1f} s)")
     if args.check:
