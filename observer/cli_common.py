@@ -42,20 +42,16 @@ def _os_error_file(exc: OSError, args: tuple) -> str:
     return " or ".join(outs) or "output file"
 
 
-def _stdout_closed() -> bool:
-    """Whether standard output is a pipe its reader closed (``... | head``); if so, it is
-    pointed at ``/dev/null`` so that the interpreter's final flush stays silent."""
+def _silence_stdout() -> None:
+    """Point standard output at ``/dev/null`` (its reader closed it: ``... | head``), so that
+    the interpreter's final flush stays silent."""
     import os
 
     try:
-        sys.stdout.flush()
-        return False
-    except BrokenPipeError:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
-        return True
     except (OSError, ValueError):
-        return False
+        pass
 
 
 #: Exit status of a command whose standard output was closed by its reader (128 + SIGPIPE).
@@ -73,7 +69,8 @@ def guarded(func, *args) -> int:
         print(f"error: {one_line(str(exc))}", file=sys.stderr)
         return 2
     except BrokenPipeError as exc:
-        if exc.filename is None and _stdout_closed():
+        if exc.filename is None:        # results go to regular files only: this is a pipe, stdout
+            _silence_stdout()
             print("error: standard output was closed by its reader (broken pipe); the files "
                   "written are not affected", file=sys.stderr)
             return BROKEN_PIPE_EXIT
