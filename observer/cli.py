@@ -14,6 +14,7 @@ from pathlib import Path
 from observer.cli_common import Parser, guarded, parse_pairs
 from observer.engines import ENGINES
 from observer.errors import InputError, printable
+from observer.outputs import atomic_write, check_outputs
 from observer.validation import check_output_path
 
 _Parser = Parser
@@ -50,6 +51,8 @@ def cmd_run(args) -> int:
     from observer.scenario import load_scenario
     from observer.simulate import simulate
     from observer.stream import ChunkWriter, exit_status
+    check_outputs({"--out": args.out, "--events": args.events},
+                  {"--log": args.log, "scenario": args.scenario})
     check_output_path("--out", args.out, SUFFIXES)
     if args.events is not None:
         check_output_path("--events", args.events, SUFFIXES)
@@ -89,6 +92,7 @@ def cmd_ensemble(args) -> int:
     """``ensemble``: n members per design (:func:`observer.ensemble.ensemble`) to a Parquet file."""
     from observer.ensemble import ensemble
     from observer.scenario import load_scenario
+    check_outputs({"--out": args.out}, {"scenario": args.scenario})
     check_output_path("--out", args.out, (".parquet",))
     sc = load_scenario(args.scenario, parse_pairs(args.set))
     designs = split_names("--designs", args.designs)
@@ -144,11 +148,10 @@ def write_events(res, path: str) -> None:
         raise InputError("--events", "this run kept no event table (time-stepping builds it "
                                      "from every step: drop --record-every / --store summary)")
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
     if p.suffix.lower() == ".parquet":
-        res.events.to_parquet(p, index=False)
+        atomic_write(p, lambda tmp: res.events.to_parquet(tmp, index=False))
     else:
-        res.events.to_csv(p, index=False, float_format="%.17g")
+        atomic_write(p, lambda tmp: res.events.to_csv(tmp, index=False, float_format="%.17g"))
     print(f"wrote {p}: {len(res.events)} events")
 
 
@@ -188,9 +191,10 @@ def _stepping_message(sc, res, in_loop_s: float = 0.0, write_s: float = 0.0) -> 
 def cmd_plot(args) -> int:
     from observer.plotting import plot_run
     from observer.result import read_frame
+    check_outputs({"--out": args.out}, {"result": args.result})
     check_output_path("--out", args.out, IMAGE_SUFFIXES)
     df = read_frame(args.result)
-    path = plot_run(df, args.out, dof=args.dof)
+    path = atomic_write(args.out, lambda tmp: plot_run(df, tmp, dof=args.dof))
     print(f"wrote {path}")
     return 0
 
@@ -200,14 +204,14 @@ def cmd_log(args) -> int:
 
     from observer.result import read_frame
     from observer.switching import log_from_active
+    check_outputs({"--out": args.out}, {"result": args.result})
     out = check_output_path("--out", args.out, (".csv",))
     df = read_frame(args.result)
     cols = sorted((c for c in df.columns if c.startswith("active")), key=lambda c: int(c[6:]))
     if not cols:
         raise InputError(args.result, "no active0.. columns: not a result written by 'run'")
     log = log_from_active(df["t"].to_numpy(), df[cols].to_numpy().astype(bool))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    log.to_csv(out, index=False, float_format="%.17g")
+    atomic_write(out, lambda tmp: log.to_csv(tmp, index=False, float_format="%.17g"))
     impacts = int(np.sum(log["t_open"] == log["t_close"]))
     print(f"wrote {out}: {len(log)} closed intervals ({impacts} impacts of zero length) "
           f"over {len(cols)} contacts")

@@ -81,6 +81,22 @@ def escape_unencodable_output() -> None:
                 pass
 
 
+def _silence_stdout() -> None:
+    """Point standard output at ``/dev/null`` (its reader closed it: ``... | head``), so that
+    the interpreter's final flush stays silent."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+
+
+#: Exit status of a command whose standard output was closed by its reader (128 + SIGPIPE).
+BROKEN_PIPE_EXIT = 141
+
+
 def guarded(func, *args) -> int:
     """Call ``func(*args)``; turn input, solver, file and out-of-memory errors, and a numerical
     library's own exception (:func:`~observer.errors.is_numerical_failure`), into one
@@ -92,6 +108,15 @@ def guarded(func, *args) -> int:
         return func(*args)
     except (InputError, ContactSolverError) as exc:
         print(f"error: {one_line(str(exc))}", file=sys.stderr)
+        return 2
+    except BrokenPipeError as exc:
+        if exc.filename is None:        # results go to regular files only: this is a pipe, stdout
+            _silence_stdout()
+            print("error: standard output was closed by its reader (broken pipe); the files "
+                  "written are not affected", file=sys.stderr)
+            return BROKEN_PIPE_EXIT
+        print(f"error: {one_line(_os_error_file(exc, args))}: {one_line(exc.strerror or str(exc))}",
+              file=sys.stderr)
         return 2
     except OSError as exc:
         print(f"error: {one_line(_os_error_file(exc, args))}: {one_line(exc.strerror or str(exc))}",

@@ -482,13 +482,14 @@ def _metadata(sc, designs, n, seed, initial_errors, V0, integrator, engine, stor
 def write_ensemble(df, out: str | Path) -> Path:
     """The rows to ``out`` (Parquet, the metadata in its attrs) and, when the frame carries
     paths, those to ``<stem>.paths.parquet`` beside it. Returns the rows' path."""
+    from observer.outputs import atomic_write
+
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
     rows = df.copy()
     rows.attrs = {"metadata": df.attrs.get("metadata", {})}
-    rows.to_parquet(out, index=False)
-    if "paths" in df.attrs:
+    if "paths" in df.attrs:             # written first: a failed write leaves no rows without their paths
         paths = df.attrs["paths"].copy()
         paths.attrs = {}
-        paths.to_parquet(out.with_name(out.stem + ".paths.parquet"), index=False)
+        atomic_write(out.with_name(out.stem + ".paths.parquet"), lambda tmp: paths.to_parquet(tmp, index=False))
+    atomic_write(out, lambda tmp: rows.to_parquet(tmp, index=False))
     return out

@@ -193,6 +193,25 @@ def energy_growth(system, q: np.ndarray, u: np.ndarray) -> float:
     return max(0.0, float(np.max(E - E[0])) / top)
 
 
+def aliased_signals(system, h: float) -> list[str]:
+    """One warning per harmonic term of the forcing f(t) or the gap offset ν(t) that the grid
+    t_k = k·h samples below its Nyquist rate (h·ω > π, nonzero amplitude).
+
+    Such a term is aliased: the scheme sees it at a frequency in [0, π/h] that it does not
+    have, and its response is not resolved however well h resolves the system's own modes
+    (h·ω_max counts those only). The exact response to a forcing of amplitude F at
+    ω ≫ ω_max is O(F/(m ω)) in velocity; the stepped one is O(F h/m).
+    """
+    out = []
+    for field, sig in (("system.forcing", system.forcing), ("system.gap", system.gap)):
+        for j, w in enumerate(np.asarray(sig.omega, dtype=float)):
+            if h * w > np.pi and np.any(np.asarray(sig.amplitude)[j] != 0):
+                out.append(f"{field} term {j}: h·ω = {h * w:.3g} > π (ω = {w:.4g} rad/s, h = {h:g}): "
+                           "the signal is sampled below its Nyquist rate (aliased); the response "
+                           "to it is not resolved: reduce h below π/ω")
+    return out
+
+
 # ---------------------------------------------------------------------------------------
 # the record
 # ---------------------------------------------------------------------------------------
@@ -228,6 +247,7 @@ def assess(inp, record_every: int, q: np.ndarray, u: np.ndarray, active: np.ndar
         msgs.append(f"h·ω_max = {how:.3g} > {H_OMEGA_MAX:g}: the stiffest mode (ω_max = {w:.4g} rad/s) "
                     f"is not resolved by h = {h:g} (its discrete frequency is off by "
                     f"{100 * (1 - 2 * np.arctan(how / 2) / how):.0f} %)")
+    msgs.extend(aliased_signals(sys_, h))
     if pen_rel > PENETRATION_MAX_REL:
         msgs.append(f"penetration {pen:.3g} = {100 * pen_rel:.3g} % of the length scale {ell:.3g} "
                     f"(bound {100 * PENETRATION_MAX_REL:g} %) at t = {float(st.time(gap_step)):.6g}: "

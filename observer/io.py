@@ -19,10 +19,14 @@ Layout
 Integrity
 ---------
 Every file carries its row count and checksums, written last (:data:`INTEGRITY_KEY` of the
-metadata: ``{"state": "complete", "rows", "sha256", "metadata_sha256", "run"}``): for a CSV
+metadata: ``{"state": "complete", "rows", "sha256", "metadata_sha256", "digest", "run"}``): for a CSV
 the SHA-256 of its bytes, in the sidecar; for Parquet the SHA-256 of its columns' values
 (:class:`ContentHash`), in the schema metadata. ``metadata_sha256`` covers the rest of the
-metadata. A run that streams its file (:mod:`observer.stream`) first writes a sidecar whose
+metadata, and ``digest`` (:func:`bound_digest`) binds the two and the row count: a file whose
+content and metadata each carry a valid checksum of their own but come from two different
+writings (another run's metadata on rows of the same shape) is refused. Files of the previous
+format (no ``digest``) are not trusted: refused, or read with ``partial=True`` as unverified.
+A run that streams its file (:mod:`observer.stream`) first writes a sidecar whose
 integrity says ``"running"`` (``NAME.json`` for a CSV, :func:`running_path` for Parquet, whose
 rows go to :func:`part_path` and are renamed when the file is closed), replaced when it
 finishes: a killed run leaves it saying ``"running"``.
@@ -161,10 +165,53 @@ class ContentHash:
         return top.hexdigest()
 
 
+def bound_digest(rows, content_sha: str, metadata_sha: str, run) -> str:
+    """SHA-256 of one writing of a file: its row count, content checksum, metadata checksum
+    and run id together (none of them can be taken from another writing)."""
+    text = f"observer-integrity-2\0{rows}\0{content_sha}\0{metadata_sha}\0{run}"
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
 def integrity_record(content: ContentHash, meta: dict, run: str) -> dict:
-    """The integrity record of a complete file: rows, content and metadata checksums."""
-    return {"state": COMPLETE, "rows": content.rows, "sha256": content.hexdigest(),
-            "metadata_sha256": metadata_digest(meta), "run": run}
+    """The integrity record of a complete file: rows, content and metadata checksums and the
+    digest binding them (:func:`bound_digest`)."""
+    rec = {"state": COMPLETE, "rows": content.rows, "sha256": content.hexdigest(),
+           "metadata_sha256": metadata_digest(meta), "run": run}
+    rec["digest"] = bound_digest(rec["rows"], rec["sha256"], rec["metadata_sha256"], run)
+    return rec
+
+
+def _binding_problem(integ: dict, content_sha: str, meta: dict) -> str | None:
+    """What keeps a file's parts from being one writing (None: bound)."""
+    if "digest" not in integ:
+        return ("was written by an earlier version of the toolkit (its content and metadata are "
+                "not bound by one digest): it cannot be verified")
+    if bound_digest(integ.get("rows"), content_sha, metadata_digest(meta), integ.get("run")) != integ["digest"]:
+        return ("its content and its metadata come from different writings (the integrity "
+                "digest does not bind them): the metadata belongs to another run")
+    return None
+
+
+#: Fraction of the memory available that a result file read whole may take.
+MEMORY_FRACTION = 0.5
+
+
+def check_input_file(path: Path, field: str | None = None) -> None:
+    """Refuse a result file that is not a regular file (a FIFO, ``/dev/zero``, a link to one)
+    or larger than :data:`MEMORY_FRACTION` of the memory available, naming it."""
+    import stat
+
+    name = field or str(path)
+    st = os.stat(path)
+    if not stat.S_ISREG(st.st_mode):
+        raise InputError(name, f"{str(path)!r} is not a regular file (a device, FIFO or link to one)")
+    try:
+        avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):     # no such counter on this system
+        return
+    if st.st_size > MEMORY_FRACTION * avail:
+        raise InputError(name, f"{str(path)!r} is {st.st_size / 2**30:.1f} GiB, more than half the "
+                               f"memory available ({avail / 2**30:.1f} GiB): too large to read whole")
 
 
 def csv_rows(data: bytes) -> int:
@@ -178,7 +225,17 @@ def read_events(path: str | Path) -> pd.DataFrame | None:
     ev = events_path(path)
     if not ev.exists():
         return None
-    return _read_checked(ev, False)[0]
+    df, meta = _read_checked(ev, False)
+    res = Path(path)
+    if res.exists():
+        try:
+            owner = _read_checked(res, False)[1]
+        except InputError:
+            owner = None
+        if owner is not None and owner.get("events_file") != ev.name:
+            raise InputError(str(ev), f"is not the events table of {res.name} (that run kept no "
+                                      "event table): a leftover of an earlier run")
+    return df
 
 
 def _check_suffix(path: Path) -> str:
@@ -189,10 +246,23 @@ def _check_suffix(path: Path) -> str:
 
 
 def _write_sidecar(side: Path, text: str) -> None:
-    """Write a sidecar atomically (a temporary name, then renamed)."""
+    """Write a sidecar atomically (a temporary name, then renamed; removed if that fails)."""
     tmp = side.with_name(f".{side.name}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, side)
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, side)
+    except OSError:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def remove_events(path: str | Path) -> None:
+    """Remove the events table (and its sidecar) beside the result ``path``: a rewritten
+    result without events must not keep an earlier run's."""
+    ev = events_path(path)
+    for f in (ev, sidecar_path(ev)):
+        if f.is_file() or f.is_symlink():
+            f.unlink()
 
 
 def write_frame(df: pd.DataFrame, path: str | Path) -> Path:
@@ -208,12 +278,22 @@ def write_frame(df: pd.DataFrame, path: str | Path) -> Path:
     Path
         ``path``.
     """
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    from observer.outputs import check_regular, family, output_lock
 
     path = Path(path)
     suffix = _check_suffix(path)
+    for f in family(path)[:2]:
+        check_regular(str(path), f)
     path.parent.mkdir(parents=True, exist_ok=True)
+    with output_lock(path):
+        _write_frame_locked(df, path, suffix)
+    return path
+
+
+def _write_frame_locked(df: pd.DataFrame, path: Path, suffix: str) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     meta = json.loads(to_json(df.attrs))
     meta.pop(INTEGRITY_KEY, None)
     content = ContentHash()
@@ -223,19 +303,29 @@ def write_frame(df: pd.DataFrame, path: str | Path) -> Path:
         plain.attrs = {}
         data = plain.to_csv(None, index=False, float_format="%.17g", lineterminator="\n").encode("utf-8")
         content.add_bytes(data, csv_rows(data))
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
         meta[INTEGRITY_KEY] = integrity_record(content, meta, new_run_id())
-        _write_sidecar(sidecar_path(path), to_json(meta) + "\n")
+        side_tmp = sidecar_path(path).with_name(f".{sidecar_path(path).name}.tmp")
+        try:
+            tmp.write_bytes(data)
+            side_tmp.write_text(to_json(meta) + "\n", encoding="utf-8")
+            os.replace(tmp, path)
+            os.replace(side_tmp, sidecar_path(path))    # last: the file and its sidecar agree
+        except OSError:
+            tmp.unlink(missing_ok=True)
+            side_tmp.unlink(missing_ok=True)
+            raise
     else:
         table = pa.Table.from_pandas(df, preserve_index=False)
         content.add_table(table)
         meta[INTEGRITY_KEY] = integrity_record(content, meta, new_run_id())
         schema_meta = dict(table.schema.metadata or {})
         schema_meta[PARQUET_KEY] = to_json(meta).encode("utf-8")
-        pq.write_table(table.replace_schema_metadata(schema_meta), tmp)
-        os.replace(tmp, path)
-    return path
+        try:
+            pq.write_table(table.replace_schema_metadata(schema_meta), tmp)
+            os.replace(tmp, path)
+        except OSError:
+            tmp.unlink(missing_ok=True)
+            raise
 
 
 SIDECAR_MAX_BYTES = 16 * 1024 * 1024
@@ -276,7 +366,7 @@ def _csv_problem(data: bytes, meta: dict, integ) -> str | None:
         return "its checksum does not match its sidecar's: the file was altered"
     if metadata_digest(meta) != integ.get("metadata_sha256"):
         return "the metadata checksum does not match: its sidecar was altered"
-    return None
+    return _binding_problem(integ, integ["sha256"], meta)
 
 
 def _whole_csv_rows(data: bytes) -> pd.DataFrame:
@@ -357,7 +447,10 @@ def _read_parquet(path: Path, partial: bool) -> tuple[pd.DataFrame, dict, str | 
         problem = "its checksum does not match its metadata's: the file was altered"
     elif metadata_digest(meta) != integ.get("metadata_sha256"):
         problem = "the metadata checksum does not match: the metadata was altered"
-    if problem is not None and not (partial and integ is None):
+    else:
+        problem = _binding_problem(integ, integ["sha256"], meta)
+    unbound = isinstance(integ, dict) and "digest" not in integ
+    if problem is not None and not (partial and (integ is None or unbound)):
         return None, meta, problem                  # a damaged Parquet file: no row is known whole
     df = table.to_pandas(ignore_metadata=True)     # the columns as checked (no index was written)
     df.attrs = {}
@@ -375,6 +468,8 @@ def _read_checked(path: Path, partial: bool) -> tuple[pd.DataFrame, dict]:
     from pyarrow import ArrowException
 
     try:
+        if path.exists():
+            check_input_file(path)
         df, meta, problem = (_read_parquet if suffix == ".parquet" else _read_csv)(path, partial)
     except (UnicodeDecodeError, ValueError, OSError, ArrowException) as exc:
         if isinstance(exc, InputError):

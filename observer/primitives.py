@@ -28,6 +28,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from observer.numba_cache import install as _install_cache_guard
+
+_install_cache_guard()        # a damaged or unwritable numba cache: a warning and a recompile
 
 OK, LCP_FAILED, PROJECTION_FAILED, RESIDUAL_EXCEEDED = 0, 1, 2, 3
 STATS_SIZE = 8

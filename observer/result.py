@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from observer.errors import InputError
-from observer.io import events_path, jsonable, read_frame, read_result, write_frame  # noqa: F401
+from observer.io import events_path, jsonable, read_frame, read_result, remove_events, write_frame  # noqa: F401
 from observer.metrics import RHOS
 from observer.model import LinearSystem
 
@@ -506,6 +506,9 @@ class SimulationResult:
         df = self.to_frame()
         if self.events is not None:
             write_frame(self.events, events_path(path))
+            df.attrs["events_file"] = events_path(path).name
+        else:
+            remove_events(path)                      # an earlier run's events are not this one's
         return write_frame(df, path)
 
 

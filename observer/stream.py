@@ -18,11 +18,11 @@ replaced (CSV) or removed (Parquet) once the file is whole: a killed run leaves 
 :func:`observer.io.read_result` refuses the file (or, ``partial=True``, reads a CSV's whole rows).
 Every file carries its row count and checksums (:func:`observer.io.integrity_record`), written last.
 
-A run stopped by SIGINT/SIGTERM (the loop stops after its current window, see
+A run stopped by SIGINT/SIGTERM/SIGHUP (the loop stops after its current window, see
 :mod:`observer.loop`) or by an exception still closes the file, with a status
 ``{"state": "stopped", "reason": ...}`` saying where it stopped: every finished step stays
 readable. Once rows are on disk, the writer (used as a context manager in the main thread)
-masks SIGINT and SIGTERM outside the loop until the file is closed — a second signal during
+masks SIGINT, SIGTERM and SIGHUP outside the loop until the file is closed — a second signal during
 the stop cannot cut the close short — and delivers the first one it masked after that. A
 failed write (a full disk) raises an ``OSError`` naming the file.
 
@@ -43,14 +43,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from observer.io import (INTEGRITY_KEY, PARQUET_KEY, SUFFIXES, ContentHash, integrity_record, new_run_id,
-                         part_path, running_path, running_record, sidecar_path, to_json)
+                         part_path, remove_events, running_path, running_record, sidecar_path, to_json)
 from observer.errors import InputError
 
 if TYPE_CHECKING:
     import pandas as pd
 
 #: Exit status of ``observer run`` for a run stopped by each signal (128 + signal number).
-SIGNAL_EXIT = {"SIGINT": 128 + int(signal.SIGINT), "SIGTERM": 128 + int(signal.SIGTERM)}
+SIGNAL_EXIT = {"SIGINT": 128 + int(signal.SIGINT), "SIGTERM": 128 + int(signal.SIGTERM),
+               "SIGHUP": 128 + int(signal.SIGHUP)}
 #: Exit status of a run stopped for another reason (its residual above tolerance).
 STOPPED_EXIT = 1
 
@@ -89,7 +90,7 @@ class ChunkWriter:
         written in place, its sidecar saying ``"running"`` until it is closed).
     """
 
-    SIGNALS = ("SIGINT", "SIGTERM")
+    SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
@@ -109,6 +110,11 @@ class ChunkWriter:
         self._masked: list[int] = []
         self._closing = False
         self._opened = False
+        self._lock = None
+        from observer.outputs import check_regular, family
+
+        for f in family(self.path)[:2]:
+            check_regular(str(self.path), f)
 
     # -- the on_chunk callback ----------------------------------------------------------
     def __call__(self, chunk) -> None:
@@ -120,7 +126,14 @@ class ChunkWriter:
 
     def _start(self) -> None:
         """Before the first row: the directory and the ``running`` sidecar."""
+        from observer.outputs import output_lock
+
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        if self._lock is None:
+            self._lock = output_lock(self.path)
+            self._lock.__enter__()                   # refused if another run writes this file
+        if self.suffix == ".csv":
+            remove_events(self.path)                 # the earlier result is being overwritten
         side = running_path(self.path)
         tmp = side.with_name(f".{side.name}.tmp")
         tmp.write_text(running_record(self._run), encoding="utf-8")
@@ -188,6 +201,8 @@ class ChunkWriter:
                 self._writer.close()
                 os.replace(self._target, self.path)
                 running_path(self.path).unlink(missing_ok=True)
+                if "events_file" not in meta:
+                    remove_events(self.path)
             else:
                 if self.chunks == 0:
                     data = b"t\n"
@@ -201,9 +216,17 @@ class ChunkWriter:
         except OSError as exc:
             self.closed = True
             self._discard()
+            self._release()
             raise self._oserror(exc) from None
         self.closed = True
+        self._release()
         return self.path
+
+    def _release(self) -> None:
+        """Release the lock on the output (:func:`observer.outputs.output_lock`)."""
+        if self._lock is not None:
+            lock, self._lock = self._lock, None
+            lock.__exit__(None, None, None)
 
     def _discard(self) -> None:
         """A Parquet file that cannot be closed is unreadable: its partial file is removed
@@ -218,6 +241,9 @@ class ChunkWriter:
                 pass
             self._writer = None
             part_path(self.path).unlink(missing_ok=True)
+        else:
+            tmp = sidecar_path(self.path)
+            tmp.with_name(f".{tmp.name}.tmp").unlink(missing_ok=True)
 
     def finish(self, result) -> Path:
         """Close with the metadata and status of ``result`` (a :class:`SimulationResult`).
@@ -277,6 +303,7 @@ class ChunkWriter:
                 if self._opened and self.suffix == ".csv":
                     self.path.unlink(missing_ok=True)    # a first chunk cut short
                 running_path(self.path).unlink(missing_ok=True)
+                self._release()
             elif exc_type is not None and not self.closed and not issubclass(exc_type, OSError):
                 where = f"after t = {self.t_last:.9g}" if self.t_last is not None else "before the first step"
                 self.close({"status": {"state": "stopped",
@@ -284,6 +311,7 @@ class ChunkWriter:
             elif exc_type is not None and not self.closed:
                 self.closed = True                       # a failed write (a full disk): nothing more to write
                 self._discard()
+                self._release()
             elif not self.closed:
                 self.close({"status": {"state": "stopped", "reason": "the writer was not finished"}})
         finally:

@@ -51,6 +51,10 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:            # results that are not results, or hold no rows
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:              # a read-only folder, a full disk: no partial index.html left
+        where = exc.filename or (out / "index.html")
+        print(f"error: {where}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     print(f"report: {index} ({index.stat().st_size / 1e6:.1f} MB, built in "
           f"{time.perf_counter() - t0:.1f} s)")
     if args.check:

@@ -58,9 +58,9 @@ def build_report(result_files: Iterable[str | Path], out_dir: str | Path, *,
     page = render(title=title or f"Observer toolkit benchmark report: {', '.join(ctx.suites)}",
                   header=header_table(ctx), sections=[s for s in sections if not s.lead],
                   command=ctx.command, lead=[s for s in sections if s.lead])
-    path = ctx.out_dir / "index.html"
-    path.write_text(page, encoding="utf-8")
-    return path
+    from observer.outputs import atomic_write
+
+    return atomic_write(ctx.out_dir / "index.html", lambda tmp: tmp.write_text(page, encoding="utf-8"))
 
 
 def resolve_figures(sections: list[Section]) -> None:

@@ -22,6 +22,22 @@ freedom): its exact flow uses dense matrix exponentials of size 2n and dense M�
 (sparse) system is refused with the size instead of attempted."""
 
 
+EVENT_MAX_PERIODS = 1e6
+"""Most periods of a forcing or gap-offset term over the run the event engine accepts: it
+locates every root of the gap functions, and a gap driven at ω has O(ω·t_end) of them."""
+
+
+def _signal_periods(sc):
+    """``(field, ω, periods)`` of the first harmonic term of f(t) or ν(t) with more than
+    :data:`EVENT_MAX_PERIODS` periods over ``[0, t_end]``, else None."""
+    for field, sig in (("system.forcing", sc.system.forcing), ("system.gap", sc.system.gap)):
+        for j, w in enumerate(np.asarray(sig.omega, dtype=float)):
+            count = w * sc.t_end / (2 * np.pi)
+            if count > EVENT_MAX_PERIODS and np.any(np.asarray(sig.amplitude)[j] != 0):
+                return field, float(w), float(count)
+    return None
+
+
 class EventEngine(Engine):
     """The exact event-driven integrator: impact problems by pivoting, the impact laws that
     declare :attr:`~observer.impact.ImpactLawDefinition.event_engine`, χ from the master's
@@ -40,6 +56,13 @@ class EventEngine(Engine):
             return Refusal(f"the event-driven integrator handles up to {EVENT_MAX_N} degrees of freedom "
                            f"(it forms dense 2n × 2n matrix exponentials, O(n³)); this system has "
                            f"n = {n}: use integrator=\"time-stepping\"", "integrator")
+        periods = _signal_periods(run.scenario)
+        if periods is not None:
+            field, w, count = periods
+            return Refusal(f"oscillates {count:.3g} times over the run (ω = {w:.4g} rad/s, "
+                           f"t_end = {run.scenario.t_end:g}): the event-driven integrator follows every "
+                           f"oscillation of the gaps (at most {EVENT_MAX_PERIODS:.0e}); use "
+                           "integrator=\"time-stepping\" or a slower signal", field)
         for option, value, default in (("record_every", run.record_every, None),
                                        ("store", run.store, "full")):
             if value != default:

@@ -38,7 +38,7 @@ state entry, a gap of the master or an observer's V): the run stops at the last 
 every quantity is finite — the compiled engine checks once per window and re-runs a window
 that fails one step at a time (the kernel is untouched), the python engine checks every step. ``on_chunk`` receives the finished rows as they are
 produced (:class:`Chunk`: every window of the compiled engine, every
-:data:`observer.engines.python.PYTHON_CHUNK` steps of the python one); with it, SIGINT and SIGTERM stop the run
+:data:`observer.engines.python.PYTHON_CHUNK` steps of the python one); with it, SIGINT, SIGTERM and SIGHUP stop the run
 after the current window instead of killing it (``stop_signal``), so a streamed file
 (:mod:`observer.stream`) keeps every finished step.
 """
@@ -197,10 +197,10 @@ class Chunk:
 
 
 class Stopper:
-    """SIGINT/SIGTERM → a flag the loop checks between windows (installed only while a
+    """SIGINT/SIGTERM/SIGHUP → a flag the loop checks between windows (installed only while a
     streamed run is in progress, and only in the main thread)."""
 
-    SIGNALS = ("SIGINT", "SIGTERM")
+    SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
 
     def __init__(self, active: bool):
         self.signal: str | None = None

@@ -1,0 +1,450 @@
+"""Fault injection (issue 36, items 16-19, 23, 24): outputs that collide with inputs or each
+other, results whose parts come from different writings, a damaged numba cache, FIFOs and
+devices, signals, a closed stdout, an aliased forcing and failed writes.
+
+Each test checks the exit status, one ``error:`` line naming the field or file, no
+traceback, no partial or temporary file left, and that finished rows are kept. A full disk
+is simulated by making the writer raise ``OSError(ENOSPC)`` (no root, no tmpfs).
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from observer.cli import main
+from observer.errors import InputError
+from observer.io import events_path, read_events, read_result, sidecar_path
+from observer.scenario import load_scenario
+from observer.simulate import simulate
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _one_error_line(err: str, *names: str) -> str:
+    """The single ``error:`` line of ``err`` (no traceback), containing each of ``names``."""
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert "Traceback" not in err, err
+    errors = [ln for ln in lines if ln.startswith("error:")]
+    assert len(errors) == 1, err
+    for name in names:
+        assert name in errors[0], errors[0]
+    return errors[0]
+
+
+def _leftovers(folder: Path, allowed: set[str]) -> set[str]:
+    return {p.name for p in folder.iterdir()} - allowed
+
+
+def _run(tmp_path, *args, t_end="0.005"):
+    return main(["run", "double_mass", "--h", "1e-3", "--t-end", t_end, *args])
+
+
+# -- item 16: data destroyed with exit 0 --------------------------------------------------
+def test_events_equal_to_out_is_refused_before_any_work(tmp_path, capsys):
+    out = tmp_path / "r.csv"
+    assert _run(tmp_path, "--out", str(out), "--events", str(out)) == 2
+    _one_error_line(capsys.readouterr().err, "--events", "r.csv")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_events_on_a_symlink_or_hard_link_to_out_is_refused(tmp_path, capsys):
+    out = tmp_path / "r.csv"
+    assert _run(tmp_path, "--out", str(out)) == 0
+    before = out.read_bytes()
+    os.link(out, tmp_path / "hard.csv")
+    (tmp_path / "soft.csv").symlink_to(out)
+    for other in ("hard.csv", "soft.csv"):
+        assert _run(tmp_path, "--out", str(out), "--events", str(tmp_path / other)) == 2
+        _one_error_line(capsys.readouterr().err, "--events")
+    assert out.read_bytes() == before
+    read_result(out)                                  # still whole
+
+
+def test_log_out_equal_to_its_result_is_refused(tmp_path, capsys):
+    out = tmp_path / "r.csv"
+    assert _run(tmp_path, "--out", str(out)) == 0
+    capsys.readouterr()
+    before = out.read_bytes()
+    assert main(["log", str(out), "--out", str(out)]) == 2
+    _one_error_line(capsys.readouterr().err, "--out", "r.csv", "input")
+    assert out.read_bytes() == before
+
+
+def test_closing_log_given_as_input_and_out_is_refused(tmp_path, capsys):
+    log = tmp_path / "log.csv"
+    log.write_text("contact,t_close,t_open\n0,0.001,0.002\n")
+    assert _run(tmp_path, "--source", "log", "--log", str(log), "--out", str(log)) == 2
+    _one_error_line(capsys.readouterr().err, "--out", "--log")
+    assert log.read_text() == "contact,t_close,t_open\n0,0.001,0.002\n"
+
+
+def test_an_output_being_written_by_another_process_is_refused(tmp_path):
+    """A second writer of one file is refused while the first holds its lock (filelock),
+    and the first one's file is whole."""
+    from observer.outputs import output_lock
+
+    out = tmp_path / "same.parquet"
+    with output_lock(out):                            # another run writing the file
+        proc = subprocess.run([sys.executable, "-m", "observer", "run", "double_mass", "--h", "1e-3",
+                               "--t-end", "0.005", "--out", str(out)], capture_output=True, text=True,
+                              env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    _one_error_line(proc.stderr, "same.parquet", "another run")
+    assert not out.exists() and _leftovers(tmp_path, set()) == set()
+
+
+def test_a_rerun_without_events_removes_the_earlier_events(tmp_path, capsys):
+    out = tmp_path / "r.csv"
+    assert _run(tmp_path, "--out", str(out)) == 0
+    assert events_path(out).exists()                  # the first run kept its events
+    assert _run(tmp_path, "--out", str(out), "--record-every", "2") == 0
+    assert not events_path(out).exists() and not sidecar_path(events_path(out)).exists()
+    assert read_events(out) is None
+
+
+def test_read_events_refuses_events_that_are_not_the_results(tmp_path):
+    res = simulate("double_mass", h=1e-3, t_end=0.005)
+    first, second = tmp_path / "a.csv", tmp_path / "b.csv"
+    res.write(first)
+    res.write(second)
+    os.unlink(events_path(second))                    # b has events of its own: now a's
+    os.unlink(sidecar_path(events_path(second)))
+    meta = json.loads(sidecar_path(second).read_text())
+    assert meta["events_file"] == "b.events.csv"
+    res_no = simulate("double_mass", h=1e-3, t_end=0.005, record_every=2)
+    res_no.write(second)
+    for f in (events_path(first), sidecar_path(events_path(first))):
+        (tmp_path / f.name.replace("a.", "b.")).write_bytes(f.read_bytes())
+    with pytest.raises(InputError, match="not the events table of b.csv"):
+        read_events(second)
+
+
+# -- item 17: content and metadata bound by one digest ------------------------------------
+def _two_runs(tmp_path, suffix):
+    a = simulate("double_mass", h=1e-3, t_end=0.005)
+    b = simulate("double_mass", h=2e-3, t_end=0.01)           # another run, same columns
+    pa, pb = tmp_path / f"a{suffix}", tmp_path / f"b{suffix}"
+    a.write(pa)
+    b.write(pb)
+    return pa, pb
+
+
+def test_a_csv_with_another_runs_metadata_is_refused(tmp_path):
+    pa, pb = _two_runs(tmp_path, ".csv")
+    ma, mb = json.loads(sidecar_path(pa).read_text()), json.loads(sidecar_path(pb).read_text())
+    spliced = {k: v for k, v in mb.items() if k != "integrity"}
+    spliced["integrity"] = {**ma["integrity"], "metadata_sha256": mb["integrity"]["metadata_sha256"]}
+    sidecar_path(pa).write_text(json.dumps(spliced))   # each part's own checksum valid
+    with pytest.raises(InputError, match="different writings"):
+        read_result(pa)
+
+
+def test_a_parquet_file_with_another_runs_metadata_is_refused(tmp_path):
+    import pyarrow.parquet as pq
+
+    pa_, pb = _two_runs(tmp_path, ".parquet")
+    ta, tb = pq.read_table(pa_), pq.read_table(pb)
+    ma = json.loads(ta.schema.metadata[b"observer"])
+    mb = json.loads(tb.schema.metadata[b"observer"])
+    spliced = {k: v for k, v in mb.items() if k != "integrity"}
+    spliced["integrity"] = {**ma["integrity"], "metadata_sha256": mb["integrity"]["metadata_sha256"]}
+    pq.write_table(ta.replace_schema_metadata({b"observer": json.dumps(spliced).encode()}), pa_)
+    with pytest.raises(InputError, match="different writings"):
+        read_result(pa_)
+
+
+def test_a_file_of_the_previous_format_is_refused_and_read_partially(tmp_path):
+    res = simulate("double_mass", h=1e-3, t_end=0.005)
+    p = tmp_path / "old.csv"
+    res.write(p)
+    meta = json.loads(sidecar_path(p).read_text())
+    del meta["integrity"]["digest"]                  # what the previous version wrote
+    sidecar_path(p).write_text(json.dumps(meta))
+    with pytest.raises(InputError, match="earlier version"):
+        read_result(p)
+    df, meta = read_result(p, partial=True)
+    assert len(df) == res.t.size and meta["status"]["state"] == "partial"
+
+
+# -- item 18: numba's cache ----------------------------------------------------------------
+_CACHED = textwrap.dedent('''
+    import warnings, sys
+    sys.path.insert(0, sys.argv[1])
+    from observer.numba_cache import install
+    install()
+    from numba import njit
+    @njit(cache=True)
+    def f(x):
+        return 2.0 * x + 1.0
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        print(f(3.0))
+    print("WARN", [str(x.message) for x in w])
+''')
+
+
+def _cached_call(tmp_path, cache_dir, env_extra=None):
+    mod = tmp_path / "m.py"
+    mod.write_text(_CACHED)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache_dir), **(env_extra or {})}
+    return subprocess.run([sys.executable, str(mod), str(ROOT)], capture_output=True, text=True,
+                          env=env, timeout=120)
+
+
+@pytest.mark.parametrize("damage", ["index", "data"])
+def test_a_damaged_numba_cache_is_a_warning_and_a_recompile(tmp_path, damage):
+    cache = tmp_path / "cache"
+    first = _cached_call(tmp_path, cache)
+    assert first.returncode == 0 and "7.0" in first.stdout, first.stderr
+    files = sorted(cache.rglob("*.nbi" if damage == "index" else "*.nbc"))
+    assert files
+    for f in files:
+        with open(f, "r+b") as fh:
+            fh.truncate(0 if damage == "index" else min(1000, f.stat().st_size // 2))
+    second = _cached_call(tmp_path, cache)
+    assert second.returncode == 0, second.stderr
+    assert "Traceback" not in second.stderr and "7.0" in second.stdout
+    if damage == "data":
+        assert "damaged" in second.stdout
+    third = _cached_call(tmp_path, cache)             # the cache was rewritten whole
+    assert third.returncode == 0 and "WARN []" in third.stdout, third.stdout + third.stderr
+
+
+def test_an_unwritable_numba_cache_is_a_warning(tmp_path, monkeypatch):
+    """A cache folder numba cannot write (a read-only installation): simulated by making
+    numba's save raise PermissionError, as it does there (root ignores permission bits)."""
+    from numba.core import caching
+
+    from observer.numba_cache import CacheWarning, install
+
+    install()
+    wrapped = caching.Cache.save_overload
+    inner = wrapped.__closure__
+    assert inner is not None                          # our wrapper around numba's
+    monkeypatch.setattr(caching.IndexDataCacheFile, "save",
+                        lambda self, key, data: (_ for _ in ()).throw(PermissionError(13, "Permission denied")))
+    from numba import njit
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+
+    def g(x):
+        return x * 3.0 + 0.5
+    with pytest.warns(CacheWarning, match="cannot be written"):
+        assert njit(cache=True)(g)(2.0) == 6.5
+
+
+# -- item 19: hangs and silent waits --------------------------------------------------------
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_a_fifo_output_is_refused_at_once(tmp_path, capsys, suffix):
+    fifo = tmp_path / f"f{suffix}"
+    os.mkfifo(fifo)
+    t0 = time.monotonic()
+    assert _run(tmp_path, "--out", str(fifo)) == 2
+    assert time.monotonic() - t0 < 5
+    _one_error_line(capsys.readouterr().err, "--out", "FIFO")
+
+
+def test_the_event_integrator_refuses_a_forcing_it_cannot_follow(tmp_path, capsys):
+    t0 = time.monotonic()
+    code = main(["run", "impact_oscillator", "--integrator", "event", "--t-end", "0.1",
+                 "--set", "system.forcing.amplitude=[500.0]", "--set", "system.forcing.omega=1e15",
+                 "--out", str(tmp_path / "r.csv")])
+    assert code == 2 and time.monotonic() - t0 < 10
+    _one_error_line(capsys.readouterr().err, "system.forcing", "oscillates")
+    assert _leftovers(tmp_path, set()) == set()
+
+
+def test_sighup_during_a_parquet_run_keeps_the_rows(tmp_path):
+    out = tmp_path / "r.parquet"
+    proc = subprocess.Popen([sys.executable, "-m", "observer", "run", "double_mass", "--engine", "python",
+                             "--h", "1e-4", "--t-end", "1000", "--observers", "none", "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONPATH": str(ROOT)})
+    deadline = time.monotonic() + 60
+    part = out.with_name(f".{out.name}.part")
+    while not part.exists() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    time.sleep(0.3)
+    proc.send_signal(signal.SIGHUP)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + signal.SIGHUP, err
+    df, meta = read_result(out)
+    assert len(df) > 1 and meta["status"]["state"] == "stopped" and "SIGHUP" in meta["status"]["reason"]
+
+
+# -- item 23: a closed stdout ------------------------------------------------------------
+def test_a_closed_stdout_does_not_blame_the_result_file(tmp_path):
+    out = tmp_path / "r.csv"
+    proc = subprocess.Popen([sys.executable, "-m", "observer", "run", "double_mass", "--h", "1e-3",
+                             "--t-end", "0.005", "--observers", "jump,nojump", "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            env={**os.environ, "PYTHONPATH": str(ROOT)})
+    proc.stdout.close()                              # the reader of `| head` is gone
+    err = proc.stderr.read().decode()
+    proc.wait(timeout=120)
+    assert proc.returncode == 141, err
+    line = _one_error_line(err, "standard output")
+    assert "r.csv" not in line
+    read_result(out)                                 # whole
+
+
+# -- item 24: silent wrong answers and leftovers -----------------------------------------------
+def test_an_aliased_forcing_is_a_health_warning():
+    """500 N at 1e15 rad/s on the 1-DOF oscillator: the exact velocity response is
+    ≤ 2F/(mω) ≈ 1e-12 m/s, the stepped one is O(F h/m); the run must say the forcing is
+    aliased (h·ω ≫ π)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")                       # the warning is read from the status
+        sc = load_scenario("impact_oscillator", {"system.forcing.amplitude": "[500.0]",
+                                                 "system.forcing.omega": "1e15"})
+        res = simulate(sc, h=1e-3, t_end=0.01)
+    assert any("aliased" in w and "system.forcing" in w for w in res.status.warnings), res.status
+
+
+def test_a_resolved_forcing_gets_no_alias_warning():
+    res = simulate("impact_oscillator", h=1e-3, t_end=0.01)
+    assert not any("aliased" in w for w in res.status.warnings)
+
+
+def _enospc(*a, **k):
+    raise OSError(errno.ENOSPC, "No space left on device")
+
+
+def test_a_full_disk_during_the_closing_log_leaves_nothing(tmp_path, capsys, monkeypatch):
+    out = tmp_path / "r.csv"
+    assert _run(tmp_path, "--out", str(out)) == 0
+    capsys.readouterr()
+    import pandas as pd
+
+    real = pd.DataFrame.to_csv
+
+    def half(self, path=None, *a, **k):
+        if path is not None and str(path).endswith(".csv"):
+            Path(path).write_text("contact,t_cl")
+            _enospc()
+        return real(self, path, *a, **k)
+    monkeypatch.setattr(pd.DataFrame, "to_csv", half)
+    before = {p.name for p in tmp_path.iterdir()}
+    assert main(["log", str(out), "--out", str(tmp_path / "log.csv")]) == 2
+    _one_error_line(capsys.readouterr().err, "No space left")
+    assert {p.name for p in tmp_path.iterdir()} == before
+
+
+def test_a_full_disk_during_a_plot_leaves_nothing(tmp_path, capsys, monkeypatch):
+    out = tmp_path / "r.csv"
+    assert _run(tmp_path, "--out", str(out)) == 0
+    capsys.readouterr()
+    import matplotlib.figure
+
+    def half(self, fname, *a, **k):
+        Path(fname).write_bytes(b"\x89PNG")
+        _enospc()
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", half)
+    before = {p.name for p in tmp_path.iterdir()}
+    assert main(["plot", str(out), "--out", str(tmp_path / "p.png")]) == 2
+    _one_error_line(capsys.readouterr().err, "No space left")
+    assert {p.name for p in tmp_path.iterdir()} == before
+
+
+def test_a_full_disk_during_an_ensemble_leaves_nothing(tmp_path, monkeypatch):
+    import pandas as pd
+
+    from observer.ensemble import write_ensemble
+
+    df = pd.DataFrame({"design": ["jump"], "t_settle": [1.0]})
+    df.attrs = {"metadata": {"n": 1}}
+
+    def half(self, path, *a, **k):
+        Path(path).write_bytes(b"PAR1")
+        _enospc()
+    monkeypatch.setattr(pd.DataFrame, "to_parquet", half)
+    with pytest.raises(OSError):
+        write_ensemble(df, tmp_path / "e.parquet")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_sidecar_name_taken_by_a_folder_is_refused_before_any_work(tmp_path, capsys):
+    (tmp_path / "r.json").mkdir()
+    assert _run(tmp_path, "--out", str(tmp_path / "r.csv")) == 2
+    _one_error_line(capsys.readouterr().err, "r.json", "directory")
+    assert _leftovers(tmp_path, {"r.json"}) == set()
+
+
+def test_a_full_disk_writing_a_csv_result_leaves_nothing(tmp_path, monkeypatch):
+    res = simulate("double_mass", h=1e-3, t_end=0.005, record_every=2)
+    real = Path.write_text
+
+    def full(self, *a, **k):
+        if self.name.endswith(".json.tmp"):
+            _enospc()
+        return real(self, *a, **k)
+    monkeypatch.setattr(Path, "write_text", full)
+    with pytest.raises(OSError):
+        res.write(tmp_path / "r.csv")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("target", ["/dev/zero", "fifo"])
+def test_a_result_that_is_a_device_or_fifo_is_refused(tmp_path, target):
+    link = tmp_path / "r.csv"
+    if target == "fifo":
+        os.mkfifo(link)
+    else:
+        link.symlink_to(target)
+    with pytest.raises(InputError, match="not a regular file"):
+        read_result(link)
+
+
+def test_a_sparse_result_larger_than_memory_is_refused_by_size(tmp_path, monkeypatch):
+    import observer.io as io
+
+    p = tmp_path / "big.csv"
+    with open(p, "wb") as fh:
+        fh.truncate(6 * 2**30)                      # 6 GiB, no block written
+    monkeypatch.setattr(io, "MEMORY_FRACTION", 1e-9)  # whatever the machine: the bound applies
+    with pytest.raises(InputError, match="big.csv.*GiB"):
+        read_result(p)
+
+
+# -- item 20 (part): reports into a read-only folder or a full disk ---------------------------
+def test_a_report_that_cannot_be_written_leaves_no_truncated_index(tmp_path, monkeypatch, capsys):
+    """The page is rendered, then its write fails half-way (a full disk): ``python -m
+    reports`` exits 2 with one line, and no index.html (nor a temporary file) is left."""
+    import reports.__main__ as cli
+    from reports import build
+
+    monkeypatch.setattr(build, "load_context", lambda files, out, **k: _Ctx(Path(out)))
+    monkeypatch.setattr(build, "build_sections", lambda ctx: [])
+    monkeypatch.setattr(build, "header_table", lambda ctx: None)
+    monkeypatch.setattr(build, "render", lambda **k: "<html>" + "x" * 10_000 + "</html>")
+    real = Path.write_text
+
+    def half(self, text, *a, **k):
+        if self.suffix == ".html":
+            real(self, text[:100], *a, **k)
+            _enospc()
+        return real(self, text, *a, **k)
+    monkeypatch.setattr(Path, "write_text", half)
+    results = tmp_path / "quick.cases"
+    results.mkdir()
+    out = tmp_path / "out"
+    assert cli.main([str(results), "--out", str(out)]) == 2
+    _one_error_line(capsys.readouterr().err, "index.html", "No space left")
+    assert list(out.iterdir()) == []
+
+
+class _Ctx:
+    def __init__(self, out):
+        self.out_dir, self.suites, self.command = out, ["quick"], "x"
