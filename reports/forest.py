@@ -18,9 +18,11 @@ import numpy as np
 import pandas as pd
 
 from observer import stats
+from reports import registry
 
-PAIR = ("jump", "nojump")
-"""(a, b) of the ratio: > 1 means a's V decays faster."""
+PAIR = tuple(reversed(registry.ratio_pairs()[0]))
+"""(a, b) of the ratio, the first declared (baseline, candidate) pair reversed (jump / no jump):
+> 1 means a's V decays faster."""
 EXACT = "event"
 """The integrator of the exact event-driven master (the floor-free reference)."""
 EXCLUDE = ("perturbed χ",)
@@ -163,7 +165,8 @@ def scenario_claims(members: pd.DataFrame, forest: pd.DataFrame) -> list[dict]:
         r = f.iloc[0]
         v = verdict(r)
         master = "exact event-driven master" if r["integrator"] == EXACT else "time-stepped master"
-        text = (f"{spec.title} — {r['label']}: jump's V decays {_interval(r)} × the rate of no jump's "
+        a, b = (registry.label(d) for d in PAIR)
+        text = (f"{spec.title} — {r['label']}: {a}'s V decays {_interval(r)} × the rate of {b}'s "
                 f"({v}; paired rate ratio, {evidence(r)}, {master})")
         if r["identical"]:
             text += "; the two designs' V are identical: the master closes no contact in the window"
@@ -182,6 +185,10 @@ def scenario_claims(members: pd.DataFrame, forest: pd.DataFrame) -> list[dict]:
     return out
 
 
+def _pair_text() -> str:
+    return " / ".join(registry.label(d) for d in PAIR)
+
+
 def _random_claim(members: pd.DataFrame, f: pd.DataFrame, spec: ScenarioClaim) -> dict:
     from reports.tables import fmt
 
@@ -191,16 +198,16 @@ def _random_claim(members: pd.DataFrame, f: pd.DataFrame, spec: ScenarioClaim) -
     slower = each[each["high"] < 1.0]
     faster = each[each["low"] > 1.0]
     if fam is not None:
-        text = (f"{spec.title}: pooled rate ratio jump / no jump {_interval(fam)} (cluster bootstrap over "
-                f"systems, {evidence(fam)}); jump's rate larger in {fam['k_clusters']} of {fam['clusters']} "
+        text = (f"{spec.title}: pooled rate ratio {_pair_text()} {_interval(fam)} (cluster bootstrap over "
+                f"systems, {evidence(fam)}); {registry.label(PAIR[0])}'s rate larger in {fam['k_clusters']} of {fam['clusters']} "
                 f"systems ({fmt(100 * fam['k_low'])}–{fmt(100 * fam['k_high'])} %)")
         r = fam
     else:
         r = each.iloc[0].to_dict()
-        text = f"{spec.title} — {r['label']}: rate ratio jump / no jump {_interval(r)} ({evidence(r)})"
+        text = f"{spec.title} — {r['label']}: rate ratio {_pair_text()} {_interval(r)} ({evidence(r)})"
     text += (f"; faster (CI above 1) in {len(faster)}, slower (CI below 1) in {len(slower)} of "
              f"{len(each)} systems")
     if len(slower):
-        text += ": jump is NOT faster on " + ", ".join(slower["label"].str.replace("random_system ", ""))
+        text += f": {registry.label(PAIR[0])} is NOT faster on " + ", ".join(slower["label"].str.replace("random_system ", ""))
     return {"key": spec.key, "text": text + ".", "verdict": verdict(r), "label": r["label"],
             "estimate": r["estimate"], "low": r["low"], "high": r["high"]}

@@ -402,8 +402,8 @@ def test_random_claim_pools_systems_and_names_where_jump_is_not_faster(ensemble_
     _, page, rows, _ = ensemble_report
     item = _claim(page, "random")
     assert f"{N} members × 3 systems" in item
-    assert "jump's rate larger in 2 of 3 systems" in item
-    assert "slower (CI below 1) in 1 of 3" in item and "NOT faster on (seed 1, 3 DOF, 2 contacts)" in item
+    assert "'s rate larger in 2 of 3 systems" in item
+    assert "slower (CI below 1) in 1 of 3" in item and "is NOT faster on (seed 1, 3 DOF, 2 contacts)" in item
 
 
 def test_grazing_claim_shows_the_grid_sensitivity(ensemble_report):
