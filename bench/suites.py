@@ -448,9 +448,6 @@ ENSEMBLE_PARAMS = {"rocking_chain": {"quick": ((("param.N", 10),),),
 the paper's N = 10 (20 DOF); the full suite sweeps N = 4, 6, 8, 10. At N = 4 the master closes
 no contact inside the coupling window [4, 8] s (its closings all fall before t = 2.9 s), so
 every design runs uncoupled there and the designs cannot differ; at N = 10 they do."""
-ENSEMBLE_VARIANT_MEMBERS = {"rocking_chain": {"quick": 30, "full": 100}}
-"""Members per design of the ensembles of :data:`ENSEMBLE_PARAMS` (the chain at N = 10 costs
-≈ 6× a member of N = 4; the quick suite keeps its added cost small)."""
 ENSEMBLE_GRIDS = {"grazing": {"quick": (5e-4,), "full": (2e-3, 5e-4, 2.5e-4)}}
 """Time steps of extra ensembles beside the declared one (the grid sensitivity: grazing's
 kick jumps with where the graze falls on the grid, so its comparison is shown with h swept)."""
@@ -502,8 +499,7 @@ def _ensemble_spec_cases(name: str, spec: dict, key: str, designs) -> list[Case]
     for over in variants:
         params = tuple({**dict(spec.get("params", ())), **dict(over)}.items())
         label = spec.get("label", "") or (_variant_label(name, over) if over else name)
-        members = ENSEMBLE_VARIANT_MEMBERS.get(name, {}).get(key, ENSEMBLE_MEMBERS[key])
-        kw = dict(observers=designs, t_end=T, slave_offset=spec.get("slave_offset"), members=members,
+        kw = dict(observers=designs, t_end=T, slave_offset=spec.get("slave_offset"), members=ENSEMBLE_MEMBERS[key],
                   paths=ENSEMBLE_PATHS)
         out.append(Case("ensemble", name, label=label, params=params, h=h, **kw))
         out += [Case("ensemble", name, label=f"{label} (h = {g:g})", params=params, h=g, **{**kw, "paths": 0})
