@@ -143,7 +143,10 @@ def evidence(r) -> str:
 def _interval(r) -> str:
     from reports.tables import fmt
 
-    return f"{fmt(r['estimate'])} (95 % CI {fmt(r['low'])}–{fmt(r['high'])})"
+    digits = 3
+    while digits < 6 and fmt(r["low"], digits) == fmt(r["high"], digits):    # a narrow interval, not 1–1
+        digits += 1
+    return f"{fmt(r['estimate'], digits)} (95 % CI {fmt(r['low'], digits)}–{fmt(r['high'], digits)})"
 
 
 def scenario_claims(members: pd.DataFrame, forest: pd.DataFrame) -> list[dict]:
