@@ -474,7 +474,10 @@ def run_ensemble(case: Case, ctx: Context) -> list[dict]:
     the energy sphere of the scenario's own initial error (or of ``case.slave_offset`` where
     the scenario has no ``[observer]`` table), seeded by ``case.seed``; one row per (design,
     member). Designs that do not apply (the K-metric jump where K is singular) are left out
-    and the note says so; ``cpu_time_s`` covers the whole ensemble (every design and member)."""
+    and the note says so; ``cpu_time_s`` covers the whole ensemble (every design and member,
+    and one more member per design started without error: its largest V in the window is the
+    design's ``floor`` with this master, and the members' decay ``rate`` is fitted above it,
+    :func:`observer.compare.member_fits`)."""
     from observer.ensemble import energy_metric
 
     sc = _ensemble_scenario(case, ctx)
@@ -485,8 +488,17 @@ def run_ensemble(case: Case, ctx: Context) -> list[dict]:
     if case.slave_offset is not None:
         x = np.concatenate([np.asarray(a, dtype=float) for a in case.slave_offset])
         V0 = 0.5 * float(x @ energy_metric(sc) @ x)
-    df, cpu, wall = _timed(observer.ensemble, sc, designs, n=case.members, seed=case.seed, V0=V0,
-                           integrator=case.integrator, label=case.name, workers=ENSEMBLE_WORKERS)
+    from observer.compare import member_fits
+    from observer.ensemble import sample_errors
+
+    X, _ = sample_errors(sc, case.members, "energy_sphere", np.random.default_rng(case.seed), V0)
+    X = np.vstack([X, np.zeros((1, X.shape[1]))])          # member n: no error (the design's floor)
+    df, cpu, wall = _timed(observer.ensemble, sc, designs, n=case.members + 1, initial_errors=X,
+                           paths=case.members + 1, integrator=case.integrator, label=case.name,
+                           workers=ENSEMBLE_WORKERS)
+    fits, floors = member_fits(sc, df, case.members, designs)
+    df = df[df["member"] < case.members].merge(fits[["design", "member", "rate", "points"]].rename(columns={"points": "rate_points"}), on=["design", "member"],
+                                               validate="one_to_one").merge(floors, on="design")
     base = {**base_row(case, sc), "members": case.members, "perturbation": case.perturbation,
             "size": case.size, "cpu_time_s": cpu, "wall_time_s": wall,
             "cpu_scope": f"whole ensemble: {len(designs)} designs × {case.members} members",

@@ -85,7 +85,7 @@ ROWS: dict[str, Columns] = {
     "ensemble": {**CASE, **TIMING, "label": str, "design": str, "member": int, "members": int,
                  "integrator": str, "perturbation": str, "size": float, "V_on": float,
                  "V_max": float, "V_end": float, "rises": int, "max_rise_rel": float,
-                 **{c(r): float for r in RHOS for c in (settle_column, sync_column)}, "paths": str},
+                 "rate": float, "rate_points": int, "floor": float, **{c(r): float for r in RHOS for c in (settle_column, sync_column)}, "paths": str},
 }
 """Kind → the columns of its rows and their types (``peers`` rows are declared by
 :mod:`bench.peers`, whose columns depend on the peer's run). An ``ensemble`` row is one

@@ -445,10 +445,15 @@ def check_cases(full: bool = True) -> list[Case]:
 # ------------------------------------------------------------------------------ ensembles
 ENSEMBLE_MEMBERS = {"quick": 100, "full": 1000}
 """Initial errors per design of every built-in scenario's ensemble (issue 22)."""
-ENSEMBLE_PARAMS = {"rocking_chain": {"quick": (("param.N", 4),), "full": (("param.N", 4),)}}
-"""Builder overrides of the ensembles where the observers case's own are too costly for n
-members per design: the chain with N = 4 blocks (8 DOF, 8 contacts) instead of 10 (≈ 6× less
-per member)."""
+ENSEMBLE_PARAMS = {"rocking_chain": {"quick": ((("param.N", 10),),),
+                                     "full": tuple((("param.N", N),) for N in (4, 6, 8, 10))}}
+"""Builder overrides of the ensembles, one ensemble per entry (a swept parameter): the chain at
+the paper's N = 10 (20 DOF); the full suite sweeps N = 4, 6, 8, 10. At N = 4 the master closes
+no contact inside the coupling window [4, 8] s (its closings all fall before t = 2.9 s), so
+every design runs uncoupled there and the designs cannot differ; at N = 10 they do."""
+ENSEMBLE_GRIDS = {"grazing": {"quick": (5e-4,), "full": (2e-3, 5e-4, 2.5e-4)}}
+"""Time steps of extra ensembles beside the declared one (the grid sensitivity: grazing's
+kick jumps with where the graze falls on the grid, so its comparison is shown with h swept)."""
 PROJECTED = ("double_mass", "random_system")
 """Scenarios whose ensembles are also run with the projected master (docs/theory/scheme.md §6: the matched
 master of the jump observers, whose discrete V has no floor from the master's penetration):
@@ -485,18 +490,26 @@ def random_family(count: int) -> list[tuple[int, int, int]]:
     return out
 
 
+def _variant_label(name: str, over: tuple) -> str:
+    return name + " (" + ", ".join(f"{k.split('.')[-1]} = {v}" for k, v in over) + ")"
+
+
 def _ensemble_spec_cases(name: str, spec: dict, key: str, designs) -> list[Case]:
     h, T = _pick(spec.get("h"), False), _pick(spec.get("t_end"), False)    # quick's, in both suites
-    params = tuple({**dict(spec.get("params", ())), **dict(ENSEMBLE_PARAMS.get(name, {}).get(key, ()))}.items())
-    label = spec.get("label", "") or (name if name not in ENSEMBLE_PARAMS else
-                                      name + " (" + ", ".join(f"{k.split('.')[-1]} = {v}"
-                                                              for k, v in ENSEMBLE_PARAMS[name][key]) + ")")
-    kw = dict(observers=designs, h=h, t_end=T, slave_offset=spec.get("slave_offset"),
-              members=ENSEMBLE_MEMBERS[key], paths=ENSEMBLE_PATHS)
-    out = [Case("ensemble", name, label=label, params=params, **kw)]
-    if name in PROJECTED and not spec.get("label"):
-        out.append(Case("ensemble", name, label=f"{label} (projected master)",
-                        params=params + (("simulation.master_projection", True),), **kw))
+    variants = ENSEMBLE_PARAMS.get(name, {}).get(key, ((),))
+    grids = () if spec.get("label") else ENSEMBLE_GRIDS.get(name, {}).get(key, ())
+    out = []
+    for over in variants:
+        params = tuple({**dict(spec.get("params", ())), **dict(over)}.items())
+        label = spec.get("label", "") or (_variant_label(name, over) if over else name)
+        kw = dict(observers=designs, t_end=T, slave_offset=spec.get("slave_offset"), members=ENSEMBLE_MEMBERS[key],
+                  paths=ENSEMBLE_PATHS)
+        out.append(Case("ensemble", name, label=label, params=params, h=h, **kw))
+        out += [Case("ensemble", name, label=f"{label} (h = {g:g})", params=params, h=g, **{**kw, "paths": 0})
+                for g in grids if g != h]
+        if name in PROJECTED and not spec.get("label"):
+            out.append(Case("ensemble", name, label=f"{label} (projected master)",
+                            params=params + (("simulation.master_projection", True),), h=h, **kw))
     return out
 
 
@@ -527,7 +540,8 @@ def ensemble_cases(full: bool) -> list[Case]:
 
     * every built-in scenario's declared observers settings (``SUITE["observers"]``; h and
       t_end of the quick suite in both: double_mass's full h = 1e-4 over 20 s would cost 4×
-      per member; the chain with :data:`ENSEMBLE_PARAMS`), with :data:`ENSEMBLE_MEMBERS` members
+      per member; the chain with :data:`ENSEMBLE_PARAMS` (N = 10; full: N swept), grazing also on
+      the steps of :data:`ENSEMBLE_GRIDS`), with :data:`ENSEMBLE_MEMBERS` members
       (100; full: 1000) sampled on the energy sphere of the scenario's own initial error, those
       of :data:`PROJECTED` also with the projected master;
     * :data:`RANDOM_SYSTEMS` systems of the ``random_system`` family (2; full: 50), 100 members

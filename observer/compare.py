@@ -81,6 +81,38 @@ def master_scenarios(sc, masters: int, spread: float, grid_jitter: float, rng: n
     return out
 
 
+def member_fits(sc, df: pd.DataFrame, n: int, designs) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The decay rate of members 0…n−1 (:func:`observer.stats.decay_rates`, stopped at
+    :func:`observer.stats.fit_levels` of the larger floor) from an :func:`observer.ensemble`
+    frame ``df`` run with ``paths`` for every member, whose member n started without error
+    (its largest V in the window is the design's floor with this master: the matched master).
+    ``df.attrs["paths"]`` is taken out of the attrs (pandas deep-copies them on every operation).
+
+    Returns
+    -------
+    (DataFrame, DataFrame)
+        Per (design, member < n): ``rate, points, t_fit, reached_level, grid_decided``; per
+        design: ``floor``.
+    """
+    paths = df.attrs.pop("paths")
+    pd_member = paths["member"].to_numpy()
+    pd_t, pd_V = paths["t"].to_numpy(), paths["V"].to_numpy()
+    t_on, t_off = window_of(sc)
+    zero = df[df["member"] == n]
+    floors = pd.DataFrame({"design": zero["design"].to_numpy(), "floor": zero["V_max"].to_numpy(dtype=float)})
+    floor = float(floors["floor"].max())
+    parts = []
+    for d in designs:
+        rows = df[(df["design"] == d) & (df["member"] < n)].sort_values("member")
+        sel = np.flatnonzero((paths["design"] == d).to_numpy(dtype=bool) & (pd_member < n))
+        sel = sel[np.lexsort((pd_t[sel], pd_member[sel]))]
+        t = pd_t[sel[pd_member[sel] == 0]]
+        V = pd_V[sel].reshape(n, t.size)
+        fit = stats.decay_rates(t, V, t_on, t_off, stats.fit_levels(rows["V_on"].to_numpy(), floor))
+        parts.append(pd.concat([rows[["design", "member"]].reset_index(drop=True), fit], axis=1))
+    return pd.concat(parts, ignore_index=True), floors
+
+
 def run_master(sc, designs, n: int, seed: int, integrator: str, engine, workers, initial_errors, V0,
                cluster: int, positions: bool) -> dict:
     """One master's paired members plus its zero-error member: per member V_on, the settling
@@ -95,26 +127,11 @@ def run_master(sc, designs, n: int, seed: int, integrator: str, engine, workers,
     X = np.vstack([X, np.zeros((1, X.shape[1]))])          # member n: no error (the floor)
     df = ensemble(sc, designs=designs, n=n + 1, initial_errors=X, integrator=integrator, engine=engine,
                   paths=n + 1, workers=workers)
-    paths = df.attrs.pop("paths")           # out of attrs first: pandas deep-copies attrs on every operation
-    pd_member = paths["member"].to_numpy()
-    pd_t, pd_V = paths["t"].to_numpy(), paths["V"].to_numpy()
-    t_on, t_off = window_of(sc)
-    zero = df[df["member"] == n]
-    floors = pd.DataFrame({"cluster": cluster, "design": zero["design"].to_numpy(),
-                           "floor": zero["V_max"].to_numpy(dtype=float)})
-    floor = float(floors["floor"].max())
-    keep = df[df["member"] < n]
-    parts = []
-    for d in designs:
-        rows = keep[keep["design"] == d].sort_values("member")
-        sel = np.flatnonzero((paths["design"] == d).to_numpy(dtype=bool) & (pd_member < n))
-        sel = sel[np.lexsort((pd_t[sel], pd_member[sel]))]
-        t = pd_t[sel[pd_member[sel] == 0]]
-        V = pd_V[sel].reshape(n, t.size)
-        fit = stats.decay_rates(t, V, t_on, t_off, stats.fit_levels(rows["V_on"].to_numpy(), floor))
-        cols = ["design", "member", "status", "V_on", "V_end", *[settle_column(r) for r in RHOS]]
-        parts.append(pd.concat([rows[cols].reset_index(drop=True), fit], axis=1))
-    members = pd.concat(parts, ignore_index=True)
+    fits, floors = member_fits(sc, df, n, designs)
+    cols = ["design", "member", "status", "V_on", "V_end", *[settle_column(r) for r in RHOS]]
+    keep = df[df["member"] < n][cols].merge(fits, on=["design", "member"], validate="one_to_one")
+    members = pd.concat([keep[keep["design"] == d].sort_values("member") for d in designs], ignore_index=True)
+    floors.insert(0, "cluster", cluster)
     members.insert(0, "cluster", cluster)
     out = {"members": members, "floors": floors, "h": sc.h, "positions": None}
     if positions:

@@ -13,8 +13,8 @@ from typing import Callable
 
 from reports.blocks import Section
 from reports.context import ReportContext
-from reports.sections import (artifacts, claims, ensemble, hard_cases, integrators, key_numbers,
-                              limitations, micro, more_numbers, observers, peers, proof_checks,
+from reports.sections import (artifacts, claims, ensemble, hard_cases, integrators, k_metric_claims,
+                              key_numbers, limitations, micro, more_numbers, observers, peers, proof_checks,
                               reproduce, robustness, scaling, scenarios, settings, work_precision)
 
 
@@ -30,6 +30,7 @@ class SectionSpec:
 SECTIONS: tuple[SectionSpec, ...] = (
     SectionSpec("claims", claims.build),
     SectionSpec("key-numbers", key_numbers.build, after_others=True),
+    SectionSpec("k-metric-question", k_metric_claims.build),
     SectionSpec("ensemble", ensemble.build),
     SectionSpec("discrete-artifacts", artifacts.build),
     SectionSpec("scenarios", scenarios.build),

@@ -1,7 +1,11 @@
-"""Claims: the page's answer, on its first screen — at most :data:`MAX_CLAIMS` sentences from
-:func:`reports.analysis.ensemble_claims`, each with its number, 95 % confidence interval and n,
-a link to its evidence, and, where it names a design whose V rises in discrete time, the
-cause and a link to the remedy (:func:`reports.sections.artifacts.caveats`)."""
+"""Claims: the page's answer, on its first screen — one figure (the forest plot of the paired
+rate ratio jump / no jump per ensemble, :mod:`reports.forest`) and at most :data:`MAX_CLAIMS`
+claims, one per scenario the paper names, each with its estimand, interval and evidence.
+
+The helpers :func:`claim_items` and :func:`claim_text` render the claims of
+:func:`reports.analysis.ensemble_claims` (the settling-time and K-metric claims, each with its
+number, 95 % CI and n, and, where it names a design whose V rises in discrete time, the cause
+and a link to the remedy): :mod:`reports.sections.k_metric_claims` shows them below."""
 
 from __future__ import annotations
 
@@ -9,13 +13,17 @@ import re
 
 import pandas as pd
 
-from reports import registry
+from reports import figures, registry
+from reports import forest as forest_mod
 from reports.blocks import Block, Section
 from reports.context import ReportContext
 from reports.sections import artifacts
-from reports.tables import fmt, fmt_int
+from reports.tables import Table, fmt, fmt_int
 
-TITLE = "Claims (ensembles of initial errors, 95 % confidence intervals)"
+TITLE = "Is the jump observer faster? Paired decay-rate ratio per scenario (95 % CI)"
+FOREST_ID = "forest-numbers"
+UNDEFINED = "—"
+"""The table's symbol for a ratio that is not defined (legend in the table's note)."""
 MAX_CLAIMS = 8
 """At most this many claims on the first screen."""
 CI_MARK = "CI"
@@ -58,18 +66,54 @@ def claim_items(claims: pd.DataFrame, notes: dict[str, str]) -> list[dict]:
     return items
 
 
+def forest_table(forest: pd.DataFrame) -> Table:
+    """The forest plot's numbers (every cell a number or a defined word: no NaN, ∞ or 0 [0, 0])."""
+    t = Table("Paired rate ratio jump / no jump per ensemble (the forest plot's numbers)",
+              ["ensemble", "integrator", "rate ratio", "95 % CI", "evidence", "members left out",
+               "jump faster in"],
+              note="rate ratio: mean decay rate of jump / of no jump over the same members "
+                   "(observer.stats.rate_ratio; CI: bootstrap over members of one master, over "
+                   "systems for a family). members left out: a rate not finite in a design. "
+                   f"{UNDEFINED}: not defined (a design's mean rate is not positive).")
+    for _, r in forest.iterrows():
+        ok = r["status"] == "ok"
+        t.add([r["label"], r["integrator"], fmt(r["estimate"]) if ok else UNDEFINED,
+               f"{fmt(r['low'])}–{fmt(r['high'])}" if ok else UNDEFINED, forest_mod.evidence(r),
+               fmt_int(r["dropped"]), f"{fmt_int(r['k_clusters'])} of {fmt_int(r['clusters'])}"])
+    return t
+
+
+def forest_frame(members: pd.DataFrame) -> pd.DataFrame:
+    """:func:`reports.forest.forest_rows` and, per integrator, the random family pooled."""
+    f = forest_mod.forest_rows(members)
+    if f.empty:
+        return f
+    fam = [forest_mod.family_row(members, "random_system", i) for i in f["integrator"].unique()]
+    fam = [r for r in fam if r is not None]
+    f = pd.concat([f, pd.DataFrame(fam)], ignore_index=True) if fam else f
+    return f[f["status"] == "ok"].reset_index(drop=True) if "status" in f else f
+
+
 def build(ctx: ReportContext) -> Section:
-    """The claims section (shown first, before the page's header)."""
+    """The page's first screen: the forest plot and one claim per scenario the paper names."""
     sec = Section("claims", TITLE, lead=True)
     view = ctx.ensemble()
-    if view.claims is None or view.claims.empty:
+    if view.members.empty:
         sec.p(f"No claims: {view.reason}. The evidence sections below show the single runs.")
         return sec
-    n = view.members.groupby(["label", "integrator", "design"]).size()
-    size = fmt_int(n.min()) if n.min() == n.max() else f"{fmt_int(n.min())}–{fmt_int(n.max())}"
-    sec.blocks.append(Block("claims", claim_items(view.claims, artifacts.caveats(view))))
-    sec.p(f"Each claim is a statistic over an ensemble of initial errors ({size} members per "
-          "scenario, integrator and design, the same members for every design); bootstrap 95 % "
-          "confidence intervals. Evidence: the settling matrix, the proof-check matrix and the "
-          "paired statistics below.")
+    forest = forest_frame(view.members)
+    if forest.empty:
+        sec.p("No claims: the ensemble rows carry no per-member decay rate of both jump and no jump. "
+              "The evidence sections below show the settling statistics.")
+        return sec
+    sec.figure(figures.forest_figure(forest), "")
+    items = [{"text": c["text"], "anchor": FOREST_ID, "caveat": "", "kind": c["verdict"]}
+             for c in forest_mod.scenario_claims(view.members, forest)][:MAX_CLAIMS]
+    sec.blocks.append(Block("claims", items))
+    sec.p("Each claim: the paired decay-rate ratio of V (jump / no jump, the same initial errors "
+          "against the same master) with its 95 % bootstrap interval and its evidence (members × "
+          "masters); faster / slower: the interval lies above / below 1. The K-metric question is "
+          "answered in its own section below.")
+    sec.anchor(FOREST_ID)
+    sec.details("The forest plot's numbers", forest_table(forest))
     return sec

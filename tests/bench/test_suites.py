@@ -661,3 +661,26 @@ def test_rows_without_settling_times_are_rerun(tmp_path):
     assert store.case_path(wp.case_id).read_bytes() == wp_bytes          # kept as it was
     stale = pd.read_parquet(store.folder / "stale" / path.name)
     assert len(stale) == 2 and not any(c.startswith("t_settle_") for c in stale.columns)
+
+
+def test_ensembles_cover_the_paper_scenarios_at_its_sizes():
+    """Issue 31: the chain's ensemble at the paper's N = 10 (full: N swept 4, 6, 8, 10), the
+    ball on a spring (K > 0) beside the K = 0 ball, grazing on more than one step h, and the
+    random family; at N = 4 the master closes no contact in the window, so the quick suite has
+    no chain ensemble there."""
+    import observer
+
+    for name, Ns in (("quick", {10}), ("full", {4, 6, 8, 10})):
+        ens = get_suite(name).of_kind("ensemble")
+        chain = [c for c in ens if c.scenario == "rocking_chain"]
+        assert {dict(c.params)["param.N"] for c in chain} == Ns, name
+        assert all(f"N = {dict(c.params)['param.N']}" in c.label for c in chain)
+        balls = {c.label: c for c in ens if c.scenario == "bouncing_ball"}
+        spring = [c for c in balls.values() if dict(c.params).get("param.k", 0.0) > 0.0]
+        assert len(spring) == 1 and "bouncing_ball (Zeno)" in balls, name
+        sc = observer.load_scenario("bouncing_ball", spring[0].overrides())
+        assert sc.system.is_stiffness_definite()
+        assert not observer.load_scenario("bouncing_ball", balls["bouncing_ball (Zeno)"].overrides()) \
+            .system.is_stiffness_definite()
+        assert len({c.h for c in ens if c.scenario == "grazing"}) >= 2, name
+        assert len({c.label for c in ens if c.scenario == "random_system"}) >= 4, name

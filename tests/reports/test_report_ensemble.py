@@ -19,7 +19,8 @@ from reports.browser import check_page, find_chromium
 from reports.build import build_report
 from reports.context import load_rows
 from reports.ensemble_view import BAND_Q, member_rows, path_band, settling_matrix
-from reports.sections import artifacts, claims
+from reports import forest
+from reports.sections import artifacts, claims, k_metric_claims
 from reports.sections.key_numbers import MAX_ITEMS, headlines
 from tests.reports.test_build import _parse, _rows_file, _synthetic_rows
 
@@ -35,17 +36,37 @@ ENSEMBLES = (("double_mass", "time-stepping"), ("double_mass", "event"),
              ("persistent contact", "time-stepping"), ("persistent contact", "event"))
 """(label, integrator) of the synthetic ensembles: jump's V rises only time-stepped with the
 plain master."""
+SCENARIO_ENSEMBLES = (("rocking_chain (N = 4)", "rocking_chain"), ("rocking_chain (N = 10)", "rocking_chain"),
+                      ("grazing", "grazing"), ("grazing (h = 0.0005)", "grazing"),
+                      ("random_system (seed 0, 2 DOF, 1 contact)", "random_system"),
+                      ("random_system (seed 1, 3 DOF, 2 contacts)", "random_system"),
+                      ("random_system (seed 2, 4 DOF, 3 contacts)", "random_system"))
+"""Time-stepped ensembles of other scenarios (label, scenario) for the first screen's claims."""
 GAP = 3.2e-5
 """The proof checks' master-penetration term / V in the synthetic witness."""
 
 
-def _member_rows(label: str, integrator: str, rng) -> list[dict]:
+RATE = 3.0
+"""Decay rate (1/s) scale of the synthetic members: member m of a design decays at
+RATE·factor·(1 + 0.1 sin(m + len(design))) / base_m, factor SPEEDUP for jump, 1 for nojump
+(:data:`RATIOS` where not)."""
+RATIOS = {"rocking_chain (N = 4)": {"jump": 1.0, "nojump": 1.0},
+          "random_system (seed 1, 3 DOF, 2 contacts)": {"jump": 0.9, "nojump": 1.0}}
+"""jump's rate over nojump's where it is not SPEEDUP: the chain at N = 4 runs uncoupled
+(identical designs), random seed 1: jump is slower."""
+
+
+def _member_rows(label: str, integrator: str, rng, scenario: str = "double_mass") -> list[dict]:
     base = rng.uniform(1.0, 4.0, N)
+    rate_of = {"jump_mass": SPEEDUP / 1.3, "jump": SPEEDUP, "nojump": 1.0, **RATIOS.get(label, {})}
+    same = rate_of["jump"] == rate_of["nojump"]
     rows = []
     for design, scale in (("jump", 1.0), ("nojump", SPEEDUP), ("jump_mass", 1.3)):
         noise = rng.lognormal(0.0, 0.05, N)
         for m in range(N):
-            row = {"kind": "ensemble", "scenario": "double_mass", "label": label, "design": design,
+            row = {"kind": "ensemble", "scenario": scenario, "label": label, "design": design,
+                   "rate": RATE * rate_of.get(design, 1.0) * (1 + 0.1 * np.sin(m + (0 if same else len(design))))
+                   / base[m],
                    "member": m, "integrator": integrator, "h": 2e-4, "t_end": 10.0, "seed": 0,
                    "status": "ok", "V_on": 0.5, "V_max": 0.5, "V_end": 1e-12, "rises": 0,
                    "max_rise_rel": 0.0}
@@ -116,6 +137,8 @@ def _cases(out) -> list[tuple[str, list[dict]]]:
     ens = []
     for label, integ in ENSEMBLES:
         ens.append((f"ensemble:{label}:{integ}", _member_rows(label, integ, rng)))
+    for label, scenario in SCENARIO_ENSEMBLES:
+        ens.append((f"ensemble:{label}", _member_rows(label, "time-stepping", rng, scenario)))
     _paths(out, "paths_dm.parquet")
     for row in ens[0][1]:
         row["paths"] = "paths_dm.parquet"
@@ -134,14 +157,17 @@ def ensemble_report(tmp_path_factory):
     return index, _parse(index), load_rows([path]), build_s
 
 
-def test_claims_come_first_with_their_ci_and_a_link_to_existing_evidence(ensemble_report):
-    """The claims are the first section of the page, before the header table and contents; at
-    most 8, each with a 95 % CI and an evidence link whose id exists on the page."""
+def test_k_metric_claims_are_below_with_their_ci_and_a_link_to_existing_evidence(ensemble_report):
+    """The first screen's section comes before the header table and contents; the settling and
+    K-metric claims are in their own section below: at most 8, each with a 95 % CI and an
+    evidence link whose id exists on the page."""
     index, page, _, _ = ensemble_report
     html = index.read_text(encoding="utf-8")
     first = html.index('<section id="claims"')
     assert first < html.index('class="header-table"') and first < html.index("<nav>")
-    items = page.sections["claims"].items
+    first = html.index(f'<section id="{k_metric_claims.ID}"')
+    assert first > html.index('class="header-table"')          # below the first screen
+    items = page.sections[k_metric_claims.ID].items
     assert 3 <= len(items) <= claims.MAX_CLAIMS
     assert all("95 % CI" in i for i in items), items
     block = html[first:html.index("</section>", first)]
@@ -161,7 +187,7 @@ def test_speed_claim_is_the_paired_median_with_its_bootstrap_ci(ensemble_report)
     tn = m[m["design"] == "nojump"].sort_values("member")["t_settle_1e-06"].to_numpy()
     speed = 1 / np.median(tj / tn)
     assert speed == pytest.approx(SPEEDUP, rel=0.05)
-    item = next(i for i in page.sections["claims"].items if "sooner" in i and "double_mass" in i)
+    item = next(i for i in page.sections[k_metric_claims.ID].items if "sooner" in i and "double_mass" in i)
     nums = [float(x) for x in re.findall(r"(\d+\.\d+)×", item)]
     assert nums and nums[0] == pytest.approx(speed, rel=2e-3)
     lo, hi = (float(x) for x in re.search(r"CI (\d+\.?\d*)–(\d+\.?\d*)", item).groups())
@@ -173,7 +199,7 @@ def test_claims_touching_a_rising_k_metric_design_say_why_and_link_the_remedy(en
     claim naming it on a time-stepped ensemble carries the cause (master penetration,
     ½‖g_m⁻‖²) and the event-driven share; a claim on an event-driven ensemble does not."""
     index, page, _, _ = ensemble_report
-    items = [i for i in page.sections["claims"].items if "jump (K metric)" in i]
+    items = [i for i in page.sections[k_metric_claims.ID].items if "jump (K metric)" in i]
     stepped = [i for i in items if "time-stepping" in i]
     assert stepped and len(stepped) < len(items)
     for i in stepped:
@@ -209,7 +235,7 @@ def test_settling_matrix_is_recomputed_and_written_beside_the_page(ensemble_repo
     index, page, rows, _ = ensemble_report
     csv = pd.read_csv(index.parent / "settling_matrix.csv")
     m = rows[rows["kind"] == "ensemble"]
-    assert len(csv) == m.groupby(["label", "integrator", "design"]).ngroups == 3 * len(ENSEMBLES)
+    assert len(csv) == m.groupby(["label", "integrator", "design"]).ngroups == 3 * (len(ENSEMBLES) + len(SCENARIO_ENSEMBLES))
     for _, r in csv.iterrows():
         t = m[(m["label"] == r["label"]) & (m["integrator"] == r["integrator"])
               & (m["design"] == r["design"])]["t_settle_1e-06"].to_numpy()
@@ -239,7 +265,7 @@ def test_paired_csv_is_the_analysis_of_the_member_rows(ensemble_report):
     ref = paired_settling(members, (("nojump", "jump"), ("jump", "jump_mass")),
                           rng=np.random.default_rng(1), n_resamples=200)
     merged = csv.merge(ref, on=["label", "integrator", "baseline", "candidate", "rho"])
-    assert len(merged) == len(ref) == 2 * len(ENSEMBLES) * len(RHO_COLS)
+    assert len(merged) == len(ref) == 2 * (len(ENSEMBLES) + len(SCENARIO_ENSEMBLES)) * len(RHO_COLS)
     assert np.allclose(merged["ratio_median_x"], merged["ratio_median_y"], rtol=1e-12)
     rises = pd.read_csv(index.parent / "rise_distribution.csv")
     assert rises["frac_rising"].tolist() == pytest.approx(rise_distribution(members)["frac_rising"].tolist())
@@ -309,19 +335,116 @@ def test_no_ensemble_rows_says_so(tmp_path):
     assert page.sections["claims"].items == []
 
 
+def _claim(page, key: str) -> str:
+    titles = {c.key: c.title for c in forest.SCENARIOS}
+    found = [i for i in page.sections["claims"].items if i.startswith(titles[key])]
+    assert len(found) == 1, (key, page.sections["claims"].items)
+    return found[0]
+
+
+def _numbers(item: str) -> tuple[float, float, float]:
+    m = re.search(r"(\d+\.?\d*) \(95 % CI (\d+\.?\d*)–(\d+\.?\d*)\)", item)
+    assert m, item
+    return tuple(float(x) for x in m.groups())
+
+
+def _rate_ratio(rows, label: str, integrator: str) -> float:
+    m = rows[(rows["kind"] == "ensemble") & (rows["label"] == label) & (rows["integrator"] == integrator)]
+    rj = m[m["design"] == "jump"].sort_values("member")["rate"].to_numpy(float)
+    rn = m[m["design"] == "nojump"].sort_values("member")["rate"].to_numpy(float)
+    return rj.mean() / rn.mean()
+
+
+def test_first_screen_claims_one_per_scenario_with_estimand_interval_and_evidence(ensemble_report):
+    """The lead section holds one figure and at most 8 claims, one per scenario the paper names
+    that the results hold; each states its interval and its evidence (members × masters)."""
+    _, page, _, _ = ensemble_report
+    items = page.sections["claims"].items
+    assert 0 < len(items) <= claims.MAX_CLAIMS
+    heads = [next(c.key for c in forest.SCENARIOS if i.startswith(c.title)) for i in items]
+    assert heads == ["double_mass", "grazing", "chain", "random"]          # the synthetic rows' scenarios
+    for i in items:
+        assert "95 % CI" in i and re.search(r"\d+ members × \d+ (master|systems)", i), i
+    html = ensemble_report[0].read_text(encoding="utf-8")
+    start = html.index('<section id="claims"')
+    lead = html[start:html.index("</section>", start)]
+    assert lead.count("<img ") == 1 and "forest plot" in lead
+    assert html.index('<section id="claims"') < html.index('class="header-table"')
+
+
+def test_double_mass_claim_is_the_exact_masters_paired_rate_ratio(ensemble_report):
+    """The double-mass claim uses the exact (event-driven) master where present; its number is
+    mean rate of jump / mean rate of nojump over the same members, recomputed from the rows,
+    inside its interval."""
+    _, page, rows, _ = ensemble_report
+    item = _claim(page, "double_mass")
+    est, lo, hi = _numbers(item)
+    ratio = _rate_ratio(rows, "double_mass", "event")
+    assert est == pytest.approx(ratio, rel=5e-3) and lo <= ratio <= hi
+    assert ratio == pytest.approx(SPEEDUP, rel=0.05)
+    assert "exact event-driven master" in item and f"{N} members × 1 master" in item
+
+
+def test_chain_claim_is_at_n_10_where_the_designs_differ(ensemble_report):
+    """The chain claim speaks of N = 10 (the largest N), not N = 4 where both designs' V are
+    identical (no closing in the window)."""
+    _, page, rows, _ = ensemble_report
+    item = _claim(page, "chain")
+    assert "N = 10" in item and "N = 4" not in item and "identical" not in item
+    assert _numbers(item)[0] == pytest.approx(_rate_ratio(rows, "rocking_chain (N = 10)", "time-stepping"),
+                                              rel=5e-3)
+    assert _rate_ratio(rows, "rocking_chain (N = 4)", "time-stepping") == 1.0
+
+
+def test_random_claim_pools_systems_and_names_where_jump_is_not_faster(ensemble_report):
+    """The random-systems claim resamples systems (3 clusters), says in how many jump's rate is
+    larger, and names the system where jump is slower (rate ratio 0.9, CI below 1)."""
+    _, page, rows, _ = ensemble_report
+    item = _claim(page, "random")
+    assert f"{N} members × 3 systems" in item
+    assert "'s rate larger in 2 of 3 systems" in item
+    assert "slower (CI below 1) in 1 of 3" in item and "is NOT faster on (seed 1, 3 DOF, 2 contacts)" in item
+
+
+def test_grazing_claim_shows_the_grid_sensitivity(ensemble_report):
+    _, page, rows, _ = ensemble_report
+    item = _claim(page, "grazing")
+    assert item.startswith("Grazing — grazing:") and "grid sensitivity: h = 0.0005 →" in item
+
+
+FORBIDDEN = re.compile(r"(?<![\w.])((?i:nan|inf)|None)(?![\w.])|0 \[0, 0\]")
+"""What no table cell may read (the Python spelling None; "none", a perturbation kind, is a word)."""
+
+
+def test_no_table_cell_prints_nan_inf_none_or_zero_intervals(ensemble_report):
+    """No cell of any table of the page reads "nan", "inf", "None" or "0 [0, 0]"."""
+    _, page, _, _ = ensemble_report
+    cells = [c for sec in page.sections.values() for t in sec.tables for row in t.rows for c in row]
+    assert cells
+    bad = [c for c in cells if FORBIDDEN.search(str(c))]
+    assert not bad, bad[:10]
+    assert FORBIDDEN.search("0 [0, 0]") and FORBIDDEN.search("median nan") and not FORBIDDEN.search("infinite")
+    assert FORBIDDEN.search("Inf") and FORBIDDEN.search("None") and not FORBIDDEN.search("none (exact χ)")
+
+
 @pytest.mark.skipif(find_chromium() is None, reason="chromium is not installed (apt-get install chromium)")
-def test_first_screen_in_headless_chromium_holds_the_claims(ensemble_report, tmp_path):
-    """At 1400×1000 the screenshot's first screen shows the claims: the browser reports the
-    bottom of the claims list above 1000 px, and the screenshot is not blank there."""
+def test_first_screen_in_headless_chromium_holds_the_forest_plot_and_the_claims(ensemble_report, tmp_path):
+    """At 1400×1000 the screenshot's first screen shows the forest plot and the per-scenario
+    claims: the browser reports the bottom of both above 1000 px (the image decoded), and the
+    screenshot is not blank there."""
     from PIL import Image
 
     index, page, _, _ = ensemble_report
     probe = index.read_text(encoding="utf-8").replace(
         "</body>", "<script>window.addEventListener('load', function () {"
-        "var r = document.querySelector('ol.claims').getBoundingClientRect();"
+        "var s = document.querySelector('section#claims');"
+        "var r = s.querySelector('ol.claims').getBoundingClientRect();"
+        "var f = s.querySelector('figure img');"
         "document.body.setAttribute('data-claims-bottom', String(r.bottom));"
+        "document.body.setAttribute('data-figure-bottom', String(f.getBoundingClientRect().bottom));"
+        "document.body.setAttribute('data-figure-width', String(f.naturalWidth));"
         "document.body.setAttribute('data-claims-items', String("
-        "document.querySelectorAll('ol.claims li').length));});</script></body>")
+        "s.querySelectorAll('ol.claims li').length));});</script></body>")
     probe_path = index.parent / "probe.html"
     probe_path.write_text(probe, encoding="utf-8")
     res = check_page(probe_path, tmp_path / "first.png", width=1400, height=1000)
@@ -330,6 +453,7 @@ def test_first_screen_in_headless_chromium_holds_the_claims(ensemble_report, tmp
     img = np.asarray(Image.open(res.screenshot).convert("L"), dtype=float)
     assert img.shape == (1000, 1400)
     bottom = float(res.attrs["data-claims-bottom"])
-    assert int(res.attrs["data-claims-items"]) == len(page.sections["claims"].items)
+    assert int(res.attrs["data-claims-items"]) == len(page.sections["claims"].items) >= 4
     assert 0 < bottom < 1000
+    assert 0 < float(res.attrs["data-figure-bottom"]) < bottom and int(res.attrs["data-figure-width"]) > 300
     assert (img[:int(bottom)] < 128).mean() > 0.01      # text drawn where the claims are
