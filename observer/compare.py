@@ -24,9 +24,12 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:                  # pandas is imported where a table is built: `import observer` stays light
+    import pandas as pd
 
 from observer.errors import InputError
 from observer.metrics import RHOS, settle_column
@@ -94,6 +97,9 @@ def member_fits(sc, df: pd.DataFrame, n: int, designs) -> tuple[pd.DataFrame, pd
         Per (design, member < n): ``rate, points, t_fit, reached_level, grid_decided``; per
         design: ``floor``.
     """
+    import pandas as pd
+    from observer import stats
+
     paths = df.attrs.pop("paths")
     pd_member = paths["member"].to_numpy()
     pd_t, pd_V = paths["t"].to_numpy(), paths["V"].to_numpy()
@@ -119,7 +125,6 @@ def run_master(sc, designs, n: int, seed: int, integrator: str, engine, workers,
     times, the decay rate (:func:`observer.stats.decay_rates`); per design the floor. A plain
     function of picklable arguments (it runs on Dask workers)."""
     import pandas as pd
-    from observer import stats
     from observer.ensemble import ensemble, sample_errors
 
     rng = np.random.default_rng(seed)
