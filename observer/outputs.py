@@ -46,6 +46,9 @@ def check_regular(field: str, path: str | Path) -> None:
         mode = os.stat(path).st_mode
     except FileNotFoundError:
         return
+    except NotADirectoryError:
+        raise InputError(field, f"cannot use {str(path)!r}: a folder on its path is not a directory "
+                                f"(it is a file)") from None
     except OSError as exc:
         raise InputError(field, f"cannot use {str(path)!r}: {exc.strerror or exc}") from None
     if stat.S_ISDIR(mode):

@@ -138,11 +138,13 @@ def test_plain_read_parquet_gives_the_documented_columns_and_schema_metadata(obs
 @pytest.mark.parametrize("ext", ["csv", "parquet"])
 def test_read_result_returns_frame_and_metadata(observed_run, tmp_path, ext):
     expected = observed_run.to_frame()
-    df, meta = read_result(observed_run.write(tmp_path / f"r.{ext}"))
+    path = observed_run.write(tmp_path / f"r.{ext}")
+    df, meta = read_result(path)
     assert list(df.columns) == DM_COLUMNS
     for col in DM_COLUMNS:
         assert np.array_equal(df[col].to_numpy(), expected[col].to_numpy()), col
-    assert meta == expected.attrs
+    # the run's metadata, plus the name of the events table written beside this file
+    assert meta == {**expected.attrs, "events_file": events_path(path).name}
     assert df["P0"].dtype == np.float64 and df["active0"].dtype.kind == "i"
     assert read_frame(tmp_path / f"r.{ext}").attrs == meta          # the attrs view agrees
 

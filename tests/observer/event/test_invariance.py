@@ -65,6 +65,7 @@ def systems(draw, zeno: bool = False) -> dict:
     M = np.diag([draw(st.floats(0.5, 2.0)) for _ in range(n)])
     B = np.array([[draw(fl) if i == j or not zeno else 0.0 for j in range(n)] for i in range(n)])
     K = (2.0 if zeno else 20.0) * B @ B.T if draw(st.booleans()) else np.zeros((n, n))
+    K = 0.5 * (K + K.T)                  # exactly symmetric (the scenario requires it; B Bᵀ may round apart)
     C = np.diag([draw(st.one_of(st.just(0.0), st.floats(1e-3, 0.5))) for _ in range(n)])
     # contact j mostly on DOF j (diagonally dominant W: independent columns); gravity on all
     W = np.eye(n) + 0.3 * np.array([[0.0 if i == j or zeno else draw(fl) for j in range(m)]
