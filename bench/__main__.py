@@ -15,7 +15,8 @@ twice.
 
 The BLAS thread count is pinned to 1 (unless already set) before NumPy is imported: the
 systems are small, and threaded BLAS on small matrices only adds contention and noise to
-the timings (measured: 4-6× slower per step for the N = 50 … 200 chain on 2 shared cores).
+the timings (measured: several times slower per step for the N = 50 … 200 chain on 2
+shared cores).
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """The peers suite's oscillator timed on two source trees in one run: this tree and a git revision.
 
 Issue 21's acceptance: "Peers suite in one run, before and after: the oscillator's per-step
-time not worse than 5 %", and "the 1-DOF oscillator ≤ 25 ns/step for the whole ``simulate``
-call". Timings of two trees taken on different days, or one after the other, compare the
+time not worse than 5 %", and a bound on the 1-DOF oscillator's time per step for the whole
+``simulate`` call. Timings of two trees taken on different days, or one after the other, compare the
 machine's load as much as the code (on a shared machine the per-step time of the same tree
 moves by ±30 % within minutes). So :func:`compare` times both trees **in one run,
 alternating call by call**: each round starts one process per tree, each importing its

@@ -15,30 +15,10 @@ Two measurements, each printed as JSON lines:
   established, and the observers' summary (V at the start and the end, the projection and
   impulse parts of ΔV).
 
-Measured (issue 23, 2 cores shared by several processes; wall times scale with the load, CPU
-times do not):
-
-* sweep N = 10 … 10⁴: whole call CPU 0.009 s (N = 10) … 0.26 s (10³) … 2.23 s (10⁴); fitted
-  exponents 0.77 (CPU), 0.78 (wall), 1.09 (the loop's own wall time) (load 9–16); again with
-  the verified definiteness and compact vectors (load 10–10.7): 0.008 s … 0.21 s … 2.31 s,
-  exponents 0.78 (CPU), 0.78 (wall), 1.13 (loop wall);
-* the scaling suite's full list (``python -m bench run scaling``, N = 5 … 10⁵, master alone,
-  4000 steps, 14 cases in 1448 s of wall time at 28 % of a core, load 9–11): CPU time per step
-  ∝ N^0.99 (N ≥ 10: 0.99, N ≥ 50: 0.97), the loop's wall time per step N^1.03, the whole call's
-  CPU time N^0.91; N = 10⁵: 18.1 ms of CPU per step, whole call 78 s of CPU, 560 MB of
-  traced memory;
-* big N = 10⁵, the default chain (cond(K) = 2.5·10¹², K ≻ 0 verified by the banded Cholesky of
-  K − cI, :func:`observer.sparse.verified_definite`), master + jump + nojump coupled over the
-  1000 steps, summary storage: 55 s of CPU (116 s wall at load 7.7–8.0; 57 s CPU and 235 s wall
-  in a run at load 10), peak RSS 645 MB, status ok, 249 contact solves, health without
-  warnings, ω_max = 110.840 rad/s by Lanczos (closed form 110.851: −1.0·10⁻⁴). The jump
-  observer projected (the part of ΔV not from damping or impulses, its projections: 4.74·10⁻⁷
-  in sum, against 2.9·10⁻¹⁰ for ``nojump``): V from 1.01·10⁻⁹ to 1.07·10⁻⁷ for
-  ``jump`` (the master penetrates O(h) at h = 1e-3 and the projection follows its contacts; the
-  same at N = 10: 7.5·10⁻⁶) and to 3.9·10⁻¹¹ for ``nojump`` — as the N = 1000 chain over the
-  same second (1.066·10⁻⁷, 4.73·10⁻⁷: in 1 s the ground's motion reaches only the chain's
-  lowest blocks). Before the verified test, the default chain's ``jump`` was refused from
-  N ≈ 45 000 and this run used ``b=0.5 a=0.45`` (54 s CPU, 295 s wall at load 15, 689 MB).
+No result is kept in this docstring: the numbers depend on the machine and its load (on a
+shared machine read the CPU times; wall times scale with the load). The scaling suite
+(``python -m bench run scaling``, N = 5 … 10⁵) stores its results, and the report's scaling
+section (:mod:`reports.sections.scaling`) shows them.
 
 Run from the repository root::
 

@@ -9,10 +9,13 @@ Chromium and every internal link of it is resolved.
 
 from __future__ import annotations
 
+import ast
+import io
 import os
 import re
 import subprocess
 import sys
+import tokenize
 from html.parser import HTMLParser
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
@@ -155,6 +158,68 @@ def test_no_file_cites_the_outside_notes_or_a_missing_file():
                 missing.append(f"{rel}: {cited}")
     assert not outside, f"files citing notes that are not in the repository: {outside}"
     assert not missing, "files citing paths that are not in the repository:\n" + "\n".join(missing)
+
+
+MACHINE_TIMING = re.compile(
+    r"\d[\d.]*\s?(?:ns|µs|μs)\b"                                  # a machine's scale, not a system's
+    r"|\d[\d.]*\s?(?:ns|µs|μs|ms)\s?(?:/|per\s)\s?(?:step|call|point|impulse|contact|observer)"
+    r"|\d[\d.]*\s?[×x]\s+(?:faster|slower)|\d\s?%\s+(?:faster|slower)"
+    r"|\d[\d.]*\s?(?:ms|s|min|h)\s+(?:of\s+)?(?:wall|CPU)\b"     # "116 s wall", "55 s of CPU"
+    r"|\d\s?min\s+\d+\s?s\b"                                # "2 min 48 s"
+    r"|\bat\s+load\s+\d|\bload\s+\d+(?:\.\d+)?\s?[–-]\s?\d"  # "at load 9", "load 9–11"
+    r"|\b(?:took|takes)\s+(?:~|about\s+)?\d[\d.]*\s?(?:ms|s|min)\b")
+"""Machine timings in prose: time per step or call, speed-ups, wall or CPU seconds, a run's
+duration, the load it ran at. Times of a simulated system (``t_end``, impact times, "within
+9 ms of the first impact") do not match: they are seconds of the model, not of the machine."""
+TIMED_TREES = ("observer", "proofs_checks", "bench", "reports")
+
+
+def machine_timings(source: str) -> list[tuple[int, str]]:
+    """(line, text) of every machine timing in the docstrings and comments of ``source``."""
+    found = []
+    for tok in tokenize.generate_tokens(io.StringIO(source).readline):
+        if tok.type == tokenize.COMMENT:
+            found += [(tok.start[0], m.group(0)) for m in MACHINE_TIMING.finditer(tok.string)]
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            doc = ast.get_docstring(node, clean=False)
+            if doc is None:
+                continue
+            start = node.body[0].lineno
+            found += [(start + doc.count("\n", 0, m.start()), m.group(0))
+                      for m in MACHINE_TIMING.finditer(doc)]
+    for node in ast.walk(ast.parse(source)):               # attribute docstrings (``X = 1`` then a string)
+        body = getattr(node, "body", None)
+        if not isinstance(body, list):
+            continue
+        for prev, stmt in zip(body, body[1:]):
+            if (isinstance(prev, (ast.Assign, ast.AnnAssign)) and isinstance(stmt, ast.Expr)
+                    and isinstance(stmt.value, ast.Constant) and isinstance(stmt.value.value, str)):
+                doc = stmt.value.value
+                found += [(stmt.lineno + doc.count("\n", 0, m.start()), m.group(0))
+                          for m in MACHINE_TIMING.finditer(doc)]
+    return sorted(found)
+
+
+def test_the_timing_scan_finds_machine_timings_and_not_the_models_times():
+    bad = ('"""One call: 114 → 67 ns per call; 4-6× slower; 55 s of CPU\n(116 s wall at load 7.7–8.0)."""\n'
+           'X = 1\n"""Measured: 2.9 µs per step."""\n'
+           'def f():\n    """The report took 2 min 48 s."""\n    return 1  # ~190 ns of 240\n')
+    assert [line for line, _ in machine_timings(bad)] == [1, 1, 1, 2, 2, 4, 6, 7]
+    good = ('"""Impacts accumulate within 9 ms of the first one; t_end = 60 s; h = 1e-3 s per step;\n'
+            'the loop is 1.5× the Delassus matrix; 10 s at h = 2e-4."""\n# first 10 s: 2.2e-3\n')
+    assert machine_timings(good) == []
+
+
+def test_no_docstring_or_comment_quotes_a_machine_timing():
+    """Issue 35: a timing in prose is true on one machine at one load; no test keeps it. The
+    stored benchmark results and the report carry the measurements, with their machine."""
+    hits = []
+    for tree in TIMED_TREES:
+        for f in sorted((REPO / tree).rglob("*.py")):
+            rel = f.relative_to(REPO).as_posix()
+            hits += [f"{rel}:{line}: {text}" for line, text in machine_timings(f.read_text(encoding="utf-8"))]
+    assert not hits, "machine timings in docstrings or comments:\n" + "\n".join(hits)
 
 
 def test_readme_is_a_front_door():

@@ -44,7 +44,8 @@ def compiled():
 AGREE_STEPS = 20_000
 """Longest horizon (steps) of the engines' agreement run: double_mass (200 000 steps by
 default) and the chain (80 000) are cut to their first 2 s, which hold impacts, closed
-contacts and coupled observers (asserted below); the numpy engine's full runs took ~1 min."""
+contacts and coupled observers (asserted below); the numpy engine's full runs would make the
+test slow."""
 
 
 @pytest.mark.parametrize("name", list(SCENARIOS))

@@ -243,8 +243,7 @@ def impulse_one(k, s, us, uf, j, Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats
     new variable), every array is read outside any branch, the status is decided on scalars
     before ``stats``, the last array written, is touched: numba then prunes every argument's
     increment and decrement (an array used in two loops, or written inside a branch, keeps
-    them: 9 pairs per call before; 114 → 67 ns per call in a compiled loop, measured on a
-    loaded 2-core machine, min of 7).
+    them: 9 pairs per call before, which made each call in a compiled loop markedly slower).
     """
     n = uf.shape[0]
     p0, p1 = Wp[j], Wp[j + 1]
@@ -506,9 +505,9 @@ def fill_waves(ca, sa, cb, sb, function, k0, out):
     rounded and then added or subtracted, as numpy's outer products do. Row p of ``ca``, ``sa``
     holds wave p's anchors from block k0 // B on, of ``cb``, ``sb`` its β_j
     (:func:`observer.model.grid_anchors`, evaluated by numpy: numba's trigonometric functions
-    may round differently). Compiled, ~1.3 ns per point; the table by numpy's outer products
-    cost ~5.5 ns per point with its anchors, ~4.8 ns this way (min of 50, loaded machine):
-    the anchors' numpy calls (~0.9 ns per point of a 16k-step window) remain (issue 21)."""
+    may round differently). Compiled, the angle addition itself costs little next to the
+    anchors' numpy calls, which remain; together they cost somewhat less than the table by
+    numpy's outer products (issue 21)."""
     P, K = out.shape
     B = cb.shape[1]
     a0 = k0 // B
@@ -613,8 +612,8 @@ def advance(k0, k1, s0, system, impact, signals, window, observers, state, stora
     ``storage`` (:class:`StorageBundle`, the records written in place) and ``tally``
     (:class:`SummaryBundle`). Each field goes to the loop by name, once per call. This is a
     Python function on purpose: the loop keeps its positional parameters because reading the
-    fields inside it, even into locals before the steps, made it 6–17 % slower per step
-    (measured against main's loop, issue 21), and a compiled wrapper gets the loop inlined
+    fields inside it, even into locals before the steps, made it slower per step
+    (measured against the positional loop, issue 21), and a compiled wrapper gets the loop inlined
     into it by LLVM, which compiles it again, differently.
 
     ``general`` selects the compiled specialization: ``True`` the general loop; ``None`` the
@@ -893,7 +892,7 @@ def _advance_loop(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupl
                         gstep = k + 1
             elif summary:
                 # the observer's summary, written here: as a call (or an inlined helper) it cost
-                # ~36 reference counts per observer step, ~190 ns of 240 (double_mass)
+                # ~36 reference counts per observer step, most of the step's time (double_mass)
                 kg = k + 1
                 for i in range(n):                                # v, v̄ (wv[:n], wv[n:2n])
                     vi = us[s, i] - us[0, i]

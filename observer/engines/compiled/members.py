@@ -15,8 +15,8 @@ structure and contact data, the streaming summary): the kernel's own functions f
 closed contacts (:func:`~observer.engines.compiled.kernel.contact_impulse`,
 :func:`~observer.primitives.project_positions`) and, for one, the operations of
 :func:`~observer.engines.compiled.kernel.impulse_one` and :func:`~observer.primitives.project_one` written inline
-(a call with their array arguments cost ~150 ns per contact step, a third of the loop's time
-on double_mass). Member i's summary is bitwise that of a single :func:`observer.simulate` of
+(a call with their array arguments cost reference counts on every contact step, a large
+part of the loop's time on double_mass). Member i's summary is bitwise that of a single :func:`observer.simulate` of
 that member (``tests/observer/test_ensemble_members.py`` checks every branch against single
 runs: a change to the kernel's observer step must be made here too). The master alone takes
 the kernel's lean specialization, whose trajectory is bitwise the general loop's
@@ -51,8 +51,9 @@ from observer.primitives import (CONTACTS_DENSE, F_DAMP, F_IMP, F_KON, F_MAXIMP,
 
 SPECIALIZE_STEPS = 50_000_000
 """Observer steps (members × designs × steps) from which :func:`advance_members` is compiled
-for the run's n and m (:func:`sizes`): ~8 s of compilation once per machine (numba's disk
-cache), ~25 ns less per observer step (double_mass), so 1.2 s less per run from here on."""
+for the run's n and m (:func:`sizes`): the specialization costs a compilation once per
+machine (numba's disk cache) and saves time on every observer step (double_mass); from this
+many observer steps on, the saving outweighs the compilation."""
 SPECIALIZE_MAX_N = 8
 """Largest n (and m) compiled as constants (the loops over them unrolled)."""
 
@@ -136,8 +137,8 @@ def advance_members(n_, m_, r_, j0, j1, steps, QM, UM, PM, CHI, COUP, FB, NU, NU
     """Advance observers j0..j1−1 (rows of ``qs``, ``us``, ``summ``; the master is row 0 and
     not advanced) over steps 0..steps−1; ``n_``, ``m_``, ``r_`` are tuples of n, m and
     ``len(rhos)`` zeros, so that these sizes are compile-time constants of the specialization
-    (its loops unrolled: 70 → 45 ns per step of double_mass, min CPU time on a loaded
-    machine), or empty for n and m taken from the arrays (:func:`sizes`). Returns the first
+    (its loops unrolled: faster per step of double_mass than with n and m from the
+    arrays), or empty for n and m taken from the arrays (:func:`sizes`). Returns the first
     observer whose step failed and the step, as ``(s, k, status)`` (``status == OK``: all
     done).
 

@@ -141,14 +141,14 @@ def _cpu_seconds(pid: int) -> float:
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
 @pytest.mark.parametrize("sig, ext, observers, t_end, cpu", [
-    (signal.SIGINT, "parquet", "none", "200", 4.5),        # in the master's run (≈ 47 s of CPU)
+    (signal.SIGINT, "parquet", "none", "200", 4.5),        # in the master's run (far from its end)
     (signal.SIGTERM, "csv", "nojump", "200", 2.5)])        # in the master's run: the observer up to there
 def test_a_signal_during_an_event_run_leaves_a_readable_stopped_file(tmp_path, sig, ext, observers,
                                                                      t_end, cpu):
-    """``cpu``: CPU seconds of the process when the signal is sent (imports ≈ 0.7 s, numba and
-    the event engine's compiled root finders loaded from numba's cache ≈ 0.9 s — compiled here
-    first, so that a fresh clone's cold cache does not eat the run — then the master at ≈ 4 s
-    of motion per CPU second here)."""
+    """``cpu``: CPU seconds of the process when the signal is sent: after the imports and
+    after numba and the event engine's compiled root finders are loaded from numba's cache
+    (compiled here first, so that a fresh clone's cold cache does not eat the run), and long
+    before the master's run to t_end = 200 s ends."""
     simulate("double_mass", t_end=0.05, integrator="event")   # fills numba's cache
     path = tmp_path / f"exact.{ext}"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
