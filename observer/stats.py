@@ -93,6 +93,20 @@ def cluster_ci(statistic, clusters: np.ndarray, *, confidence: float = CONFIDENC
     return float(res.confidence_interval.low), float(res.confidence_interval.high), unit
 
 
+def share_interval(share: float, low: float, high: float, clusters: np.ndarray,
+                   confidence: float = CONFIDENCE) -> tuple[float, float]:
+    """A cluster bootstrap interval ``(low, high)`` of a proportion ``share``, widened where it
+    has no width: when every resampled value is the same (all clusters all-success, or
+    all-failure), the percentile interval [1, 1] (or [0, 0]) says nothing of the sampling
+    error. It is then the Clopper–Pearson interval of ``share`` with as many trials as there
+    are clusters (members of one cluster counted as one observation: the design effect at its
+    largest), the "k of m masters" bound."""
+    if not (np.isfinite(low) and np.isfinite(high)) or high > low:
+        return low, high
+    m = int(np.unique(np.asarray(clusters)).size)
+    return clopper_pearson(int(round(share * m)), m, confidence)
+
+
 # ---------------------------------------------------------------------------------------
 # floors and levels
 # ---------------------------------------------------------------------------------------
@@ -268,7 +282,8 @@ def settling_summary(members: pd.DataFrame, column: str, window: float, *, confi
     -------
     DataFrame
         One row per design: ``n``, ``settled``, ``share_settled`` with ``share_low``,
-        ``share_high`` (cluster bootstrap; Clopper–Pearson with one cluster), ``median`` with
+        ``share_high`` (cluster bootstrap, :func:`share_interval` where it has no width;
+        Clopper–Pearson with one cluster), ``median`` with
         ``median_low``, ``median_high`` (NaN = not reached: the Kaplan–Meier curve, or the
         interval's end, stays above ½ inside the window), ``rmst`` (restricted mean
         ∫₀^window S(t) dt, s) with ``rmst_low``, ``rmst_high``, ``window``, ``unit``.
@@ -285,6 +300,8 @@ def settling_summary(members: pd.DataFrame, column: str, window: float, *, confi
         settled = int(np.sum(np.isfinite(times)))
         if ci["share"][2] == "members":
             ci["share"] = (*clopper_pearson(settled, times.size, confidence), "members")
+        else:
+            ci["share"] = (*share_interval(share, ci["share"][0], ci["share"][1], cl, confidence), "clusters")
         fin = lambda x: float(x) if np.isfinite(x) else np.nan  # noqa: E731
         rows.append({"design": d, "n": int(times.size), "settled": settled, "share_settled": share,
                      "share_low": ci["share"][0], "share_high": ci["share"][1],
@@ -303,8 +320,8 @@ def settle_order(members: pd.DataFrame, column: str, a: str, b: str, *, confiden
     -------
     DataFrame
         One row: ``pairs``, ``a_first``, ``b_first``, ``ties``, ``share`` (a_first /
-        (a_first + b_first)) with ``low``, ``high`` (cluster bootstrap; Clopper–Pearson with one
-        cluster), ``p_value`` (two-sided exact binomial test on the members, independent given
+        (a_first + b_first)) with ``low``, ``high`` (cluster bootstrap, :func:`share_interval`
+        where it has no width; Clopper–Pearson with one cluster), ``p_value`` (two-sided exact binomial test on the members, independent given
         the master: with one cluster only), ``unit``.
     """
     w = members.pivot_table(index=["cluster", "member"], columns="design", values=column, aggfunc="first")
@@ -321,8 +338,8 @@ def settle_order(members: pd.DataFrame, column: str, a: str, b: str, *, confiden
         def stat(i):
             mm = first_a[i].sum() + first_b[i].sum()
             return float(first_a[i].sum() / mm) if mm else 0.5
-        row["low"], row["high"], row["unit"] = cluster_ci(stat, cl, confidence=confidence,
-                                                          n_resamples=n_resamples, seed=seed)
+        low, high, row["unit"] = cluster_ci(stat, cl, confidence=confidence, n_resamples=n_resamples, seed=seed)
+        row["low"], row["high"] = share_interval(row["share"], low, high, cl, confidence)
     else:
         from scipy.stats import binomtest
 

@@ -90,3 +90,24 @@ def test_cluster_bootstrap_coverage():
         hits_iid += iid["low"] <= 2.0 <= iid["high"]
     assert hits / reps >= 0.93
     assert hits_iid / reps < 0.8
+
+
+def test_a_share_every_cluster_agrees_on_has_the_k_of_m_clusters_interval():
+    """Three masters, every member of each settling and settling first: the percentile
+    bootstrap gives [1, 1] (every resample is 1); the reported interval is the exact binomial
+    interval of 3 successes in 3 trials (members of one master counted as one), computed
+    here from its closed form: [(α/2)^(1/3), 1]."""
+    rng = np.random.default_rng(4)
+    n = 20
+    members = pd.DataFrame({"design": np.repeat(["jump", "nojump"], 3 * n),
+                            "cluster": np.tile(np.repeat([0, 1, 2], n), 2),
+                            "member": np.tile(np.arange(3 * n), 2),
+                            "t": np.concatenate([rng.uniform(1, 2, 3 * n), rng.uniform(3, 4, 3 * n)])})
+    low_exact = 0.025 ** (1 / 3)                 # Clopper–Pearson lower end of 3/3 at 95 %
+    summary = stats.settling_summary(members, "t", 10.0, n_resamples=200).set_index("design")
+    assert summary.loc["jump", "share_settled"] == 1.0
+    assert summary.loc["jump", "share_low"] == pytest.approx(low_exact, rel=1e-9)
+    assert summary.loc["jump", "share_high"] == 1.0
+    order = stats.settle_order(members, "t", "jump", "nojump", n_resamples=200).iloc[0]
+    assert order["a_first"] == 3 * n and order["share"] == 1.0
+    assert order["low"] == pytest.approx(low_exact, rel=1e-9) and order["high"] == 1.0
