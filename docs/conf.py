@@ -73,7 +73,7 @@ def _gallery_argv(gallery_conf: dict, script_vars: dict) -> list[str]:
 sphinx_gallery_conf = {
     "examples_dirs": str(ROOT / "examples"),
     "gallery_dirs": "auto_examples",
-    "filename_pattern": r"(paper_figures|my_system|measured_log)\.py$",
+    "filename_pattern": r"(paper_figures|my_system|measured_log|compare_designs)\.py$",
     "ignore_pattern": r"__init__\.py",
     "reset_argv": _gallery_argv,
     "download_all_examples": False,
