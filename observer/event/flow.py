@@ -11,7 +11,7 @@ is exact (up to the round-off of ``scipy.linalg.expm``) for singular K too (the 
 ball: A is then nilpotent on (q, u, 1)). The oscillator components are always set from t
 analytically (``z(t, x)``), so no phase error accumulates over long runs.
 
-With a set I of contacts held closed (persistent contact, docs/theory/scheme.md §5), the contact force
+With a set I of contacts held closed (persistent contact, docs/theory/event.md §3), the contact force
 λ_I keeps ``γ̇_I = 0``: ``γ̇_I = (γ̇_I)_free + G_I λ_I`` with the Delassus matrix
 ``G_I = W_Iᵀ M⁻¹ W_I``, so ``λ_I = −G_I⁻¹ (γ̇_I)_free`` is an exact linear function of z
 (a row matrix ``Λ``), and the constrained flow has the generator

@@ -104,7 +104,7 @@ def test_chain_matrices_structure(N):
 
 
 def test_chain_default_numbers_match_theory():
-    """docs/theory/models.md §2.3/§4.4: ω from 6.68 to 109.6 rad/s, G_(1L,1R) = -1.4, static y_s from
+    """docs/theory/models.md §2.3/§2.4: ω from 6.68 to 109.6 rad/s, G_(1L,1R) = -1.4, static y_s from
     -0.049 to -0.270 m, unloaded clearances g⁰_L from 0.0511 to 0.0069 m, g⁰_R = g⁰_L + 1 mm."""
     M, C, K, W, _, _ = chain_matrices(10)
     omega = np.sqrt(sla.eigh(K, M, eigvals_only=True))
@@ -316,7 +316,7 @@ def test_double_mass_initial_state_is_static_contact_equilibrium():
     assert abs(g[0]) <= 1e-12
     np.testing.assert_allclose(sc.q0, [-0.25, -0.17405], rtol=0, atol=5e-6)   # docs/theory/models.md §1.2
     assert np.all(sc.u0 == 0.0)
-    # K q* = f_grav + w λ_s with λ_s = 2.215 N (docs/theory/models.md §1.2, §7.5)
+    # K q* = f_grav + w λ_s with λ_s = 2.215 N (docs/theory/models.md §1.2, docs/theory/oracles.md §5)
     f_grav = s.forcing.constant
     lam = (s.K @ sc.q0 - f_grav) @ s.W[:, 0]
     np.testing.assert_allclose(s.K @ sc.q0 - f_grav, s.W[:, 0] * lam, rtol=0, atol=1e-12)

@@ -1,4 +1,4 @@
-"""Moreau–Jean time stepping against exact oracles (docs/theory/scheme.md, §7, §10).
+"""Moreau–Jean time stepping against exact oracles (docs/theory/scheme.md §7, docs/theory/oracles.md).
 
 External oracle data is resolved by ``tests/oracles.py`` (``../shared/oracles`` from the
 project root; a missing oracle fails under ``CI`` and skips otherwise).

@@ -1,7 +1,7 @@
 """Exact event-driven master (issue 11, items 1, 2 and 4): flow, root isolation, event loop.
 
 Every expected value is computed here independently of :mod:`observer.event`: closed forms
-(docs/theory/oracles.md §1 bouncing ball, §7.2 impact oscillator, §7.5 static contact), the analytic
+(docs/theory/oracles.md §1 bouncing ball, §2 impact oscillator, §5 static contact), the analytic
 solution of the grazing oscillator, an analytic one-period map with ``scipy.optimize.brentq``,
 and Siconos' event-driven reference outputs (``BouncingBallED.ref``, ``LinearOscillatorED.ref``).
 """

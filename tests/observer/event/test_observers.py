@@ -19,7 +19,7 @@ from observer.event.observers import (Exosystem, expm, run_observers, run_schedu
                                       switching_schedule)
 from observer.observers import lyapunov
 
-# -- the double-mass oscillator at rest on the ground (docs/theory/models.md §1, §7.7: F = 0, χ ≡ 1) ---------
+# -- the double-mass oscillator at rest on the ground (docs/theory/models.md §1, docs/theory/oracles.md §5: F = 0, χ ≡ 1) ---------
 K1 = K2 = 100.0
 C1 = C2 = 1.0
 OMEGA_N2 = (K1 + K2) / 1.0                          # mass 2 with mass 1 held: ω² = (k1+k2)/m2
