@@ -283,7 +283,7 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
             integrator: str = "time-stepping", engine: str | None = None, spread: float = SPREAD,
             grid_jitter: float = 0.0, initial_errors: str = "energy_sphere", V0: float | None = None,
             workers: int | None = None, scheduler: str | None = None, confidence: float | None = None,
-            n_resamples: int | None = None) -> Comparison:
+            n_resamples: int | None = None, sensor: dict | None = None) -> Comparison:
     """Compare observer designs on ``scenario`` with paired members against several masters.
 
     Parameters
@@ -312,6 +312,10 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
         Threads per master run.
     scheduler : str, optional
         A Dask scheduler address: the masters run there, one task each.
+    sensor : dict, optional
+        χ from a contact sensor (the ``[observer.sensor]`` keys, replacing the scenario's
+        table): each master's members see what the sensor makes of that master
+        (:func:`observer.ensemble`); recorded in ``metadata["sensor"]`` unless ideal.
 
     Returns
     -------
@@ -340,8 +344,12 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
     for name, value in (("spread", spread), ("grid_jitter", grid_jitter)):
         if not (isinstance(value, (int, float)) and 0.0 <= value < 1.0):
             raise InputError(name, f"must be a number in [0, 1), got {value!r}")
-    from observer.scenario import load_scenario
+    from observer.scenario import check_overrides, load_scenario
+    from observer.sensor import Sensor
+    if sensor is not None:
+        overrides = {**check_overrides(overrides), "observer.sensor": sensor}
     sc = _load(load_scenario(scenario, overrides) if overrides else scenario, h, t_end)
+    sensed = Sensor.from_table(sc.observer.get("sensor"))
     ss = np.random.SeedSequence(seed)
     master_seed, *member_seeds = ss.spawn(masters + 1)
     scs = master_scenarios(sc, masters, spread, grid_jitter, np.random.default_rng(master_seed))
@@ -355,6 +363,8 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
                        "integrator": integrator, "engine": engine, "h": sc.h, "t_end": sc.t_end,
                        "master_steps": [d["h"] for d in done], "confidence": confidence,
                        "n_resamples": n_resamples, "wall_time_s": time.perf_counter() - t0}
+    if not sensed.ideal:
+        result.metadata["sensor"] = sensed.to_dict()
     return result
 
 

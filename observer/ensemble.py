@@ -377,7 +377,7 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
              V0: float | None = None, h: float | None = None, t_end: float | None = None,
              integrator: str = "time-stepping", engine: str | None = None, store: str = "summary",
              paths: int = 0, workers: int | None = None, out: str | Path | None = None,
-             label: str | None = None):
+             label: str | None = None, sensor: dict | None = None):
     """Run n observers per design from n initial errors against one master; one row per
     (design, member).
 
@@ -418,6 +418,10 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
         A ``.parquet`` file for the rows (and ``<stem>.paths.parquet`` with ``paths``).
     label : str, optional
         The scenario's variant label in the rows (default: its name).
+    sensor : dict, optional
+        Every member's χ from a contact sensor on the one master (the ``[observer.sensor]``
+        keys, replacing the scenario's table; :func:`observer.simulate.sensed_scenario`); a
+        sensor that is not ideal is recorded in ``attrs["metadata"]["sensor"]``.
 
     Returns
     -------
@@ -441,11 +445,15 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
     if V0 is not None:
         V0 = as_scalar("V0", V0, positive=True)
     sc = _load(scenario, h, t_end)
+    from observer.simulate import sensed_scenario
+    sc, sensed = sensed_scenario(sc, sensor, integrator, engine=engine)
     X, V0_used = sample_errors(sc, n, initial_errors, gen, V0)
     rows, path_frame = run_members(sc, designs, X, integrator, store, engine, paths, workers)
     df = _frame(sc, sc.name if label is None else str(label), designs, X, rows, integrator, seed_value)
     df.attrs["metadata"] = _metadata(sc, designs, n, seed_value, initial_errors, V0_used, integrator, engine,
                                      store, workers, time.perf_counter() - t0)
+    if sensed is not None:
+        df.attrs["metadata"]["sensor"] = sensed
     if path_frame is not None:
         df.attrs["paths"] = path_frame
     if out is not None:

@@ -133,10 +133,10 @@ class ObserverConfig:
         source = table.get("source", "master")
         if source not in SOURCES:
             raise InputError("observer.source", f"must be one of {list(SOURCES)}, got {source!r}")
-        log = table.get("log")
-        if source == "log" and not log:
+        log = table.get("log")                    # a path, or a DataFrame (a sensed log)
+        if source == "log" and (log is None or isinstance(log, str) and not log):
             raise InputError("observer.log", "source = \"log\" needs a log file path")
-        if log is not None and base_dir is not None:
+        if isinstance(log, str) and base_dir is not None:
             from pathlib import Path
             p = Path(log)
             if not p.is_absolute() and not p.exists() and (Path(base_dir) / p).exists():

@@ -20,6 +20,8 @@ TOML format (the contract; ``[observer]`` is used by the observers)::
     [simulation]        t_end, h, theta, solver, master_projection
     [observer]          q, u, coupling = [t_on, t_off], source = "master" | "log", log,
                         observers = ["jump", "nojump"]
+    [observer.sensor]   threshold, latency, sampling_period, jitter, missed, false_rate, seed
+                        (χ from a contact sensor, :mod:`observer.sensor`)
 
 ``phase`` may be a scalar or a vector.
 """
@@ -39,6 +41,7 @@ import numpy as np
 from observer.errors import InputError, InputWarning
 from observer.impact import ImpactLaw
 from observer.model import Harmonic, LinearSystem
+from observer.sensor import Sensor
 from observer.solver_registry import solver_factory
 from observer import sparse as sps
 from observer.validation import (MAX_DEPTH, as_array, as_matrix, as_scalar, check_step_count,
@@ -56,7 +59,9 @@ SCHEMA: dict = {
     "initial": {"q": None, "u": None},
     "simulation": {"t_end": None, "h": None, "theta": None, "solver": None, "master_projection": None},
     "observer": {"q": None, "u": None, "coupling": None, "source": None, "log": None,
-                 "observers": None},
+                 "observers": None,
+                 "sensor": {"threshold": None, "latency": None, "sampling_period": None, "jitter": None,
+                            "missed": None, "false_rate": None, "seed": None}},
 }
 REQUIRED = ("system.M", "system.C", "system.K", "system.W", "impact.law", "impact.restitution",
             "initial.q", "initial.u", "simulation.t_end", "simulation.h")
@@ -104,6 +109,16 @@ FIELDS: dict[str, tuple[str, str, str, str]] = {
                      "closing log (contact, t_close, t_open), relative to the TOML file"),
     "observer.observers": ("array of design names", "", '["jump", "nojump"]',
                            "observer designs to run (keys of OBSERVER_DESIGNS)"),
+    # [observer.sensor]: χ from a contact sensor (observer/sensor.py, docs/guide/sensors.md)
+    "observer.sensor.threshold": ("number ≥ 0", "m", "0", "gap δ at or below which a contact is seen "
+                                  "closed (0: the master's closed set; not with source = \"log\")"),
+    "observer.sensor.latency": ("number ≥ 0", "s", "0", "delay d of every reported closing and opening"),
+    "observer.sensor.sampling_period": ("number > 0", "s", "none (every step)",
+                                        "χ read at t = j·T and held in between"),
+    "observer.sensor.jitter": ("number ≥ 0", "s", "0", "standard deviation σ of each endpoint's time error"),
+    "observer.sensor.missed": ("number in [0, 1]", "1", "0", "probability that a closing or impact is not seen"),
+    "observer.sensor.false_rate": ("number ≥ 0", "1/s", "0", "rate λ of false impacts (Poisson)"),
+    "observer.sensor.seed": ("integer ≥ 0", "", "0", "seed of the sensor's missed, false and jitter draws"),
 }
 """The documented fields of a scenario document: every leaf of :data:`SCHEMA`, with its type,
 unit, default and meaning (``required`` for the keys of :data:`REQUIRED`)."""
@@ -306,6 +321,7 @@ class Scenario:
             system.require_definite_stiffness("simulation.master_projection")
         check_initial_gap("initial.q", system, q0)
         check_finite_energy("initial", system, q0, u0)
+        Sensor.from_table(doc.get("observer", {}).get("sensor"))
         meta = doc.get("scenario", {})
         return Scenario(str(meta.get("name", Path(source).stem if source else "custom")),
                         str(meta.get("description", "")), system, law, q0, u0, t_end, h, theta,

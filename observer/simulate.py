@@ -52,7 +52,7 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
              coupling: tuple[float, float] | None | str = "scenario", log: str | Path | None = None,
              residual_tol: float = 1e-9, engine: str | None = None, record_every: int | None = None,
              store: str = "full", integrator: str | None = None, on_chunk=None,
-             t0: float = 0.0) -> SimulationResult:
+             t0: float = 0.0, sensor: dict | None = None) -> SimulationResult:
     """Simulate the master and the observers of ``scenario`` on a registered engine.
 
     Parameters
@@ -73,6 +73,11 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         The time origin (default 0): the initial state is taken at t0, the grid is
         t_k = t0 + k·h up to t_end, forcing and gap offsets at the absolute time; a time shift
         is this keyword, not a launch delay. Only the event integrator takes t0 ≠ 0.
+    sensor : dict, optional
+        The observers' χ from a contact sensor (:mod:`observer.sensor`), the keys of the
+        ``[observer.sensor]`` table; given, it replaces the scenario's table. A sensor that is
+        not ideal drives the observers by the log it sees (:func:`sensed_scenario`) and
+        ``metadata["sensor"]`` records its settings.
 
     Returns
     -------
@@ -83,6 +88,11 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         engine, integrator, coupling, residual_tol, record_every, observers, on_chunk)
     sc = _scenario(scenario, h=h, t_end=t_end, solver=solver, theta=theta,
                    master_projection=master_projection)
+    sensed = None
+    if observers and (observers != "scenario" or sc.observer):
+        sc, sensed = sensed_scenario(sc, sensor, integrator, source, log, engine)
+        if sensed is not None:
+            source, log = "log", sc.observer["log"]
     run = describe(sc, integrator, observers, source, coupling, log, residual_tol, record_every,
                    store, None if on_chunk is None else user_callback("on_chunk", on_chunk))
     t0 = as_scalar("t0", t0)
@@ -94,7 +104,74 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     record = chosen.run(run)
     if note:
         record.metadata["engine_note"] = note
+    if sensed is not None:
+        record.metadata["sensor"] = sensed
+        record.metadata["log"] = sensed["log"]
     return SimulationResult.from_record(record, sc.system)
+
+
+def sensed_scenario(sc: Scenario, sensor: dict | None, integrator: str = "time-stepping",
+                    source: str | None = None, log=None, engine: str | None = None) -> tuple[Scenario, dict | None]:
+    """``sc`` with its observers driven by what a contact sensor sees (:mod:`observer.sensor`).
+
+    The sensor is ``sensor`` (the ``[observer.sensor]`` keys; None: the scenario's table). An
+    ideal one (or none) gives ``sc`` back without the table. Else, with χ from the master
+    (``source``, default the scenario's: ``"master"``), the plant is run alone (time-stepping,
+    every step kept), its gaps give the seen-closed steps and the sensor's other parts the
+    log (:func:`observer.sensor.sensed_master_log`); with ``source = "log"`` the measured
+    log passes through the sensor's timing, missed and false parts
+    (:func:`observer.sensor.sense_log`). The scenario returned reads that log
+    (``observer.source = "log"``, ``observer.log`` the DataFrame).
+
+    Returns
+    -------
+    (Scenario, dict or None)
+        The scenario, and the sensor's settings with ``applied_to`` (``"master"`` or
+        ``"log"``), ``log`` (the measured log's path, or ``"sensor"``) and ``intervals`` (rows
+        of the log seen); None for the ideal sensor.
+
+    Raises
+    ------
+    InputError
+        Naming ``observer.sensor.FIELD`` for a bad setting; ``observer.sensor`` for χ that no
+        sensor can act on (self-driven observers) or a master run by the event integrator;
+        ``observer.sensor.threshold`` for δ > 0 with a measured log (no gap is known).
+    """
+    from observer.observers import ObserverConfig
+    from observer.sensor import FIELD, Sensor, sense_log, sensed_master_log
+    from observer.switching import read_log
+
+    table = sc.observer.get("sensor") if sensor is None else sensor
+    spec = Sensor.from_table(table)
+    plain = dataclasses.replace(sc, observer={k: v for k, v in sc.observer.items() if k != "sensor"})
+    if spec.ideal:
+        return plain, None
+    base_dir = str(Path(sc.source).parent) if sc.source.endswith(".toml") else None
+    given = {"source": source} if source else {}
+    if log is not None:
+        given["log"] = log
+    cfg = ObserverConfig.from_table({**plain.observer, **given}, sc.system.n, sc.q0, sc.u0, base_dir)
+    if cfg.source == "self":
+        raise InputError(FIELD, "the observers are self-driven (source = \"self\"): they read no χ, "
+                         "so a sensor has nothing to act on")
+    if cfg.source == "log":
+        if spec.threshold > 0.0:
+            raise InputError(f"{FIELD}.threshold", "a measured log (source = \"log\") has no gap to "
+                             "compare with a threshold: only latency, sampling_period, jitter, missed "
+                             "and false_rate apply to it")
+        path = cfg.log
+        seen = sense_log(read_log(path, sc.system.m), spec, m=sc.system.m, t_end=sc.t_end, h=sc.h)
+        label = str(path) if isinstance(path, (str, Path)) else f"DataFrame ({len(path)} rows)"
+    else:
+        if integrator != "time-stepping":
+            raise InputError(FIELD, "χ from a sensor on the master's gaps needs the time-stepping "
+                             "integrator (the gaps are read on its grid); with integrator = \"event\" "
+                             "a sensor applies to a measured log only (source = \"log\")")
+        res = simulate(plain, observers=(), store="full", engine=engine)
+        seen = sensed_master_log(res.t, res.q, res.u, res.active, sc.system, sc.h, spec)
+        label = "sensor"
+    meta = {**spec.to_dict(), "applied_to": cfg.source, "log": label, "intervals": int(len(seen))}
+    return dataclasses.replace(plain, observer={**plain.observer, "source": "log", "log": seen}), meta
 
 
 def _scenario(scenario: str | Path | Scenario, **settings) -> Scenario:
