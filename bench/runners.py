@@ -426,9 +426,8 @@ def run_robustness(case: Case, ctx: Context) -> list[dict]:
     ``cpu_time_s`` covers the master and both observers)."""
     sc = observer.load_scenario(case.scenario, case.overrides())
     base = _base_log(sc, ctx, ("log", case.scenario, case.params, case.law, case.h, case.t_end))
-    rng = np.random.default_rng(case.seed)
-    log = perturb_log(base, case.perturbation, case.size, rng=rng, m=sc.system.m, t_min=0.0,
-                      t_max=float(sc.t_end), h=sc.h)
+    log = perturb_log(base, case.perturbation, case.size, seed=case.seed, m=sc.system.m,
+                      t_end=float(sc.t_end), h=sc.h)
     path = ctx.artefacts / "logs" / f"{safe_name(case.case_id)}.csv"
     path.parent.mkdir(parents=True, exist_ok=True)
     log.to_csv(path, index=False, float_format="%.17g")
@@ -461,8 +460,8 @@ def _ensemble_scenario(case: Case, ctx: Context):
     if case.perturbation == "none":
         return sc
     base = _base_log(sc, ctx, ("log", case.scenario, case.params, case.law, case.h, case.t_end))
-    log = perturb_log(base, case.perturbation, case.size, rng=np.random.default_rng(case.seed),
-                      m=sc.system.m, t_min=0.0, t_max=float(sc.t_end), h=sc.h)
+    log = perturb_log(base, case.perturbation, case.size, seed=case.seed, m=sc.system.m,
+                      t_end=float(sc.t_end), h=sc.h)
     path = ctx.artefacts / "logs" / f"{safe_name(case.case_id)}.csv"
     path.parent.mkdir(parents=True, exist_ok=True)
     log.to_csv(path, index=False, float_format="%.17g")

@@ -82,7 +82,8 @@ class Case:
     perturbation : str
         robustness: one of :data:`bench.perturb.KINDS`.
     size : float
-        robustness: size of the perturbation (s, fraction or 1/s).
+        robustness: size of the perturbation (s, probability or 1/s): the value of its sensor
+        setting (:data:`bench.perturb.SETTINGS`).
     memory : bool
         scaling: also measure the peak traced memory (a second, traced run).
     members : int

@@ -42,7 +42,8 @@ def intro(rob: pd.DataFrame, bands: pd.DataFrame) -> str:
                   f"median and the {lo}–{hi} % band.")
     return (f"Scenario {', '.join(dict.fromkeys(rob['name'].astype(str)))} (h = {fmt(r0['h'])} s, "
             f"T = {fmt(r0['t_end'])} s, coupled over the whole run). The observers read χ from the "
-            f"master's closing log (source = \"log\") after one perturbation: "
+            f"master's closing log (source = \"log\") after one perturbation, each one setting of "
+            f"the contact sensor model ([observer.sensor], observer.sensor): "
             + "; ".join(f"{k}: {labels[k]}" for k in kinds) + ". " + seeds_text)
 
 
