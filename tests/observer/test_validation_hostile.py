@@ -599,6 +599,65 @@ CASES += [
 ]
 
 
+# --- issue 33: [observer.sensor], the contact sensor that gives the observers their χ --------------
+SENSOR_LOG = {"log.csv": LOG_OK}
+CASES += [
+    doc_case("sensor-latency-negative", {"observer.sensor.latency": "-1e-3"}, "observer.sensor.latency",
+             "must be >= 0.0"),
+    doc_case("sensor-threshold-negative", {"observer.sensor.threshold": "-1e-4"},
+             "observer.sensor.threshold", "must be >= 0.0"),
+    doc_case("sensor-period-zero", {"observer.sensor.sampling_period": "0.0"},
+             "observer.sensor.sampling_period", "must be > 0"),
+    doc_case("sensor-period-negative", {"observer.sensor.sampling_period": "-1e-3"},
+             "observer.sensor.sampling_period", "must be > 0"),
+    doc_case("sensor-period-text", {"observer.sensor.sampling_period": '"fast"'},
+             "observer.sensor.sampling_period", "string"),
+    doc_case("sensor-period-boolean", {"observer.sensor.sampling_period": "true"},
+             "observer.sensor.sampling_period", "boolean"),
+    doc_case("sensor-missed-above-one", {"observer.sensor.missed": "1.5"}, "observer.sensor.missed",
+             "must be <= 1.0"),
+    doc_case("sensor-missed-negative", {"observer.sensor.missed": "-0.1"}, "observer.sensor.missed",
+             "must be >= 0.0"),
+    doc_case("sensor-false-rate-negative", {"observer.sensor.false_rate": "-2.0"},
+             "observer.sensor.false_rate", "must be >= 0.0"),
+    doc_case("sensor-jitter-nan", {"observer.sensor.jitter": "nan"}, "observer.sensor.jitter", "NaN"),
+    doc_case("sensor-seed-fraction", {"observer.sensor.seed": "1.5"}, "observer.sensor.seed",
+             "integer ≥ 0"),
+    doc_case("sensor-unknown-key", {"observer.sensor.delay": "1e-3"}, "observer.sensor.delay",
+             "unknown key"),
+    doc_case("sensor-not-a-table", {"observer.sensor": "1e-3"}, "observer.sensor", "must be a table"),
+    api_case("sensor-keyword-latency-negative", lambda tmp: observer.simulate(
+        "double_mass", t_end=0.01, observers=["jump"], sensor={"latency": -1e-3}),
+        "observer.sensor.latency", "must be >= 0.0"),
+    api_case("sensor-keyword-unknown", lambda tmp: observer.simulate(
+        "double_mass", t_end=0.01, observers=["jump"], sensor={"lag": 1e-3}),
+        "observer.sensor.lag", "unknown key"),
+    api_case("sensor-keyword-not-a-dict", lambda tmp: observer.simulate(
+        "double_mass", t_end=0.01, observers=["jump"], sensor=1e-3), "observer.sensor", "must be a table"),
+    api_case("sensor-ensemble-missed", lambda tmp: observer.ensemble(
+        "double_mass", n=2, t_end=0.01, sensor={"missed": 2.0}), "observer.sensor.missed", "must be <= 1.0"),
+    api_case("sensor-compare-period", lambda tmp: observer.compare(
+        "double_mass", n=2, masters=1, t_end=0.01, sensor={"sampling_period": -1.0}),
+        "observer.sensor.sampling_period", "must be > 0"),
+    Bad("sensor-threshold-with-a-log", "observer.sensor.threshold", "no gap",
+        lambda tmp: observer.simulate("double_mass", t_end=0.01, observers=["jump"], source="log",
+                                      log=str(tmp / "log.csv"), sensor={"threshold": 1e-3}),
+        ["run", "double_mass", "--observers", "jump", "--source", "log", "--log", "{tmp}/log.csv",
+         "--set", "observer.sensor.threshold=1e-3", "--t-end", "0.01", "--out", OUT],
+        files=SENSOR_LOG, kind="log"),
+    Bad("sensor-self-driven", "observer.sensor", "self-driven",
+        lambda tmp: observer.simulate("double_mass", t_end=0.01, observers=["jump"], source="self",
+                                      sensor={"latency": 1e-3}),
+        ["run", "double_mass", "--observers", "jump", "--source", "self",
+         "--set", "observer.sensor.latency=1e-3", "--t-end", "0.01", "--out", OUT], kind="cli"),
+    Bad("sensor-event-master", "observer.sensor", "time-stepping",
+        lambda tmp: observer.simulate("double_mass", t_end=0.01, observers=["jump"], integrator="event",
+                                      sensor={"latency": 1e-3}),
+        ["run", "double_mass", "--observers", "jump", "--integrator", "event",
+         "--set", "observer.sensor.latency=1e-3", "--t-end", "0.01", "--out", OUT], kind="cli"),
+]
+
+
 def _prepare(case: Bad, tmp: Path) -> None:
     for name, content in case.files.items():
         path = tmp / name
