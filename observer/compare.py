@@ -313,9 +313,7 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
     scheduler : str, optional
         A Dask scheduler address: the masters run there, one task each.
     sensor : dict, optional
-        χ from a contact sensor (the ``[observer.sensor]`` keys, replacing the scenario's
-        table): each master's members see what the sensor makes of that master
-        (:func:`observer.ensemble`); recorded in ``metadata["sensor"]`` unless ideal.
+        ``[observer.sensor]`` keys: χ from a contact sensor on each master (:func:`compared_scenario`).
 
     Returns
     -------
@@ -327,7 +325,7 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
         Naming the argument that is not valid.
     """
     from observer import stats
-    from observer.ensemble import _check_designs, _load, integrator_name
+    from observer.ensemble import _check_designs, integrator_name
 
     confidence = stats.CONFIDENCE if confidence is None else confidence
     n_resamples = stats.N_RESAMPLES if n_resamples is None else n_resamples
@@ -344,12 +342,7 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
     for name, value in (("spread", spread), ("grid_jitter", grid_jitter)):
         if not (isinstance(value, (int, float)) and 0.0 <= value < 1.0):
             raise InputError(name, f"must be a number in [0, 1), got {value!r}")
-    from observer.scenario import check_overrides, load_scenario
-    from observer.sensor import Sensor
-    if sensor is not None:
-        overrides = {**check_overrides(overrides), "observer.sensor": sensor}
-    sc = _load(load_scenario(scenario, overrides) if overrides else scenario, h, t_end)
-    sensed = Sensor.from_table(sc.observer.get("sensor"))
+    sc, sensed = compared_scenario(scenario, overrides, h, t_end, sensor)
     ss = np.random.SeedSequence(seed)
     master_seed, *member_seeds = ss.spawn(masters + 1)
     scs = master_scenarios(sc, masters, spread, grid_jitter, np.random.default_rng(master_seed))
@@ -362,10 +355,24 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
                        "masters": masters, "seed": seed, "spread": spread, "grid_jitter": grid_jitter,
                        "integrator": integrator, "engine": engine, "h": sc.h, "t_end": sc.t_end,
                        "master_steps": [d["h"] for d in done], "confidence": confidence,
-                       "n_resamples": n_resamples, "wall_time_s": time.perf_counter() - t0}
-    if not sensed.ideal:
-        result.metadata["sensor"] = sensed.to_dict()
+                       "n_resamples": n_resamples, "wall_time_s": time.perf_counter() - t0,
+                       **({} if sensed.ideal else {"sensor": sensed.to_dict()})}
     return result
+
+
+def compared_scenario(scenario, overrides, h, t_end, sensor):
+    """The scenario :func:`compare` runs (``overrides``, then ``h`` and ``t_end``), with
+    ``sensor`` (a dict) as its ``[observer.sensor]`` table, and that table's
+    :class:`~observer.sensor.Sensor`. Each master's ensemble applies the sensor to that master
+    (:func:`observer.ensemble`); a sensor that is not ideal is in ``metadata["sensor"]``."""
+    from observer.ensemble import _load
+    from observer.scenario import check_overrides, load_scenario
+    from observer.sensor import Sensor
+
+    if sensor is not None:
+        overrides = {**check_overrides(overrides), "observer.sensor": sensor}
+    sc = _load(load_scenario(scenario, overrides) if overrides else scenario, h, t_end)
+    return sc, Sensor.from_table(sc.observer.get("sensor"))
 
 
 def _run_jobs(jobs, scheduler):

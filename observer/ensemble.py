@@ -215,6 +215,15 @@ def _load(scenario, h, t_end) -> Scenario:
     return sc.with_overrides(over) if over else sc
 
 
+def _load_sensed(scenario, h, t_end, sensor, integrator: str, engine) -> tuple[Scenario, dict | None]:
+    """:func:`_load`, then every member's χ from the contact sensor ``sensor`` (the
+    ``[observer.sensor]`` keys, replacing the scenario's table) on the one master
+    (:func:`observer.simulate.sensed_scenario`). Returns the scenario and the sensor's
+    settings (None: ideal; else ``attrs["metadata"]["sensor"]``)."""
+    from observer.simulate import sensed_scenario
+    return sensed_scenario(_load(scenario, h, t_end), sensor, integrator, engine=engine)
+
+
 # ---------------------------------------------------------------------------------------
 # the runs
 # ---------------------------------------------------------------------------------------
@@ -419,9 +428,7 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
     label : str, optional
         The scenario's variant label in the rows (default: its name).
     sensor : dict, optional
-        Every member's χ from a contact sensor on the one master (the ``[observer.sensor]``
-        keys, replacing the scenario's table; :func:`observer.simulate.sensed_scenario`); a
-        sensor that is not ideal is recorded in ``attrs["metadata"]["sensor"]``.
+        ``[observer.sensor]`` keys: χ from a contact sensor on the master (:func:`_load_sensed`).
 
     Returns
     -------
@@ -442,18 +449,13 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
     n = _count("n", n, 1)
     gen, seed_value = _generator(seed, rng)
     integrator, store, paths, workers, out = _check_options(integrator, store, paths, n, workers, out)
-    if V0 is not None:
-        V0 = as_scalar("V0", V0, positive=True)
-    sc = _load(scenario, h, t_end)
-    from observer.simulate import sensed_scenario
-    sc, sensed = sensed_scenario(sc, sensor, integrator, engine=engine)
+    V0 = None if V0 is None else as_scalar("V0", V0, positive=True)
+    sc, sensed = _load_sensed(scenario, h, t_end, sensor, integrator, engine)
     X, V0_used = sample_errors(sc, n, initial_errors, gen, V0)
     rows, path_frame = run_members(sc, designs, X, integrator, store, engine, paths, workers)
     df = _frame(sc, sc.name if label is None else str(label), designs, X, rows, integrator, seed_value)
     df.attrs["metadata"] = _metadata(sc, designs, n, seed_value, initial_errors, V0_used, integrator, engine,
-                                     store, workers, time.perf_counter() - t0)
-    if sensed is not None:
-        df.attrs["metadata"]["sensor"] = sensed
+                                     store, workers, time.perf_counter() - t0, sensed)
     if path_frame is not None:
         df.attrs["paths"] = path_frame
     if out is not None:
@@ -477,13 +479,16 @@ def _frame(sc, label, designs, X, rows, integrator, seed):
     return pd.concat([df, summary, errors], axis=1)
 
 
-def _metadata(sc, designs, n, seed, initial_errors, V0, integrator, engine, store, workers, wall) -> dict:
+def _metadata(sc, designs, n, seed, initial_errors, V0, integrator, engine, store, workers, wall,
+              sensed=None) -> dict:
     from observer.result import package_versions
 
     meta = {"scenario": sc.name, "params": sc.parameters(), "designs": list(designs), "n": n, "seed": seed,
             "initial_errors": initial_errors if isinstance(initial_errors, str) else "array",
             "V0": V0, "h": sc.h, "t_end": sc.t_end, "integrator": integrator, "engine": engine,
             "store": store, "workers": workers, "versions": package_versions(), "wall_time_s": wall}
+    if sensed is not None:                      # a sensor that is not ideal (observer.sensor)
+        meta["sensor"] = sensed
     return json.loads(json.dumps(meta, default=float))
 
 
