@@ -22,6 +22,7 @@ from observer.observers import Slave, check_coupling, make_slaves  # noqa: F401 
 from observer.result import SimulationResult
 from observer.scenario import (Scenario, check_finite_energy,  # noqa: F401  (re-exported:
                                load_scenario)                  # observer.load_scenario)
+from observer.sensor import Sensor
 from observer.validation import MAX_STEPS, as_scalar
 
 
@@ -93,6 +94,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         sc, sensed = sensed_scenario(sc, sensor, integrator, source, log, engine)
         if sensed is not None:
             source, log = "log", sc.observer["log"]
+    elif sensor is not None:
+        Sensor.from_table(sensor)                   # checked, though no observer reads χ
     run = describe(sc, integrator, observers, source, coupling, log, residual_tol, record_every,
                    store, None if on_chunk is None else user_callback("on_chunk", on_chunk))
     t0 = as_scalar("t0", t0)
@@ -138,7 +141,7 @@ def sensed_scenario(sc: Scenario, sensor: dict | None, integrator: str = "time-s
         ``observer.sensor.threshold`` for δ > 0 with a measured log (no gap is known).
     """
     from observer.observers import ObserverConfig
-    from observer.sensor import FIELD, Sensor, sense_log, sensed_master_log
+    from observer.sensor import FIELD, sense_log, sensed_master_log
     from observer.switching import read_log
 
     table = sc.observer.get("sensor") if sensor is None else sensor

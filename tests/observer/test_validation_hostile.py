@@ -629,6 +629,8 @@ CASES += [
     api_case("sensor-keyword-latency-negative", lambda tmp: observer.simulate(
         "double_mass", t_end=0.01, observers=["jump"], sensor={"latency": -1e-3}),
         "observer.sensor.latency", "must be >= 0.0"),
+    api_case("sensor-keyword-without-observers", lambda tmp: observer.simulate(
+        "double_mass", t_end=0.01, sensor={"missed": -0.5}), "observer.sensor.missed", "must be >= 0.0"),
     api_case("sensor-keyword-unknown", lambda tmp: observer.simulate(
         "double_mass", t_end=0.01, observers=["jump"], sensor={"lag": 1e-3}),
         "observer.sensor.lag", "unknown key"),
