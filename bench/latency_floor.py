@@ -141,10 +141,17 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, default=OUT, help="the JSON result (the rows go to the .csv beside it)")
     p.add_argument("--members", type=int, default=MEMBERS)
     args = p.parse_args(argv)
+    if args.members < 1:
+        print(f"error: --members: must be an integer ≥ 1, got {args.members}", file=sys.stderr)
+        return 2
     if args.out.suffix != ".json":
         print("error: --out: must end in .json (the rows go to the .csv beside it)", file=sys.stderr)
         return 2
-    result = run(args.out, args.members)
+    try:
+        result = run(args.out, args.members)
+    except observer.InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     for f in result["fits"]:
         print(f"{f['design']}: slope {f['slope']} (95 % intervals {f['interval']}) over {f['latencies']} "
               f"({f['status']})")
