@@ -20,6 +20,9 @@ TOML format (the contract; ``[observer]`` is used by the observers)::
     [simulation]        t_end, h, theta, solver, master_projection
     [observer]          q, u, coupling = [t_on, t_off], source = "master" | "log", log,
                         observers = ["jump", "nojump"]
+    [observer.model]    M, C, K, W (full, or {scale}, {factors}, {relative_std, seed}),
+                        forcing, gap, impact, error_metric: the observers' own model
+                        (:mod:`observer.plant_model`)
 
 ``phase`` may be a scalar or a vector.
 """
@@ -39,6 +42,7 @@ import numpy as np
 from observer.errors import InputError, InputWarning
 from observer.impact import ImpactLaw
 from observer.model import Harmonic, LinearSystem
+from observer.plant_model import MODEL_SCHEMA, build_model
 from observer.solver_registry import solver_factory
 from observer import sparse as sps
 from observer.validation import (MAX_DEPTH, as_array, as_matrix, as_scalar, check_step_count,
@@ -56,7 +60,7 @@ SCHEMA: dict = {
     "initial": {"q": None, "u": None},
     "simulation": {"t_end": None, "h": None, "theta": None, "solver": None, "master_projection": None},
     "observer": {"q": None, "u": None, "coupling": None, "source": None, "log": None,
-                 "observers": None},
+                 "observers": None, "model": MODEL_SCHEMA},
 }
 REQUIRED = ("system.M", "system.C", "system.K", "system.W", "impact.law", "impact.restitution",
             "initial.q", "initial.u", "simulation.t_end", "simulation.h")
@@ -104,6 +108,32 @@ FIELDS: dict[str, tuple[str, str, str, str]] = {
                      "closing log (contact, t_close, t_open), relative to the TOML file"),
     "observer.observers": ("array of design names", "", '["jump", "nojump"]',
                            "observer designs to run (keys of OBSERVER_DESIGNS)"),
+    **{f"observer.model.{k}": (f"{shape} matrix or perturbation table", unit, f"the plant's system.{k}",
+                               f"observers' {k}: in full, or {{scale}}, {{factors}}, {{relative_std, seed}} "
+                               "of the plant's (guide: model error)")
+       for k, shape, unit in (("M", "n×n", "kg (or kg·m²)"), ("C", "n×n", "N·s/m"), ("K", "n×n", "N/m"),
+                              ("W", "n×m", "1"))},
+    **{f"observer.model.{key}": (kind, unit, f"system.{key}", f"observers' {meaning} (replaces the plant's key)")
+       for key, (kind, unit, meaning) in {
+           "forcing.constant": ("n-vector or scalar", "N", "constant part of f(t)"),
+           "forcing.amplitude": ("n-vector or scalar", "N", "forcing amplitude"),
+           "forcing.omega": ("number ≥ 0", "rad/s", "forcing angular frequency"),
+           "forcing.phase": ("n-vector or scalar", "rad", "forcing phase"),
+           "forcing.harmonics[].amplitude": ("n-vector or scalar", "N", "forcing terms (all of them)"),
+           "forcing.harmonics[].omega": ("number ≥ 0", "rad/s", "their angular frequencies"),
+           "forcing.harmonics[].phase": ("n-vector or scalar", "rad", "their phases"),
+           "gap.offset": ("m-vector or scalar", "m", "gap offset, constant part of ν(t)"),
+           "gap.amplitude": ("m-vector or scalar", "m", "gap motion amplitude"),
+           "gap.omega": ("number ≥ 0", "rad/s", "gap motion angular frequency"),
+           "gap.phase": ("m-vector or scalar", "rad", "gap motion phase"),
+           "gap.harmonics[].amplitude": ("m-vector or scalar", "m", "gap motion terms (all of them)"),
+           "gap.harmonics[].omega": ("number ≥ 0", "rad/s", "their angular frequencies"),
+           "gap.harmonics[].phase": ("m-vector or scalar", "rad", "their phases"),
+           "impact.law": ('"newton" or "poisson"', "", "impact law"),
+           "impact.restitution": ("m-vector or scalar in [0, 1]", "1", "restitution coefficients"),
+       }.items()},
+    "observer.model.error_metric": ('"plant" or "model"', "", '"plant"',
+                                    "whose M and K measure V and the errors against the plant's state"),
 }
 """The documented fields of a scenario document: every leaf of :data:`SCHEMA`, with its type,
 unit, default and meaning (``required`` for the keys of :data:`REQUIRED`)."""
@@ -238,6 +268,9 @@ class Scenario:
         Use the position-projected master (K-metric projection on its own closed set).
     observer : dict
         The raw ``[observer]`` table (validated by :mod:`observer.observers`).
+    model : ObserverModel or None
+        The observers' own model, from ``[observer.model]`` (:mod:`observer.plant_model`);
+        None: the observers carry the plant's.
     """
 
     name: str
@@ -253,6 +286,7 @@ class Scenario:
     master_projection: bool = False
     observer: dict = field(default_factory=dict)
     source: str = ""
+    model: Any = field(default=None, compare=False, repr=False)
 
     # -- construction ----------------------------------------------------------------------
     @staticmethod
@@ -307,9 +341,12 @@ class Scenario:
         check_initial_gap("initial.q", system, q0)
         check_finite_energy("initial", system, q0, u0)
         meta = doc.get("scenario", {})
+        observer = dict(doc.get("observer", {}))
+        model = (build_model(observer["model"], doc, system, law, projection) if "model" in observer
+                 else None)
         return Scenario(str(meta.get("name", Path(source).stem if source else "custom")),
                         str(meta.get("description", "")), system, law, q0, u0, t_end, h, theta,
-                        solver, projection, dict(doc.get("observer", {})), source)
+                        solver, projection, observer, source, model)
 
     def to_dict(self) -> dict:
         """The scenario as a TOML-ready document (inverse of :meth:`from_dict`): dense

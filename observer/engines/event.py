@@ -50,7 +50,11 @@ class EventEngine(Engine):
 
     def refuses(self, run: RunDescription) -> Refusal | None:
         """Time-stepping options, another solver, a law it lacks, a self-driven χ, a system
-        larger than :data:`EVENT_MAX_N` degrees of freedom."""
+        larger than :data:`EVENT_MAX_N` degrees of freedom, an observer model
+        (:mod:`observer.plant_model`: the time-stepping engines carry it)."""
+        if run.scenario.model is not None and run.slaves:
+            return Refusal("the event-driven engine does not carry an observer model distinct from the "
+                           "plant ([observer.model]); use integrator=\"time-stepping\"", "observer.model")
         n = run.scenario.system.n
         if n > EVENT_MAX_N:
             return Refusal(f"the event-driven integrator handles up to {EVENT_MAX_N} degrees of freedom "
