@@ -283,7 +283,7 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
             integrator: str = "time-stepping", engine: str | None = None, spread: float = SPREAD,
             grid_jitter: float = 0.0, initial_errors: str = "energy_sphere", V0: float | None = None,
             workers: int | None = None, scheduler: str | None = None, confidence: float | None = None,
-            n_resamples: int | None = None) -> Comparison:
+            n_resamples: int | None = None, model: dict | None = None) -> Comparison:
     """Compare observer designs on ``scenario`` with paired members against several masters.
 
     Parameters
@@ -312,6 +312,9 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
         Threads per master run.
     scheduler : str, optional
         A Dask scheduler address: the masters run there, one task each.
+    model : dict, optional
+        The observers' own model (``[observer.model]``, :mod:`observer.plant_model`): every
+        master is the plant, the observers carry the model (time-stepping only).
 
     Returns
     -------
@@ -341,7 +344,8 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
         if not (isinstance(value, (int, float)) and 0.0 <= value < 1.0):
             raise InputError(name, f"must be a number in [0, 1), got {value!r}")
     from observer.scenario import load_scenario
-    sc = _load(load_scenario(scenario, overrides) if overrides else scenario, h, t_end)
+    from observer.plant_model import with_model
+    sc = with_model(_load(load_scenario(scenario, overrides) if overrides else scenario, h, t_end), model)
     ss = np.random.SeedSequence(seed)
     master_seed, *member_seeds = ss.spawn(masters + 1)
     scs = master_scenarios(sc, masters, spread, grid_jitter, np.random.default_rng(master_seed))
@@ -355,6 +359,8 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
                        "integrator": integrator, "engine": engine, "h": sc.h, "t_end": sc.t_end,
                        "master_steps": [d["h"] for d in done], "confidence": confidence,
                        "n_resamples": n_resamples, "wall_time_s": time.perf_counter() - t0}
+    if sc.model is not None:
+        result.metadata["observer_model"] = sc.model.metadata(sc.system)
     return result
 
 

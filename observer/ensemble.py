@@ -313,6 +313,8 @@ def run_members(sc: Scenario, designs, X, integrator, store, engine, paths, work
         fast = _members_after_one_master(sc, designs, X, engine, paths, workers)
         if fast is not None:
             return fast
+        if sc.model is not None:            # the kernel's summary would measure V against its own master
+            store = "full"
     chunks = _chunks(X.shape[0], workers)
     if integrator == "time-stepping" and len(chunks) > 1:
         from observer.engines.compiled.driver import compile_time
@@ -377,7 +379,7 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
              V0: float | None = None, h: float | None = None, t_end: float | None = None,
              integrator: str = "time-stepping", engine: str | None = None, store: str = "summary",
              paths: int = 0, workers: int | None = None, out: str | Path | None = None,
-             label: str | None = None):
+             label: str | None = None, model: dict | None = None):
     """Run n observers per design from n initial errors against one master; one row per
     (design, member).
 
@@ -418,6 +420,10 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
         A ``.parquet`` file for the rows (and ``<stem>.paths.parquet`` with ``paths``).
     label : str, optional
         The scenario's variant label in the rows (default: its name).
+    model : dict, optional
+        The observers' own model (``[observer.model]``, :mod:`observer.plant_model`): the
+        master is the plant, every member carries the model, V is measured against the plant
+        (``attrs["metadata"]["observer_model"]`` says in whose M and K). Time-stepping only.
 
     Returns
     -------
@@ -440,12 +446,15 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
     integrator, store, paths, workers, out = _check_options(integrator, store, paths, n, workers, out)
     if V0 is not None:
         V0 = as_scalar("V0", V0, positive=True)
-    sc = _load(scenario, h, t_end)
+    from observer.plant_model import with_model
+    sc = with_model(_load(scenario, h, t_end), model)
     X, V0_used = sample_errors(sc, n, initial_errors, gen, V0)
     rows, path_frame = run_members(sc, designs, X, integrator, store, engine, paths, workers)
     df = _frame(sc, sc.name if label is None else str(label), designs, X, rows, integrator, seed_value)
     df.attrs["metadata"] = _metadata(sc, designs, n, seed_value, initial_errors, V0_used, integrator, engine,
                                      store, workers, time.perf_counter() - t0)
+    if sc.model is not None:
+        df.attrs["metadata"]["observer_model"] = json.loads(json.dumps(sc.model.metadata(sc.system)))
     if path_frame is not None:
         df.attrs["paths"] = path_frame
     if out is not None:

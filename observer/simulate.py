@@ -18,6 +18,7 @@ from observer.engines.base import scenario_observers  # noqa: F401  (re-exported
 from observer.engines.timestepping import result_events, stepping_events  # noqa: F401  (re-exported)
 from observer.errors import InputError, is_numerical_failure, user_callback
 from observer.engines.loop import check_record_every
+from observer.plant_model import with_model
 from observer.observers import Slave, check_coupling, make_slaves  # noqa: F401  (make_slaves re-exported)
 from observer.result import SimulationResult
 from observer.scenario import (Scenario, check_finite_energy,  # noqa: F401  (re-exported:
@@ -52,7 +53,7 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
              coupling: tuple[float, float] | None | str = "scenario", log: str | Path | None = None,
              residual_tol: float = 1e-9, engine: str | None = None, record_every: int | None = None,
              store: str = "full", integrator: str | None = None, on_chunk=None,
-             t0: float = 0.0) -> SimulationResult:
+             t0: float = 0.0, model: dict | None = None) -> SimulationResult:
     """Simulate the master and the observers of ``scenario`` on a registered engine.
 
     Parameters
@@ -73,6 +74,12 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         The time origin (default 0): the initial state is taken at t0, the grid is
         t_k = t0 + k·h up to t_end, forcing and gap offsets at the absolute time; a time shift
         is this keyword, not a launch delay. Only the event integrator takes t0 ≠ 0.
+    model : dict, optional
+        The observers' own model, the ``[observer.model]`` table (:mod:`observer.plant_model`:
+        M, C, K, W in full or as ``{"scale": ...}``, ``{"factors": ...}``,
+        ``{"relative_std": ..., "seed": ...}``; forcing, gap, impact, error_metric), replacing
+        the scenario's. The master is the plant; V is measured against it. None: the
+        scenario's table, if any.
 
     Returns
     -------
@@ -81,8 +88,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     """
     integrator, coupling, residual_tol, observers = check_arguments(
         engine, integrator, coupling, residual_tol, record_every, observers, on_chunk)
-    sc = _scenario(scenario, h=h, t_end=t_end, solver=solver, theta=theta,
-                   master_projection=master_projection)
+    sc = with_model(_scenario(scenario, h=h, t_end=t_end, solver=solver, theta=theta,
+                              master_projection=master_projection), model)
     run = describe(sc, integrator, observers, source, coupling, log, residual_tol, record_every,
                    store, None if on_chunk is None else user_callback("on_chunk", on_chunk))
     t0 = as_scalar("t0", t0)
