@@ -599,6 +599,49 @@ CASES += [
 ]
 
 
+# --- issue 33: the observers' own model, [observer.model] -------------------------------------------
+CASES += [
+    doc_case("model-K-wrong-shape", {"observer.model.K": "[[100.0, -100.0, 0.0], [-100.0, 200.0, 0.0]]"},
+             "observer.model.K", "wrong shape"),
+    doc_case("model-W-wrong-shape", {"observer.model.W": "[[1.0, 0.0], [0.0, 1.0]]"}, "observer.model.W",
+             "wrong shape"),
+    doc_case("model-K-factors-wrong-shape", {"observer.model.K": "{factors = [1.0, 1.0]}"},
+             "observer.model.K.factors", "wrong shape"),
+    doc_case("model-K-factors-indefinite", {"observer.model.K": "{factors = [[1.0, 1.6], [1.6, 1.0]]}"},
+             "observer.model.K", "positive semi-definite"),
+    doc_case("model-M-random-not-spd", {"observer.model.M": "{relative_std = 1.0, seed = 1}"},
+             "observer.model.M", "positive definite"),
+    doc_case("model-M-scale-zero", {"observer.model.M": "{scale = 0.0}"}, "observer.model.M.scale", "must be > 0"),
+    doc_case("model-K-scale-negative", {"observer.model.K": "{scale = -1.01}"}, "observer.model.K.scale",
+             "must be > 0"),
+    doc_case("model-K-scale-text", {"observer.model.K": '{scale = "1%"}'}, "observer.model.K.scale", "number"),
+    doc_case("model-unknown-key", {"observer.model.stiffness": "1.01"}, "observer.model.stiffness",
+             "unknown key"),
+    doc_case("model-K-unknown-perturbation-key", {"observer.model.K": "{scale = 1.01, sigma = 2.0}"},
+             "observer.model.K.sigma", "unknown key"),
+    doc_case("model-K-two-perturbations", {"observer.model.K": "{scale = 1.01, factors = [[1.0, 1.0], [1.0, 1.0]]}"},
+             "observer.model.K", "exactly one of scale, factors, relative_std"),
+    doc_case("model-K-seed-missing", {"observer.model.K": "{relative_std = 0.01}"}, "observer.model.K.seed",
+             "required with relative_std"),
+    doc_case("model-K-seed-negative", {"observer.model.K": "{relative_std = 0.01, seed = -3}"},
+             "observer.model.K.seed", "non-negative integer"),
+    doc_case("model-K-relative-std-negative", {"observer.model.K": "{relative_std = -0.01, seed = 3}"},
+             "observer.model.K.relative_std", ">= 0"),
+    doc_case("model-error-metric", {"observer.model.error_metric": '"mass"'}, "observer.model.error_metric",
+             "must be one of ['plant', 'model']"),
+    doc_case("model-restitution-above-1", {"observer.model.impact.restitution": "1.5"},
+             "observer.model.impact.restitution", "[0, 1]"),
+    doc_case("model-gap-offset-length", {"observer.model.gap.offset": "[0.25, 0.25]"},
+             "observer.model.gap.offset", "wrong shape"),
+    doc_case("model-not-a-table", {"observer.model": "1.01"}, "observer.model", "must be a table"),
+    Bad("model-on-the-event-engine", "observer.model", "does not carry an observer model",
+        lambda tmp: observer.simulate("double_mass", t_end=0.01, observers=["jump"], integrator="event",
+                                      model={"K": {"scale": 1.01}}),
+        ["run", "double_mass", "--set", "observer.model.K={scale = 1.01}", "--observers", "jump",
+         "--integrator", "event", "--t-end", "0.01", "--out", OUT], kind="cli"),
+]
+
+
 def _prepare(case: Bad, tmp: Path) -> None:
     for name, content in case.files.items():
         path = tmp / name
