@@ -301,8 +301,9 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
         Settling threshold, one of :data:`observer.metrics.RHOS`.
     seed : int
         Seeds the masters and every master's errors.
-    overrides : dict, optional
-        Dotted-key overrides (``--set``); ``h``, ``t_end`` override the step and horizon.
+    overrides, model : dict, optional
+        Dotted-key overrides (``--set``); ``h``, ``t_end`` override the step and horizon;
+        ``model``: the observers' own model (:mod:`observer.plant_model`), the masters the plant.
     integrator : {"time-stepping", "event"}
         The masters' and observers' integrator; ``"event"`` is the exact event-driven
         reference, free of discretization floors.
@@ -312,9 +313,6 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
         Threads per master run.
     scheduler : str, optional
         A Dask scheduler address: the masters run there, one task each.
-    model : dict, optional
-        The observers' own model (``[observer.model]``, :mod:`observer.plant_model`): every
-        master is the plant, the observers carry the model (time-stepping only).
 
     Returns
     -------
@@ -344,8 +342,7 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
         if not (isinstance(value, (int, float)) and 0.0 <= value < 1.0):
             raise InputError(name, f"must be a number in [0, 1), got {value!r}")
     from observer.scenario import load_scenario
-    from observer.plant_model import with_model
-    sc = with_model(_load(load_scenario(scenario, overrides) if overrides else scenario, h, t_end), model)
+    sc = _load(load_scenario(scenario, overrides) if overrides else scenario, h, t_end, model)
     ss = np.random.SeedSequence(seed)
     master_seed, *member_seeds = ss.spawn(masters + 1)
     scs = master_scenarios(sc, masters, spread, grid_jitter, np.random.default_rng(master_seed))
@@ -358,9 +355,8 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
                        "masters": masters, "seed": seed, "spread": spread, "grid_jitter": grid_jitter,
                        "integrator": integrator, "engine": engine, "h": sc.h, "t_end": sc.t_end,
                        "master_steps": [d["h"] for d in done], "confidence": confidence,
-                       "n_resamples": n_resamples, "wall_time_s": time.perf_counter() - t0}
-    if sc.model is not None:
-        result.metadata["observer_model"] = sc.model.metadata(sc.system)
+                       "n_resamples": n_resamples, "wall_time_s": time.perf_counter() - t0,
+                       **({} if sc.model is None else {"observer_model": sc.model.metadata(sc.system)})}
     return result
 
 

@@ -206,13 +206,17 @@ def _check_options(integrator, store, paths, n, workers, out):
     return integrator, store, paths, workers, out
 
 
-def _load(scenario, h, t_end) -> Scenario:
+def _load(scenario, h, t_end, model=None) -> Scenario:
+    """The scenario with the step, horizon and observer model (:func:`observer.plant_model.with_model`)
+    of the call."""
+    from observer.plant_model import with_model
+
     for name, value in (("h", h), ("t_end", t_end)):
         if value is not None:
             as_scalar(name, value, positive=True)
     sc = load_scenario(scenario)
     over = {f"simulation.{k}": v for k, v in (("h", h), ("t_end", t_end)) if v is not None}
-    return sc.with_overrides(over) if over else sc
+    return with_model(sc.with_overrides(over) if over else sc, model)
 
 
 # ---------------------------------------------------------------------------------------
@@ -401,8 +405,8 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
         scenario's own error's half-widths, or given.
     V0 : float, optional
         The sphere's level (default: V of the scenario's own ``[observer]`` initial error).
-    h, t_end : float, optional
-        Override the scenario's step and horizon.
+    h, t_end, model : optional
+        Override the scenario's step, horizon and observer model (:mod:`observer.plant_model`).
     integrator : {"time-stepping", "event"}
         Moreau–Jean time-stepping (the compiled kernel's streaming summary) or the exact
         event-driven engine (every member's V on the grid t_k = k·h, summarized here).
@@ -420,10 +424,6 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
         A ``.parquet`` file for the rows (and ``<stem>.paths.parquet`` with ``paths``).
     label : str, optional
         The scenario's variant label in the rows (default: its name).
-    model : dict, optional
-        The observers' own model (``[observer.model]``, :mod:`observer.plant_model`): the
-        master is the plant, every member carries the model, V is measured against the plant
-        (``attrs["metadata"]["observer_model"]`` says in whose M and K). Time-stepping only.
 
     Returns
     -------
@@ -446,15 +446,12 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
     integrator, store, paths, workers, out = _check_options(integrator, store, paths, n, workers, out)
     if V0 is not None:
         V0 = as_scalar("V0", V0, positive=True)
-    from observer.plant_model import with_model
-    sc = with_model(_load(scenario, h, t_end), model)
+    sc = _load(scenario, h, t_end, model)
     X, V0_used = sample_errors(sc, n, initial_errors, gen, V0)
     rows, path_frame = run_members(sc, designs, X, integrator, store, engine, paths, workers)
     df = _frame(sc, sc.name if label is None else str(label), designs, X, rows, integrator, seed_value)
     df.attrs["metadata"] = _metadata(sc, designs, n, seed_value, initial_errors, V0_used, integrator, engine,
                                      store, workers, time.perf_counter() - t0)
-    if sc.model is not None:
-        df.attrs["metadata"]["observer_model"] = json.loads(json.dumps(sc.model.metadata(sc.system)))
     if path_frame is not None:
         df.attrs["paths"] = path_frame
     if out is not None:
@@ -485,6 +482,8 @@ def _metadata(sc, designs, n, seed, initial_errors, V0, integrator, engine, stor
             "initial_errors": initial_errors if isinstance(initial_errors, str) else "array",
             "V0": V0, "h": sc.h, "t_end": sc.t_end, "integrator": integrator, "engine": engine,
             "store": store, "workers": workers, "versions": package_versions(), "wall_time_s": wall}
+    if sc.model is not None:
+        meta["observer_model"] = sc.model.metadata(sc.system)
     return json.loads(json.dumps(meta, default=float))
 
 

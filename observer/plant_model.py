@@ -86,6 +86,19 @@ class ObserverModel:
         """The system whose M and K measure V: ``plant`` or :attr:`system`."""
         return plant if self.error_metric == "plant" else self.system
 
+    def require_projection(self, slaves) -> None:
+        """Raise unless the model's K-metric projection (eqs. (13)-(14)) is computable for every
+        observer of ``slaves`` with position jumps in the K metric (the model's K ≻ 0 and
+        WᵀK⁻¹W well conditioned; errors name ``observer.model.K`` or ``observer.model.W``)."""
+        for s in slaves:
+            if s.position_jumps and s.metric == "K":
+                try:
+                    self.system.require_definite_stiffness(f"the observer {s.name!r} (position jumps in the "
+                                                           "K metric)")
+                except InputError as exc:
+                    raise _renamed(exc, "system", PREFIX) from None
+                return
+
     def metadata(self, plant) -> dict:
         """What the result's ``metadata["observer_model"]`` records: the given keys, the metric
         and, per matrix, the relative difference ‖Â − A‖_F / ‖A‖_F (0 for the plant's own)."""
@@ -158,16 +171,15 @@ def build_model(table: Any, doc: dict, system, law, master_projection: bool = Fa
 
     The forcing, gap and impact tables' keys replace the plant's keys (``[observer.model.gap]
     offset = [...]`` keeps the plant's gap harmonics); W keeps the plant's number of contacts
-    (χ is the plant's). Every error names ``observer.model.*``.
+    (χ is the plant's). Every error names ``observer.model.*``; the table's keys are checked
+    with the scenario's (:data:`MODEL_SCHEMA` is part of :data:`observer.scenario.SCHEMA`).
     """
     from observer.impact import ImpactLaw
-    from observer.model import LinearSystem
-    from observer.scenario import _harmonic_doc, check_keys
+    from observer.model import LinearSystem, harmonic_table
     from observer.sparse import dense, is_sparse
 
     if not isinstance(table, dict):
         raise InputError(PREFIX, f"must be a table, got {type(table).__name__}")
-    check_keys(table, MODEL_SCHEMA, PREFIX)
     if system.sparse or any(is_sparse(getattr(system, k)) for k in MATRICES):
         raise InputError(PREFIX, f"needs a dense plant (n = {system.n} is held sparse)")
     metric = table.get("error_metric", "plant")
@@ -178,8 +190,8 @@ def build_model(table: Any, doc: dict, system, law, master_projection: bool = Fa
     sysd = doc.get("system", {})
     merged = {key: {**(sysd.get(key) or {}), **table.get(key, {})} for key in ("forcing", "gap")}
     try:
-        forcing = _harmonic_doc("system.forcing", merged["forcing"], system.n, "cos", "constant")
-        gap = _harmonic_doc("system.gap", merged["gap"], system.m, "sin", "offset")
+        forcing = harmonic_table("system.forcing", merged["forcing"], system.n, "cos", "constant")
+        gap = harmonic_table("system.gap", merged["gap"], system.m, "sin", "offset")
         model = LinearSystem(mats["M"], mats["C"], mats["K"], mats["W"], forcing, gap)
     except InputError as exc:
         raise _renamed(exc, "system", PREFIX) from None

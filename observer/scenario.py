@@ -41,7 +41,7 @@ import numpy as np
 
 from observer.errors import InputError, InputWarning
 from observer.impact import ImpactLaw
-from observer.model import Harmonic, LinearSystem
+from observer.model import Harmonic, LinearSystem, harmonic_table
 from observer.plant_model import MODEL_SCHEMA, build_model
 from observer.solver_registry import solver_factory
 from observer import sparse as sps
@@ -238,18 +238,6 @@ def apply_overrides(doc: dict, overrides: dict[str, Any]) -> dict:
     return doc
 
 
-def _harmonic_doc(field_name: str, d: dict, n: int, kind: str, const_key: str) -> Harmonic:
-    terms, names = [], []
-    if any(k in d for k in ("amplitude", "omega", "phase")):
-        terms.append({k: d[k] for k in ("amplitude", "omega", "phase") if k in d})
-        names.append(field_name)
-    for j, term in enumerate(d.get("harmonics", [])):
-        terms.append(term)
-        names.append(f"{field_name}.harmonics[{j}]")
-    return Harmonic.build(field_name, n, constant=d.get(const_key, 0.0), terms=terms, kind=kind,
-                          constant_name=const_key, term_names=names)
-
-
 @dataclass(frozen=True)
 class Scenario:
     """A complete, validated simulation case.
@@ -316,8 +304,8 @@ class Scenario:
             warnings.warn(f"system.gap.offset: not given, so every contact's offset is 0: the "
                           f"{m} contact(s) close where Wᵀq = 0 (a table [system.gap] with "
                           f"offset = [...] sets the distances at q = 0)", InputWarning, stacklevel=3)
-        forcing = _harmonic_doc("system.forcing", sysd.get("forcing", {}), n, "cos", "constant")
-        gap = _harmonic_doc("system.gap", sysd.get("gap", {}), m, "sin", "offset")
+        forcing = harmonic_table("system.forcing", sysd.get("forcing", {}), n, "cos", "constant")
+        gap = harmonic_table("system.gap", sysd.get("gap", {}), m, "sin", "offset")
         if system is None:
             system = LinearSystem(M, sysd["C"], sysd["K"], W, forcing, gap)
         law = ImpactLaw.build(doc["impact"]["law"], doc["impact"]["restitution"], m)
