@@ -634,11 +634,9 @@ CASES += [
     doc_case("model-gap-offset-length", {"observer.model.gap.offset": "[0.25, 0.25]"},
              "observer.model.gap.offset", "wrong shape"),
     doc_case("model-not-a-table", {"observer.model": "1.01"}, "observer.model", "must be a table"),
-    Bad("model-on-the-event-engine", "observer.model", "does not carry an observer model",
-        lambda tmp: observer.simulate("double_mass", t_end=0.01, observers=["jump"], integrator="event",
-                                      model={"K": {"scale": 1.01}}),
-        ["run", "double_mass", "--set", "observer.model.K={scale = 1.01}", "--observers", "jump",
-         "--integrator", "event", "--t-end", "0.01", "--out", OUT], kind="cli"),
+    Bad("model-with-the-kernel-summary", "store", "use store=\"full\"",
+        lambda tmp: observer.simulate("double_mass", t_end=0.01, observers=["jump"], store="summary",
+                                      model={"K": {"scale": 1.01}}), kind="api"),
 ]
 
 

@@ -1,0 +1,52 @@
+"""The stored floor-versus-ε measurement of :mod:`bench.model_error` (issue 33, acceptance 3).
+
+The stored result is what the guide and the report quote; these tests keep it true: its
+slopes refit from its own member floors, one of its points recomputed from scratch (ε = 1e-2,
+every member over the whole window), and the fit itself checked on an exact power law.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from bench.model_error import DESIGNS, EPSILONS, STORED, bootstrap_slopes, fit_slope, member_floors
+
+
+@pytest.fixture(scope="module")
+def stored() -> dict:
+    return json.loads(STORED.read_text())
+
+
+def test_the_fit_recovers_an_exact_power_law_and_its_interval_is_a_point():
+    eps = np.array(EPSILONS)
+    floors = 3e-2 * eps[:, None] ** 2 * np.linspace(1.0, 2.0, 5)[None, :]
+    slope, intercept = fit_slope(eps, floors)
+    assert slope == pytest.approx(2.0, abs=1e-12)
+    assert intercept == pytest.approx(np.log10(3e-2 * 1.5), abs=1e-12)
+    boot = bootstrap_slopes(eps, floors, 50, np.random.default_rng(0))
+    np.testing.assert_allclose(boot, 2.0, atol=1e-12)
+    bent = floors * (1.0 + 100.0 * eps[:, None])                 # a near miss: not a power law
+    assert abs(fit_slope(eps, bent)[0] - 2.0) > 0.05
+
+
+def test_the_stored_slopes_refit_from_the_stored_member_floors(stored):
+    assert stored["status"] == "ok" and stored["epsilons"] == pytest.approx(list(EPSILONS), rel=1e-15)
+    assert min(stored["epsilons"]) == pytest.approx(1e-4) and max(stored["epsilons"]) == pytest.approx(1e-2)
+    for d in DESIGNS:
+        r = stored["designs"][d]
+        F = np.array(r["member_floors"])
+        assert F.shape == (len(EPSILONS), stored["members"])
+        slope, _ = fit_slope(np.array(EPSILONS), F)
+        assert slope == pytest.approx(r["slope"], rel=1e-12)
+        lo, hi = r["slope_interval_95"]
+        assert lo <= slope <= hi
+        np.testing.assert_allclose(r["floor_median"], np.median(F, axis=1), rtol=1e-15)
+
+
+def test_the_stored_point_at_one_per_cent_is_recomputed(stored):
+    again = member_floors(EPSILONS[-1], stored["members"], stored["seed"], stored["t_end"], workers=1)
+    for d in DESIGNS:
+        np.testing.assert_allclose(again[d], stored["designs"][d]["member_floors"][-1], rtol=1e-9)
