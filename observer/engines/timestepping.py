@@ -197,7 +197,7 @@ def stepping_record(run: RunDescription, stepper: MoreauJean, out, record_every:
     if out.q_pre is not None:
         master["q_pre"] = out.q_pre[0]
     trajectories = {s.name: _trajectory(system if metric is None else metric, sc.h, out, i, s.name, master,
-                                        record_every if metric is None else 0)
+                                        record_every == 1 and metric is None)
                     for i, s in enumerate(slaves, start=1)}
     summary = None
     if out.summary is not None:                     # the tables: DataFrames built on first read
@@ -211,15 +211,16 @@ def stepping_record(run: RunDescription, stepper: MoreauJean, out, record_every:
 
 
 def _trajectory(system, h: float, out, i: int, name: str, master: dict,
-                record_every: int) -> SlaveTrajectory:
-    """Observer ``i`` of the loop's output as a :class:`SlaveTrajectory` (V and, when every
-    step is kept, its per-step damping/impulse/projection parts)."""
+                parts: bool) -> SlaveTrajectory:
+    """Observer ``i`` of the loop's output as a :class:`SlaveTrajectory` (V in ``system``'s M and
+    K and, with ``parts`` (every step kept, one model), its per-step damping/impulse/projection
+    parts)."""
     traj = {"q": out.q[i], "u": out.u[i], "P": out.P[i], "sigma": out.sigma[i]}
     if out.q_pre is not None:
         traj["q_pre"] = out.q_pre[i]
     V = (out.V[i] if out.V is not None
          else lyapunov(system, traj["q"], traj["u"], master["q"], master["u"]))
-    parts = (lyapunov_decrements(system, h, traj, master) if record_every == 1
+    parts = (lyapunov_decrements(system, h, traj, master) if parts
              else {"damping": None, "impulse": None, "projection": None})
     return SlaveTrajectory(name, traj["q"], traj["u"], traj["P"], V, parts["damping"],
                            parts["impulse"], parts["projection"], traj["sigma"])

@@ -50,3 +50,22 @@ def test_the_stored_point_at_one_per_cent_is_recomputed(stored):
     again = member_floors(EPSILONS[-1], stored["members"], stored["seed"], stored["t_end"], workers=1)
     for d in DESIGNS:
         np.testing.assert_allclose(again[d], stored["designs"][d]["member_floors"][-1], rtol=1e-9)
+
+
+def test_the_guide_quotes_the_stored_numbers(stored):
+    """docs/guide/model-error.md's table: slope, interval, floor at 1e-2 and without error, as
+    stored (to the digits shown)."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "guide" / "model-error.md").read_text()
+    for d in DESIGNS:
+        row = next(line for line in text.splitlines() if line.startswith(f"| {d} |"))
+        cells = [c.strip() for c in row.strip("|").split("|")]
+        slope, interval, at_1e2, exact = cells[1], cells[2], cells[3], cells[4]
+        r = stored["designs"][d]
+        digits = len(slope.split(".")[1])
+        assert float(slope) == round(r["slope"], digits), (d, slope)
+        lo, hi = (float(x) for x in interval.strip("[]").split(","))
+        assert (lo, hi) == (round(r["slope_interval_95"][0], digits), round(r["slope_interval_95"][1], digits))
+        assert float(at_1e2) == float(f"{r['floor_median'][-1]:.2g}"), (d, at_1e2)
+        assert float(exact) == float(f"{r['exact_floor_median']:.2g}"), (d, exact)

@@ -203,3 +203,20 @@ def test_the_kernel_summary_refuses_a_model_naming_the_field():
     with pytest.raises(InputError) as info:
         observer.simulate(sc, observers=["jump"], store="summary", model={"K": {"scale": 1.01}})
     assert info.value.field == "store"
+
+
+def test_a_log_source_and_sparse_rows_give_the_masters_run_on_the_same_rows():
+    """χ from the plant's closing log is χ from the plant (the log samples back exactly), and
+    ``record_every`` keeps every k-th row of the full mismatch run."""
+    sc = load_scenario("double_mass", {"simulation.t_end": 0.3})
+    model = {"K": {"scale": 1.01}, "C": {"scale": 0.9}}
+    full = observer.simulate(sc, observers="scenario", model=model, engine="python")
+    log = log_from_active(full.t, full.active)
+    logged = observer.simulate(sc, observers="scenario", model=model, engine="python", source="log", log=log)
+    every = observer.simulate(sc, observers="scenario", model=model, engine="python", record_every=7)
+    np.testing.assert_array_equal(every.q, full.q[::7])
+    for d in full.slaves:
+        np.testing.assert_array_equal(logged.slaves[d].q, full.slaves[d].q)
+        np.testing.assert_array_equal(every.slaves[d].q, full.slaves[d].q[::7])
+        np.testing.assert_array_equal(every.slaves[d].V, full.slaves[d].V[::7])
+        assert full.slaves[d].dV_damping is None                 # no ΔV parts with a model
