@@ -93,7 +93,6 @@ class TimeStepping(Engine):
                            on_chunk=run.on_chunk)
         return stepping_record(run, stepper, out, record_every)
 
-
     def run_with_model(self, run: RunDescription) -> RunRecord:
         """The true plant as the master, the observers on their own model
         (:mod:`observer.plant_model`): two loops of this engine, no new one.
@@ -109,8 +108,9 @@ class TimeStepping(Engine):
         (:meth:`~observer.plant_model.ObserverModel.metric_system`), and
         ``metadata["observer_model"]`` records the model, the metric and the observers' own
         health record. ``on_chunk`` receives no chunk (loop 2's rows carry the nominal
-        master): the result is written whole at the end, as the event engine's. The per-step parts of ΔV (eq. (17)) are not given (the decomposition
-        holds for one model: a mismatch adds a term of its own).
+        master): the result is written whole at the end, as the event engine's. The per-step
+        parts of ΔV (eq. (17)) are not given (the decomposition holds for one model: a
+        mismatch adds a term of its own).
 
         Raises
         ------
@@ -211,16 +211,16 @@ def stepping_record(run: RunDescription, stepper: MoreauJean, out, record_every:
 
 
 def _trajectory(system, h: float, out, i: int, name: str, master: dict,
-                parts: bool) -> SlaveTrajectory:
+                with_parts: bool) -> SlaveTrajectory:
     """Observer ``i`` of the loop's output as a :class:`SlaveTrajectory` (V in ``system``'s M and
-    K and, with ``parts`` (every step kept, one model), its per-step damping/impulse/projection
+    K and, ``with_parts`` (every step kept, one model), its per-step damping/impulse/projection
     parts)."""
     traj = {"q": out.q[i], "u": out.u[i], "P": out.P[i], "sigma": out.sigma[i]}
     if out.q_pre is not None:
         traj["q_pre"] = out.q_pre[i]
     V = (out.V[i] if out.V is not None
          else lyapunov(system, traj["q"], traj["u"], master["q"], master["u"]))
-    parts = (lyapunov_decrements(system, h, traj, master) if parts
+    parts = (lyapunov_decrements(system, h, traj, master) if with_parts
              else {"damping": None, "impulse": None, "projection": None})
     return SlaveTrajectory(name, traj["q"], traj["u"], traj["P"], V, parts["damping"],
                            parts["impulse"], parts["projection"], traj["sigma"])

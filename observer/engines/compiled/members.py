@@ -22,6 +22,11 @@ runs: a change to the kernel's observer step must be made here too). The master 
 the kernel's lean specialization, whose trajectory is bitwise the general loop's
 (:func:`observer.engines.compiled.bundles.specialization`).
 
+With an observer model distinct from the plant (:mod:`observer.plant_model`) the master run is
+the plant's and the members advance on the nominal model: :func:`observers_input` hands
+:func:`advance_members` the model's matrices, signal tables, law and projection metrics (the
+same loop, other data), and V is measured against the plant's recorded state.
+
 A run this path does not cover returns None, and :mod:`observer.ensemble` takes the kernel's
 run of the chunk instead (:func:`applicable` says which): banded or factored structure, a
 master that stops or needs the reference solver, a member whose contact step fails or whose
