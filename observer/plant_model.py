@@ -212,6 +212,18 @@ def build_model(table: Any, doc: dict, system, law, master_projection: bool = Fa
     return ObserverModel(model, model_law, metric, tuple(k for k in MODEL_SCHEMA if k in table))
 
 
+def plain_table(value: Any) -> Any:
+    """``value`` (the ``[observer.model]`` table as the API may give it: NumPy arrays and
+    scalars inside) as plain lists, floats and ints, for the TOML document."""
+    if isinstance(value, dict):
+        return {k: plain_table(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain_table(v) for v in value]
+    if isinstance(value, (np.ndarray, np.generic)):
+        return value.tolist()
+    return value
+
+
 def model_scenario(sc):
     """The nominal scenario of ``sc``: its model's system and law in place of the plant's, the
     rest (initial state, grid, solver, ``[observer]`` without its model) unchanged; the

@@ -42,7 +42,7 @@ import numpy as np
 from observer.errors import InputError, InputWarning
 from observer.impact import ImpactLaw
 from observer.model import Harmonic, LinearSystem, harmonic_table
-from observer.plant_model import MODEL_SCHEMA, build_model
+from observer.plant_model import MODEL_SCHEMA, build_model, plain_table
 from observer.solver_registry import solver_factory
 from observer import sparse as sps
 from observer.validation import (MAX_DEPTH, as_array, as_matrix, as_scalar, check_step_count,
@@ -380,6 +380,8 @@ class Scenario:
             for key in ("q", "u"):
                 if isinstance(doc["observer"].get(key), (list, np.ndarray)):
                     doc["observer"][key] = vec(doc["observer"][key])
+            if plain and "model" in doc["observer"]:
+                doc["observer"]["model"] = plain_table(doc["observer"]["model"])
         return doc
 
     def with_overrides(self, overrides: dict[str, Any]) -> "Scenario":

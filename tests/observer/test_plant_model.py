@@ -162,9 +162,10 @@ def test_scale_is_the_whole_matrix_times_the_factor():
     np.testing.assert_array_equal(sc.model.system.M, sc.system.M)
 
 
-def test_the_model_table_round_trips_through_toml(tmp_path):
-    sc = load_scenario("double_mass", {"observer.model": {"K": {"relative_std": 0.01, "seed": 3},
-                                                          "impact": {"restitution": 0.5}}})
+@pytest.mark.parametrize("K", [{"relative_std": 0.01, "seed": 3}, np.array([[101.0, -100.0], [-100.0, 200.0]])],
+                         ids=["random", "array"])
+def test_the_model_table_round_trips_through_toml(tmp_path, K):
+    sc = load_scenario("double_mass", {"observer.model": {"K": K, "impact": {"restitution": np.float64(0.5)}}})
     path = tmp_path / "case.toml"
     path.write_text(dumps(sc.to_dict()))
     back = load_scenario(str(path))
