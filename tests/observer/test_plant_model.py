@@ -24,7 +24,7 @@ from observer.tomlio import dumps
 
 CASES = {
     # scenario, horizon, the model table, the same model written into the plant's document
-    "double_mass-K+1%": ("double_mass", 0.6, {"K": {"scale": 1.01}},
+    "double_mass-K+1%": ("double_mass", 0.5, {"K": {"scale": 1.01}},
                          lambda sc: {"system.K": (1.01 * sc.system.K).tolist()}),
     "random_system-KC-gap": ("random_system", 1.0,
                              {"K": {"factors": [[1.02, 0.97, 1.0], [0.97, 1.0, 1.05], [1.0, 1.05, 0.99]]},
