@@ -13,6 +13,10 @@ is fitted by least squares over ε = 1e-4 … 1e-2; the slope s is stated with a
 from :data:`RESAMPLES` bootstrap resamples of the members (paired across ε and designs: member
 i is the same initial error everywhere), the percentile interval of the refitted slope.
 
+A **sensitivity table** goes with it: the median floor per design when one parameter of the
+plant is off by :data:`SENSITIVITY_EPS` relative (M, C, K or W times 1 + ε, or the gap offset
+ν times 1 + ε), the others exact — which parameter's error costs most on this scenario.
+
 ``python -m bench.model_error [--out FILE]`` writes the result (default
 :data:`STORED`, the stored result the guide's numbers come from); ``--quick`` runs a
 short horizon and few members (a check that the script runs, not the measurement).
@@ -35,14 +39,32 @@ RESAMPLES = 2000
 TAIL = 0.25
 """The floor is the largest V/V(t_on) over this last fraction of the coupling window."""
 DESIGNS = ("jump", "nojump")
+SENSITIVITY_EPS = 1e-2
+SENSITIVITY = ("M", "C", "K", "W", "gap.offset")
+"""The parameters of the sensitivity table, each off by :data:`SENSITIVITY_EPS` alone."""
 STORED = Path(__file__).parent / "stored" / "model_error_floor_double_mass.json"
 
 
-def member_floors(eps: float, n: int, seed: int, t_end: float | None, workers: int | None) -> dict:
-    """Per design, the n members' floors (module docstring) with the observers' K = (1 + ε)K."""
+def one_parameter_model(name: str, eps: float) -> dict | None:
+    """The ``[observer.model]`` table with parameter ``name`` (a matrix or ``gap.offset``) off by
+    the relative ε (None for ε = 0)."""
     import observer
 
-    model = None if eps == 0.0 else {"K": {"scale": 1.0 + eps}}
+    if eps == 0.0:
+        return None
+    if name == "gap.offset":
+        offset = observer.load_scenario("double_mass").system.gap.constant
+        return {"gap": {"offset": ((1.0 + eps) * offset).tolist()}}
+    return {name: {"scale": 1.0 + eps}}
+
+
+def member_floors(eps: float, n: int, seed: int, t_end: float | None, workers: int | None,
+                  parameter: str = "K") -> dict:
+    """Per design, the n members' floors (module docstring) with the observers' ``parameter``
+    off by the relative ε (default K = (1 + ε)K)."""
+    import observer
+
+    model = one_parameter_model(parameter, eps)
     df = observer.ensemble("double_mass", DESIGNS, n=n, seed=seed, t_end=t_end, paths=n, workers=workers,
                            model=model)
     paths = df.attrs["paths"]
@@ -99,6 +121,10 @@ def measure(n: int = MEMBERS, seed: int = SEED, t_end: float | None = None, work
                                 "member_floors": F.tolist(), "exact_member_floors": exact[d],
                                 "slope": slope, "slope_interval_95": [float(lo), float(hi)],
                                 "intercept": intercept}
+    result["sensitivity"] = {"eps": SENSITIVITY_EPS, "floor_median": {}}
+    for name in SENSITIVITY:
+        f = member_floors(SENSITIVITY_EPS, n, seed, t_end, workers, name)
+        result["sensitivity"]["floor_median"][name] = {d: float(np.median(f[d])) for d in DESIGNS}
     result["status"] = "ok"
     result["versions"] = package_versions()
     result["wall_time_s"] = time.perf_counter() - t0
@@ -120,6 +146,8 @@ def main(argv: list[str] | None = None) -> int:
     for d, r in result["designs"].items():
         print(f"{d}: slope {r['slope']:.3f} [{r['slope_interval_95'][0]:.3f}, {r['slope_interval_95'][1]:.3f}]; "
               f"exact floor {r['exact_floor_median']:.3g}; floors {', '.join(f'{x:.3g}' for x in r['floor_median'])}")
+    for name, floors in result["sensitivity"]["floor_median"].items():
+        print(f"{name} off by {result['sensitivity']['eps']:g}: " + ", ".join(f"{d} {v:.3g}" for d, v in floors.items()))
     return 0
 
 

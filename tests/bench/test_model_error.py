@@ -69,3 +69,27 @@ def test_the_guide_quotes_the_stored_numbers(stored):
         assert (lo, hi) == (round(r["slope_interval_95"][0], digits), round(r["slope_interval_95"][1], digits))
         assert float(at_1e2) == float(f"{r['floor_median'][-1]:.2g}"), (d, at_1e2)
         assert float(exact) == float(f"{r['exact_floor_median']:.2g}"), (d, exact)
+
+
+def test_the_sensitivity_table_holds_its_invariants_and_the_guide_quotes_it(stored):
+    """K costs most for both designs; the observer without jumps does not see W's scale or the
+    gap offset (its floor is the exact one: it uses no gap while coupled and its velocity jump
+    depends on the span of W only); the K row is the curve's point at 1e-2; the guide's
+    sensitivity table quotes the stored medians (2 digits)."""
+    from pathlib import Path
+
+    sens = stored["sensitivity"]
+    floors = sens["floor_median"]
+    assert sens["eps"] == EPSILONS[-1]
+    for d in DESIGNS:
+        assert max(floors, key=lambda p: floors[p][d]) == "K"
+        assert floors["K"][d] == stored["designs"][d]["floor_median"][-1]
+    exact = stored["designs"]["nojump"]["exact_floor_median"]
+    for p in ("W", "gap.offset"):
+        assert floors[p]["nojump"] == pytest.approx(exact, rel=1e-6)
+        assert floors[p]["jump"] > 1e3 * stored["designs"]["jump"]["exact_floor_median"]
+    text = (Path(__file__).resolve().parents[2] / "docs" / "guide" / "model-error.md").read_text()
+    for p, by_design in floors.items():
+        row = next(line for line in text.splitlines() if line.startswith(f"| {p} |"))
+        cells = [c.strip() for c in row.strip("|").split("|")]
+        assert [float(c) for c in cells[1:]] == [float(f"{by_design[d]:.2g}") for d in DESIGNS], row
