@@ -17,6 +17,12 @@ A **sensitivity table** goes with it: the median floor per design when one param
 plant is off by :data:`SENSITIVITY_EPS` relative (M, C, K or W times 1 + ε, or the gap offset
 ν times 1 + ε), the others exact — which parameter's error costs most on this scenario.
 
+An **uncertainty ensemble** completes it: :data:`DRAWS` observer models drawn around the plant,
+``K = { relative_std = σ, seed = s }`` with σ = :data:`DRAW_STD` and s = 0 … DRAWS − 1 (the
+plant fixed, the model sampled), the same members for every draw and design (paired); per
+design the median floor of each draw, their median and 2.5–97.5 % range over the draws, and
+the fraction of draws in which the observer without jumps has the lower floor.
+
 ``python -m bench.model_error [--out FILE]`` writes the result (default
 :data:`STORED`, the stored result the guide's numbers come from); ``--quick`` runs a
 short horizon and few members (a check that the script runs, not the measurement).
@@ -39,6 +45,8 @@ RESAMPLES = 2000
 TAIL = 0.25
 """The floor is the largest V/V(t_on) over this last fraction of the coupling window."""
 DESIGNS = ("jump", "nojump")
+DRAWS = 20
+DRAW_STD = 1e-2
 SENSITIVITY_EPS = 1e-2
 SENSITIVITY = ("M", "C", "K", "W", "gap.offset")
 """The parameters of the sensitivity table, each off by :data:`SENSITIVITY_EPS` alone."""
@@ -59,12 +67,12 @@ def one_parameter_model(name: str, eps: float) -> dict | None:
 
 
 def member_floors(eps: float, n: int, seed: int, t_end: float | None, workers: int | None,
-                  parameter: str = "K") -> dict:
+                  parameter: str = "K", model: dict | None = None) -> dict:
     """Per design, the n members' floors (module docstring) with the observers' ``parameter``
-    off by the relative ε (default K = (1 + ε)K)."""
+    off by the relative ε (default K = (1 + ε)K), or with the observer model ``model``."""
     import observer
 
-    model = one_parameter_model(parameter, eps)
+    model = one_parameter_model(parameter, eps) if model is None else model
     df = observer.ensemble("double_mass", DESIGNS, n=n, seed=seed, t_end=t_end, paths=n, workers=workers,
                            model=model)
     paths = df.attrs["paths"]
@@ -125,10 +133,24 @@ def measure(n: int = MEMBERS, seed: int = SEED, t_end: float | None = None, work
     for name in SENSITIVITY:
         f = member_floors(SENSITIVITY_EPS, n, seed, t_end, workers, name)
         result["sensitivity"]["floor_median"][name] = {d: float(np.median(f[d])) for d in DESIGNS}
+    result["uncertainty"] = sampled_models(n, seed, t_end, workers)
     result["status"] = "ok"
     result["versions"] = package_versions()
     result["wall_time_s"] = time.perf_counter() - t0
     return result
+
+
+def sampled_models(n: int, seed: int, t_end: float | None, workers: int | None, draws: int = DRAWS) -> dict:
+    """The uncertainty ensemble of the module docstring."""
+    per = [member_floors(0.0, n, seed, t_end, workers, model={"K": {"relative_std": DRAW_STD, "seed": s}})
+           for s in range(draws)]
+    med = {d: np.array([np.median(f[d]) for f in per]) for d in DESIGNS}
+    out = {"model": f"K = {{ relative_std = {DRAW_STD}, seed = s }}, s = 0..{draws - 1}", "draws": draws,
+           "draw_floor_median": {d: med[d].tolist() for d in DESIGNS},
+           "floor_median_over_draws": {d: float(np.median(med[d])) for d in DESIGNS},
+           "floor_range_95": {d: [float(x) for x in np.percentile(med[d], [2.5, 97.5])] for d in DESIGNS}}
+    out["nojump_lower_fraction"] = float(np.mean(med["nojump"] < med["jump"]))
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -146,6 +168,10 @@ def main(argv: list[str] | None = None) -> int:
     for d, r in result["designs"].items():
         print(f"{d}: slope {r['slope']:.3f} [{r['slope_interval_95'][0]:.3f}, {r['slope_interval_95'][1]:.3f}]; "
               f"exact floor {r['exact_floor_median']:.3g}; floors {', '.join(f'{x:.3g}' for x in r['floor_median'])}")
+    u = result["uncertainty"]
+    print(f"{u['model']}: " + ", ".join(f"{d} {u['floor_median_over_draws'][d]:.3g} "
+                                        f"[{u['floor_range_95'][d][0]:.3g}, {u['floor_range_95'][d][1]:.3g}]"
+                                        for d in DESIGNS) + f"; nojump lower in {u['nojump_lower_fraction']:.0%}")
     for name, floors in result["sensitivity"]["floor_median"].items():
         print(f"{name} off by {result['sensitivity']['eps']:g}: " + ", ".join(f"{d} {v:.3g}" for d, v in floors.items()))
     return 0

@@ -93,3 +93,31 @@ def test_the_sensitivity_table_holds_its_invariants_and_the_guide_quotes_it(stor
         row = next(line for line in text.splitlines() if line.startswith(f"| {p} |"))
         cells = [c.strip() for c in row.strip("|").split("|")]
         assert [float(c) for c in cells[1:]] == [float(f"{by_design[d]:.2g}") for d in DESIGNS], row
+
+
+def test_the_uncertainty_ensemble_is_recomputed_and_the_guide_quotes_it(stored):
+    """Draw 0 of the sampled models recomputed from scratch; the median, range and fraction
+    follow from the stored draws; the guide's table and fraction quote them."""
+    from pathlib import Path
+
+    from bench.model_error import DRAW_STD
+
+    u = stored["uncertainty"]
+    again = member_floors(0.0, stored["members"], stored["seed"], stored["t_end"], workers=1,
+                          model={"K": {"relative_std": DRAW_STD, "seed": 0}})
+    text = (Path(__file__).resolve().parents[2] / "docs" / "guide" / "model-error.md").read_text()
+    for d in DESIGNS:
+        draws = np.array(u["draw_floor_median"][d])
+        assert draws.size == u["draws"]
+        assert draws[0] == pytest.approx(float(np.median(again[d])), rel=1e-9)
+        assert u["floor_median_over_draws"][d] == float(np.median(draws))
+        assert u["floor_range_95"][d] == [float(x) for x in np.percentile(draws, [2.5, 97.5])]
+        rows = [[c.strip() for c in line.strip("|").split("|")] for line in text.splitlines()
+                if line.startswith(f"| {d} | ")]
+        row = cells = next(r for r in rows if len(r) == 3)          # the uncertainty table's row
+        assert float(cells[1]) == float(f"{u['floor_median_over_draws'][d]:.2g}"), row
+        lo, hi = (float(x) for x in cells[2].strip("[]").split(","))
+        assert (lo, hi) == tuple(float(f"{x:.2g}") for x in u["floor_range_95"][d]), row
+    fraction = np.mean(np.array(u["draw_floor_median"]["nojump"]) < np.array(u["draw_floor_median"]["jump"]))
+    assert u["nojump_lower_fraction"] == fraction
+    assert f"lower floor in {round(100 * fraction)} % of the draws" in text
