@@ -283,7 +283,8 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
             integrator: str = "time-stepping", engine: str | None = None, spread: float = SPREAD,
             grid_jitter: float = 0.0, initial_errors: str = "energy_sphere", V0: float | None = None,
             workers: int | None = None, scheduler: str | None = None, confidence: float | None = None,
-            n_resamples: int | None = None, sensor: dict | None = None) -> Comparison:
+            n_resamples: int | None = None, sensor: dict | None = None,
+            model: dict | None = None) -> Comparison:
     """Compare observer designs on ``scenario`` with paired members against several masters.
 
     Parameters
@@ -301,8 +302,9 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
         Settling threshold, one of :data:`observer.metrics.RHOS`.
     seed : int
         Seeds the masters and every master's errors.
-    overrides : dict, optional
-        Dotted-key overrides (``--set``); ``h``, ``t_end`` override the step and horizon.
+    overrides, model : dict, optional
+        Dotted-key overrides (``--set``); ``h``, ``t_end`` override the step and horizon;
+        ``model``: the observers' own model (:mod:`observer.plant_model`), the masters the plant.
     integrator : {"time-stepping", "event"}
         The masters' and observers' integrator; ``"event"`` is the exact event-driven
         reference, free of discretization floors.
@@ -342,7 +344,7 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
     for name, value in (("spread", spread), ("grid_jitter", grid_jitter)):
         if not (isinstance(value, (int, float)) and 0.0 <= value < 1.0):
             raise InputError(name, f"must be a number in [0, 1), got {value!r}")
-    sc, sensed = compared_scenario(scenario, overrides, h, t_end, sensor)
+    sc, sensed = compared_scenario(scenario, overrides, h, t_end, sensor, model)
     ss = np.random.SeedSequence(seed)
     master_seed, *member_seeds = ss.spawn(masters + 1)
     scs = master_scenarios(sc, masters, spread, grid_jitter, np.random.default_rng(master_seed))
@@ -356,22 +358,25 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
                        "integrator": integrator, "engine": engine, "h": sc.h, "t_end": sc.t_end,
                        "master_steps": [d["h"] for d in done], "confidence": confidence,
                        "n_resamples": n_resamples, "wall_time_s": time.perf_counter() - t0,
-                       **({} if sensed.ideal else {"sensor": sensed.to_dict()})}
+                       **({} if sensed.ideal else {"sensor": sensed.to_dict()}),
+                       **({} if sc.model is None else {"observer_model": sc.model.metadata(sc.system)})}
     return result
 
 
-def compared_scenario(scenario, overrides, h, t_end, sensor):
+def compared_scenario(scenario, overrides, h, t_end, sensor, model=None):
     """The scenario :func:`compare` runs (``overrides``, then ``h`` and ``t_end``), with
     ``sensor`` (a dict) as its ``[observer.sensor]`` table, and that table's
-    :class:`~observer.sensor.Sensor`. Each master's ensemble applies the sensor to that master
-    (:func:`observer.ensemble`); a sensor that is not ideal is in ``metadata["sensor"]``."""
+    :class:`~observer.sensor.Sensor`, and ``model`` (a dict) as its ``[observer.model]``
+    table (:func:`observer.plant_model.with_model`). Each master's ensemble applies the sensor
+    to that master (:func:`observer.ensemble`); a sensor that is not ideal is in
+    ``metadata["sensor"]``."""
     from observer.ensemble import _load
     from observer.scenario import check_overrides, load_scenario
     from observer.sensor import Sensor
 
     if sensor is not None:
         overrides = {**check_overrides(overrides), "observer.sensor": sensor}
-    sc = _load(load_scenario(scenario, overrides) if overrides else scenario, h, t_end)
+    sc = _load(load_scenario(scenario, overrides) if overrides else scenario, h, t_end, model)
     return sc, Sensor.from_table(sc.observer.get("sensor"))
 
 

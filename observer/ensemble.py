@@ -206,22 +206,28 @@ def _check_options(integrator, store, paths, n, workers, out):
     return integrator, store, paths, workers, out
 
 
-def _load(scenario, h, t_end) -> Scenario:
+def _load(scenario, h, t_end, model=None) -> Scenario:
+    """The scenario with the step, horizon and observer model (:func:`observer.plant_model.with_model`)
+    of the call."""
+    from observer.plant_model import with_model
+
     for name, value in (("h", h), ("t_end", t_end)):
         if value is not None:
             as_scalar(name, value, positive=True)
     sc = load_scenario(scenario)
     over = {f"simulation.{k}": v for k, v in (("h", h), ("t_end", t_end)) if v is not None}
-    return sc.with_overrides(over) if over else sc
+    return with_model(sc.with_overrides(over) if over else sc, model)
 
 
-def _load_sensed(scenario, h, t_end, sensor, integrator: str, engine) -> tuple[Scenario, dict | None]:
+def _load_sensed(scenario, h, t_end, sensor, integrator: str, engine,
+                 model=None) -> tuple[Scenario, dict | None]:
     """:func:`_load`, then every member's χ from the contact sensor ``sensor`` (the
     ``[observer.sensor]`` keys, replacing the scenario's table) on the one master
-    (:func:`observer.simulate.sensed_scenario`). Returns the scenario and the sensor's
+    (:func:`observer.simulate.sensed_scenario`); ``model`` the observers' own model
+    (:func:`observer.plant_model.with_model`). Returns the scenario and the sensor's
     settings (None: ideal; else ``attrs["metadata"]["sensor"]``)."""
     from observer.simulate import sensed_scenario
-    return sensed_scenario(_load(scenario, h, t_end), sensor, integrator, engine=engine)
+    return sensed_scenario(_load(scenario, h, t_end, model), sensor, integrator, engine=engine)
 
 
 # ---------------------------------------------------------------------------------------
@@ -322,6 +328,8 @@ def run_members(sc: Scenario, designs, X, integrator, store, engine, paths, work
         fast = _members_after_one_master(sc, designs, X, engine, paths, workers)
         if fast is not None:
             return fast
+        if sc.model is not None:            # the kernel's summary would measure V against its own master
+            store = "full"
     chunks = _chunks(X.shape[0], workers)
     if integrator == "time-stepping" and len(chunks) > 1:
         from observer.engines.compiled.driver import compile_time
@@ -386,7 +394,7 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
              V0: float | None = None, h: float | None = None, t_end: float | None = None,
              integrator: str = "time-stepping", engine: str | None = None, store: str = "summary",
              paths: int = 0, workers: int | None = None, out: str | Path | None = None,
-             label: str | None = None, sensor: dict | None = None):
+             label: str | None = None, sensor: dict | None = None, model: dict | None = None):
     """Run n observers per design from n initial errors against one master; one row per
     (design, member).
 
@@ -408,8 +416,8 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
         scenario's own error's half-widths, or given.
     V0 : float, optional
         The sphere's level (default: V of the scenario's own ``[observer]`` initial error).
-    h, t_end : float, optional
-        Override the scenario's step and horizon.
+    h, t_end, model : optional
+        Override the scenario's step, horizon and observer model (:mod:`observer.plant_model`).
     integrator : {"time-stepping", "event"}
         Moreau–Jean time-stepping (the compiled kernel's streaming summary) or the exact
         event-driven engine (every member's V on the grid t_k = k·h, summarized here).
@@ -450,7 +458,7 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
     gen, seed_value = _generator(seed, rng)
     integrator, store, paths, workers, out = _check_options(integrator, store, paths, n, workers, out)
     V0 = None if V0 is None else as_scalar("V0", V0, positive=True)
-    sc, sensed = _load_sensed(scenario, h, t_end, sensor, integrator, engine)
+    sc, sensed = _load_sensed(scenario, h, t_end, sensor, integrator, engine, model)
     X, V0_used = sample_errors(sc, n, initial_errors, gen, V0)
     rows, path_frame = run_members(sc, designs, X, integrator, store, engine, paths, workers)
     df = _frame(sc, sc.name if label is None else str(label), designs, X, rows, integrator, seed_value)
@@ -489,6 +497,8 @@ def _metadata(sc, designs, n, seed, initial_errors, V0, integrator, engine, stor
             "store": store, "workers": workers, "versions": package_versions(), "wall_time_s": wall}
     if sensed is not None:                      # a sensor that is not ideal (observer.sensor)
         meta["sensor"] = sensed
+    if sc.model is not None:
+        meta["observer_model"] = sc.model.metadata(sc.system)
     return json.loads(json.dumps(meta, default=float))
 
 

@@ -187,6 +187,20 @@ class Harmonic:
                 for a, w, p in zip(self.amplitude, self.omega, self.phase)]
 
 
+def harmonic_table(field_name: str, d: dict, n: int, kind: str, const_key: str) -> Harmonic:
+    """The :class:`Harmonic` of a document's signal table ``d`` (``[system.forcing]`` or
+    ``[system.gap]``: the table's own term, then its ``harmonics``); errors name ``field_name.*``."""
+    terms, names = [], []
+    if any(k in d for k in ("amplitude", "omega", "phase")):
+        terms.append({k: d[k] for k in ("amplitude", "omega", "phase") if k in d})
+        names.append(field_name)
+    for j, term in enumerate(d.get("harmonics", [])):
+        terms.append(term)
+        names.append(f"{field_name}.harmonics[{j}]")
+    return Harmonic.build(field_name, n, constant=d.get(const_key, 0.0), terms=terms, kind=kind,
+                          constant_name=const_key, term_names=names)
+
+
 @dataclass(frozen=True)
 class LinearSystem:
     """An n-DOF LTI mechanical system with m unilateral contacts (paper eqs. (1)-(3)).

@@ -22,6 +22,9 @@ TOML format (the contract; ``[observer]`` is used by the observers)::
                         observers = ["jump", "nojump"]
     [observer.sensor]   threshold, latency, sampling_period, jitter, missed, false_rate, seed
                         (χ from a contact sensor, :mod:`observer.sensor`)
+    [observer.model]    M, C, K, W (full, or {scale}, {factors}, {relative_std, seed}),
+                        forcing, gap, impact, error_metric: the observers' own model
+                        (:mod:`observer.plant_model`)
 
 ``phase`` may be a scalar or a vector.
 """
@@ -40,7 +43,8 @@ import numpy as np
 
 from observer.errors import InputError, InputWarning
 from observer.impact import ImpactLaw
-from observer.model import Harmonic, LinearSystem
+from observer.model import Harmonic, LinearSystem, harmonic_table
+from observer.plant_model import MODEL_SCHEMA, build_model, plain_table
 from observer.sensor import Sensor
 from observer.solver_registry import solver_factory
 from observer import sparse as sps
@@ -61,7 +65,8 @@ SCHEMA: dict = {
     "observer": {"q": None, "u": None, "coupling": None, "source": None, "log": None,
                  "observers": None,
                  "sensor": {"threshold": None, "latency": None, "sampling_period": None, "jitter": None,
-                            "missed": None, "false_rate": None, "seed": None}},
+                            "missed": None, "false_rate": None, "seed": None},
+                 "model": MODEL_SCHEMA},
 }
 REQUIRED = ("system.M", "system.C", "system.K", "system.W", "impact.law", "impact.restitution",
             "initial.q", "initial.u", "simulation.t_end", "simulation.h")
@@ -119,6 +124,32 @@ FIELDS: dict[str, tuple[str, str, str, str]] = {
     "observer.sensor.missed": ("number in [0, 1]", "1", "0", "probability that a closing or impact is not seen"),
     "observer.sensor.false_rate": ("number ≥ 0", "1/s", "0", "rate λ of false impacts (Poisson)"),
     "observer.sensor.seed": ("integer ≥ 0", "", "0", "seed of the sensor's missed, false and jitter draws"),
+    **{f"observer.model.{k}": (f"{shape} matrix or perturbation table", unit, f"the plant's system.{k}",
+                               f"observers' {k}: in full, or {{scale}}, {{factors}}, {{relative_std, seed}} "
+                               "of the plant's (guide: model error)")
+       for k, shape, unit in (("M", "n×n", "kg (or kg·m²)"), ("C", "n×n", "N·s/m"), ("K", "n×n", "N/m"),
+                              ("W", "n×m", "1"))},
+    **{f"observer.model.{key}": (kind, unit, f"system.{key}", f"observers' {meaning} (replaces the plant's key)")
+       for key, (kind, unit, meaning) in {
+           "forcing.constant": ("n-vector or scalar", "N", "constant part of f(t)"),
+           "forcing.amplitude": ("n-vector or scalar", "N", "forcing amplitude"),
+           "forcing.omega": ("number ≥ 0", "rad/s", "forcing angular frequency"),
+           "forcing.phase": ("n-vector or scalar", "rad", "forcing phase"),
+           "forcing.harmonics[].amplitude": ("n-vector or scalar", "N", "forcing terms (all of them)"),
+           "forcing.harmonics[].omega": ("number ≥ 0", "rad/s", "their angular frequencies"),
+           "forcing.harmonics[].phase": ("n-vector or scalar", "rad", "their phases"),
+           "gap.offset": ("m-vector or scalar", "m", "gap offset, constant part of ν(t)"),
+           "gap.amplitude": ("m-vector or scalar", "m", "gap motion amplitude"),
+           "gap.omega": ("number ≥ 0", "rad/s", "gap motion angular frequency"),
+           "gap.phase": ("m-vector or scalar", "rad", "gap motion phase"),
+           "gap.harmonics[].amplitude": ("m-vector or scalar", "m", "gap motion terms (all of them)"),
+           "gap.harmonics[].omega": ("number ≥ 0", "rad/s", "their angular frequencies"),
+           "gap.harmonics[].phase": ("m-vector or scalar", "rad", "their phases"),
+           "impact.law": ('"newton" or "poisson"', "", "impact law"),
+           "impact.restitution": ("m-vector or scalar in [0, 1]", "1", "restitution coefficients"),
+       }.items()},
+    "observer.model.error_metric": ('"plant" or "model"', "", '"plant"',
+                                    "whose M and K measure V and the errors against the plant's state"),
 }
 """The documented fields of a scenario document: every leaf of :data:`SCHEMA`, with its type,
 unit, default and meaning (``required`` for the keys of :data:`REQUIRED`)."""
@@ -223,18 +254,6 @@ def apply_overrides(doc: dict, overrides: dict[str, Any]) -> dict:
     return doc
 
 
-def _harmonic_doc(field_name: str, d: dict, n: int, kind: str, const_key: str) -> Harmonic:
-    terms, names = [], []
-    if any(k in d for k in ("amplitude", "omega", "phase")):
-        terms.append({k: d[k] for k in ("amplitude", "omega", "phase") if k in d})
-        names.append(field_name)
-    for j, term in enumerate(d.get("harmonics", [])):
-        terms.append(term)
-        names.append(f"{field_name}.harmonics[{j}]")
-    return Harmonic.build(field_name, n, constant=d.get(const_key, 0.0), terms=terms, kind=kind,
-                          constant_name=const_key, term_names=names)
-
-
 @dataclass(frozen=True)
 class Scenario:
     """A complete, validated simulation case.
@@ -253,6 +272,9 @@ class Scenario:
         Use the position-projected master (K-metric projection on its own closed set).
     observer : dict
         The raw ``[observer]`` table (validated by :mod:`observer.observers`).
+    model : ObserverModel or None
+        The observers' own model, from ``[observer.model]`` (:mod:`observer.plant_model`);
+        None: the observers carry the plant's.
     """
 
     name: str
@@ -268,6 +290,7 @@ class Scenario:
     master_projection: bool = False
     observer: dict = field(default_factory=dict)
     source: str = ""
+    model: Any = field(default=None, compare=False, repr=False)
 
     # -- construction ----------------------------------------------------------------------
     @staticmethod
@@ -297,8 +320,8 @@ class Scenario:
             warnings.warn(f"system.gap.offset: not given, so every contact's offset is 0: the "
                           f"{m} contact(s) close where Wᵀq = 0 (a table [system.gap] with "
                           f"offset = [...] sets the distances at q = 0)", InputWarning, stacklevel=3)
-        forcing = _harmonic_doc("system.forcing", sysd.get("forcing", {}), n, "cos", "constant")
-        gap = _harmonic_doc("system.gap", sysd.get("gap", {}), m, "sin", "offset")
+        forcing = harmonic_table("system.forcing", sysd.get("forcing", {}), n, "cos", "constant")
+        gap = harmonic_table("system.gap", sysd.get("gap", {}), m, "sin", "offset")
         if system is None:
             system = LinearSystem(M, sysd["C"], sysd["K"], W, forcing, gap)
         law = ImpactLaw.build(doc["impact"]["law"], doc["impact"]["restitution"], m)
@@ -323,9 +346,12 @@ class Scenario:
         check_finite_energy("initial", system, q0, u0)
         Sensor.from_table(doc.get("observer", {}).get("sensor"))
         meta = doc.get("scenario", {})
+        observer = dict(doc.get("observer", {}))
+        model = (build_model(observer["model"], doc, system, law, projection) if "model" in observer
+                 else None)
         return Scenario(str(meta.get("name", Path(source).stem if source else "custom")),
                         str(meta.get("description", "")), system, law, q0, u0, t_end, h, theta,
-                        solver, projection, dict(doc.get("observer", {})), source)
+                        solver, projection, observer, source, model)
 
     def to_dict(self) -> dict:
         """The scenario as a TOML-ready document (inverse of :meth:`from_dict`): dense
@@ -371,6 +397,8 @@ class Scenario:
             for key in ("q", "u"):
                 if isinstance(doc["observer"].get(key), (list, np.ndarray)):
                     doc["observer"][key] = vec(doc["observer"][key])
+            if plain and "model" in doc["observer"]:
+                doc["observer"]["model"] = plain_table(doc["observer"]["model"])
         return doc
 
     def with_overrides(self, overrides: dict[str, Any]) -> "Scenario":

@@ -18,6 +18,7 @@ from observer.engines.base import scenario_observers  # noqa: F401  (re-exported
 from observer.engines.timestepping import result_events, stepping_events  # noqa: F401  (re-exported)
 from observer.errors import InputError, is_numerical_failure, user_callback
 from observer.engines.loop import check_record_every
+from observer.plant_model import with_model
 from observer.observers import Slave, check_coupling, make_slaves  # noqa: F401  (make_slaves re-exported)
 from observer.result import SimulationResult
 from observer.scenario import (Scenario, check_finite_energy,  # noqa: F401  (re-exported:
@@ -53,7 +54,7 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
              coupling: tuple[float, float] | None | str = "scenario", log: str | Path | None = None,
              residual_tol: float = 1e-9, engine: str | None = None, record_every: int | None = None,
              store: str = "full", integrator: str | None = None, on_chunk=None,
-             t0: float = 0.0, sensor: dict | None = None) -> SimulationResult:
+             t0: float = 0.0, sensor: dict | None = None, model: dict | None = None) -> SimulationResult:
     """Simulate the master and the observers of ``scenario`` on a registered engine.
 
     Parameters
@@ -79,6 +80,12 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
         ``[observer.sensor]`` table; given, it replaces the scenario's table. A sensor that is
         not ideal drives the observers by the log it sees (:func:`sensed_scenario`) and
         ``metadata["sensor"]`` records its settings.
+    model : dict, optional
+        The observers' own model, the ``[observer.model]`` table (:mod:`observer.plant_model`:
+        M, C, K, W in full or as ``{"scale": ...}``, ``{"factors": ...}``,
+        ``{"relative_std": ..., "seed": ...}``; forcing, gap, impact, error_metric), replacing
+        the scenario's. The master is the plant; V is measured against it. None: the
+        scenario's table, if any.
 
     Returns
     -------
@@ -87,8 +94,8 @@ def simulate(scenario: str | Path | Scenario, h: float | None = None, t_end: flo
     """
     integrator, coupling, residual_tol, observers = check_arguments(
         engine, integrator, coupling, residual_tol, record_every, observers, on_chunk)
-    sc = _scenario(scenario, h=h, t_end=t_end, solver=solver, theta=theta,
-                   master_projection=master_projection)
+    sc = with_model(_scenario(scenario, h=h, t_end=t_end, solver=solver, theta=theta,
+                              master_projection=master_projection), model)
     sensed = None
     if observers and (observers != "scenario" or sc.observer):
         sc, sensed = sensed_scenario(sc, sensor, integrator, source, log, engine)

@@ -8,7 +8,10 @@ seed 0) × {jump, nojump}, 10 s at h = 2e-4 (50 000 steps):
   one chunk per core (threads);
 * ``test_separate_calls[summary]`` / ``[full]`` — one :func:`observer.simulate` per member with
   its two observers (the same initial states), in the same process, ``store="summary"`` (the
-  same summary per call) or the default ``store="full"``.
+  same summary per call) or the default ``store="full"``;
+* ``test_mismatch_ensemble`` — the same ensemble with the observers on a model whose K is
+  1 % off the plant's (issue 33: its median against ``test_ensemble_one_pass``'s is the
+  cost of a mismatch ensemble).
 
 The kernel and the members' loop (its specialization for double_mass's sizes, which the
 full case takes: :data:`observer.engines.compiled.members.SPECIALIZE_STEPS`) are compiled (or loaded from
@@ -112,3 +115,29 @@ def test_separate_calls(benchmark, store):
     ends = _cpu_timed(benchmark, separate)
     benchmark.extra_info.update(observer_steps=2 * n * round(t_end / H), members=n, store=store)
     assert np.all(np.isfinite(ends)) and len(ends) == n
+
+
+MISMATCH = {"K": {"scale": 1.01}}
+"""The observer model of the mismatch ensemble (issue 33): the plant's K known to 1 %."""
+
+
+def test_mismatch_ensemble(benchmark):
+    """The acceptance case of issue 33: the same ensemble with the observers on a model whose K
+    is 1 % off the plant's (:mod:`observer.plant_model`; the members loop on the model's
+    matrices against one plant run); its cost against :func:`test_ensemble_one_pass`'s is the
+    ratio of the medians. Checked: 5 sampled members' V(end) and V_max equal those of a single
+    mismatch run (``store="full"``, the plant as master) to 1e-12 relative."""
+    n, t_end = _case(benchmark)
+    _warm()
+    sc = observer.load_scenario("double_mass")
+    df = _cpu_timed(benchmark, observer.ensemble, "double_mass", designs=DESIGNS, n=n, seed=0, h=H, t_end=t_end,
+                    model=MISMATCH)
+    benchmark.extra_info.update(observer_steps=2 * n * round(t_end / H), members=n,
+                                workers=df.attrs["metadata"]["workers"])
+    X, _ = sample_errors(sc, n, "energy_sphere", np.random.default_rng(0), None)
+    for i in SAMPLED[:n]:
+        alone = observer.simulate(sc, h=H, t_end=t_end, observers=member_slaves(sc, DESIGNS, X, [i]), model=MISMATCH)
+        for d in DESIGNS:
+            row = df[(df.design == d) & (df.member == i)].iloc[0]
+            V = alone.slaves[f"{d}#{i}"].V
+            assert abs(row["V_end"] - V[-1]) <= 1e-12 * V[-1] and abs(row["V_max"] - V.max()) <= 1e-12 * V.max()

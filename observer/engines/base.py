@@ -191,6 +191,8 @@ def describe(sc: Scenario, integrator: str, observers, source, coupling, log, re
         for s in slaves:
             if s.position_jumps and s.metric == "K":
                 system.require_definite_stiffness(f"the observer {s.name!r} (position jumps in the K metric)")
+        if sc.model is not None:
+            sc.model.require_projection(slaves)
     if source is not None and source not in SOURCES:
         raise InputError("observer.source", f"must be one of {list(SOURCES)}, got {source!r}")
     log_frame = None

@@ -118,6 +118,8 @@ def _event_run(run: RunDescription, signalled) -> RunRecord:
         meta.update(observers=list(obs.runs), source=run.source,
                     observer_events={name: len(r.event_rows) for name, r in obs.runs.items()})
         observers_whole = all(r.status == "ok" for r in obs.runs.values())
+        if sc.model is not None:
+            meta["observer_model"] = sc.model.metadata(sc.system)
         if obs.status != "ok" and status.ok:
             status = RunStatus(RunState.STOPPED, f"observer {obs.status}")
     sig = signalled()
@@ -152,12 +154,22 @@ def _event_run(run: RunDescription, signalled) -> RunRecord:
 
 
 def _observers(run: RunDescription, master, master_signal, signalled):
-    """The event-driven observers of ``run`` against ``master``: ``(slaves, χ, result)``."""
+    """The event-driven observers of ``run`` against ``master``: ``(slaves, χ, result)``. With an
+    observer model (:mod:`observer.plant_model`) the master is the plant and the observers
+    advance the nominal scenario (:func:`~observer.plant_model.model_scenario`) switched at the
+    plant's exact closing and opening times (or the log's); V is measured against the plant."""
     from observer.event.observers import run_observers
+    from observer.observers import lyapunov
+    from observer.plant_model import model_scenario
 
+    sc = run.scenario                       # with an observer model: the observers run on it
+    own = sc if sc.model is None else model_scenario(sc)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # overflow: stopped by the caller
-        obs = run_observers(master, run.scenario, list(run.slaves), intervals=_intervals(run),
+        obs = run_observers(master, own, list(run.slaves), intervals=_intervals(run),
                             coupling=run.coupling, should_stop=None if master_signal else signalled)
+        if sc.model is not None:            # V against the plant, in the model's error metric
+            for r in obs.runs.values():
+                r.V = lyapunov(sc.model.metric_system(sc.system), r.q, r.u, master.q, master.u)
     slaves = {name: r.as_slave() for name, r in obs.runs.items()}
     return slaves, obs.chi, obs
 

@@ -71,7 +71,10 @@ class TimeStepping(Engine):
         raise NotImplementedError(f"engine {self.name!r} has no time-stepping loop")
 
     def run(self, run: RunDescription) -> RunRecord:
-        """The master and the observers over the grid t_k = t0 + k·h."""
+        """The master and the observers over the grid t_k = t0 + k·h (with an observer model,
+        :meth:`run_with_model`)."""
+        if run.scenario.model is not None and run.slaves:
+            return self.run_with_model(run)
         sc, slaves = run.scenario, run.slaves
         stepper = MoreauJean(sc.system, sc.law, sc.h, sc.t_end, sc.theta, solver=sc.solver,
                              residual_tol=run.residual_tol, structure=self.structure)
@@ -90,6 +93,78 @@ class TimeStepping(Engine):
                            on_chunk=run.on_chunk)
         return stepping_record(run, stepper, out, record_every)
 
+    def run_with_model(self, run: RunDescription) -> RunRecord:
+        """The true plant as the master, the observers on their own model
+        (:mod:`observer.plant_model`): two loops of this engine, no new one.
+
+        1. The plant alone, every step recorded: its trajectory and its closed sets χ_k.
+        2. The nominal scenario (:func:`~observer.plant_model.model_scenario`) with the
+           observers, χ_k given explicitly as the plant's (``source="master"``; a log or
+           ``"self"`` as the run asks), so that every observer step is the one of a run of the
+           nominal model fed the plant's closing log.
+
+        The result's master is the plant (every ``record_every``-th row of loop 1), its health
+        the plant's; V is measured against it in the model's ``error_metric``
+        (:meth:`~observer.plant_model.ObserverModel.metric_system`), and
+        ``metadata["observer_model"]`` records the model, the metric and the observers' own
+        health record. ``on_chunk`` receives no chunk (loop 2's rows carry the nominal
+        master): the result is written whole at the end, as the event engine's. The per-step
+        parts of ΔV (eq. (17)) are not given (the decomposition holds for one model: a
+        mismatch adds a term of its own).
+
+        Raises
+        ------
+        InputError
+            Naming ``store`` for ``store="summary"`` (the kernel's summary measures V against
+            the loop's own master; :func:`observer.ensemble` has its own path).
+        """
+        import dataclasses
+
+        from observer.plant_model import model_scenario
+
+        if run.store == "summary":
+            raise InputError("store", 'store="summary" measures V against the loop\'s own master; with '
+                             'observer.model use store="full" (observer.ensemble has its own path)')
+        sc = run.scenario
+        model = sc.model
+        plant_run = dataclasses.replace(run, slaves=(), on_chunk=None, chi=None, metrics=None, record_pre=False)
+        plant_stepper = MoreauJean(sc.system, sc.law, sc.h, sc.t_end, sc.theta, solver=sc.solver,
+                                   residual_tol=run.residual_tol, structure=self.structure)
+        plant = self.advance(loop_input(plant_run, plant_stepper))
+        chi = run.chi
+        if chi is None and run.log_frame is None and run.source != "self":
+            chi = np.zeros((plant_stepper.steps, sc.system.m), dtype=bool)
+            chi[:plant.active.shape[0] - 1] = plant.active[1:]
+        nominal = dataclasses.replace(run, scenario=model_scenario(sc), chi=chi, on_chunk=None)
+        out = self._nominal_loop(nominal)
+        every, R = out.record_every, out.q.shape[1]
+        rows = plant.q.shape[1]
+        R = min(R, (rows - 1) // every + 1)
+        cut = {k: getattr(out, k)[:, :R].copy() for k in ("q", "u", "P", "sigma")}
+        for k in ("q", "u", "P", "sigma"):
+            cut[k][0] = getattr(plant, k)[0, ::every][:R]
+        stop = plant if plant.stopped_at is not None else out
+        merged = dataclasses.replace(out, **cut, active=plant.active[::every][:R], chi=out.chi[:R],
+                                     q_pre=None if out.q_pre is None else out.q_pre[:, :R], t=None, V=None,
+                                     stopped_at=stop.stopped_at, stop_reason=stop.stop_reason,
+                                     stop_signal=stop.stop_signal, health=plant.health,
+                                     stats={**out.stats, **{k: plant.stats[k] for k in ("min_gap", "min_gap_step")
+                                                            if k in plant.stats}})
+        record = stepping_record(run, plant_stepper, merged, every, metric=model.metric_system(sc.system))
+        record.metadata["observer_model"] = {**model.metadata(sc.system),
+                                             "observers_health": out.health.to_dict() if out.health else None}
+        return record
+
+    def _nominal_loop(self, nominal: RunDescription) -> LoopOutput:
+        """Loop 2 of :meth:`run_with_model`: the nominal scenario's master and observers."""
+        sc, slaves = nominal.scenario, nominal.slaves
+        stepper = MoreauJean(sc.system, sc.law, sc.h, sc.t_end, sc.theta, solver=sc.solver,
+                             residual_tol=nominal.residual_tol, structure=self.structure)
+        record_every = check_record_every(1 if nominal.record_every is None else nominal.record_every)
+        other_metric = any(s.position_jumps and s.metric != "K" for s in slaves)
+        return self.advance(loop_input(nominal, stepper), record_every=record_every, store="full",
+                            record_pre=nominal.record_pre or other_metric)
+
 
 def loop_input(run: RunDescription, stepper: MoreauJean) -> LoopInput:
     """The loop's input: master first, then the observers (state, jumps, metric, name), with
@@ -107,8 +182,10 @@ def loop_input(run: RunDescription, stepper: MoreauJean) -> LoopInput:
                      names=tuple(s.name for s in slaves))
 
 
-def stepping_record(run: RunDescription, stepper: MoreauJean, out, record_every: int) -> RunRecord:
-    """The :class:`RunRecord` of a loop's output (metadata, trajectories, V, tables)."""
+def stepping_record(run: RunDescription, stepper: MoreauJean, out, record_every: int,
+                    metric=None) -> RunRecord:
+    """The :class:`RunRecord` of a loop's output (metadata, trajectories, V, tables); ``metric``
+    (a system, with an observer model): V in its M and K, without the per-step parts of ΔV."""
     sc, slaves, system = run.scenario, run.slaves, run.scenario.system
     meta = run_metadata(sc, stepper, out)
     names = [s.name for s in slaves]
@@ -119,7 +196,8 @@ def stepping_record(run: RunDescription, stepper: MoreauJean, out, record_every:
     master = {"q": out.q[0], "u": out.u[0], "P": out.P[0], "sigma": out.sigma[0]}
     if out.q_pre is not None:
         master["q_pre"] = out.q_pre[0]
-    trajectories = {s.name: _trajectory(system, sc.h, out, i, s.name, master, record_every)
+    trajectories = {s.name: _trajectory(system if metric is None else metric, sc.h, out, i, s.name, master,
+                                        record_every == 1 and metric is None)
                     for i, s in enumerate(slaves, start=1)}
     summary = None
     if out.summary is not None:                     # the tables: DataFrames built on first read
@@ -133,15 +211,16 @@ def stepping_record(run: RunDescription, stepper: MoreauJean, out, record_every:
 
 
 def _trajectory(system, h: float, out, i: int, name: str, master: dict,
-                record_every: int) -> SlaveTrajectory:
-    """Observer ``i`` of the loop's output as a :class:`SlaveTrajectory` (V and, when every
-    step is kept, its per-step damping/impulse/projection parts)."""
+                with_parts: bool) -> SlaveTrajectory:
+    """Observer ``i`` of the loop's output as a :class:`SlaveTrajectory` (V in ``system``'s M and
+    K and, ``with_parts`` (every step kept, one model), its per-step damping/impulse/projection
+    parts)."""
     traj = {"q": out.q[i], "u": out.u[i], "P": out.P[i], "sigma": out.sigma[i]}
     if out.q_pre is not None:
         traj["q_pre"] = out.q_pre[i]
     V = (out.V[i] if out.V is not None
          else lyapunov(system, traj["q"], traj["u"], master["q"], master["u"]))
-    parts = (lyapunov_decrements(system, h, traj, master) if record_every == 1
+    parts = (lyapunov_decrements(system, h, traj, master) if with_parts
              else {"damping": None, "impulse": None, "projection": None})
     return SlaveTrajectory(name, traj["q"], traj["u"], traj["P"], V, parts["damping"],
                            parts["impulse"], parts["projection"], traj["sigma"])

@@ -14,8 +14,8 @@ import pytest
 from observer import load_scenario
 from observer import sparse as sps
 from observer.errors import InputError
-from observer.model import LinearSystem
-from observer.scenario import Scenario, _harmonic_doc
+from observer.model import LinearSystem, harmonic_table
+from observer.scenario import Scenario
 from observer.scenarios import rocking_chain as rc
 from observer.tomlio import MAX_BYTES, dumps, read_toml
 from observer.validation import as_array, as_matrix
@@ -27,8 +27,8 @@ def unchecked_scenario(doc: dict) -> Scenario:
     s = doc["system"]
     n = len(doc["initial"]["q"]) if isinstance(doc["initial"]["q"], list) else doc["initial"]["q"]["n"]
     system = LinearSystem(*(as_matrix(f"system.{k}", s[k], (n, n)) for k in "MCKW"),
-                          _harmonic_doc("system.forcing", s["forcing"], n, "cos", "constant"),
-                          _harmonic_doc("system.gap", s["gap"], n, "sin", "offset"), check=False)
+                          harmonic_table("system.forcing", s["forcing"], n, "cos", "constant"),
+                          harmonic_table("system.gap", s["gap"], n, "sin", "offset"), check=False)
     return Scenario.from_dict(doc, "rocking_chain", system)
 
 

@@ -22,6 +22,11 @@ runs: a change to the kernel's observer step must be made here too). The master 
 the kernel's lean specialization, whose trajectory is bitwise the general loop's
 (:func:`observer.engines.compiled.bundles.specialization`).
 
+With an observer model distinct from the plant (:mod:`observer.plant_model`) the master run is
+the plant's and the members advance on the nominal model: :func:`observers_input` hands
+:func:`advance_members` the model's matrices, signal tables, law and projection metrics (the
+same loop, other data), and V is measured against the plant's recorded state.
+
 A run this path does not cover returns None, and :mod:`observer.ensemble` takes the kernel's
 run of the chunk instead (:func:`applicable` says which): banded or factored structure, a
 master that stops or needs the reference solver, a member whose contact step fails or whose
@@ -388,13 +393,30 @@ def _finite_energies(system, slaves) -> bool:
     return bool(np.all(np.isfinite(kinetic)) and np.all(np.isfinite(elastic)) and np.all(np.isfinite(gaps)))
 
 
+def observers_input(sc, slaves, engine, inp):
+    """The loop input whose system the members advance and the one whose M, K, C measure
+    their V: ``(inp, inp)`` without an observer model; with one (:mod:`observer.plant_model`),
+    the nominal scenario's input (its matrices, signals, law and projection metrics go to
+    :func:`advance_members` in place of the plant's: the same loop, other data) and, for V,
+    the plant's ``inp`` or the nominal one by the model's ``error_metric``. ``(None, None)``
+    when the compiled engine would not take the nominal run."""
+    if sc.model is None:
+        return inp, inp
+    from observer.plant_model import model_scenario
+
+    own = _member_input(model_scenario(sc), slaves, engine)
+    return own, (inp if sc.model.error_metric == "plant" else own)
+
+
 def member_summaries(sc, slaves, engine, workers: int, paths: tuple = ()):
     """The streaming summary of every observer in ``slaves`` against one master run of ``sc``,
     each equal to that of a single ``simulate(sc, observers=[slave], store="summary")``.
 
     Returns ``(rows, paths)``: one row per slave (the columns of
     :func:`observer.engines.loop.summary_frame`) and, for the slaves at indices ``paths``,
-    ``{index: (t, V)}`` sampled every ``max(1, steps // 20 000)`` steps; or None when the run is
+    ``{index: (t, V)}`` sampled every ``max(1, steps // 20 000)`` steps (with an observer model,
+    :func:`observers_input`: the master the plant, the members on the model, V against the
+    plant); or None when the run is
     not one this path covers (module docstring), the master or a member failed, or a result is
     not finite. ``workers`` threads advance contiguous chunks of the members.
     """
@@ -408,9 +430,16 @@ def member_summaries(sc, slaves, engine, workers: int, paths: tuple = ()):
     tables = master_tables(inp, steps)
     if tables is None:
         return None
-    FB, NU, NUD = signal_tables_on_grid(inp, signal_tables(st.system), steps)
-    law, obs, state = law_bundle(st), observer_bundle(inp), state_bundle(inp)
-    tally = summary_bundle(inp, True, tuple(RHOS), 1)
+    own, metric = observers_input(sc, slaves, engine, inp)       # the observers' model, V's metric
+    if own is None:
+        return None
+    if own is not inp:
+        st, system = own.stepper, system_bundle(own)
+        if not applicable(st, system, steps):
+            return None
+    FB, NU, NUD = signal_tables_on_grid(own, signal_tables(st.system), steps)
+    law, obs, state = law_bundle(st), observer_bundle(own), state_bundle(own)
+    tally = summary_bundle(metric, True, tuple(RHOS), 1)
     summary_start(state, system, tally)
     S = inp.q0.shape[0]
     every = max(1, steps // 20_000)
