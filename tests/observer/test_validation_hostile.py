@@ -657,6 +657,7 @@ CASES += [
                                       sensor={"latency": 1e-3}),
         ["run", "double_mass", "--observers", "jump", "--integrator", "event",
          "--set", "observer.sensor.latency=1e-3", "--t-end", "0.01", "--out", OUT], kind="cli"),
+]
 # --- issue 33: the observers' own model, [observer.model] -------------------------------------------
 CASES += [
     doc_case("model-K-wrong-shape", {"observer.model.K": "[[100.0, -100.0, 0.0], [-100.0, 200.0, 0.0]]"},
