@@ -353,14 +353,21 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
              initial_errors, V0, j, positions and j == 0) for j, s in enumerate(scs)]
     done = _run_jobs(jobs, scheduler)
     result = _assemble(sc, designs, rho, done, confidence, n_resamples, seed)
-    result.metadata = {"scenario": sc.name, "params": sc.parameters(), "designs": list(designs), "n": n,
-                       "masters": masters, "seed": seed, "spread": spread, "grid_jitter": grid_jitter,
-                       "integrator": integrator, "engine": engine, "h": sc.h, "t_end": sc.t_end,
-                       "master_steps": [d["h"] for d in done], "confidence": confidence,
-                       "n_resamples": n_resamples, "wall_time_s": time.perf_counter() - t0,
-                       **({} if sensed.ideal else {"sensor": sensed.to_dict()}),
-                       **({} if sc.model is None else {"observer_model": sc.model.metadata(sc.system)})}
+    result.metadata = _metadata(sc, sensed, done, dict(designs=list(designs), n=n, masters=masters, seed=seed,
+                                spread=spread, grid_jitter=grid_jitter, integrator=integrator, engine=engine,
+                                confidence=confidence, n_resamples=n_resamples), time.perf_counter() - t0)
     return result
+
+
+def _metadata(sc, sensed, done, settings: dict, wall: float) -> dict:
+    """The comparison's metadata: the scenario, the call's ``settings``, the masters' steps,
+    the wall time, the sensor's settings (when not ideal) and the observers' model (if any)."""
+    return {"scenario": sc.name, "params": sc.parameters(), **{k: settings[k] for k in
+            ("designs", "n", "masters", "seed", "spread", "grid_jitter", "integrator", "engine")},
+            "h": sc.h, "t_end": sc.t_end, "master_steps": [d["h"] for d in done],
+            "confidence": settings["confidence"], "n_resamples": settings["n_resamples"], "wall_time_s": wall,
+            **({} if sensed.ideal else {"sensor": sensed.to_dict()}),
+            **({} if sc.model is None else {"observer_model": sc.model.metadata(sc.system)})}
 
 
 def compared_scenario(scenario, overrides, h, t_end, sensor, model=None):
