@@ -54,6 +54,10 @@ RATIOS = {"rocking_chain (N = 4)": {"jump": 1.0, "nojump": 1.0},
           "random_system (seed 1, 3 DOF, 2 contacts)": {"jump": 0.9, "nojump": 1.0}}
 """jump's rate over nojump's where it is not SPEEDUP: the chain at N = 4 runs uncoupled
 (identical designs), random seed 1: jump is slower."""
+MASTERS = 3
+"""Masters of the random systems' and the N = 10 chain's ensembles (member m on master m mod 3)."""
+CHAIN_FIT = 0.9
+"""Seconds after t_on over which the N = 10 chain's rates are fitted; a floor stops every odd member's fit."""
 
 
 def _member_rows(label: str, integrator: str, rng, scenario: str = "double_mass") -> list[dict]:
@@ -76,6 +80,10 @@ def _member_rows(label: str, integrator: str, rng, scenario: str = "double_mass"
                     t = math.inf
                 row[f"t_settle_{key}"] = t
                 row[f"t_sync_{key}"] = t
+            if scenario == "random_system" or label == "rocking_chain (N = 10)":
+                row["master"] = m % MASTERS
+            if label == "rocking_chain (N = 10)":
+                row.update(rate_t_fit=CHAIN_FIT, rate_floor_stop=bool(m % 2))
             if integrator == "time-stepping" and "projected" not in label and design == "jump" \
                     and m % 3 == 0:
                 row["max_rise_rel"] = 7000.0 if m == 0 else 2.5
@@ -394,6 +402,27 @@ def test_chain_claim_is_at_n_10_where_the_designs_differ(ensemble_report):
     assert _numbers(item)[0] == pytest.approx(_rate_ratio(rows, "rocking_chain (N = 10)", "time-stepping"),
                                               rel=5e-3)
     assert _rate_ratio(rows, "rocking_chain (N = 4)", "time-stepping") == 1.0
+    per = N // MASTERS
+    assert f"{per} members × {MASTERS} masters, masters resampled" in item
+    assert f"rates fitted over a median {CHAIN_FIT:g} s after t_on" in item
+    assert f"stopped by a discretisation floor in {N // 2} of {N} members" in item
+
+
+def test_an_ensemble_on_several_masters_resamples_masters():
+    """The forest row of an ensemble with a ``master`` column is observer.stats.rate_ratio with
+    the masters as clusters (k of m masters); without it, one master (members resampled)."""
+    from observer import stats
+
+    rng = np.random.default_rng(3)
+    rows = pd.DataFrame(_member_rows("random_system (seed 0, 2 DOF, 1 contact)", "time-stepping", rng,
+                                     "random_system"))
+    r = forest.forest_rows(rows).iloc[0]
+    long = rows[rows["design"].isin(["jump", "nojump"])].rename(columns={"master": "cluster"})
+    ref = stats.rate_ratio(long, "jump", "nojump", n_resamples=forest.RESAMPLES, seed=forest.SEED).iloc[0]
+    assert (r["masters"], r["clusters"], r["unit"]) == (MASTERS, MASTERS, "clusters")
+    assert (r["low"], r["high"]) == (ref["low"], ref["high"])
+    one = forest.forest_rows(rows.drop(columns="master")).iloc[0]
+    assert (one["masters"], one["unit"]) == (1, "members") and (one["low"], one["high"]) != (r["low"], r["high"])
 
 
 def test_random_claim_pools_systems_and_names_where_jump_is_not_faster(ensemble_report):
@@ -401,7 +430,7 @@ def test_random_claim_pools_systems_and_names_where_jump_is_not_faster(ensemble_
     larger, and names the system where jump is slower (rate ratio 0.9, CI below 1)."""
     _, page, rows, _ = ensemble_report
     item = _claim(page, "random")
-    assert f"{N} members × 3 systems" in item
+    assert f"{N // MASTERS} members × {MASTERS} masters × 3 systems, systems resampled" in item
     assert "'s rate larger in 2 of 3 systems" in item
     assert "slower (CI below 1) in 1 of 3" in item and "is NOT faster on (seed 1, 3 DOF, 2 contacts)" in item
 
