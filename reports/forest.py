@@ -2,12 +2,14 @@
 its interval per ensemble (the forest plot) and one claim per scenario the paper names.
 
 Every number is an estimand of :mod:`observer.stats` (:func:`observer.stats.rate_ratio`:
-the ratio of mean rates with its cluster bootstrap interval — members resampled within one
-master, systems resampled across the random family — and "faster in k of m" with its
+the ratio of mean rates with its cluster bootstrap interval — masters resampled within an
+ensemble on several (members within one), systems across the random family — and "faster in k of m" with its
 Clopper–Pearson interval); nothing is re-derived here. The per-member rate is the ensemble
-rows' ``rate`` (:func:`observer.metrics.decay_rate`: least squares of ln V over the coupling
-window, up to the first time V reaches 1e-9·V(t_on)), so a rate is a property of the decay,
-not of a settling threshold that a floor or the window's end could decide.
+rows' ``rate`` (:func:`observer.compare.member_fits`: least squares of ln V from t_on until V
+first reaches 10³× the largest floor met so far, :func:`observer.stats.floor_path`, the floor
+being the V of a zero-error observer against the same master), so a rate is a property of the
+decay, not of a settling threshold that a floor or the window's end could decide; each claim
+says over how long a span the rates were fitted and in how many members a floor stopped the fit.
 """
 
 from __future__ import annotations
@@ -218,9 +220,36 @@ def _fit_span(r) -> str:
     stops = int(r.get("floor_stops", 0))
     if stops:
         text += (f", stopped by a discretisation floor in {stops} of {int(r['members'])} members (V within "
-                 f"{stats.SAFETY:g}× the zero-error observer's V met so far; the decay beyond is not decided "
-                 "with this master)")
+                 f"{stats.SAFETY:g}× the largest V of a zero-error observer so far: beyond, not decided)")
     return text
+
+
+def where_faster(forest: pd.DataFrame) -> str:
+    """One sentence: over the ensembles of the forest plot with the plain master (one per
+    system, no pooled row, no robustness ensemble; the exact master's where present), where
+    the first design of :data:`PAIR` is faster (interval above 1) and by how much (the range of
+    the estimates), where the intervals contain 1, and where it is slower, by name."""
+    from reports.tables import fmt
+
+    f = forest[forest["label"].map(_plain) & ~forest["label"].str.contains("all ", regex=False)]
+    if f.empty:
+        return ""
+    f = f.assign(_o=(f["integrator"] != EXACT).astype(int)).sort_values("_o", kind="stable")
+    f = f.drop_duplicates("label")
+    faster, slower = f[f["low"] > 1.0], f[f["high"] < 1.0]
+    same = f[(f["low"] <= 1.0) & (f["high"] >= 1.0)]
+    a, b = (registry.label(d) for d in PAIR)
+    text = f"Where {a} is faster than {b}, over these {len(f)} ensembles: faster (95 % CI above 1) in {len(faster)}"
+    if len(faster):
+        text += (f", its V decaying {fmt(faster['estimate'].min())}–{fmt(faster['estimate'].max())}× as fast "
+                 f"(lowest CI end {fmt(faster['low'].min())})")
+    text += f"; not different (CI contains 1) in {len(same)}"
+    if len(same):
+        text += " (" + ", ".join(same["label"]) + ")"
+    text += f"; slower (CI below 1) in {len(slower)}"
+    if len(slower):
+        text += (" (" + ", ".join(f"{o['label']}: {fmt(o['estimate'])}" for _, o in slower.iterrows()) + ")")
+    return text + "."
 
 
 def _pair_text() -> str:

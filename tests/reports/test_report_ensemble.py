@@ -136,7 +136,8 @@ def _checks_row() -> tuple[str, list[dict]]:
     return ("checks:dm", [{"kind": "checks", "scenario": "double_mass", "name": "double_mass",
                            "check": "lyapunov_decrease", "equation": "(17)", "check_status": "PASS",
                            "margin": 0.0, "tolerance": 1e-9, "status": "ok", "reason": "",
-                           "witness": f"steps=12; max_{artifacts.GAP_KEY}/V={GAP:g}; max_impulse_slack/V=1e-7",
+                           "witness": f"steps=12; max_{artifacts.GAP_KEY}/V={GAP:g}; max_impulse_slack/V=1e-7; "
+                                      "slack_order_impulse_slack=nan; min_open_gap=inf",
                            "evidence": "bounded", "verdict": "holds up to an O(h) slack"}])
 
 
@@ -454,6 +455,14 @@ def test_no_table_cell_prints_nan_inf_none_or_zero_intervals(ensemble_report):
     assert not bad, bad[:10]
     assert FORBIDDEN.search("0 [0, 0]") and FORBIDDEN.search("median nan") and not FORBIDDEN.search("infinite")
     assert FORBIDDEN.search("Inf") and FORBIDDEN.search("None") and not FORBIDDEN.search("none (exact χ)")
+    assert FORBIDDEN.search("slack_order=nan")                     # the synthetic witness's, before it is shown
+
+
+def test_a_witness_value_that_is_no_number_reads_like_a_table_cell():
+    from reports.tables import witness_text
+
+    assert witness_text("a=nan; b=1e-3; c=inf; d=-inf; e=None; nanny=2; f=nan2") == \
+        "a=n/a; b=1e-3; c=∞; d=−∞; e=n/a; nanny=2; f=nan2"
 
 
 @pytest.mark.skipif(find_chromium() is None, reason="chromium is not installed (apt-get install chromium)")
@@ -486,3 +495,22 @@ def test_first_screen_in_headless_chromium_holds_the_forest_plot_and_the_claims(
     assert 0 < bottom < 1000
     assert 0 < float(res.attrs["data-figure-bottom"]) < bottom and int(res.attrs["data-figure-width"]) > 300
     assert (img[:int(bottom)] < 128).mean() > 0.01      # text drawn where the claims are
+
+
+def test_where_jump_is_faster_counts_faster_not_different_and_slower_ensembles():
+    """Hand-made forest rows: the exact master's row replaces the time-stepped one of the same
+    ensemble; projected-master and pooled rows are left out; the interval's position decides."""
+    from reports.tables import fmt
+
+    rows = [("double_mass", "event", 2.0, 1.8, 2.2), ("double_mass", "time-stepping", 2.5, 2.3, 2.7),
+            ("grazing", "time-stepping", 3.0, 2.9, 3.1), ("rocking_chain (N = 4)", "time-stepping", 1.0, 1.0, 1.0),
+            ("random_system (seed 1)", "time-stepping", 0.9, 0.85, 0.95),
+            ("double_mass (projected master)", "time-stepping", 9.0, 8.0, 10.0),
+            ("random_system (all 2 systems)", "time-stepping", 0.95, 0.5, 1.5)]
+    f = pd.DataFrame(rows, columns=["label", "integrator", "estimate", "low", "high"])
+    text = forest.where_faster(f)
+    assert "over these 4 ensembles: faster (95 % CI above 1) in 2" in text
+    assert f"decaying {fmt(2.0)}–{fmt(3.0)}× as fast (lowest CI end {fmt(1.8)})" in text
+    assert "not different (CI contains 1) in 1 (rocking_chain (N = 4))" in text
+    assert f"slower (CI below 1) in 1 (random_system (seed 1): {fmt(0.9)})" in text
+    assert forest.where_faster(f[f["label"] == "grazing"]).count("in 0") == 2     # near miss: no slower row
