@@ -487,25 +487,58 @@ def run_ensemble(case: Case, ctx: Context) -> list[dict]:
     if case.slave_offset is not None:
         x = np.concatenate([np.asarray(a, dtype=float) for a in case.slave_offset])
         V0 = 0.5 * float(x @ energy_metric(sc) @ x)
-    from observer.compare import member_fits
-    from observer.ensemble import sample_errors
-
-    X, _ = sample_errors(sc, case.members, "energy_sphere", np.random.default_rng(case.seed), V0)
-    X = np.vstack([X, np.zeros((1, X.shape[1]))])          # member n: no error (the design's floor)
-    df, cpu, wall = _timed(observer.ensemble, sc, designs, n=case.members + 1, initial_errors=X,
-                           paths=case.members + 1, integrator=case.integrator, label=case.name,
-                           workers=ENSEMBLE_WORKERS)
-    fits, floors = member_fits(sc, df, case.members, designs)
-    df = df[df["member"] < case.members].merge(fits[["design", "member", "rate", "points"]].rename(columns={"points": "rate_points"}), on=["design", "member"],
-                                               validate="one_to_one").merge(floors, on="design")
+    frames, cpu, wall = [], 0.0, 0.0
+    for j, (sc_j, n_j, rng) in enumerate(_ensemble_masters(case, sc)):
+        df_j, c, w = _ensemble_members(case, sc_j, designs, n_j, rng, V0)
+        df_j["member"] += sum(len(f) for f in frames) // len(designs)
+        frames.append(df_j.assign(master=j))
+        cpu, wall = cpu + c, wall + w
+    df = pd.concat(frames, ignore_index=True)
     base = {**base_row(case, sc), "members": case.members, "perturbation": case.perturbation,
             "size": case.size, "cpu_time_s": cpu, "wall_time_s": wall,
-            "cpu_scope": f"whole ensemble: {len(designs)} designs × {case.members} members",
+            "cpu_scope": f"whole ensemble: {len(designs)} designs × {case.members} members"
+                         + (f" over {case.masters} masters" if case.masters > 1 else ""),
             "note": f"not applicable (K singular): {', '.join(skipped)}" if skipped else ""}
     if case.paths:
         base["paths"] = ensemble_paths(case, ctx, sc, designs, df)
     return [{**rec, **base, "status": str(rec["status"])}     # base: the case's seed, n, name
             for rec in df.to_dict("records")]
+
+
+MASTER_SPREAD = 0.05
+"""Size of the extra masters' initial-state perturbations (:func:`observer.compare.master_scenarios`)."""
+
+
+def _ensemble_masters(case: Case, sc):
+    """``(scenario, members, rng)`` per master of the case: the scenario's own and
+    ``case.masters − 1`` sampled around it (seeded by the case's seed), ``case.members`` split
+    evenly (the first masters take the remainder); one master: the scenario, every member,
+    the case's seed (as before masters existed)."""
+    if case.masters <= 1:
+        return [(sc, case.members, np.random.default_rng(case.seed))]
+    from observer.compare import master_scenarios
+
+    master_ss, *member_ss = np.random.SeedSequence(case.seed).spawn(case.masters + 1)
+    scs = master_scenarios(sc, case.masters, MASTER_SPREAD, 0.0, np.random.default_rng(master_ss))
+    sizes = [case.members // case.masters + (j < case.members % case.masters) for j in range(case.masters)]
+    return [(s, k, np.random.default_rng(ss)) for s, k, ss in zip(scs, sizes, member_ss)]
+
+
+def _ensemble_members(case: Case, sc, designs, n: int, rng, V0):
+    """One master's n members (and the zero-error member whose V is each design's floor):
+    the rows with their decay ``rate`` (:func:`observer.compare.member_fits`), CPU and wall time."""
+    from observer.compare import member_fits
+    from observer.ensemble import sample_errors
+
+    X, _ = sample_errors(sc, n, "energy_sphere", rng, V0)
+    X = np.vstack([X, np.zeros((1, X.shape[1]))])          # member n: no error (the design's floor)
+    df, cpu, wall = _timed(observer.ensemble, sc, designs, n=n + 1, initial_errors=X, paths=n + 1,
+                           integrator=case.integrator, label=case.name, workers=ENSEMBLE_WORKERS)
+    fits, floors = member_fits(sc, df, n, designs)
+    fits = fits[["design", "member", "rate", "points", "t_fit", "floor_stop"]].rename(
+        columns={"points": "rate_points", "t_fit": "rate_t_fit", "floor_stop": "rate_floor_stop"})
+    df = df[df["member"] < n].merge(fits, on=["design", "member"], validate="one_to_one").merge(floors, on="design")
+    return df, cpu, wall
 
 
 SUMMARY_EVERY_STEP = 40_000
@@ -532,7 +565,8 @@ def ensemble_paths(case: Case, ctx: Context, sc, designs: tuple[str, ...], df: p
     Run after the timed ensemble (its ``cpu_time_s`` is not charged). Returns the file's path
     relative to the results folder (the rows' ``paths`` column)."""
     nd = sc.system.n
-    first = df[df["design"] == designs[0]].sort_values("member").head(case.paths)
+    own = df["master"] == 0 if "master" in df else True                # the paths rerun the scenario's master
+    first = df[(df["design"] == designs[0]) & own].sort_values("member").head(case.paths)
     X = first[[f"dq0_{j}" for j in range(nd)] + [f"du0_{j}" for j in range(nd)]].to_numpy(dtype=float)
     # a summary run of fewer than 40 000 steps keeps every step anyway: "full" stores the same
     # rows (and the paths' ΔV parts); from 40 000 steps the summary's sampled V(t) suffices

@@ -85,7 +85,7 @@ ROWS: dict[str, Columns] = {
     "ensemble": {**CASE, **TIMING, "label": str, "design": str, "member": int, "members": int,
                  "integrator": str, "perturbation": str, "size": float, "V_on": float,
                  "V_max": float, "V_end": float, "rises": int, "max_rise_rel": float,
-                 "rate": float, "rate_points": int, "floor": float, **{c(r): float for r in RHOS for c in (settle_column, sync_column)}, "paths": str},
+                 "rate": float, "rate_points": int, "rate_t_fit": float, "rate_floor_stop": bool, "master": int, "floor": float, **{c(r): float for r in RHOS for c in (settle_column, sync_column)}, "paths": str},
 }
 """Kind → the columns of its rows and their types (``peers`` rows are declared by
 :mod:`bench.peers`, whose columns depend on the peer's run). An ``ensemble`` row is one
@@ -99,13 +99,13 @@ OPTIONAL: dict[str, frozenset] = {
     "scaling": frozenset({"peak_mem_mb", "trajectory_mb", "whole_call_cpu_s", "whole_call_wall_s",
                           "load_cpu_s"}),
     "checks": frozenset({"evidence", "verdict"}),
-    "ensemble": frozenset({"paths"}),
+    "ensemble": frozenset({"paths", "rate_t_fit", "rate_floor_stop", "master"}),
 }
 """Columns a row of the kind may lack: an observers row of a design that does not apply
 (status "n/a") has no synchronization, engine or timing columns; a scaling case declared
 with ``memory=False`` has no memory columns, one written before issue 23 no whole-call columns; a checks row written before the evidence levels
 has no ``evidence`` and ``verdict``; an ensemble row keeps no V(t) ``paths`` unless its case asks
-for them."""
+for them, and one written before several masters per ensemble no ``master``, ``rate_t_fit`` and ``rate_floor_stop``."""
 
 
 def _is(value: Any, typ) -> bool:

@@ -54,7 +54,8 @@ def master_scenarios(sc, masters: int, spread: float, grid_jitter: float, rng: n
     scenario's observer-error level when x₀ = 0; a sample penetrating a contact is drawn
     again), on the step h·(1 + U(−grid_jitter, grid_jitter)). The observer's initial error
     is defined relative to the master's state, so every master gets errors from the same
-    distribution."""
+    distribution (the scenario's ``[observer]`` initial state, where it has one, moves with
+    the master's)."""
     from observer.ensemble import energy_metric, sample_errors, scenario_error
 
     out = [sc]
@@ -68,9 +69,9 @@ def master_scenarios(sc, masters: int, spread: float, grid_jitter: float, rng: n
     for j in range(1, masters):
         for _ in range(MASTER_TRIES):
             dx, _v = sample_errors(sc, 1, "energy_sphere", rng, max(spread ** 2 * E, 1e-300))
-            over = {"initial.q": (sc.q0 + dx[0, :nd]).tolist(), "initial.u": (sc.u0 + dx[0, nd:]).tolist(),
-                    "observer.q": (np.asarray(sc.observer.get("q", sc.q0)) + dx[0, :nd]).tolist(),
-                    "observer.u": (np.asarray(sc.observer.get("u", sc.u0)) + dx[0, nd:]).tolist()}
+            over = {"initial.q": (sc.q0 + dx[0, :nd]).tolist(), "initial.u": (sc.u0 + dx[0, nd:]).tolist()}
+            over.update({f"observer.{k}": (np.asarray(sc.observer[k]) + dx[0, j]).tolist()
+                         for k, j in (("q", slice(0, nd)), ("u", slice(nd, None))) if k in sc.observer})
             if grid_jitter:
                 over["simulation.h"] = float(sc.h * (1.0 + rng.uniform(-grid_jitter, grid_jitter)))
             try:
@@ -86,7 +87,8 @@ def master_scenarios(sc, masters: int, spread: float, grid_jitter: float, rng: n
 
 def member_fits(sc, df: pd.DataFrame, n: int, designs) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The decay rate of members 0…n−1 (:func:`observer.stats.decay_rates`, stopped at
-    :func:`observer.stats.fit_levels` of the larger floor) from an :func:`observer.ensemble`
+    :func:`observer.stats.fit_levels` of the designs' floor met so far,
+    :func:`observer.stats.floor_path`) from an :func:`observer.ensemble`
     frame ``df`` run with ``paths`` for every member, whose member n started without error
     (its largest V in the window is the design's floor with this master: the matched master).
     ``df.attrs["paths"]`` is taken out of the attrs (pandas deep-copies them on every operation).
@@ -94,8 +96,9 @@ def member_fits(sc, df: pd.DataFrame, n: int, designs) -> tuple[pd.DataFrame, pd
     Returns
     -------
     (DataFrame, DataFrame)
-        Per (design, member < n): ``rate, points, t_fit, reached_level, grid_decided``; per
-        design: ``floor``.
+        Per (design, member < n): ``rate, points, t_fit, reached_level, grid_decided`` and
+        ``floor_stop`` (a floor, not the level 1e-12·V(t_on) or the window's end, stopped the
+        fit: beyond t_fit the master cannot tell the member from its floor); per design: ``floor``.
     """
     import pandas as pd
     from observer import stats
@@ -106,15 +109,21 @@ def member_fits(sc, df: pd.DataFrame, n: int, designs) -> tuple[pd.DataFrame, pd
     t_on, t_off = window_of(sc)
     zero = df[df["member"] == n]
     floors = pd.DataFrame({"design": zero["design"].to_numpy(), "floor": zero["V_max"].to_numpy(dtype=float)})
-    floor = float(floors["floor"].max())
+    t, V = {}, {}
+    for d in designs:
+        sel = np.flatnonzero((paths["design"] == d).to_numpy(dtype=bool))
+        sel = sel[np.lexsort((pd_t[sel], pd_member[sel]))]
+        t[d] = pd_t[sel[pd_member[sel] == 0]]
+        V[d] = pd_V[sel].reshape(n + 1, t[d].size)
+    floor = stats.floor_path(t[designs[0]], np.vstack([V[d][n] for d in designs]), t_on, t_off)
     parts = []
     for d in designs:
         rows = df[(df["design"] == d) & (df["member"] < n)].sort_values("member")
-        sel = np.flatnonzero((paths["design"] == d).to_numpy(dtype=bool) & (pd_member < n))
-        sel = sel[np.lexsort((pd_t[sel], pd_member[sel]))]
-        t = pd_t[sel[pd_member[sel] == 0]]
-        V = pd_V[sel].reshape(n, t.size)
-        fit = stats.decay_rates(t, V, t_on, t_off, stats.fit_levels(rows["V_on"].to_numpy(), floor))
+        V_on = rows["V_on"].to_numpy()
+        fit = stats.decay_rates(t[d], V[d][:n], t_on, t_off, stats.fit_levels(V_on, floor))
+        k_stop = np.searchsorted(t[d], t_on) + fit["points"].to_numpy()
+        at_stop = floor[np.minimum(k_stop, floor.size - 1)]
+        fit["floor_stop"] = fit["reached_level"].to_numpy() & (stats.SAFETY * at_stop >= stats.LEVEL_MIN * V_on)
         parts.append(pd.concat([rows[["design", "member"]].reset_index(drop=True), fit], axis=1))
     return pd.concat(parts, ignore_index=True), floors
 

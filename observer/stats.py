@@ -10,7 +10,7 @@ when there is a single cluster (the interval is then conditional on that master)
 
 * :func:`decay_rates` — the exponential rate r of V(t) ≈ V(t_on)·e^{−r(t−t_on)} per member:
   least squares of ln V on the samples from t_on until V first reaches a level above both
-  designs' floors (:func:`fit_levels`), or the window's end. A rate is a property of the
+  designs' floors met so far (:func:`floor_path`, :func:`fit_levels`), or the window's end. A rate is a property of the
   decay, not of where the window ends (estimand (a) of the acceptance).
 * :func:`rate_ratio` — the paired ratio of mean rates ``mean r_a / mean r_b`` with its cluster
   bootstrap interval, and "the rate of a is larger in k of m clusters" with its
@@ -38,7 +38,8 @@ import numpy as np
 import pandas as pd
 
 SAFETY = 1e3
-"""The rate fit stops when V first reaches SAFETY × the larger of the two designs' floors."""
+"""The rate fit stops when V first reaches SAFETY × the larger of the two designs' floors
+(met so far: :func:`floor_path`)."""
 
 LEVEL_MIN = 1e-12
 """…and at the latest when V first reaches LEVEL_MIN·V(t_on) (the fit needs no more decades)."""
@@ -110,10 +111,35 @@ def share_interval(share: float, low: float, high: float, clusters: np.ndarray,
 # ---------------------------------------------------------------------------------------
 # floors and levels
 # ---------------------------------------------------------------------------------------
-def fit_levels(V_on: np.ndarray, floor: float) -> np.ndarray:
-    """The level at which each member's rate fit stops: ``max(SAFETY·floor, LEVEL_MIN·V_on)``
-    (``floor``: the larger of the paired designs' floors with this master)."""
-    return np.maximum(SAFETY * float(floor), LEVEL_MIN * np.asarray(V_on, dtype=float))
+def fit_levels(V_on: np.ndarray, floor) -> np.ndarray:
+    """The level at which each member's rate fit stops: ``max(SAFETY·floor, LEVEL_MIN·V_on)``.
+
+    ``floor`` is the larger of the paired designs' floors with this master: a number (one
+    level per member), or a floor per sample (:func:`floor_path`: one level per member and
+    sample, shape ``(members, samples)``)."""
+    V_on = np.asarray(V_on, dtype=float)
+    floor = np.asarray(floor, dtype=float)
+    if floor.ndim == 0:
+        return np.maximum(SAFETY * float(floor), LEVEL_MIN * V_on)
+    return np.maximum(SAFETY * floor[None, :], LEVEL_MIN * V_on[:, None])
+
+
+def floor_path(t: np.ndarray, V_zero: np.ndarray, t_on: float, t_off: float) -> np.ndarray:
+    """The floor up to each sample: the largest V of the zero-error observers (one row of
+    ``V_zero`` per design, the matched master) over the samples from t_on up to that sample,
+    and over the designs (0 before t_on).
+
+    A discretization floor is the zero-error observer's V, which starts at 0 and appears where
+    the master's discrete contacts first differ from the observer's (at a closing); a member's
+    V at time t cannot be told from the floors reached *up to t*, and a floor that appears
+    later does not touch the samples before it. This running maximum is at every sample at
+    least the floor there, and at most the window's largest floor (:func:`floor_flags`), so
+    a fit stopped at :data:`SAFETY` times it (:func:`fit_levels`) uses only samples safely
+    above every floor met so far."""
+    t = np.asarray(t, dtype=float)
+    V = np.atleast_2d(np.asarray(V_zero, dtype=float)).max(axis=0)
+    inside = (t >= t_on) & (t <= t_off)
+    return np.maximum.accumulate(np.where(inside, V, 0.0))
 
 
 def floor_flags(members: pd.DataFrame, floors: pd.DataFrame, rho: float) -> pd.DataFrame:
@@ -171,7 +197,8 @@ def decay_rates(t: np.ndarray, V: np.ndarray, t_on: float, t_off: float, levels:
     """Least-squares rate of ln V per row of ``V`` (members on one time grid).
 
     The fit uses the samples ``t_on ≤ t_k ≤ t_off`` up to (excluding) the first at which
-    ``V ≤ levels[i]`` (or V = 0), at least 3. Exactly: ``rate = −slope`` of the ordinary
+    ``V ≤ levels[i]`` (or V = 0), at least 3; ``levels`` is one level per member, or one per
+    member and sample of ``t`` (a floor that grows with time, :func:`floor_path`). Exactly: ``rate = −slope`` of the ordinary
     least-squares line through (t_k, ln V_k), in closed form from the samples' sums.
 
     Returns
@@ -185,7 +212,9 @@ def decay_rates(t: np.ndarray, V: np.ndarray, t_on: float, t_off: float, levels:
     V = np.atleast_2d(np.asarray(V, dtype=float))
     idx = np.flatnonzero((t >= t_on) & (t <= t_off))
     tw, Vw = t[idx] - t[idx[0]], V[:, idx]
-    low = (Vw <= np.asarray(levels, dtype=float)[:, None]) | ~(Vw > 0.0)
+    levels = np.asarray(levels, dtype=float)
+    lw = levels[:, None] if levels.ndim == 1 else levels[:, idx]
+    low = (Vw <= lw) | ~(Vw > 0.0)
     reached = low.any(axis=1)
     stop = np.where(reached, np.argmax(low, axis=1), tw.size)
     k = np.maximum(stop, 3)

@@ -2,12 +2,14 @@
 its interval per ensemble (the forest plot) and one claim per scenario the paper names.
 
 Every number is an estimand of :mod:`observer.stats` (:func:`observer.stats.rate_ratio`:
-the ratio of mean rates with its cluster bootstrap interval — members resampled within one
-master, systems resampled across the random family — and "faster in k of m" with its
+the ratio of mean rates with its cluster bootstrap interval — masters resampled within an
+ensemble on several (members within one), systems across the random family — and "faster in k of m" with its
 Clopper–Pearson interval); nothing is re-derived here. The per-member rate is the ensemble
-rows' ``rate`` (:func:`observer.metrics.decay_rate`: least squares of ln V over the coupling
-window, up to the first time V reaches 1e-9·V(t_on)), so a rate is a property of the decay,
-not of a settling threshold that a floor or the window's end could decide.
+rows' ``rate`` (:func:`observer.compare.member_fits`: least squares of ln V from t_on until V
+first reaches 10³× the largest floor met so far, :func:`observer.stats.floor_path`, the floor
+being the V of a zero-error observer against the same master), so a rate is a property of the
+decay, not of a settling threshold that a floor or the window's end could decide; each claim
+says over how long a span the rates were fitted and in how many members a floor stopped the fit.
 """
 
 from __future__ import annotations
@@ -77,8 +79,20 @@ def _ratio(g: pd.DataFrame, cluster: str) -> dict | None:
     if "rate_points" in g:
         pts = g.pivot_table(index=[cluster, "member"], columns="design", values="rate_points", aggfunc="first")
         grid = int(np.sum((pts[list(PAIR)].to_numpy(dtype=float) < stats.MIN_POINTS).any(axis=1)[keep]))
-    rr.update(dropped=int((~keep).sum()), identical=same, grid_decided=grid)
+    rr.update(dropped=int((~keep).sum()), identical=same, grid_decided=grid, t_fit=np.nan, floor_stops=0)
+    if "rate_t_fit" in g and g["rate_t_fit"].notna().all():
+        tf = g.pivot_table(index=[cluster, "member"], columns="design", values="rate_t_fit", aggfunc="first")
+        rr["t_fit"] = float(np.median(tf[list(PAIR)].to_numpy(dtype=float)[keep]))
+    if "rate_floor_stop" in g and g["rate_floor_stop"].notna().all():
+        fs = g.assign(_s=g["rate_floor_stop"].astype(bool)).pivot_table(
+            index=[cluster, "member"], columns="design", values="_s", aggfunc="first")
+        rr["floor_stops"] = int(np.sum(fs[list(PAIR)].to_numpy(dtype=bool).any(axis=1)[keep]))
     return rr
+
+
+def _cluster(g: pd.DataFrame) -> pd.Series:
+    """The master of each row (one master when the rows carry none)."""
+    return g["master"].fillna(0).astype(int) if "master" in g else pd.Series(0, index=g.index)
 
 
 def forest_rows(members: pd.DataFrame) -> pd.DataFrame:
@@ -90,10 +104,11 @@ def forest_rows(members: pd.DataFrame) -> pd.DataFrame:
     for (label, integ), g in members.groupby(["label", "integrator"], sort=False):
         if any(x in str(label) for x in EXCLUDE):
             continue
-        rr = _ratio(g.assign(_c=0), "_c")
+        g = g.assign(_c=_cluster(g))
+        rr = _ratio(g, "_c")
         if rr is not None:
             rows.append({"label": str(label), "integrator": str(integ), "scenario": str(g["scenario"].iloc[0]),
-                         "masters": 1, **rr})
+                         "masters": int(g["_c"].nunique()), "systems": 1, **rr})
     return pd.DataFrame(rows)
 
 
@@ -105,9 +120,11 @@ def family_row(members: pd.DataFrame, scenario: str, integrator: str) -> dict | 
     if g["label"].nunique() < 2:
         return None
     rr = _ratio(g, "label")
-    return None if rr is None else {"label": f"{scenario} (all {g['label'].nunique()} systems)",
-                                    "integrator": integrator, "scenario": scenario,
-                                    "masters": int(g["label"].nunique()), **rr}
+    if rr is None:
+        return None
+    masters = int(g.assign(_c=_cluster(g)).groupby("label")["_c"].nunique().min())
+    return {"label": f"{scenario} (all {g['label'].nunique()} systems)", "integrator": integrator,
+            "scenario": scenario, "masters": masters, "systems": int(g["label"].nunique()), **rr}
 
 
 def _pick(forest: pd.DataFrame, spec: ScenarioClaim) -> pd.DataFrame:
@@ -134,10 +151,13 @@ def verdict(r) -> str:
 
 
 def evidence(r) -> str:
-    """Members × masters (or systems) of a ratio."""
-    per = int(r["members"]) // max(int(r["masters"]), 1)
-    unit = "systems" if int(r["masters"]) > 1 else "master"
-    return f"{per} members × {int(r['masters'])} {unit}" if int(r["masters"]) > 1 else f"{per} members × 1 master"
+    """Members × masters (× systems) of a ratio, and what its interval resamples."""
+    masters, systems = int(r["masters"]), int(r.get("systems", 1) or 1)
+    per = int(r["members"]) // max(masters * systems, 1)
+    text = f"{per} members × {masters} master{'s' if masters > 1 else ''}"
+    if systems > 1:
+        return text + f" × {systems} systems, systems resampled"
+    return text + (", masters resampled" if masters > 1 else ", members resampled")
 
 
 def _interval(r) -> str:
@@ -173,6 +193,7 @@ def scenario_claims(members: pd.DataFrame, forest: pd.DataFrame) -> list[dict]:
                 f"({v}; paired rate ratio, {evidence(r)}, {master})")
         if r["identical"]:
             text += "; the two designs' V are identical: the master closes no contact in the window"
+        text += _fit_span(r)
         if r.get("grid_decided", 0):
             text += (f"; UNDECIDED: in {int(r['grid_decided'])} of {int(r['members'])} members a rate is "
                      f"fitted on fewer than {stats.MIN_POINTS} samples above {stats.SAFETY:g}× the design's "
@@ -188,6 +209,49 @@ def scenario_claims(members: pd.DataFrame, forest: pd.DataFrame) -> list[dict]:
     return out
 
 
+def _fit_span(r) -> str:
+    """Where the rates were fitted, and how many members' fit a floor stopped (beyond it the
+    master cannot tell a member from its floor: that part of the decay is not decided)."""
+    from reports.tables import fmt
+
+    if not np.isfinite(r.get("t_fit", np.nan)):
+        return ""
+    text = f"; rates fitted over a median {fmt(r['t_fit'])} s after t_on"
+    stops = int(r.get("floor_stops", 0))
+    if stops:
+        text += (f", stopped by a discretisation floor in {stops} of {int(r['members'])} members (V within "
+                 f"{stats.SAFETY:g}× the largest V of a zero-error observer so far: beyond, not decided)")
+    return text
+
+
+def where_faster(forest: pd.DataFrame) -> str:
+    """One sentence: over the ensembles of the forest plot with the plain master (one per
+    system, no pooled row, no robustness ensemble; the exact master's where present), where
+    the first design of :data:`PAIR` is faster (interval above 1) and by how much (the range of
+    the estimates), where the intervals contain 1, and where it is slower, by name."""
+    from reports.tables import fmt
+
+    f = forest[forest["label"].map(_plain) & ~forest["label"].str.contains("all ", regex=False)]
+    if f.empty:
+        return ""
+    f = f.assign(_o=(f["integrator"] != EXACT).astype(int)).sort_values("_o", kind="stable")
+    f = f.drop_duplicates("label")
+    faster, slower = f[f["low"] > 1.0], f[f["high"] < 1.0]
+    same = f[(f["low"] <= 1.0) & (f["high"] >= 1.0)]
+    a, b = (registry.label(d) for d in PAIR)
+    text = f"Where {a} is faster than {b}, over these {len(f)} ensembles: faster (95 % CI above 1) in {len(faster)}"
+    if len(faster):
+        text += (f", its V decaying {fmt(faster['estimate'].min())}–{fmt(faster['estimate'].max())}× as fast "
+                 f"(lowest CI end {fmt(faster['low'].min())})")
+    text += f"; not different (CI contains 1) in {len(same)}"
+    if len(same):
+        text += " (" + ", ".join(same["label"]) + ")"
+    text += f"; slower (CI below 1) in {len(slower)}"
+    if len(slower):
+        text += (" (" + ", ".join(f"{o['label']}: {fmt(o['estimate'])}" for _, o in slower.iterrows()) + ")")
+    return text + "."
+
+
 def _pair_text() -> str:
     return " / ".join(registry.label(d) for d in PAIR)
 
@@ -201,8 +265,8 @@ def _random_claim(members: pd.DataFrame, f: pd.DataFrame, spec: ScenarioClaim) -
     slower = each[each["high"] < 1.0]
     faster = each[each["low"] > 1.0]
     if fam is not None:
-        text = (f"{spec.title}: pooled rate ratio {_pair_text()} {_interval(fam)} (cluster bootstrap over "
-                f"systems, {evidence(fam)}); {registry.label(PAIR[0])}'s rate larger in {fam['k_clusters']} of {fam['clusters']} "
+        text = (f"{spec.title}: pooled rate ratio {_pair_text()} {_interval(fam)} (cluster bootstrap, "
+                f"{evidence(fam)}); {registry.label(PAIR[0])}'s rate larger in {fam['k_clusters']} of {fam['clusters']} "
                 f"systems ({fmt(100 * fam['k_low'])}–{fmt(100 * fam['k_high'])} %)")
         r = fam
     else:
@@ -210,7 +274,10 @@ def _random_claim(members: pd.DataFrame, f: pd.DataFrame, spec: ScenarioClaim) -
         text = f"{spec.title} — {r['label']}: rate ratio {_pair_text()} {_interval(r)} ({evidence(r)})"
     text += (f"; faster (CI above 1) in {len(faster)}, slower (CI below 1) in {len(slower)} of "
              f"{len(each)} systems")
-    if len(slower):
-        text += f": {registry.label(PAIR[0])} is NOT faster on " + ", ".join(slower["label"].str.replace("random_system ", ""))
+    not_faster = each[each["low"] <= 1.0]
+    if len(not_faster):
+        text += (f"; {registry.label(PAIR[0])} is NOT faster on "
+                 + ", ".join(f"{o['label'].replace('random_system ', '')} ({_interval(o)}, "
+                             f"{'slower' if o['high'] < 1.0 else 'not different'})" for _, o in not_faster.iterrows()))
     return {"key": spec.key, "text": text + ".", "verdict": verdict(r), "label": r["label"],
             "estimate": r["estimate"], "low": r["low"], "high": r["high"]}

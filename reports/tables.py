@@ -146,3 +146,16 @@ def text(x: Any) -> str:
     """A text cell of a row: '' for a missing value (None or NaN, as a concat of rows of
     different kinds leaves them), else ``str(x)``."""
     return "" if _isnan(x) else str(x)
+
+
+_NUMBER_WORDS = {"nan": "n/a", "none": "n/a", "inf": "∞", "+inf": "∞", "-inf": "−∞"}
+
+
+def witness_text(x: Any) -> str:
+    """A ``key=value; …`` witness (a proof check's) as a cell: :func:`text`, a value that is no
+    number (``nan``, ``None``) read "n/a" and an infinite one "∞", as :func:`fmt` shows them."""
+    import re
+
+    return re.sub(r"=\s*([+-]?inf|nan|None)\b(?![\w.])",
+                  lambda m: "=" + _NUMBER_WORDS[m.group(1).lower()], text(x), flags=re.IGNORECASE)
+

@@ -72,8 +72,9 @@ def forest_table(forest: pd.DataFrame) -> Table:
               ["ensemble", "integrator", "rate ratio", "95 % CI", "evidence", "members left out",
                "jump faster in"],
               note="rate ratio: mean decay rate of jump / of no jump over the same members "
-                   "(observer.stats.rate_ratio; CI: bootstrap over members of one master, over "
-                   "systems for a family). members left out: a rate not finite in a design. "
+                   "(observer.stats.rate_ratio; CI: bootstrap over the masters of an ensemble on several, "
+                   "over its members on one, over systems for a family). members left out: a rate not "
+                   "finite in a design. "
                    f"{UNDEFINED}: not defined (a design's mean rate is not positive).")
     for _, r in forest.iterrows():
         ok = r["status"] == "ok"
@@ -110,10 +111,13 @@ def build(ctx: ReportContext) -> Section:
     items = [{"text": c["text"], "anchor": FOREST_ID, "caveat": "", "kind": c["verdict"]}
              for c in forest_mod.scenario_claims(view.members, forest)][:MAX_CLAIMS]
     sec.blocks.append(Block("claims", items))
+    summary = forest_mod.where_faster(forest)
+    if summary:
+        sec.p(summary)
     sec.p("Each claim: the paired decay-rate ratio of V (jump / no jump, the same initial errors "
           "against the same master) with its 95 % bootstrap interval and its evidence (members × "
-          "masters); faster / slower: the interval lies above / below 1. The K-metric question is "
-          "answered in its own section below.")
+          "masters × systems, and what the interval resamples); faster / slower: the interval lies "
+          "above / below 1. The K-metric question is answered in its own section below.")
     sec.anchor(FOREST_ID)
     sec.details("The forest plot's numbers", forest_table(forest))
     return sec

@@ -11,7 +11,7 @@ from reports import analysis, registry
 from reports.analysis import CHECK_STATUSES, EVIDENCE_ORDER, check_evidence, check_matrix
 from reports.blocks import Section
 from reports.context import ReportContext
-from reports.tables import Table, fmt, fmt_int, text
+from reports.tables import Table, fmt, fmt_int, text, witness_text
 
 TITLE = "Proof-step checks (proofs_checks)"
 WITNESS_CHARS = 220
@@ -57,7 +57,7 @@ def matrix_cell(r: pd.Series) -> tuple[str, str, str]:
         cell, cls = f"FAIL ({ev})", "evidence-violated"
     else:
         cell, cls = ev, f"evidence-{ev}"
-    verdict, reason, wit = text(r.get("verdict")), text(r.get("reason")), text(r.get("witness"))
+    verdict, reason, wit = text(r.get("verdict")), text(r.get("reason")), witness_text(r.get("witness"))
     body = reason if st == "n/a" else " | ".join(x for x in (verdict, wit or reason) if x)
     hover = f"{r['check']} on {r['scenario']}: {st}" + (f" — {body}" if body else "")
     return cell, cls, _cut(hover, HOVER_CHARS)
@@ -89,7 +89,7 @@ def checks_table(ch: pd.DataFrame) -> Table:
     for _, r in ch.iterrows():
         st = str(r["check_status"])
         na = st == "n/a"
-        reason, wit = text(r.get("reason")), text(r.get("witness"))
+        reason, wit = text(r.get("reason")), witness_text(r.get("witness"))
         detail = (reason if na else wit or reason) or "—"
         if len(detail) > WITNESS_CHARS:
             detail = detail[:WITNESS_CHARS - 3] + "…"

@@ -45,6 +45,7 @@ def _value(ctx: ReportContext, kind: str, col: str, default: str = "n/a") -> str
 def definitions_table(ctx: ReportContext) -> Table:
     """Definitions of V, the thresholds, times, norms and bands."""
     from bench.suites import BAND, SCALING_FIT_FROM
+    from observer import stats
 
     t = Table("Tolerances and definitions used by the suites", ["quantity", "definition / value"])
     t.add(["V", "½(û−u)ᵀM(û−u) + ½(q̂−q)ᵀK(q̂−q), observer minus master (paper (16), ½ on both terms)"])
@@ -59,6 +60,12 @@ def definitions_table(ctx: ReportContext) -> Table:
     t.add(["floor", "median of V over the last part of the coupling window (observer.metrics.floor)"])
     t.add(["rate", "−slope of the least-squares line through log V over the window, up to "
            f"V ≤ {fmt(_rate_floor_fraction())}·V(t_on) (observer.metrics.decay_rate)"])
+    t.add(["ensemble member's rate (the claims' rate ratio)", "−slope of the least-squares line through "
+           "log V from t_on up to the first sample where V ≤ max("
+           f"{fmt(stats.SAFETY)} × the largest V of the zero-error observers of every design against the "
+           f"same master so far, {fmt(stats.LEVEL_MIN)}·V(t_on)), or the window's end "
+           "(observer.compare.member_fits, observer.stats.floor_path); the claims' intervals resample "
+           "masters (members split over the masters of an ensemble) or systems"])
     t.add(["work-precision error", _value(ctx, "work_precision", "norm") + " (time average, "
            "trapezoid on the stored grid: every step, or every k-th step at spacing h_record)"])
     t.add(["references of the work-precision points", _value(ctx, "work_precision", "reference")])

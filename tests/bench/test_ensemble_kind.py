@@ -122,3 +122,27 @@ def test_paths_of_a_singular_k_scenario(tmp_path):
     rows = run_case(case, _ctx(tmp_path))
     p = pd.read_parquet(tmp_path / rows[0]["paths"])
     assert set(p["design"]) == set(DESIGNS) - {"jump"} and set(p["member"]) == {0, 1}
+
+
+def test_an_ensemble_on_several_masters_splits_its_members_over_them(tmp_path):
+    """``masters = 2``, 5 members: members 0–2 on the scenario's own master, 3–4 on a master
+    started elsewhere; every error on the scenario's energy sphere; the rows of master 0 are
+    what observer.ensemble gives against the scenario itself with those errors, those of
+    master 1 are not (their master moved)."""
+    import pandas as pd
+
+    case = Case("ensemble", "double_mass", observers=("jump", "nojump"), h=1e-3, t_end=1.0, members=5,
+                masters=2, seed=2)
+    rows = pd.DataFrame(run_case(case, _ctx(tmp_path)))
+    for r in rows.to_dict("records"):
+        check_row(r)
+    jump = rows[rows["design"] == "jump"].sort_values("member")
+    assert jump["member"].tolist() == [0, 1, 2, 3, 4] and jump["master"].tolist() == [0, 0, 0, 1, 1]
+    sc = observer.load_scenario("double_mass", {"simulation.h": 1e-3, "simulation.t_end": 1.0})
+    A = energy_metric(sc)
+    x_own = np.concatenate([np.asarray(sc.observer["q"]) - sc.q0, np.asarray(sc.observer["u"]) - sc.u0])
+    X = jump[["dq0_0", "dq0_1", "du0_0", "du0_1"]].to_numpy()
+    assert np.einsum("ij,jk,ik->i", X, A, X) == pytest.approx(np.full(5, x_own @ A @ x_own), rel=1e-12)
+    own = observer.ensemble(sc, ("jump",), n=5, initial_errors=X).sort_values("member")
+    same = np.isclose(own["V_end"].to_numpy(), jump["V_end"].to_numpy(), rtol=1e-12, atol=0.0)
+    assert same.tolist() == [True, True, True, False, False]

@@ -21,6 +21,32 @@ def test_decay_rate_is_the_exponent_and_not_the_floor():
     assert whole < 1.6                                                 # what the floor does without the level
 
 
+def test_floor_path_is_the_running_maximum_over_designs_inside_the_window():
+    """Hand-written zero-error V of two designs on 10 samples, window [2, 8]: 0 before t_on (a
+    floor there does not count), then the largest value met so far over both designs."""
+    t = np.arange(10.0)
+    Vz = np.array([[9.0, 9.0, 0.0, 0.0, 1e-8, 0.0, 0.0, 0.0, 3e-8, 0.0],
+                   [0.0, 0.0, 0.0, 2e-9, 0.0, 0.0, 5e-8, 0.0, 0.0, 7.0]])
+    expected = [0.0, 0.0, 0.0, 2e-9, 1e-8, 1e-8, 5e-8, 5e-8, 5e-8, 5e-8]
+    assert stats.floor_path(t, Vz, 2.0, 8.0).tolist() == expected
+
+
+def test_a_floor_that_appears_late_does_not_stop_the_fit_early():
+    """V = e^{-2t}; the zero-error V is 0 until t = 5, 1e-10 on [5, 7), 1e-6 from t = 7. The
+    fit stops at the first sample with V ≤ 10³ × the floor met so far: t = 7 (V = e^{-14} <
+    10⁻³), rate exactly 2. The window's largest floor used from t_on (the near miss) stops it
+    where e^{-2t} = 10⁻³ (t = 3.45)."""
+    t = np.linspace(0.0, 10.0, 1001)
+    V = np.exp(-2.0 * t)[None, :]
+    Vz = np.where(t >= 7.0, 1e-6, np.where(t >= 5.0, 1e-10, 0.0))
+    fl = stats.floor_path(t, Vz, 0.0, 10.0)
+    fit = stats.decay_rates(t, V, 0.0, 10.0, stats.fit_levels(V[:, 0], fl)).iloc[0]
+    assert fit["t_fit"] == pytest.approx(6.99) and fit["reached_level"]
+    assert fit["rate"] == pytest.approx(2.0, rel=1e-9)
+    whole = stats.decay_rates(t, V, 0.0, 10.0, stats.fit_levels(V[:, 0], fl.max())).iloc[0]
+    assert whole["t_fit"] == pytest.approx(0.5 * np.log(1e3), abs=0.01)
+
+
 def test_kaplan_meier_closed_form():
     """Times 1, 2, 3 and two never (censored at 10): S = .8, .6, .4; median 3; RMST 1 + .8 + .6 + .4·7."""
     df = pd.DataFrame({"design": "a", "cluster": 0, "member": range(5), "t": [1.0, 2.0, 3.0, np.inf, np.inf]})

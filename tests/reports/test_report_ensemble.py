@@ -54,6 +54,10 @@ RATIOS = {"rocking_chain (N = 4)": {"jump": 1.0, "nojump": 1.0},
           "random_system (seed 1, 3 DOF, 2 contacts)": {"jump": 0.9, "nojump": 1.0}}
 """jump's rate over nojump's where it is not SPEEDUP: the chain at N = 4 runs uncoupled
 (identical designs), random seed 1: jump is slower."""
+MASTERS = 3
+"""Masters of the random systems' and the N = 10 chain's ensembles (member m on master m mod 3)."""
+CHAIN_FIT = 0.9
+"""Seconds after t_on over which the N = 10 chain's rates are fitted; a floor stops every odd member's fit."""
 
 
 def _member_rows(label: str, integrator: str, rng, scenario: str = "double_mass") -> list[dict]:
@@ -76,6 +80,10 @@ def _member_rows(label: str, integrator: str, rng, scenario: str = "double_mass"
                     t = math.inf
                 row[f"t_settle_{key}"] = t
                 row[f"t_sync_{key}"] = t
+            if scenario == "random_system" or label == "rocking_chain (N = 10)":
+                row["master"] = m % MASTERS
+            if label == "rocking_chain (N = 10)":
+                row.update(rate_t_fit=CHAIN_FIT, rate_floor_stop=bool(m % 2))
             if integrator == "time-stepping" and "projected" not in label and design == "jump" \
                     and m % 3 == 0:
                 row["max_rise_rel"] = 7000.0 if m == 0 else 2.5
@@ -128,7 +136,8 @@ def _checks_row() -> tuple[str, list[dict]]:
     return ("checks:dm", [{"kind": "checks", "scenario": "double_mass", "name": "double_mass",
                            "check": "lyapunov_decrease", "equation": "(17)", "check_status": "PASS",
                            "margin": 0.0, "tolerance": 1e-9, "status": "ok", "reason": "",
-                           "witness": f"steps=12; max_{artifacts.GAP_KEY}/V={GAP:g}; max_impulse_slack/V=1e-7",
+                           "witness": f"steps=12; max_{artifacts.GAP_KEY}/V={GAP:g}; max_impulse_slack/V=1e-7; "
+                                      "slack_order_impulse_slack=nan; min_open_gap=inf",
                            "evidence": "bounded", "verdict": "holds up to an O(h) slack"}])
 
 
@@ -394,6 +403,27 @@ def test_chain_claim_is_at_n_10_where_the_designs_differ(ensemble_report):
     assert _numbers(item)[0] == pytest.approx(_rate_ratio(rows, "rocking_chain (N = 10)", "time-stepping"),
                                               rel=5e-3)
     assert _rate_ratio(rows, "rocking_chain (N = 4)", "time-stepping") == 1.0
+    per = N // MASTERS
+    assert f"{per} members × {MASTERS} masters, masters resampled" in item
+    assert f"rates fitted over a median {CHAIN_FIT:g} s after t_on" in item
+    assert f"stopped by a discretisation floor in {N // 2} of {N} members" in item
+
+
+def test_an_ensemble_on_several_masters_resamples_masters():
+    """The forest row of an ensemble with a ``master`` column is observer.stats.rate_ratio with
+    the masters as clusters (k of m masters); without it, one master (members resampled)."""
+    from observer import stats
+
+    rng = np.random.default_rng(3)
+    rows = pd.DataFrame(_member_rows("random_system (seed 0, 2 DOF, 1 contact)", "time-stepping", rng,
+                                     "random_system"))
+    r = forest.forest_rows(rows).iloc[0]
+    long = rows[rows["design"].isin(["jump", "nojump"])].rename(columns={"master": "cluster"})
+    ref = stats.rate_ratio(long, "jump", "nojump", n_resamples=forest.RESAMPLES, seed=forest.SEED).iloc[0]
+    assert (r["masters"], r["clusters"], r["unit"]) == (MASTERS, MASTERS, "clusters")
+    assert (r["low"], r["high"]) == (ref["low"], ref["high"])
+    one = forest.forest_rows(rows.drop(columns="master")).iloc[0]
+    assert (one["masters"], one["unit"]) == (1, "members") and (one["low"], one["high"]) != (r["low"], r["high"])
 
 
 def test_random_claim_pools_systems_and_names_where_jump_is_not_faster(ensemble_report):
@@ -401,7 +431,7 @@ def test_random_claim_pools_systems_and_names_where_jump_is_not_faster(ensemble_
     larger, and names the system where jump is slower (rate ratio 0.9, CI below 1)."""
     _, page, rows, _ = ensemble_report
     item = _claim(page, "random")
-    assert f"{N} members × 3 systems" in item
+    assert f"{N // MASTERS} members × {MASTERS} masters × 3 systems, systems resampled" in item
     assert "'s rate larger in 2 of 3 systems" in item
     assert "slower (CI below 1) in 1 of 3" in item and "is NOT faster on (seed 1, 3 DOF, 2 contacts)" in item
 
@@ -425,6 +455,14 @@ def test_no_table_cell_prints_nan_inf_none_or_zero_intervals(ensemble_report):
     assert not bad, bad[:10]
     assert FORBIDDEN.search("0 [0, 0]") and FORBIDDEN.search("median nan") and not FORBIDDEN.search("infinite")
     assert FORBIDDEN.search("Inf") and FORBIDDEN.search("None") and not FORBIDDEN.search("none (exact χ)")
+    assert FORBIDDEN.search("slack_order=nan")                     # the synthetic witness's, before it is shown
+
+
+def test_a_witness_value_that_is_no_number_reads_like_a_table_cell():
+    from reports.tables import witness_text
+
+    assert witness_text("a=nan; b=1e-3; c=inf; d=-inf; e=None; nanny=2; f=nan2") == \
+        "a=n/a; b=1e-3; c=∞; d=−∞; e=n/a; nanny=2; f=nan2"
 
 
 @pytest.mark.skipif(find_chromium() is None, reason="chromium is not installed (apt-get install chromium)")
@@ -457,3 +495,22 @@ def test_first_screen_in_headless_chromium_holds_the_forest_plot_and_the_claims(
     assert 0 < bottom < 1000
     assert 0 < float(res.attrs["data-figure-bottom"]) < bottom and int(res.attrs["data-figure-width"]) > 300
     assert (img[:int(bottom)] < 128).mean() > 0.01      # text drawn where the claims are
+
+
+def test_where_jump_is_faster_counts_faster_not_different_and_slower_ensembles():
+    """Hand-made forest rows: the exact master's row replaces the time-stepped one of the same
+    ensemble; projected-master and pooled rows are left out; the interval's position decides."""
+    from reports.tables import fmt
+
+    rows = [("double_mass", "event", 2.0, 1.8, 2.2), ("double_mass", "time-stepping", 2.5, 2.3, 2.7),
+            ("grazing", "time-stepping", 3.0, 2.9, 3.1), ("rocking_chain (N = 4)", "time-stepping", 1.0, 1.0, 1.0),
+            ("random_system (seed 1)", "time-stepping", 0.9, 0.85, 0.95),
+            ("double_mass (projected master)", "time-stepping", 9.0, 8.0, 10.0),
+            ("random_system (all 2 systems)", "time-stepping", 0.95, 0.5, 1.5)]
+    f = pd.DataFrame(rows, columns=["label", "integrator", "estimate", "low", "high"])
+    text = forest.where_faster(f)
+    assert "over these 4 ensembles: faster (95 % CI above 1) in 2" in text
+    assert f"decaying {fmt(2.0)}–{fmt(3.0)}× as fast (lowest CI end {fmt(1.8)})" in text
+    assert "not different (CI contains 1) in 1 (rocking_chain (N = 4))" in text
+    assert f"slower (CI below 1) in 1 (random_system (seed 1): {fmt(0.9)})" in text
+    assert forest.where_faster(f[f["label"] == "grazing"]).count("in 0") == 2     # near miss: no slower row
