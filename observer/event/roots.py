@@ -103,6 +103,26 @@ class RootIsolationError(RuntimeError):
         self.t_ok, self.z_ok = t_ok, z_ok
 
 
+STOP_EVERY = 64
+"""Safe advances of a search between two looks at its ``should_stop`` (:func:`first_zero`; the
+first look after the first advances, so a stopped search always got past its start)."""
+
+
+class SearchStopped(RootIsolationError):
+    """A signal stopped a search (:func:`first_zero` with ``should_stop``): every functional
+    is certified nonzero on ``[t0, t_ok)``, so the trajectory up to there is whole.
+
+    Attributes
+    ----------
+    signal : str
+        What ``should_stop`` returned (``"SIGINT"``, ...).
+    """
+
+    def __init__(self, signal: str, t_ok: float, z_ok: np.ndarray) -> None:
+        super().__init__(f"{signal} during the search, at t = {t_ok!r}", t_ok, z_ok)
+        self.signal = signal
+
+
 class NonFiniteFlow(RootIsolationError):
     """The flow left the floating-point range during a search (issue 20: a stop, never a row).
 
@@ -631,8 +651,8 @@ def _row_norm(v: np.ndarray) -> float:
 
 
 def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: float,
-               certified: dict[int, float] | None = None, tau: float | None = None
-               ) -> tuple[Zero | None, float, np.ndarray]:
+               certified: dict[int, float] | None = None, tau: float | None = None,
+               should_stop=None) -> tuple[Zero | None, float, np.ndarray]:
     """First zero in ``[t0, t_end]`` of any functional ``rows[i]·z(t)`` along ``flow``.
 
     Tolerances are the motion's (:func:`motion_tolerance`, :func:`touch_band`). A search
@@ -653,6 +673,10 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     tau : float, optional
         The motion's time scale τ of the tolerances (default ``flow.time_scale``; a run
         of a system without one passes its motion's, :func:`observer.event.master.motion_time_scale`).
+    should_stop : callable, optional
+        Looked at every :data:`STOP_EVERY` safe advances; a signal name it returns stops
+        the search with :class:`SearchStopped` at the certified point reached (a long quiet
+        stretch is no longer one uninterruptible search).
 
     Returns
     -------
@@ -672,7 +696,9 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     growth = exp_upper(up(flow.certified_norm * window * (1.0 + 2.0 * _U)))  # ≥ e^{‖T⁻¹AT‖₂ w}
     t_ok, z_ok = a, za                                # the last search point with finite values
     coefs = _scale_coefficients(tau)
-    for _ in range(MAX_STEPS):
+    for count in range(MAX_STEPS):
+        if should_stop is not None and count % STOP_EVERY == STOP_EVERY - 1 and (sig := should_stop()):
+            raise SearchStopped(sig, a, za)
         if t_end - a <= resolution(t_end, tau):          # a remainder of a few ulp: flow
             z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
             _check_finite(t_end, z, np.zeros((1, 1)), t_ok, z_ok)
