@@ -15,7 +15,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from observer import sparse as sps
-from observer.arrays import MAX_DEPTH, as_array, non_numeric_entry  # noqa: F401  (re-exported)
+from observer.arrays import MAX_DEPTH, as_array, check_declared_size, non_numeric_entry  # noqa: F401  (re-exported)
 from observer.errors import InputError
 
 SYMMETRY_RTOL = 0.0
@@ -71,6 +71,7 @@ def triplet_matrix(field: str, value: dict) -> sp.csr_matrix:
         raise InputError(f"{field}.shape", f"must be two positive integers, got {value['shape']!r}")
     n, m = int(shape[0]), int(shape[1])
     vals = as_array(f"{field}.values", value["values"], (None,))
+    check_declared_size(field, f"a {n} × {m} sparse matrix", 16.0 * (n + 1) + 40.0 * vals.size)  # row pointers
     idx = []
     for key, size in (("rows", n), ("cols", m)):
         ix = as_array(f"{field}.{key}", value[key], (vals.size,))
