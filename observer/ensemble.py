@@ -158,7 +158,8 @@ def _count(field: str, value: Any, low: int) -> int:
 
 MEMBER_BYTES = 4096
 """Bytes one (design, member) takes besides its states, with a margin: its observer, its
-summary row and its share of the frame (measured on double_mass: about 2 KiB)."""
+summary row and its share of the frame (an estimate, about twice the peak-memory growth per
+member of a double_mass ensemble)."""
 
 
 def check_member_memory(n: int, designs: int, dof: int) -> None:
