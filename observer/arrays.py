@@ -118,11 +118,11 @@ bit, wherever a vector is read (initial state, forcing, gaps, observers, restitu
 def check_declared_size(field: str, what: str, need: float) -> None:
     """Raise before expanding a compact declaration (a periodic vector, a banded or triplet
     matrix table) whose expansion needs ``need`` bytes (estimated) when fewer are available
-    (:func:`observer.validation.available_memory`): a file of a few hundred bytes can declare
+    (:func:`observer.memory.available_memory`): a file of a few hundred bytes can declare
     a system of 10⁹ degrees of freedom. The error names ``field`` and what it declares."""
-    from observer.validation import available_memory
+    from observer import memory
 
-    avail = available_memory()
+    avail = memory.available_memory()
     if avail is not None and need > avail:
         raise InputError(field, f"declares {what}: expanding it needs about {need / 2 ** 30:.3g} GiB "
                          f"(estimated) but {avail / 2 ** 30:.3g} GiB are available")

@@ -164,14 +164,14 @@ member of a double_mass ensemble)."""
 
 def check_member_memory(n: int, designs: int, dof: int) -> None:
     """Raise before sampling when n members of ``designs`` designs would not fit in the
-    memory available (:func:`observer.validation.available_memory`): each takes
+    memory available (:func:`observer.memory.available_memory`): each takes
     :data:`MEMBER_BYTES` plus its error and two initial states, 8 bytes per entry. The error
     names ``n`` (``ensemble --n``); without it ``--n 10000000`` ran out of memory after
     minutes."""
-    from observer.validation import available_memory
+    from observer import memory
 
     need = n * designs * (MEMBER_BYTES + 8 * 4 * dof)
-    avail = available_memory()
+    avail = memory.available_memory()
     if avail is not None and need > avail:
         raise InputError("n", f"{n} members × {designs} design(s) need about {need / 2 ** 30:.3g} GiB "
                          f"({MEMBER_BYTES + 32 * dof} bytes each, estimated) but {avail / 2 ** 30:.3g} GiB "

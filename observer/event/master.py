@@ -876,8 +876,7 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
                 t0: float, should_stop) -> MasterEventResult:
     run, t_end, x, persistent = _start(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, should_stop)
     t0 = run.t0
-    status = "ok"
-    t = t0
+    status, t = "ok", t0
     certified: dict[tuple[str, int], float] = {}
     n_events, same_time, t_last_event = 0, 0, -np.inf
     n_impacts = 0                                      # impacts since the last landing

@@ -651,8 +651,8 @@ def _row_norm(v: np.ndarray) -> float:
 
 
 def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: float,
-               certified: dict[int, float] | None = None, tau: float | None = None,
-               should_stop=None) -> tuple[Zero | None, float, np.ndarray]:
+               certified: dict[int, float] | None = None, tau: float | None = None, should_stop=None
+               ) -> tuple[Zero | None, float, np.ndarray]:
     """First zero in ``[t0, t_end]`` of any functional ``rows[i]·z(t)`` along ``flow``.
 
     Tolerances are the motion's (:func:`motion_tolerance`, :func:`touch_band`). A search
@@ -674,9 +674,7 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
         The motion's time scale τ of the tolerances (default ``flow.time_scale``; a run
         of a system without one passes its motion's, :func:`observer.event.master.motion_time_scale`).
     should_stop : callable, optional
-        Looked at every :data:`STOP_EVERY` safe advances; a signal name it returns stops
-        the search with :class:`SearchStopped` at the certified point reached (a long quiet
-        stretch is no longer one uninterruptible search).
+        A signal name it returns (:func:`_look`) stops the search: :class:`SearchStopped`.
 
     Returns
     -------
@@ -690,15 +688,13 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     if rows.shape[0] == 0 or t_end - a <= resolution(t_end, tau):
         z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
         return None, t_end, z
-    fs = functional_set(flow, rows, tau)
-    certified = dict(certified or {})
+    fs, certified = functional_set(flow, rows, tau), dict(certified or {})
     window = WINDOW / max(flow.norm_bound, 1e-300)
     growth = exp_upper(up(flow.certified_norm * window * (1.0 + 2.0 * _U)))  # ≥ e^{‖T⁻¹AT‖₂ w}
     t_ok, z_ok = a, za                                # the last search point with finite values
     coefs = _scale_coefficients(tau)
     for count in range(MAX_STEPS):
-        if should_stop is not None and count % STOP_EVERY == STOP_EVERY - 1 and (sig := should_stop()):
-            raise SearchStopped(sig, a, za)
+        _look(should_stop, count, a, za)
         if t_end - a <= resolution(t_end, tau):          # a remainder of a few ulp: flow
             z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
             _check_finite(t_end, z, np.zeros((1, 1)), t_ok, z_ok)
@@ -734,6 +730,13 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
             step = min(res, w)                       # nothing approaches: time moves on
         a, za = a + step, _reset(flow, a + step, flow.expm(step) @ za)
     raise RootIsolationError(f"root isolation stalled near t = {a!r} ({MAX_STEPS} safe steps)", a, za)
+
+
+def _look(should_stop, count: int, a: float, za: np.ndarray) -> None:
+    """:class:`SearchStopped` at (a, za) when ``should_stop``, looked at every
+    :data:`STOP_EVERY` advances of :func:`first_zero`, names a signal."""
+    if should_stop is not None and count % STOP_EVERY == STOP_EVERY - 1 and (sig := should_stop()):
+        raise SearchStopped(sig, a, za)
 
 
 UNRESOLVED_REACH = 1e-3

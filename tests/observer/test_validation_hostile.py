@@ -1011,8 +1011,8 @@ h = 0.001
 
 def _memory(monkeypatch, nbytes: int) -> None:
     """Whatever the machine: the memory the size checks see."""
-    import observer.validation as validation
-    monkeypatch.setattr(validation, "available_memory", lambda: nbytes)
+    import observer.memory as memory
+    monkeypatch.setattr(memory, "available_memory", lambda: nbytes)
 
 
 AS_LIMIT = 4 * 2 ** 30
