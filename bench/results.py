@@ -34,6 +34,7 @@ import subprocess
 import sys
 import time
 import uuid
+from contextlib import contextmanager
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Iterable
@@ -87,7 +88,10 @@ def content_digest(table) -> str:
 
 def _read_case(path: Path):
     """Read one case file; raise :class:`DamagedCase` if it does not open, has no checksum,
-    a checksum that does not match its rows, or fewer/more rows than ``case_rows`` says."""
+    a checksum that does not match its rows, fewer/more rows than ``case_rows`` says, or rows
+    of a case other than the one its name stands for (the file name is :func:`case_key` of the
+    ``case_id`` its checksummed rows carry: a file copied under another case's name would
+    count as that case, leaving one missing and one twice)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -103,7 +107,57 @@ def _read_case(path: Path):
     if "case_rows" not in table.column_names or table.num_rows == 0 \
             or table.column("case_rows")[0].as_py() != table.num_rows:
         raise DamagedCase(path, f"holds {table.num_rows} rows, not the case_rows it was written with")
+    ids = set(table.column("case_id").to_pylist()) if "case_id" in table.column_names else set()
+    if len(ids) != 1:
+        raise DamagedCase(path, f"holds the rows of {len(ids)} cases, not of one")
+    (case_id,) = ids
+    if case_key(str(case_id)) != path.stem:
+        raise DamagedCase(path, f"holds case {case_id!r}, whose file is {case_key(str(case_id))}.parquet: "
+                          "a case file copied or renamed under another case's name")
     return table
+
+
+LOCK_TIMEOUT_S = 3600.0
+"""Default of the longest wait for a case's lock held by another client (:meth:`CaseStore.holding`)."""
+LOCK_TIMEOUT_ENV = "BENCH_LOCK_TIMEOUT"
+"""Environment variable that sets that wait in seconds."""
+
+
+class LockTimeout(Exception):
+    """A case's lock stayed held by another client beyond the wait (:meth:`CaseStore.holding`)."""
+
+
+def lock_timeout() -> float:
+    """The longest wait for a case's lock: ``$BENCH_LOCK_TIMEOUT`` seconds (a finite number
+    ≥ 0), else :data:`LOCK_TIMEOUT_S`."""
+    raw = os.environ.get(LOCK_TIMEOUT_ENV)
+    if raw is None:
+        return LOCK_TIMEOUT_S
+    try:
+        value = float(raw)
+    except ValueError:
+        value = float("nan")
+    if not (0.0 <= value < float("inf")):
+        from observer.errors import InputError
+        raise InputError(LOCK_TIMEOUT_ENV, f"must be a number of seconds ≥ 0, got {raw!r}")
+    return value
+
+
+def _holder(owner: Path) -> str:
+    """Who holds a lock: the pid in its ``.owner`` file and whether that process is stopped."""
+    try:
+        pid = int(owner.read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return "another client"
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        state = ""
+    return f"pid {pid}" + (" (stopped)" if state in ("T", "t") else "")
+
+
+def _say(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
 
 
 class DamagedCase(Exception):
@@ -196,6 +250,39 @@ class CaseStore:
         ``FOLDER/.locks/<key>.lock``): hold it to check, compute and write the case, so that
         concurrent clients on one folder compute it once."""
         return self._lock(case_key(case_id))
+
+    @contextmanager
+    def holding(self, case_id: str, timeout: float | None = None, say=None):
+        """Hold the case's lock (:meth:`lock`), waiting at most ``timeout`` seconds
+        (:func:`lock_timeout` by default) for a client that holds it.
+
+        A wait is said first, in one line to ``say`` (stderr by default) naming the case,
+        the lock file and the holder (its pid, and "stopped" when it is: a suspended client
+        keeps its lock); past the timeout :class:`LockTimeout` is raised, naming the same.
+        The holder's pid is kept beside the lock (``<key>.owner``) while it is held.
+        """
+        from filelock import Timeout
+
+        timeout = lock_timeout() if timeout is None else float(timeout)
+        lock = self.lock(case_id)
+        owner = Path(lock.lock_file).with_suffix(".owner")
+        try:
+            lock.acquire(timeout=0)
+        except Timeout:
+            (say or _say)(f"bench: case {case_id!r} waits for its lock {lock.lock_file}, held by "
+                          f"{_holder(owner)}; at most {timeout:g} s ({LOCK_TIMEOUT_ENV})")
+            try:
+                lock.acquire(timeout=timeout)
+            except Timeout:
+                raise LockTimeout(f"its lock {lock.lock_file} was held by {_holder(owner)} for more "
+                                  f"than {timeout:g} s ({LOCK_TIMEOUT_ENV}): not computed; it is "
+                                  "computed by the next run once that client ends") from None
+        try:
+            owner.write_text(f"{os.getpid()}\n")
+            yield
+        finally:
+            owner.unlink(missing_ok=True)
+            lock.release()
 
     def _lock(self, key: str):
         from filelock import FileLock

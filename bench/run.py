@@ -30,7 +30,8 @@ from pathlib import Path
 from observer.errors import InputError
 
 from bench import RESULTS_DIR
-from bench.results import CASES_SUFFIX, DAMAGED_SUFFIX, STALE, CaseStore, environment, export_csv
+from bench.results import (CASES_SUFFIX, DAMAGED_SUFFIX, STALE, CaseStore, LockTimeout, environment,
+                           export_csv)
 from bench.suites import Case, Suite, get_suite
 
 REPO = Path(__file__).resolve().parent.parent
@@ -167,32 +168,43 @@ def execute_case(case: Case, suite: str, out_dir: str | Path, env: dict,
     Nothing is computed when the case is done (a worker that died after writing it, a case
     finished by an earlier sweep or by a concurrent client): the case's lock
     (:meth:`~bench.results.CaseStore.lock`) is held while it is checked, computed and written.
+    A lock another client holds is waited for with one line saying so, at most
+    :func:`bench.results.lock_timeout` seconds; past that the case is ``failed`` with the
+    lock and its holder named (:meth:`~bench.results.CaseStore.holding`).
     The kernel is made ready in this process first, so no case pays its compile time;
     ``compile_time_s`` and ``pid`` in the rows are this process's. ``reference_grids``
     (:func:`bench.runners.reference_grids` of the run's cases) lets the work-precision cases of
     one sweep share one event-driven reference per process.
     """
-    from bench.runners import Context, Unavailable, run_case
-
     store = CaseStore(results_path(suite, out_dir))
     if store.has(case.case_id):
         return Outcome(case.case_id, "done")
-    with store.lock(case.case_id):       # another client may be computing it: wait, then look again
-        if store.has(case.case_id):
-            return Outcome(case.case_id, "done")
-        env = {**env, "compile_time_s": kernel_ready(), "pid": os.getpid()}
-        try:
-            rows = run_case(case, Context(suite, Path(out_dir), env,
-                                          reference_grids=dict(reference_grids or {})))
-        except Unavailable as exc:
-            return Outcome(case.case_id, "unavailable", str(exc))
-        except KeyboardInterrupt:
-            raise
-        except Exception as exc:  # record and go on; the case is retried next time
-            if os.environ.get("BENCH_TRACEBACK"):
-                traceback.print_exc()
-            return Outcome(case.case_id, "failed", f"{type(exc).__name__}: {exc}")
-        store.write_case(suite, case.case_id, rows)
+    try:
+        with store.holding(case.case_id):    # another client may be computing it: wait, then look again
+            return _compute_held(case, suite, out_dir, env, reference_grids, store)
+    except LockTimeout as exc:
+        return Outcome(case.case_id, "failed", str(exc))
+
+
+def _compute_held(case: Case, suite: str, out_dir, env: dict, reference_grids, store: CaseStore) -> Outcome:
+    """:func:`execute_case` once the case's lock is held: look again, run, write."""
+    from bench.runners import Context, Unavailable, run_case
+
+    if store.has(case.case_id):
+        return Outcome(case.case_id, "done")
+    env = {**env, "compile_time_s": kernel_ready(), "pid": os.getpid()}
+    try:
+        rows = run_case(case, Context(suite, Path(out_dir), env,
+                                      reference_grids=dict(reference_grids or {})))
+    except Unavailable as exc:
+        return Outcome(case.case_id, "unavailable", str(exc))
+    except KeyboardInterrupt:
+        raise
+    except Exception as exc:  # record and go on; the case is retried next time
+        if os.environ.get("BENCH_TRACEBACK"):
+            traceback.print_exc()
+        return Outcome(case.case_id, "failed", f"{type(exc).__name__}: {exc}")
+    store.write_case(suite, case.case_id, rows)
     return Outcome(case.case_id, "ran")
 
 

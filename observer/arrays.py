@@ -115,6 +115,19 @@ tail = [...]}``, the periodic form (:data:`PATTERN_KEYS`) with its length ``n``,
 bit, wherever a vector is read (initial state, forcing, gaps, observers, restitution)."""
 
 
+def check_declared_size(field: str, what: str, need: float) -> None:
+    """Raise before expanding a compact declaration (a periodic vector, a banded or triplet
+    matrix table) whose expansion needs ``need`` bytes (estimated) when fewer are available
+    (:func:`observer.memory.available_memory`): a file of a few hundred bytes can declare
+    a system of 10⁹ degrees of freedom. The error names ``field`` and what it declares."""
+    from observer import memory
+
+    avail = memory.available_memory()
+    if avail is not None and need > avail:
+        raise InputError(field, f"declares {what}: expanding it needs about {need / 2 ** 30:.3g} GiB "
+                         f"(estimated) but {avail / 2 ** 30:.3g} GiB are available")
+
+
 def periodic_vector(field: str, value: dict, size: int | None, keys: tuple[str, ...] = VECTOR_KEYS) -> np.ndarray:
     """Expand a periodic table (``keys``: :data:`VECTOR_KEYS` for a vector, with its length
     ``n``; :data:`PATTERN_KEYS` for a banded matrix's diagonal, whose length ``size`` the matrix
@@ -137,6 +150,7 @@ def periodic_vector(field: str, value: dict, size: int | None, keys: tuple[str, 
     fill = size - head.size - tail.size
     if pat.size == 0 or fill < 0:
         raise InputError(f"{field}.pattern", f"must be non-empty, with head and tail at most {size} values")
+    check_declared_size(field, f"{size} values", 16.0 * size)    # the repeated body, then the whole
     body = np.tile(pat, -(-fill // pat.size))[:fill]     # (np.resize concatenates fill/p copies: slow)
     return np.concatenate([head, body, tail])
 

@@ -156,6 +156,28 @@ def _count(field: str, value: Any, low: int) -> int:
     return int(value)
 
 
+MEMBER_BYTES = 4096
+"""Bytes one (design, member) takes besides its states, with a margin: its observer, its
+summary row and its share of the frame (an estimate, about twice the peak-memory growth per
+member of a double_mass ensemble)."""
+
+
+def check_member_memory(n: int, designs: int, dof: int) -> None:
+    """Raise before sampling when n members of ``designs`` designs would not fit in the
+    memory available (:func:`observer.memory.available_memory`): each takes
+    :data:`MEMBER_BYTES` plus its error and two initial states, 8 bytes per entry. The error
+    names ``n`` (``ensemble --n``); without it ``--n 10000000`` ran out of memory after
+    minutes."""
+    from observer import memory
+
+    need = n * designs * (MEMBER_BYTES + 8 * 4 * dof)
+    avail = memory.available_memory()
+    if avail is not None and need > avail:
+        raise InputError("n", f"{n} members × {designs} design(s) need about {need / 2 ** 30:.3g} GiB "
+                         f"({MEMBER_BYTES + 32 * dof} bytes each, estimated) but {avail / 2 ** 30:.3g} GiB "
+                         "are available: fewer members, or several runs with different seeds")
+
+
 SEED_MAX = 2 ** 63 - 1
 """Largest seed: the rows' ``seed`` column is a 64-bit integer (pandas ``Int64``)."""
 
@@ -459,6 +481,7 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
     integrator, store, paths, workers, out = _check_options(integrator, store, paths, n, workers, out)
     V0 = None if V0 is None else as_scalar("V0", V0, positive=True)
     sc, sensed = _load_sensed(scenario, h, t_end, sensor, integrator, engine, model)
+    check_member_memory(n, len(designs), sc.system.n)
     X, V0_used = sample_errors(sc, n, initial_errors, gen, V0)
     rows, path_frame = run_members(sc, designs, X, integrator, store, engine, paths, workers)
     df = _frame(sc, sc.name if label is None else str(label), designs, X, rows, integrator, seed_value)

@@ -33,6 +33,10 @@ Every run of :meth:`observer.engines.timestepping.TimeStepping.advance` gets a :
     term (README, "What holds in discrete time"). Checked: ``energy_growth ≤
     ENERGY_ROUNDOFF + ENERGY_SLACK·h·ω_ref`` with ω_ref = max(ω_max, 1/T) over the horizon T.
     None when not applicable.
+``observer_gap``
+    Per observer whose gap went deeper than its bound while χ said open (empty when none
+    did): the contact, the row's time, the depth ``−g_s,i`` and the bound ``b_i``
+    (:func:`observer_gaps`: the bound and the theorem it rests on).
 ``computed_by``
     How the spectral quantities were computed: ``omega_max`` (dense ``eigh``, or Lanczos with
     its tolerance for a large sparse system) and the model's checks of M, C, K, W
@@ -90,6 +94,7 @@ class Health:
     energy_bound: float | None = None
     warnings: tuple = field(default_factory=tuple)
     computed_by: dict = field(default_factory=dict)
+    observer_gap: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         """Plain JSON-ready dict (the run's ``metadata["health"]``)."""
@@ -255,11 +260,153 @@ def assess(inp, record_every: int, q: np.ndarray, u: np.ndarray, active: np.ndar
     if growth is not None and growth > bound:
         msgs.append(f"mechanical energy grew by {growth:.3g} of its scale in an unforced run "
                     f"(allowed {bound:.3g}: round-off + O(h) slack)")
+    deep = observer_gaps(inp, record_every, q, u, chi, ell)
+    for name, d in deep.items():
+        msgs.append(f"observer {name!r}: gap {d['contact']} = {-d['depth']:.3g} at t = {d['t']:.6g} "
+                    f"while χ = 0, below −{d['bound']:.3g} (the master's penetration bound "
+                    f"{100 * PENETRATION_MAX_REL:g} % of {ell:.3g} plus what its error at V's smallest "
+                    "can explain): V rose, so χ is not the master's closed set (a closing missing "
+                    "from the log?)")
     return Health(res, float(st.time(res_step)) if res_step >= 0 else None, tol,
                   stats.get("residual_source", "applied"), pen,
                   float(st.time(gap_step)) if gap_step >= 0 and pen > 0 else None, ell,
                   float(pen_rel), lam, how, growth, bound, tuple(msgs),
-                  computed_by(sys_))
+                  computed_by(sys_), deep)
+
+
+ROW_BLOCK = 1 << 20
+"""Entries (rows × max(n, m)) of one block of records that :func:`observer_gaps` evaluates at
+once: its extra memory is a few such blocks, whatever the run's length."""
+MAX_GAP_CONTACTS = 64
+"""At most this many contacts (the deepest) get their ``‖W_i‖_{K⁻¹}`` computed by
+:func:`observer_gaps` (each a solve with K's factor on a large system)."""
+
+
+def observer_gaps(inp, record_every: int, q: np.ndarray, u: np.ndarray, chi: np.ndarray,
+                  ell: float) -> dict:
+    """Observers whose gap goes below its bound while χ says the contact is open.
+
+    On a recorded row r whose step was coupled with χ_i = 0, observer s's gap
+    ``g_s,i = W_iᵀq_s + ν_i(t)`` is checked against
+
+    ``b_i(r) = PENETRATION_MAX_REL·ℓ + ‖W_i‖_{K⁻¹} · sqrt(2·min_{r₀ ≤ j ≤ r} V_j)``,
+
+    ℓ the run's length scale (:func:`length_scale`), ``‖W_i‖²_{K⁻¹} = (WᵀK⁻¹W)_ii``, V the
+    observer's error Lyapunov function (paper eq. (16)) against the run's master and r₀ the
+    row before the first coupled step.
+
+    **Why a correct χ never crosses it.** Observer and master share W and ν, so
+    ``g_s,i − g_m,i = W_iᵀe`` (e = q_s − q_m, paper eq. (2)), and by Cauchy–Schwarz in the
+    K inner product ``|W_iᵀe| = |(K⁻¹W_i)ᵀKe| ≤ ‖W_i‖_{K⁻¹}‖e‖_K ≤ ‖W_i‖_{K⁻¹}·sqrt(2V)``
+    (eq. (16)). When χ is the master's closed set (``source="master"``, an exact log),
+    master and observer are two solutions of (7)-(11) with the same χ and V is
+    non-increasing (Theorem 1, eq. (17); in discrete time its twin (docs/theory/scheme.md §1), up to the
+    slack of docs/theory/scheme.md §7.2), so V_r = min_{j≤r} V_j. A master inside its own
+    health bound has ``g_m,i ≥ −PENETRATION_MAX_REL·ℓ``; hence ``g_s,i ≥ −b_i(r)``.
+    A row below ``−b_i(r)`` therefore proves that V rose above its smallest value since
+    coupling (or the master penetrated beyond its bound, which its own warning reports):
+    χ did not follow the master's contacts — a closing missing from the log lets the
+    observer move through the wall the master rests on.
+
+    The bound needs no knowledge of the error beyond the run's own V; it uses the
+    recorded rows only (every step when ``record_every = 1``); None of it applies to an
+    uncoupled or self-driven observer (its own constraints keep its gap) or when K is not
+    positive definite (no K-norm). Memory: blocks of :data:`ROW_BLOCK` entries.
+
+    Returns
+    -------
+    dict
+        Per observer name crossing its bound, the row with the largest excess
+        ``−g_s,i − b_i``: ``{"contact", "t", "depth", "bound"}``.
+    """
+    st = inp.stepper
+    sys_ = st.system
+    S, R = q.shape[0], q.shape[1]
+    if S < 2 or R < 2 or inp.self_driven or sys_.m == 0:
+        return {}
+    rows = np.arange(R)
+    step_t = st.time(np.maximum(rows * record_every - 1, 0))      # the step ending at row r
+    coupled = np.ones(R, bool) if inp.coupling is None else \
+        (step_t >= inp.coupling[0]) & (step_t <= inp.coupling[1])
+    coupled[0] = False
+    if not coupled.any():
+        return {}
+    r0 = int(np.flatnonzero(coupled)[0]) - 1
+    margin = PENETRATION_MAX_REL * ell
+    names = tuple(inp.names) or tuple(f"obs{s}" for s in range(1, S))
+    block = max(1, ROW_BLOCK // max(sys_.n, sys_.m, 1))
+    out = {}
+    for s in range(1, S):
+        cand = _deep_rows(sys_, st, record_every, q[s], chi, coupled, margin, block)
+        if cand is None:
+            continue
+        worst = _worst_excess(sys_, st, record_every, q, u, s, r0, cand, margin, block)
+        if worst is not None:
+            out[names[s - 1]] = worst
+    return out
+
+
+def _deep_rows(sys_, st, record_every, qs, chi, coupled, margin, block):
+    """(row, contact, depth) of every coupled row with χ_i = 0 and ``−g_s,i > margin`` (None:
+    no such row)."""
+    found = []
+    for a in range(0, qs.shape[0], block):
+        b = min(a + block, qs.shape[0])
+        g = sys_.gaps(np.asarray(qs[a:b]), st.time(np.arange(a, b) * record_every))
+        open_ = ~np.asarray(chi[a:b], dtype=bool) & coupled[a:b, None]
+        r, i = np.nonzero(open_ & (-g > margin))
+        if r.size:
+            found.append((r + a, i, -g[r, i]))
+    if not found:
+        return None
+    return tuple(np.concatenate(c) for c in zip(*found))
+
+
+def _worst_excess(sys_, st, record_every, q, u, s, r0, cand, margin, block):
+    """The candidate row with the largest ``depth − b_i(r)`` if positive (else None); V and its
+    running minimum from row r0 on (:func:`observer_gaps`)."""
+    from observer.observers import lyapunov
+
+    rows, contacts, depth = cand
+    last = int(rows.max()) + 1
+    vmin = np.empty(last - r0)
+    low = np.inf
+    for a in range(r0, last, block):
+        b = min(a + block, last)
+        V = lyapunov(sys_, np.asarray(q[s, a:b]), np.asarray(u[s, a:b]),
+                     np.asarray(q[0, a:b]), np.asarray(u[0, a:b]))
+        run = np.minimum.accumulate(np.concatenate([[low], V]))[1:]
+        vmin[a - r0:b - r0] = run
+        low = run[-1]
+    deepest = np.unique(contacts[np.argsort(-depth)])[:MAX_GAP_CONTACTS]
+    norms = _k_inverse_norms(st, deepest)
+    if norms is None:
+        return None
+    keep = np.isin(contacts, deepest)
+    rows, contacts, depth = rows[keep], contacts[keep], depth[keep]
+    bound = margin + norms[np.searchsorted(deepest, contacts)] * np.sqrt(2.0 * np.maximum(vmin[rows - r0], 0.0))
+    k = int(np.argmax(depth - bound))
+    if not depth[k] > bound[k]:
+        return None
+    return {"contact": int(contacts[k]), "t": float(st.time(int(rows[k]) * record_every)),
+            "depth": float(depth[k]), "bound": float(bound[k])}
+
+
+def _k_inverse_norms(st, idx: np.ndarray) -> np.ndarray | None:
+    """``‖W_i‖_{K⁻¹} = sqrt((WᵀK⁻¹W)_ii)`` for the contacts ``idx`` (sorted), from the
+    stepper's K-projection data (None when K is not positive definite)."""
+    if not st.system.stiffness_definiteness()[0]:
+        return None
+    if st.S.factored:
+        L = st._active_slices(np.asarray(idx, dtype=np.int64))[5]
+        if L is None:
+            return None
+        d = np.diag(L)
+    else:
+        if st.S.KinvW is None:
+            return None
+        d = np.diag(st.S.L)[idx]
+    return np.sqrt(np.maximum(d, 0.0))
 
 
 def computed_by(system) -> dict:

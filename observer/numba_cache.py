@@ -12,7 +12,12 @@ error) or a cache folder it cannot write (``PermissionError``) into a traceback.
   function's index is emptied (numba's ``flush``: the next save writes it afresh) and the
   function is compiled again;
 * a cache entry that cannot be written is a :class:`CacheWarning` naming the folder; the
-  compiled function is used from memory for this process.
+  compiled function is used from memory for this process;
+* a function for which numba finds no cache folder at all (``NUMBA_CACHE_DIR``, the
+  module's ``__pycache__`` and the user's cache folder all unwritable: numba raises
+  ``RuntimeError: cannot cache function ...: no locator available`` when the function is
+  decorated, i.e. when the toolkit is imported) is a :class:`CacheWarning` and is compiled
+  in memory, uncached.
 
 Either way the result is the one a fresh compile gives: the cache holds no result, only
 machine code numba can rebuild.
@@ -23,6 +28,8 @@ from __future__ import annotations
 import warnings
 
 _INSTALLED = False
+_UNCACHED: set[str] = set()
+"""Source files whose functions found no cache folder (warned once each)."""
 
 
 class CacheWarning(RuntimeWarning):
@@ -70,4 +77,29 @@ def install() -> None:
             return None
 
     caching.Cache.load_overload, caching.Cache.save_overload = load_overload, save_overload
+    _guard_locator()
     _INSTALLED = True
+
+
+def _guard_locator() -> None:
+    """Wrap :meth:`numba.core.dispatcher.Dispatcher.enable_caching`: no cache folder for a
+    function is a warning and a :class:`numba.core.caching.NullCache` (compile, keep in memory)."""
+    from numba.core import caching, dispatcher
+
+    enable = dispatcher.Dispatcher.enable_caching
+
+    def enable_caching(self):
+        try:
+            enable(self)
+        except RuntimeError as exc:     # numba's "no locator available": no writable folder
+            if "no locator available" not in str(exc):
+                raise
+            source = self.py_func.__code__.co_filename
+            if source not in _UNCACHED:            # one line per module, not per function
+                _UNCACHED.add(source)
+                warnings.warn(f"numba finds no writable cache folder for the functions of {source} "
+                              "(NUMBA_CACHE_DIR, its __pycache__, the user's cache folder): they are "
+                              "compiled for this run only", CacheWarning, stacklevel=3)
+            self._cache = caching.NullCache()
+
+    dispatcher.Dispatcher.enable_caching = enable_caching

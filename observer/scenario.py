@@ -531,9 +531,9 @@ def check_build_memory(name: str, key: str, value: Any) -> None:
     the bytes its build takes per unit (measured, with a margin); none, no check. Without it
     a huge ``param.N`` was killed by the kernel (exit 137, nothing said)."""
     from observer.scenarios import SCENARIOS
-    from observer.validation import available_memory
+    from observer import memory
     per = getattr(SCENARIOS[name], "MEMORY_PER_UNIT", {}).get(key)
-    avail = available_memory()
+    avail = memory.available_memory()
     if per is None or avail is None or value * per <= avail:
         return
     raise InputError(f"param.{key}", f"{key} = {value} needs about {value * per / 2 ** 30:.3g} GiB to "

@@ -27,7 +27,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from observer.arrays import PATTERN_KEYS, as_array, periodic_vector  # noqa: F401  (PATTERN_KEYS re-exported)
+from observer.arrays import PATTERN_KEYS, as_array, check_declared_size, periodic_vector  # noqa: F401  (PATTERN_KEYS re-exported)
 from observer.errors import InputError
 
 DENSE_MAX_N = 512
@@ -172,6 +172,11 @@ def banded_document(A: Any, plain: bool = True) -> dict:
     return doc
 
 
+BANDED_BYTES_PER_ENTRY = 48
+"""Bytes per entry of a banded table while it is built: its diagonals, the DIA, COO and CSR
+forms scipy passes through (8-byte values and indices), with a margin."""
+
+
 def banded_matrix(field: str, value: dict) -> sp.csr_matrix:
     """A CSR matrix from a document's banded table (:data:`BANDED_KEYS`), in O(entries); errors
     name ``field.KEY``."""
@@ -197,6 +202,9 @@ def banded_matrix(field: str, value: dict) -> sp.csr_matrix:
     if not isinstance(diags, (list, tuple)) or len(diags) != offsets.size:
         raise InputError(f"{field}.diagonals", f"must be a list of {offsets.size} diagonals, one per offset")
     ks = [int(k) for k in offsets]
+    entries = sum((min(n, m - k) if k >= 0 else min(n + k, m)) * (2 if symmetric and k < 0 else 1) for k in ks)
+    check_declared_size(field, f"a {n} × {m} banded matrix of {entries} entries",
+                        BANDED_BYTES_PER_ENTRY * entries + 8.0 * (n + 1))
     data = [_diagonal(f"{field}.diagonals[{i}]", d, min(n, m - k) if k >= 0 else min(n + k, m))
             for i, (k, d) in enumerate(zip(ks, diags))]
     A = sp.diags(data, ks, shape=(n, m), format="csr") if data else sp.csr_matrix((n, m))

@@ -229,8 +229,9 @@ class ChunkWriter:
             lock.__exit__(None, None, None)
 
     def _discard(self) -> None:
-        """A Parquet file that cannot be closed is unreadable: its partial file is removed
-        (the ``running`` sidecar stays, saying the run did not finish)."""
+        """A Parquet file that cannot be closed is unreadable: its partial file is removed, and
+        so is the ``running`` sidecar unless an earlier file of that name is there (then it
+        stays, saying that file is not this run's); nothing else is left."""
         if self.suffix == ".parquet":
             from pyarrow import ArrowException
 
@@ -241,6 +242,8 @@ class ChunkWriter:
                 pass
             self._writer = None
             part_path(self.path).unlink(missing_ok=True)
+            if not self.path.exists():
+                running_path(self.path).unlink(missing_ok=True)
         else:
             tmp = sidecar_path(self.path)
             tmp.with_name(f".{tmp.name}.tmp").unlink(missing_ok=True)

@@ -15,7 +15,8 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from observer import sparse as sps
-from observer.arrays import MAX_DEPTH, as_array, non_numeric_entry  # noqa: F401  (re-exported)
+from observer.arrays import MAX_DEPTH, as_array, check_declared_size, non_numeric_entry  # noqa: F401  (re-exported)
+from observer.memory import available_memory  # noqa: F401  (re-exported)
 from observer.errors import InputError
 
 SYMMETRY_RTOL = 0.0
@@ -71,6 +72,7 @@ def triplet_matrix(field: str, value: dict) -> sp.csr_matrix:
         raise InputError(f"{field}.shape", f"must be two positive integers, got {value['shape']!r}")
     n, m = int(shape[0]), int(shape[1])
     vals = as_array(f"{field}.values", value["values"], (None,))
+    check_declared_size(field, f"a {n} × {m} sparse matrix", 16.0 * (n + 1) + 40.0 * vals.size)  # row pointers
     idx = []
     for key, size in (("rows", n), ("cols", m)):
         ix = as_array(f"{field}.{key}", value[key], (vals.size,))
@@ -391,20 +393,6 @@ def check_step_count(h: float, t_end: float, t0: float = 0.0) -> float:
     return steps
 
 
-def available_memory() -> int | None:
-    """Bytes of memory available to a new allocation (Linux ``MemAvailable``, else the free
-    physical pages), or None where the system does not say."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):
-        return None
 
 
 def check_output_path(field: str, path: Any, suffixes: tuple[str, ...]) -> Path:

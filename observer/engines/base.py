@@ -13,6 +13,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
+import numpy as np
+
 from observer.errors import InputError
 from observer.observers import ObserverConfig, Slave, make_slaves
 from observer.result import RunRecord
@@ -175,6 +177,7 @@ def describe(sc: Scenario, integrator: str, observers, source, coupling, log, re
     InputError
         An unknown design or source, a missing log, an observer's non-finite energy.
     """
+    check_initial_state(sc)
     if isinstance(observers, str):
         observers = scenario_observers(sc) if observers == "scenario" else [observers]
     slaves: list[Slave] = []
@@ -205,6 +208,18 @@ def describe(sc: Scenario, integrator: str, observers, source, coupling, log, re
     return RunDescription(sc, integrator, tuple(slaves), source,
                           None if coupling == "scenario" else coupling, log, log_frame,
                           residual_tol, record_every, store, on_chunk)
+
+
+def check_initial_state(sc: Scenario) -> None:
+    """The master's initial state as the run finds it: a loaded scenario's ``q0``/``u0`` are
+    plain arrays a user can edit after loading (``sc.q0[0] = nan``), so they are checked again
+    when the run starts — n finite entries each and a finite energy — with an
+    :class:`InputError` naming ``initial.q`` or ``initial.u``, never a NaN first row."""
+    from observer.validation import as_array
+
+    for name, value in (("initial.q", sc.q0), ("initial.u", sc.u0)):
+        as_array(name, value, (sc.system.n,))
+    check_finite_energy("initial", sc.system, np.asarray(sc.q0, float), np.asarray(sc.u0, float))
 
 
 def scenario_observers(sc: Scenario) -> list[str]:

@@ -69,7 +69,7 @@ import numpy as np
 from observer.contact import get_solver
 from observer.event.flow import Flow, flow_for
 from observer.event.roots import (FLOOR_FACTOR, ROUNDOFF, NonFiniteFlow, RootIsolationError,
-                                  first_zero, motion_tolerance, resolution, tolerance)
+                                  SearchStopped, first_zero, motion_tolerance, resolution, tolerance)
 from observer.event.tails import JointTail, horner, joint_due, joint_tail
 from observer.impact import ImpactLaw, impact
 from observer.scenario import Scenario
@@ -306,6 +306,16 @@ class _Run:
         if forced and k < tg.size and t_b > t_cur:
             self.P[k, forced] += flow.force_rows @ flow.integral(t_b - t_cur, z_cur)
         self.k_next = k
+
+    def fill_certified(self, flow: Flow, t_a: float, x_a: np.ndarray, t_b: float) -> None:
+        """The samples of ``[t_a, t_b)`` after a signal stopped a search at ``t_b``: no
+        functional vanishes there, so they are whole and kept although a stop is pending."""
+        stop, self.should_stop = self.should_stop, None
+        try:
+            if t_b > t_a:
+                self.fill(flow, t_a, x_a, t_b, include_end=False)
+        finally:
+            self.should_stop = stop
 
     def _sample(self, flow: Flow, k: int, dt: float, z: np.ndarray, forced: list) -> np.ndarray:
         z_new = flow.expm(dt) @ z
@@ -866,17 +876,18 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
                 t0: float, should_stop) -> MasterEventResult:
     run, t_end, x, persistent = _start(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, should_stop)
     t0 = run.t0
-    status = "ok"
-    t = t0
+    status, t = "ok", t0
     certified: dict[tuple[str, int], float] = {}
     n_events, same_time, t_last_event = 0, 0, -np.inf
     n_impacts = 0                                      # impacts since the last landing
     while True:
+        flow = flow_for(run.system, persistent)
         sig = run.halted or (should_stop() if should_stop is not None else None)
         if sig:                                        # SIGINT/SIGTERM of a streamed run
+            if run.k_next == 0:                        # before any row: the initial state is one
+                run.fill_certified(flow, t, x, float(np.nextafter(t, np.inf)))
             status = f"stopped: {sig} at t = {t:.9g}"
             break
-        flow = flow_for(run.system, persistent)
         free = [j for j in range(run.m) if j not in persistent]
         z_now = flow.z(t, x)
         forced = [i for i in range(len(persistent)) if not _identically_zero(flow, flow.force_rows[i], z_now)]
@@ -884,7 +895,11 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
         keys = [("g", j) for j in free] + [("f", persistent[i]) for i in forced]
         cert = {i: certified[k] for i, k in enumerate(keys) if k in certified}
         try:
-            zero, t_stop, _ = first_zero(flow, rows, t, flow.z(t, x), t_end, cert, run.tau)
+            zero, t_stop, _ = first_zero(flow, rows, t, flow.z(t, x), t_end, cert, run.tau, should_stop)
+        except SearchStopped as exc:                  # a signal mid-search: the certified rows are kept
+            run.fill_certified(flow, t, x, exc.t_ok)
+            run.halted = exc.signal
+            break
         except NonFiniteFlow as exc:                  # overflow: a stop at the last finite state
             if np.all(np.isfinite(exc.z_ok)):
                 run.fill(flow, t, x, exc.t_ok, include_end=True)

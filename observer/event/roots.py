@@ -103,6 +103,26 @@ class RootIsolationError(RuntimeError):
         self.t_ok, self.z_ok = t_ok, z_ok
 
 
+STOP_EVERY = 64
+"""Safe advances of a search between two looks at its ``should_stop`` (:func:`first_zero`; the
+first look after the first advances, so a stopped search always got past its start)."""
+
+
+class SearchStopped(RootIsolationError):
+    """A signal stopped a search (:func:`first_zero` with ``should_stop``): every functional
+    is certified nonzero on ``[t0, t_ok)``, so the trajectory up to there is whole.
+
+    Attributes
+    ----------
+    signal : str
+        What ``should_stop`` returned (``"SIGINT"``, ...).
+    """
+
+    def __init__(self, signal: str, t_ok: float, z_ok: np.ndarray) -> None:
+        super().__init__(f"{signal} during the search, at t = {t_ok!r}", t_ok, z_ok)
+        self.signal = signal
+
+
 class NonFiniteFlow(RootIsolationError):
     """The flow left the floating-point range during a search (issue 20: a stop, never a row).
 
@@ -631,7 +651,7 @@ def _row_norm(v: np.ndarray) -> float:
 
 
 def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: float,
-               certified: dict[int, float] | None = None, tau: float | None = None
+               certified: dict[int, float] | None = None, tau: float | None = None, should_stop=None
                ) -> tuple[Zero | None, float, np.ndarray]:
     """First zero in ``[t0, t_end]`` of any functional ``rows[i]·z(t)`` along ``flow``.
 
@@ -653,6 +673,8 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     tau : float, optional
         The motion's time scale τ of the tolerances (default ``flow.time_scale``; a run
         of a system without one passes its motion's, :func:`observer.event.master.motion_time_scale`).
+    should_stop : callable, optional
+        A signal name it returns (:func:`_look`) stops the search: :class:`SearchStopped`.
 
     Returns
     -------
@@ -666,13 +688,13 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     if rows.shape[0] == 0 or t_end - a <= resolution(t_end, tau):
         z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
         return None, t_end, z
-    fs = functional_set(flow, rows, tau)
-    certified = dict(certified or {})
+    fs, certified = functional_set(flow, rows, tau), dict(certified or {})
     window = WINDOW / max(flow.norm_bound, 1e-300)
     growth = exp_upper(up(flow.certified_norm * window * (1.0 + 2.0 * _U)))  # ≥ e^{‖T⁻¹AT‖₂ w}
     t_ok, z_ok = a, za                                # the last search point with finite values
     coefs = _scale_coefficients(tau)
-    for _ in range(MAX_STEPS):
+    for count in range(MAX_STEPS):
+        _look(should_stop, count, a, za)
         if t_end - a <= resolution(t_end, tau):          # a remainder of a few ulp: flow
             z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
             _check_finite(t_end, z, np.zeros((1, 1)), t_ok, z_ok)
@@ -708,6 +730,13 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
             step = min(res, w)                       # nothing approaches: time moves on
         a, za = a + step, _reset(flow, a + step, flow.expm(step) @ za)
     raise RootIsolationError(f"root isolation stalled near t = {a!r} ({MAX_STEPS} safe steps)", a, za)
+
+
+def _look(should_stop, count: int, a: float, za: np.ndarray) -> None:
+    """:class:`SearchStopped` at (a, za) when ``should_stop``, looked at every
+    :data:`STOP_EVERY` advances of :func:`first_zero`, names a signal."""
+    if should_stop is not None and count % STOP_EVERY == STOP_EVERY - 1 and (sig := should_stop()):
+        raise SearchStopped(sig, a, za)
 
 
 UNRESOLVED_REACH = 1e-3

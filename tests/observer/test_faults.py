@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bench.results import case_key
 from observer.cli import main
 from observer.errors import InputError
 from observer.io import events_path, read_events, read_result, sidecar_path
@@ -448,3 +449,353 @@ def test_a_report_that_cannot_be_written_leaves_no_truncated_index(tmp_path, mon
 class _Ctx:
     def __init__(self, out):
         self.out_dir, self.suites, self.command = out, ["quick"], "x"
+
+
+# -- item 10: an observer through the wall while the log says the contact is open ----------------
+# double_mass: M = I, K = [[100, -100], [-100, 200]], W = e_0, ν = 0.25 → ‖W_0‖²_{K⁻¹} = (K⁻¹)_00
+# = 200/10000 = 0.02; the length scale ℓ = 0.25 (the clearance), so the master's bound is 1 % of it.
+DM_M = np.eye(2)
+DM_K = np.array([[100.0, -100.0], [-100.0, 200.0]])
+DM_WK = np.sqrt(0.02)
+DM_MARGIN = 0.01 * 0.25
+
+
+def _exact_log(frame, h):
+    """The master's closed intervals as a log (runs of closed steps; step k decided at t_{k+1} − h/2)."""
+    import pandas as pd
+    t, act = frame["t"].to_numpy(), frame["active0"].to_numpy(int)
+    edges = np.diff(np.concatenate([[0], act, [0]]))
+    a, b = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    return pd.DataFrame({"contact": 0, "t_close": t[a] - h / 2, "t_open": t[b] - h / 2})
+
+
+def _observer_depth_and_bound(frame, name):
+    """Per row: the observer's depth −g below the wall and the bound b = 1 % ℓ + ‖W‖_{K⁻¹}·sqrt(2 min V),
+    recomputed here from the states with the matrices above (V of paper eq. (16))."""
+    q = frame[[f"{name}_q0", f"{name}_q1"]].to_numpy()
+    e = q - frame[["q0", "q1"]].to_numpy()
+    v = frame[[f"{name}_u0", f"{name}_u1"]].to_numpy() - frame[["u0", "u1"]].to_numpy()
+    V = 0.5 * np.einsum("ki,ij,kj->k", v, DM_M, v) + 0.5 * np.einsum("ki,ij,kj->k", e, DM_K, e)
+    depth = -(q[:, 0] + 0.25)
+    bound = DM_MARGIN + DM_WK * np.sqrt(2.0 * np.minimum.accumulate(V))
+    open_ = frame["chi0"].to_numpy() == 0
+    return np.where(open_, depth, -np.inf), bound
+
+
+def _log_run(log):
+    from observer.health import RunHealthWarning
+    sc = load_scenario("double_mass", {"simulation.h": 1e-3, "simulation.t_end": 4.5})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = simulate(sc, observers=("jump", "nojump"), source="log", log=log)
+    return res, [str(w.message) for w in caught if issubclass(w.category, RunHealthWarning)]
+
+
+@pytest.fixture(scope="module")
+def dm_log():
+    frame = simulate(load_scenario("double_mass", {"simulation.h": 1e-3, "simulation.t_end": 4.5})).to_frame()
+    return _exact_log(frame, 1e-3)
+
+
+def test_an_observer_through_the_wall_of_a_dropped_resting_interval_is_a_health_warning(dm_log):
+    """The log misses the longest resting interval (mass 1 on the ground for 0.18 s): both
+    observers fall through the wall the master rests on, deeper than their error explains."""
+    longest = (dm_log["t_open"] - dm_log["t_close"]).idxmax()
+    res, msgs = _log_run(dm_log.drop(index=longest))
+    frame = res.to_frame()
+    for name in ("jump", "nojump"):
+        line = [m for m in msgs if f"observer {name!r}" in m]
+        assert len(line) == 1 and "gap 0" in line[0] and "χ = 0" in line[0], msgs
+        depth, bound = _observer_depth_and_bound(frame, name)
+        assert np.max(depth - bound) > 0.005                 # 2 mm beyond the bound, recomputed here
+        rec = res.metadata["health"]["observer_gap"][name]
+        k = int(np.argmin(np.abs(frame["t"].to_numpy() - rec["t"])))
+        assert rec["depth"] == pytest.approx(depth[k], rel=1e-12)
+        assert rec["bound"] == pytest.approx(bound[k], rel=1e-9)
+
+
+def test_an_exact_log_keeps_every_observer_above_its_bound(dm_log):
+    """Near miss: with the exact log the jump observer does go below −1 % ℓ while χ = 0 (its
+    initial error: a bound of the master's kind alone would fire), yet stays above the bound
+    that adds what its error at V's smallest explains — no warning."""
+    res, msgs = _log_run(dm_log)
+    assert not any("observer " in m for m in msgs), msgs
+    assert res.metadata["health"]["observer_gap"] == {}
+    depth, bound = _observer_depth_and_bound(res.to_frame(), "jump")
+    assert depth.max() > 2 * DM_MARGIN
+    assert np.max(depth - bound) < 0
+
+
+def _gap_rows(d_rows, V1_offset=0.0):
+    """Three recorded rows of double_mass (master at rest on the ground) and one observer:
+    rows 0 and 1 have the error (a, 0) (V = ½·100·a²), row 2 the error (−d, 0) (its gap −d); χ = 0."""
+    from observer.loop import LoopInput
+    from observer.stepping import MoreauJean
+    sc = load_scenario("double_mass", {"simulation.h": 1e-3, "simulation.t_end": 0.01})
+    st = MoreauJean(sc.system, sc.law, sc.h, sc.t_end, sc.theta)
+    qm = np.tile(sc.q0, (3, 1))
+    qs = qm.copy()
+    qs[:2, 0] += V1_offset
+    qs[2, 0] -= d_rows
+    q = np.stack([qm, qs])
+    u = np.zeros_like(q)
+    inp = LoopInput(st, q[:, 0], u[:, 0], np.array([False, True]), False, names=("jump",))
+    return inp, q, u, np.zeros((3, 1), bool)
+
+
+@pytest.mark.parametrize("a", [0.0, 1e-3])
+def test_the_observer_gap_bound_is_sharp(a):
+    """The bound b = 1 % ℓ + ‖W‖_{K⁻¹}·sqrt(2 min V) = 0.0025 + sqrt(0.02)·sqrt(100 a²) by hand
+    (min V = V of rows 0-1 = 50 a², since the observer's gap at row 2 is what is tested): one part
+    in 10⁶ inside is quiet, one part in 10⁶ outside is flagged."""
+    from observer.health import observer_gaps
+    b = DM_MARGIN + DM_WK * np.sqrt(100.0) * a
+    assert sc_q0_gap_is_zero()
+    for d, flagged in ((b * (1 - 1e-6), False), (b * (1 + 1e-6), True)):
+        inp, q, u, chi = _gap_rows(d, a)
+        out = observer_gaps(inp, 1, q, u, chi, 0.25)
+        assert bool(out) == flagged, (d, b, out)
+        if flagged:
+            assert out["jump"]["bound"] == pytest.approx(b, rel=1e-9)
+            assert out["jump"]["depth"] == pytest.approx(d, rel=1e-9)
+
+
+def sc_q0_gap_is_zero() -> bool:
+    """The built-in's master starts resting on the ground: its gap is 0 (to round-off)."""
+    sc = load_scenario("double_mass")
+    return abs(float(sc.q0[0]) + 0.25) < 1e-12
+
+
+# -- item 19: a bench client behind a case lock held by a stopped client -------------------------
+_HOLDER = """
+import sys, time
+from bench.results import CaseStore
+held = CaseStore(sys.argv[1]).holding(sys.argv[2])
+held.__enter__()
+print("held", flush=True)
+time.sleep(300)
+"""
+
+
+def test_a_bench_client_behind_a_stopped_clients_lock_says_so_and_gives_up(tmp_path, monkeypatch, capsys):
+    """A client holds a case's lock and is stopped (SIGSTOP): another client says in one line
+    which case and lock it waits for and who holds it, waits at most $BENCH_LOCK_TIMEOUT s and
+    reports the case failed naming the lock — instead of waiting without a word."""
+    import threading
+
+    from bench.run import execute_case, results_path
+    from bench.suites import Case
+
+    case = Case("work_precision", "bouncing_ball", law="newton", h=4e-3, t_end=0.3, observers=(),
+                reference="closed form")
+    folder = results_path("locked", tmp_path)
+    holder = subprocess.Popen([sys.executable, "-c", _HOLDER, str(folder), case.case_id],
+                              stdout=subprocess.PIPE, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        os.kill(holder.pid, signal.SIGSTOP)
+        monkeypatch.setenv("BENCH_LOCK_TIMEOUT", "0.5")
+        outcome = []
+        waiter = threading.Thread(target=lambda: outcome.append(
+            execute_case(case, "locked", tmp_path, {})), daemon=True)
+        t0 = time.monotonic()
+        waiter.start()
+        waiter.join(timeout=30)
+        assert not waiter.is_alive(), "the client still waits"
+        assert time.monotonic() - t0 < 15
+    finally:
+        os.kill(holder.pid, signal.SIGCONT)
+        holder.kill()
+        holder.wait(timeout=30)
+    (out,) = outcome
+    lock = folder / ".locks" / f"{case_key(case.case_id)}.lock"
+    assert out.state == "failed" and str(lock) in out.message and "0.5 s" in out.message, out
+    assert f"pid {holder.pid} (stopped)" in out.message
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 1 and case.case_id in err[0] and str(lock) in err[0] and "at most 0.5 s" in err[0], err
+    assert not (folder.exists() and list(folder.glob("*.parquet")))
+
+
+def test_a_bench_lock_timeout_that_is_not_a_number_is_refused(monkeypatch):
+    from bench.results import lock_timeout
+    for bad in ("soon", "-1", "inf", "nan"):
+        monkeypatch.setenv("BENCH_LOCK_TIMEOUT", bad)
+        with pytest.raises(InputError, match="BENCH_LOCK_TIMEOUT"):
+            lock_timeout()
+    monkeypatch.setenv("BENCH_LOCK_TIMEOUT", "0")
+    assert lock_timeout() == 0.0
+
+
+# -- item 24: a bench case file copied under another case's name ---------------------------------
+def test_a_bench_case_file_copied_under_another_cases_name_is_damaged(tmp_path):
+    """Case B's file replaced by a byte copy of case A's (each a valid checksum of its rows): B
+    is not done (A's rows name A), the store serves each case once."""
+    import shutil
+
+    from bench.results import CaseStore
+    store = CaseStore(tmp_path / "s.cases")
+    a = store.write_case("s", "case A", [{"x": 1.0}])
+    b = store.write_case("s", "case B", [{"x": 2.0}])
+    shutil.copyfile(a, b)
+    assert store.has("case A") and not store.has("case B")
+    reason = store.problem(b)
+    assert "'case A'" in reason and "another case's name" in reason, reason
+    assert [r["case_id"] for r in store.rows()] == ["case A"]
+    assert store.done_ids() == {"case A"}
+
+
+# -- item 19: SIGINT during a stuck event search -------------------------------------------------
+QUIET_TOML = """
+[scenario]
+name = "quiet"
+[system]
+M = [[1.0]]
+C = [[0.0]]
+K = [[1000000.0]]
+W = [[1.0]]
+[system.gap]
+offset = [10.0]
+[impact]
+law = "newton"
+restitution = 0.5
+[initial]
+q = [1.0]
+u = [0.0]
+[simulation]
+t_end = 100000.0
+h = 0.01
+"""
+"""x'' + ω²x = 0 (ω = 1000 rad/s) from x = 1, a wall 9 below the orbit: one quiet phase of 10⁵ s,
+searched in windows of 0.5/ω — one event search that runs for minutes (or stalls)."""
+
+
+def _cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process (``/proc/PID/stat`` fields 14-15)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return float("inf")
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _closed_form_rows(t, q, u):
+    """Every kept row is the exact orbit x = cos ωt, on the grid k·h without a gap."""
+    w = 1000.0
+    assert np.allclose(np.diff(t), 0.01, rtol=0, atol=1e-9)
+    assert np.max(np.abs(q - np.cos(w * t))) <= 1e-10
+    assert np.max(np.abs(u + w * np.sin(w * t))) <= 1e-7
+
+
+def test_a_signal_during_a_stuck_event_search_stops_it_and_keeps_the_rows(tmp_path, monkeypatch):
+    """A stop asked during the one long search: the search ends there (not at its stall
+    after MAX_STEPS safe steps, lowered here so that the old behaviour fails fast), the status
+    names the signal, and every grid row up to the certified point is kept, exact."""
+    import observer.event.roots as roots
+    from observer.event.master import run_master
+    from observer.scenario import Scenario
+
+    monkeypatch.setattr(roots, "MAX_STEPS", 20000)
+    (tmp_path / "quiet.toml").write_text(QUIET_TOML)
+    sc = load_scenario(str(tmp_path / "quiet.toml"))
+    assert isinstance(sc, Scenario)
+    asked = []
+
+    def should_stop():                     # the signal from the 20th look on (the search looks every 64 steps)
+        asked.append(time.monotonic())
+        return "SIGINT" if len(asked) >= 20 else None
+    res = run_master(sc, should_stop=should_stop)
+    assert res.status.startswith("stopped: SIGINT"), res.status
+    assert time.monotonic() - asked[19] < 5
+    assert res.t.size > 10
+    _closed_form_rows(res.t, res.q[:, 0], res.u[:, 0])
+
+
+def test_sigint_during_a_stuck_event_search_exits_promptly_with_the_rows(tmp_path):
+    """``observer run`` on the same quiet phase, SIGINT once it has searched for a while (3 s of
+    CPU): exit 130 within seconds (was: at the stall, 0 rows), one line naming the signal, and
+    the result holds the exact rows up to where it stopped."""
+    (tmp_path / "quiet.toml").write_text(QUIET_TOML)
+    out = tmp_path / "r.csv"
+    proc = subprocess.Popen([sys.executable, "-m", "observer", "run", str(tmp_path / "quiet.toml"),
+                             "--integrator", "event", "--out", str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    deadline = time.monotonic() + 120
+    while _cpu_seconds(proc.pid) < 3.0 and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.1)                              # imports and set-up take < 2 s of CPU: then the search
+    proc.send_signal(signal.SIGINT)
+    t0 = time.monotonic()
+    _, err = proc.communicate(timeout=60)
+    assert time.monotonic() - t0 < 10 and proc.returncode == 130, err
+    _one_error_line(err, "SIGINT")
+    df, meta = read_result(out)
+    assert meta["status"]["state"] == "stopped" and len(df) > 10
+    _closed_form_rows(df["t"].to_numpy(), df["q0"].to_numpy(), df["u0"].to_numpy())
+
+
+_TWO_CACHED = _CACHED.replace("    print(f(3.0))", "    print(f(3.0))\n    @njit(cache=True)\n    def g(x):\n        return x - 1.0\n    print(g(3.0))")
+
+
+@pytest.mark.parametrize("where", ["no-folder-at-all", "pycache-only"])
+def test_an_unwritable_cache_folder_is_a_warning_not_a_failure(tmp_path, where):
+    """A read-only installation, made real without permissions (root ignores them): the
+    module's ``__pycache__`` is a regular file, so numba cannot create its cache beside it.
+    With NUMBA_CACHE_DIR and the user's cache folder also below a regular file, numba has no
+    folder at all (its ``RuntimeError: no locator available`` at decoration, a traceback
+    before): one CacheWarning line, the functions compiled, the right values. With the user's
+    cache folder writable, numba caches there and nothing is said."""
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    (tmp_path / "__pycache__").write_text("")       # the module's cache folder cannot exist
+    mod = tmp_path / "m.py"
+    mod.write_text(_TWO_CACHED)
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    if where == "no-folder-at-all":
+        env.update(NUMBA_CACHE_DIR=str(blocker / "cache"), XDG_CACHE_HOME=str(blocker / "xdg"),
+                   HOME=str(blocker))
+    else:
+        env.update(XDG_CACHE_HOME=str(tmp_path / "xdg"))
+    proc = subprocess.run([sys.executable, str(mod), str(ROOT)], capture_output=True, text=True,
+                          env=env, timeout=120)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stdout.splitlines()[:2] == ["7.0", "2.0"], proc.stdout
+    said = [ln for ln in proc.stderr.splitlines() if "CacheWarning" in ln]
+    if where == "no-folder-at-all":
+        assert len(said) == 1 and "no writable cache folder" in said[0] and str(mod) in said[0], proc.stderr
+    else:
+        assert said == [] and list((tmp_path / "xdg").rglob("*.nbi")), proc.stderr
+
+
+# -- item 24: a failed streamed Parquet write leaves nothing -----------------------------------
+@pytest.mark.parametrize("earlier", [False, True])
+def test_a_full_disk_during_a_streamed_parquet_run_leaves_nothing(tmp_path, capsys, monkeypatch, earlier):
+    """The second row group of a streamed Parquet run fails (ENOSPC): exit 2, one line naming
+    the file; the unreadable partial file is gone and so is its ``running`` sidecar (it
+    described nothing); an earlier whole file of that name is left as it was, with the
+    sidecar saying it is not this run's."""
+    import pyarrow.parquet as pq
+
+    from observer.io import running_path
+    out = tmp_path / "r.parquet"
+    if earlier:
+        assert main(["run", "double_mass", "--h", "1e-3", "--t-end", "0.005", "--observers", "none",
+                     "--out", str(out)]) == 0
+        before = out.read_bytes()
+    capsys.readouterr()
+    real, calls = pq.ParquetWriter.write_table, []
+
+    def full(self, table, *a, **k):
+        calls.append(1)
+        if len(calls) == 2:
+            _enospc()
+        return real(self, table, *a, **k)
+    monkeypatch.setattr(pq.ParquetWriter, "write_table", full)
+    code = main(["run", "double_mass", "--h", "1e-4", "--t-end", "2", "--observers", "none", "--out", str(out)])
+    assert code == 2 and len(calls) == 2
+    _one_error_line(capsys.readouterr().err, "r.parquet", "No space left")
+    if earlier:
+        assert out.read_bytes() == before and _leftovers(tmp_path, {"r.parquet", "r.events.parquet"}) == \
+            {running_path(out).name}
+        with pytest.raises(InputError, match="earlier one"):
+            read_result(out)
+    else:
+        assert _leftovers(tmp_path, set()) == set()

@@ -1063,3 +1063,129 @@ def test_a_hostile_sidecar_or_result_is_one_line_naming_the_file(what, tmp_path,
     assert code == 2 and err.splitlines() == [err.rstrip("\n")], err
     assert err.startswith(f"error: {name}: ") and hint in err, err
     assert not (tmp_path / "closings.csv").exists() and out == ""
+
+
+# -- issue 36, item 24: a loaded scenario edited, and sizes bounded up front -----------------------
+@pytest.mark.parametrize("name, index", [("q0", 0), ("u0", 1)])
+def test_a_loaded_scenarios_initial_state_edited_to_nan_is_refused_at_simulate_time(name, index):
+    """``sc.q0[0] = nan`` after loading (the arrays are plain numpy arrays): the run refuses
+    it naming ``initial.q`` / ``initial.u`` instead of returning a NaN first row."""
+    sc = load_scenario("double_mass", {"simulation.t_end": 0.01})
+    getattr(sc, name)[index] = np.nan
+    field_name = {"q0": "initial.q", "u0": "initial.u"}[name]
+    for integrator in ("time-stepping", "event"):
+        with pytest.raises(InputError) as exc:
+            observer.simulate(sc, integrator=integrator)
+        assert exc.value.field == field_name and "NaN" in str(exc.value)
+
+
+def test_a_loaded_scenarios_initial_state_edited_to_an_overflowing_one_is_refused():
+    sc = load_scenario("double_mass", {"simulation.t_end": 0.01})
+    sc.u0[:] = 1e200                                  # finite, but ½uᵀMu overflows
+    with pytest.raises(InputError) as exc:
+        observer.simulate(sc)
+    assert exc.value.field == "initial.u"
+
+
+HUGE_TOML = """[scenario]
+name = "huge"
+[system]
+M = {shape = [1000000000, 1000000000], offsets = [0], diagonals = [{pattern = [1.0]}], symmetric = true}
+K = {shape = [1000000000, 1000000000], offsets = [0, -1], diagonals = [{pattern = [2.0]}, {pattern = [-1.0]}], symmetric = true}
+C = {shape = [1000000000, 1000000000], offsets = [0], diagonals = [{pattern = [0.01]}], symmetric = true}
+W = {shape = [1000000000, 1], rows = [0], cols = [0], values = [1.0]}
+[system.gap]
+offset = [0.1]
+[impact]
+law = "newton"
+restitution = 0.5
+[initial]
+q = {n = 1000000000, pattern = [0.0]}
+u = {n = 1000000000, pattern = [0.0]}
+[simulation]
+t_end = 1.0
+h = 0.001
+"""
+"""A system of 10⁹ degrees of freedom in compact notation (banded tables, periodic vectors)."""
+
+
+def _memory(monkeypatch, nbytes: int) -> None:
+    """Whatever the machine: the memory the size checks see."""
+    import observer.memory as memory
+    monkeypatch.setattr(memory, "available_memory", lambda: nbytes)
+
+
+AS_LIMIT = 4 * 2 ** 30
+"""Address space of the subprocesses below (``RLIMIT_AS``): a regression allocates into a
+MemoryError there instead of into the machine's memory (the toolkit's estimate counts it)."""
+
+
+def _limited(argv: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    import resource
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_AS, (AS_LIMIT, AS_LIMIT))
+    return subprocess.run([sys.executable, "-m", "observer", *argv], capture_output=True, text=True,
+                          cwd=cwd, env={**os.environ, "PYTHONPATH": str(ROOT)}, preexec_fn=limit, timeout=120)
+
+
+def test_a_small_file_declaring_a_billion_dofs_is_refused_naming_the_matrix(tmp_path):
+    """Issue 36, item 24: under 1 KiB of TOML, 10⁹ DOF: refused before anything is expanded,
+    one line naming system.M and the memory (the address space left by a 4 GiB limit), no
+    result (it was a MemoryError reported as the --store line)."""
+    path = tmp_path / "huge.toml"
+    path.write_text(HUGE_TOML)
+    assert path.stat().st_size < 1024
+    proc = _limited(["run", str(path), "--out", str(tmp_path / "r.csv")], tmp_path)
+    err = proc.stderr
+    assert proc.returncode == 2 and err.count("\n") == 1 and err.startswith("error: system.M: "), err
+    assert "1000000000 × 1000000000" in err and "GiB are available" in err
+    assert not (tmp_path / "r.csv").exists()
+
+
+@pytest.mark.parametrize("form", ["vector", "banded", "triplet"])
+def test_a_compact_declaration_is_expanded_up_to_the_memory_available(form, monkeypatch):
+    """Near miss of the bound: with exactly the estimated bytes available the table is
+    expanded; one byte fewer and it is refused naming the field (estimates: 16 bytes per
+    vector entry; 48 per banded entry plus 8 per row pointer; 16 per row pointer and 40 per
+    triplet)."""
+    from observer.sparse import banded_matrix
+    from observer.validation import triplet_matrix
+    n = 1000
+    if form == "vector":
+        need, build = 16 * n, lambda: observer.validation.as_array("initial.q", {"n": n, "pattern": [0.5]}, (n,))
+    elif form == "banded":
+        need = 48 * (n + 2 * (n - 1)) + 8 * (n + 1)   # main diagonal + the sub-diagonal and its mirror
+        build = lambda: banded_matrix("system.K", {"shape": [n, n], "offsets": [0, -1], "symmetric": True,
+                                                   "diagonals": [{"pattern": [2.0]}, {"pattern": [-1.0]}]})
+    else:
+        need = 16 * (n + 1) + 40 * 2
+        build = lambda: triplet_matrix("system.W", {"shape": [n, 1], "rows": [0, 5], "cols": [0, 0],
+                                                    "values": [1.0, 2.0]})
+    _memory(monkeypatch, need)
+    assert build().shape[0] == n
+    _memory(monkeypatch, need - 1)
+    with pytest.raises(InputError) as exc:
+        build()
+    assert exc.value.field in ("initial.q", "system.K", "system.W") and "GiB" in str(exc.value)
+
+
+def test_an_ensemble_of_ten_million_members_is_refused_up_front(tmp_path):
+    """``ensemble --n 10000000``: one line naming n and the memory, at once (it ran for minutes
+    before running out of memory), no output."""
+    proc = _limited(["ensemble", "double_mass", "--n", "10000000", "--out", str(tmp_path / "e.parquet")],
+                    tmp_path)
+    err = proc.stderr
+    assert proc.returncode == 2 and err.count("\n") == 1 and err.startswith("error: n: 10000000 members"), err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_ensemble_memory_bound_is_sharp(monkeypatch):
+    from observer.ensemble import MEMBER_BYTES, check_member_memory
+    need = 1000 * 2 * (MEMBER_BYTES + 32 * 2)
+    _memory(monkeypatch, need)
+    check_member_memory(1000, 2, 2)
+    _memory(monkeypatch, need - 1)
+    with pytest.raises(InputError, match="1000 members") as exc:
+        check_member_memory(1000, 2, 2)
+    assert exc.value.field == "n"
