@@ -451,8 +451,7 @@ def ensemble(scenario: str | Path | Scenario, designs=("jump", "nojump"), n: int
     paths : int
         Keep V(t) of members 0..paths−1 of every design (``df.attrs["paths"]``, long format).
     workers : int, optional
-        Threads, each advancing a contiguous chunk of the members (default: the machine's
-        cores).
+        Threads, each advancing a contiguous chunk of the members (default: the machine's cores).
     out : str or Path, optional
         A ``.parquet`` file for the rows (and ``<stem>.paths.parquet`` with ``paths``).
     label : str, optional
