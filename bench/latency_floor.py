@@ -14,8 +14,8 @@ line: how well one power law describes the curve) and the members' (resampling t
 errors; narrow, since with one master the floor hardly depends on the initial error).
 
 Run ``python -m bench.latency_floor [--out FILE.json]``: it writes the member rows
-(``FILE.csv``) and the fits with the settings and metadata (``FILE.json``), by default under
-``bench/results/`` like the suites' results.
+(``FILE.csv``) and the fits with the settings and metadata (``FILE.json``), by default the
+stored result ``bench/stored/latency_floor_double_mass.{json,csv}`` that the README quotes.
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ BROKEN = 0.1
 """… and below this V/V(t_on): above it the observer no longer synchronises (no power law)."""
 CONFIDENCE = 0.95
 RESAMPLES = 2000
-OUT = Path(__file__).resolve().parent / "results" / "latency_floor.json"
+OUT = Path(__file__).resolve().parent / "stored" / "latency_floor_double_mass.json"
 
 
 def measure(latency: float, members: int = MEMBERS, h: float = H, t_end: float = T_END) -> pd.DataFrame:
