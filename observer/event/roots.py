@@ -691,6 +691,41 @@ def derivative_sign(fs: FunctionalSet, i: int, k: int, za: np.ndarray, d: float,
     return flow_sign(fs.flow.A, fs.rows[i], za, 0.0, k)
 
 
+STALLED_STATE = 4.0
+"""A positive approaching functional whose value is within this many of its certified errors
+(the float64 state's own representation of it) cannot be approached by safe steps — each
+step's state rounds back to the same value — so its zero, once certified in a bracket, is
+refined from the fixed state (:func:`_near_zero`). Not a tolerance of any decision: the zero
+is certified either way."""
+
+
+def _near_zero(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d: np.ndarray, err: np.ndarray,
+               bound: float, w: float, lower0: float) -> Zero | None:
+    """A certified first zero of ψ_i near a, refined from the fixed state za, when safe steps
+    cannot reach it (:data:`STALLED_STATE`), else None.
+
+    With ψ_i(a) > 0 certain (``lower0`` a lower bound) and ψ_i'(a) < 0 certain, the upper
+    cubic ``U(s) = (d0 + e0) + (d1 + e1)s + max(d2 + e2, 0)s²/2 + B s³/6`` bounds ψ_i(a + s)
+    above; ``U(s_c) < 0`` at ``s_c = 2(d0 + e0)/|d1 + e1|`` certifies a zero in (0, s_c), and the
+    lower cubic's first zero s_lo (:func:`first_cubic_zero`) none before it: the zero in
+    ``[s_lo, s_c]`` is refined by :func:`_refine` (Newton on the exact flow from za)."""
+    d0, d1, d2 = float(d[0, i]), float(d[1, i]), float(d[2, i])
+    e0, e1, e2 = float(err[0, i]), float(err[1, i]), float(err[2, i])
+    if not (d1 + e1 < 0.0):
+        return None
+    res = time_resolution(a)
+    s_c = 2.0 * (d0 + e0) / -(d1 + e1)
+    if not (s_c <= w and (d0 <= STALLED_STATE * e0 or s_c <= UNRESOLVED_REACH * res)):
+        return None
+    upper = (d0 + e0) + (d1 + e1) * s_c + max(d2 + e2, 0.0) * s_c * s_c / 2 + bound * s_c ** 3 / 6
+    if not upper < 0.0:
+        return None
+    s_lo = first_cubic_zero(lower0, d1 - e1, d2 - e2, bound, s_c)
+    tau = _refine(fs, i, 0, a, za, s_lo, s_c, 0.5 * (s_lo + s_c))
+    z = _reset(fs.flow, a + tau, fs.flow.expm(tau) @ za)
+    return Zero(a + tau, i, "cross", z, fs.value(i, 0, z), fs.value(i, 1, z), a + tau)
+
+
 def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, err: np.ndarray,
                bound: np.ndarray, w: float, certified: dict[int, float]) -> tuple[float, list[Zero]]:
     """Largest step from a over which no functional is certified to vanish, and the zeros
@@ -724,6 +759,10 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, err: 
         start = L0[i]
         if s0.sign == 1:
             start = max(start, s0.lower)
+            near = _near_zero(fs, i, a, za, d, err, BD[i], w, start)
+            if near is not None:
+                found.append(near)
+                continue
         else:
             s1 = derivative_sign(fs, i, 1, za, D1[i], E1[i])
             leaving = s1.sign == 1 or (s1.sign == 0 and
