@@ -28,9 +28,11 @@ PRECISION_START = 128
 """Bits of the first ball-arithmetic evaluation after float64 could not decide."""
 
 PRECISION_CAP = 4096
-"""Largest precision (bits) tried. A dot product of float64 data is exact below it (its
-products and partial sums span at most 2·1075 + 2·53 + log2(N) bits), so only a quantity of
-the flow, ``r·exp(As)z``, can stay undecided at the cap."""
+"""Largest precision (bits) tried. A dot product of float64 data is exact at it when its
+nonzero products ``r_i z_i`` span fewer than about 3990 binary orders of magnitude (each
+product has 106 bits; arb rounds a sum only beyond the working precision) — every state
+short of mixing subnormals with values near overflow — so, in practice, only a quantity of
+the flow, ``r·exp(As)z``, stays undecided at the cap."""
 
 _U = np.finfo(float).eps / 2.0
 
@@ -75,7 +77,8 @@ def dot_sign(row: np.ndarray, z: np.ndarray) -> Decision:
     Float64 first: ``|fl(r·z) − r·z| ≤ γ_N Σ|r_i z_i|`` (Higham §3.1), raised by ``1 + 2γ_N``
     to dominate the rounding of the bound, plus N·2^-1074 for underflow; decided when 0 lies
     outside ``fl(r·z) ± bound``. Else :func:`arb_dot` at doubling precision (exact for
-    float64 data below :data:`PRECISION_CAP`: a zero is then certain)."""
+    float64 data at :data:`PRECISION_CAP` but for extreme exponent ranges: a zero ball of
+    radius 0 is then a certain zero)."""
     r = np.asarray(row, dtype=float).ravel()
     v = np.asarray(z, dtype=float).ravel()
     N = r.size

@@ -134,8 +134,10 @@ class Flow:
     force_rows : ndarray, shape (len(active), N)
         ``λ_I = force_rows @ z`` (zero rows for the free flow).
     time_scale : float
-        The system's own time scale τ (:func:`_time_scale`): tolerances are relative to the
-        motion over τ.
+        The time scale τ (:func:`_time_scale`) of the part of the system the gaps see
+        (:meth:`_coupled_scale`: a mode no contact is coupled to sets none): the event loop's
+        contact tolerances in :mod:`observer.event.master` and the touch band are relative to
+        the motion over τ; the root search's sign decisions use no τ (issue 34).
     intrinsic : bool
         Whether the system has a time scale of its own (a natural frequency, a damping rate or
         a harmonic frequency); if not, ``time_scale`` is the flow's window, which is not

@@ -12,25 +12,38 @@ so the cubic ``L_i(s) = ψ_i(a) + ψ_i'(a)s + ψ_i''(a)s²/2 − B_i s³/6`` is 
 positive zero of ``min_i L_i`` can never step over a zero of any ψ_i: a transversal zero
 is approached monotonically from the safe side, at the rate of Newton's method.
 
+The window, B_i and the growth factors are those of the block of A the functionals depend
+on (the closure S of their support under the sparsity of A, :meth:`FunctionalSet._coupled`):
+a mode no functional sees (an unconnected spring of any frequency) changes none of them.
+
+Every sign decision is three-valued (issue 34, :mod:`observer.event.enclosures`): ψ_i(a),
+ψ_i'(a), ψ_i''(a) certainly positive, certainly negative, exactly zero or undecided, from
+the float64 value and its certified error (:meth:`FunctionalSet.errors`) and, where that
+cannot decide, from the same data in ball arithmetic. A functional not certainly positive
+at a is at a zero unless it is leaving (ψ' > 0, or ψ' = 0 exactly and ψ'' > 0); no
+tolerance widens "zero". A certainly positive, approaching functional that safe steps cannot
+approach (its value within :data:`STALLED_STATE` certified errors: the float state rounds
+back to it) has its zero certified in a bracket and refined from the fixed state.
+
 A double root (grazing: ψ_i touches zero with ψ_i' = 0) cannot be certified either way in
 floating point; when the minimum of ψ_i lies in a window on which ψ_i'' > 0 is certified
 (``ψ_i''(a) − B_i s > 0``), ψ_i has exactly one local minimum t_m there, found as the
 simple zero of ψ_i'. A certified enclosure ``[lower, upper]`` of its value (a Taylor model
-with Lagrange remainder, :meth:`FunctionalSet.enclose`, :func:`minimum_enclosure`) decides
-against the touch band δ of ψ_i (:func:`touch_band`, on the scale of the motion):
-``lower > δ``, the whole convex window is certified positive; ``upper < −δ``, a **cross**
-before t_m, isolated by the bracket ``[a, t_m]``; otherwise a **touch** (graze) at t_m. The
-guaranteed crossing depth is δ* = δ + (upper − lower): a deeper minimum is always a cross.
+with Lagrange remainder and the curvature bound, :func:`minimum_decision`; ball arithmetic
+where float64 cannot place it) decides against the touch band δ of ψ_i (:func:`graze_band`,
+the stated band of a graze): ``lower > δ``, the whole convex window is certified positive;
+``upper < −δ``, a **cross** before t_m, isolated by the bracket ``[a, t_m]``; otherwise a
+**touch** (graze) at t_m. The guaranteed crossing depth is δ* = δ + (upper − lower): a
+deeper minimum is always a cross.
 
 Zeros are refined by safeguarded Newton steps (bisection when a step leaves the bracket)
-until the step is below the time resolution :data:`TIME_RTOL`·max(|t|, τ).
+until the step is below the time resolution :func:`time_resolution` (two ulp of t, no time
+scale). A search interval no longer than it is integrated as flow and not searched; zeros
+closer than it are taken by their time to zero (and noted when float64 cannot order them).
 
-Tolerances are the motion's (issue 19): "zero" is decided against
-:func:`motion_tolerance` (evaluation floor, the motion scale S = Σ_k |ψ^(k)| τ^k/k! over the
-system's time scale τ, and |ψ'| times the time resolution), invariant under translations of
-coordinates and time and covariant with units but for the evaluation floor Σ|r z|, which
-float64 imposes. A search interval no longer than the time resolution is integrated as flow
-and not searched; zeros closer than it are taken by their time to zero and noted.
+:func:`motion_tolerance` and :func:`resolution` (on the motion's time scale τ) remain for
+the event loop's contact decisions in :mod:`observer.event.master` and
+:mod:`observer.event.tails`, not for the search.
 """
 
 from __future__ import annotations
@@ -554,8 +567,8 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
 
     The decision is three-valued on a certified enclosure ``[lower, upper]`` of the minimum
     m of the exact flow from ``za`` (:func:`minimum_decision`: float64 first, ball arithmetic
-    where float64 cannot decide) against the touch band δ of ψ_i (:func:`graze_band`, what
-    the gap's float64 representation cannot tell from zero): ``lower > δ`` a miss,
+    where float64 cannot decide) against the touch band δ of ψ_i (:func:`graze_band`):
+    ``lower > δ`` a miss,
     ``upper < −δ`` a crossing, anything else a touch whose row states ``m* = ψ_i(t_m)``, δ
     and the enclosure. So a minimum deeper than ``δ* = δ + (upper − lower)`` is always a
     crossing.
@@ -587,10 +600,12 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
 
 
 def graze_band(fs: FunctionalSet, i: int, z: np.ndarray) -> float:
-    """Touch band of functional i at the state z: :data:`FLOOR_FACTOR` times its
-    representation floor ``ROUNDOFF·Σ_j |r_ij z_j|`` (what float64 cannot tell from zero in
-    these coordinates). No time scale of the system enters it (issue 34)."""
-    return FLOOR_FACTOR * ROUNDOFF * float(fs.abs_d[0][i] @ np.abs(z))
+    """Touch band of functional i at its minimum state z: :func:`touch_band` with the
+    functional set's time scale (the run's τ, of the part of the system the contacts see,
+    :meth:`observer.event.flow.Flow._coupled_scale`) and the representation floor
+    ``ROUNDOFF·Σ_j |r_ij z_j|``: the stated band of a graze (README)."""
+    floor = ROUNDOFF * float(fs.abs_d[0][i] @ np.abs(z))
+    return float(touch_band(fs.value(i, 2, z), fs.value(i, 3, z), floor, fs.tau))
 
 
 def minimum_decision(fs: FunctionalSet, i: int, za: np.ndarray, tau_m: float, span: float,
