@@ -220,27 +220,6 @@ def motion_scale(derivs, tau: float) -> np.ndarray:
     return out
 
 
-def _scale_coefficients(tau: float) -> tuple[float, ...]:
-    """The weights ``τ^k/k!``, k = 0..3, of :func:`motion_scale`, computed as it does."""
-    out, fac, tk = [1.0], 1.0, 1.0
-    for k in range(1, 4):
-        fac *= k
-        tk *= tau
-        out.append(tk / fac)
-    return tuple(out)
-
-
-def _motion_scales(ad: np.ndarray, coefs) -> np.ndarray:
-    """:func:`motion_scale` of ``(ψ, ψ′, ψ″, ψ‴)``, of ``(ψ′, ψ″, ψ‴)`` and of ``(ψ″, ψ‴)`` at
-    once, shape (3, p), from ``ad = |(ψ, ψ′, ψ″, ψ‴)|`` (shape (4, p)) and the weights
-    ``coefs`` (:func:`_scale_coefficients`): the same sums in the same order, vectorised."""
-    out = ad[:3].copy()                              # 0 + |ψ^(k)|·1, exactly
-    out += ad[1:] * coefs[1]
-    out[:2] += ad[2:] * coefs[2]
-    out[:1] += ad[3:] * coefs[3]
-    return out
-
-
 def motion_tolerance(rows: np.ndarray, A: np.ndarray, z: np.ndarray, tau: float, t: float
                      ) -> np.ndarray:
     """Zero tolerance of the functionals ``rows @ z`` of a flow with generator A at time t:
