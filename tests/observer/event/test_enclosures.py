@@ -155,3 +155,15 @@ def test_spectator_modes_do_not_move_the_contacts_events(p, spectators):
     assert rows_s == rows
     assert np.all(np.abs(times_s - times) <= RESOLUTION)
     assert np.allclose(q_s, q, rtol=0, atol=1e-12)
+
+
+def test_an_exact_zero_of_a_flow_that_balls_cannot_prove_is_reported_undecided_at_the_cap():
+    """``e^{s} − e^{s}`` (r = (1, 1), z = (1, −1), A = I): exactly 0, but each exponential is a
+    ball of nonzero radius, so no precision decides; the decision says so at the cap, with an
+    enclosure of 0 — and an exact zero the balls can prove (s = 0: exp(0) = I) is a certain 0."""
+    A = np.eye(2)
+    d = flow_sign(A, [1.0, 1.0], [1.0, -1.0], 0.5)
+    assert d.sign is None and d.bits == PRECISION_CAP and d.lower <= 0.0 <= d.upper
+    assert d.note.startswith("undecided") and f"{PRECISION_CAP} bits" in d.note
+    assert flow_sign(A, [1.0, 1.0], [1.0, -1.0], 0.0).sign == 0
+    assert flow_sign(A, [1.0, 1.0], [1.0, -1.0 + 2.0 ** -52], 0.5).sign == 1
