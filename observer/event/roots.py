@@ -56,7 +56,7 @@ import numpy as np
 from numba import njit
 
 from observer.event.enclosures import PRECISION_CAP, PRECISION_START, coupled, dot_sign, flow_value
-from observer.event.flow import Flow, balance, exp_upper, norm_upper, spectral_norm_upper, up
+from observer.event.flow import Flow, exp_upper, norm_upper, spectral_norm_upper, up
 
 WINDOW = 0.5
 """Window length in units of ``1/‖T⁻¹AT‖``: the growth factor of z over a window is ≤ e^0.5."""
