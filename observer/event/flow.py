@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
+from functools import cached_property
 
 import flint
 import numpy as np
@@ -133,8 +134,10 @@ class Flow:
     force_rows : ndarray, shape (len(active), N)
         ``λ_I = force_rows @ z`` (zero rows for the free flow).
     time_scale : float
-        The system's own time scale τ (:func:`_time_scale`): tolerances are relative to the
-        motion over τ.
+        The time scale τ (:func:`_time_scale`) of the part of the system the gaps see
+        (:meth:`_coupled_scale`: a mode no contact is coupled to sets none): the event loop's
+        contact tolerances in :mod:`observer.event.master` and the touch band are relative to
+        the motion over τ; the root search's sign decisions use no τ (issue 34).
     intrinsic : bool
         Whether the system has a time scale of its own (a natural frequency, a damping rate or
         a harmonic frequency); if not, ``time_scale`` is the flow's window, which is not
@@ -203,12 +206,51 @@ class Flow:
         self.scale, self._balanced = balance(A, cancelled)
         self.norm_bound = float(np.linalg.norm(self._balanced, 2))
         free = None if not self.active else flow_for(system, ())
-        self.time_scale, self.intrinsic = ((_time_scale(system, self.freqs, self.norm_bound),
-                                            _has_rates(system, self.freqs)) if free is None
+        self.time_scale, self.intrinsic = (self._coupled_scale() if free is None
                                            else (free.time_scale, free.intrinsic))  # one τ for all
         self._expm_cache: OrderedDict = OrderedDict()
         self._phi_cache: OrderedDict = OrderedDict()
         self._certified_norm: float | None = None
+
+    def _coupled_scale(self) -> tuple[float, bool]:
+        """``(time_scale, intrinsic)`` of the part of the system the gaps see: the closure of
+        the gap rows' support under the sparsity of A (:func:`observer.event.enclosures.coupled`),
+        whose DOFs D and harmonic frequencies alone enter :func:`_time_scale` (``M⁻¹K`` and
+        ``M⁻¹C`` restricted to D: the closure makes their coupling to the rest zero). A mode
+        no contact sees (an unconnected spring) sets no scale of the run (issue 34)."""
+        from observer.event.enclosures import coupled
+
+        n = self.n
+        mask = coupled(self.A, np.any(self.gap_rows != 0.0, axis=0))
+        dofs = np.flatnonzero(mask[:n] | mask[n:2 * n])
+        freqs = [w for k, w in enumerate(self.freqs)
+                 if mask[2 * n + 2 * k] or mask[2 * n + 2 * k + 1]]
+        if mask.all():
+            dofs = np.arange(n)
+        S = np.flatnonzero(mask)
+        norm = float(np.linalg.norm(self._balanced[np.ix_(S, S)], 2)) if S.size else 0.0
+        return (_time_scale(self.system, freqs, norm, dofs),
+                _has_rates(self.system, freqs, dofs))
+
+    @cached_property
+    def blocks(self) -> list[np.ndarray]:
+        """Index sets of the connected components of the sparsity graph of A (A_ij ≠ 0 joins
+        i and j): A is block diagonal over them, and so is exp(A dt). One block (all
+        indices) for a system whose parts are all coupled."""
+        nz = (self.A != 0.0) | (self.A != 0.0).T
+        left = set(range(self.N))
+        out = []
+        while left:
+            todo, comp = [min(left)], set()
+            while todo:
+                i = todo.pop()
+                if i in comp:
+                    continue
+                comp.add(i)
+                todo.extend(int(j) for j in np.flatnonzero(nz[i]) if j not in comp)
+            left -= comp
+            out.append(np.array(sorted(comp)))
+        return out if len(out) > 1 else [np.arange(self.N)]
 
     @property
     def certified_norm(self) -> float:
@@ -244,8 +286,14 @@ class Flow:
         if hit is None and dt == 0.0:
             return np.eye(self.N)                 # exactly (the Padé quotient is 1 − eps/2)
         if hit is None:
-            # balanced: exp(A dt) = T exp(B dt) T⁻¹, B = T⁻¹AT of smaller norm
-            hit = expm_pade13(self._balanced * dt) * self.scale[:, None] / self.scale[None, :]
+            # balanced: exp(A dt) = T exp(B dt) T⁻¹, B = T⁻¹AT of smaller norm; per block of
+            # the sparsity of A (:attr:`blocks`: a mode coupled to nothing is exponentiated
+            # alone, so its frequency sets no scaling of the others)
+            hit = np.zeros((self.N, self.N))
+            for b in self.blocks:
+                sub = np.ix_(b, b)
+                hit[sub] = expm_pade13(self._balanced[sub] * dt)
+            hit *= self.scale[:, None] / self.scale[None, :]
             self._expm_cache[dt] = hit
             if len(self._expm_cache) > 8:
                 self._expm_cache.popitem(last=False)
@@ -440,7 +488,8 @@ def spectral_norm_upper(A: np.ndarray, scale: np.ndarray) -> float:
     return up(math.sqrt(max(top, 0.0)), 1)
 
 
-def _time_scale(system: LinearSystem, freqs: list[float], norm_bound: float) -> float:
+def _time_scale(system: LinearSystem, freqs: list[float], norm_bound: float,
+                dofs: np.ndarray | None = None) -> float:
     """The system's own time scale τ = 1/ω_max, for the tolerances of
     :mod:`observer.event.roots` (a property of the motion, not of the coordinates).
 
@@ -453,8 +502,10 @@ def _time_scale(system: LinearSystem, freqs: list[float], norm_bound: float) -> 
     leave A unchanged when K = 0).
     """
     Minv = np.linalg.inv(system.M)
+    D = np.arange(system.n) if dofs is None else np.asarray(dofs, dtype=int)
     rates = [0.0]
     for mat, root in ((Minv @ system.K, True), (Minv @ system.C, False)):
+        mat = mat[np.ix_(D, D)]
         if np.any(mat):
             ev = np.abs(np.linalg.eigvals(mat))
             rates.append(float(np.max(np.sqrt(ev) if root else ev)))
@@ -465,9 +516,12 @@ def _time_scale(system: LinearSystem, freqs: list[float], norm_bound: float) -> 
     return 0.5 / max(norm_bound, 1e-300)
 
 
-def _has_rates(system: LinearSystem, freqs: list[float]) -> bool:
-    """True if K, C or a harmonic term gives the system a time scale of its own."""
-    return bool(np.any(system.K) or np.any(system.C) or freqs)
+def _has_rates(system: LinearSystem, freqs: list[float], dofs: np.ndarray | None = None) -> bool:
+    """True if K, C (on the DOFs ``dofs``, default all) or a harmonic term gives the system a
+    time scale of its own."""
+    D = np.arange(system.n) if dofs is None else np.asarray(dofs, dtype=int)
+    sub = np.ix_(D, D)
+    return bool(np.any(system.K[sub]) or np.any(system.C[sub]) or freqs)
 
 
 _FLOWS: dict = {}

@@ -67,6 +67,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from observer.contact import get_solver
+from observer.event.enclosures import dot_sign
 from observer.event.flow import Flow, flow_for
 from observer.event.roots import (FLOOR_FACTOR, ROUNDOFF, NonFiniteFlow, RootIsolationError,
                                   SearchStopped, first_zero, motion_tolerance, resolution, tolerance)
@@ -1039,21 +1040,19 @@ def motion_time_scale(flow: Flow, t0: float, x: np.ndarray) -> float:
 def _initial_contacts(run: _Run, x: np.ndarray):
     """Closed contacts at t0: an impact if approaching, persistent contact if the force is positive.
 
-    A contact is closed at t0 when its gap is below CONTACT_TOL round-offs of the motion
-    (:func:`observer.event.roots.motion_tolerance` without its floor: a property of the
-    motion, the same in any units and at any translation) plus FLOOR_FACTOR round-offs of
-    the gap's representation ``ROUNDOFF·Σ|r_j z_j|`` (what float64 cannot resolve, as in
-    the touch band), a penetration accepted by the scenario
-    (:data:`observer.scenario.INITIAL_GAP_TOL`) included, and its velocity is not leaving."""
+    Three-valued decisions on the exact gap and velocity of the initial state
+    (:func:`observer.event.enclosures.dot_sign`: float64 with its certified error, ball
+    arithmetic where it cannot decide): a contact is closed at t0 when its gap is not
+    certainly positive (zero, or a penetration accepted by the scenario,
+    :data:`observer.scenario.INITIAL_GAP_TOL`) and its velocity is not certainly leaving. No
+    scale of the motion enters: a ball 1 m above the ground is open whatever else the system
+    holds (issue 34)."""
     fl = run.free_flow
     t0 = run.t0
     z = fl.z(t0, x)
     g = fl.gap_rows @ z
-    gam = fl.velocity_rows @ z
-    floor = tolerance(fl.gap_rows, z)                  # the gap's representation floor
-    tol_g = CONTACT_TOL * (run.tol(fl.gap_rows, z, t0) - floor) + FLOOR_FACTOR * floor
-    tol_v = CONTACT_TOL * run.tol(fl.velocity_rows, z, t0)
-    closed = {j for j in range(run.m) if g[j] <= tol_g[j] and gam[j] <= tol_v[j]}
+    closed = {j for j in range(run.m) if dot_sign(fl.gap_rows[j], z).sign != 1
+              and dot_sign(fl.velocity_rows[j], z).sign != 1}
     if not closed:
         return x, ()
     qfix = x.copy()

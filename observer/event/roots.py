@@ -12,25 +12,38 @@ so the cubic ``L_i(s) = ψ_i(a) + ψ_i'(a)s + ψ_i''(a)s²/2 − B_i s³/6`` is 
 positive zero of ``min_i L_i`` can never step over a zero of any ψ_i: a transversal zero
 is approached monotonically from the safe side, at the rate of Newton's method.
 
+The window, B_i and the growth factors are those of the block of A the functionals depend
+on (the closure S of their support under the sparsity of A, :meth:`FunctionalSet._coupled`):
+a mode no functional sees (an unconnected spring of any frequency) changes none of them.
+
+Every sign decision is three-valued (issue 34, :mod:`observer.event.enclosures`): ψ_i(a),
+ψ_i'(a), ψ_i''(a) certainly positive, certainly negative, exactly zero or undecided, from
+the float64 value and its certified error (:meth:`FunctionalSet.errors`) and, where that
+cannot decide, from the same data in ball arithmetic. A functional not certainly positive
+at a is at a zero unless it is leaving (ψ' > 0, or ψ' = 0 exactly and ψ'' > 0); no
+tolerance widens "zero". A certainly positive, approaching functional that safe steps cannot
+approach (its value within :data:`STALLED_STATE` certified errors: the float state rounds
+back to it) has its zero certified in a bracket and refined from the fixed state.
+
 A double root (grazing: ψ_i touches zero with ψ_i' = 0) cannot be certified either way in
 floating point; when the minimum of ψ_i lies in a window on which ψ_i'' > 0 is certified
 (``ψ_i''(a) − B_i s > 0``), ψ_i has exactly one local minimum t_m there, found as the
 simple zero of ψ_i'. A certified enclosure ``[lower, upper]`` of its value (a Taylor model
-with Lagrange remainder, :meth:`FunctionalSet.enclose`, :func:`minimum_enclosure`) decides
-against the touch band δ of ψ_i (:func:`touch_band`, on the scale of the motion):
-``lower > δ``, the whole convex window is certified positive; ``upper < −δ``, a **cross**
-before t_m, isolated by the bracket ``[a, t_m]``; otherwise a **touch** (graze) at t_m. The
-guaranteed crossing depth is δ* = δ + (upper − lower): a deeper minimum is always a cross.
+with Lagrange remainder and the curvature bound, :func:`minimum_decision`; ball arithmetic
+where float64 cannot place it) decides against the touch band δ of ψ_i (:func:`graze_band`,
+the stated band of a graze): ``lower > δ``, the whole convex window is certified positive;
+``upper < −δ``, a **cross** before t_m, isolated by the bracket ``[a, t_m]``; otherwise a
+**touch** (graze) at t_m. The guaranteed crossing depth is δ* = δ + (upper − lower): a
+deeper minimum is always a cross.
 
 Zeros are refined by safeguarded Newton steps (bisection when a step leaves the bracket)
-until the step is below the time resolution :data:`TIME_RTOL`·max(|t|, τ).
+until the step is below the time resolution :func:`time_resolution` (two ulp of t, no time
+scale). A search interval no longer than it is integrated as flow and not searched; zeros
+closer than it are taken by their time to zero (and noted when float64 cannot order them).
 
-Tolerances are the motion's (issue 19): "zero" is decided against
-:func:`motion_tolerance` (evaluation floor, the motion scale S = Σ_k |ψ^(k)| τ^k/k! over the
-system's time scale τ, and |ψ'| times the time resolution), invariant under translations of
-coordinates and time and covariant with units but for the evaluation floor Σ|r z|, which
-float64 imposes. A search interval no longer than the time resolution is integrated as flow
-and not searched; zeros closer than it are taken by their time to zero and noted.
+:func:`motion_tolerance` and :func:`resolution` (on the motion's time scale τ) remain for
+the event loop's contact decisions in :mod:`observer.event.master` and
+:mod:`observer.event.tails`, not for the search.
 """
 
 from __future__ import annotations
@@ -42,7 +55,8 @@ import numpy as np
 
 from numba import njit
 
-from observer.event.flow import Flow, exp_upper, norm_upper, up
+from observer.event.enclosures import PRECISION_CAP, PRECISION_START, coupled, dot_sign, flow_value
+from observer.event.flow import Flow, exp_upper, norm_upper, spectral_norm_upper, up
 
 WINDOW = 0.5
 """Window length in units of ``1/‖T⁻¹AT‖``: the growth factor of z over a window is ≤ e^0.5."""
@@ -226,27 +240,6 @@ def motion_scale(derivs, tau: float) -> np.ndarray:
     return out
 
 
-def _scale_coefficients(tau: float) -> tuple[float, ...]:
-    """The weights ``τ^k/k!``, k = 0..3, of :func:`motion_scale`, computed as it does."""
-    out, fac, tk = [1.0], 1.0, 1.0
-    for k in range(1, 4):
-        fac *= k
-        tk *= tau
-        out.append(tk / fac)
-    return tuple(out)
-
-
-def _motion_scales(ad: np.ndarray, coefs) -> np.ndarray:
-    """:func:`motion_scale` of ``(ψ, ψ′, ψ″, ψ‴)``, of ``(ψ′, ψ″, ψ‴)`` and of ``(ψ″, ψ‴)`` at
-    once, shape (3, p), from ``ad = |(ψ, ψ′, ψ″, ψ‴)|`` (shape (4, p)) and the weights
-    ``coefs`` (:func:`_scale_coefficients`): the same sums in the same order, vectorised."""
-    out = ad[:3].copy()                              # 0 + |ψ^(k)|·1, exactly
-    out += ad[1:] * coefs[1]
-    out[:2] += ad[2:] * coefs[2]
-    out[:1] += ad[3:] * coefs[3]
-    return out
-
-
 def motion_tolerance(rows: np.ndarray, A: np.ndarray, z: np.ndarray, tau: float, t: float
                      ) -> np.ndarray:
     """Zero tolerance of the functionals ``rows @ z`` of a flow with generator A at time t:
@@ -382,6 +375,7 @@ class FunctionalSet:
         self._absA = np.abs(flow.A)
         self.d = [self.rows]
         self.err = [np.zeros_like(self.rows)]
+        self._coupled(flow)
         self._extend(3)
         third = (np.abs(self.d[3]) + self.err[3]) * flow.scale   # ≥ |r_3 T| entrywise
         self.third_norm = np.array([_row_norm(r) for r in third])
@@ -392,6 +386,43 @@ class FunctionalSet:
         # ``vstack`` is not: BLAS blocks the rows differently)
         self._d4 = np.stack(self.d[:4])
         self._abs_rows = np.stack(self.abs_d + [self._ecoef(k) for k in range(3)])
+
+    def _coupled(self, flow: Flow) -> None:
+        """The block of the flow the functionals depend on (:func:`observer.event.enclosures.coupled`:
+        the closure S of their support under the sparsity of A, so that ``A[S, S^c] = 0`` and
+        ``r A^k exp(As) z = r_S A_SS^k exp(A_SS s) z_S`` exactly), and its norms: the window
+        ``WINDOW/norm_bound`` and the growth factors of the certified bounds are those of the
+        block, not of modes the functionals do not see (an unconnected spring of 1e6 rad/s
+        must not shrink the windows of a ball's gap). ``support``: indices of S;
+        ``norm_bound``: ``‖T_S⁻¹A_SS T_S‖₂`` (float64); :attr:`certified_norm`: a proved
+        upper bound of it, cached per flow and block."""
+        mask = coupled(flow.A, np.any(self.rows != 0.0, axis=0))
+        self.support = np.flatnonzero(mask)
+        self._full = bool(mask.all())
+        if self._full:
+            self.norm_bound = flow.norm_bound
+        else:
+            S = self.support
+            self.norm_bound = float(np.linalg.norm(flow._balanced[np.ix_(S, S)], 2))
+
+    @property
+    def certified_norm(self) -> float:
+        """A proved upper bound of ``‖T_S⁻¹A_SS T_S‖₂`` (:func:`~observer.event.flow.spectral_norm_upper`
+        on the coupled block; the flow's own when the block is everything)."""
+        if self._full:
+            return self.flow.certified_norm
+        cache = self.flow.__dict__.setdefault("_block_norms", {})
+        key = self.support.tobytes()
+        hit = cache.get(key)
+        if hit is None:
+            S = self.support
+            hit = cache[key] = spectral_norm_upper(self.flow.A[np.ix_(S, S)], self.flow.scale[S])
+        return hit
+
+    def state_norm(self, z: np.ndarray) -> float:
+        """Proved upper bound of ``‖(T⁻¹z)_S‖₂`` (the coupled block's part of the state)."""
+        sc = self.flow.scale
+        return norm_upper(z / sc if self._full else z[self.support] / sc[self.support])
 
     def _ecoef(self, k: int) -> np.ndarray:
         """Rows ``err_k + γ_N |r̂_k|`` of the certified error of ``r̂_k·z`` (:meth:`errors`)."""
@@ -455,8 +486,8 @@ class FunctionalSet:
         term *= s / K                  # s^K/K! to (1 + u)^{2K}: raised by (1 + (2K + 1)u)
         term = up(term * (1.0 + (2 * K + 1) * _U))
         rest = np.abs(self.d[K + j][i]) + self.err[K + j][i]
-        growth = exp_upper(up(flow.certified_norm * s * (1.0 + 2.0 * _U)))
-        remainder = up(_row_norm(rest * flow.scale) * growth * norm_upper(z / flow.scale)
+        growth = exp_upper(up(self.certified_norm * s * (1.0 + 2.0 * _U)))
+        remainder = up(_row_norm(rest * flow.scale) * growth * self.state_norm(z)
                        * term * (1.0 + 5.0 * _U))
         u = np.finfo(float).eps / 2.0
         g3k = 3.0 * K * u / (1.0 - 3.0 * K * u)
@@ -487,11 +518,18 @@ def functional_set(flow: Flow, rows: np.ndarray, tau: float) -> FunctionalSet:
     return hit
 
 
+def time_resolution(t: float) -> float:
+    """Time resolution of the search at t: ``TIME_RTOL·|t|`` (two ulp of t; the smallest
+    normal float at t = 0): a time step below it does not move t. No time scale of the
+    system enters (issue 34): a slow mode anywhere does not coarsen it."""
+    return TIME_RTOL * max(abs(float(t)), np.finfo(float).tiny)
+
+
 def _refine(fs: FunctionalSet, i: int, k: int, a: float, za: np.ndarray, lo: float, hi: float,
             tau: float) -> float:
     """Zero of the k-th derivative of ψ_i on the bracket ``[lo, hi]`` (offsets from a), where
     ``ψ_i^{(k)}(lo) ≥ 0 ≥ ψ_i^{(k)}(hi)`` or the reverse; safeguarded Newton from ``tau``,
-    stopped at the time resolution (:func:`resolution`)."""
+    stopped at the time resolution (:func:`time_resolution`)."""
     flow = fs.flow
     f_lo = fs.value(i, k, flow.expm(lo) @ za) if lo > 0 else fs.value(i, k, za)
     sign_lo = np.sign(f_lo)
@@ -511,7 +549,7 @@ def _refine(fs: FunctionalSet, i: int, k: int, a: float, za: np.ndarray, lo: flo
             new = 0.5 * (lo + hi)
             step = new - tau
         tau = new
-        res = resolution(a + tau, fs.tau)
+        res = time_resolution(a + tau)
         if abs(step) <= res or hi - lo <= res:
             return tau
     return tau
@@ -522,14 +560,17 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
     """Analyse functional i on a window where its minimum is near (d1 < 0 < d2).
 
     Returns ``None`` when convexity cannot be certified on ``[a, a + 2s_m]`` (s_m = −d1/d2,
-    within ``width``; ``d2 − e2 − bound·2s_m > 0``, e2 the certified error of d2), else
-    ``("positive", certified_until)``, ``("touch", Zero)`` or ``("cross", Zero)``.
+    within ``width``; ``curv = d2 − e2 − bound·2s_m > 0`` bounds ψ_i'' below on the span, e2
+    the certified error of d2), else ``("positive", certified_until)``, ``("touch", Zero)``
+    or ``("cross", Zero)``.
 
-    The decision is certified (:func:`minimum_enclosure`): the minimum m of the exact flow
-    from ``za`` over the window lies in ``[lower, upper]``; ``lower >`` the touch band
-    (:func:`touch_band`) is a miss, ``upper < −band`` a crossing, anything else a touch
-    whose row states ``m* = ψ_i(t_m)``, the band and the enclosure. So a minimum deeper than
-    the guaranteed crossing depth ``δ* = band + (upper − lower)`` is always a crossing.
+    The decision is three-valued on a certified enclosure ``[lower, upper]`` of the minimum
+    m of the exact flow from ``za`` (:func:`minimum_decision`: float64 first, ball arithmetic
+    where float64 cannot decide) against the touch band δ of ψ_i (:func:`graze_band`):
+    ``lower > δ`` a miss,
+    ``upper < −δ`` a crossing, anything else a touch whose row states ``m* = ψ_i(t_m)``, δ
+    and the enclosure. So a minimum deeper than ``δ* = δ + (upper − lower)`` is always a
+    crossing.
     """
     s_m = -d1 / d2
     span = 2.0 * s_m
@@ -540,9 +581,8 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
     tau_m = _refine(fs, i, 1, a, za, 0.0, span, s_m)
     z_m = flow.expm(tau_m) @ za
     m_star = fs.value(i, 0, z_m)
-    floor = ROUNDOFF * float(fs.abs_d[0][i] @ np.abs(z_m))
-    touch = float(touch_band(fs.value(i, 2, z_m), fs.value(i, 3, z_m), floor, fs.tau))
-    lower, upper = minimum_enclosure(fs, i, za, tau_m, span)
+    touch = graze_band(fs, i, z_m)
+    lower, upper, note = minimum_decision(fs, i, za, tau_m, span, curv, touch)
     if lower > touch:
         return "positive", a + span
     t_m = a + tau_m
@@ -551,10 +591,68 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
         # ψ ≥ lower + (curv/2)(t − t_m)² on the span: above 2·touch after resume (≤ the span)
         resume = t_m + np.sqrt(max(2.0 * (2.0 * touch - lower), 0.0) / curv)
         return "touch", Zero(t_m, i, "touch", z_m, m_star, fs.value(i, 1, z_m),
-                             float(min(resume, a + span)), band=touch, enclosure=(lower, upper))
+                             float(min(resume, a + span)), band=touch, enclosure=(lower, upper),
+                             note=note)
     tau = _refine(fs, i, 0, a, za, 0.0, tau_m, 0.5 * tau_m) if d0 > 0.0 else 0.0
     z = _reset(flow, a + tau, flow.expm(tau) @ za)
     return "cross", Zero(a + tau, i, "cross", z, fs.value(i, 0, z), fs.value(i, 1, z), a + tau)
+
+
+def graze_band(fs: FunctionalSet, i: int, z: np.ndarray) -> float:
+    """Touch band of functional i at its minimum state z: :func:`touch_band` with the
+    functional set's time scale (the run's τ, of the part of the system the contacts see,
+    :meth:`observer.event.flow.Flow._coupled_scale`) and the representation floor
+    ``ROUNDOFF·Σ_j |r_ij z_j|``: the stated band of a graze (README)."""
+    floor = ROUNDOFF * float(fs.abs_d[0][i] @ np.abs(z))
+    return float(touch_band(fs.value(i, 2, z), fs.value(i, 3, z), floor, fs.tau))
+
+
+def minimum_decision(fs: FunctionalSet, i: int, za: np.ndarray, tau_m: float, span: float,
+                     curv: float, band: float) -> tuple[float, float, str]:
+    """Certified enclosure ``[lower, upper]`` of ``min ψ_i`` over ``[a, a + span]`` for the
+    exact flow from ``za`` at a, where ``ψ_i'' ≥ curv > 0`` is certified, tight enough to
+    place the minimum against ``±band`` (three-valued: above, below, or within).
+
+    ``upper`` bounds ψ_i(a + tau_m) from above; convexity with the curvature bound gives
+    ``ψ_i(a + s) ≥ ψ_i(a + tau_m) + ψ_i'(a + tau_m)(s − tau_m) + curv (s − tau_m)²/2 ≥
+    ψ_i(a + tau_m) − ψ_i'(a + tau_m)²/(2 curv)`` (``lower``). Float64 first
+    (:meth:`FunctionalSet.enclose`); where the enclosure meets ±band, ψ_i and ψ_i' at
+    ``a + tau_m`` are re-evaluated in ball arithmetic (:func:`observer.event.enclosures.flow_value`)
+    from :data:`~observer.event.enclosures.PRECISION_START` bits, doubled while the
+    enclosure narrows, up to the cap. The note is empty when decided, else it states the
+    enclosure and the precision reached."""
+    lo0, hi0 = fs.enclose(i, 0, za, tau_m)
+    lo1, hi1 = fs.enclose(i, 1, za, tau_m)
+    lower, upper = _convex_bounds(lo0, hi0, lo1, hi1, curv)
+    if lower > band or upper < -band or (lower >= -band and upper <= band):
+        return lower, upper, ""
+    import flint
+
+    A, r = fs.flow.A, fs.rows[i]
+    bits, width = PRECISION_START, upper - lower
+    while bits <= PRECISION_CAP:
+        with flint.ctx.workprec(bits):
+            v0, v1 = flow_value(A, r, za, tau_m, 0), flow_value(A, r, za, tau_m, 1)
+            b = [float(np.nextafter(float(x), w)) for x, w in
+                 ((v0.lower(), -np.inf), (v0.upper(), np.inf), (v1.lower(), -np.inf),
+                  (v1.upper(), np.inf))]
+        lo, hi = _convex_bounds(*b, curv)
+        lower, upper = max(lower, lo), min(upper, hi)
+        if lower > band or upper < -band or (lower >= -band and upper <= band):
+            return lower, upper, ""
+        if upper - lower >= 0.5 * width:          # no longer narrowing: the time resolution
+            break
+        width, bits = upper - lower, 2 * bits
+    return lower, upper, (f"undecided: minimum in [{lower:.17g}, {upper:.17g}] at {bits} bits "
+                          f"against the band ±{band:.3g}")
+
+
+def _convex_bounds(lo0: float, hi0: float, lo1: float, hi1: float, curv: float
+                   ) -> tuple[float, float]:
+    """``(lo0 − max(|lo1|, |hi1|)²/(2 curv), hi0)`` rounded outwards (:func:`minimum_decision`)."""
+    slope = max(abs(lo1), abs(hi1))
+    drop = up(slope * slope / (2.0 * curv) * (1.0 + 4.0 * _U), 1) if slope else 0.0
+    return float(np.nextafter(lo0 - drop, -np.inf)), float(hi0)
 
 
 def minimum_enclosure(fs: FunctionalSet, i: int, za: np.ndarray, tau_m: float, span: float
@@ -563,7 +661,8 @@ def minimum_enclosure(fs: FunctionalSet, i: int, za: np.ndarray, tau_m: float, s
     exact flow from ``za`` at a, where ψ_i is certified convex, near its computed minimum
     point ``a + tau_m``: ``upper`` bounds ψ_i(a + tau_m) from above, and by convexity
     ``ψ_i(a + s) ≥ ψ_i(a + tau_m) + ψ_i'(a + tau_m)(s − tau_m)`` gives ``lower`` (both
-    from :meth:`FunctionalSet.enclose`)."""
+    from :meth:`FunctionalSet.enclose`; with a curvature bound, :func:`minimum_decision` is
+    tighter)."""
     lo0, hi0 = fs.enclose(i, 0, za, tau_m)
     lo1, hi1 = fs.enclose(i, 1, za, tau_m)
     slope = max(abs(lo1), abs(hi1))
@@ -578,61 +677,123 @@ def _reset(flow: Flow, t: float, z: np.ndarray) -> np.ndarray:
     return z
 
 
-def _zero_now(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d: np.ndarray) -> Zero:
-    """Functional i is at zero (within its tolerance) at a and not leaving: a cross at a,
-    refined to the exact zero when ψ_i(a) > 0 is still approaching."""
+def _zero_now(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d: np.ndarray,
+              note: str = "") -> Zero:
+    """Functional i is not certified positive at a and not leaving: a cross at a, refined to
+    the exact zero when ψ_i(a) > 0 is still approaching."""
     d0, d1 = d[0, i], d[1, i]
     tau = 0.0
     if d0 > 0.0 and d1 < 0.0:
         tau = _refine(fs, i, 0, a, za, 0.0, 4.0 * d0 / -d1, d0 / -d1)
     z = _reset(fs.flow, a + tau, fs.flow.expm(tau) @ za) if tau > 0.0 else za
+    return Zero(a + tau, i, "cross", z, fs.value(i, 0, z), fs.value(i, 1, z), a + tau, note=note)
+
+
+def derivative_sign(fs: FunctionalSet, i: int, k: int, za: np.ndarray, d: float, e: float):
+    """Three-valued sign of ``ψ_i^{(k)}`` at the state za (exact flow): float64 ``d ± e``
+    (e its certified error, :meth:`FunctionalSet.errors`) first, then ball arithmetic
+    (``r·A^k·z`` from the float data, :func:`observer.event.enclosures.flow_sign` at s = 0).
+    Returns the :class:`~observer.event.enclosures.Decision`."""
+    from observer.event.enclosures import Decision, flow_sign
+
+    if d - e > 0.0:
+        return Decision(1, d - e, d + e, 53)
+    if d + e < 0.0:
+        return Decision(-1, d - e, d + e, 53)
+    if k == 0:
+        return dot_sign(fs.rows[i], za)
+    return flow_sign(fs.flow.A, fs.rows[i], za, 0.0, k)
+
+
+STALLED_STATE = 4.0
+"""A positive approaching functional whose value is within this many of its certified errors
+(the float64 state's own representation of it) cannot be approached by safe steps — each
+step's state rounds back to the same value — so its zero, once certified in a bracket, is
+refined from the fixed state (:func:`_near_zero`). Not a tolerance of any decision: the zero
+is certified either way."""
+
+
+def _near_zero(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d: np.ndarray, err: np.ndarray,
+               bound: float, w: float, lower0: float) -> Zero | None:
+    """A certified first zero of ψ_i near a, refined from the fixed state za, when safe steps
+    cannot reach it (:data:`STALLED_STATE`), else None.
+
+    With ψ_i(a) > 0 certain (``lower0`` a lower bound) and ψ_i'(a) < 0 certain, the upper
+    cubic ``U(s) = (d0 + e0) + (d1 + e1)s + max(d2 + e2, 0)s²/2 + B s³/6`` bounds ψ_i(a + s)
+    above; ``U(s_c) < 0`` at ``s_c = 2(d0 + e0)/|d1 + e1|`` certifies a zero in (0, s_c), and the
+    lower cubic's first zero s_lo (:func:`first_cubic_zero`) none before it: the zero in
+    ``[s_lo, s_c]`` is refined by :func:`_refine` (Newton on the exact flow from za)."""
+    d0, d1, d2 = float(d[0, i]), float(d[1, i]), float(d[2, i])
+    e0, e1, e2 = float(err[0, i]), float(err[1, i]), float(err[2, i])
+    if not (d1 + e1 < 0.0):
+        return None
+    res = time_resolution(a)
+    s_c = 2.0 * (d0 + e0) / -(d1 + e1)
+    if not (s_c <= w and (d0 <= STALLED_STATE * e0 or s_c <= UNRESOLVED_REACH * res)):
+        return None
+    upper = (d0 + e0) + (d1 + e1) * s_c + max(d2 + e2, 0.0) * s_c * s_c / 2 + bound * s_c ** 3 / 6
+    if not upper < 0.0:
+        return None
+    s_lo = first_cubic_zero(lower0, d1 - e1, d2 - e2, bound, s_c)
+    tau = _refine(fs, i, 0, a, za, s_lo, s_c, 0.5 * (s_lo + s_c))
+    z = _reset(fs.flow, a + tau, fs.flow.expm(tau) @ za)
     return Zero(a + tau, i, "cross", z, fs.value(i, 0, z), fs.value(i, 1, z), a + tau)
 
 
-def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, tols, bound: np.ndarray,
-               w: float, certified: dict[int, float]) -> tuple[float, list[Zero]]:
+def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, err: np.ndarray,
+               bound: np.ndarray, w: float, certified: dict[int, float]) -> tuple[float, list[Zero]]:
     """Largest step from a over which no functional is certified to vanish, and the zeros
     found exactly on the way (convex minima, zeros at a). Vectorised quick test first: a
-    functional whose cubic bound stays positive on the whole window needs no more work.
-    The cubic lower bound uses the derivatives minus their certified errors ``err``
-    (:meth:`FunctionalSet.errors`), so that it bounds the exact flow from za."""
-    tol, tol1, tol2, band, err = tols
-    tol = np.maximum(tol, 2.0 * err[0])   # ψ_i > tol leaves a positive certified lower bound
+    functional whose cubic lower bound (the derivatives minus their certified errors
+    ``err``, :meth:`FunctionalSet.errors`, so that it bounds the exact flow from za) stays
+    positive on the whole window needs no more work.
+
+    Every other decision is three-valued (:func:`derivative_sign`): ψ_i(a) certainly
+    positive (its certified lower bound starts the cubic), or not — then it is at a zero
+    unless leaving (ψ_i' > 0, or ψ_i' = 0 exactly and ψ_i'' > 0); no tolerance."""
     d0, d1, d2 = d[0], d[1], d[2]
     l0, l1, l2 = d0 - err[0], d1 - err[1], d2 - err[2]   # certified lower bounds
     step = w
     found: list[Zero] = []
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s_min = np.where((d1 < 0.0) & (d2 > 0.0), -d1 / d2, np.inf)
-        near_touch = (s_min <= w) & (d0 - d1 * d1 / (2.0 * d2) <= 2.0 * band)
-    quick = (d0 > tol) & ~near_touch & (
+    quick = (l0 > 0.0) & (
         l0 + np.minimum(l1, 0.0) * w + np.minimum(l2, 0.0) * w * w / 2 - bound * w ** 3 / 6 > 0.0)
     todo = np.flatnonzero(~quick).tolist()
     if not todo:
         return step, found
     # per-functional work on Python floats (the same IEEE values; no numpy scalar dispatch)
-    D0, D1, D2, T0, T1, T2 = (v.tolist() for v in (d0, d1, d2, tol, tol1, tol2))
-    L0, L1, L2, BD, E2, NT = (v.tolist() for v in (l0, l1, l2, bound, err[2], near_touch))
+    D0, D1, D2, E0, E1, E2 = (v.tolist() for v in (d0, d1, d2, err[0], err[1], err[2]))
+    L0, L1, L2, BD = (v.tolist() for v in (l0, l1, l2, bound))
     for i in todo:
         until = certified.get(i, -np.inf)
         if until > a:
             step = min(step, until - a)
             continue
-        leaving = D1[i] > T1[i] or (abs(D1[i]) <= T1[i] and D2[i] > T2[i])
         convex = D1[i] < 0.0 < D2[i]
-        if D0[i] <= T0[i] and not leaving:
-            res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i]) \
-                if convex else None
-            if res is None:
-                found.append(_zero_now(fs, i, a, za, d))
-            elif res[0] == "positive":
-                certified[i] = res[1]
-                step = min(step, res[1] - a)
-            else:
-                found.append(res[1])
-            continue
-        s = first_cubic_zero(max(L0[i], 0.0), L1[i], L2[i], BD[i], w)
-        if (s < w or NT[i]) and convex:
+        s0 = derivative_sign(fs, i, 0, za, D0[i], E0[i])
+        start = L0[i]
+        if s0.sign == 1:
+            start = max(start, s0.lower)
+            near = _near_zero(fs, i, a, za, d, err, BD[i], w, start)
+            if near is not None:
+                found.append(near)
+                continue
+        else:
+            s1 = derivative_sign(fs, i, 1, za, D1[i], E1[i])
+            leaving = s1.sign == 1 or (s1.sign == 0 and
+                                       derivative_sign(fs, i, 2, za, D2[i], E2[i]).sign == 1)
+            if not leaving:
+                res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i]) \
+                    if convex else None
+                if res is None:
+                    found.append(_zero_now(fs, i, a, za, d, s0.note or s1.note))
+                elif res[0] == "positive":
+                    certified[i] = res[1]
+                    step = min(step, res[1] - a)
+                else:
+                    found.append(res[1])
+                continue
+        s = first_cubic_zero(max(start, 0.0), L1[i], L2[i], BD[i], w)
+        if s < w and convex:
             res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i])
             if res is not None:
                 if res[0] != "positive":
@@ -655,9 +816,11 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
                ) -> tuple[Zero | None, float, np.ndarray]:
     """First zero in ``[t0, t_end]`` of any functional ``rows[i]·z(t)`` along ``flow``.
 
-    Tolerances are the motion's (:func:`motion_tolerance`, :func:`touch_band`). A search
-    interval (or its remainder) no longer than the time resolution (:func:`resolution`) is
-    integrated as a flow, not searched: a few ulp cannot hold a decidable zero.
+    Decisions are three-valued on certified enclosures (:func:`_safe_step`,
+    :func:`minimum_decision`); a search interval (or its remainder) no longer than the
+    time resolution (:func:`time_resolution`) is integrated as a flow, not searched. The
+    windows and bounds are those of the block of the flow the functionals depend on
+    (:meth:`FunctionalSet._coupled`).
 
     Parameters
     ----------
@@ -671,8 +834,8 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     certified : dict, optional
         ``{i: t}``: ψ_i is known to stay positive until t (after a touch).
     tau : float, optional
-        The motion's time scale τ of the tolerances (default ``flow.time_scale``; a run
-        of a system without one passes its motion's, :func:`observer.event.master.motion_time_scale`).
+        Unused by the search's decisions (kept for the callers' signature; the functional
+        sets are cached per value).
     should_stop : callable, optional
         A signal name it returns (:func:`_look`) stops the search: :class:`SearchStopped`.
 
@@ -685,17 +848,17 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     rows = np.atleast_2d(rows)
     a, za = float(t0), np.asarray(z0, dtype=float)
     tau = flow.time_scale if tau is None else float(tau)
-    if rows.shape[0] == 0 or t_end - a <= resolution(t_end, tau):
+    if rows.shape[0] == 0 or t_end - a <= time_resolution(t_end):
         z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
         return None, t_end, z
-    fs, certified = functional_set(flow, rows, tau), dict(certified or {})
-    window = WINDOW / max(flow.norm_bound, 1e-300)
-    growth = exp_upper(up(flow.certified_norm * window * (1.0 + 2.0 * _U)))  # ≥ e^{‖T⁻¹AT‖₂ w}
+    fs = functional_set(flow, rows, tau)
+    certified = dict(certified or {})
+    window = WINDOW / fs.norm_bound if fs.norm_bound > 0.0 else np.inf   # inf: ψ polynomial
+    growth = exp_upper(up(fs.certified_norm * min(window, t_end - a) * (1.0 + 2.0 * _U)))
     t_ok, z_ok = a, za                                # the last search point with finite values
-    coefs = _scale_coefficients(tau)
     for count in range(MAX_STEPS):
         _look(should_stop, count, a, za)
-        if t_end - a <= resolution(t_end, tau):          # a remainder of a few ulp: flow
+        if t_end - a <= time_resolution(t_end):        # a remainder of a few ulp: flow
             z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
             _check_finite(t_end, z, np.zeros((1, 1)), t_ok, z_ok)
             return None, t_end, z
@@ -703,19 +866,14 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
         d = fs.derivatives(za)
         _check_finite(a, za, d, t_ok, z_ok)           # overflow: a stop (NonFiniteFlow)
         t_ok, z_ok = a, za
-        sums, errs = fs.sums(za)
-        floor = ROUNDOFF * sums + np.finfo(float).tiny
-        res = resolution(a, tau)
-        ad = np.abs(d)
-        tol, tol1, tol2 = floor + ROUNDOFF * _motion_scales(ad, coefs) + ad[1:] * res
-        band = touch_band(d[2], d[3], floor[0], tau)
-        bound = np.nextafter(fs.third_norm * (growth * norm_upper(za / flow.scale))
+        _, errs = fs.sums(za)
+        res = time_resolution(a)
+        bound = np.nextafter(fs.third_norm * (growth * fs.state_norm(za))
                              * (1.0 + 4.0 * _U), np.inf)
         if not np.isfinite(bound).all():              # the certified bound overflows: no search
             i = int(np.flatnonzero(~np.isfinite(bound))[0])
             raise NonFiniteFlow(a, a, za, ("bound", 3, i), float(bound[i]))
-        tols = (tol, tol1, tol2, band, errs)
-        step, found = _safe_step(fs, a, za, d, tols, bound, w, certified)
+        step, found = _safe_step(fs, a, za, d, errs, bound, w, certified)
         # no functional without a found zero vanishes in (a, a + step): the earliest found zero
         # within that reach is the first zero; one beyond it is recomputed later
         if found:
@@ -739,31 +897,30 @@ def _look(should_stop, count: int, a: float, za: np.ndarray) -> None:
         raise SearchStopped(sig, a, za)
 
 
-UNRESOLVED_REACH = 1e-3
+UNRESOLVED_REACH = 64.0
 """An unresolved zero (:func:`_unresolved`) is taken only among functionals whose first-order
-time to zero ψ/|ψ'| is within this fraction of the motion's time scale τ."""
+time to zero ψ/|ψ'| is within this many time resolutions of a."""
 
 
 def _unresolved(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray,
                 certified: dict[int, float] | None = None, res: float = np.inf) -> Zero | None:
-    """The safe step fell below the time resolution: some functional reaches zero within a
-    few ulp of a, where float64 cannot order the zeros. Taken consistently: the approaching
-    functional (ψ' < 0) with the smallest first-order time to zero ``ψ/|ψ'|`` (a time, the
-    same in any coordinates); None if none approaches. A functional certified nonzero beyond
-    a (a graze just passed, ``certified[i] > a``) is not a candidate: its touch is what
-    shrank the step, and another functional far from zero must not be taken in its place;
-    nor is one whose first-order time to zero exceeds :data:`UNRESOLVED_REACH` times the
-    motion's time scale τ (or the resolution ``res`` if larger): it does not vanish near a
-    (a decision on a time of the motion, the same after a shift of the time origin). The
-    zero's note says so."""
+    """The safe step fell below the time resolution ``res``: some functional reaches zero
+    within a few ulp of a, where float64 cannot order the zeros. Taken consistently: the
+    approaching functional (ψ' < 0) with the smallest first-order time to zero ``ψ/|ψ'|``;
+    None if none approaches within :data:`UNRESOLVED_REACH` resolutions. A functional
+    certified nonzero beyond a (a graze just passed, ``certified[i] > a``) is not a
+    candidate: its touch is what shrank the step, and another functional far from zero must
+    not be taken in its place. The zero's note says so."""
     with np.errstate(divide="ignore", invalid="ignore"):
         ttz = np.where(d[1] < 0.0, np.maximum(d[0], 0.0) / -d[1], np.inf)
     for i, until in (certified or {}).items():
         if until > a:
             ttz[i] = np.inf
-    ttz[ttz > UNRESOLVED_REACH * max(res, fs.tau)] = np.inf
+    ttz[ttz > UNRESOLVED_REACH * res] = np.inf
     if not np.isfinite(ttz).any():
         return None
     i = int(np.argmin(ttz))
-    return Zero(a, i, "cross", za, float(d[0, i]), float(d[1, i]), a,
-                note=f"unresolved: zero within the time resolution of t = {a:.17g}")
+    several = int(np.isfinite(ttz).sum()) > 1     # zeros float64 cannot order: say so
+    note = f"unresolved: zeros of {np.flatnonzero(np.isfinite(ttz)).tolist()} within the time " \
+           f"resolution of t = {a:.17g}" if several else ""
+    return Zero(a, i, "cross", za, float(d[0, i]), float(d[1, i]), a, note=note)

@@ -1,0 +1,168 @@
+"""Three-valued sign decisions from rigorous enclosures (issue 34: no scale heuristics).
+
+A decision of the event engine — is a gap, a contact velocity or a contact force positive,
+negative or zero — is taken on an enclosure ``[lower, upper]`` of the exact quantity:
+certainly positive (``lower > 0``), certainly negative (``upper < 0``), exactly zero (the
+enclosure is the point 0), or undecided. The quantities are linear functionals ``r·z`` of
+an augmented state z (paper eqs. (2)-(3)), or of the exact flow ``r·exp(As)z`` from z, with
+r, A, z and s float64 data taken as exact (the state the engine carries is the exact
+initial state of the next piece of the flow).
+
+The float64 evaluation with its certified error bound is the first try
+(:func:`dot_sign`; the Taylor model of :meth:`observer.event.roots.FunctionalSet.enclose`
+for a flow). Where it cannot decide, the same quantity is evaluated from the same data in
+ball arithmetic (python-flint ``arb``/``arb_mat``) at :data:`PRECISION_START` bits, the
+precision doubled until decided or :data:`PRECISION_CAP`; never by widening a tolerance.
+What is still undecided at the cap is returned as such, with its enclosure
+(:attr:`Decision.note`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import flint
+import numpy as np
+
+PRECISION_START = 128
+"""Bits of the first ball-arithmetic evaluation after float64 could not decide."""
+
+PRECISION_CAP = 4096
+"""Largest precision (bits) tried. A dot product of float64 data is exact at it when its
+nonzero products ``r_i z_i`` span fewer than about 3990 binary orders of magnitude (each
+product has 106 bits; arb rounds a sum only beyond the working precision) — every state
+short of mixing subnormals with values near overflow — so, in practice, only a quantity of
+the flow, ``r·exp(As)z``, stays undecided at the cap."""
+
+_U = np.finfo(float).eps / 2.0
+
+
+@dataclass(frozen=True)
+class Decision:
+    """A three-valued sign with its enclosure.
+
+    Attributes
+    ----------
+    sign : int or None
+        ``+1`` certainly positive, ``-1`` certainly negative, ``0`` exactly zero, ``None``
+        undecided at :data:`PRECISION_CAP`.
+    lower, upper : float
+        Enclosure of the exact value (floats rounded outwards).
+    bits : int
+        Precision that decided (53: the float64 path).
+    """
+
+    sign: int | None
+    lower: float
+    upper: float
+    bits: int
+
+    @property
+    def note(self) -> str:
+        """Empty when decided, else the undecided enclosure and the precision reached."""
+        if self.sign is not None:
+            return ""
+        return (f"undecided: sign of a value in [{self.lower:.17g}, {self.upper:.17g}] "
+                f"at {self.bits} bits")
+
+
+def _gamma(n: int) -> float:
+    """γ_n = n·u/(1 − n·u) (Higham, *Accuracy and Stability*, §3.1)."""
+    return n * _U / (1.0 - n * _U)
+
+
+def dot_sign(row: np.ndarray, z: np.ndarray) -> Decision:
+    """Sign of the exact dot product ``row·z`` of float64 data.
+
+    Float64 first: ``|fl(r·z) − r·z| ≤ γ_N Σ|r_i z_i|`` (Higham §3.1), raised by ``1 + 2γ_N``
+    to dominate the rounding of the bound, plus N·2^-1074 for underflow; decided when 0 lies
+    outside ``fl(r·z) ± bound``. Else :func:`arb_dot` at doubling precision (exact for
+    float64 data at :data:`PRECISION_CAP` but for extreme exponent ranges: a zero ball of
+    radius 0 is then a certain zero)."""
+    r = np.asarray(row, dtype=float).ravel()
+    v = np.asarray(z, dtype=float).ravel()
+    N = r.size
+    val = float(r @ v)
+    mag = float(np.abs(r) @ np.abs(v))
+    if np.isfinite(val) and np.isfinite(mag):
+        g = _gamma(N + 1)
+        err = mag * g * (1.0 + 2.0 * g) + N * 5e-324
+        if val - err > 0.0:
+            return Decision(1, val - err, val + err, 53)
+        if val + err < 0.0:
+            return Decision(-1, val - err, val + err, 53)
+        if mag == 0.0:
+            return Decision(0, 0.0, 0.0, 53)
+    return _refine(lambda: arb_dot(r, v))
+
+
+def arb_dot(row, z) -> flint.arb:
+    """``row·z`` in ball arithmetic at the current precision (``flint.ctx.prec``)."""
+    s = flint.arb(0)
+    for a, b in zip(np.asarray(row, dtype=float).tolist(), np.asarray(z, dtype=float).tolist()):
+        if a != 0.0 and b != 0.0:
+            s += flint.arb(a) * flint.arb(b)
+    return s
+
+
+def flow_sign(A: np.ndarray, row: np.ndarray, z: np.ndarray, s: float, k: int = 0,
+              start: int = PRECISION_START) -> Decision:
+    """Sign of ``ψ^{(k)}(s) = row·A^k·exp(A s)·z``, the functional ``row`` (k-th derivative) of
+    the exact flow ż = Az from z after the time s (float64 data taken as exact), in ball
+    arithmetic from ``start`` bits, doubled until decided or :data:`PRECISION_CAP`."""
+    return _refine(lambda: flow_value(A, row, z, s, k), start)
+
+
+def flow_value(A: np.ndarray, row: np.ndarray, z: np.ndarray, s: float, k: int = 0) -> flint.arb:
+    """Ball enclosure of ``row·A^k·exp(A s)·z`` at the current precision (``flint.ctx.prec``):
+    ``arb_mat.exp`` is rigorous, and only the block of A that the functional depends on
+    (:func:`coupled`) is exponentiated (``r·exp(As)z = r_S·exp(A_SS s)z_S``)."""
+    A = np.asarray(A, dtype=float)
+    r = np.asarray(row, dtype=float).ravel()
+    v = np.asarray(z, dtype=float).ravel()
+    keep = np.flatnonzero(coupled(A, r != 0.0))
+    Aa = flint.arb_mat(A[np.ix_(keep, keep)].tolist())
+    w = (Aa * flint.arb(float(s))).exp() * flint.arb_mat([[b] for b in v[keep].tolist()])
+    for _ in range(int(k)):
+        w = Aa * w
+    return sum((flint.arb(a) * w[i, 0] for i, a in enumerate(r[keep].tolist()) if a != 0.0),
+               flint.arb(0))
+
+
+def coupled(A: np.ndarray, seed: np.ndarray) -> np.ndarray:
+    """Boolean mask of the closure of ``seed`` (a mask of components) under the sparsity of
+    A: l joins when ``A[j, l] ≠ 0`` for some j already in (the components that the
+    functionals supported on ``seed`` and all their derivatives ``r A^k`` depend on)."""
+    nz = np.asarray(A) != 0.0
+    mask = np.asarray(seed, dtype=bool).copy()
+    while True:
+        grown = mask | nz[mask].any(axis=0)
+        if np.array_equal(grown, mask):
+            return mask
+        mask = grown
+
+
+def _refine(value, start: int = PRECISION_START) -> Decision:
+    """Evaluate ``value()`` (an arb) at ``start`` bits, doubled until its sign is decided or
+    :data:`PRECISION_CAP` is passed."""
+    bits = max(int(start), 2)
+    x = None
+    while bits <= PRECISION_CAP:
+        with flint.ctx.workprec(bits):
+            x = value()
+            if x.is_zero():
+                return Decision(0, 0.0, 0.0, bits)
+            lo, hi = _outward(x)
+            if x > 0:
+                return Decision(1, lo, hi, bits)
+            if x < 0:
+                return Decision(-1, lo, hi, bits)
+        bits *= 2
+    lo, hi = _outward(x)
+    return Decision(None, lo, hi, bits // 2)
+
+
+def _outward(x: flint.arb) -> tuple[float, float]:
+    """Float bounds of the ball x, rounded outwards (arf → float may round either way)."""
+    lo, hi = float(x.lower()), float(x.upper())
+    return float(np.nextafter(lo, -np.inf)), float(np.nextafter(hi, np.inf))
