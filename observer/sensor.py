@@ -149,7 +149,8 @@ def seen_closed(t: np.ndarray, q: np.ndarray, u: np.ndarray, active: np.ndarray,
     out = np.asarray(active, dtype=bool).copy()
     if threshold > 0.0:
         tk = t[:-1]
-        g_pred = (q[:-1] + 0.5 * h * u[:-1]) @ system.W + system.nu(tk) + 0.5 * h * system.nu_dot(tk)
+        # the Siconos predictor of MoreauJean.predicted_active, on the whole recorded run
+        g_pred = system.gaps(q[:-1] + (h / 2) * u[:-1], tk) + (h / 2) * system.nu_dot(tk)
         out[1:] |= g_pred <= threshold
     return out
 
