@@ -179,7 +179,7 @@ def internal_modules() -> list[str]:
     return [m for _, content in _directive_blocks(text, "internal-modules") for m in content]
 
 
-def _public_objects() -> dict[str, object]:
+def _public_objects() -> dict[tuple[str, int], str]:
     """Public name's last component + id of its object -> the public name (a re-export keeps
     its name: ``observer.ENGINES`` is ``observer.engines.ENGINES``)."""
     out = {}
@@ -596,9 +596,39 @@ def resolve_same_object(app, env, node, contnode):
                 return domain.resolve_xref(env, node["refdoc"], app.builder, "class", best, node, contnode)
         if obj is not _MISSING and getattr(obj, "__module__", None) and \
                 obj.__module__.split(".")[0] not in PACKAGES and hasattr(obj, "__qualname__"):
-            node["reftarget"] = f"{obj.__module__}.{obj.__qualname__}"   # for nitpick_ignore
+            node["external_target"] = f"{obj.__module__}.{obj.__qualname__}"   # see below
         return None
     return domain.resolve_xref(env, node["refdoc"], app.builder, node["reftype"], best, node, contnode)
+
+
+def ignore_external(app, domain, node):
+    """Apply ``nitpick_ignore_regex`` to the full name of an external object that a
+    docstring names as its module imported it (``Path`` for ``pathlib.Path``)."""
+    name = node.get("external_target")
+    kind = f"{node.get('refdomain')}:{node.get('reftype')}"
+    if name and any(re.fullmatch(role, kind) and re.fullmatch(target, name)
+                    for role, target in app.config.nitpick_ignore_regex):
+        return True
+    return None
+
+
+def anchor_defining_module(app, doctree) -> None:
+    """Give each signature of a re-exported object a second anchor under the module that
+    defines it (``observer.LinearSystem.energy`` also ``observer.model.LinearSystem.energy``):
+    the "[docs]" links of the highlighted source (``sphinx.ext.viewcode``, one set of links per
+    module, under the module's own name) land on it."""
+    from sphinx import addnodes
+    for sig in doctree.findall(addnodes.desc_signature):
+        module, fullname = sig.get("module"), sig.get("fullname")
+        if not module or not fullname or module.split(".")[0] not in PACKAGES:
+            continue
+        top = _import(f"{module}.{fullname.split('.')[0]}")
+        home = getattr(top, "__module__", None) if (inspect.isclass(top) or _is_routine(top)) else None
+        if home and home != module and home.split(".")[0] in PACKAGES:
+            anchor = f"{home}.{fullname}"
+            if anchor not in sig["ids"] and anchor not in doctree.ids:
+                sig["ids"].append(anchor)
+                doctree.ids[anchor] = sig
 
 
 def setup(app):
@@ -607,6 +637,8 @@ def setup(app):
     app.add_directive("internal-modules", InternalModules)
     app.connect("builder-inited", write_internal_pages)
     app.connect("missing-reference", resolve_same_object)
+    app.connect("warn-missing-reference", ignore_external)
+    app.connect("doctree-read", anchor_defining_module)
     app.connect("autodoc-process-docstring", escape_bars)
     app.connect("autodoc-skip-member", skip_builtin_inherited)
     return {"version": "1", "parallel_read_safe": True}
