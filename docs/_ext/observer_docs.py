@@ -446,6 +446,16 @@ def _escape_bars(line: str) -> str:
     return "".join(p if k % 2 else p.replace("|", "\\|") for k, p in enumerate(pieces))
 
 
+def drop_type_docstring(app, what, name, obj, options, lines: list[str]) -> None:
+    """A constant without a documentation comment shows its value, not its type's docstring
+    (``REQUIRED``, a tuple, is not "Built-in immutable sequence")."""
+    if what not in ("data", "attribute") or inspect.isclass(obj) or _is_routine(obj):
+        return
+    first = (inspect.getdoc(type(obj)) or "").strip().split("\n")[0].strip()
+    if first and any(line.strip() == first for line in lines):
+        lines[:] = []
+
+
 def skip_builtin_inherited(app, what, name, obj, skip, options):
     """Skip a class member that has no docstring of its own but would inherit one from a
     class outside the packages (``ReadOnlyDict.clear`` is not ``dict.clear``, ``Parser.error``
@@ -640,5 +650,6 @@ def setup(app):
     app.connect("warn-missing-reference", ignore_external)
     app.connect("doctree-read", anchor_defining_module)
     app.connect("autodoc-process-docstring", escape_bars)
+    app.connect("autodoc-process-docstring", drop_type_docstring, priority=400)
     app.connect("autodoc-skip-member", skip_builtin_inherited)
     return {"version": "1", "parallel_read_safe": True}

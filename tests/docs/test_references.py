@@ -142,3 +142,12 @@ def test_bars_are_escaped_outside_literals_roles_and_literal_blocks():
     observer_docs.escape_bars(None, "function", "f", None, {}, lines)
     assert lines == [r"\|A\|³ per step, ``|x|`` and :math:`|y|`; \|g\| ≤ tol::", "", "    a | b", "",
                      ">>> 1 | 2", r"after \|t\|"]
+
+
+def test_a_constant_shows_its_own_documentation_not_its_types():
+    lines = ["Built-in immutable sequence.", "", "If no argument is given, ..."]
+    observer_docs.drop_type_docstring(None, "data", "REQUIRED", ("a", "b"), {}, lines)
+    assert lines == []
+    own = ["The fields a scenario must set (a tuple)."]                    # its own comment stays
+    observer_docs.drop_type_docstring(None, "data", "REQUIRED", ("a", "b"), {}, own)
+    assert own == ["The fields a scenario must set (a tuple)."]
