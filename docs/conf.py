@@ -30,6 +30,7 @@ extensions = [
     "myst_parser",
     "sphinx_gallery.gen_gallery",
     "observer_docs",
+    "observer_api",
 ]
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
@@ -40,10 +41,10 @@ nitpicky = True
 suppress_warnings = ["config.cache"]   # the gallery's argv function cannot be pickled
 # Nitpicky: every cross-reference of the pages and of the docstrings resolves. The packages'
 # own names all do (the public API's pages, the developer API of docs/api/internals.rst, and
-# docs/_ext/observer_docs.py's resolution of re-exports and module-relative names); what is
+# docs/_ext/observer_api.py's resolution of re-exports and module-relative names); what is
 # left are objects of other packages, whose inventories cannot be fetched here (no network, so
 # no intersphinx). Each entry names one external object or one external package's namespace;
-# none may match a name of observer or proofs_checks (tests/docs/test_docs.py checks it).
+# none may match a name of observer or proofs_checks (tests/docs/test_references.py checks it).
 EXTERNAL_NAMESPACES = [
     "numpy", "scipy", "pandas", "numba", "matplotlib", "dask", "distributed", "flint", "cvxpy",
     "osqp", "pyarrow", "pytest",

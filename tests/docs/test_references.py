@@ -24,7 +24,7 @@ REPO = Path(__file__).resolve().parents[2]
 DOCS = REPO / "docs"
 sys.path.insert(0, str(DOCS / "_ext"))
 
-import observer_docs  # noqa: E402  (the documentation's own Sphinx extension)
+import observer_api  # noqa: E402  (the documentation's own Sphinx extension)
 
 PACKAGES = (observer, proofs_checks)
 
@@ -95,7 +95,7 @@ def test_nitpick_ignores_name_external_objects_only(conf):
 def test_every_module_has_a_page():
     """A module of the packages is a public page (``observer``, ``proofs_checks``) or one line
     of ``docs/api/internals.rst``, exactly once; the page lists no module that is not there."""
-    listed = observer_docs.internal_modules()
+    listed = observer_api.internal_modules()
     assert len(listed) == len(set(listed)), "a module is listed twice in docs/api/internals.rst"
     expected = set(_modules()) - {"observer", "proofs_checks"}
     missing = sorted(expected - set(listed))
@@ -105,14 +105,14 @@ def test_every_module_has_a_page():
 
 
 def test_internal_pages_leave_re_exports_to_the_public_pages_and_show_referenced_names():
-    public = observer_docs._public_objects()
-    model = dict((name, kind) for kind, name in observer_docs.module_members("observer.model", public))
+    public = observer_api._public_objects()
+    model = dict((name, kind) for kind, name in observer_api.module_members("observer.model", public))
     assert "Harmonic" not in model and "LinearSystem" not in model      # observer.Harmonic's page
     assert "grid_wave" in model                                         # not public: here
-    scenario = observer_docs.internal_page("observer.scenario", public, set(observer_docs.public_names()))
+    scenario = observer_api.internal_page("observer.scenario", public, set(observer_api.public_names()))
     assert ".. autodata:: SCHEMA" in scenario        # no comment of its own, but docstrings cite it
     assert ":no-index:" not in scenario
-    simulate = observer_docs.internal_page("observer.simulate", public, set(observer_docs.public_names()))
+    simulate = observer_api.internal_page("observer.simulate", public, set(observer_api.public_names()))
     assert ":no-index:" in simulate                  # observer.simulate is the function's name
     assert ".. autofunction:: simulate" not in simulate
 
@@ -125,13 +125,13 @@ def test_internal_pages_leave_re_exports_to_the_public_pages_and_show_referenced
     ("InputError", "proofs_checks.pieces", None),                             # not imported there
 ])
 def test_names_are_read_as_python_reads_them_where_the_docstring_stands(target, where, expected):
-    scopes = observer_docs._scopes(where, None, None)
-    obj, _ = observer_docs._lookup(target, scopes)
+    scopes = observer_api._scopes(where, None, None)
+    obj, _ = observer_api._lookup(target, scopes)
     if target == "SchemeMatrices.build":
         from observer.stepping import SchemeMatrices
-        assert observer_docs._same(obj, SchemeMatrices.build)
+        assert observer_api._same(obj, SchemeMatrices.build)
     elif expected is None:
-        assert obj is observer_docs._MISSING
+        assert obj is observer_api._MISSING
     else:
         assert obj is expected
 
@@ -139,15 +139,15 @@ def test_names_are_read_as_python_reads_them_where_the_docstring_stands(target, 
 def test_bars_are_escaped_outside_literals_roles_and_literal_blocks():
     lines = ["|A|³ per step, ``|x|`` and :math:`|y|`; |g| ≤ tol::", "", "    a | b", "",
              ">>> 1 | 2", "after |t|"]
-    observer_docs.escape_bars(None, "function", "f", None, {}, lines)
+    observer_api.escape_bars(None, "function", "f", None, {}, lines)
     assert lines == [r"\|A\|³ per step, ``|x|`` and :math:`|y|`; \|g\| ≤ tol::", "", "    a | b", "",
                      ">>> 1 | 2", r"after \|t\|"]
 
 
 def test_a_constant_shows_its_own_documentation_not_its_types():
     lines = ["Built-in immutable sequence.", "", "If no argument is given, ..."]
-    observer_docs.drop_type_docstring(None, "data", "REQUIRED", ("a", "b"), {}, lines)
+    observer_api.drop_type_docstring(None, "data", "REQUIRED", ("a", "b"), {}, lines)
     assert lines == []
     own = ["The fields a scenario must set (a tuple)."]                    # its own comment stays
-    observer_docs.drop_type_docstring(None, "data", "REQUIRED", ("a", "b"), {}, own)
+    observer_api.drop_type_docstring(None, "data", "REQUIRED", ("a", "b"), {}, own)
     assert own == ["The fields a scenario must set (a tuple)."]
