@@ -40,7 +40,7 @@ Every run of :meth:`observer.engines.timestepping.TimeStepping.advance` gets a :
 ``computed_by``
     How the spectral quantities were computed: ``omega_max`` (dense ``eigh``, or Lanczos with
     its tolerance for a large sparse system) and the model's checks of M, C, K, W
-    (:attr:`observer.model.LinearSystem.check_methods`: dense eigenvalues and SVD, or banded
+    (``check_methods`` of :class:`observer.LinearSystem`: dense eigenvalues and SVD, or banded
     Cholesky and Lanczos) and, when a K-metric projection needed K ≻ 0, how that was
     established (``K_definite``: a verified banded Cholesky of K − cI, or eigenvalues).
 

@@ -2,8 +2,7 @@
 
 Fixtures
 --------
-``double_mass_scenario``, ``rocking_chain_scenario``, ``bouncing_ball_scenario``,
-``impact_oscillator_scenario``, ``grazing_scenario``
+``double_mass_scenario``, ``rocking_chain_scenario``, ``bouncing_ball_scenario``, ``impact_oscillator_scenario``, ``grazing_scenario``
     The built-in scenarios, loaded once per session (:class:`observer.scenario.Scenario`).
 ``load_check_scenario``
     A function ``(name_or_path, overrides=None) -> Scenario`` (cached per session).

@@ -38,13 +38,13 @@ def _run(script: str, out: Path, *extra: str) -> subprocess.CompletedProcess:
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory) -> dict:
-    """name -> (CompletedProcess, output directory) for the three scripts, plus ``my_system.py``
+    """name -> (CompletedProcess, output directory) for the four scripts, plus ``my_system.py``
     on one rocking block with per-contact Newton restitution [0.1, 0.95] exported as TOML
     (``failing``: A3 is violated there, the impact map is not monotone on the coupled
     contacts) and on a file with a
     missing key (``bad_input``)."""
     out = {}
-    for script in ("paper_figures.py", "my_system.py", "measured_log.py"):
+    for script in ("paper_figures.py", "my_system.py", "measured_log.py", "compare_designs.py"):
         d = tmp_path_factory.mktemp(script.removesuffix(".py"))
         out[script] = (_run(script, d), d)
     d = tmp_path_factory.mktemp("failing")
@@ -227,3 +227,42 @@ def test_measured_log_exact_log_is_the_masters_closings(runs):
             tc, to = grp["t_close"].to_numpy(), grp["t_open"].to_numpy()
             assert np.all(to >= tc) and np.all(np.diff(tc) >= 0) and np.all(tc[1:] >= to[:-1]), path.name
     _assert_png(out / "measured_log.png")
+
+
+# --- compare_designs.py --------------------------------------------------------------------
+
+def _interval(text: str) -> tuple[float, float, float]:
+    """(estimate, low, high) of ``"2.09 [1.32, 3.25]"`` at the start of ``text``."""
+    import re
+    m = re.match(r"\s*([-+\d.eE]+)\s*\[([-+\d.eE]+),\s*([-+\d.eE]+)\]", text)
+    assert m, f"no 'estimate [low, high]' in {text!r}"
+    return tuple(float(x) for x in m.groups())
+
+
+def test_compare_designs_interval_says_jumps_decay_faster(runs):
+    """The paper's claim (Fig. 2) with its interval: the decay-rate ratio jump/nojump is above
+    1 over the resampled masters, and the printed interval contains its estimate."""
+    proc, _ = _ok(runs, "compare_designs.py")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    lines = proc.stdout.splitlines()
+    assert lines[0].startswith("double_mass: 6 members x 3 masters per design"), lines[0]   # --quick
+    ratio = next(x for x in lines if x.startswith("decay-rate ratio jump/nojump:"))
+    est, low, high = _interval(ratio.split(":", 1)[1])
+    assert low <= est <= high and math.isfinite(high)
+    assert low > 1.0, ratio
+
+
+def test_compare_designs_settling_shares_and_figure(runs):
+    proc, out = _ok(runs, "compare_designs.py")
+    shares = {}
+    for line in proc.stdout.splitlines():
+        cells = line.split()
+        if cells[:2] in (["jump", "settled"], ["nojump", "settled"]):
+            share, low, high = _interval(line.split("settled", 1)[1].replace("%", ""))
+            assert 0 <= low <= share <= high <= 100, line
+            shares[cells[0]] = share
+    assert set(shares) == {"jump", "nojump"}, proc.stdout
+    assert shares["jump"] > shares["nojump"], "with position jumps more members settle in the window"
+    png = out / "compare_designs.png"
+    _assert_png(png)
+    assert _pixels_near(png, TAB_BLUE) > 300 and _pixels_near(png, TAB_RED) > 300

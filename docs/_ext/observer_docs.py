@@ -5,6 +5,8 @@
   documentation, or documentation without a leaf, is a build error);
 * ``.. cli-reference:: MODULE`` — every subcommand of a command-line parser
   (``MODULE.build_parser()``), with its help and options.
+
+The developer API's pages and the resolution of cross-references are ``observer_api.py``.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 For ``seed``, ``dof`` = n ∈ 2…8 and ``contacts`` = m ∈ 1…4 (m ≤ n), a generator
 ``numpy.random.default_rng(seed)`` draws, in this order:
 
-* M = I + B_M B_Mᵀ / n, K = k (I + B_K B_Kᵀ / n), C = c (I + B_C B_Cᵀ / n) with B_· standard
+* M = I + B_M B_Mᵀ / n, K = k (I + B_K B_Kᵀ / n), C = c (I + B_C B_Cᵀ / n) with ``B_·`` standard
   normal n × n: symmetric positive definite (eigenvalues ≥ 1, ≥ k, ≥ c), so every observer
   design applies (K ≻ 0, docs/theory/index.md §2 item 6);
 * W (n × m): standard normal columns scaled to unit length, redrawn until rank m (independent

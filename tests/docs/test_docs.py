@@ -257,10 +257,12 @@ class _Links(HTMLParser):
                 self.links.append(value)
 
 
-def _parse(path: Path) -> _Links:
-    p = _Links()
-    p.feed(path.read_text(encoding="utf-8", errors="replace"))
-    return p
+def _parse(path: Path, cache: dict) -> _Links:
+    """The links and ids of a page, each page parsed once."""
+    if path not in cache:
+        cache[path] = _Links()
+        cache[path].feed(path.read_text(encoding="utf-8", errors="replace"))
+    return cache[path]
 
 
 def test_every_internal_link_of_the_site_resolves():
@@ -269,7 +271,7 @@ def test_every_internal_link_of_the_site_resolves():
     parsed: dict[Path, _Links] = {}
     bad = []
     for page in pages:
-        links = parsed.setdefault(page, _parse(page)).links
+        links = _parse(page, parsed).links
         for link in links:
             parts = urlsplit(link)
             if parts.scheme or parts.netloc or link.startswith(("mailto:", "javascript:", "data:")):
@@ -281,7 +283,7 @@ def test_every_internal_link_of_the_site_resolves():
                 bad.append(f"{page.relative_to(site)} -> {link}")
                 continue
             if parts.fragment and target.suffix == ".html":
-                ids = parsed.setdefault(target, _parse(target)).ids
+                ids = _parse(target, parsed).ids
                 if unquote(parts.fragment) not in ids:
                     bad.append(f"{page.relative_to(site)} -> {link} (no such anchor)")
     assert len(pages) > 20
