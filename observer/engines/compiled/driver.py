@@ -26,7 +26,7 @@ from observer.engines.loop import (FiniteGuard, LoopInput, LoopOutput, Stopper, 
 from observer.errors import InputError
 from observer.primitives import OK, PROJECTION_FAILED, RESIDUAL_EXCEEDED
 from observer.scenario import Scenario
-from observer.stepping import MoreauJean, StepStats
+from observer.stepping import MoreauJean, SolverCounts
 
 WINDOW = 1 << 14
 """Steps per window of the compiled engine (the signals of one window are built at a time).
@@ -88,7 +88,7 @@ def _restore(state: tuple, snap: tuple, fallbacks: list, stepper) -> None:
     del fallbacks[nfb:]
     ref = getattr(stepper, "_reference_twin", None)
     if ref is not None:
-        ref.stats = StepStats() if ref_stats is None else ref_stats
+        ref.stats = SolverCounts() if ref_stats is None else ref_stats
 
 
 class CompiledRun:
