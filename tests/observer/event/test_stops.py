@@ -36,8 +36,8 @@ def test_a_stalled_quiet_phase_keeps_every_row_up_to_the_stall(monkeypatch):
     monkeypatch.setattr(roots, "MAX_STEPS", 2000)
     w = 1e3
     res = run_master(quiet_oscillator(w=w))
-    assert res.status.startswith("stopped: root isolation stalled")
-    t_stall = float(res.status.split("near t = ")[1].split(" ")[0])
+    assert str(res.status).startswith("stopped: root isolation stalled")
+    t_stall = float(str(res.status).split("near t = ")[1].split(" ")[0])
     assert t_stall > 0.5                              # 2000 windows of 0.5/ω at least
     t = res.t
     assert t.size >= int(t_stall / 1e-2)              # every grid row before the stall
@@ -75,7 +75,7 @@ def ball_impacts(height: float, e: float, count: int) -> np.ndarray:
 
 def test_an_event_cap_keeps_the_events_before_it():
     res = run_master(ball(t_end=2.0), max_events=4)
-    assert res.status.startswith("stopped: event cap 4")
+    assert str(res.status).startswith("stopped: event cap 4")
     impacts = res.impact_times()
     assert impacts.size == 4
     assert np.max(np.abs(impacts - ball_impacts(1.0, 0.5, 4))) <= 1e-12
