@@ -148,10 +148,10 @@ def test_a_signal_during_an_event_run_leaves_a_readable_stopped_file(tmp_path, s
     """``cpu``: CPU seconds of the process when the signal is sent: after the imports and
     after numba and the event engine's compiled root finders are loaded from numba's cache
     (compiled here first, so that a fresh clone's cold cache does not eat the run), and long
-    before the master's run to t_end = 200 s ends (the process has spent about 1.2 s of CPU
-    when the run starts; the signal lands at t ≈ 20 s, measured). The output is sampled at
-    h = 1e-3: what follows the signal (the observer up to there, the file, reading it back)
-    costs in proportion to the rows, ten times fewer than at double_mass's own h = 1e-4."""
+    before the master's run to t_end = 200 s ends (the test asserts that the stop lies past
+    t = 1 s and before t_end). The output is sampled at h = 1e-3: what follows the signal (the
+    observer up to there, the file, reading it back) costs in proportion to the rows, ten
+    times fewer than at double_mass's own h = 1e-4."""
     simulate("double_mass", t_end=0.05, integrator="event")   # fills numba's cache
     path = tmp_path / f"exact.{ext}"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
