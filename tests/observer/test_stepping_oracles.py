@@ -6,10 +6,12 @@ project root; a missing oracle fails under ``CI`` and skips otherwise).
 Floating-point results are compared with a stated round-off tolerance (they depend on the
 BLAS and library versions); bitwise equality is asserted only where it is the property
 (structural zeros of an inactive contact, one code path driven two ways). The external
-oracles of the scheme (Siconos) are run on every engine that takes a time-stepping case (the
-``engine`` fixture of tests/conftest.py: the numba kernel, the numpy reference stepper of
-``observer/stepping.py``, the toy engine; the event engine refuses them), each checked on its
-own with its tolerance.
+oracles of the scheme (Siconos) and the closed forms are run on every engine that takes the
+case (the ``engine`` fixture of tests/conftest.py): the properties of the scheme (its order,
+its impact step, its energy balance) on the engines that take a time-stepping case (the numba
+kernel, the numpy reference stepper of ``observer/stepping.py``, the toy engine; the event
+engine refuses them), the closed-form impact and rest times of the ball and the static
+preload of double_mass on the event engine too, each checked on its own with its tolerance.
 
 Oracles used here:
 

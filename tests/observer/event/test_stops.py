@@ -12,6 +12,7 @@ import observer
 import observer.event.roots as roots
 from observer.errors import InputError
 from observer.event.master import run_master
+from observer.result import RunState, RunStatus
 from observer.scenario import Scenario
 
 G0 = 9.81
@@ -52,6 +53,21 @@ def test_a_stalled_run_through_simulate_keeps_its_rows(monkeypatch):
     res = observer.simulate(quiet_oscillator(), integrator="event")
     assert not res.status.ok and "stalled" in res.status.reason
     assert len(res.t) > 10 and np.isfinite(res.q).all()
+
+
+def test_the_masters_stop_is_a_status_from_where_it_stopped(monkeypatch):
+    """The exact master decides its :class:`RunStatus` where it stops (state, reason; no
+    "stopped: …" string to parse): the run's status says it is the master's stop, the
+    metadata keeps the master's own; a non-finite stop names the master's quantity itself."""
+    monkeypatch.setattr(roots, "MAX_STEPS", 1000)
+    master = run_master(quiet_oscillator())
+    assert isinstance(master.status, RunStatus) and master.status.state is RunState.STOPPED
+    assert master.status.reason.startswith("root isolation stalled") and not master.nonfinite
+    res = observer.simulate(quiet_oscillator(), integrator="event")
+    assert res.status == RunStatus(RunState.STOPPED, f"master: {master.status.reason}")
+    assert res.metadata["master_status"] == f"stopped: {master.status.reason}"
+    ok = run_master(ball(t_end=0.5))
+    assert ok.status == RunStatus() and str(ok.status) == "ok"
 
 
 def ball(height: float = 1.0, e: float = 0.5, t_end: float = 1.0) -> Scenario:
