@@ -121,22 +121,27 @@ def _timed(fn, *args, **kwargs):
 
 
 def simulate(sc, case: Case, **kwargs):
-    """:func:`observer.simulate` with the case's integrator (time-stepping: on the engine of
-    :func:`bench.suites.engine_for`), timed: ``(result, cpu seconds, wall seconds)``."""
+    """:func:`observer.simulate` with the case's integrator and engine (:func:`engine_kwargs`),
+    timed: ``(result, cpu seconds, wall seconds)``."""
     if case.integrator == "event":
         kwargs = {k: v for k, v in kwargs.items() if k not in ("solver", "record_every")}
-        return _timed(observer.simulate, sc, integrator="event", **kwargs)
-    kwargs = {**engine_kwargs(kwargs.get("solver") or case.solver), **kwargs}
+        return _timed(observer.simulate, sc, integrator="event", **{**engine_kwargs(case), **kwargs})
+    kwargs = {**engine_kwargs(case, kwargs.get("solver")), **kwargs}
     return _timed(observer.simulate, sc, **kwargs)
 
 
-def engine_kwargs(solver: str) -> dict[str, str]:
-    """The engine keyword of a case with contact solver ``solver``: none (the engine
-    registry's first that accepts the run) when the registry's first engine has the solver, else
-    the engine :func:`bench.suites.engine_for` names."""
+def engine_kwargs(case: Case, solver: str | None = None) -> dict[str, str]:
+    """The engine keyword of a case (run with contact solver ``solver``, default the case's):
+    its declared :attr:`~bench.suites.Case.engine`; else none for the event integrator or
+    when the engine registry's first engine has the solver (the registry's first that accepts
+    the run), else the engine :func:`bench.suites.engine_for` names."""
     from observer.engines import ENGINES
 
-    chosen = engine_for(solver)
+    if case.engine is not None:
+        return {"engine": case.engine}
+    if case.integrator == "event":
+        return {}
+    chosen = engine_for(solver or case.solver)
     return {} if chosen == next(iter(ENGINES)) else {"engine": chosen}
 
 
@@ -533,7 +538,8 @@ def _ensemble_members(case: Case, sc, designs, n: int, rng, V0):
     X, _ = sample_errors(sc, n, "energy_sphere", rng, V0)
     X = np.vstack([X, np.zeros((1, X.shape[1]))])          # member n: no error (the design's floor)
     df, cpu, wall = _timed(observer.ensemble, sc, designs, n=n + 1, initial_errors=X, paths=n + 1,
-                           integrator=case.integrator, label=case.name, workers=ENSEMBLE_WORKERS)
+                           integrator=case.integrator, label=case.name, workers=ENSEMBLE_WORKERS,
+                           engine=case.engine)
     fits, floors = member_fits(sc, df, n, designs)
     fits = fits[["design", "member", "rate", "points", "t_fit", "floor_stop"]].rename(
         columns={"points": "rate_points", "t_fit": "rate_t_fit", "floor_stop": "rate_floor_stop"})
@@ -572,7 +578,8 @@ def ensemble_paths(case: Case, ctx: Context, sc, designs: tuple[str, ...], df: p
     # rows (and the paths' ΔV parts); from 40 000 steps the summary's sampled V(t) suffices
     store = "full" if sc.t_end / sc.h < SUMMARY_EVERY_STEP else "summary"
     run = observer.ensemble(sc, designs, n=len(X), initial_errors=X, paths=len(X), store=store,
-                            integrator=case.integrator, label=case.name, workers=ENSEMBLE_WORKERS)
+                            integrator=case.integrator, label=case.name, workers=ENSEMBLE_WORKERS,
+                            engine=case.engine)
     paths = thin_paths(run.attrs["paths"])
     paths["member"] = first["member"].to_numpy()[paths["member"].to_numpy()]
     path = ctx.artefacts / "paths" / f"{safe_name(case.case_id)}.parquet"
@@ -595,7 +602,7 @@ def whole_call(case: Case) -> dict[str, float]:
     c0, w0 = time.process_time(), time.perf_counter()
     sc = observer.load_scenario(case.scenario, case.overrides())
     c1 = time.process_time()
-    observer.simulate(sc, **engine_kwargs(case.solver), record_every=record_every(case.h, case.h_record))
+    observer.simulate(sc, **engine_kwargs(case), record_every=record_every(case.h, case.h_record))
     return {"whole_call_cpu_s": time.process_time() - c0, "whole_call_wall_s": time.perf_counter() - w0,
             "load_cpu_s": c1 - c0}
 
@@ -638,7 +645,7 @@ def run_scaling(case: Case, ctx: Context) -> list[dict]:
         gc.collect()
         tracemalloc.start()
         try:
-            observer.simulate(sc, **engine_kwargs(case.solver), record_every=every)
+            observer.simulate(sc, **engine_kwargs(case), record_every=every)
             _, peak = tracemalloc.get_traced_memory()
         finally:
             tracemalloc.stop()

@@ -70,6 +70,10 @@ class Case:
         scenarios without an ``[observer]`` table; None uses the scenario's table.
     integrator : str
         ``"time-stepping"`` (Moreau–Jean) or ``"event"`` (the exact event-driven integrator).
+    engine : str or None
+        The engine of the case's runs (:data:`observer.engines.ENGINES`, as
+        :func:`observer.simulate`'s ``engine``); None: the registry's choice for the case's
+        solver (:func:`engine_for`), or the event engine for ``integrator="event"``.
     target : str
         work_precision: ``"master"`` or an observer name whose trajectory error is measured.
     reference : str
@@ -109,6 +113,7 @@ class Case:
     seed: int = 0
     slave_offset: tuple | None = None
     integrator: str = "time-stepping"
+    engine: str | None = None
     target: str = "master"
     reference: str = ""
     h_record: float | None = None
@@ -122,6 +127,9 @@ class Case:
     def __post_init__(self):
         if self.kind not in KINDS:
             raise ValueError(f"unknown case kind {self.kind!r}; choose from {KINDS}")
+        from observer.engines import check_engine_name
+
+        check_engine_name(self.engine)
 
     @property
     def name(self) -> str:

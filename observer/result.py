@@ -140,6 +140,10 @@ class RunStatus:
         """True only for a run that ended normally without any fallback."""
         return self.state is RunState.OK
 
+    def __str__(self) -> str:
+        """``"ok"``, else ``"STATE: reason"`` (e.g. ``"stopped: event cap 10 reached at t = …"``)."""
+        return self.state.value if self.ok else f"{self.state.value}: {self.reason}"
+
     @classmethod
     def from_metadata(cls, metadata: dict) -> "RunStatus":
         """The status a run's metadata implies: ``stopped`` when it has ``stopped`` (the
@@ -510,6 +514,64 @@ class SimulationResult:
         else:
             remove_events(path)                      # an earlier run's events are not this one's
         return write_frame(df, path)
+
+
+@dataclass(frozen=True)
+class RecordArray:
+    """One record array of a run, declared once in :data:`RECORD_ARRAYS`.
+
+    Attributes
+    ----------
+    name : str
+        The attribute name, the same in the loops' records (:func:`observer.engines.loop.allocate_records`,
+        :class:`~observer.engines.loop.LoopOutput`, :class:`~observer.engines.loop.Chunk`, the
+        compiled kernel's ``StorageBundle``) and in :class:`RunRecord` / :class:`SimulationResult`.
+    dtype : type
+    width : {"n", "m"}
+        Per row: one value per degree of freedom or per contact.
+    per_system : bool
+        Each system (master first, then the observers) has its own: the loops' array is
+        ``(S, rows, width)``; else one ``(rows, width)`` array for the run (the master's closed
+        set, the observers' χ).
+    zero_filled : bool
+        Allocated as zeros (the loops write only the closed contacts' entries); else every
+        row is written before it is read.
+    optional : bool
+        Kept only when asked for (``record_pre``): absent from the streamed chunks and None in
+        a record without it.
+    """
+
+    name: str
+    dtype: type
+    width: str
+    per_system: bool
+    zero_filled: bool
+    optional: bool = False
+
+    def allocate(self, S: int, rows: int, n: int, m: int) -> np.ndarray:
+        """The loops' array of this record: ``(S, rows, width)`` or ``(rows, width)``."""
+        shape = ((S,) if self.per_system else ()) + (rows, n if self.width == "n" else m)
+        return (np.zeros if self.zero_filled else np.empty)(shape, dtype=self.dtype)
+
+    def rows(self, x: np.ndarray, sl: slice) -> np.ndarray:
+        """Rows ``sl`` of the loops' array ``x`` (a view)."""
+        return x[:, sl] if self.per_system else x[sl]
+
+
+RECORD_ARRAYS = (
+    RecordArray("q", np.float64, "n", True, False),
+    RecordArray("u", np.float64, "n", True, False),
+    RecordArray("P", np.float64, "m", True, True),
+    RecordArray("sigma", np.float64, "m", True, True),
+    RecordArray("active", np.bool_, "m", False, True),
+    RecordArray("chi", np.bool_, "m", False, True),
+    RecordArray("q_pre", np.float64, "n", True, False, optional=True),
+)
+"""The record arrays of a run, in order: positions, velocities, the impulse and the projection
+multiplier of the step ending at the row, the master's closed set, the observers' signal χ,
+the positions before the projection (row k+1 = step k; row 0 the initial state). The loops
+allocate, truncate and stream them from this declaration; the classes that carry them list
+them in this order (``tests/observer/test_records.py``)."""
 
 
 @dataclass(frozen=True)

@@ -349,8 +349,10 @@ class Grid:
 
 
 @dataclass
-class StepStats:
-    """Work counters of one stepper (contact solves, pivots, fallbacks, worst residual)."""
+class SolverCounts:
+    """Work counters of one stepper's contact solves (solves, pivots, fallbacks, worst
+    residual); a run's counters are :class:`observer.result.StepStats`, which the engines
+    build from these."""
 
     contact_solves: int = 0
     iterations: int = 0
@@ -394,7 +396,7 @@ class MoreauJean:
         self.steps = grid_steps(h, t_end, self.t0)
         self._t_end = t_end
         self._grid: Grid | None = None
-        self.stats = StepStats()
+        self.stats = SolverCounts()
         self._e = np.asarray(law.restitution)
         self._fallback = None
         self._k = 0

@@ -72,6 +72,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of all random sampling (default 0)")
     p.add_argument("--h", type=float, help="step of the run-based checks (default: the scenario's)")
     p.add_argument("--t-end", type=float, help="horizon of the run-based checks (default: min(t_end, 40000 h); convergence: the scenario's t_end within a memory budget)")
+    p.add_argument("--engine", default=None, metavar="NAME",
+                   help="engine of the checks' runs, as simulate's engine (default: the first "
+                        "time-stepping engine that accepts each run)")
     p.add_argument("--json", metavar="FILE", help="write all results (with full witnesses) as JSON")
     p.add_argument("--list", action="store_true", help="list the checks and exit")
     return p
@@ -84,6 +87,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _main(args) -> int:
     import proofs_checks
+    from observer.engines import check_engine_name
     from observer.scenarios import SCENARIOS
     from proofs_checks import CHECKS, EVIDENCE_LEVELS, CheckSettings, run_checks, select
 
@@ -96,7 +100,9 @@ def _main(args) -> int:
     names = [s for item in args.scenarios for s in (SCENARIOS if item == "all" else [item])]
     only = select(args.only) if args.only else None
     overrides = parse_pairs(args.set, "--set")
-    settings = CheckSettings(seed=args.seed, h=args.h, t_end=args.t_end, options=_options(args.option))
+    check_engine_name(args.engine)
+    settings = CheckSettings(seed=args.seed, h=args.h, t_end=args.t_end, options=_options(args.option),
+                             engine=args.engine)
     _check_run_option("--h", settings.h)
     _check_run_option("--t-end", settings.t_end)
     scenarios = [proofs_checks.load(n, overrides) for n in names]   # validate all inputs first
@@ -120,7 +126,7 @@ def _main(args) -> int:
     if args.json:
         path = Path(args.json)
         path.parent.mkdir(parents=True, exist_ok=True)
-        doc = {"settings": {"seed": settings.seed, "h": settings.h, "t_end": settings.t_end,
+        doc = {"settings": {"seed": settings.seed, "h": settings.h, "t_end": settings.t_end, "engine": settings.engine,
                             "options": settings.options, "overrides": overrides, "scenarios": names},
                "platform": platform.platform(), "python": platform.python_version(),
                "wall_time_s": time.perf_counter() - t_start,

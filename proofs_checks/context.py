@@ -50,6 +50,10 @@ class CheckSettings:
     options : dict
         Per-check keyword arguments, ``{check_name: {keyword: value}}``, passed to the
         check functions (tolerances, sample counts, ...).
+    engine : str or None
+        The engine of every run of the checks (:data:`observer.engines.ENGINES`, as
+        :func:`observer.simulate`'s ``engine``); None: the first time-stepping engine that
+        accepts the run.
     """
 
     seed: int = 0
@@ -58,6 +62,7 @@ class CheckSettings:
     max_steps: int = 40_000
     short_steps: int = 20_000
     options: dict = field(default_factory=dict)
+    engine: str | None = None
 
 
 class CheckContext:
@@ -75,6 +80,11 @@ class CheckContext:
     @property
     def system(self):
         return self.scenario.system
+
+    @property
+    def engine(self) -> str | None:
+        """The engine of the checks' runs (:attr:`CheckSettings.engine`)."""
+        return self.settings.engine
 
     @property
     def law(self):
@@ -119,7 +129,7 @@ class CheckContext:
         """The shared run (computed on first use)."""
         if self._run is None:
             self._run = replay(self.scenario, h=self.h, t_end=self.t_end, slaves=self.slave_specs(),
-                               master_projection=self.scenario.master_projection)
+                               master_projection=self.scenario.master_projection, engine=self.engine)
         return self._run
 
     def horizon_text(self, t_end: float) -> str:
@@ -144,7 +154,8 @@ class CheckContext:
                 steps = max(s.max_steps, CONVERGENCE_BUDGET // (self.system.n + self.system.m))
                 t_end = max(self.t_end, min(sc.t_end, steps * self.h))
             run = self.run if t_end == self.t_end else replay(
-                sc, h=self.h, t_end=t_end, slaves=self.slave_specs(), master_projection=sc.master_projection)
+                sc, h=self.h, t_end=t_end, slaves=self.slave_specs(), master_projection=sc.master_projection,
+                engine=self.engine)
             run.settings["horizon_source"] = self.horizon_text(float(run.t[-1]) + 0.5 * self.h)
             self._conv_run = run
         return self._conv_run

@@ -42,17 +42,17 @@ def jump_parts(run: Run, a: str, b: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def design_pair_run(scenario, design: ObserverDesign, specs: list[SlaveSpec], h: float,
-                    t_end: float) -> Run:
+                    t_end: float, engine: str | None = None) -> Run:
     """Two observers of ``design`` (the states of ``specs``) coupled to the master over the run."""
     N = design.metric_matrix(scenario.system)
     pair = [SlaveSpec(f"{design.name}_{x}", True, s.q0, s.u0, N) for x, s in zip("ab", specs)]
     return replay(scenario, h=h, t_end=t_end, slaves=pair,
-                  master_projection=scenario.master_projection)
+                  master_projection=scenario.master_projection, engine=engine)
 
 
 def check_projection_energy(scenario, specs: list[SlaveSpec], *, h: float, t_end: float,
                             designs: dict[str, ObserverDesign] | None = None,
-                            tolerance: float = 0.0) -> CheckResult:
+                            tolerance: float = 0.0, engine: str | None = None) -> CheckResult:
     """Position jumps in the K metric never raise V (eqs. (13)-(14) in eq. (17)); measure the
     other metrics.
 
@@ -66,6 +66,8 @@ def check_projection_energy(scenario, specs: list[SlaveSpec], *, h: float, t_end
         Designs to measure (default: the registry); those without position jumps are skipped.
     tolerance : float
         On the margin ``−max_k (J_k − allowance_k)/V_k`` of the K-metric designs.
+    engine : str, optional
+        The engine of the runs (:func:`proofs_checks.runs.replay`).
 
     Returns
     -------
@@ -82,7 +84,7 @@ def check_projection_energy(scenario, specs: list[SlaveSpec], *, h: float, t_end
     for name, d in designs.items():
         if not d.position_jumps:
             continue
-        run = design_pair_run(scenario, d, specs[:2], h, t_end)
+        run = design_pair_run(scenario, d, specs[:2], h, t_end, engine)
         a, b = f"{name}_a", f"{name}_b"
         J, allow = jump_parts(run, a, b)
         V = np.maximum(lyapunov_pair(run.system, run.slaves[a], run.slaves[b])[:-1], np.finfo(float).tiny)

@@ -51,7 +51,7 @@ class _Pair:
 
 
 def _simulate(sc: Scenario, h: float | None, t_end: float | None, projection: bool, jumps: bool,
-              chi_tolerance: float = 0.0, slave_offset: float = 0.0) -> _Pair:
+              chi_tolerance: float = 0.0, slave_offset: float = 0.0, engine: str | None = None) -> _Pair:
     """Master (plain or projected) and a slave started in its state, coupled over the run.
 
     With ``chi_tolerance = 0`` this is :func:`observer.simulate` with χ the master's closed
@@ -63,22 +63,23 @@ def _simulate(sc: Scenario, h: float | None, t_end: float | None, projection: bo
     q_slave = sc.q0 + slave_offset
     if chi_tolerance == 0.0:
         r = observer.simulate(sc, h=h, t_end=t_end, master_projection=projection, source="master",
-                              coupling=None, observers=[Slave(name, jumps, q_slave, sc.u0)])
+                              coupling=None, observers=[Slave(name, jumps, q_slave, sc.u0)],
+                              integrator="time-stepping", engine=engine)
         s = r.slaves[name]
         return _Pair(r.t, r.q, r.u, r.P, r.active, r.sigma, s.q, s.u, s.P, s.V)
     from proofs_checks.runs import SlaveSpec, lyapunov_pair, replay
-    master = replay(sc, h=h, t_end=t_end, master_projection=projection)
+    master = replay(sc, h=h, t_end=t_end, master_projection=projection, engine=engine)
     chi = np.zeros_like(master.chi)
     chi[1:] = master.g_pred[1:] <= chi_tolerance
     r = replay(sc, h=h, t_end=t_end, master_projection=projection, chi=chi,
-               slaves=[SlaveSpec(name, jumps, q_slave, sc.u0)])
+               slaves=[SlaveSpec(name, jumps, q_slave, sc.u0)], engine=engine)
     s, m = r.slaves[name], r.master
     return _Pair(r.t, m.q, m.u, m.P, m.active, m.sigma, s.q, s.u, s.P, lyapunov_pair(r.system, s, m))
 
 
 def check_proposition1_exact(scenario: Scenario, *, h: float | None = None,
                              t_end: float | None = None, chi_tolerance: float = 0.0,
-                             slave_offset: float = 0.0) -> CheckResult:
+                             slave_offset: float = 0.0, engine: str | None = None) -> CheckResult:
     """Proposition 1, discrete exact form: matched master/slave pairs are bitwise identical.
 
     Parameters
@@ -92,6 +93,8 @@ def check_proposition1_exact(scenario: Scenario, *, h: float | None = None,
         Added to every component of the slaves' initial positions (0: the proposition's
         hypothesis, identical initial states; a one-ulp offset is the near-miss known-bad
         input: the tolerance is 0, so any difference fails).
+    engine : str, optional
+        The time-stepping engine of the runs (default: the first that accepts them).
 
     Returns
     -------
@@ -111,7 +114,7 @@ def check_proposition1_exact(scenario: Scenario, *, h: float | None = None,
         witness["projected_master__jump_slave"] = "not applicable: " + _k_reason(scenario)
     first_bad = None
     for label, projection, jumps in pairs:
-        res = _simulate(scenario, h, t_end, projection, jumps, chi_tolerance, slave_offset)
+        res = _simulate(scenario, h, t_end, projection, jumps, chi_tolerance, slave_offset, engine)
         d = np.maximum(np.max(np.abs(res.slave_q - res.q), axis=1), np.max(np.abs(res.slave_u - res.u), axis=1))
         d = np.maximum(d, np.max(np.abs(res.slave_P - res.P), axis=1))
         bad = np.flatnonzero(d > 0)
@@ -141,7 +144,8 @@ def check_proposition1_exact(scenario: Scenario, *, h: float | None = None,
 
 def check_proposition1_h_scaling(scenario: Scenario, *, h: float | None = None, t_end: float | None = None,
                                  factors: tuple[float, ...] = (16.0, 4.0, 1.0),
-                                 min_order: float = 0.5, chi_tolerance: float = 0.0) -> CheckResult:
+                                 min_order: float = 0.5, chi_tolerance: float = 0.0,
+                                 engine: str | None = None) -> CheckResult:
     """Proposition 1, continuous claim via h → 0: mismatched pairs converge with h.
 
     Parameters
@@ -176,7 +180,7 @@ def check_proposition1_h_scaling(scenario: Scenario, *, h: float | None = None, 
                                      ("projected_master__nojump_slave", True, False)):
         rms, mx, closed = [], [], []
         for hh in hs:
-            res = _simulate(scenario, hh, t_end, projection, jumps, chi_tolerance)
+            res = _simulate(scenario, hh, t_end, projection, jumps, chi_tolerance, engine=engine)
             d = np.sqrt(2.0 * np.maximum(res.slave_V, 0.0))
             rms.append(float(np.sqrt(np.mean(d ** 2))))
             mx.append(float(d.max()))

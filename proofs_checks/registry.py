@@ -7,12 +7,14 @@ Below :mod:`proofs_checks.asserts` and the package's ``__init__``, which import 
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
 import pandas as pd
 
+from observer.engines import check_engine_name
 from observer.errors import InputError
 from observer.scenario import Scenario
 from proofs_checks.assumptions import (check_constraints_independent, check_damping_pd, check_mass_spd,
@@ -45,11 +47,11 @@ CHECKS: dict[str, Check] = {
     "projection_psd": lambda c: check_projection_psd(
         c.system.K, c.system.W, rng=c.rng("projection_psd"), **c.options("projection_psd")),
     "projection_energy": lambda c: check_projection_energy(
-        c.scenario, c.slave_specs(), h=c.h, t_end=c.t_end, **c.options("projection_energy")),
+        c.scenario, c.slave_specs(), h=c.h, t_end=c.t_end, engine=c.engine, **c.options("projection_energy")),
     "proposition1_exact": lambda c: check_proposition1_exact(
-        c.scenario, h=c.h, t_end=c.short_t_end, **c.options("proposition1_exact")),
+        c.scenario, h=c.h, t_end=c.short_t_end, engine=c.engine, **c.options("proposition1_exact")),
     "proposition1_h_scaling": lambda c: check_proposition1_h_scaling(
-        c.scenario, h=c.h, t_end=c.short_t_end, **c.options("proposition1_h_scaling")),
+        c.scenario, h=c.h, t_end=c.short_t_end, engine=c.engine, **c.options("proposition1_h_scaling")),
     "lyapunov_decrease": lambda c: check_lyapunov_decrease(c.run, **c.options("lyapunov_decrease")),
     "convergence": lambda c: check_convergence(c.convergence_run, **c.options("convergence")),
 }
@@ -77,8 +79,8 @@ def select(only: str | Iterable[str] | None) -> list[str]:
 def run_checks(scenario: str | Path | Scenario, only: str | Iterable[str] | None = None, *,
                overrides: dict[str, Any] | None = None, seed: int = 0, h: float | None = None,
                t_end: float | None = None, options: dict | None = None,
-               settings: CheckSettings | None = None, progress: Callable[[CheckResult], None] | None = None
-               ) -> list[CheckResult]:
+               settings: CheckSettings | None = None, progress: Callable[[CheckResult], None] | None = None,
+               engine: str | None = None) -> list[CheckResult]:
     """Run the registered checks on a scenario.
 
     Parameters
@@ -93,6 +95,10 @@ def run_checks(scenario: str | Path | Scenario, only: str | Iterable[str] | None
         See :class:`CheckSettings` (ignored when ``settings`` is given).
     progress : callable, optional
         Called with each result as soon as it is available.
+    engine : str, optional
+        The engine of every run of the checks, as :func:`observer.simulate`'s ``engine``
+        (:data:`observer.engines.ENGINES`); overrides ``settings.engine``. Default: the first
+        time-stepping engine that accepts each run.
 
     Returns
     -------
@@ -100,8 +106,11 @@ def run_checks(scenario: str | Path | Scenario, only: str | Iterable[str] | None
         In the order of ``only`` (or of :data:`CHECKS`); a check that raises is reported
         as failed with the exception in ``reason``.
     """
+    check_engine_name(engine)
     sc = load(scenario, overrides)
     settings = settings or CheckSettings(seed=seed, h=h, t_end=t_end, options=dict(options or {}))
+    if engine is not None:
+        settings = dataclasses.replace(settings, engine=engine)
     unknown = [k for k in settings.options if k not in CHECKS]
     if unknown:
         raise InputError("options", f"unknown check(s) {unknown}; choose from {', '.join(CHECKS)}")

@@ -244,7 +244,7 @@ def slave_specs_of(run: Run) -> list[SlaveSpec]:
 
 
 def rerun(run: Run, h: float) -> Run:
-    """The same case as ``run`` (scenario, system, metric, observers, horizon) at step ``h``.
+    """The same case as ``run`` (scenario, system, metric, observers, horizon, engine) at step ``h``.
 
     Raises ValueError when the run used an explicit χ (it lives on the run's own grid).
     """
@@ -252,7 +252,8 @@ def rerun(run: Run, h: float) -> Run:
     if run.scenario is None or st.get("chi_override"):
         raise ValueError("the run cannot be repeated at another step (no scenario, or an explicit χ)")
     return replay(run.scenario, h=h, t_end=st["t_end"], slaves=slave_specs_of(run),
-                  master_projection=st["master_projection"], metric=st["metric"], system=st["system"])
+                  master_projection=st["master_projection"], metric=st["metric"], system=st["system"],
+                  engine=st["engine"])
 
 
 def lyapunov_pair(system: LinearSystem, a: Trajectory, b: Trajectory, pre: bool = False) -> np.ndarray:

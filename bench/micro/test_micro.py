@@ -41,6 +41,7 @@ import pytest
 
 import observer
 from observer.contact import CONTACT_SOLVERS, get_solver
+from observer.loop import ENGINES  # the registry's time-stepping engines, in its order
 
 SIZES = (1, 4, 20)
 SOLVERS = tuple(CONTACT_SOLVERS)
@@ -104,9 +105,18 @@ LOOP_CASES = {
 (bouncing_ball 6 s, impact_oscillator 20 s, grazing 40 s at h = 1e-3), 2 s of double_mass
 (h = 1e-4) and of the chain (h = 1e-4; its contacts close after ≈ 1 s)."""
 
-ENGINES = ("compiled", "python")
-LOOP_ROUNDS = {"compiled": 10, "python": 5}
-"""Timed rounds per loop benchmark (one call each; the median is reported)."""
+LOOP_ROUNDS = (10, 5)
+"""Timed rounds per loop benchmark (one call each; the median is reported): the registry's
+first time-stepping engine (its default), then every other (the slower references)."""
+
+
+def loop_rounds(engine: str) -> int:
+    return LOOP_ROUNDS[0] if engine == ENGINES[0] else LOOP_ROUNDS[1]
+
+
+def other_engine(engine: str) -> str:
+    """The time-stepping engine the smoke run compares ``engine`` with."""
+    return next(e for e in ENGINES if e != engine)
 SMOKE_STEPS = 200
 
 
@@ -120,7 +130,7 @@ def loop_input(scenario: str, overrides: dict, observers: tuple, steps: int, eng
     sc = observer.load_scenario(scenario, overrides)
     sc = sc.with_overrides({"simulation.t_end": steps * sc.h})
     stepper = observer.MoreauJean(sc.system, sc.law, sc.h, sc.t_end, sc.theta, solver=sc.solver,
-                                  structure="auto" if engine == "compiled" else "dense")
+                                  structure=observer.ENGINES[engine].structure)
     cfg = ObserverConfig.from_table(sc.observer, sc.system.n, sc.q0, sc.u0) if observers else None
     q0 = np.stack([sc.q0] + [cfg.q0 for _ in observers])
     u0 = np.stack([sc.u0] + [cfg.u0 for _ in observers])
@@ -155,12 +165,11 @@ def test_loop(benchmark, kernel_compiled, engine, case):
                                 structure="dense" if inp.stepper.S.band is None else "banded",
                                 compile_time_s=float(kernel_compiled))
     out = benchmark.pedantic(run, args=(inp,), kwargs={"engine": engine},
-                             rounds=LOOP_ROUNDS[engine], iterations=1, warmup_rounds=0)
+                             rounds=loop_rounds(engine), iterations=1, warmup_rounds=0)
     assert np.all(np.isfinite(out.q)) and np.all(np.isfinite(out.u))
     assert out.q.shape[1] == inp.stepper.grid.steps + 1
-    other = run(loop_input(scenario, overrides, observers, steps,
-                           "python" if engine == "compiled" else "compiled"),
-                engine="python" if engine == "compiled" else "compiled") if benchmark.disabled else None
+    other = run(loop_input(scenario, overrides, observers, steps, other_engine(engine)),
+                engine=other_engine(engine)) if benchmark.disabled else None
     if other is not None:
         scale = max(1.0, float(np.max(np.abs(other.q))))
         assert np.max(np.abs(out.q - other.q)) <= 1e-9 * scale

@@ -2,8 +2,9 @@
 times to round-off, Zeno resolved into persistent contact; sampled on the grid t_k = k·h.
 
 The master's and the observers' arrays go into the :class:`~observer.result.RunRecord`
-directly (no DataFrame is built unless a user reads one), their status strings become a
-:class:`~observer.result.RunStatus` here, in one place.
+directly (no DataFrame is built unless a user reads one); the master's and the observers'
+:class:`~observer.result.RunStatus` are decided where each stopped (:mod:`observer.event.master`,
+:mod:`observer.event.observers`) and composed here into the run's.
 """
 
 from __future__ import annotations
@@ -89,13 +90,14 @@ class EventEngine(Engine):
             return _event_run(run, lambda: stopper.signal)
 
 
-def master_status(status: str) -> RunStatus:
-    """The master's status string as a :class:`RunStatus`."""
-    if status == "ok":
-        return RunStatus()
-    if status.startswith("stopped: non-finite"):                 # names the master's quantity
-        return RunStatus(RunState.STOPPED, status.removeprefix("stopped: "))
-    return RunStatus(RunState.STOPPED, f"master: {status}")
+def master_status(master) -> RunStatus:
+    """The run's status from the master's (:attr:`observer.event.master.MasterEventResult.status`,
+    decided where the master stopped): a non-finite stop names the master's quantity already,
+    any other stop is said to be the master's."""
+    status = master.status
+    if status.ok or master.nonfinite:
+        return status
+    return RunStatus(RunState.STOPPED, f"master: {status.reason}")
 
 
 def _event_run(run: RunDescription, signalled) -> RunRecord:
@@ -108,20 +110,20 @@ def _event_run(run: RunDescription, signalled) -> RunRecord:
     n, m = sc.system.n, sc.system.m
     meta = {"scenario": sc.name, "integrator": "event", "h": sc.h, "t_end": sc.t_end, "t0": run.t0,
             "n": n, "m": m, "law": sc.law.law, "restitution": sc.law.restitution.tolist(),
-            "steps": int(t.size - 1), "master_status": master.status,
+            "steps": int(t.size - 1), "master_status": str(master.status),
             "events": len(master.event_rows), "zeno": master.zeno,
             "versions": package_versions(), "engine": "event"}
-    status = master_status(master.status)
+    status = master_status(master)
     slaves, chi, observers_whole = {}, None, True
     if run.slaves:
         slaves, chi, obs = _observers(run, master, master_signal, signalled)
         meta.update(observers=list(obs.runs), source=run.source,
                     observer_events={name: len(r.event_rows) for name, r in obs.runs.items()})
-        observers_whole = all(r.status == "ok" for r in obs.runs.values())
+        observers_whole = all(r.status.ok for r in obs.runs.values())
         if sc.model is not None:
             meta["observer_model"] = sc.model.metadata(sc.system)
-        if obs.status != "ok" and status.ok:
-            status = RunStatus(RunState.STOPPED, f"observer {obs.status}")
+        if not obs.status.ok and status.ok:
+            status = RunStatus(RunState.STOPPED, f"observer {obs.status.reason}")
     sig = signalled()
     keep, bad = _event_finite_rows(t, q, u, P, slaves)
     if bad is not None:                     # rows an observer did not reach or where it overflowed

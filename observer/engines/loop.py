@@ -54,6 +54,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from observer.errors import InputError
+from observer.result import RECORD_ARRAYS
 from observer.sparse import abs_sum
 from observer.stepping import MoreauJean
 
@@ -223,6 +224,10 @@ class Stopper:
         return False
 
 
+STREAMED = tuple(a for a in RECORD_ARRAYS if not a.optional)
+"""The record arrays a :class:`Chunk` carries (every one but the optional ``q_pre``)."""
+
+
 def emitter(inp: LoopInput, rec: dict, record_every: int, on_chunk, rec_V=None):
     """``emit(k)``: pass the rows finished up to grid index k (not yet passed) to ``on_chunk``."""
     state = {"done": 0}
@@ -237,9 +242,8 @@ def emitter(inp: LoopInput, rec: dict, record_every: int, on_chunk, rec_V=None):
             return
         sl = slice(r0, r1)
         rows = np.arange(r0, r1) * record_every
-        on_chunk(Chunk(rows, inp.stepper.time(rows), rec["q"][:, sl], rec["u"][:, sl],
-                       rec["P"][:, sl], rec["sigma"][:, sl], rec["active"][sl], rec["chi"][sl],
-                       None if rec_V is None else rec_V[:, sl], inp.stepper.system, names))
+        on_chunk(Chunk(rows, inp.stepper.time(rows), **{a.name: a.rows(rec[a.name], sl) for a in STREAMED},
+                       V=None if rec_V is None else rec_V[:, sl], system=inp.stepper.system, names=names))
         state["done"] = r1
 
     return emit
@@ -255,12 +259,10 @@ def finish(inp: LoopInput, out: LoopOutput, stopped_at: int | None, reason: str 
 
     if stopped_at is not None:
         R = min(out.q.shape[1], stopped_at // out.record_every + 1)   # the rows of steps ≤ stopped_at
-        cut = {k: getattr(out, k)[:, :R] for k in ("q", "u", "P", "sigma")}
-        cut.update(active=out.active[:R], chi=out.chi[:R])
+        cut = {a.name: a.rows(getattr(out, a.name), slice(R)) for a in RECORD_ARRAYS
+               if getattr(out, a.name) is not None}
         if out.t is not None:
             cut["t"] = out.t[:R]
-        if out.q_pre is not None:
-            cut["q_pre"] = out.q_pre[:, :R]
         if out.V is not None:
             cut["V"] = out.V[:, :R]
         out = replace(out, stopped_at=int(stopped_at), stop_reason=reason, stop_signal=sig, **cut)
@@ -437,19 +439,24 @@ def projection_slots(inp: LoopInput) -> tuple[np.ndarray, np.ndarray, np.ndarray
 STORES = ("full", "summary")
 
 
-def allocate_records(inp: LoopInput, record_every: int, record_pre: bool):
+def allocate_records(inp: LoopInput, record_every: int, record_pre: bool) -> tuple[dict, int]:
+    """The loops' records (:data:`~observer.result.RECORD_ARRAYS`, name → array; ``q_pre`` with
+    no rows unless ``record_pre``) with row 0 the initial states, and their row count R."""
     stepper = inp.stepper
     steps, n, m = stepper.steps, stepper.system.n, stepper.system.m
     S = inp.q0.shape[0]
     R = steps // record_every + 1
-    rec = {"q": np.empty((S, R, n)), "u": np.empty((S, R, n)), "P": np.zeros((S, R, m)),
-           "sigma": np.zeros((S, R, m)), "active": np.zeros((R, m), dtype=bool),
-           "chi": np.zeros((R, m), dtype=bool),
-           "q_pre": np.empty((S, R if record_pre else 0, n))}
+    rec = {a.name: a.allocate(S, R if record_pre or not a.optional else 0, n, m) for a in RECORD_ARRAYS}
     rec["q"][:, 0], rec["u"][:, 0] = inp.q0, inp.u0
     if record_pre:
         rec["q_pre"][:, 0] = inp.q0
     return rec, R
+
+
+def loop_records(rec: dict, record_pre: bool) -> dict:
+    """The record arrays of :func:`allocate_records` as :class:`LoopOutput`'s fields (``q_pre``
+    None unless recorded)."""
+    return {a.name: None if a.optional and not record_pre else rec[a.name] for a in RECORD_ARRAYS}
 
 
 def python_step(inp: LoopInput, stepper: MoreauJean, k: int, s: int, q, u, chi,

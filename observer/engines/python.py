@@ -14,7 +14,7 @@ import numpy as np
 
 from observer.engines.base import Refusal, RunDescription
 from observer.engines.loop import (FiniteGuard, LoopInput, LoopOutput, Stopper, allocate_records, emitter,
-                                   finish, python_step, stopped_text)
+                                   finish, loop_records, python_step, stopped_text)
 from observer.engines.timestepping import TimeStepping
 from observer.errors import InputError
 from observer.stepping import MoreauJean, NonFiniteState
@@ -114,11 +114,10 @@ def run_python(inp: LoopInput, record_every: int, record_pre: bool, on_chunk=Non
     emit(stepper.grid.steps if stop is None else stop)
     run_time = time.perf_counter() - t0
     st = stepper.stats
-    out = LoopOutput(record_every, rec["q"], rec["u"], rec["P"], rec["sigma"], rec["active"], rec["chi"],
-                     rec["q_pre"] if record_pre else None, "python",
-                     {"contact_solves": st.contact_solves, "iterations": st.iterations,
-                      "max_residual": st.max_residual, "fallbacks": st.fallbacks, **health},
-                     [], 0.0, run_time)
+    out = LoopOutput(record_every, **loop_records(rec, record_pre), engine="python",
+                     stats={"contact_solves": st.contact_solves, "iterations": st.iterations,
+                            "max_residual": st.max_residual, "fallbacks": st.fallbacks, **health},
+                     run_time_s=run_time)
     return finish(inp, out, stop, reason, stopper.signal if stopper is not None else None)
 
 

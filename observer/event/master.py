@@ -73,6 +73,7 @@ from observer.event.roots import (FLOOR_FACTOR, ROUNDOFF, NonFiniteFlow, RootIso
                                   SearchStopped, first_zero, motion_tolerance, resolution, tolerance)
 from observer.event.tails import JointTail, horner, joint_due, joint_tail
 from observer.impact import ImpactLaw, impact
+from observer.result import RunState, RunStatus
 from observer.scenario import Scenario
 
 if TYPE_CHECKING:
@@ -167,9 +168,13 @@ class MasterEventResult:
     segments : list of tuple
         The exact solution: ``(t_start, t_stop, held contacts, x(t_start))`` per flow piece
         (see :meth:`state`).
-    status : str
-        ``"ok"`` or ``"stopped: <reason>"``; a stopped run's rows end at the last grid
-        time before the stop (:attr:`t_stop`), never with NaN rows.
+    status : RunStatus
+        ``ok``, or ``stopped`` with the reason (``str(status)``: ``"stopped: <reason>"``); a
+        stopped run's rows end at the last grid time before the stop (:attr:`t_stop`), never
+        with NaN rows.
+    nonfinite : bool
+        The stop is a state that left the floating-point range (the reason names the master's
+        quantity).
     closings, openings : list of ndarray
         Per contact, the times it closes and opens again (χ_j = 1 on each
         ``[closing, opening]``; an impact or graze is a zero-length interval; ``inf``:
@@ -190,12 +195,13 @@ class MasterEventResult:
     P: np.ndarray
     active: np.ndarray
     event_rows: list
-    status: str
+    status: RunStatus
     closings: list
     openings: list
     zeno: list = field(default_factory=list)
     segments: list = field(default_factory=list)
     t_stop: float = float("nan")
+    nonfinite: bool = False
 
     @cached_property
     def frame(self) -> pd.DataFrame:
@@ -211,7 +217,7 @@ class MasterEventResult:
             cols[f"active{j}"] = self.active[:, j].astype(np.int8)
         frame = pd.DataFrame(cols)
         frame.attrs.update({"scenario": self.scenario.name, "integrator": "event", "h": self.h,
-                            "t_end": self.t_end, "status": self.status, "t_stop": self.t_stop})
+                            "t_end": self.t_end, "status": str(self.status), "t_stop": self.t_stop})
         return frame
 
     @cached_property
@@ -877,7 +883,8 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
                 t0: float, should_stop) -> MasterEventResult:
     run, t_end, x, persistent = _start(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, should_stop)
     t0 = run.t0
-    status, t = "ok", t0
+    status, nonfinite = RunStatus(), False
+    t = t0
     certified: dict[tuple[str, int], float] = {}
     n_events, same_time, t_last_event = 0, 0, -np.inf
     n_impacts = 0                                      # impacts since the last landing
@@ -887,7 +894,7 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
         if sig:                                        # SIGINT/SIGTERM of a streamed run
             if run.k_next == 0:                        # before any row: the initial state is one
                 run.fill_certified(flow, t, x, float(np.nextafter(t, np.inf)))
-            status = f"stopped: {sig} at t = {t:.9g}"
+            status = _stopped(f"{sig} at t = {t:.9g}")
             break
         free = [j for j in range(run.m) if j not in persistent]
         z_now = flow.z(t, x)
@@ -904,14 +911,15 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
         except NonFiniteFlow as exc:                  # overflow: a stop at the last finite state
             if np.all(np.isfinite(exc.z_ok)):
                 run.fill(flow, t, x, exc.t_ok, include_end=True)
-            status = f"stopped: non-finite {_flow_quantity(run, keys, exc)} at t = {exc.t:.9g}"
+            status = _stopped(f"non-finite {_flow_quantity(run, keys, exc)} at t = {exc.t:.9g}")
+            nonfinite = True
             t = exc.t
             break
         except RootIsolationError as exc:             # a stall: the certified part is kept
             if exc.t_ok is not None and exc.t_ok > t:
                 run.fill(flow, t, x, exc.t_ok, include_end=True)
                 t = exc.t_ok
-            status = f"stopped: {exc}"
+            status = _stopped(str(exc))
             break
         if zero is None:
             run.fill(flow, t, x, t_end, include_end=True)
@@ -921,13 +929,13 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
         kind, j = keys[zero.index]
         n_events += 1
         if n_events > max_events:
-            status = f"stopped: event cap {max_events} reached at t = {t:.17g}"
+            status = _stopped(f"event cap {max_events} reached at t = {t:.17g}")
             break
         same_time = same_time + 1 if t == t_last_event else 0
         t_last_event = t
         if same_time >= STALL_EVENTS:
-            status = (f"stopped: no progress, {STALL_EVENTS} events at t = {t:.17g} "
-                      f"(contact {j}, a degenerate contact state)")
+            status = _stopped(f"no progress, {STALL_EVENTS} events at t = {t:.17g} "
+                              f"(contact {j}, a degenerate contact state)")
             break
         if zero.kind == "touch":                      # graze of a gap, or a force touching 0
             certified[(kind, j)] = zero.resume
@@ -947,12 +955,16 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
         t, x, persistent, n_impacts, done = _impact(run, t, x, persistent, j, n_impacts)
         if done:                                       # the accumulation lies beyond t_end
             break
-    if run.halted and not status.startswith("stopped: non-finite"):
+    if run.halted and not nonfinite:
         t = float(run.t_grid[run.k_next - 1]) if run.k_next else t0
-        status = f"stopped: {run.halted} at t = {t:.9g}"
-    if status == "ok" and run.k_next < run.t_grid.size:
-        status = "stopped: sampling incomplete"
-    return _result(run, scenario, status, t)
+        status = _stopped(f"{run.halted} at t = {t:.9g}")
+    if status.ok and run.k_next < run.t_grid.size:
+        status = _stopped("sampling incomplete")
+    return _result(run, scenario, status, t, nonfinite)
+
+
+def _stopped(reason: str) -> RunStatus:
+    return RunStatus(RunState.STOPPED, reason)
 
 
 def _impact(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int, n_impacts: int):
@@ -1131,21 +1143,22 @@ def _finite_rows(run: _Run, G: np.ndarray) -> tuple[int, str | None]:
     return first, what
 
 
-def _result(run: _Run, scenario: Scenario, status: str, t_stop: float) -> MasterEventResult:
+def _result(run: _Run, scenario: Scenario, status: RunStatus, t_stop: float,
+            nonfinite: bool) -> MasterEventResult:
     n, m = run.n, run.m
-    if status != "ok":                 # a stopped run ends at its stop time: no NaN rows
+    if not status.ok:                  # a stopped run ends at its stop time: no NaN rows
         keep = run.k_next
         run.t_grid, run.X, run.P = run.t_grid[:keep], run.X[:keep], run.P[:keep]
     G = run.X[:, :n] @ run.system.W + run.system.nu(run.t_grid)
     keep, bad = _finite_rows(run, G)   # non-finite rows (overflow): the output ends before them
     if bad is not None:
-        if status == "ok" or not status.startswith("stopped: non-finite"):
-            status = f"stopped: non-finite {bad} at t = {run.t_grid[keep]:.9g}"
+        if not nonfinite:
+            status, nonfinite = _stopped(f"non-finite {bad} at t = {run.t_grid[keep]:.9g}"), True
         t_stop = float(run.t_grid[keep])
         run.t_grid, run.X, run.P, G = run.t_grid[:keep], run.X[:keep], run.P[:keep], G[:keep]
-    if status.startswith("stopped: non-finite"):
-        status += (f"; the output ends at t = {run.t_grid[-1]:.9g}, the last finite state"
-                   if run.t_grid.size else "; no finite output row")
+    if nonfinite:
+        status = _stopped(status.reason + (f"; the output ends at t = {run.t_grid[-1]:.9g}, the last "
+                                           "finite state" if run.t_grid.size else "; no finite output row"))
     t_grid = run.t_grid
     for j, since in list(run.closed_since.items()):
         run.intervals[j].append((since, np.inf))
@@ -1160,4 +1173,4 @@ def _result(run: _Run, scenario: Scenario, status: str, t_stop: float) -> Master
     return MasterEventResult(scenario, run.h, run.t_end, t_grid, run.X[:, :n], run.X[:, n:], G,
                              run.P, active.astype(bool), list(run.events), status, closings,
                              openings, run.zeno, run.segments,
-                             float(run.t_end if status == "ok" else t_stop))
+                             float(run.t_end if status.ok else t_stop), nonfinite)

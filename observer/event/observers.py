@@ -69,7 +69,7 @@ from observer.errors import InputError
 from observer.impact import ImpactLaw
 from observer.model import LinearSystem
 from observer.observers import ObserverConfig, Slave, lyapunov, make_slaves
-from observer.result import EVENT_COLUMNS
+from observer.result import EVENT_COLUMNS, RunState, RunStatus
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -366,8 +366,8 @@ class EventObserverRun:
     event_rows : list of tuple
         The observer's own events, rows of :data:`observer.result.EVENT_COLUMNS` (kinds
         :data:`EVENT_KINDS`); :attr:`events` is their DataFrame.
-    status : str
-        ``"ok"`` or ``"stopped: <reason>"``.
+    status : RunStatus
+        ``ok``, or ``stopped`` with the reason (decided where the run stopped).
     """
 
     name: str
@@ -378,7 +378,7 @@ class EventObserverRun:
     P: np.ndarray
     sigma: np.ndarray
     event_rows: list = field(default_factory=list)
-    status: str = "ok"
+    status: RunStatus = field(default_factory=RunStatus)
 
     @property
     def events(self) -> pd.DataFrame:
@@ -408,7 +408,7 @@ class EventObserversResult:
     t: np.ndarray
     chi: np.ndarray
     runs: dict = field(default_factory=dict)
-    master_status: str = "ok"
+    master_status: RunStatus = field(default_factory=RunStatus)
 
     @property
     def frame(self) -> pd.DataFrame:
@@ -428,12 +428,17 @@ class EventObserversResult:
         return pd.DataFrame(cols)
 
     @property
-    def status(self) -> str:
-        """``"ok"`` if the master and every observer ran to the end, else the first
-        ``"stopped: …"`` status (prefixed ``master:`` or the observer's name)."""
-        if self.master_status != "ok":
-            return f"master: {self.master_status}"
-        return next((f"{n}: {r.status}" for n, r in self.runs.items() if r.status != "ok"), "ok")
+    def status(self) -> RunStatus:
+        """``ok`` if the master and every observer ran to the end, else the first stop (its
+        reason prefixed ``master:`` or the observer's name)."""
+        if not self.master_status.ok:
+            return _stopped(f"master: {self.master_status.reason}")
+        return next((_stopped(f"{n}: {r.status.reason}") for n, r in self.runs.items() if not r.status.ok),
+                    RunStatus())
+
+
+def _stopped(reason: str) -> RunStatus:
+    return RunStatus(RunState.STOPPED, reason)
 
 
 def switching_schedule(intervals: list[np.ndarray], t0: float, t_end: float) -> list[tuple[float, list, list]]:
@@ -591,15 +596,15 @@ class _ObserverIntegrator:
         q, u, now = q0.astype(float).copy(), u0.astype(float).copy(), float(t[0])
         closed, active = frozenset(), frozenset()
         k_next = 1                                   # next grid row to fill
-        status = "ok"
+        status = RunStatus()
         for t_sw, on, off in schedule + [(float(t[-1]), [], [])]:
             sig = self.should_stop() if self.should_stop is not None else None
             if sig:                                  # SIGINT/SIGTERM of a streamed run
-                status = f"stopped: {sig} at t = {now:.9g}"
+                status = _stopped(f"{sig} at t = {now:.9g}")
                 break
             q, u, now, closed, active, k_next, status = self._flow_until(
                 t, Q, U, q, u, now, t_sw, closed, active, k_next)
-            if status != "ok":
+            if not status.ok:
                 break
             row = min(k_next, N1 - 1) if now > t[0] else 0
             if on:
@@ -612,8 +617,8 @@ class _ObserverIntegrator:
             if k_next < N1 and t[k_next] == now:     # a grid sample at the event instant: right limit
                 Q[k_next], U[k_next] = q, u
                 k_next += 1
-        if status == "ok" and k_next < N1:
-            status = f"stopped: output rows from t = {t[k_next]} not reached"
+        if status.ok and k_next < N1:
+            status = _stopped(f"output rows from t = {t[k_next]} not reached")
         Q[k_next:], U[k_next:] = np.nan, np.nan      # rows a stopped run did not reach
         return Q, U, status
 
@@ -646,15 +651,15 @@ class _ObserverIntegrator:
             for mon in mons:
                 s0 = _safe_start(md, mon, z, delta)
                 if s0 < 0.0:
-                    return q, u, now, closed, active, k_next, (
-                        f"stopped: degenerate {mon.kind} monitor of contact {mon.contact} at t = {now!r}")
+                    return q, u, now, closed, active, k_next, _stopped(
+                        f"degenerate {mon.kind} monitor of contact {mon.contact} at t = {now!r}")
                 if s0 >= delta:
                     continue
                 try:
                     tau = _first_crossing(md, mon.row, z, delta, s0)
                 except _Stalled as exc:
-                    return q, u, now, closed, active, k_next, (
-                        f"stopped: {exc} for the {mon.kind} monitor of contact {mon.contact} at t = {now!r}")
+                    return q, u, now, closed, active, k_next, _stopped(
+                        f"{exc} for the {mon.kind} monitor of contact {mon.contact} at t = {now!r}")
                 if tau is not None:
                     lo = self._bracket_left(md, mon.row, z, s0, tau)
                     tau = _refine(md, mon.row, z, lo, tau)
@@ -677,14 +682,14 @@ class _ObserverIntegrator:
             count_here = count_here + 1 if now == last_event_t else 1
             last_event_t = now
             if count_here > MAX_EVENTS_PER_INSTANT:
-                return q, u, now, closed, active, k_next, f"stopped: mode cycle at t = {now!r}"
+                return q, u, now, closed, active, k_next, _stopped(f"mode cycle at t = {now!r}")
             gam = float(self.system.contact_velocities(u, now)[mon.contact])
             if mon.kind == "stick":                 # LCP decides: held (λ > 0) or touched and free
                 active = self.select_active(now, q, u, closed)
             else:
                 active = active - {mon.contact}
             self.events.append((now, mon.contact, mon.kind, gam, gam, 0.0))
-        return q, u, now, closed, active, k_next, "ok"
+        return q, u, now, closed, active, k_next, RunStatus()
 
     @staticmethod
     def _bracket_left(md: Mode, row: np.ndarray, z: np.ndarray, s0: float, tau: float) -> float:
@@ -784,12 +789,12 @@ def run_observers(master, scenario, observers: Iterable = ("jump", "nojump"), *,
     schedule = switching_schedule(intervals, float(t[k_on]), float(t[-1]))
     chi = _grid_chi(t, intervals)
     chi[:k_on] = False
-    out = EventObserversResult(t, chi, master_status=str(getattr(master, "status", "ok")))
+    out = EventObserversResult(t, chi, master_status=getattr(master, "status", None) or RunStatus())
     limit = t.size               # rows to compute: fewer once a signal stopped an observer
     for s in slaves:
         if limit == t.size:
             run = _run_one(scenario, s, t, k_on, schedule, solver, should_stop)
-            if should_stop is not None and should_stop() and run.status != "ok":
+            if should_stop is not None and should_stop() and not run.status.ok:
                 reached = np.isfinite(run.q).all(axis=1)
                 if not reached.all():
                     limit = max(int(np.argmin(reached)), k_on + 1)
@@ -851,8 +856,8 @@ def _run_one(scenario, s: Slave, t: np.ndarray, k_on: int, schedule, solver: str
         P[k_on] += pre["P"][-1]
         sigma = np.vstack([np.zeros((k_on, system.m)), sigma])
         events = pre["events"] + events
-        if pre["status"] != "ok":
-            status = f"uncoupled phase {pre['status']}"
+        if not pre["status"].ok:
+            status = _stopped(f"uncoupled phase stopped: {pre['status'].reason}")
     return EventObserverRun(s.name, s.position_jumps, Q, U, np.full(t.size, np.nan), P, sigma, events, status)
 
 

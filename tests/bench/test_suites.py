@@ -151,6 +151,27 @@ def test_engine_follows_the_contact_solver():
         assert engine_for(solver) == "python"
 
 
+def test_a_case_declares_its_engine():
+    """A case's ``engine`` (as ``simulate``'s) reaches its runs and its row; undeclared, the
+    case id is unchanged (resumable suites) and the registry chooses; an unknown name is
+    refused naming the field."""
+    from bench.runners import engine_kwargs, simulate
+    base = Case("observers", "impact_oscillator", t_end=0.05)
+    assert "engine" not in base.case_id and engine_kwargs(base) == {}
+    assert engine_kwargs(Case("observers", "impact_oscillator", solver="lemke")) == {"engine": "python"}
+    assert engine_kwargs(Case("work_precision", "impact_oscillator", integrator="event")) == {}
+    pinned = Case("observers", "impact_oscillator", t_end=0.05, engine="python")
+    assert pinned.case_id == base.case_id + ":engine=python"
+    sc = observer.load_scenario(pinned.scenario, pinned.overrides())
+    res, _, _ = simulate(sc, pinned, observers=[])
+    assert res.metadata["engine"] == "python"
+    res, _, _ = simulate(sc, base, observers=[])
+    assert res.metadata["engine"] == "compiled"
+    with pytest.raises(InputError) as info:
+        Case("observers", "impact_oscillator", engine="numpy")
+    assert info.value.field == "engine"
+
+
 def test_record_every_from_h_record():
     assert record_every(1e-3, None) == 1 and record_every(1e-3, 5e-4) == 1
     assert record_every(2e-3 / 2 ** 11, 2e-3 / 2 ** 6) == 32

@@ -234,7 +234,10 @@ def test_toy_engine_and_toy_law_through_the_proof_checks(toys, monkeypatch):
     from proofs_checks.context import CheckSettings
     from toys.toy_engine import ToyEngine
 
-    settings = CheckSettings(seed=0, max_steps=150, short_steps=100)
+    # t_end: every run of the checks 150 steps of h = 1e-4, the convergence run too (without it
+    # that run takes the scenario's 20 s within the check's memory budget: 2·10⁵ numpy steps
+    # of five systems per engine, minutes)
+    settings = CheckSettings(seed=0, t_end=0.015, max_steps=150, short_steps=100)
     over = {"impact.law": "toy_plastic"}
     ref = run_checks("double_mass", RUN_CHECKS, overrides=over, settings=settings)
     ran = []

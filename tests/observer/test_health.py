@@ -51,7 +51,7 @@ def _gaps(inp, out) -> np.ndarray:
     return st.system.gaps(out.q[0], st.time(out.rows))
 
 
-@pytest.mark.parametrize("engine", ["compiled", "python"])
+@pytest.mark.parametrize("engine", loop.ENGINES)
 def test_in_regime_run_is_quiet_and_measured(engine):
     """double_mass at its h with the jump observer: no warning; the metrics are the analytic
     values and the deepest recorded gap."""
@@ -69,7 +69,7 @@ def test_in_regime_run_is_quiet_and_measured(engine):
     assert out.stopped_at is None
 
 
-@pytest.mark.parametrize("engine", ["compiled", "python"])
+@pytest.mark.parametrize("engine", loop.ENGINES)
 def test_coarse_step_warns_penetration_and_h_omega(engine):
     """The issue's case: double_mass at h = 0.1 penetrates centimetres of a 25 cm clearance and
     h·ω_max = 1.62 > 1: both warned, on stderr (RunHealthWarning) and in the record."""
@@ -118,7 +118,7 @@ def _newton_residuals(inp, out) -> np.ndarray:
     return r[act]
 
 
-@pytest.mark.parametrize("engine", ["compiled", "python"])
+@pytest.mark.parametrize("engine", loop.ENGINES)
 def test_residual_is_recomputed_from_the_state(engine):
     """impact_oscillator (Newton, one contact): the recorded max residual is round-off, like
     the residual recomputed here from u_k, u_{k+1}, P."""
@@ -129,7 +129,7 @@ def test_residual_is_recomputed_from_the_state(engine):
     assert mine.max() < 1e-12 and out.health.max_residual < 1e-12
 
 
-@pytest.mark.parametrize("engine", ["compiled", "python"])
+@pytest.mark.parametrize("engine", loop.ENGINES)
 def test_residual_above_tolerance_stops_the_run(engine):
     """A step whose applied impulse violates the law (Â⁻¹W applied 1.5× the Delassus matrix the
     LCP used: a broken scheme the solver's own residual cannot see) stops the run at that

@@ -434,7 +434,7 @@ def test_positions_before_the_projection_are_the_same_on_both_engines():
 
 
 @pytest.mark.filterwarnings("ignore:mechanical energy grew")     # the broken scheme's, expected
-@pytest.mark.parametrize("engine", ["compiled", "python"])
+@pytest.mark.parametrize("engine", ENGINES)
 def test_a_residual_equal_to_the_tolerance_does_not_stop_the_run(engine):
     """The residual tolerance is inclusive (a step stops the run only if its residual exceeds
     ``residual_tol``): bouncing_ball with Â⁻¹W applied 1.5× (the broken scheme of
@@ -467,7 +467,7 @@ def test_a_residual_equal_to_the_tolerance_does_not_stop_the_run(engine):
     assert below.health.max_residual == r and np.array_equal(below.q, free.q[:, :k + 1])   # r stopped it
 
 
-@pytest.mark.parametrize("engine", ["compiled", "python"])
+@pytest.mark.parametrize("engine", ENGINES)
 def test_replaying_the_recorded_chi_reproduces_the_run(engine):
     """double_mass with a jump and a no-jump observer: the χ each step used (the master's
     closed set, recorded in ``chi``) given back as an explicit χ array (``LoopInput.chi``,

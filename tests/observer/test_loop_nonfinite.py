@@ -75,7 +75,7 @@ def _next_state(inp: LoopInput, out) -> tuple[np.ndarray, np.ndarray]:
 
 
 @pytest.mark.parametrize("n, spec", [(1, "scalar"), (2, "lean")])
-@pytest.mark.parametrize("engine", ["compiled", "python"])
+@pytest.mark.parametrize("engine", loop.ENGINES)
 def test_a_state_overflowing_mid_run_stops_at_the_last_finite_step(monkeypatch, n, spec, engine):
     monkeypatch.setattr(driver, "WINDOW", 1000)                   # the stop is in window 8 of 8
     inp = _input(n, 80.0)
@@ -110,7 +110,7 @@ def test_a_huge_but_finite_run_is_not_stopped():
     _assert_rows_finite(out)
 
 
-@pytest.mark.parametrize("engine", ["compiled", "python"])
+@pytest.mark.parametrize("engine", loop.ENGINES)
 def test_an_observer_whose_V_overflows_stops_before_that_row(monkeypatch, engine):
     """The general loop (an observer): its states stay finite long after V = ½v² − ½κe²
     (v ≈ 10 sinh(10t), e = cosh(10t) from a unit offset) overflows at |v| ≈ 1.9e154."""
@@ -153,7 +153,7 @@ def test_the_summary_store_stops_with_a_finite_summary(monkeypatch):
 
 
 
-@pytest.mark.parametrize("engine", ["compiled", "python"])
+@pytest.mark.parametrize("engine", loop.ENGINES)
 def test_a_streamed_run_reports_a_signal_only_when_one_stopped_it(monkeypatch, engine):
     """A streamed run (``on_chunk``: the SIGINT/SIGTERM handler installed) stopped by the
     overflow reports no signal (``stop_signal is None``, not an empty name); the same run with
@@ -189,7 +189,7 @@ def test_the_numpy_stepper_refuses_a_non_finite_free_velocity():
 # ---------------------------------------------------------------------------------------
 # the issue's case: a finite but huge forcing, through the CLI and the API
 # ---------------------------------------------------------------------------------------
-@pytest.mark.parametrize("engine", ["compiled", "python"])
+@pytest.mark.parametrize("engine", loop.ENGINES)
 def test_huge_forcing_is_a_stop_not_nan_rows(tmp_path, capsys, engine):
     path = tmp_path / "dm.csv"
     code = main(["run", "double_mass", "--set", "system.forcing.constant=[1e308,1e308]",

@@ -6,10 +6,12 @@ project root; a missing oracle fails under ``CI`` and skips otherwise).
 Floating-point results are compared with a stated round-off tolerance (they depend on the
 BLAS and library versions); bitwise equality is asserted only where it is the property
 (structural zeros of an inactive contact, one code path driven two ways). The external
-oracles of the scheme (Siconos) are run on every engine that takes a time-stepping case (the
-``engine`` fixture of tests/conftest.py: the numba kernel, the numpy reference stepper of
-``observer/stepping.py``, the toy engine; the event engine refuses them), each checked on its
-own with its tolerance.
+oracles of the scheme (Siconos) and the closed forms are run on every engine that takes the
+case (the ``engine`` fixture of tests/conftest.py): the properties of the scheme (its order,
+its impact step, its energy balance) on the engines that take a time-stepping case (the numba
+kernel, the numpy reference stepper of ``observer/stepping.py``, the toy engine; the event
+engine refuses them), the closed-form impact and rest times of the ball and the static
+preload of double_mass on the event engine too, each checked on its own with its tolerance.
 
 Oracles used here:
 
@@ -58,12 +60,17 @@ BALL = dict(m=2.0, g0=9.81, h0=1.0, e=0.8)
 # helpers
 # ---------------------------------------------------------------------------------------
 @functools.lru_cache(maxsize=None)
-def ball_run(law: str, h: float, t_end: float, theta: float = 0.5):
-    """The built-in bouncing ball with :data:`BALL` parameters (cached per module)."""
+def ball_run(engine, law: str, h: float, t_end: float, theta: float = 0.5,
+             integrator: str | None = "time-stepping"):
+    """The built-in bouncing ball with :data:`BALL` parameters on ``engine`` (the ``engine``
+    fixture; ``integrator=None``: the engine's own), cached per module."""
     sc = observer.load_scenario("bouncing_ball", {
         "param.m": BALL["m"], "param.g0": BALL["g0"], "param.h0": BALL["h0"],
         "param.restitution": BALL["e"], "param.law": law})
-    return observer.simulate(sc, h=h, t_end=t_end, theta=theta)
+    kw = {} if integrator is None else {"integrator": integrator}
+    if theta != 0.5:
+        kw["theta"] = theta
+    return engine.simulate(sc, h=h, t_end=t_end, **kw)
 
 
 def impact_rows(P: np.ndarray) -> np.ndarray:
@@ -286,12 +293,12 @@ H_BALL = 5e-4
 
 
 @pytest.mark.parametrize("law", LAWS)
-def test_ball_first_impact_step(law):
+def test_ball_first_impact_step(law, engine):
     """The first step with P > 0 starts at t_k with |t_k − t1| ≤ h/2 + g h²/(8 v1),
     t1 = sqrt(2h0/g): the predicted index set g(q_k + (h/2)u_k) ≤ 0 closes the contact in
     the step whose midpoint is nearest to the exact impact (free flight is exact for θ = ½)."""
     h, g, h0 = H_BALL, BALL["g0"], BALL["h0"]
-    res = ball_run(law, h, 5.0)
+    res = ball_run(engine, law, h, 5.0)
     t1 = np.sqrt(2 * h0 / g)
     v1 = np.sqrt(2 * g * h0)
     assert t1 == pytest.approx(bb.impact_times(h0, g, BALL["e"], 1)[0], rel=1e-15)
@@ -305,25 +312,25 @@ def test_ball_first_impact_step(law):
     assert res.u[k + 1, 0] == pytest.approx(-BALL["e"] * res.u[k, 0], rel=1e-12)
 
 
-def test_ball_poisson_is_newton():
+def test_ball_poisson_is_newton(engine):
     """For one contact Poisson's law is Newton's law, and the discrete Poisson step is the
     discrete Newton step: the two ball runs (θ = ½ and θ = 1, 5 s, several hundred impact
     and contact steps) agree to round-off, 1e-12 relative to the largest |q|, |u|, |P|."""
     for theta in (0.5, 1.0):
-        newton, poisson = (ball_run(law, H_BALL, 5.0, theta) for law in LAWS)
+        newton, poisson = (ball_run(engine, law, H_BALL, 5.0, theta) for law in LAWS)
         assert impact_rows(newton.P[:, 0]).size >= 20
         for a, b in ((newton.q, poisson.q), (newton.u, poisson.u), (newton.P, poisson.P)):
             assert np.max(np.abs(a - b)) <= 1e-12 * np.max(np.abs(a))
 
 
 @pytest.mark.parametrize("law", LAWS)
-def test_ball_impact_times(law):
+def test_ball_impact_times(law, engine):
     """The first 10 impact times (start of each new group of P > 0 steps) follow the
     closed form t_k = t1 + (2v1/g) e(1 − e^{k−1})/(1 − e): the first two within 2h, all ten
     within 5h (grid quantisation h/2 plus an O(h) per-bounce error that stays small,
     measured ≤ 3h). Both laws: for one contact the discrete Poisson step is Newton's."""
     h, g, h0, e = H_BALL, BALL["g0"], BALL["h0"], BALL["e"]
-    res = ball_run(law, h, 5.0)
+    res = ball_run(engine, law, h, 5.0, integrator=None)
     t_grid, _ = ball_impact_times(res, g)
     n = 10
     assert t_grid.size > n
@@ -334,14 +341,14 @@ def test_ball_impact_times(law):
 
 
 @pytest.mark.parametrize("law", LAWS)
-def test_ball_rests_after_accumulation(law):
+def test_ball_rests_after_accumulation(law, engine):
     """After the Zeno time t_∞ = sqrt(2h0/g)(1+e)/(1−e) = 4.0637 s the ball rests:
     |q| ≤ 10h, the contact is closed in every step, and P/h equals the persistent contact
     force m·g0 to a few percent (≤ 5 %) right after t_∞ and to 1e-6 from t_∞ + 0.05 s on."""
     h, g, h0, e, m = H_BALL, BALL["g0"], BALL["h0"], BALL["e"], BALL["m"]
     t_inf = bb.accumulation_time(h0, g, e)
     assert t_inf == pytest.approx(4.0637, abs=1e-4)
-    res = ball_run(law, h, 5.0)
+    res = ball_run(engine, law, h, 5.0, integrator=None)
     rows = np.flatnonzero(res.t > t_inf)
     assert rows.size > 1000
     assert np.max(np.abs(res.q[rows, 0])) <= 10 * h
@@ -366,7 +373,7 @@ def exact_last_time_above(h0, g, e, level):
 
 
 @pytest.mark.parametrize("law", LAWS)
-def test_ball_last_time_above_1mm(law):
+def test_ball_last_time_above_1mm(law, engine):
     """The last time q > 1e-3 m matches the closed form 3.9277 s (docs/theory/oracles.md §1) at h = 1e-4
     to 10h (impact-time error ≤ 5h, plus the sensitivity 0.34 s/(m/s) of the crossing of
     the low 15th apex (1.24 mm) to an O(g h) rebound-speed error); both laws, since for
@@ -375,7 +382,7 @@ def test_ball_last_time_above_1mm(law):
     k, t_exact = exact_last_time_above(h0, g, e, 1e-3)
     # docs/theory/oracles.md §1 quotes 3.9278 s; the series gives 3.92770 s (t_15 = 3.90485 s + 22.85 ms)
     assert k == 15 and t_exact == pytest.approx(3.9277, abs=5e-5)
-    res = ball_run(law, h, 4.0)
+    res = ball_run(engine, law, h, 4.0, integrator=None)
     t_last = res.t[np.flatnonzero(res.q[:, 0] > 1e-3)[-1]]
     assert abs(t_last - t_exact) <= 10 * h, (t_last, t_exact)
 
@@ -407,7 +414,7 @@ def test_exact_oscillator_reproduces_periodic_orbit():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("law", LAWS)
-def test_impact_oscillator_first_order(law):
+def test_impact_oscillator_first_order(law, engine):
     """Built-in ``impact_oscillator`` (M = K = 1, C = 0, f = A cos(ωt + φ), g = σ − q,
     Newton/Poisson r = 0.8) started mid-flight on the (1,1) orbit and run over 3¼ forcing
     periods (4 well-separated impacts, |ẋ⁻| = 0.34) converges to the event-driven exact
@@ -433,7 +440,7 @@ def test_impact_oscillator_first_order(law):
             "param.A": A, "param.omega": om, "param.sigma": sig, "param.restitution": r,
             "param.zeta": 0.0, "param.law": law, "param.q0": float(x0), "param.u0": float(v0),
             "system.forcing.phase": om * tau0})
-        res = observer.simulate(sc, h=h, t_end=(m + 3 * N + N // 4) * h)
+        res = engine.simulate(sc, h=h, t_end=(m + 3 * N + N // 4) * h, integrator="time-stepping")
         x_exact, _ = ex(res.t + tau0)
         errs.append(np.max(np.abs(res.q[:, 0] - x_exact)))
         n_impacts.append(impact_rows(res.P[:, 0]).size)
@@ -454,7 +461,7 @@ F2 = np.array([1.0, -2.0])
 W2 = np.array([[1.0], [0.5]])
 
 
-def free_response_errors(theta, hs, t_end=2.0):
+def free_response_errors(engine, theta, hs, t_end=2.0):
     """Max state error on the grid vs expm of the augmented system [q, u, 1]."""
     n = 2
     q0, u0 = np.array([0.1, -0.05]), np.array([0.3, 0.2])
@@ -470,7 +477,7 @@ def free_response_errors(theta, hs, t_end=2.0):
         # the wall is 100 m away: the contact is never reached
         sc = custom_scenario(M2, C2, K2, W2, q0=q0, u0=u0, h=h, t_end=t_end, theta=theta,
                              offset=[100.0], constant=F2)
-        res = observer.simulate(sc)
+        res = engine.simulate(sc, integrator="time-stepping")
         assert not res.active.any() and not res.P.any()
         Phi = sla.expm(Aug * h)
         X = np.empty((res.t.size, 2 * n + 1))
@@ -483,22 +490,22 @@ def free_response_errors(theta, hs, t_end=2.0):
     return np.array(errs)
 
 
-def test_free_response_second_order_theta_half():
+def test_free_response_second_order_theta_half(engine):
     """Contact-free 2-DOF damped system with constant forcing (non-diagonal M, C, K):
     the θ = ½ scheme converges to expm of [[0, I], [−M⁻¹K, −M⁻¹C]] (state augmented by
     the constant forcing) with fitted order 2 ± 0.2 over h = 2e-2 … 1.25e-3."""
     hs = np.array([2e-2, 1e-2, 5e-3, 2.5e-3, 1.25e-3])
-    errs = free_response_errors(0.5, hs)
+    errs = free_response_errors(engine, 0.5, hs)
     order = fit_order(hs, errs)
     assert abs(order - 2.0) <= 0.2, (order, errs)
     assert errs[-1] <= 1e-5
 
 
-def test_free_response_first_order_theta_one():
+def test_free_response_first_order_theta_one(engine):
     """θ = 1 (fully implicit) runs and, as backward Euler, converges with order 1 ± 0.2
     on the same contact-free problem."""
     hs = np.array([1e-2, 5e-3, 2.5e-3, 1.25e-3])
-    errs = free_response_errors(1.0, hs)
+    errs = free_response_errors(engine, 1.0, hs)
     order = fit_order(hs, errs)
     assert abs(order - 1.0) <= 0.2, (order, errs)
 
@@ -523,7 +530,7 @@ def single_impact_system(kind: str):
 @pytest.mark.parametrize("kind", ["1dof", "2dof"])
 @pytest.mark.parametrize("e", [0.0, 0.5, 0.8, 1.0])
 @pytest.mark.parametrize("law", LAWS)
-def test_single_impact(law, e, kind):
+def test_single_impact(law, e, kind, engine):
     """K = C = 0, f = 0, one contact approached with γ⁻ < 0 so that exactly one step
     carries an impulse: γ⁺ = −eγ⁻ to round-off, the kinetic energy changes by exactly
     −(1−e²)(γ⁻)²/(2G) with G = wᵀM⁻¹w (relative 1e-12 of the kinetic energy), the impulse
@@ -542,7 +549,7 @@ def test_single_impact(law, e, kind):
     gap0 = abs(gamma_minus) * h * (N + 0.45)   # contact predicted closed in step N exactly
     sc = custom_scenario(M, np.zeros((n, n)), np.zeros((n, n)), w[:, None], q0=np.zeros(n),
                          u0=u0, h=h, t_end=30 * h, law=law, e=e, offset=[gap0])
-    res = observer.simulate(sc)
+    res = engine.simulate(sc, integrator="time-stepping")
     G = float(w @ np.linalg.solve(M, w))
     roundoff = 100 * EPS * abs(gamma_minus) / G
     rows = np.flatnonzero(np.abs(res.P[:, 0]) > roundoff)
@@ -575,7 +582,7 @@ def test_single_impact(law, e, kind):
 # 6. static preload of double_mass
 # ---------------------------------------------------------------------------------------
 @pytest.mark.parametrize("law", LAWS)
-def test_double_mass_static_preload(law):
+def test_double_mass_static_preload(law, engine):
     """``double_mass`` with F = 0 started at its static contact equilibrium stays in
     persistent contact: the contact is closed in every step, P_k/h equals the static force
     λ_s = −g_s/(wᵀK⁻¹w) (g_s = wᵀK⁻¹f_const + ν₀, computed here from the loaded M, K, W,
@@ -595,7 +602,7 @@ def test_double_mass_static_preload(law):
     assert np.allclose(sc.q0, q_s + Kinv_w * lam_s, rtol=0, atol=1e-12)
     assert np.all(sc.u0 == 0.0)
 
-    res = observer.simulate(sc, h=h, t_end=2.0)
+    res = engine.simulate(sc, h=h, t_end=2.0)
     assert res.active[1:, 0].all()
     rel = np.abs(res.P[1:, 0] / h / lam_s - 1.0)
     assert np.max(rel) <= 1e-6
@@ -609,7 +616,7 @@ def test_double_mass_static_preload(law):
 # ---------------------------------------------------------------------------------------
 @pytest.mark.slow
 @pytest.mark.parametrize("law", LAWS)
-def test_ball_impact_times_first_order(law):
+def test_ball_impact_times_first_order(law, engine):
     """Both laws converge to the same closed-form impact times with order 1 ± 0.2: RMS
     error of the first 8 impact times (sub-step estimate from the last pre-impact state)
     over h = 2e-3 … 6.25e-5, with the same constant (≤ 5h at the finest h)."""
@@ -619,7 +626,7 @@ def test_ball_impact_times_first_order(law):
     hs = 2e-3 * 2.0 ** -np.arange(6)
     errs = []
     for h in hs:
-        res = ball_run(law, h, float(exact[-1] + 0.1))
+        res = ball_run(engine, law, h, float(exact[-1] + 0.1))
         _, t_sub = ball_impact_times(res, g)
         assert t_sub.size >= n
         errs.append(np.sqrt(np.mean((t_sub[:n] - exact) ** 2)))
@@ -633,12 +640,12 @@ def test_ball_impact_times_first_order(law):
 # 8. θ: fully implicit runs; θ = ½ has the exact discrete energy balance
 # ---------------------------------------------------------------------------------------
 @pytest.mark.parametrize("law", LAWS)
-def test_theta_one_bouncing_ball_runs(law):
+def test_theta_one_bouncing_ball_runs(law, engine):
     """θ = 1 is accepted, reported in the metadata, and gives a sane impacting run: the
     first impact within h of t1, P ≥ 0, no deep penetration, and the ball ends at rest
     with P/h = m g0."""
     h, g, m = 1e-3, BALL["g0"], BALL["m"]
-    res = ball_run(law, h, 5.0, theta=1.0)
+    res = ball_run(engine, law, h, 5.0, theta=1.0)
     assert res.metadata["theta"] == 1.0
     assert np.all(np.isfinite(res.q)) and np.all(res.P >= 0)
     t_grid, _ = ball_impact_times(res, g)
@@ -651,7 +658,7 @@ def test_theta_one_bouncing_ball_runs(law):
 
 
 @pytest.mark.parametrize("forced", [False, True])
-def test_theta_half_exact_energy_balance(forced):
+def test_theta_half_exact_energy_balance(forced, engine):
     """Contact-free damped 2-DOF system, θ = ½: E = ½uᵀMu + ½qᵀKq obeys
     E_{k+1} − E_k = −h ūᵀCū + h f̄ᵀū (ū = (u_k+u_{k+1})/2, f̄ = (f_k+f_{k+1})/2) to
     round-off at every step — with zero forcing and with harmonic forcing."""
@@ -659,7 +666,7 @@ def test_theta_half_exact_energy_balance(forced):
     q0, u0 = np.array([0.2, -0.1]), np.array([-0.5, 0.8])
     kw = dict(amplitude=[1.5, -0.7], omega=3.3, phase=0.4) if forced else {}
     sc = custom_scenario(M2, C2, K2, W2, q0=q0, u0=u0, h=h, t_end=t_end, offset=[100.0], **kw)
-    res = observer.simulate(sc)
+    res = engine.simulate(sc, integrator="time-stepping")
     assert not res.active.any()
     E = res.system.energy(res.q, res.u)
     ubar = 0.5 * (res.u[1:] + res.u[:-1])

@@ -59,7 +59,7 @@ def _assert_prefix(part: pd.DataFrame, full: pd.DataFrame) -> None:
         assert np.array_equal(a.astype(float), b.astype(float)), c
 
 
-@pytest.mark.parametrize("engine", ["compiled", "python"])
+@pytest.mark.parametrize("engine", loop.ENGINES)
 @pytest.mark.parametrize("suffix", [".parquet", ".csv"])
 def test_streamed_file_equals_the_run(tmp_path, monkeypatch, engine, suffix):
     """Several chunks (small windows), two observers: the file read back is the run."""
@@ -80,7 +80,7 @@ def test_streamed_file_equals_the_run(tmp_path, monkeypatch, engine, suffix):
     assert len(df) == inp.stepper.steps + 1
 
 
-@pytest.mark.parametrize("engine", ["compiled", "python"])
+@pytest.mark.parametrize("engine", loop.ENGINES)
 @pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
 def test_signal_stops_the_run_after_the_window(tmp_path, monkeypatch, engine, signame):
     """A signal during a streamed run: the loop stops after the current window, the records are

@@ -199,7 +199,8 @@ def test_cli_run_output_json_and_codes(tmp_path, capsys):
     assert lines[4].startswith("  -> 2 passed, 0 failed, 0 not applicable in ")
     assert lines[-1] == f"wrote {out}"
     doc = json.loads(out.read_text())
-    assert doc["settings"] == {"seed": 4, "h": 0.002, "t_end": 1.5, "options": {"mass_spd": {"rcond_min": 0.25}},
+    assert doc["settings"] == {"seed": 4, "h": 0.002, "t_end": 1.5, "engine": None,
+                               "options": {"mass_spd": {"rcond_min": 0.25}},
                                "overrides": {"param.m1": "2"}, "scenarios": ["double_mass"]}
     assert set(doc) == {"settings", "platform", "python", "wall_time_s", "results"}
     assert doc["wall_time_s"] > 0 and [r["name"] for r in doc["results"]] == ["mass_spd", "stiffness_spd"]
@@ -320,7 +321,7 @@ def test_cli_help_text(capsys):
     text = " ".join(capsys.readouterr().out.split())
     for piece in (
             "usage: python -m proofs_checks [-h] [--set KEY=VALUE] [--only NAME] [--option CHECK.KEY=VALUE] "
-            "[--seed SEED] [--h H] [--t-end T_END] [--json FILE] [--list] [SCENARIO ...]",
+            "[--seed SEED] [--h H] [--t-end T_END] [--engine NAME] [--json FILE] [--list] [SCENARIO ...]",
             "Numerically verify the steps of Proposition 1 and Theorem 1 on a scenario. Checks: mass_spd,",
             "SCENARIO built-in name, .toml path, or 'all' (every built-in scenario)",
             "--set KEY=VALUE scenario override (param.NAME for builder parameters, else dotted TOML key)",
@@ -330,6 +331,8 @@ def test_cli_help_text(capsys):
             "--h H step of the run-based checks (default: the scenario's)",
             "--t-end T_END horizon of the run-based checks (default: min(t_end, 40000 h); convergence: the "
             "scenario's t_end within a memory budget)",
+            "--engine NAME engine of the checks' runs, as simulate's engine (default: the first time-stepping "
+            "engine that accepts each run)",
             "--json FILE write all results (with full witnesses) as JSON",
             "--list list the checks and exit"):
         assert piece in text, piece

@@ -16,6 +16,8 @@ import numpy as np
 import pytest
 
 import proofs_checks as pc
+from observer.errors import InputError
+from observer.loop import ENGINES as STEPPING_ENGINES
 from observer.stepping import MoreauJean
 from proofs_checks import runs as ru
 from proofs_checks.runs import SlaveSpec, replay
@@ -323,3 +325,56 @@ def test_engine_choice_reaches_the_registry(sc, monkeypatch):
     py = dataclasses.replace(sc, law=im.ImpactLaw.build("newton_py", 0.3, 1))
     assert replay(py, h=H, t_end=0.1).settings["engine"] == "python"
     assert seen == ["python", "compiled", "python"]
+
+
+RUN_BASED = ("switching_generated", "projection_energy", "proposition1_exact", "proposition1_h_scaling",
+             "lyapunov_decrease", "convergence")
+"""The checks that run the scenario (the others are algebraic)."""
+
+
+def _engines_that_ran(monkeypatch) -> list[str]:
+    """The names of the engines whose ``run`` is called from now on (in call order)."""
+    from observer.engines import ENGINES
+    seen: list[str] = []
+    for eng in {type(e) for e in ENGINES.values()}:
+        def spy(self, run, _real=eng.run):
+            seen.append(self.name)
+            return _real(self, run)
+        monkeypatch.setattr(eng, "run", spy)
+    return seen
+
+
+@pytest.mark.filterwarnings("ignore::observer.health.RunHealthWarning")     # the coarse h of the h-scaling
+@pytest.mark.parametrize("engine", STEPPING_ENGINES)
+def test_run_checks_runs_every_check_on_the_engine_named(sc, monkeypatch, engine):
+    """``run_checks(engine=...)``, as ``simulate(engine=...)``: every run of every run-based
+    check (the shared run, the Proposition 1 pairs at each h, the designs' pairs, the
+    convergence run) is made by the engine named; ``--engine`` of the command line too."""
+    seen = _engines_that_ran(monkeypatch)
+    res = pc.run_checks(sc, RUN_BASED, h=H, t_end=0.2, engine=engine)
+    assert [r.name for r in res] == list(RUN_BASED)
+    assert not [r for r in res if "exception" in r.witness], [r.witness for r in res]
+    assert len(seen) >= 8 and set(seen) == {engine}, seen
+    seen.clear()
+    from proofs_checks import cli
+    cli.main(["double_mass", "--only", "proposition1_exact", "--h", str(H), "--t-end", "0.2",
+              "--engine", engine])
+    assert len(seen) == 2 and set(seen) == {engine}, seen
+
+
+def test_run_checks_without_an_engine_takes_the_registry_default(sc, monkeypatch):
+    """The near miss of the test above: without ``engine`` the runs go to the registry's first
+    time-stepping engine that accepts them (the compiled one for double_mass)."""
+    seen = _engines_that_ran(monkeypatch)
+    pc.run_checks(sc, "proposition1_exact", h=H, t_end=0.2)
+    assert seen == ["compiled", "compiled"]
+
+
+def test_run_checks_refuses_an_unknown_engine(sc, capsys):
+    from proofs_checks import cli
+    with pytest.raises(InputError) as info:
+        pc.run_checks(sc, "mass_spd", engine="numpy")
+    assert info.value.field == "engine" and "'numpy'" in str(info.value)
+    assert cli.main(["double_mass", "--only", "mass_spd", "--engine", "numpy"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "engine" in err[0] and "numpy" in err[0]

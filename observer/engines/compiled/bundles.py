@@ -20,6 +20,7 @@ from observer.engines.compiled.kernel import WAVE_NAMES, fill_waves
 from observer.engines.loop import LoopInput, projection_slots
 from observer.errors import InputError
 from observer.model import grid_anchors
+from observer.result import RECORD_ARRAYS
 from observer.stepping import FACTORED_MIN_N, MoreauJean, dense, to_band
 from observer.primitives import (CONTACTS_DENSE, CONTACTS_FACTORED, STATS_SIZE, STRUCTURE_BANDED, STRUCTURE_DENSE,
                                  SUMMARY_FIELDS)
@@ -389,9 +390,8 @@ def state_bundle(inp: LoopInput) -> "StateBundle":
 def storage_bundle(rec: dict, record_every: int, record_pre: bool, t_rec: np.ndarray | None) -> "StorageBundle":
     """The records of :func:`allocate_records` (``t_rec``: the rows' times, or None)."""
 
-    return StorageBundle(record_every=int(record_every), q=rec["q"], u=rec["u"], P=rec["P"], sigma=rec["sigma"],
-                         active=rec["active"], chi=rec["chi"], q_pre=rec["q_pre"], record_pre=bool(record_pre),
-                         t=np.empty(0) if t_rec is None else t_rec)
+    return StorageBundle(record_every=int(record_every), **{a.name: rec[a.name] for a in RECORD_ARRAYS},
+                         record_pre=bool(record_pre), t=np.empty(0) if t_rec is None else t_rec)
 
 
 def summary_bundle(inp: LoopInput, on: bool, rhos: tuple, R: int) -> "SummaryBundle":

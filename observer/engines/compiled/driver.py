@@ -22,11 +22,11 @@ from observer.engines.compiled.bundles import (law_bundle, observer_bundle, sign
                                                window_bundle)
 from observer.engines.compiled.kernel import summary_start
 from observer.engines.loop import (FiniteGuard, LoopInput, LoopOutput, Stopper, allocate_records, emitter,
-                                   finish, python_step, stopped_text)
+                                   finish, loop_records, python_step, stopped_text)
 from observer.errors import InputError
 from observer.primitives import OK, PROJECTION_FAILED, RESIDUAL_EXCEEDED
 from observer.scenario import Scenario
-from observer.stepping import MoreauJean, StepStats
+from observer.stepping import MoreauJean, SolverCounts
 
 WINDOW = 1 << 14
 """Steps per window of the compiled engine (the signals of one window are built at a time).
@@ -88,7 +88,7 @@ def _restore(state: tuple, snap: tuple, fallbacks: list, stepper) -> None:
     del fallbacks[nfb:]
     ref = getattr(stepper, "_reference_twin", None)
     if ref is not None:
-        ref.stats = StepStats() if ref_stats is None else ref_stats
+        ref.stats = SolverCounts() if ref_stats is None else ref_stats
 
 
 class CompiledRun:
@@ -243,10 +243,10 @@ class CompiledRun:
                   "fallbacks": len(self.fallbacks), "min_gap": float(stats[3]),
                   "min_gap_step": int(stats[4]), "applied_residual": float(stats[5]),
                   "applied_residual_step": int(stats[6]), "residual_source": "applied"}
-        return LoopOutput(self.storage.record_every, rec["q"], rec["u"], rec["P"], rec["sigma"], rec["active"],
-                          rec["chi"], rec["q_pre"] if self.storage.record_pre else None, "compiled", counts,
-                          self.fallbacks, self.compile_time, run_time, t.rec_V if t.on else None, out_summary,
-                          t=self.t_rec)
+        return LoopOutput(self.storage.record_every, **loop_records(rec, self.storage.record_pre),
+                          engine="compiled", stats=counts, fallbacks=self.fallbacks,
+                          compile_time_s=self.compile_time, run_time_s=run_time, V=t.rec_V if t.on else None,
+                          summary=out_summary, t=self.t_rec)
 
 
 def run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: bool = False,

@@ -12,6 +12,7 @@ import observer
 import observer.event.roots as roots
 from observer.errors import InputError
 from observer.event.master import run_master
+from observer.result import RunState, RunStatus
 from observer.scenario import Scenario
 
 G0 = 9.81
@@ -36,8 +37,8 @@ def test_a_stalled_quiet_phase_keeps_every_row_up_to_the_stall(monkeypatch):
     monkeypatch.setattr(roots, "MAX_STEPS", 2000)
     w = 1e3
     res = run_master(quiet_oscillator(w=w))
-    assert res.status.startswith("stopped: root isolation stalled")
-    t_stall = float(res.status.split("near t = ")[1].split(" ")[0])
+    assert str(res.status).startswith("stopped: root isolation stalled")
+    t_stall = float(str(res.status).split("near t = ")[1].split(" ")[0])
     assert t_stall > 0.5                              # 2000 windows of 0.5/ω at least
     t = res.t
     assert t.size >= int(t_stall / 1e-2)              # every grid row before the stall
@@ -52,6 +53,21 @@ def test_a_stalled_run_through_simulate_keeps_its_rows(monkeypatch):
     res = observer.simulate(quiet_oscillator(), integrator="event")
     assert not res.status.ok and "stalled" in res.status.reason
     assert len(res.t) > 10 and np.isfinite(res.q).all()
+
+
+def test_the_masters_stop_is_a_status_from_where_it_stopped(monkeypatch):
+    """The exact master decides its :class:`RunStatus` where it stops (state, reason; no
+    "stopped: …" string to parse): the run's status says it is the master's stop, the
+    metadata keeps the master's own; a non-finite stop names the master's quantity itself."""
+    monkeypatch.setattr(roots, "MAX_STEPS", 1000)
+    master = run_master(quiet_oscillator())
+    assert isinstance(master.status, RunStatus) and master.status.state is RunState.STOPPED
+    assert master.status.reason.startswith("root isolation stalled") and not master.nonfinite
+    res = observer.simulate(quiet_oscillator(), integrator="event")
+    assert res.status == RunStatus(RunState.STOPPED, f"master: {master.status.reason}")
+    assert res.metadata["master_status"] == f"stopped: {master.status.reason}"
+    ok = run_master(ball(t_end=0.5))
+    assert ok.status == RunStatus() and str(ok.status) == "ok"
 
 
 def ball(height: float = 1.0, e: float = 0.5, t_end: float = 1.0) -> Scenario:
@@ -75,7 +91,7 @@ def ball_impacts(height: float, e: float, count: int) -> np.ndarray:
 
 def test_an_event_cap_keeps_the_events_before_it():
     res = run_master(ball(t_end=2.0), max_events=4)
-    assert res.status.startswith("stopped: event cap 4")
+    assert str(res.status).startswith("stopped: event cap 4")
     impacts = res.impact_times()
     assert impacts.size == 4
     assert np.max(np.abs(impacts - ball_impacts(1.0, 0.5, 4))) <= 1e-12
