@@ -896,12 +896,7 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
                 run.fill_certified(flow, t, x, float(np.nextafter(t, np.inf)))
             status = _stopped(f"{sig} at t = {t:.9g}")
             break
-        free = [j for j in range(run.m) if j not in persistent]
-        z_now = flow.z(t, x)
-        forced = [i for i in range(len(persistent)) if not _identically_zero(flow, flow.force_rows[i], z_now)]
-        rows = np.vstack([flow.gap_rows[free], flow.force_rows[forced]])
-        keys = [("g", j) for j in free] + [("f", persistent[i]) for i in forced]
-        cert = {i: certified[k] for i, k in enumerate(keys) if k in certified}
+        rows, keys, cert = _functionals(run, flow, t, x, persistent, certified)
         try:
             zero, t_stop, _ = first_zero(flow, rows, t, flow.z(t, x), t_end, cert, run.tau, should_stop)
         except SearchStopped as exc:                  # a signal mid-search: the certified rows are kept
@@ -961,6 +956,18 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
     if status.ok and run.k_next < run.t_grid.size:
         status = _stopped("sampling incomplete")
     return _result(run, scenario, status, t, nonfinite)
+
+
+def _functionals(run: "_Run", flow, t: float, x: np.ndarray, persistent: tuple, certified: dict):
+    """The functionals the search watches from (t, x): the free contacts' gaps and the
+    persistent contacts' forces that are not identically zero; their keys (``("g", j)``,
+    ``("f", j)``) and the certified ones (``{row: t}``, :func:`observer.event.roots.first_zero`)."""
+    free = [j for j in range(run.m) if j not in persistent]
+    z_now = flow.z(t, x)
+    forced = [i for i in range(len(persistent)) if not _identically_zero(flow, flow.force_rows[i], z_now)]
+    rows = np.vstack([flow.gap_rows[free], flow.force_rows[forced]])
+    keys = [("g", j) for j in free] + [("f", persistent[i]) for i in forced]
+    return rows, keys, {i: certified[k] for i, k in enumerate(keys) if k in certified}
 
 
 def _stopped(reason: str) -> RunStatus:

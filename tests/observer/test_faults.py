@@ -704,7 +704,7 @@ def test_a_signal_during_a_stuck_event_search_stops_it_and_keeps_the_rows(tmp_pa
         asked.append(time.monotonic())
         return "SIGINT" if len(asked) >= 20 else None
     res = run_master(sc, should_stop=should_stop)
-    assert res.status.startswith("stopped: SIGINT"), res.status
+    assert str(res.status).startswith("stopped: SIGINT"), res.status
     assert time.monotonic() - asked[19] < 5
     assert res.t.size > 10
     _closed_form_rows(res.t, res.q[:, 0], res.u[:, 0])
