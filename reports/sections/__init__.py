@@ -14,8 +14,8 @@ from typing import Callable
 from reports.blocks import Section
 from reports.context import ReportContext
 from reports.sections import (artifacts, claims, ensemble, hard_cases, integrators, k_metric_claims,
-                              key_numbers, limitations, micro, model_error, more_numbers, observers, peers, proof_checks,
-                              reproduce, robustness, scaling, scenarios, settings, work_precision)
+                              key_numbers, limitations, micro, model_error, more_numbers, observers, peers,
+                              proof_checks, reproduce, robustness, scaling, scenarios, settings, work_precision)
 
 
 @dataclass(frozen=True)

@@ -137,7 +137,7 @@ def test_the_crossover_sentences_name_the_design_lower_everywhere(section):
         assert np.all(m1 < m2) or np.all(m2 < m1)               # the stored curves do not cross
         lower = d1 if np.all(m1 < m2) else d2
         text = next(t for t in items if t.startswith(what.label))
-        assert f"no crossover on" in text and f"{registry.label(lower)} has the lower median floor" in text
+        assert "no crossover on" in text and f"{registry.label(lower)} has the lower median floor" in text
 
 
 def test_the_sensitivity_ranking_is_the_stored_one(section):
