@@ -6,6 +6,7 @@ Public API (a contract relied on by the benchmarks, reports and users):
 * :func:`simulate` — Moreau–Jean simulation of the master and its observers;
 * :func:`ensemble` — n observers per design from n initial errors against one master run;
 * :func:`compare` — paired designs against several masters: rate ratio, censored settling, floors;
+* :func:`uncertainty_ensemble` — the designs' floors over plants drawn from a model uncertainty;
 * :data:`SCENARIOS`, :data:`OBSERVER_DESIGNS`, :data:`IMPACT_LAWS`, :data:`CONTACT_SOLVERS`, :data:`ENGINES` —
   registries (add an entry, and it runs everywhere);
 * :class:`LinearSystem`, :class:`ImpactLaw`, :class:`Scenario`, :class:`MoreauJean`,
@@ -25,8 +26,10 @@ from observer.scenario import Scenario
 from observer.scenarios import SCENARIOS
 from observer.simulate import load_scenario, simulate
 from observer.stepping import MoreauJean
+from observer.uncertainty import uncertainty_ensemble
 from observer.version import __version__
 
 __all__ = ["CONTACT_SOLVERS", "ContactSolverError", "ENGINES", "Harmonic", "IMPACT_LAWS", "ImpactLaw", "InputError",
            "LinearSystem", "MoreauJean", "OBSERVER_DESIGNS", "ObserverDesign", "SCENARIOS", "Scenario", "SimulationResult",
-           "Slave", "Comparison", "compare", "ensemble", "load_scenario", "lyapunov", "read_frame", "read_result", "simulate", "__version__"]
+           "Slave", "Comparison", "compare", "ensemble", "load_scenario", "lyapunov", "read_frame", "read_result", "simulate", "uncertainty_ensemble",
+           "__version__"]

@@ -14,8 +14,8 @@ from typing import Callable
 from reports.blocks import Section
 from reports.context import ReportContext
 from reports.sections import (artifacts, claims, ensemble, hard_cases, integrators, k_metric_claims,
-                              key_numbers, limitations, micro, more_numbers, observers, peers, proof_checks,
-                              reproduce, robustness, scaling, scenarios, settings, work_precision)
+                              key_numbers, limitations, micro, model_error, more_numbers, observers, peers,
+                              proof_checks, reproduce, robustness, scaling, scenarios, settings, work_precision)
 
 
 @dataclass(frozen=True)
@@ -39,6 +39,7 @@ SECTIONS: tuple[SectionSpec, ...] = (
     SectionSpec("work-precision", work_precision.build),
     SectionSpec("integrators", integrators.build),
     SectionSpec("robustness", robustness.build),
+    SectionSpec("model-error", model_error.build),
     SectionSpec("hard-cases", hard_cases.build),
     SectionSpec("scaling", scaling.build),
     SectionSpec("peers", peers.build),

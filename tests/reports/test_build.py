@@ -31,7 +31,7 @@ from reports.tables import fmt, fmt_ratio, fmt_rho, fmt_time
 
 REPO = Path(__file__).resolve().parents[2]
 SECTIONS = ["Key numbers", "Scenarios: trajectories", "Observer table", "Work-precision",
-            "Robustness", "Hard cases", "Scaling", "Peers: Siconos", "Micro-benchmarks", "Proof-step checks",
+            "Robustness", "Model error and sensors", "Hard cases", "Scaling", "Peers: Siconos", "Micro-benchmarks", "Proof-step checks",
             "Settings and tolerances", "Limitations", "How to reproduce"]
 
 

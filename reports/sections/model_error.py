@@ -1,0 +1,411 @@
+"""Model error and sensors: the floor of V/V(t_on) when the observers' model differs from the
+plant (a relative stiffness error ε, ``[observer.model]``) and when χ comes from a sensor with a
+latency d (``[observer.sensor]``), read from the two stored results of ``bench/stored``.
+
+The stored results are read here as data files (JSON, and the member rows' CSV beside the
+latency result): the report imports nothing from ``bench``. Per uncertainty and design the
+section draws the floor against the size (median over the paired members, band = the members'
+spread), states the stored power law ``log10 floor = a + s·log10 size`` with its intervals, the
+crossover where one design's floor drops below the other's, the sensitivity table of the
+model-error result and, inverting the fitted law, the size a user must keep the uncertainty
+below for a target floor.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from reports import registry
+from reports.blocks import Block, Section
+from reports.context import ReportContext
+from reports.figures import Figure, fixed_layout, plt, to_data_uri
+from reports.tables import Table, fmt, fmt_rho
+
+TITLE = "Model error and sensors"
+STORED = Path(__file__).resolve().parents[2] / "bench" / "stored"
+"""Folder of the stored results (``bench/stored`` of the repository)."""
+MODEL_ERROR = "model_error_floor_double_mass.json"
+LATENCY = "latency_floor_double_mass.json"
+TARGETS = (1e-6, 1e-3)
+"""Target floors of V/V(t_on) for "what a user needs to know the model to"."""
+CONFIDENCE = 0.95
+SLOPE_DIGITS = 4
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    """What one stored result varies: its label, unit and the command that regenerates it."""
+
+    key: str
+    label: str
+    unit: str
+    command: str
+
+
+K_ERROR = Uncertainty("K", "relative K error ε (observers' K̂ = (1 + ε)K)", "", "python -m bench.model_error")
+SENSOR_LATENCY = Uncertainty("latency", "sensor latency d", "s", "python -m bench.latency_floor")
+
+
+@dataclass(frozen=True)
+class Curve:
+    """One design's floor against one uncertainty's size, as stored.
+
+    Attributes
+    ----------
+    sizes : ndarray
+        The sizes > 0 measured, ascending.
+    floors : ndarray
+        Member floors, shape (len(sizes), members); member i is the same initial error at
+        every size (paired).
+    exact : ndarray
+        The member floors at size 0 (the floor of the grid and window alone).
+    slope, intercept : float
+        The stored fit ``log10 floor = intercept + slope·log10 size`` of the median floor.
+    slope_members : (float, float)
+        The stored 95 % interval of the slope from resampling the members.
+    fit_sizes : ndarray
+        The sizes the stored fit used.
+    """
+
+    what: Uncertainty
+    design: str
+    sizes: np.ndarray
+    floors: np.ndarray
+    exact: np.ndarray
+    slope: float
+    intercept: float
+    slope_members: tuple
+    fit_sizes: np.ndarray
+
+    @property
+    def median(self) -> np.ndarray:
+        return np.median(self.floors, axis=1)
+
+
+def model_error_curves(path: Path) -> tuple[list[Curve], dict]:
+    """The K-error curves of the stored model-error result, and the raw JSON."""
+    data = json.loads(Path(path).read_text(encoding="utf-8"))
+    eps = np.asarray(data["epsilons"], dtype=float)
+    curves = [Curve(K_ERROR, d, eps, np.asarray(r["member_floors"], dtype=float),
+                    np.asarray(r["exact_member_floors"], dtype=float), float(r["slope"]),
+                    float(r["intercept"]), tuple(map(float, r["slope_interval_95"])), eps)
+              for d, r in data["designs"].items()]
+    return curves, data
+
+
+def latency_curves(path: Path) -> tuple[list[Curve], dict]:
+    """The latency curves of the stored latency result (fits from the JSON, member floors from
+    the CSV of member rows beside it), and the raw JSON."""
+    import pandas as pd
+
+    data = json.loads(Path(path).read_text(encoding="utf-8"))
+    rows = pd.read_csv(Path(path).with_suffix(".csv"))
+    curves = []
+    for fit in data["fits"]:
+        if fit.get("status") != "ok":
+            continue
+        d = fit["design"]
+        table = rows[rows["design"] == d].pivot(index="latency", columns="member", values="floor").sort_index()
+        sizes = table.index.to_numpy(dtype=float)
+        F = table.to_numpy(dtype=float)
+        curves.append(Curve(SENSOR_LATENCY, d, sizes[sizes > 0], F[sizes > 0], F[sizes == 0].ravel(),
+                            float(fit["slope"]), float(fit["intercept"]),
+                            tuple(map(float, fit["interval"]["members"])), np.asarray(fit["latencies"], float)))
+    return curves, data
+
+
+def fit_rows(c: Curve, F: np.ndarray | None = None) -> np.ndarray:
+    """Rows of ``F`` (default the curve's member floors) at the fitted sizes."""
+    F = c.floors if F is None else F
+    return F[np.isin(c.sizes, c.fit_sizes)]
+
+
+def regression_interval(c: Curve) -> tuple[float, float]:
+    """The slope's 95 % interval from the fitted points' scatter about the line (slope ± t·standard
+    error, k − 2 degrees of freedom): how well one power law describes the median curve."""
+    from scipy import stats
+
+    x = np.log10(c.fit_sizes)
+    reg = stats.linregress(x, np.log10(np.median(fit_rows(c), axis=1)))
+    half = float(stats.t.ppf(0.5 + CONFIDENCE / 2, x.size - 2) * reg.stderr)
+    return float(reg.slope) - half, float(reg.slope) + half
+
+
+def size_for(target: float, slope: float, intercept: float) -> float:
+    """The size at which the fitted law reaches the floor ``target``: ``10^((log10 target − a)/s)``."""
+    return float(10.0 ** ((np.log10(target) - intercept) / slope))
+
+
+def needed_size(c: Curve, target: float) -> tuple[float, float, float]:
+    """The size giving the floor ``target`` on the stored fitted line, with the 95 % interval of
+    the same inversion refitted on resampled members (:func:`observer.stats.cluster_ci`, each
+    member a cluster, paired across sizes)."""
+    from observer.stats import cluster_ci
+
+    x = np.log10(c.fit_sizes)
+    F = fit_rows(c)
+
+    def refit(idx: np.ndarray) -> float:
+        y = np.log10(np.median(F[:, idx], axis=1))
+        s = float(np.dot(x - x.mean(), y - y.mean()) / np.dot(x - x.mean(), x - x.mean()))
+        return size_for(target, s, float(y.mean() - s * x.mean()))
+
+    lo, hi, _ = cluster_ci(refit, np.arange(F.shape[1]), confidence=CONFIDENCE)
+    return size_for(target, c.slope, c.intercept), lo, hi
+
+
+def interpolated_size(c: Curve, target: float) -> float | None:
+    """The size where the stored median floors cross ``target`` (log-log interpolation between
+    the bracketing points); None when the target lies outside the measured floors."""
+    m = c.median
+    for i in range(len(m) - 1):
+        if (m[i] - target) * (m[i + 1] - target) <= 0 and m[i] != m[i + 1]:
+            w = (np.log10(target) - np.log10(m[i])) / (np.log10(m[i + 1]) - np.log10(m[i]))
+            return float(10.0 ** (np.log10(c.sizes[i]) + w * np.log10(c.sizes[i + 1] / c.sizes[i])))
+    return None
+
+
+def crossover(a: Curve, b: Curve) -> dict:
+    """Where ``a``'s median floor crosses ``b``'s on the stored sizes: the bracketing sizes and
+    the log-log interpolated crossing of the first sign change, or none (then the range of the
+    ratio a/b over the sizes)."""
+    d = np.log10(a.median) - np.log10(b.median)
+    ratio = 10.0 ** d
+    for i in range(len(d) - 1):
+        if d[i] * d[i + 1] < 0:
+            w = d[i] / (d[i] - d[i + 1])
+            at = 10.0 ** (np.log10(a.sizes[i]) + w * np.log10(a.sizes[i + 1] / a.sizes[i]))
+            return {"between": (float(a.sizes[i]), float(a.sizes[i + 1])), "at": float(at),
+                    "lower_after": a.design if d[i + 1] < 0 else b.design}
+    return {"between": None, "lower": a.design if d[0] < 0 else b.design,
+            "ratio": (float(ratio.min()), float(ratio.max()))}
+
+
+def _value(x: float, unit: str) -> str:
+    return fmt(x, unit=unit)
+
+
+def crossover_text(a: Curve, b: Curve) -> str:
+    """One sentence: where a's floor overtakes b's, or that it never does on the stored sizes (and
+    whether the fitted lines are parallel within the slopes' member intervals)."""
+    cr, u, la, lb = crossover(a, b), a.what.unit, registry.label(a.design), registry.label(b.design)
+    span = f"{_value(a.sizes[0], u)} … {_value(a.sizes[-1], u)}"
+    if cr["between"] is not None:
+        lo, hi = cr["between"]
+        return (f"{a.what.label}: the floors cross between {_value(lo, u)} and {_value(hi, u)} "
+                f"(log-log interpolation: {_value(cr['at'], u)}); above it "
+                f"{registry.label(cr['lower_after'])} has the lower floor.")
+    lower, other = (la, lb) if cr["lower"] == a.design else (lb, la)
+    r_lo, r_hi = cr["ratio"]
+    ia, ib = a.slope_members, b.slope_members
+    overlap = ia[0] <= ib[1] and ib[0] <= ia[1]
+    if overlap:
+        slopes = "the fitted slopes' member intervals overlap: parallel lines, no crossover predicted"
+    else:
+        at = 10.0 ** ((b.intercept - a.intercept) / (a.slope - b.slope))
+        slopes = (f"the fitted slopes differ, but the lines would cross only at {_value(at, u)}, an "
+                  f"extrapolation far outside {span}" if not a.sizes[0] <= at <= a.sizes[-1] else
+                  f"the fitted lines cross at {_value(at, u)}")
+    zero = (la if np.median(a.exact) < np.median(b.exact) else lb)
+    return (f"{a.what.label}: no crossover on {span}: {lower} has the lower median floor at every "
+            f"stored size (floor {la} / {lb} from {fmt(r_lo)} to {fmt(r_hi)}; at size 0 {zero} has the "
+            f"lower one); {slopes}.")
+
+
+def slope_cell(value: float, interval: tuple) -> str:
+    return (f"{fmt(value, digits=SLOPE_DIGITS)} [{fmt(interval[0], digits=SLOPE_DIGITS)} – "
+            f"{fmt(interval[1], digits=SLOPE_DIGITS)}]")
+
+
+def laws_table(curves: list[Curve]) -> Table:
+    """The fitted power laws, one row per (uncertainty, design)."""
+    pct = f"{100 * CONFIDENCE:.0f} %"
+    t = Table(f"Fitted floor laws log10(floor) = a + s·log10(size) (median over members; {pct} intervals)",
+              ["uncertainty", "observer", "slope s [members]", "slope s [regression]", "a",
+               "fitted sizes", "floor at size 0 (median)"])
+    for c in curves:
+        t.add([c.what.label, registry.label(c.design), slope_cell(c.slope, c.slope_members),
+               slope_cell(c.slope, regression_interval(c)), fmt(c.intercept),
+               f"{_value(c.fit_sizes.min(), c.what.unit)} … {_value(c.fit_sizes.max(), c.what.unit)} "
+               f"({c.fit_sizes.size} points)", fmt(float(np.median(c.exact)))])
+    t.note = ("members: the stored percentile interval of the slope refitted on resampled members "
+              "(paired across sizes; narrow, since with one master the floor hardly depends on the "
+              "initial error); regression: slope ± t·standard error from the fitted points' scatter "
+              "about the line (computed here from the stored medians). V is quadratic in the state "
+              "error, so a slope s for V is a slope s/2 for the error norm.")
+    return t
+
+
+def needs_table(curves: list[Curve]) -> Table:
+    """The size each uncertainty must stay below for a target floor, per design."""
+    t = Table("What the model and the sensor must be known to: the size at which the floor reaches a target",
+              ["uncertainty", "observer", "target floor", "size (fitted law) [members 95 %]",
+               "size (interpolated between stored points)", "within the fitted sizes"])
+    for c in curves:
+        for target in TARGETS:
+            v, lo, hi = needed_size(c, target)
+            u = c.what.unit
+            inter = interpolated_size(c, target)
+            inside = c.fit_sizes.min() <= v <= c.fit_sizes.max()
+            t.add([c.what.label, registry.label(c.design), fmt_rho(target),
+                   f"{fmt(v)} [{fmt(lo)} – {fmt(hi)}]" + (f" {u}" if u else ""),
+                   _value(inter, u) if inter is not None else "n/a (target outside the stored floors)",
+                   "yes" if inside else "no (extrapolated)"])
+    t.note = ("The interval resamples the members (paired across sizes) and refits the line: the "
+              "spread over initial errors of one master and one plant, not over other plants; the "
+              "interpolated column reads the stored medians without the fitted law.")
+    return t
+
+
+def sensitivity_table(data: dict) -> Table | None:
+    """The model-error result's sensitivity table: the median floor per design with one
+    parameter of the observers' model off by the stated relative ε, the others exact."""
+    sens = data.get("sensitivity")
+    if not sens:
+        return None
+    designs = registry.in_registry_order(next(iter(sens["floor_median"].values())))
+    exact = {d: float(data["designs"][d]["exact_floor_median"]) for d in designs if d in data["designs"]}
+    t = Table(f"Sensitivity: median floor with one parameter off by {fmt(sens['eps'])} (relative), "
+              f"{data.get('scenario', '')}",
+              ["parameter", *[f"{registry.label(d)} floor (× exact)" for d in designs]])
+    for name, row in sens["floor_median"].items():
+        t.add([name, *[f"{fmt(row[d])} (× {fmt(row[d] / exact[d])})" if d in exact else fmt(row[d])
+                       for d in designs]])
+    return t
+
+
+def sensitivity_items(data: dict) -> list[str]:
+    """Per design: the parameter whose error costs most and the one that costs least."""
+    sens = data.get("sensitivity")
+    if not sens:
+        return []
+    table = sens["floor_median"]
+    designs = registry.in_registry_order(next(iter(table.values())))
+    out = []
+    for d in designs:
+        ranked = sorted(table, key=lambda p: table[p][d], reverse=True)
+        out.append(f"{registry.label(d)}: an error of {fmt(sens['eps'])} costs most in {ranked[0]} "
+                   f"(floor {fmt(table[ranked[0]][d])}), least in {ranked[-1]} "
+                   f"(floor {fmt(table[ranked[-1]][d])}); order: {', '.join(ranked)}.")
+    return out
+
+
+def draws_text(data: dict) -> str:
+    """One sentence on the stored uncertainty ensemble (observer models drawn around the plant)."""
+    u = data.get("uncertainty")
+    if not u:
+        return ""
+    parts = [f"{registry.label(d)} {fmt(m)} [{fmt(u['floor_range_95'][d][0])} – {fmt(u['floor_range_95'][d][1])}]"
+             for d, m in u["floor_median_over_draws"].items()]
+    smooth = [d for d in u["floor_median_over_draws"] if d not in registry.jump_designs()]
+    share = (f"; {registry.label(smooth[0])} has the lower floor in {100 * u['nojump_lower_fraction']:.0f} % "
+             f"of the draws" if "nojump_lower_fraction" in u and len(smooth) == 1 else "")
+    return (f"Observer models drawn around the plant ({u['model']}; {u['draws']} draws, the plant "
+            f"fixed, the same members for every draw and design): median floor over the draws, "
+            f"[2.5–97.5 % of the draws]: " + ", ".join(parts) + share + ".")
+
+
+def pairs(curves: list[Curve]) -> list[tuple[Curve, Curve]]:
+    """Per uncertainty, the declared (baseline, candidate) design pairs both curves exist for."""
+    out = []
+    for what in dict.fromkeys(c.what for c in curves):
+        by = {c.design: c for c in curves if c.what == what}
+        out += [(by[a], by[b]) for a, b in registry.ratio_pairs() if a in by and b in by]
+    return out
+
+
+def floor_figure(curves: list[Curve]) -> Figure | None:
+    """One panel per uncertainty: per design the median floor (markers), the members' spread
+    (band), the stored fitted line over its sizes (dashed) and the floor at size 0 (dotted)."""
+    whats = list(dict.fromkeys(c.what for c in curves))
+    if not whats:
+        return None
+    fig, axes = plt.subplots(1, len(whats), figsize=(5.2 * len(whats), 3.8), squeeze=False)
+    for ax, what in zip(axes[0], whats):
+        for c in (c for c in curves if c.what == what):
+            lk = registry.look(c.design)
+            ax.fill_between(c.sizes, c.floors.min(axis=1), c.floors.max(axis=1), color=lk.color, alpha=0.2)
+            ax.loglog(c.sizes, c.median, "o", color=lk.color, ms=4,
+                      label=f"{lk.label} (s = {fmt(c.slope, digits=SLOPE_DIGITS)})")
+            x = np.geomspace(c.fit_sizes.min(), c.fit_sizes.max(), 20)
+            ax.loglog(x, 10.0 ** (c.intercept + c.slope * np.log10(x)), color=lk.color, ls="--", lw=1.0)
+            ax.axhline(float(np.median(c.exact)), color=lk.color, ls=":", lw=0.8)
+        ax.set_xlabel(what.label + (f" ({what.unit})" if what.unit else ""), fontsize=8)
+        ax.set_ylabel("floor of V / V(t_on)")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7, loc="upper left")
+    fixed_layout(fig, top=0.2, wspace=0.9)
+    return Figure(to_data_uri(fig, fit=False), "floor of V/V(t_on) against the model error and the sensor latency",
+                  "Markers: median floor over the paired members; shaded: the members' spread (min–max); "
+                  "dashed: the stored fitted power law over its sizes; dotted: the floor at size 0 "
+                  "(exact model, ideal sensor: the floor of the grid and the window).")
+
+
+def intro(me: dict | None, lat: dict | None) -> str:
+    """Where the numbers come from."""
+    parts = []
+    if me is not None:
+        parts.append(f"{me['scenario']}, observers carrying {me['model']} for ε in "
+                     f"{fmt(min(me['epsilons']))} … {fmt(max(me['epsilons']))}: {me['members']} paired "
+                     f"members (seed {me['seed']}); floor = {me['floor']}; status {me['status']} "
+                     f"({K_ERROR.command}, {MODEL_ERROR})")
+    if lat is not None:
+        s = lat["settings"]
+        parts.append(f"{s['scenario']}, χ from a sensor with latency d (h = {fmt(s['h'])} s, T = "
+                     f"{fmt(s['t_end'])} s): {s['members']} paired members (seed {s['seed']}); floor = median "
+                     f"of V/V(t_on) over the last {fmt(100 * s['tail'])} % of the window; status "
+                     f"{lat['status']} ({SENSOR_LATENCY.command}, {LATENCY} and its CSV)")
+    return ("The master is the true plant; each observer design advances the nominal model or reads "
+            "χ from the sensor. Stored results (bench/stored): " + "; ".join(parts) + ".")
+
+
+def load(stored: Path) -> tuple[list[Curve], dict | None, dict | None]:
+    """The curves of the stored results present in ``stored`` and their raw JSON (None if absent)."""
+    curves, me, lat = [], None, None
+    if (stored / MODEL_ERROR).exists():
+        c, me = model_error_curves(stored / MODEL_ERROR)
+        curves += c
+    if (stored / LATENCY).exists() and (stored / LATENCY).with_suffix(".csv").exists():
+        c, lat = latency_curves(stored / LATENCY)
+        curves += c
+    return curves, me, lat
+
+
+def build_from(stored: Path, key_numbers: list | None = None) -> Section:
+    """The section from the stored results in ``stored``; adds one key-number line."""
+    sec = Section("model-error", TITLE)
+    curves, me, lat = load(Path(stored))
+    if not curves:
+        sec.p(f"No stored model-error or sensor result in {stored} (run {K_ERROR.command} and "
+              f"{SENSOR_LATENCY.command}).")
+        return sec
+    sec.p(intro(me, lat))
+    sec.figure(floor_figure(curves), "No curves.")
+    sec.table(laws_table(curves))
+    cross = [crossover_text(a, b) for a, b in pairs(curves)]
+    sec.blocks.append(Block("list", cross))
+    if me is not None:
+        table = sensitivity_table(me)
+        if table is not None:
+            sec.table(table)
+            sec.items(sensitivity_items(me))
+        if draws_text(me):
+            sec.p(draws_text(me))
+    sec.table(needs_table(curves))
+    if key_numbers is not None:
+        scen = ", ".join(dict.fromkeys(x["scenario"] if "scenario" in x else x["settings"]["scenario"]
+                                       for x in (me, lat) if x is not None))
+        key_numbers.append(f"Model error and sensors ({scen}, stored results): fitted floor slopes "
+                           + "; ".join(f"{registry.label(c.design)} against {c.what.key}: "
+                                       f"{slope_cell(c.slope, c.slope_members)}" for c in curves)
+                           + ". " + " ".join(cross))
+    return sec
+
+
+def build(ctx: ReportContext) -> Section:
+    """The section from the repository's stored results (:data:`STORED`)."""
+    return build_from(STORED, ctx.key_numbers)

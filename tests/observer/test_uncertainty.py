@@ -1,0 +1,113 @@
+"""observer.uncertainty_ensemble on tiny sizes: the plants are the seeded draws the docstring
+states (recomputed here from numpy's generators), and with relative_std = 0 the floors are those
+of the exact model (a plain run of the nominal scenario with hand-built observers)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import observer
+from observer.observers import OBSERVER_DESIGNS
+from observer.uncertainty import uncertainty_ensemble
+
+T_END = 0.5
+TAIL = 0.5
+DESIGNS = ("jump", "nojump")
+
+
+def drawn_K(K: np.ndarray, sigma: float, seed: int) -> np.ndarray:
+    """K ∘ (1 + σZ), Z standard normal from default_rng(seed), its upper triangle mirrored."""
+    Z = np.random.default_rng(seed).standard_normal(K.shape)
+    Z = np.triu(Z) + np.triu(Z, 1).T
+    return K * (1.0 + sigma * Z)
+
+
+def floors_by_hand(X: np.ndarray, plant_K: np.ndarray | None = None) -> dict[tuple[str, int], tuple[float, float]]:
+    """(design, member) → (max V/V(0), max ‖q̂ − q‖) over the last TAIL of [0, T_END], from one
+    run of double_mass with the observers built here: the nominal plant and no model table, or
+    the plant with stiffness ``plant_K`` and observers carrying the nominal K."""
+    sc = observer.load_scenario("double_mass")
+    nd = sc.system.n
+    model = None
+    if plant_K is not None:
+        model = {"K": np.asarray(sc.system.K, dtype=float).tolist()}
+        sc = sc.with_overrides({"system.K": plant_K.tolist()})
+    slaves = [observer.Slave(f"{d}/{i}", OBSERVER_DESIGNS[d].position_jumps, sc.q0 + x[:nd], sc.u0 + x[nd:],
+                             OBSERVER_DESIGNS[d]) for d in DESIGNS for i, x in enumerate(X)]
+    res = observer.simulate(sc, t_end=T_END, observers=slaves, model=model)
+    t = np.asarray(res.t)
+    sel = t >= (1.0 - TAIL) * T_END - 1e-12
+    out = {}
+    for d in DESIGNS:
+        for i in range(len(X)):
+            s = res.slaves[f"{d}/{i}"]
+            V, q = np.asarray(s.V), np.asarray(s.q)
+            out[d, i] = (float(V[sel].max() / V[0]),
+                         float(np.sqrt(((q[sel] - np.asarray(res.q)[sel]) ** 2).sum(axis=1)).max()))
+    return out
+
+
+def run(sigma: float, sample: str, plants: int = 2, seed: int = 5):
+    return uncertainty_ensemble("double_mass", DESIGNS, model={"K": {"relative_std": sigma}}, plants=plants,
+                                n=2, seed=seed, sample=sample, t_end=T_END, tail=TAIL, record_every=1,
+                                n_resamples=99)
+
+
+def test_the_plants_are_the_seeded_draws():
+    df = run(0.02, "plant", plants=3)
+    meta = df.attrs["metadata"]
+    K = np.asarray(observer.load_scenario("double_mass").system.K, dtype=float)
+    want = np.random.SeedSequence(5).spawn(2)[1].generate_state(3, dtype=np.uint32)
+    assert [p["seeds"]["K"] for p in meta["plants"]] == [int(s) for s in want]
+    for p in meta["plants"]:
+        Kp = drawn_K(K, 0.02, p["seeds"]["K"])
+        # the observers carry the nominal K; the master the drawn one: ‖K − K̂p‖ / ‖K̂p‖
+        assert p["relative_difference"]["K"] == pytest.approx(np.linalg.norm(K - Kp) / np.linalg.norm(Kp), rel=1e-12)
+        other = drawn_K(K, 0.02, p["seeds"]["K"] + 1)            # near miss: the next seed's draw
+        assert p["relative_difference"]["K"] != pytest.approx(np.linalg.norm(K - other) / np.linalg.norm(other),
+                                                               rel=1e-6)
+    first = df.attrs["members"].query("plant == 0")      # the master is plant 0's drawn K
+    by_hand = floors_by_hand(np.asarray(meta["initial_errors"]), drawn_K(K, 0.02, meta["plants"][0]["seeds"]["K"]))
+    for _, r in first.iterrows():
+        assert r["floor_V"] == pytest.approx(by_hand[r["design"], r["member"]][0], rel=1e-9)
+    assert list(df["design"]) == list(DESIGNS) and (df["plants"] == 3).all()
+    assert (df["floor_V_low"] <= df["floor_V"]).all() and (df["floor_V"] <= df["floor_V_high"]).all()
+    members = df.attrs["members"]
+    assert len(members) == 3 * 2 * len(DESIGNS) and members["floor_V"].nunique() > len(DESIGNS) * 2
+
+
+@pytest.mark.parametrize("sample", ["plant", "model"])
+def test_with_zero_spread_the_floors_are_the_exact_models(sample):
+    df = run(0.0, sample)
+    X = np.asarray(df.attrs["metadata"]["initial_errors"])
+    exact = floors_by_hand(X)
+    for _, r in df.attrs["members"].iterrows():
+        fV, fq = exact[r["design"], r["member"]]
+        assert r["floor_V"] == pytest.approx(fV, rel=1e-9, abs=1e-15)
+        assert r["floor_q"] == pytest.approx(fq, rel=1e-9, abs=1e-15)
+    for d in DESIGNS:
+        med = np.median([exact[d, i][0] for i in range(len(X))])
+        assert float(df.loc[df["design"] == d, "floor_V"].iloc[0]) == pytest.approx(med, rel=1e-9)
+
+
+def test_a_spread_moves_the_floors_off_the_exact_ones():
+    """Near miss of the test above: σ = 1e-3 changes every member's floor."""
+    df = run(1e-3, "plant")
+    exact = floors_by_hand(np.asarray(df.attrs["metadata"]["initial_errors"]))
+    for _, r in df.attrs["members"].iterrows():
+        assert r["floor_V"] != pytest.approx(exact[r["design"], r["member"]][0], rel=1e-6)
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    ({"model": {"Q": {"relative_std": 0.1}}}, "model.Q"),
+    ({"model": {"K": {"scale": 1.1}}}, "model.K"),
+    ({"model": {"K": {"relative_std": -0.1}}}, "model.K.relative_std"),
+    ({"model": {"K": {"relative_std": 0.1}}, "sample": "both"}, "sample"),
+    ({"model": {"K": {"relative_std": 0.1}}, "plants": 0}, "plants"),
+    ({"model": {"K": {"relative_std": 0.1}}, "tail": 1.5}, "tail"),
+])
+def test_bad_input_names_the_keyword(kwargs, field):
+    with pytest.raises(observer.InputError) as exc:
+        uncertainty_ensemble("double_mass", **kwargs)
+    assert exc.value.field == field
