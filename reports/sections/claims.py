@@ -84,6 +84,10 @@ def forest_table(forest: pd.DataFrame) -> Table:
     return t
 
 
+FOREST_CSV = "forest.csv"
+"""The forest plot's rows, written beside the page (the stored result the README quotes is a
+copy: ``bench/stored/quick_forest.csv``)."""
+
 def forest_frame(members: pd.DataFrame) -> pd.DataFrame:
     """:func:`reports.forest.forest_rows` and, per integrator, the random family pooled."""
     f = forest_mod.forest_rows(members)
@@ -119,5 +123,6 @@ def build(ctx: ReportContext) -> Section:
           "masters × systems, and what the interval resamples); faster / slower: the interval lies "
           "above / below 1. The K-metric question is answered in its own section below.")
     sec.anchor(FOREST_ID)
-    sec.details("The forest plot's numbers", forest_table(forest))
+    forest.to_csv(ctx.out_dir / FOREST_CSV, index=False)
+    sec.details("The forest plot's numbers", forest_table(forest), FOREST_CSV)
     return sec
