@@ -228,15 +228,21 @@ class CaseStore:
 
     def quarantine(self) -> list[tuple[Path, str]]:
         """Move every damaged case file to ``<name>.damaged`` (its case is then computed
-        again); return ``(moved-to path, reason)`` of each."""
+        again); return ``(moved-to path, reason)`` of each. A case whose lock a client holds
+        is waited for as :meth:`holding` waits (said, and at most :func:`lock_timeout`
+        seconds); past that the file is left as it is, in one line."""
         moved = []
         for f, _ in self.damaged():
-            with self._lock(f.stem):          # a concurrent client may be rewriting the case
-                reason = self.problem(f)
-                if reason is None or reason == "is missing":
-                    continue                  # rewritten whole, or moved by another client
-                dest = f.with_name(f.name + DAMAGED_SUFFIX)
-                os.replace(f, dest)
+            try:
+                with self._held(f.stem, f"case file {f.name!r}"):   # a client may be rewriting it
+                    reason = self.problem(f)
+                    if reason is None or reason == "is missing":
+                        continue              # rewritten whole, or moved by another client
+                    dest = f.with_name(f.name + DAMAGED_SUFFIX)
+                    os.replace(f, dest)
+            except LockTimeout as exc:        # its holder is stuck: the file stays, said once
+                _say(f"bench: case file {f.name!r} left as it is: {exc}")
+                continue
             moved.append((dest, reason))
         return moved
 
@@ -261,15 +267,21 @@ class CaseStore:
         keeps its lock); past the timeout :class:`LockTimeout` is raised, naming the same.
         The holder's pid is kept beside the lock (``<key>.owner``) while it is held.
         """
+        with self._held(case_key(case_id), f"case {case_id!r}", timeout, say):
+            yield
+
+    @contextmanager
+    def _held(self, key: str, what: str, timeout: float | None = None, say=None):
+        """:meth:`holding` on the lock of ``key`` (``what`` names it in the lines)."""
         from filelock import Timeout
 
         timeout = lock_timeout() if timeout is None else float(timeout)
-        lock = self.lock(case_id)
+        lock = self._lock(key)
         owner = Path(lock.lock_file).with_suffix(".owner")
         try:
             lock.acquire(timeout=0)
         except Timeout:
-            (say or _say)(f"bench: case {case_id!r} waits for its lock {lock.lock_file}, held by "
+            (say or _say)(f"bench: {what} waits for its lock {lock.lock_file}, held by "
                           f"{_holder(owner)}; at most {timeout:g} s ({LOCK_TIMEOUT_ENV})")
             try:
                 lock.acquire(timeout=timeout)

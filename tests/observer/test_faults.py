@@ -616,6 +616,48 @@ def test_a_bench_client_behind_a_stopped_clients_lock_says_so_and_gives_up(tmp_p
     assert not (folder.exists() and list(folder.glob("*.parquet")))
 
 
+def test_quarantine_behind_a_stopped_clients_lock_says_so_and_leaves_the_file(tmp_path, monkeypatch, capsys):
+    """A damaged case file whose lock a stopped client holds: the quarantine says which file,
+    lock and holder it waits for, gives up after $BENCH_LOCK_TIMEOUT s and leaves the file as
+    it is (the next run moves it) — instead of waiting without a bound."""
+    import threading
+
+    from bench.results import CaseStore
+    from bench.run import execute_case, results_path
+    from bench.suites import Case
+
+    case = Case("work_precision", "bouncing_ball", law="newton", h=4e-3, t_end=0.3, observers=(),
+                reference="closed form")
+    folder = results_path("quarantined", tmp_path)
+    assert execute_case(case, "quarantined", tmp_path, {}).state == "ran"
+    (path,) = CaseStore(folder).files()
+    path.write_bytes(path.read_bytes()[:-7])                 # damaged: its checksum no longer holds
+    assert CaseStore(folder).damaged()
+    holder = subprocess.Popen([sys.executable, "-c", _HOLDER, str(folder), case.case_id],
+                              stdout=subprocess.PIPE, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        os.kill(holder.pid, signal.SIGSTOP)
+        monkeypatch.setenv("BENCH_LOCK_TIMEOUT", "0.5")
+        outcome = []
+        waiter = threading.Thread(target=lambda: outcome.append(CaseStore(folder).quarantine()), daemon=True)
+        t0 = time.monotonic()
+        waiter.start()
+        waiter.join(timeout=30)
+        assert not waiter.is_alive(), "the quarantine still waits"
+        assert time.monotonic() - t0 < 15
+    finally:
+        os.kill(holder.pid, signal.SIGCONT)
+        holder.kill()
+        holder.wait(timeout=30)
+    assert outcome == [[]] and path.exists()
+    lock = folder / ".locks" / f"{case_key(case.case_id)}.lock"
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 2 and all(path.name in ln and str(lock) in ln for ln in err), err
+    assert "at most 0.5 s" in err[0] and f"pid {holder.pid} (stopped)" in err[1] and "left as it is" in err[1]
+    assert CaseStore(folder).quarantine() and not path.exists()   # the holder gone: moved
+
+
 def test_a_bench_lock_timeout_that_is_not_a_number_is_refused(monkeypatch):
     from bench.results import lock_timeout
     for bad in ("soon", "-1", "inf", "nan"):
