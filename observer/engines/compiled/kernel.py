@@ -55,9 +55,9 @@ solvers that return ``(iterations, status, residual)``.
   projection's branches at compile time; with one degree of freedom and one contact,
   :func:`advance_scalar` runs that loop on scalars (numba reloads every array value after
   each store to a record: it cannot tell they do not alias), about twice as fast. The entry
-  points take their arguments in a few named bundles (:class:`SystemBundle`, …) and pass
-  each field by name to the positional step loops, once per call (:func:`advance` says why
-  this is done in Python). Every function uses numba's ``error_model="numpy"`` (IEEE
+  points take their arguments in a few named bundles (:class:`SystemBundle`, …); the step
+  loops are generated from one template (:mod:`observer.engines.compiled.step`) and bind each
+  field to its name once per call. Every function uses numba's ``error_model="numpy"`` (IEEE
   division, no ``ZeroDivisionError`` branch: every denominator here is positive or guarded),
   whose raise branches would otherwise keep numba's reference-count pruning from removing
   the increments.
@@ -72,7 +72,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from observer.engines.compiled.step import build
+from observer.engines.compiled.step import build, impulse_one  # noqa: F401 (impulse_one: the kernel's)
 from observer.primitives import (CONTACTS_DENSE, CONTACTS_FACTORED, EPS, F_DAMP, F_IMP, F_KON,  # noqa: F401
                                  F_MAXIMP, F_MAXINC, F_NINC, F_PROJ, F_VEND, F_VMAX, F_VON, JIT,
                                  LCP_FAILED, OK, PROJECTION_FAILED, RESIDUAL_EXCEEDED, ROUNDOFF, STATS_SIZE,
@@ -233,59 +233,18 @@ def banded_free_velocity(k, s, qs, us, h, Ru_b, Rq_b, Ach_b, bw, fbar, uf):
 
 
 @njit(**JIT)
-def impulse_one(k, s, us, uf, j, Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats, u1, P):
-    """:func:`contact_impulse` on the one closed contact j, in closed form.
-
-    Newton's and Poisson's maps agree on one contact: ``P = max(0, −b/Ĝ_jj)`` with
-    ``b = γ_free + e_j γ_k``; the same operations as the general path, bit for bit
-    (``δu_i = 0 + (Â⁻¹W)_ji P`` is recomputed where the applied residual reads it instead of
-    being stored). Free of reference counts (checked in its compiled code by
-    ``tests/observer/test_kernel.py``): no helper is inlined (each inlined array argument is a
-    new variable), every array is read outside any branch, the status is decided on scalars
-    before ``stats``, the last array written, is touched: numba then prunes every argument's
-    increment and decrement (an array used in two loops, or written inside a branch, keeps
-    them: 9 pairs per call before, which made each call in a compiled loop markedly slower).
-    """
-    n = uf.shape[0]
-    p0, p1 = Wp[j], Wp[j + 1]
-    gk = 0.0                                                                # (Wᵀu_k)_j
-    for p in range(p0, p1):
-        gk += Wv[p] * us[s, Wi[p]]
-    gk = gk + nu_dot[k, j]
-    gc = 0.0                                                                # γ_free
-    for p in range(p0, p1):
-        gc += Wv[p] * uf[Wi[p]]
-    gc = gc + nu_dot[k + 1, j]
-    g = Ghat[j, j]
-    b = gc + e[j] * gk
-    x = -b / g if b < 0.0 else 0.0
-    gx = 0.0 + g * x                                                        # lcp_residual, a = 1
-    r = 0.0
-    v = abs(min(x, gx + b))
-    if v > r:
-        r = v
-    res = r / max(abs(b) if abs(b) > 0.0 else 0.0, abs(gx) if abs(gx) > 0.0 else 0.0, TINY)
-    for i in range(n):
-        u1[i] = uf[i] + (0.0 + AinvWT[j, i] * x)                            # u_free + δu
-    P[0] = x
-    d = 0.0                                                                 # (Wᵀδu)_j: applied_residual
-    for p in range(p0, p1):
-        d += Wv[p] * (0.0 + AinvWT[j, Wi[p]] * x)
-    r = 0.0
-    v = abs(min(x, b + d))
-    if v > r:
-        r = v
-    applied = r / max(abs(b) if abs(b) > 0.0 else 0.0, abs(d) if abs(d) > 0.0 else 0.0, TINY)
-    solved = res <= tol
-    status = OK if solved and applied <= tol else (LCP_FAILED if not solved else RESIDUAL_EXCEEDED)
-    worst = stats[2]
-    last = stats[7]
-    worst = res if solved and res > worst else worst
-    last = applied if solved else last
-    stats[0] += 1
-    stats[2] = worst
-    stats[7] = last
-    return status
+def _applied(Wp, Wi, Wv, act, a, law, uf, du, u1, bvec, x, le, tol, stats):
+    """The velocity after an impulse, ``u1 = u_free + δu``, and its applied residual
+    (:func:`applied_residual`, into ``stats[7]``): the status of the step
+    (:data:`RESIDUAL_EXCEEDED` beyond ``tol``). The end of :func:`contact_impulse` and of
+    :func:`factored_impulse`."""
+    for i in range(uf.shape[0]):
+        u1[i] = uf[i] + du[i]
+    res = applied_residual(Wp, Wi, Wv, act, a, du, bvec, x if (law == 0 or a == 1) else le)
+    stats[7] = res
+    if not res <= tol:
+        return RESIDUAL_EXCEEDED
+    return OK
 
 
 @njit(**JIT)
@@ -317,13 +276,7 @@ def contact_impulse(k, s, us, uf, act, a, law, W, nu_dot, AinvWT, Ghat, e, tol, 
         j = act[r]
         for i in range(n):
             du[i] += AinvWT[j, i] * x[r]
-    for i in range(n):
-        u1[i] = uf[i] + du[i]
-    res = applied_residual(Wp, Wi, Wv, act, a, du, bvec, x if (law == 0 or a == 1) else le)
-    stats[7] = res
-    if not res <= tol:
-        return RESIDUAL_EXCEEDED
-    return OK
+    return _applied(Wp, Wi, Wv, act, a, law, uf, du, u1, bvec, x, le, tol, stats)
 
 
 @njit(**JIT)
@@ -474,13 +427,7 @@ def factored_impulse(k, s, us, uf, act, a, law, W, nu_dot, Ach_b, bw, cache, e, 
     for r in range(a):
         P[r] = x[r]
     _factored_apply(act, a, Wp, Wi, Wv, Ach_b, bw, x, du)
-    for i in range(uf.shape[0]):
-        u1[i] = uf[i] + du[i]
-    res = applied_residual(Wp, Wi, Wv, act, a, du, bvec, x if (law == 0 or a == 1) else le)
-    stats[7] = res
-    if not res <= tol:
-        return RESIDUAL_EXCEEDED
-    return OK
+    return _applied(Wp, Wi, Wv, act, a, law, uf, du, u1, bvec, x, le, tol, stats)
 
 
 @njit(**JIT)
@@ -617,25 +564,56 @@ def summary_start(state, system, tally):
 def advance(k0, k1, s0, system, impact, signals, window, observers, state, storage, tally, general):
     """Advance every system from step k0 (starting with system s0) up to step k1.
 
-    The step loop :func:`_advance_loop` (its docstring: the scheme, the signals, the records,
-    the summary) fed by bundles, so that no call can pass an argument in the wrong order:
-    ``system`` (:class:`SystemBundle`), ``impact`` (:class:`LawBundle`), ``signals``
-    (:class:`SignalBundle`), ``window`` (:class:`WindowBundle`), ``observers``
-    (:class:`ObserverBundle`), ``state`` (:class:`StateBundle`, advanced in place),
-    ``storage`` (:class:`StorageBundle`, the records written in place) and ``tally``
-    (:class:`SummaryBundle`). Each field goes to the loop by name, once per call. This is a
-    Python function on purpose: the loop keeps its positional parameters because reading the
-    fields inside it, even into locals before the steps, made it slower per step
-    (measured against the positional loop, issue 21), and a compiled wrapper gets the loop inlined
-    into it by LLVM, which compiles it again, differently.
+    One Moreau–Jean step of system s (row s of ``qs``, ``us``) on its closed set A: the
+    master's from Siconos' predictor ``g_k + (h/2)γ_k ≤ 0`` (projected when
+    ``master_projection``), an observer's χ_k while coupled (projected when ``jumps[s]``),
+    else its own predicted set; ``u_free`` (dense ``Bu u + Bq q + Bf f̄``, or the banded
+    solve), the impulse of the impact law on A (:func:`contact_impulse`),
+    ``q_{k+1} = q_k + h((1−θ)u_k + θu_{k+1})`` and the position jump
+    (:func:`project_positions`). The n×m matrices come transposed (a contact's column
+    contiguous); ``KinvWT`` (N⁻¹W)ᵀ and ``L`` WᵀN⁻¹W are stacks over the projection
+    metrics, ``slots[s]`` selects system s's.
 
-    ``general`` selects the compiled specialization: ``True`` the general loop; ``None`` the
-    lean loop of the master alone, dense, without summary, pre-projection records or master
-    projection (:func:`observer.engines.compiled.bundles.specialization`), whose other branches numba prunes at
-    compile time: bitwise the same trajectory, a shorter step.
+    The signals f, ν and ν̇ are evaluated here at every grid point t_k = t0 + k·h from their
+    tables (:func:`observer.engines.compiled.bundles.signal_tables`): ``waves`` holds the distinct waves
+    ``function(ω t_k + phase)`` of the window (column k − kb, :func:`observer.engines.compiled.bundles.wave_table`:
+    the trigonometric calls stay out of the step loop); per signal, its entries ``(column,
+    coefficient, wave)`` in the summation order of :class:`observer.model.Harmonic` (so the
+    values are those of :meth:`observer.stepping.Grid.window` bit for bit) and its varying
+    columns; f̄_k = (1−θ)f(t_k) + θf(t_{k+1}). Only the varying columns are evaluated per step
+    (the others keep their constant): O(columns with a harmonic term + entries) per step.
+    ``coupled`` and ``chi_log`` are a window of the grid starting at step ``kb`` (row k − kb
+    holds step k). ``qs``, ``us`` (S, n) hold the current states and are updated in place;
+    ``chi_now`` (m,) the closed set fed to the observers at the current step (the master's, or the log's). Row r of the records holds
+    step ``r·record_every`` (row 0: the initial state, written by the caller); impulses and
+    multipliers are those of the step ending at the row. ``rec_P``, ``rec_sig`` and ``rec_act``
+    come zero-filled (each row is written once: only the closed contacts' entries are set).
+
+    With ``summary``, every step also updates the streaming summary of each observer
+    (:data:`SUMMARY_FIELDS`, coupling window = grid samples k_on..k_off, thresholds ``rhos``),
+    records V at the recorded rows (``rec_V``), and counts the master's closings per contact.
+    ``stats`` (:data:`STATS_SIZE`) = [solves, iterations, max residual, min gap after a step,
+    its step, max applied residual, its step, last applied residual].
+
+    ``general`` selects the compiled specialization: ``True`` the loop as described; ``None``
+    the lean loop of the common case — the master alone (S = 1), dense structure, no summary,
+    no pre-projection records, no master projection — where numba prunes every other branch
+    at compile time (the same operations on the same values: bitwise the same trajectory, a
+    shorter step). The caller passes ``None`` only in that case (:func:`observer.engines.compiled.bundles.specialization`).
 
     Returns ``(k, s, status)``: ``status == OK`` and k = k1 when done; otherwise the step and
     system that failed (their state untouched).
+
+    The loop is generated from the step's template (:mod:`observer.engines.compiled.step`:
+the same source as the members' loop) and takes the bundles: ``system``
+(:class:`SystemBundle`), ``impact`` (:class:`LawBundle`), ``signals``
+(:class:`SignalBundle`), ``window`` (:class:`WindowBundle`), ``observers``
+(:class:`ObserverBundle`), ``state`` (:class:`StateBundle`, advanced in place), ``storage``
+(:class:`StorageBundle`, the records written in place) and ``tally``
+(:class:`SummaryBundle`), each field bound to its name once per call
+(:data:`observer.engines.compiled.step.KERNEL_FIELDS`). This is a Python function on
+purpose: a compiled wrapper gets the loop inlined into it by LLVM, which compiles it again,
+differently.
     """
     return _advance_loop(k0, k1, s0, system, impact, signals, window, observers, state, storage, tally, general)
 
@@ -650,15 +628,23 @@ _advance_loop = build("_advance_loop", globals())
 def advance_scalar(k0, k1, system, impact, signals, window, state, storage):
     """:func:`advance` for n = m = 1 (the master alone, dense): the scalar step loop
     :func:`_advance_scalar_loop` (the state in registers; bitwise the same trajectory) fed by
-    the same bundles, each field passed by name (a Python function, for the reason given in
-    :func:`advance`). Writes the rows' times into
-    ``storage.t`` when it has a row per record. Returns ``(k, 0, status)``.
+    the same bundles: the arrays it reads per step passed by name, the rest in three tuples
+    (the grid's t0, h, θ; the signals' pointers; the scheme's and contact's arrays with the
+    tolerance). Passing the bundles themselves (unpacked in the loop) made its step 6–7 %
+    slower (issue 32); this form is as fast as the 33 positional parameters it replaces. Writes
+    the rows' times into ``storage.t`` when it has a row per record. Returns ``(k, 0, status)``.
     """
-    return _advance_scalar_loop(k0, k1, system, impact, signals, window, state, storage)
+    return _advance_scalar_loop(
+        k0, k1, window.kb, state.qs, state.us, storage.record_every, storage.q, storage.u, storage.P,
+        storage.active, storage.t, (system.t0, system.h, system.theta), window.waves, (signals.e_ptr, signals.v_ptr),
+        signals.e_coef, signals.e_wave, signals.f_c, signals.nu_c,
+        (system.Bu, system.Bq, system.Bf, system.Wp, system.Wi, system.Wv, system.AinvWT, system.Ghat, impact.e,
+         impact.tol), state.stats)
 
 
 @njit(**JIT)
-def _advance_scalar_loop(k0, k1, system, impact, signals, window, state, storage):
+def _advance_scalar_loop(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, rec_act, rec_t, grid, waves, ptrs,
+                         e_coef, e_wave, f_c, nu_c, contact, stats):
     """:func:`advance`'s lean loop for n = m = 1 (the master alone, dense): the same
     operations on the same values, with the state, the signals and the scheme's 1×1 matrices
     held in scalars instead of arrays (numba cannot tell that a store to a record does not
@@ -669,17 +655,15 @@ def _advance_scalar_loop(k0, k1, system, impact, signals, window, state, storage
     recorded row's time ``t0 + k·h`` is written there too, computed as
     :meth:`observer.stepping.MoreauJean.time` computes it (bitwise its values).
 
+    ``grid`` is ``(t0, h, θ)``, ``ptrs`` ``(e_ptr, v_ptr)`` and ``contact`` ``(Bu, Bq, Bf, Wp,
+    Wi, Wv, AinvWT, Ghat, e, tol)`` (:func:`advance_scalar`).
+
     Called only by :func:`advance_scalar`. One function because it is a step loop, for the
     reason of :func:`_advance_loop`.
     """
-    kb, waves, qs, us, stats = window.kb, window.waves, state.qs, state.us, state.stats
-    record_every, rec_q, rec_u, rec_P, rec_act, rec_t = (storage.record_every, storage.q, storage.u, storage.P,
-                                                         storage.active, storage.t)
-    t0, h, theta, Bu, Bq, Bf = system.t0, system.h, system.theta, system.Bu, system.Bq, system.Bf
-    Wp, Wi, Wv, AinvWT, Ghat = system.Wp, system.Wi, system.Wv, system.AinvWT, system.Ghat
-    e_ptr, e_coef, e_wave, v_ptr, f_c, nu_c = (signals.e_ptr, signals.e_coef, signals.e_wave, signals.v_ptr,
-                                               signals.f_c, signals.nu_c)
-    e, tol = impact.e, impact.tol
+    t0, h, theta = grid
+    e_ptr, v_ptr = ptrs
+    Bu, Bq, Bf, Wp, Wi, Wv, AinvWT, Ghat, e, tol = contact
     q, u = qs[0, 0], us[0, 0]
     bu, bq, bf = Bu[0, 0], Bq[0, 0], Bf[0, 0]
     wnz = Wp[1] > Wp[0]                              # W's one entry (none: every gap is ν)

@@ -64,18 +64,15 @@ from the bundles it is given (:func:`observer.engines.compiled.members.member_su
 builds them), so such an observer needs no new loop, only other bundles.
 
 Placeholders: an inline ``$NAME`` is replaced by the loop's expression for it, a line that
-is only ``$NAME`` by the loop's statement block (:func:`fill`).
+is only ``$NAME`` by the loop's statement block (:func:`observer.codegen.fill`).
 """
 
 from __future__ import annotations
 
-import re
 import textwrap
-from pathlib import Path
 
-from numba import njit
-
-from observer.primitives import JIT
+from observer.codegen import compile_function, fill
+from observer.primitives import JIT, LCP_FAILED, OK, PROJECT_ONE, RESIDUAL_EXCEEDED, TINY
 
 CLOSED_SET = """
 if $COUPLED:
@@ -124,15 +121,15 @@ if a > 0 or not dense:
     if factored and a > G.shape[0]:
         mb = min(m, 2 * a)
         G, Gs, Lf, Gp = np.empty((mb, mb)), np.empty((mb, mb)), np.empty((mb, mb)), np.empty((mb, mb))
-        mats = (G, Gs, Lf)
     if factored and a > 0:
-        status = factored_impulse(kl, s, us, uf, act, a, code, W, nu_dot, Ach_b, bw, Acache_t, e, tol, stats,
-                                  work, mats, u1, P, col)
+        status = factored_impulse(kl, s, us, uf, act, a, code, (Wp, Wi, Wv), nu_dot, Ach_b, bw,
+                                  (Acache, Aslot, Aowner, Astamp), e, tol, stats,
+                                  (gk, bvec, x, lc, le, gc, rhs, sol, basic, infeas, du), (G, Gs, Lf), u1, P, col)
     elif a == 1:
-        status = impulse_one(kl, s, us, uf, act[0], Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats, u1, P)
+        $IMPULSE_ONE
     elif a > 1:
-        status = contact_impulse(kl, s, us, uf, act, a, code, W, nu_dot, AinvWT, Ghat, e, tol, stats, work,
-                                 mats, u1, P)
+        status = contact_impulse(kl, s, us, uf, act, a, code, (Wp, Wi, Wv), nu_dot, AinvWT, Ghat, e, tol, stats,
+                                 (gk, bvec, x, lc, le, gc, rhs, sol, basic, infeas, du), (G, Gs, Lf), u1, P)
     if a > 0:
         if stats[7] > stats[5]:
             stats[5] = stats[7]
@@ -150,10 +147,10 @@ if projected:
     for i in range(n):
         qpre[i] = q1[i]
     if factored:
-        status = factored_project(kl + 1, act, a, slots[s], W, nu, Kch, bwk, Kcache_t, q1, sig, gp, sp_, Gp, Lf,
-                                  col)
+        status = factored_project(kl + 1, act, a, slots[s], (Wp, Wi, Wv), nu, Kch, bwk,
+                                  (Kcache, Kslot, Kowner, Kstamp), q1, sig, gp, sp_, Gp, Lf, col)
     elif a == 1:
-        status = project_one(kl + 1, act[0], slots[s], Wp, Wi, Wv, nu, KinvWT, L, q1, sig)
+        $PROJECT_ONE
     else:
         status = project_positions(kl + 1, act, a, slots[s], Wp, Wi, Wv, nu, KinvWT, L, q1, sig, gp, sp_, Gp, Lf)
     if status != OK:
@@ -277,14 +274,11 @@ mb = min(m, FACTORED_BLOCK) if factored else m       # factored: grown when more
 G, Gs, Lf, Gp = np.empty((mb, mb)), np.empty((mb, mb)), np.empty((mb, mb)), np.empty((mb, mb))
 col = np.empty(n if factored else 1)
 basic, infeas = np.zeros(m, np.bool_), np.zeros(m, np.bool_)
-W = (Wp, Wi, Wv)
-work = (gk, bvec, x, lc, le, gc, rhs, sol, basic, infeas, du)
-mats = (G, Gs, Lf)
-Acache_t = (Acache, Aslot, Aowner, Astamp)
-Kcache_t = (Kcache, Kslot, Kowner, Kstamp)
 """
-"""The step's work buffers, allocated once per call (a view or a tuple built per step would be
-a reference count per step)."""
+"""The step's work buffers, allocated once per call (a view built per step would be a reference
+count per step). The helpers of the rarer paths (several contacts, factored data) take some of
+them in tuples built at their call: a tuple held across the loop made every step slower
+(double_mass, issue 32)."""
 
 SYSTEM_FIELDS = ("structure", "Bu", "Bq", "Bf", "Ru_b", "Rq_b", "Ach_b", "bw", "Wp", "Wi", "Wv", "AinvWT",
                  "Ghat", "contacts", "Acache", "Aslot", "Aowner", "Astamp", "h", "theta")
@@ -329,22 +323,6 @@ def unpack(fields: dict) -> str:
             name, field = (item, item) if isinstance(item, str) else item
             lines.append(f"{name} = {bundle}.{field}")
     return "\n".join(lines)
-
-
-def fill(fragment: str, values: dict) -> str:
-    """``fragment`` with its placeholders replaced: a line that is only ``$NAME`` by the block
-    ``values[NAME]`` at that line's indentation (none: the line goes), an inline ``$NAME`` by
-    the expression ``values[NAME]``. A placeholder without a value raises KeyError."""
-    out = []
-    for line in textwrap.dedent(fragment).strip("\n").splitlines():
-        alone = re.fullmatch(r"(\s*)\$([A-Z_]+)\s*", line)
-        if alone:
-            block = textwrap.dedent(values[alone.group(2)]).strip("\n")
-            if block:
-                out.append(textwrap.indent(block, alone.group(1)))
-            continue
-        out.append(re.sub(r"\$([A-Z_]+)", lambda mt: values[mt.group(1)], line))
-    return "\n".join(out)
 
 
 KERNEL_SUMMARY = {"MASTER_U": "us[0, i]", "MASTER_Q": "qs[0, i]", "MASTER_P": "Pfull_m[j]", "V_PREV": "Vprev[s]",
@@ -527,6 +505,69 @@ def advance_members(n_, m_, r_, j0, j1, master, system, impact, observers, state
 """The members' loop: each observer alone over the whole grid, :data:`CLOSED_SET`,
 :data:`DYNAMICS` and :data:`OBSERVER_SUMMARY` per step against the master's tables."""
 
+IMPULSE_ONE = """
+j1 = $J
+pa, pb = Wp[j1], Wp[j1 + 1]
+gk1 = 0.0                                                               # (Wᵀu_k)_j
+for p1 in range(pa, pb):
+    gk1 += Wv[p1] * us[s, Wi[p1]]
+gk1 = gk1 + nu_dot[$ROW, j1]
+gc1 = 0.0                                                               # γ_free
+for p1 in range(pa, pb):
+    gc1 += Wv[p1] * uf[Wi[p1]]
+gc1 = gc1 + nu_dot[$ROW + 1, j1]
+gjj = Ghat[j1, j1]
+b1 = gc1 + e[j1] * gk1
+x1 = -b1 / gjj if b1 < 0.0 else 0.0
+gx1 = 0.0 + gjj * x1                                                    # lcp_residual, a = 1
+r1 = 0.0
+v1 = abs(min(x1, gx1 + b1))
+if v1 > r1:
+    r1 = v1
+res1 = r1 / max(abs(b1) if abs(b1) > 0.0 else 0.0, abs(gx1) if abs(gx1) > 0.0 else 0.0, TINY)
+for i1 in range(n):
+    u1[i1] = uf[i1] + (0.0 + AinvWT[j1, i1] * x1)                       # u_free + δu
+P[0] = x1
+d1 = 0.0                                                                # (Wᵀδu)_j: applied_residual
+for p1 in range(pa, pb):
+    d1 += Wv[p1] * (0.0 + AinvWT[j1, Wi[p1]] * x1)
+r1 = 0.0
+v1 = abs(min(x1, b1 + d1))
+if v1 > r1:
+    r1 = v1
+applied1 = r1 / max(abs(b1) if abs(b1) > 0.0 else 0.0, abs(d1) if abs(d1) > 0.0 else 0.0, TINY)
+solved1 = res1 <= tol
+status = OK if solved1 and applied1 <= tol else (LCP_FAILED if not solved1 else RESIDUAL_EXCEEDED)
+worst1 = stats[2]
+last1 = stats[7]
+worst1 = res1 if solved1 and res1 > worst1 else worst1
+last1 = applied1 if solved1 else last1
+stats[0] += 1
+stats[2] = worst1
+stats[7] = last1
+"""
+"""The impulse of one closed contact ``$J`` in closed form (system s; ``$ROW``: the row of
+ν̇(t_k) in ``nu_dot``): Newton's and Poisson's maps agree on one contact,
+``P = max(0, −b/Ĝ_jj)`` with ``b = γ_free + e_j γ_k``, the same operations as the general
+path (:func:`observer.engines.compiled.kernel.contact_impulse`), bit for bit
+(``δu_i = 0 + (Â⁻¹W)_ji P`` is recomputed where the applied residual reads it instead of
+being stored); writes ``u1``, ``P[0]``, the counters (``stats[0, 2, 7]``) and ``status``. The
+one source of the one-contact impulse: the body of :func:`impulse_one` and, inline, of the
+step loops'. Free of reference counts as a function (checked in its compiled code by
+``tests/observer/test_kernel.py``): every array is read outside any branch, the status is
+decided on scalars before ``stats``, the last array written, is touched."""
+
+impulse_one = compile_function("impulse_one", f'''
+def impulse_one(k, s, us, uf, j, Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats, u1, P):
+    """The impulse of system s's step on its one closed contact j, in closed form
+    (:data:`IMPULSE_ONE`); returns the status."""
+    n = uf.shape[0]
+{textwrap.indent(fill(IMPULSE_ONE, {"J": "j", "ROW": "k"}), "    ")}
+    return status
+''', {"__name__": __name__, "OK": OK, "LCP_FAILED": LCP_FAILED,
+                                                       "RESIDUAL_EXCEEDED": RESIDUAL_EXCEEDED, "TINY": TINY},
+                               __file__, JIT)
+
 KERNEL_CHI = """
 if s == 0 and S > 1:                        # χ_k, for the observers
     if use_log:
@@ -541,19 +582,27 @@ if s == 0 and S > 1:                        # χ_k, for the observers
 """The kernel's χ_k after the master's prediction: the log's row or the master's closed set."""
 
 
+ONE_CONTACT = {"IMPULSE_ONE": fill(IMPULSE_ONE, {"J": "act[0]", "ROW": "kl"}),
+               "PROJECT_ONE": fill(PROJECT_ONE, {"J": "act[0]", "ROW": "kl + 1", "SLOT": "slots[s]"})}
+"""The one-contact impulse and projection placed inline in :data:`DYNAMICS` (on the step's
+closed contact, signals at row kl)."""
+
+
 def kernel_source() -> str:
     """The source of the kernel's loop :func:`_advance_loop` (:data:`KERNEL_LOOP`)."""
     closed = fill(CLOSED_SET, {"COUPLED": "s > 0 and coupled[kw]", "CHI_J": "chi_now[j]",
                                "AFTER_PREDICTION": KERNEL_CHI})
     return fill(KERNEL_LOOP, {"UNPACK": unpack(KERNEL_FIELDS), "BUFFERS": BUFFERS, "CLOSED_SET": closed,
-                              "DYNAMICS": DYNAMICS, "OBSERVER_SUMMARY": fill(OBSERVER_SUMMARY, KERNEL_SUMMARY)})
+                              "DYNAMICS": fill(DYNAMICS, ONE_CONTACT),
+                              "OBSERVER_SUMMARY": fill(OBSERVER_SUMMARY, KERNEL_SUMMARY)})
 
 
 def members_source() -> str:
     """The source of the members' loop (:data:`MEMBERS_LOOP`)."""
     closed = fill(CLOSED_SET, {"COUPLED": "COUP[k]", "CHI_J": "CHI[k, j]", "AFTER_PREDICTION": ""})
     return fill(MEMBERS_LOOP, {"UNPACK": unpack(MEMBER_FIELDS), "BUFFERS": BUFFERS, "CLOSED_SET": closed,
-                               "DYNAMICS": DYNAMICS, "OBSERVER_SUMMARY": fill(OBSERVER_SUMMARY, MEMBER_SUMMARY)})
+                               "DYNAMICS": fill(DYNAMICS, ONE_CONTACT),
+                               "OBSERVER_SUMMARY": fill(OBSERVER_SUMMARY, MEMBER_SUMMARY)})
 
 
 SOURCES = {"_advance_loop": kernel_source, "advance_members": members_source}
@@ -563,9 +612,5 @@ SOURCES = {"_advance_loop": kernel_source, "advance_members": members_source}
 def build(name: str, namespace: dict):
     """Compile the generated loop ``name`` (:data:`SOURCES`) with :data:`observer.primitives.JIT`
     in ``namespace`` (the globals it reads: the step's compiled helpers and constants) and
-    return the dispatcher. The source is compiled under this file's name, so that numba's
-    disk cache (keyed by the file, the function's name and its bytecode) holds it."""
-    code = compile(SOURCES[name](), str(Path(__file__)), "exec")
-    scope = dict(namespace)
-    exec(code, scope)                                   # noqa: S102 (our own template)
-    return njit(**JIT)(scope[name])
+    return the dispatcher (:func:`observer.codegen.compile_function`, under this file's name)."""
+    return compile_function(name, SOURCES[name](), namespace, __file__, JIT)
