@@ -175,14 +175,14 @@ g1 = g1 + nu[$ROW, j1]
 l00 = L[$SLOT, j1, j1]
 ok1 = l00 > 0.0
 s1 = -g1 / l00 if ok1 else 0.0
-sig[0] = s1
+$SIGMA
 for i1 in range(n):
     q1[i1] += KinvWT[$SLOT, j1, i1] * s1
 status = OK if ok1 else PROJECTION_FAILED
 """
 """The position jump of eqs. (13)-(14) on one closed contact ``$J``, in closed form:
 ``Σ = −g_j(q1)/L_jj`` with the gap at row ``$ROW`` of ``nu``, ``q1 += (N⁻¹W)_j Σ`` in the metric
-of slot ``$SLOT``; Σ into ``sig[0]``, the status into ``status`` (:data:`PROJECTION_FAILED`
+of slot ``$SLOT``; ``$SIGMA`` keeps Σ (``sig[0] = s1``, or nothing), the status into ``status`` (:data:`PROJECTION_FAILED`
 when ``L_jj ≤ 0``). The one source of the one-contact projection: the body of
 :func:`project_one` and, placed inline, of the compiled step loops'
 (:mod:`observer.engines.compiled.step`; a call there costs every array's fields per step). No
@@ -192,7 +192,7 @@ project_one = compile_function("project_one", f'''
 def project_one(k, j, slot, Wp, Wi, Wv, nu, KinvWT, L, q1, sig):
     """:func:`project_positions` on the one closed contact j (:data:`PROJECT_ONE`)."""
     n = q1.shape[0]
-{textwrap.indent(fill(PROJECT_ONE, {"J": "j", "ROW": "k", "SLOT": "slot"}), "    ")}
+{textwrap.indent(fill(PROJECT_ONE, {"J": "j", "ROW": "k", "SLOT": "slot", "SIGMA": "sig[0] = s1"}), "    ")}
     return status
 ''', globals(), __file__, JIT)
 

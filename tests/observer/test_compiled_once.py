@@ -147,8 +147,10 @@ def test_the_predictor_has_one_compiled_definition():
 def test_the_projection_has_one_compiled_definition():
     from observer.primitives import PROJECT_ONE
 
-    placed = (codegen.fill(PROJECT_ONE, {"J": "act[0]", "ROW": "kl + 1", "SLOT": "slots[s]"}),   # in the loops
-              codegen.fill(PROJECT_ONE, {"J": "j", "ROW": "k", "SLOT": "slot"}))               # project_one's body
+    from observer.engines.compiled import step
+
+    placed = (step.ONE_CONTACT["PROJECT_ONE"], step.MEMBER_ONE["PROJECT_ONE"],                  # in the loops
+              codegen.fill(PROJECT_ONE, {"J": "j", "ROW": "k", "SLOT": "slot", "SIGMA": "sig[0] = s1"}))  # project_one
 
     def outside_the_fragment(src):
         for fragment in placed:
@@ -159,11 +161,12 @@ def test_the_projection_has_one_compiled_definition():
     readers = {key.rpartition(".")[2] for key, fn in found.items() if outside_the_fragment(source(key, fn)) > 0}
     assert readers == PROJECTION - {"project_one"}        # project_one is the fragment itself
     assert "pass" in without_fragment(source("observer.primitives.project_one",
-                                             found["observer.primitives.project_one"]), placed[1])
-    for loop in ("observer.engines.compiled.kernel._advance_loop", "observer.engines.compiled.members.advance_members"):
+                                             found["observer.primitives.project_one"]), placed[2])
+    for loop, fragment in (("observer.engines.compiled.kernel._advance_loop", placed[0]),
+                           ("observer.engines.compiled.members.advance_members", placed[1])):
         src = source(loop, found[loop])
         assert projection_reads(src) == projection_reads(PROJECT_ONE.replace("$", "")) > 0   # the fragment, once
-        assert without_fragment(src, placed[0]) != src
+        assert without_fragment(src, fragment) != src
         assert "project_positions(" in src and "factored_project(" in src
 
 
@@ -173,5 +176,9 @@ def test_both_loops_place_the_same_step(loop):
     from observer.engines.compiled import step
 
     src = step.SOURCES[loop]()
-    for fragment in (step.fill(step.DYNAMICS, step.ONE_CONTACT),):
+    one = step.ONE_CONTACT if loop == "_advance_loop" else step.MEMBER_ONE
+    for fragment in (step.fill(step.DYNAMICS, one), step.fill(step.CLOSED_SET, {
+            "COUPLED": "s > 0 and coupled[kw]" if loop == "_advance_loop" else "COUP[k]",
+            "CHI_J": "chi_now[j]" if loop == "_advance_loop" else "CHI[k, j]",
+            "AFTER_PREDICTION": step.KERNEL_CHI if loop == "_advance_loop" else ""})):
         assert without_fragment(src, fragment) != src
