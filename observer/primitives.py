@@ -182,7 +182,8 @@ status = OK if ok1 else PROJECTION_FAILED
 """
 """The position jump of eqs. (13)-(14) on one closed contact ``$J``, in closed form:
 ``Σ = −g_j(q1)/L_jj`` with the gap at row ``$ROW`` of ``nu``, ``q1 += (N⁻¹W)_j Σ`` in the metric
-of slot ``$SLOT``; ``$SIGMA`` keeps Σ (``sig[0] = s1``, or nothing), the status into ``status`` (:data:`PROJECTION_FAILED`
+of slot ``$SLOT``; ``$SIGMA`` keeps Σ (``sig[0] = s1``, or nothing), the status into
+``status`` (:data:`PROJECTION_FAILED`
 when ``L_jj ≤ 0``). The one source of the one-contact projection: the body of
 :func:`project_one` and, placed inline, of the compiled step loops'
 (:mod:`observer.engines.compiled.step`; a call there costs every array's fields per step). No

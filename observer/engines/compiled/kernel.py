@@ -584,7 +584,8 @@ def advance(k0, k1, s0, system, impact, signals, window, observers, state, stora
     (the others keep their constant): O(columns with a harmonic term + entries) per step.
     ``coupled`` and ``chi_log`` are a window of the grid starting at step ``kb`` (row k − kb
     holds step k). ``qs``, ``us`` (S, n) hold the current states and are updated in place;
-    ``chi_now`` (m,) the closed set fed to the observers at the current step (the master's, or the log's). Row r of the records holds
+    ``chi_now`` (m,) the closed set fed to the observers at the current step (the master's, or
+    the log's). Row r of the records holds
     step ``r·record_every`` (row 0: the initial state, written by the caller); impulses and
     multipliers are those of the step ending at the row. ``rec_P``, ``rec_sig`` and ``rec_act``
     come zero-filled (each row is written once: only the closed contacts' entries are set).
@@ -599,7 +600,8 @@ def advance(k0, k1, s0, system, impact, signals, window, observers, state, stora
     the lean loop of the common case — the master alone (S = 1), dense structure, no summary,
     no pre-projection records, no master projection — where numba prunes every other branch
     at compile time (the same operations on the same values: bitwise the same trajectory, a
-    shorter step). The caller passes ``None`` only in that case (:func:`observer.engines.compiled.bundles.specialization`).
+    shorter step). The caller passes ``None`` only in that case
+    (:func:`observer.engines.compiled.bundles.specialization`).
 
     Returns ``(k, s, status)``: ``status == OK`` and k = k1 when done; otherwise the step and
     system that failed (their state untouched).
@@ -619,7 +621,8 @@ differently.
 
 
 _advance_loop = build("_advance_loop", globals())
-"""The step loop of :func:`advance`, generated from the step's template (:func:`observer.engines.compiled.step.kernel_source`)."""
+"""The step loop of :func:`advance`, generated from the step's template
+(:func:`observer.engines.compiled.step.kernel_source`)."""
 
 
 # ---------------------------------------------------------------------------------------

@@ -584,7 +584,8 @@ if s == 0 and S > 1:                        # χ_k, for the observers
 
 
 ONE_CONTACT = {"IMPULSE_ONE": fill(IMPULSE_ONE, {"J": "act[0]", "ROW": "kl", "COUNT_ONE": COUNT_ONE}),
-               "PROJECT_ONE": fill(PROJECT_ONE, {"J": "act[0]", "ROW": "kl + 1", "SLOT": "slots[s]", "SIGMA": "sig[0] = s1"}),
+               "PROJECT_ONE": fill(PROJECT_ONE, {"J": "act[0]", "ROW": "kl + 1", "SLOT": "slots[s]",
+                                                 "SIGMA": "sig[0] = s1"}),
                "HEALTH": "if stats[7] > stats[5]:\n    stats[5] = stats[7]\n    stats[6] = k + 1",
                "KEEP_PRE": "for i in range(n):\n    qpre[i] = q1[i]"}
 """The kernel's: the one-contact impulse and projection placed inline in :data:`DYNAMICS` (on
