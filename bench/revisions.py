@@ -22,6 +22,7 @@ less sensitive to other processes on the machine) per step, and the loop's own w
 
     python -m bench.revisions d26e40e                       # 10⁶ steps, 3 rounds × 7 calls
     python -m bench.revisions d26e40e --steps 200000 --rounds 5 --out osc.csv
+    python -m bench.revisions d26e40e --problem ensemble --steps 200000 --rounds 3 --repeats 3
 
 The table (:func:`summary`) gives per tree the median and spread (min, quartiles, max) of the
 per-call ns/step, the median of the per-process medians, and the ratio of this tree's median
@@ -49,7 +50,23 @@ ROOT = Path(__file__).resolve().parents[1]
 """This source tree (the checkout that holds ``bench/``)."""
 
 PROBLEM = "impact_oscillator"
-"""The timed problem: the peers suite's 1-DOF oscillator."""
+"""The default timed problem: the peers suite's 1-DOF oscillator."""
+
+PROBLEMS = {
+    "oscillator": {"scenario": PROBLEM, "overrides": {"impact.law": "newton"}, "kind": "simulate",
+                   "observers": []},
+    "double_mass": {"scenario": "double_mass", "overrides": {}, "kind": "simulate", "observers": None},
+    "chain": {"scenario": "rocking_chain", "overrides": {"param.N": 100}, "kind": "simulate", "observers": []},
+    "ensemble": {"scenario": "double_mass", "overrides": {}, "kind": "ensemble", "observers": None,
+                 "members": 1000},
+}
+"""The timed problems (``--problem``), each one whole public call per timing: ``oscillator`` (the
+peers suite's: Newton's law, the master alone), ``double_mass`` with both of its scenario's
+observers, the ``chain`` (``rocking_chain``, N = 100, the master alone) and the ``ensemble`` of
+1000 members per design of ``double_mass``'s observers (:func:`observer.ensemble`, one worker,
+seed 0; its warm-up is one whole call, since the members' loop is compiled for the run's size,
+:func:`observer.engines.compiled.members.sizes`). ``observers: None``: the scenario's own. ns/step
+is the call's time per grid step."""
 
 CHILD = r"""
 import gc, importlib.util, json, pathlib, sys, time
@@ -61,18 +78,27 @@ if not pathlib.Path(origin).resolve().is_relative_to(pathlib.Path(args["tree"]).
 import observer
 sc = observer.load_scenario(args["scenario"], args["overrides"])
 sc = sc.with_overrides({"simulation.t_end": args["steps"] * sc.h})
+obs = args["observers"]
+if obs is None:
+    obs = list((sc.observer or {}).get("observers", ()))
+def call(t_end=None):
+    if args["kind"] == "ensemble":
+        return observer.ensemble(sc, designs=tuple(obs), n=args["members"] if t_end is None else 2, seed=0,
+                                 workers=1, t_end=t_end)
+    return observer.simulate(sc, observers=obs, t_end=t_end)
 t0 = time.perf_counter()
-res = observer.simulate(sc, t_end=10 * sc.h)
-print(json.dumps({"file": observer.__file__, "engine": res.metadata.get("engine", "?"),
-                  "warmup_s": time.perf_counter() - t0}), flush=True)
+res = call() if args["kind"] == "ensemble" else call(10 * sc.h)   # an ensemble's loop is specialized by size
+engine = res.metadata.get("engine", "?") if hasattr(res, "metadata") else "ensemble"
+print(json.dumps({"file": observer.__file__, "engine": engine, "warmup_s": time.perf_counter() - t0}), flush=True)
 for line in sys.stdin:                                    # one timed call per line, until EOF
     res = None
     gc.collect()
     w0, c0 = time.perf_counter(), time.process_time()
-    res = observer.simulate(sc)
+    res = call()
+    meta = getattr(res, "metadata", {})
     print(json.dumps({"wall_s": time.perf_counter() - w0, "cpu_s": time.process_time() - c0,
-                      "loop_s": res.metadata.get("wall_time_s", float("nan")),
-                      "steps": int(res.metadata.get("steps", args["steps"]))}), flush=True)
+                      "loop_s": meta.get("wall_time_s", float("nan")),
+                      "steps": int(meta.get("steps", args["steps"]))}), flush=True)
 """
 """The timing process's script (run with the tree first on ``PYTHONPATH``; public API only,
 so that it runs on any revision that has ``load_scenario`` and ``simulate``): it reports the
@@ -118,11 +144,10 @@ class TreeTimer:
         before importing: nothing is timed then).
     """
 
-    def __init__(self, tree: Path, steps: int, python: str = sys.executable):
+    def __init__(self, tree: Path, steps: int, python: str = sys.executable, problem: str = "oscillator"):
         env = {**os.environ, "PYTHONPATH": str(tree), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
                "MKL_NUM_THREADS": "1"}
-        arg = json.dumps({"scenario": PROBLEM, "overrides": {"impact.law": "newton"},  # peer_overrides()
-                          "steps": steps, "tree": str(tree)})
+        arg = json.dumps({**PROBLEMS[problem], "steps": steps, "tree": str(tree)})
         self.tree, self.steps = Path(tree), steps
         self.proc = subprocess.Popen([python, "-c", CHILD, arg], cwd=tree, env=env, text=True,
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
@@ -161,7 +186,7 @@ class TreeTimer:
 
 
 def compare(revision: str, steps: int = 1_000_000, rounds: int = 3, repeats: int = 7,
-            python: str = sys.executable, repo: Path = ROOT) -> pd.DataFrame:
+            python: str = sys.executable, repo: Path = ROOT, problem: str = "oscillator") -> pd.DataFrame:
     """Time this tree and ``revision`` alternately in one run; one row per timed call.
 
     Each round starts one process per tree (:class:`TreeTimer`), then alternates their calls
@@ -170,8 +195,10 @@ def compare(revision: str, steps: int = 1_000_000, rounds: int = 3, repeats: int
     "revision"), ``commit`` (the revision's hash; "working tree" for this one), ``round``,
     ``process``, ``call``, ``steps``, ``ns_per_step`` (wall), ``cpu_ns_per_step``,
     ``loop_ns_per_step`` (the loop's own wall time), ``warmup_s`` (the process's warm-up call:
-    compilation or cache load), ``engine``.
+    compilation or cache load), ``engine``, ``problem`` (:data:`PROBLEMS`).
     """
+    if problem not in PROBLEMS:
+        raise InputError("problem", f"must be one of {', '.join(PROBLEMS)}, got {problem!r}")
     for name, value in (("steps", steps), ("rounds", rounds), ("repeats", repeats)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise InputError(name, f"must be a positive integer, got {value!r}")
@@ -180,7 +207,8 @@ def compare(revision: str, steps: int = 1_000_000, rounds: int = 3, repeats: int
         commit = extract(revision, Path(tmp), repo)
         trees = {"current": (repo, "working tree"), "revision": (Path(tmp), commit)}
         for r in range(rounds):
-            with TreeTimer(trees["revision"][0], steps, python) as old, TreeTimer(repo, steps, python) as new:
+            with (TreeTimer(trees["revision"][0], steps, python, problem) as old,
+                  TreeTimer(repo, steps, python, problem) as new):
                 timers = {"revision": (old, 2 * r), "current": (new, 2 * r + 1)}
                 for i in range(repeats):
                     order = ("revision", "current") if (i + r) % 2 == 0 else ("current", "revision")
@@ -191,7 +219,7 @@ def compare(revision: str, steps: int = 1_000_000, rounds: int = 3, repeats: int
                                      "call": i, "steps": c["steps"], "ns_per_step": 1e9 * c["wall_s"] / c["steps"],
                                      "cpu_ns_per_step": 1e9 * c["cpu_s"] / c["steps"],
                                      "loop_ns_per_step": 1e9 * c["loop_s"] / c["steps"],
-                                     "warmup_s": timer.warmup_s, "engine": timer.engine})
+                                     "warmup_s": timer.warmup_s, "engine": timer.engine, "problem": problem})
     return pd.DataFrame(rows)
 
 
@@ -223,9 +251,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--out", type=Path, default=None, help="CSV of every timed call")
+    ap.add_argument("--problem", default="oscillator", help=f"the timed problem: {', '.join(PROBLEMS)}")
     args = ap.parse_args(argv)
     try:
-        calls = compare(args.revision, args.steps, args.rounds, args.repeats)
+        calls = compare(args.revision, args.steps, args.rounds, args.repeats, problem=args.problem)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -25,9 +25,12 @@ the values equal the real-number quantities.
 
 from __future__ import annotations
 
+import textwrap
+
 import numpy as np
 from numba import njit
 
+from observer.codegen import compile_function, fill
 from observer.numba_cache import install as _install_cache_guard
 
 _install_cache_guard()        # a damaged or unwritable numba cache: a warning and a recompile
@@ -163,19 +166,36 @@ def applied_residual(Wp, Wi, Wv, act, a, du, bvec, z):
     return r_ / max(sb, sd, TINY)
 
 
-@njit(**JIT)
+PROJECT_ONE = """
+j1 = $J
+g1 = 0.0
+for p1 in range(Wp[j1], Wp[j1 + 1]):
+    g1 += Wv[p1] * q1[Wi[p1]]
+g1 = g1 + nu[$ROW, j1]
+l00 = L[$SLOT, j1, j1]
+ok1 = l00 > 0.0
+s1 = -g1 / l00 if ok1 else 0.0
+$SIGMA
+for i1 in range(n):
+    q1[i1] += KinvWT[$SLOT, j1, i1] * s1
+status = OK if ok1 else PROJECTION_FAILED
+"""
+"""The position jump of eqs. (13)-(14) on one closed contact ``$J``, in closed form:
+``Σ = −g_j(q1)/L_jj`` with the gap at row ``$ROW`` of ``nu``, ``q1 += (N⁻¹W)_j Σ`` in the metric
+of slot ``$SLOT``; ``$SIGMA`` keeps Σ (``sig[0] = s1``, or nothing), the status into
+``status`` (:data:`PROJECTION_FAILED`
+when ``L_jj ≤ 0``). The one source of the one-contact projection: the body of
+:func:`project_one` and, placed inline, of the compiled step loops'
+(:mod:`observer.engines.compiled.step`; a call there costs every array's fields per step). No
+branch around an array access, like :func:`observer.engines.compiled.kernel.impulse_one`."""
+
+project_one = compile_function("project_one", f'''
 def project_one(k, j, slot, Wp, Wi, Wv, nu, KinvWT, L, q1, sig):
-    """:func:`project_positions` on the one closed contact j (no branch around an array
-    access, like :func:`observer.engines.compiled.kernel.impulse_one`)."""
+    """:func:`project_positions` on the one closed contact j (:data:`PROJECT_ONE`)."""
     n = q1.shape[0]
-    g = _wt(Wp, Wi, Wv, q1, j) + nu[k, j]
-    l00 = L[slot, j, j]
-    ok = l00 > 0.0
-    s_ = -g / l00 if ok else 0.0
-    sig[0] = s_
-    for i in range(n):
-        q1[i] += KinvWT[slot, j, i] * s_
-    return OK if ok else PROJECTION_FAILED
+{textwrap.indent(fill(PROJECT_ONE, {"J": "j", "ROW": "k", "SLOT": "slot", "SIGMA": "sig[0] = s1"}), "    ")}
+    return status
+''', globals(), __file__, JIT)
 
 
 @njit(**JIT)
@@ -185,24 +205,20 @@ def project_positions(k, act, a, slot, Wp, Wi, Wv, nu, KinvWT, L, q1, sig, g, s_
     ``(W_AᵀN⁻¹W_A)Σ = −g_A(q1)``; Σ into ``sig[:a]`` (``g``, ``s_`` (m,), ``Gp``, ``Lf`` (m, m):
     work buffers). Returns the status
     (:data:`PROJECTION_FAILED` when ``W_AᵀN⁻¹W_A`` is not positive definite)."""
+    if a == 1:
+        return project_one(k, act[0], slot, Wp, Wi, Wv, nu, KinvWT, L, q1, sig)
     n = q1.shape[0]
     for r in range(a):
         j = act[r]
         g[r] = _wt(Wp, Wi, Wv, q1, j) + nu[k, j]
-    if a == 1:
-        l00 = L[slot, act[0], act[0]]
-        if not l00 > 0.0:
-            return PROJECTION_FAILED
-        s_[0] = -g[0] / l00
-    else:
-        for r in range(a):
-            for c in range(a):
-                Gp[r, c] = L[slot, act[r], act[c]]
-        if not _cholesky(Gp, a, Lf):
-            return PROJECTION_FAILED
-        _cho_solve(Lf, a, g, s_)
-        for r in range(a):
-            s_[r] = -s_[r]
+    for r in range(a):
+        for c in range(a):
+            Gp[r, c] = L[slot, act[r], act[c]]
+    if not _cholesky(Gp, a, Lf):
+        return PROJECTION_FAILED
+    _cho_solve(Lf, a, g, s_)
+    for r in range(a):
+        s_[r] = -s_[r]
     for r in range(a):
         sig[r] = s_[r]
         j = act[r]

@@ -794,11 +794,10 @@ def test_impulse_one_is_the_general_path_bit_for_bit(seed):
         st1, st2 = np.array([3.0, 0, 1e-17, 0, 0, 0, 0, 5e-18]), np.array([3.0, 0, 1e-17, 0, 0, 0, 0, 5e-18])
         u1a, u1b, Pa, Pb = np.full(n, 9.0), np.full(n, 9.0), np.zeros(m), np.zeros(m)
         sa = kernel.impulse_one(0, 1, us, uf, j, Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, st1, u1a, Pa)
-        w = [np.zeros(m) for _ in range(8)]
-        sb = kernel.contact_impulse(0, 1, us, uf, np.array([j] + [0] * (m - 1)), 1, 0, Wp, Wi, Wv, nu_dot,
-                                    AinvWT, Ghat, e, tol, st2, *w, np.zeros((m, m)), np.zeros((m, m)),
-                                    np.zeros((m, m)), np.zeros(m, np.bool_), np.zeros(m, np.bool_), np.zeros(n),
-                                    u1b, Pb)
+        work = (*[np.zeros(m) for _ in range(8)], np.zeros(m, np.bool_), np.zeros(m, np.bool_), np.zeros(n))
+        mats = (np.zeros((m, m)), np.zeros((m, m)), np.zeros((m, m)))
+        sb = kernel.contact_impulse(0, 1, us, uf, np.array([j] + [0] * (m - 1)), 1, 0, (Wp, Wi, Wv), nu_dot,
+                                    AinvWT, Ghat, e, tol, st2, work, mats, u1b, Pb)
         assert sa == sb
         if sa == kernel.OK:
             assert Pa[0] == pytest.approx(-b / Ghat[j, j], rel=1e-12)      # max(0, −b/Ĝ_jj), b < 0

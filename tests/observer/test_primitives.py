@@ -13,7 +13,7 @@ from observer import primitives
 ROOT = Path(__file__).resolve().parents[2] / "observer"
 PREDICTOR = re.compile(r"\+ 0\.5 \* h \* \w+")
 """The predictor's ``x + 0.5 * h * v`` in compiled code (the numpy reference writes ``S.h``)."""
-PROJECTION = re.compile(r"q1\[i\] \+= \w+\[slot, j, i\] \* s_")
+PROJECTION = re.compile(r"q1\[\w+\] \+= \w+\[.+\] \* s")
 """The projection's update ``q1 += (N⁻¹W_j) Σ_j`` of one closed contact."""
 
 
@@ -26,6 +26,7 @@ def test_the_patterns_catch_the_hand_written_forms():
     assert PREDICTOR.search("g += Wv[p] * (qs[s, Wi[p]] + 0.5 * h * us[s, Wi[p]])")
     assert PREDICTOR.search("if g + NU[k, j] + 0.5 * h * NUD[k, j] <= 0.0:")
     assert PROJECTION.search("            q1[i] += KinvWT[slot, j, i] * s_")
+    assert PROJECTION.search("                            q1[i] += KinvWT[slots[s], j, i] * s1")
     assert not PREDICTOR.search("g_pred = S.WT @ (q + 0.5 * S.h * u)")
 
 
@@ -37,10 +38,11 @@ def test_the_predictor_is_written_once():
 
 
 def test_the_loops_call_the_shared_predictor_and_projection():
-    for module in (kernel, members):
-        assert module.predicted_closed is primitives.predicted_closed
-        assert module.predicted_term is primitives.predicted_term
-    assert kernel.project_positions is primitives.project_positions
+    for loop in (kernel._advance_loop, members.advance_members):     # generated (observer.engines.compiled.step)
+        names = loop.py_func.__globals__
+        assert names["predicted_closed"] is primitives.predicted_closed
+        assert names["predicted_term"] is primitives.predicted_term
+        assert names["project_positions"] is primitives.project_positions
     where = [(p.relative_to(ROOT).as_posix(), i) for p in sorted(ROOT.rglob("*.py"))
              for i, line in enumerate(_code_lines(p), 1) if PROJECTION.search(line)]
     assert {p for p, _ in where} == {"primitives.py"}, where

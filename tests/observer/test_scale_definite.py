@@ -126,7 +126,7 @@ def test_jump_at_1e5_blocks_closes_the_gaps_to_round_off():
         q = rng.normal(size=n) * 1e-3
         g0 = (W.T @ q + nu[0])[act]
         q1 = q.copy()
-        status = factored_project(0, act, a, 0, Wp, Wi, Wv, nu, fac, bw, *cache, q1, np.empty(a), np.empty(a),
+        status = factored_project(0, act, a, 0, (Wp, Wi, Wv), nu, fac, bw, cache, q1, np.empty(a), np.empty(a),
                                   np.empty(a), np.empty((a, a)), np.empty((a, a)), np.empty(n))
         assert status == 0
         g1 = (W.T @ q1 + nu[0])[act]

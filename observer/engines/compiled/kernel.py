@@ -55,9 +55,9 @@ solvers that return ``(iterations, status, residual)``.
   projection's branches at compile time; with one degree of freedom and one contact,
   :func:`advance_scalar` runs that loop on scalars (numba reloads every array value after
   each store to a record: it cannot tell they do not alias), about twice as fast. The entry
-  points take their arguments in a few named bundles (:class:`SystemBundle`, …) and pass
-  each field by name to the positional step loops, once per call (:func:`advance` says why
-  this is done in Python). Every function uses numba's ``error_model="numpy"`` (IEEE
+  points take their arguments in a few named bundles (:class:`SystemBundle`, …); the step
+  loops are generated from one template (:mod:`observer.engines.compiled.step`) and bind each
+  field to its name once per call. Every function uses numba's ``error_model="numpy"`` (IEEE
   division, no ``ZeroDivisionError`` branch: every denominator here is positive or guarded),
   whose raise branches would otherwise keep numba's reference-count pruning from removing
   the increments.
@@ -72,6 +72,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from observer.engines.compiled.step import build, impulse_one  # noqa: F401 (impulse_one: the kernel's)
 from observer.primitives import (CONTACTS_DENSE, CONTACTS_FACTORED, EPS, F_DAMP, F_IMP, F_KON,  # noqa: F401
                                  F_MAXIMP, F_MAXINC, F_NINC, F_PROJ, F_VEND, F_VMAX, F_VON, JIT,
                                  LCP_FAILED, OK, PROJECTION_FAILED, RESIDUAL_EXCEEDED, ROUNDOFF, STATS_SIZE,
@@ -232,88 +233,12 @@ def banded_free_velocity(k, s, qs, us, h, Ru_b, Rq_b, Ach_b, bw, fbar, uf):
 
 
 @njit(**JIT)
-def impulse_one(k, s, us, uf, j, Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats, u1, P):
-    """:func:`contact_impulse` on the one closed contact j, in closed form.
-
-    Newton's and Poisson's maps agree on one contact: ``P = max(0, −b/Ĝ_jj)`` with
-    ``b = γ_free + e_j γ_k``; the same operations as the general path, bit for bit
-    (``δu_i = 0 + (Â⁻¹W)_ji P`` is recomputed where the applied residual reads it instead of
-    being stored). Free of reference counts (checked in its compiled code by
-    ``tests/observer/test_kernel.py``): no helper is inlined (each inlined array argument is a
-    new variable), every array is read outside any branch, the status is decided on scalars
-    before ``stats``, the last array written, is touched: numba then prunes every argument's
-    increment and decrement (an array used in two loops, or written inside a branch, keeps
-    them: 9 pairs per call before, which made each call in a compiled loop markedly slower).
-    """
-    n = uf.shape[0]
-    p0, p1 = Wp[j], Wp[j + 1]
-    gk = 0.0                                                                # (Wᵀu_k)_j
-    for p in range(p0, p1):
-        gk += Wv[p] * us[s, Wi[p]]
-    gk = gk + nu_dot[k, j]
-    gc = 0.0                                                                # γ_free
-    for p in range(p0, p1):
-        gc += Wv[p] * uf[Wi[p]]
-    gc = gc + nu_dot[k + 1, j]
-    g = Ghat[j, j]
-    b = gc + e[j] * gk
-    x = -b / g if b < 0.0 else 0.0
-    gx = 0.0 + g * x                                                        # lcp_residual, a = 1
-    r = 0.0
-    v = abs(min(x, gx + b))
-    if v > r:
-        r = v
-    res = r / max(abs(b) if abs(b) > 0.0 else 0.0, abs(gx) if abs(gx) > 0.0 else 0.0, TINY)
-    for i in range(n):
-        u1[i] = uf[i] + (0.0 + AinvWT[j, i] * x)                            # u_free + δu
-    P[0] = x
-    d = 0.0                                                                 # (Wᵀδu)_j: applied_residual
-    for p in range(p0, p1):
-        d += Wv[p] * (0.0 + AinvWT[j, Wi[p]] * x)
-    r = 0.0
-    v = abs(min(x, b + d))
-    if v > r:
-        r = v
-    applied = r / max(abs(b) if abs(b) > 0.0 else 0.0, abs(d) if abs(d) > 0.0 else 0.0, TINY)
-    solved = res <= tol
-    status = OK if solved and applied <= tol else (LCP_FAILED if not solved else RESIDUAL_EXCEEDED)
-    worst = stats[2]
-    last = stats[7]
-    worst = res if solved and res > worst else worst
-    last = applied if solved else last
-    stats[0] += 1
-    stats[2] = worst
-    stats[7] = last
-    return status
-
-
-@njit(**JIT)
-def contact_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats,
-                    gk, bvec, x, lc, le, gc, rhs, sol, G, Gs, Lf, basic, infeas, du, u1, P):
-    """The impulse of system s's step on the closed set ``act[:a]`` (a ≥ 1) and its velocity.
-
-    The closed set's block of the precomputed Ĝ, the impact law's impulse on it
-    (:func:`_law_impulse`); writes ``P[:a]``, ``u1 = u_free + δu`` with
-    ``δu = Σ_j (Â⁻¹W)_j P_j`` summed once, and the applied residual
-    (:func:`applied_residual`) in ``stats[7]``; returns the status. ``gk`` … ``infeas`` are
-    work buffers ((m,) and (m, m); separate arrays, not views: a view costs a reference count).
-    """
-    n = uf.shape[0]
-    for r in range(a):
-        for c in range(a):
-            G[r, c] = Ghat[act[r], act[c]]
-    status = _law_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, e, tol, stats, gk, bvec, x, lc, le,
-                          gc, rhs, sol, G, Gs, Lf, basic, infeas)
-    if status != OK:
-        return status
-    for i in range(n):
-        du[i] = 0.0
-    for r in range(a):                                       # δu = Σ_j (Â⁻¹W)_j P_j, once
-        P[r] = x[r]
-        j = act[r]
-        for i in range(n):
-            du[i] += AinvWT[j, i] * x[r]
-    for i in range(n):
+def _applied(Wp, Wi, Wv, act, a, law, uf, du, u1, bvec, x, le, tol, stats):
+    """The velocity after an impulse, ``u1 = u_free + δu``, and its applied residual
+    (:func:`applied_residual`, into ``stats[7]``): the status of the step
+    (:data:`RESIDUAL_EXCEEDED` beyond ``tol``). The end of :func:`contact_impulse` and of
+    :func:`factored_impulse`."""
+    for i in range(uf.shape[0]):
         u1[i] = uf[i] + du[i]
     res = applied_residual(Wp, Wi, Wv, act, a, du, bvec, x if (law == 0 or a == 1) else le)
     stats[7] = res
@@ -323,15 +248,50 @@ def contact_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, AinvWT, Ghat,
 
 
 @njit(**JIT)
-def _law_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, e, tol, stats, gk, bvec, x, lc, le, gc, rhs,
-                 sol, G, Gs, Lf, basic, infeas):
+def contact_impulse(k, s, us, uf, act, a, law, W, nu_dot, AinvWT, Ghat, e, tol, stats, work, mats, u1, P):
+    """The impulse of system s's step on the closed set ``act[:a]`` (a ≥ 1) and its velocity.
+
+    The closed set's block of the precomputed Ĝ, the impact law's impulse on it
+    (:func:`_law_impulse`); writes ``P[:a]``, ``u1 = u_free + δu`` with
+    ``δu = Σ_j (Â⁻¹W)_j P_j`` summed once, and the applied residual
+    (:func:`applied_residual`) in ``stats[7]``; returns the status. ``W`` is ``(Wp, Wi, Wv)``,
+    ``work`` the buffers ``(gk, bvec, x, lc, le, gc, rhs, sol, basic, infeas, du)`` ((m,), du
+    (n,)) and ``mats`` ``(G, Gs, Lf)`` ((m, m)): separate arrays, not views (a view costs a
+    reference count).
+    """
+    Wp, Wi, Wv = W
+    x, le, du = work[2], work[4], work[10]
+    bvec, G = work[1], mats[0]
+    n = uf.shape[0]
+    for r in range(a):
+        for c in range(a):
+            G[r, c] = Ghat[act[r], act[c]]
+    status = _law_impulse(k, s, us, uf, act, a, law, W, nu_dot, e, tol, stats, work, mats)
+    if status != OK:
+        return status
+    for i in range(n):
+        du[i] = 0.0
+    for r in range(a):                                       # δu = Σ_j (Â⁻¹W)_j P_j, once
+        P[r] = x[r]
+        j = act[r]
+        for i in range(n):
+            du[i] += AinvWT[j, i] * x[r]
+    return _applied(Wp, Wi, Wv, act, a, law, uf, du, u1, bvec, x, le, tol, stats)
+
+
+@njit(**JIT)
+def _law_impulse(k, s, us, uf, act, a, law, W, nu_dot, e, tol, stats, work, mats):
     """The impact law's impulse on the closed set ``act[:a]`` with its Delassus block
     ``G[:a, :a] = Ĝ_AA`` into ``x[:a]``; the LCP's right-hand side stays in ``bvec`` (and, for
     Poisson on several contacts, μ = Λ_E − ε∘Λ_C in ``le``) for the applied residual.
 
     Newton (``law == 0``), and Poisson on one contact (the same map): ``LCP(Ĝ, γ_free + e∘γ_k)``;
-    Poisson on several: Glocker's compression and expansion phases. Returns the status.
+    Poisson on several: Glocker's compression and expansion phases. Returns the status
+    (``W``, ``work``, ``mats``: :func:`contact_impulse`).
     """
+    Wp, Wi, Wv = W
+    gk, bvec, x, lc, le, gc, rhs, sol, basic, infeas, _ = work
+    G, Gs, Lf = mats
     max_iter = max(200, 20 * a)
     for r in range(a):
         j = act[r]
@@ -450,35 +410,35 @@ def _factored_apply(act, a, Wp, Wi, Wv, fac, bw, x, out):
 
 
 @njit(**JIT)
-def factored_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, Ach_b, bw, Acache, Aslot, Aowner, Astamp,
-                     e, tol, stats, gk, bvec, x, lc, le, gc, rhs, sol, G, Gs, Lf, basic, infeas, du, u1, P, col):
+def factored_impulse(k, s, us, uf, act, a, law, W, nu_dot, Ach_b, bw, cache, e, tol, stats, work, mats, u1, P,
+                     col):
     """:func:`contact_impulse` without the n×m ``Â⁻¹W`` and the m×m Ĝ: ``Ĝ_AA`` from the banded
     factor of Â (:func:`factored_gram`, cached columns ``Acache``) and ``δu = Â⁻¹(W_A P)``
-    by one banded solve: O(n·bw) per contact step plus O(n·bw) per uncached closed contact."""
+    by one banded solve: O(n·bw) per contact step plus O(n·bw) per uncached closed contact.
+    ``cache`` is ``(Acache, Aslot, Aowner, Astamp)``; ``W``, ``work``, ``mats`` as there."""
+    Wp, Wi, Wv = W
+    Acache, Aslot, Aowner, Astamp = cache
+    x, le, du = work[2], work[4], work[10]
+    bvec, G = work[1], mats[0]
     factored_gram(act, a, Wp, Wi, Wv, Ach_b, bw, Acache, Aslot, Aowner, Astamp, col, G)
-    status = _law_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, e, tol, stats, gk, bvec, x, lc, le,
-                          gc, rhs, sol, G, Gs, Lf, basic, infeas)
+    status = _law_impulse(k, s, us, uf, act, a, law, W, nu_dot, e, tol, stats, work, mats)
     if status != OK:
         return status
     for r in range(a):
         P[r] = x[r]
     _factored_apply(act, a, Wp, Wi, Wv, Ach_b, bw, x, du)
-    for i in range(uf.shape[0]):
-        u1[i] = uf[i] + du[i]
-    res = applied_residual(Wp, Wi, Wv, act, a, du, bvec, x if (law == 0 or a == 1) else le)
-    stats[7] = res
-    if not res <= tol:
-        return RESIDUAL_EXCEEDED
-    return OK
+    return _applied(Wp, Wi, Wv, act, a, law, uf, du, u1, bvec, x, le, tol, stats)
 
 
 @njit(**JIT)
-def factored_project(k, act, a, slot, Wp, Wi, Wv, nu, Kch, bwk, Kcache, Kslot, Kowner, Kstamp, q1, sig, g, s_,
-                     Gp, Lf, col):
+def factored_project(k, act, a, slot, W, nu, Kch, bwk, cache, q1, sig, g, s_, Gp, Lf, col):
     """:func:`project_positions` from the banded factor of the metric (``Kch[slot]``, eqs.
     (13)-(14)): ``L_A`` by :func:`factored_gram` (cached columns ``Kcache[slot]``) and
     ``q1 += N⁻¹(W_A Σ)`` by one banded solve. Returns the status (:data:`PROJECTION_FAILED`
-    when L_A is not positive definite, a singular factor included)."""
+    when L_A is not positive definite, a singular factor included). ``W`` is ``(Wp, Wi, Wv)``,
+    ``cache`` ``(Kcache, Kslot, Kowner, Kstamp)``."""
+    Wp, Wi, Wv = W
+    Kcache, Kslot, Kowner, Kstamp = cache
     for r in range(a):
         g[r] = _wt(Wp, Wi, Wv, q1, act[r]) + nu[k, act[r]]
     factored_gram(act, a, Wp, Wi, Wv, Kch[slot], bwk, Kcache[slot], Kslot[slot], Kowner[slot], Kstamp[slot],
@@ -604,52 +564,6 @@ def summary_start(state, system, tally):
 def advance(k0, k1, s0, system, impact, signals, window, observers, state, storage, tally, general):
     """Advance every system from step k0 (starting with system s0) up to step k1.
 
-    The step loop :func:`_advance_loop` (its docstring: the scheme, the signals, the records,
-    the summary) fed by bundles, so that no call can pass an argument in the wrong order:
-    ``system`` (:class:`SystemBundle`), ``impact`` (:class:`LawBundle`), ``signals``
-    (:class:`SignalBundle`), ``window`` (:class:`WindowBundle`), ``observers``
-    (:class:`ObserverBundle`), ``state`` (:class:`StateBundle`, advanced in place),
-    ``storage`` (:class:`StorageBundle`, the records written in place) and ``tally``
-    (:class:`SummaryBundle`). Each field goes to the loop by name, once per call. This is a
-    Python function on purpose: the loop keeps its positional parameters because reading the
-    fields inside it, even into locals before the steps, made it slower per step
-    (measured against the positional loop, issue 21), and a compiled wrapper gets the loop inlined
-    into it by LLVM, which compiles it again, differently.
-
-    ``general`` selects the compiled specialization: ``True`` the general loop; ``None`` the
-    lean loop of the master alone, dense, without summary, pre-projection records or master
-    projection (:func:`observer.engines.compiled.bundles.specialization`), whose other branches numba prunes at
-    compile time: bitwise the same trajectory, a shorter step.
-
-    Returns ``(k, s, status)``: ``status == OK`` and k = k1 when done; otherwise the step and
-    system that failed (their state untouched).
-    """
-    return _advance_loop(
-        k0, k1, s0, window.kb, state.qs, state.us, observers.jumps, observers.slots,
-        observers.master_projection, window.coupled, window.chi_log, window.use_log, state.chi_now,
-        storage.record_every, storage.q, storage.u, storage.P, storage.sigma, storage.active, storage.chi,
-        storage.q_pre, storage.record_pre, tally.on, tally.k_on, tally.k_off, tally.rhos, tally.summ,
-        tally.vprev, tally.Vprev, tally.rec_V, tally.closings, tally.prev_act, tally.Mq, tally.Kq, tally.Cq,
-        impact.code, system.h, system.theta, system.structure, system.Bu, system.Bq, system.Bf, system.Ru_b,
-        system.Rq_b, system.Ach_b, system.bw, window.waves, signals.e_ptr, signals.e_col, signals.e_coef,
-        signals.e_wave, signals.v_ptr, signals.v_col, signals.f_c, signals.nu_c, system.Wp, system.Wi,
-        system.Wv, system.AinvWT, system.Ghat, system.G0, observers.KinvWT, observers.L,
-        system.contacts, system.Acache, system.Aslot, system.Aowner, system.Astamp, observers.Kch, observers.bwk,
-        observers.Kcache, observers.Kslot, observers.Kowner, observers.Kstamp, impact.e, impact.tol,
-        state.stats, general)
-
-
-@njit(**JIT)
-def _advance_loop(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupled, chi_log, use_log, chi_now,
-            record_every, rec_q, rec_u, rec_P, rec_sig, rec_act, rec_chi, rec_qpre, record_pre,
-            summary, k_on, k_off, rhos, summ, vprev, Vprev, rec_V, closings, prev_act, Mq, Kq, Cq,
-            law, h, theta, structure, Bu, Bq, Bf, Ru_b, Rq_b, Ach_b, bw, waves,
-            e_ptr, e_col, e_coef, e_wave, v_ptr, v_col, f_c, nu_c, Wp, Wi, Wv, AinvWT, Ghat, G0,
-            KinvWT, L,
-            contacts, Acache, Aslot, Aowner, Astamp, Kch, bwk, Kcache, Kslot, Kowner, Kstamp,
-            e, tol, stats, general):
-    """Advance every system from step k0 (starting with system s0) up to step k1.
-
     One Moreau–Jean step of system s (row s of ``qs``, ``us``) on its closed set A: the
     master's from Siconos' predictor ``g_k + (h/2)γ_k ≤ 0`` (projected when
     ``master_projection``), an observer's χ_k while coupled (projected when ``jumps[s]``),
@@ -670,7 +584,8 @@ def _advance_loop(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupl
     (the others keep their constant): O(columns with a harmonic term + entries) per step.
     ``coupled`` and ``chi_log`` are a window of the grid starting at step ``kb`` (row k − kb
     holds step k). ``qs``, ``us`` (S, n) hold the current states and are updated in place;
-    ``chi_now`` (m,) the closed set fed to the observers at the current step (the master's, or the log's). Row r of the records holds
+    ``chi_now`` (m,) the closed set fed to the observers at the current step (the master's, or
+    the log's). Row r of the records holds
     step ``r·record_every`` (row 0: the initial state, written by the caller); impulses and
     multipliers are those of the step ending at the row. ``rec_P``, ``rec_sig`` and ``rec_act``
     come zero-filled (each row is written once: only the closed contacts' entries are set).
@@ -685,324 +600,29 @@ def _advance_loop(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupl
     the lean loop of the common case — the master alone (S = 1), dense structure, no summary,
     no pre-projection records, no master projection — where numba prunes every other branch
     at compile time (the same operations on the same values: bitwise the same trajectory, a
-    shorter step). The caller passes ``None`` only in that case (:func:`observer.engines.compiled.bundles.specialization`).
+    shorter step). The caller passes ``None`` only in that case
+    (:func:`observer.engines.compiled.bundles.specialization`).
 
     Returns ``(k, s, status)``: ``status == OK`` and k = k1 when done; otherwise the step and
     system that failed (their state untouched).
 
-    Called only by :func:`advance`, which passes each bundle field by name.
-    One function because it is the step loop, the hot path: every piece moved into a
-    function of its own would be a call with array arguments per step (a reference count
-    each, see the module docstring) or, inlined, the same; the pieces that are not per step
-    (contacts, banded solve, projection, summary) are already calls.
+    The loop is generated from the step's template (:mod:`observer.engines.compiled.step`:
+the same source as the members' loop) and takes the bundles: ``system``
+(:class:`SystemBundle`), ``impact`` (:class:`LawBundle`), ``signals``
+(:class:`SignalBundle`), ``window`` (:class:`WindowBundle`), ``observers``
+(:class:`ObserverBundle`), ``state`` (:class:`StateBundle`, advanced in place), ``storage``
+(:class:`StorageBundle`, the records written in place) and ``tally``
+(:class:`SummaryBundle`), each field bound to its name once per call
+(:data:`observer.engines.compiled.step.KERNEL_FIELDS`). This is a Python function on
+purpose: a compiled wrapper gets the loop inlined into it by LLVM, which compiles it again,
+differently.
     """
-    S, n = qs.shape
-    if general is None:             # the lean specialization (see above): pruned at compile time
-        S = 1
-        summary = False
-        record_pre = False
-        master_projection = False
-    m = Wp.shape[0] - 1
-    act = np.empty(m, np.int64)
-    uf = np.empty(n)
-    du = np.empty(n)
-    q1 = np.empty(n)
-    qpre = np.empty(n)
-    u1 = np.empty(n)
-    P = np.zeros(m)
-    sig = np.zeros(m)
-    Pfull_m = np.zeros(m)
-    wv = np.empty(2 * n + m)
-    gk, bvec, x, lc, le = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
-    gc, rhs, sol, gp, sp_ = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
-    factored = contacts == CONTACTS_FACTORED
-    if general is None:
-        factored = False
-    mb = min(m, FACTORED_BLOCK) if factored else m       # factored: grown when more contacts close
-    G, Gs, Lf, Gp = np.empty((mb, mb)), np.empty((mb, mb)), np.empty((mb, mb)), np.empty((mb, mb))
-    col = np.empty(n if factored else 1)
-    basic, infeas = np.zeros(m, np.bool_), np.zeros(m, np.bool_)
-    # the signals at t_k (row 0) and t_{k+1} (row 1); f̄_k in row 0 of fbar
-    fsig, nu, nu_dot, fbar = np.zeros((2, n)), np.zeros((2, m)), np.zeros((2, m)), np.zeros((1, n))
-    for j in range(n):
-        fsig[0, j] = f_c[j]
-        fsig[1, j] = f_c[j]
-        fbar[0, j] = (1.0 - theta) * f_c[j] + theta * f_c[j]
-    for j in range(m):
-        nu[0, j] = nu_c[j]
-        nu[1, j] = nu_c[j]
-    dense = structure == STRUCTURE_DENSE
-    if general is None:
-        dense = True
-    vp0, vp1, vp2, vp3 = v_ptr[0], v_ptr[1], v_ptr[2], v_ptr[3]     # loop bounds as scalars
-    ep0, ep1, ep2, ep3 = e_ptr[0], e_ptr[1], e_ptr[2], e_ptr[3]
-    gmin, gstep = stats[3], stats[4]           # the master's smallest gap, kept in registers
-    # step k is recorded (row (k+1)/record_every) when (k+1) % record_every == 0: counted,
-    # not divided, per step
-    d = (record_every - (k0 + 1) % record_every) % record_every   # k0 + d: the next recorded step
-    until = d + 1
-    r = (k0 + 1 + d) // record_every - 1
-    for k in range(k0, k1):
-        kw = k - kb
-        nrep = 2 if k == k0 else 1                          # the first step also needs t_k
-        for rep in range(nrep):
-            kt = kw + 1 + rep - (nrep - 1)                  # column of the grid point in waves
-            for c in range(vp0, vp1):                       # the varying columns restart
-                j = v_col[c]
-                fsig[0, j] = fsig[1, j]
-                fsig[1, j] = f_c[j]
-            for c in range(vp1, vp2):
-                j = v_col[c]
-                nu[0, j] = nu[1, j]
-                nu[1, j] = nu_c[j]
-            for c in range(vp2, vp3):
-                j = v_col[c]
-                nu_dot[0, j] = nu_dot[1, j]
-                nu_dot[1, j] = 0.0
-            for i in range(ep0, ep1):                       # entries in summation order
-                fsig[1, e_col[i]] += e_coef[i] * waves[e_wave[i], kt]
-            for i in range(ep1, ep2):
-                nu[1, e_col[i]] += e_coef[i] * waves[e_wave[i], kt]
-            for i in range(ep2, ep3):
-                nu_dot[1, e_col[i]] += e_coef[i] * waves[e_wave[i], kt]
-        for c in range(vp0, vp1):
-            j = v_col[c]
-            fbar[0, j] = (1.0 - theta) * fsig[0, j] + theta * fsig[1, j]
-        kl = 0                                              # row of t_k in the signal buffers
-        until -= 1
-        rec = until == 0
-        if rec:
-            r += 1
-            until = record_every
-        first = s0 if k == k0 else 0
-        for s in range(first, S):
-            # --- the closed set A = act[:a] and whether the step projects
-            if s > 0 and coupled[kw]:
-                a = 0
-                for j in range(m):
-                    if chi_now[j]:
-                        act[a] = j
-                        a += 1
-                project = jumps[s]
-            else:
-                a = 0                                       # Siconos' predictor
-                for j in range(m):
-                    g = 0.0
-                    for p in range(Wp[j], Wp[j + 1]):
-                        g += predicted_term(Wv[p], qs[s, Wi[p]], us[s, Wi[p]], h)
-                    if predicted_closed(g, nu[kl, j], nu_dot[kl, j], h):
-                        act[a] = j
-                        a += 1
-                project = master_projection
-                if s == 0 and S > 1:                        # χ_k, for the observers
-                    if use_log:
-                        for j in range(m):
-                            chi_now[j] = chi_log[kw, j]
-                    else:
-                        for j in range(m):
-                            chi_now[j] = False
-                        for i in range(a):
-                            chi_now[act[i]] = True
-            # --- u_free, the impulse, the positions
-            status = OK
-            if dense:
-                for i in range(n):
-                    s1 = 0.0
-                    s2 = 0.0
-                    s3 = 0.0
-                    for j in range(n):
-                        s1 += Bu[i, j] * us[s, j]
-                    for j in range(n):
-                        s2 += Bq[i, j] * qs[s, j]
-                    for j in range(n):
-                        s3 += Bf[i, j] * fbar[kl, j]
-                    ufi = s1 + s2 + s3
-                    uf[i] = ufi
-                    if a == 0:                              # the common step: done in this pass
-                        u1[i] = ufi
-                        q1[i] = qs[s, i] + h * ((1.0 - theta) * us[s, i] + theta * ufi)
-            else:
-                banded_free_velocity(kl, s, qs, us, h, Ru_b, Rq_b, Ach_b, bw, fbar, uf)
-            if a > 0 or not dense:
-                if factored and a > G.shape[0]:
-                    mb = min(m, 2 * a)
-                    G, Gs, Lf, Gp = np.empty((mb, mb)), np.empty((mb, mb)), np.empty((mb, mb)), np.empty((mb, mb))
-                if factored and a > 0:
-                    status = factored_impulse(kl, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, Ach_b, bw, Acache,
-                                              Aslot, Aowner, Astamp, e, tol, stats, gk, bvec, x, lc, le, gc, rhs,
-                                              sol, G, Gs, Lf, basic, infeas, du, u1, P, col)
-                elif a == 1:
-                    status = impulse_one(kl, s, us, uf, act[0], Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol,
-                                         stats, u1, P)
-                elif a > 1:
-                    status = contact_impulse(kl, s, us, uf, act, a, law, Wp, Wi, Wv, nu_dot, AinvWT, Ghat,
-                                             e, tol, stats, gk, bvec, x, lc, le, gc, rhs, sol, G, Gs, Lf,
-                                             basic, infeas, du, u1, P)
-                if a > 0:
-                    if stats[7] > stats[5]:
-                        stats[5] = stats[7]
-                        stats[6] = k + 1
-                    if status != OK:
-                        stats[3], stats[4] = gmin, gstep
-                        return k, s, status
-                else:
-                    for i in range(n):
-                        u1[i] = uf[i]
-                for i in range(n):
-                    q1[i] = qs[s, i] + h * ((1.0 - theta) * us[s, i] + theta * u1[i])
-            projected = project and a > 0
-            if projected:
-                for i in range(n):
-                    qpre[i] = q1[i]
-                if factored:
-                    status = factored_project(kl + 1, act, a, slots[s], Wp, Wi, Wv, nu, Kch, bwk, Kcache, Kslot,
-                                              Kowner, Kstamp, q1, sig, gp, sp_, Gp, Lf, col)
-                elif a == 1:
-                    status = project_one(kl + 1, act[0], slots[s], Wp, Wi, Wv, nu, KinvWT, L, q1, sig)
-                else:
-                    status = project_positions(kl + 1, act, a, slots[s], Wp, Wi, Wv, nu, KinvWT, L, q1,
-                                               sig, gp, sp_, Gp, Lf)
-                if status != OK:
-                    stats[3], stats[4] = gmin, gstep
-                    return k, s, status
-            for i in range(n):
-                qs[s, i] = q1[i]
-                us[s, i] = u1[i]
-            # --- bookkeeping: the master's closings and penetration, the observers' summary
-            if s == 0:
-                if summary:                                 # the master's impulse and closings
-                    for j in range(m):
-                        Pfull_m[j] = 0.0
-                    for i in range(a):
-                        Pfull_m[act[i]] = P[i]
-                    for i in range(a):
-                        if not prev_act[act[i]]:
-                            closings[act[i]] += 1
-                    for j in range(m):
-                        prev_act[j] = False
-                    for i in range(a):
-                        prev_act[act[i]] = True
-                for j in range(m):
-                    g = 0.0
-                    for p in range(Wp[j], Wp[j + 1]):
-                        g += Wv[p] * q1[Wi[p]]
-                    g += nu[kl + 1, j]
-                    if g < gmin:
-                        gmin = g
-                        gstep = k + 1
-            elif summary:
-                # the observer's summary, written here: as a call (or an inlined helper) it cost
-                # ~36 reference counts per observer step, most of the step's time (double_mass)
-                kg = k + 1
-                for i in range(n):                                # v, v̄ (wv[:n], wv[n:2n])
-                    vi = us[s, i] - us[0, i]
-                    wv[i] = vi
-                    wv[n + i] = 0.5 * (vi + vprev[s, i])
-                    vprev[s, i] = vi
-                qM = 0.0                                          # vᵀMv, v̄ᵀCv̄, then eᵀKe: _quad's sums
-                qC = 0.0
-                qK = 0.0
-                if dense:
-                    for i in range(n):
-                        rM = 0.0
-                        rC = 0.0
-                        for j in range(n):
-                            rM += Mq[i, j] * wv[j]
-                            rC += Cq[i, j] * wv[n + j]
-                        qM += wv[i] * rM
-                        qC += wv[n + i] * rC
-                else:
-                    for j in range(n):
-                        qM += Mq[0, j] * wv[j] * wv[j]
-                        qC += Cq[0, j] * wv[n + j] * wv[n + j]
-                        for dd in range(1, bw + 1):
-                            i = j + dd
-                            if i >= n:
-                                break
-                            qM += 2.0 * Mq[dd, j] * wv[i] * wv[j]
-                            qC += 2.0 * Cq[dd, j] * wv[n + i] * wv[n + j]
-                for i in range(n):
-                    wv[i] = qs[s, i] - qs[0, i]                   # e
-                if dense:
-                    for i in range(n):
-                        rK = 0.0
-                        for j in range(n):
-                            rK += Kq[i, j] * wv[j]
-                        qK += wv[i] * rK
-                else:
-                    for j in range(n):
-                        qK += Kq[0, j] * wv[j] * wv[j]
-                        for dd in range(1, bw + 1):
-                            i = j + dd
-                            if i >= n:
-                                break
-                            qK += 2.0 * Kq[dd, j] * wv[i] * wv[j]
-                V = 0.5 * qM
-                damping = -h * qC
-                V += 0.5 * qK
-                impulse = 0.0                                     # (Wᵀv̄)ᵀ(P_s − P_m)
-                for j in range(m):
-                    wv[2 * n + j] = -Pfull_m[j]
-                for i in range(a):
-                    wv[2 * n + act[i]] += P[i]
-                for j in range(m):
-                    dP = wv[2 * n + j]
-                    if dP != 0.0:
-                        g = 0.0
-                        for p in range(Wp[j], Wp[j + 1]):
-                            g += Wv[p] * wv[n + Wi[p]]
-                        impulse += g * dP
-                Vp = Vprev[s]
-                dV = V - Vp
-                if kg - 1 >= k_on and kg <= k_off:
-                    if dV > 0.0:
-                        summ[s, F_NINC] += 1
-                        if Vp > 0.0 and dV / Vp > summ[s, F_MAXINC]:
-                            summ[s, F_MAXINC] = dV / Vp
-                    summ[s, F_DAMP] += damping
-                    summ[s, F_IMP] += impulse
-                    summ[s, F_PROJ] += dV - damping - impulse
-                    if Vp > 0.0 and impulse / Vp > summ[s, F_MAXIMP]:
-                        summ[s, F_MAXIMP] = impulse / Vp
-                Vprev[s] = V
-                summ[s, F_VEND] = V                               # the sample (_summary_sample)
-                if kg >= k_on and kg <= k_off:
-                    if kg == k_on:
-                        summ[s, F_VON] = V
-                        summ[s, F_KON] = kg
-                        summ[s, F_VMAX] = V
-                    if V > summ[s, F_VMAX]:
-                        summ[s, F_VMAX] = V
-                    V0 = summ[s, F_VON]
-                    nr = rhos.shape[0]
-                    for i in range(nr):
-                        below = V <= rhos[i] * V0
-                        if below and summ[s, SUMMARY_FIELDS + i] < 0:
-                            summ[s, SUMMARY_FIELDS + i] = kg
-                        if not below:
-                            summ[s, SUMMARY_FIELDS + nr + i] = kg
-                if rec:
-                    rec_V[s, r] = V
-            # --- the records
-            if rec:
-                for i in range(n):
-                    rec_q[s, r, i] = q1[i]
-                    rec_u[s, r, i] = u1[i]
-                if record_pre:
-                    for i in range(n):
-                        rec_qpre[s, r, i] = qpre[i] if projected else q1[i]
-                for i in range(a):                          # rows are zero-filled (caller)
-                    rec_P[s, r, act[i]] = P[i]
-                    if projected:
-                        rec_sig[s, r, act[i]] = sig[i]
-                if s == 0:
-                    for i in range(a):
-                        rec_act[r, act[i]] = True
-                    if S > 1:
-                        for j in range(m):
-                            rec_chi[r, j] = chi_now[j]
-    stats[3], stats[4] = gmin, gstep
-    return k1, 0, OK
+    return _advance_loop(k0, k1, s0, system, impact, signals, window, observers, state, storage, tally, general)
+
+
+_advance_loop = build("_advance_loop", globals())
+"""The step loop of :func:`advance`, generated from the step's template
+(:func:`observer.engines.compiled.step.kernel_source`)."""
 
 
 # ---------------------------------------------------------------------------------------
@@ -1011,22 +631,23 @@ def _advance_loop(k0, k1, s0, kb, qs, us, jumps, slots, master_projection, coupl
 def advance_scalar(k0, k1, system, impact, signals, window, state, storage):
     """:func:`advance` for n = m = 1 (the master alone, dense): the scalar step loop
     :func:`_advance_scalar_loop` (the state in registers; bitwise the same trajectory) fed by
-    the same bundles, each field passed by name (a Python function, for the reason given in
-    :func:`advance`). Writes the rows' times into
-    ``storage.t`` when it has a row per record. Returns ``(k, 0, status)``.
+    the same bundles: the arrays it reads per step passed by name, the rest in three tuples
+    (the grid's t0, h, θ; the signals' pointers; the scheme's and contact's arrays with the
+    tolerance). Passing the bundles themselves (unpacked in the loop) made its step 6–7 %
+    slower (issue 32); this form is as fast as the 33 positional parameters it replaces. Writes
+    the rows' times into ``storage.t`` when it has a row per record. Returns ``(k, 0, status)``.
     """
     return _advance_scalar_loop(
         k0, k1, window.kb, state.qs, state.us, storage.record_every, storage.q, storage.u, storage.P,
-        storage.active, storage.t, system.t0, system.h, system.theta, system.Bu, system.Bq, system.Bf,
-        window.waves, signals.e_ptr, signals.e_col, signals.e_coef, signals.e_wave, signals.v_ptr,
-        signals.f_c, signals.nu_c, system.Wp, system.Wi, system.Wv, system.AinvWT, system.Ghat, impact.e,
-        impact.tol, state.stats)
+        storage.active, storage.t, (system.t0, system.h, system.theta), window.waves, (signals.e_ptr, signals.v_ptr),
+        signals.e_coef, signals.e_wave, signals.f_c, signals.nu_c,
+        (system.Bu, system.Bq, system.Bf, system.Wp, system.Wi, system.Wv, system.AinvWT, system.Ghat, impact.e,
+         impact.tol), state.stats)
 
 
 @njit(**JIT)
-def _advance_scalar_loop(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, rec_act, rec_t, t0, h, theta,
-                   Bu, Bq, Bf, waves, e_ptr, e_col, e_coef, e_wave, v_ptr, f_c, nu_c, Wp, Wi, Wv, AinvWT, Ghat,
-                   e, tol, stats):
+def _advance_scalar_loop(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, rec_act, rec_t, grid, waves, ptrs,
+                         e_coef, e_wave, f_c, nu_c, contact, stats):
     """:func:`advance`'s lean loop for n = m = 1 (the master alone, dense): the same
     operations on the same values, with the state, the signals and the scheme's 1×1 matrices
     held in scalars instead of arrays (numba cannot tell that a store to a record does not
@@ -1037,9 +658,15 @@ def _advance_scalar_loop(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, 
     recorded row's time ``t0 + k·h`` is written there too, computed as
     :meth:`observer.stepping.MoreauJean.time` computes it (bitwise its values).
 
+    ``grid`` is ``(t0, h, θ)``, ``ptrs`` ``(e_ptr, v_ptr)`` and ``contact`` ``(Bu, Bq, Bf, Wp,
+    Wi, Wv, AinvWT, Ghat, e, tol)`` (:func:`advance_scalar`).
+
     Called only by :func:`advance_scalar`. One function because it is a step loop, for the
     reason of :func:`_advance_loop`.
     """
+    t0, h, theta = grid
+    e_ptr, v_ptr = ptrs
+    Bu, Bq, Bf, Wp, Wi, Wv, AinvWT, Ghat, e, tol = contact
     q, u = qs[0, 0], us[0, 0]
     bu, bq, bf = Bu[0, 0], Bq[0, 0], Bf[0, 0]
     wnz = Wp[1] > Wp[0]                              # W's one entry (none: every gap is ν)

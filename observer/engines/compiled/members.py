@@ -9,18 +9,15 @@ per step (:func:`master_tables`), and then advances every member over the whole 
 :func:`advance_members`, a compiled loop with the member's state in cache and no other
 system's work per step; chunks of members run in threads (``nogil``).
 
-:func:`advance_members` performs, per observer step, the operations of the observer branch
-of :func:`observer.engines.compiled.kernel._advance_loop` in the same order on the same values (dense
-structure and contact data, the streaming summary): the kernel's own functions for several
-closed contacts (:func:`~observer.engines.compiled.kernel.contact_impulse`,
-:func:`~observer.primitives.project_positions`) and, for one, the operations of
-:func:`~observer.engines.compiled.kernel.impulse_one` and :func:`~observer.primitives.project_one` written inline
-(a call with their array arguments cost reference counts on every contact step, a large
-part of the loop's time on double_mass). Member i's summary is bitwise that of a single :func:`observer.simulate` of
-that member (``tests/observer/test_ensemble_members.py`` checks every branch against single
-runs: a change to the kernel's observer step must be made here too). The master alone takes
-the kernel's lean specialization, whose trajectory is bitwise the general loop's
-(:func:`observer.engines.compiled.bundles.specialization`).
+:func:`advance_members` is the kernel's step loop's observer step, not a copy of it: both
+loops are generated from one template (:mod:`observer.engines.compiled.step`), the members'
+with the master's tables as the data source of χ_k, the coupling, the signals and the
+master's state and impulse after the step (:class:`MasterTables`), the summary row held in
+registers and n, m as compile-time constants when given (:func:`sizes`). Member i's summary
+is bitwise that of a single :func:`observer.simulate` of that member
+(``tests/observer/test_ensemble_members.py`` checks every branch against single runs). The
+master alone takes the kernel's lean specialization, whose trajectory is bitwise the general
+loop's (:func:`observer.engines.compiled.bundles.specialization`).
 
 With an observer model distinct from the plant (:mod:`observer.plant_model`) the master run is
 the plant's and the members advance on the nominal model: :func:`observers_input` hands
@@ -38,21 +35,20 @@ from __future__ import annotations
 
 import types
 from concurrent.futures import ThreadPoolExecutor
+from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
 from observer.engines.compiled.bundles import (law_bundle, observer_bundle, signal_tables, state_bundle,
                                                summary_bundle, system_bundle, wave_table)
 from observer.engines.compiled import driver
 from observer.engines.compiled.driver import run_compiled
-from observer.engines.compiled.kernel import contact_impulse, summary_start
+from observer.engines.compiled import kernel
+from observer.engines.compiled.kernel import summary_start
+from observer.engines.compiled.step import build
 from observer.engines.loop import FiniteGuard, LoopInput, summary_frame
 from observer.metrics import RHOS
-from observer.primitives import (CONTACTS_DENSE, F_DAMP, F_IMP, F_KON, F_MAXIMP, F_MAXINC, F_NINC, F_PROJ, F_VEND,
-                                 F_VMAX, F_VON, JIT, LCP_FAILED, OK, PROJECTION_FAILED, RESIDUAL_EXCEEDED,
-                                 STATS_SIZE, STRUCTURE_DENSE, SUMMARY_FIELDS, TINY, predicted_closed,
-                                 predicted_term, project_positions)
+from observer.primitives import CONTACTS_DENSE, OK, STRUCTURE_DENSE
 
 SPECIALIZE_STEPS = 50_000_000
 """Observer steps (members × designs × steps) from which :func:`advance_members` is compiled
@@ -135,224 +131,58 @@ def master_tables(inp, steps: int):
     return c(out.q[0]), c(out.u[0]), c(out.P[0]), chi, coupled
 
 
-@njit(**JIT)
-def advance_members(n_, m_, r_, j0, j1, steps, QM, UM, PM, CHI, COUP, FB, NU, NUD, qs, us, jumps, slots,
-                    master_projection, k_on, k_off, rhos, summ, vprev, Vprev, Mq, Kq, Cq, law, h, theta,
-                    Bu, Bq, Bf, Wp, Wi, Wv, AinvWT, Ghat, KinvWT, L, e, tol, path_row, every, rec_V):
-    """Advance observers j0..j1−1 (rows of ``qs``, ``us``, ``summ``; the master is row 0 and
-    not advanced) over steps 0..steps−1; ``n_``, ``m_``, ``r_`` are tuples of n, m and
-    ``len(rhos)`` zeros, so that these sizes are compile-time constants of the specialization
-    (its loops unrolled: faster per step of double_mass than with n and m from the
-    arrays), or empty for n and m taken from the arrays (:func:`sizes`). Returns the first
-    observer whose step failed and the step, as ``(s, k, status)`` (``status == OK``: all
-    done).
+class MasterTables(NamedTuple):
+    """What an observer's step reads from the rest of the run, per grid step
+    (:func:`master_tables`, :func:`signal_tables_on_grid`).
 
-    Per observer step, the operations of the observer branch of
-    :func:`observer.engines.compiled.kernel._advance_loop` on a dense system in the same order: the closed set
-    (χ_k of ``CHI`` while ``COUP[k]``, projected when ``jumps[s]``; else the observer's own
-    predicted set with ν(t_k), ν̇(t_k), projected when ``master_projection``), u_free, the
-    impulse (one contact: :func:`~observer.engines.compiled.kernel.impulse_one`'s operations inline; several:
-    :func:`~observer.engines.compiled.kernel.contact_impulse`), the positions and their jump (one contact:
-    :func:`~observer.primitives.project_one`'s operations inline; several:
-    :func:`~observer.primitives.project_positions`; metric slot ``slots[s]``), then the streaming
-    summary (:data:`observer.primitives.SUMMARY_FIELDS`) against the master's state and impulse
-    after the step (``QM``, ``UM``, ``PM`` rows k + 1, :func:`master_tables`); the signals
-    are the tables of :func:`signal_tables_on_grid` read at the global step (the kernel's
-    functions index them by the same k). With ``path_row[s] ≥ 0`` V is recorded after every
-    ``every``-th step in ``rec_V[path_row[s]]`` (row 0, V(t_0), by the caller).
-
-    One function because it is the hot loop (one observer step, ~30 flops for two degrees of
-    freedom): every piece as a call would cost reference counts per step, as in the kernel.
+    Attributes
+    ----------
+    q, u, P : ndarray (steps + 1, n), (steps + 1, n), (steps + 1, m)
+        The master's state and impulse after each step (row k + 1: after step k).
+    chi : ndarray of bool (steps, m)
+        χ_k (the master's closed set or the log's).
+    coupled : ndarray of bool (steps,)
+        Whether step k follows χ_k.
+    fbar : ndarray (steps, n)
+        f̄_k.
+    nu, nu_dot : ndarray (steps + 1, m)
+        ν(t_k), ν̇(t_k).
     """
-    n = len(n_) if len(n_) > 0 else qs.shape[1]     # compile-time constants when given
-    m = len(m_) if len(m_) > 0 else Wp.shape[0] - 1
-    nr = len(r_)
-    act = np.empty(m, np.int64)
-    uf, q1, u1 = np.empty(n), np.empty(n), np.empty(n)
-    P, sig = np.zeros(m), np.zeros(m)
-    wv = np.empty(2 * n + m)
-    gk, bvec, x, lc, le = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
-    gc, rhs, sol, gp, sp_ = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
-    G, Gs, Lf, Gp = np.empty((m, m)), np.empty((m, m)), np.empty((m, m)), np.empty((m, m))
-    du = np.empty(n)
-    basic, infeas = np.zeros(m, np.bool_), np.zeros(m, np.bool_)
-    stats = np.zeros(STATS_SIZE)
-    marks = np.empty(2 * nr)
-    for s in range(j0, j1):
-        prow = path_row[s]
-        Vlast = Vprev[s]                        # the summary row in registers, written back below
-        von, vmax, vend, kon = summ[s, F_VON], summ[s, F_VMAX], summ[s, F_VEND], summ[s, F_KON]
-        ninc, maxinc, maximp = summ[s, F_NINC], summ[s, F_MAXINC], summ[s, F_MAXIMP]
-        damp, imp, proj = summ[s, F_DAMP], summ[s, F_IMP], summ[s, F_PROJ]
-        for i in range(2 * nr):
-            marks[i] = summ[s, SUMMARY_FIELDS + i]
-        for k in range(steps):
-            if COUP[k]:                                     # the closed set A = act[:a]
-                a = 0
-                for j in range(m):
-                    if CHI[k, j]:
-                        act[a] = j
-                        a += 1
-                project = jumps[s]
-            else:
-                a = 0                                       # Siconos' predictor
-                for j in range(m):
-                    g = 0.0
-                    for p in range(Wp[j], Wp[j + 1]):
-                        g += predicted_term(Wv[p], qs[s, Wi[p]], us[s, Wi[p]], h)
-                    if predicted_closed(g, NU[k, j], NUD[k, j], h):
-                        act[a] = j
-                        a += 1
-                project = master_projection
-            for i in range(n):                              # u_free, and the free step
-                s1 = 0.0
-                s2 = 0.0
-                s3 = 0.0
-                for j in range(n):
-                    s1 += Bu[i, j] * us[s, j]
-                for j in range(n):
-                    s2 += Bq[i, j] * qs[s, j]
-                for j in range(n):
-                    s3 += Bf[i, j] * FB[k, j]
-                ufi = s1 + s2 + s3
-                uf[i] = ufi
-                if a == 0:
-                    u1[i] = ufi
-                    q1[i] = qs[s, i] + h * ((1.0 - theta) * us[s, i] + theta * ufi)
-            if a > 0:                                       # the impulse, the positions
-                if a == 1:                                  # impulse_one's operations, inline
-                    j = act[0]
-                    gk1 = 0.0
-                    for p in range(Wp[j], Wp[j + 1]):
-                        gk1 += Wv[p] * us[s, Wi[p]]
-                    gk1 = gk1 + NUD[k, j]
-                    gc1 = 0.0
-                    for p in range(Wp[j], Wp[j + 1]):
-                        gc1 += Wv[p] * uf[Wi[p]]
-                    gc1 = gc1 + NUD[k + 1, j]
-                    gjj = Ghat[j, j]
-                    b1 = gc1 + e[j] * gk1
-                    x1 = -b1 / gjj if b1 < 0.0 else 0.0
-                    gx = 0.0 + gjj * x1
-                    v1 = abs(min(x1, gx + b1))
-                    res = (v1 if v1 > 0.0 else 0.0) / max(abs(b1) if abs(b1) > 0.0 else 0.0,
-                                                          abs(gx) if abs(gx) > 0.0 else 0.0, TINY)
-                    for i in range(n):
-                        u1[i] = uf[i] + (0.0 + AinvWT[j, i] * x1)
-                    P[0] = x1
-                    d1 = 0.0
-                    for p in range(Wp[j], Wp[j + 1]):
-                        d1 += Wv[p] * (0.0 + AinvWT[j, Wi[p]] * x1)
-                    v1 = abs(min(x1, b1 + d1))
-                    applied = (v1 if v1 > 0.0 else 0.0) / max(abs(b1) if abs(b1) > 0.0 else 0.0,
-                                                          abs(d1) if abs(d1) > 0.0 else 0.0, TINY)
-                    status = OK if res <= tol and applied <= tol else (
-                        LCP_FAILED if not res <= tol else RESIDUAL_EXCEEDED)
-                else:
-                    status = contact_impulse(k, s, us, uf, act, a, law, Wp, Wi, Wv, NUD, AinvWT, Ghat, e, tol,
-                                             stats, gk, bvec, x, lc, le, gc, rhs, sol, G, Gs, Lf, basic, infeas,
-                                             du, u1, P)
-                if status != OK:
-                    return s, k, status
-                for i in range(n):
-                    q1[i] = qs[s, i] + h * ((1.0 - theta) * us[s, i] + theta * u1[i])
-                if project:
-                    if a == 1:                              # project_one's operations, inline
-                        j = act[0]
-                        g = 0.0
-                        for p in range(Wp[j], Wp[j + 1]):
-                            g += Wv[p] * q1[Wi[p]]
-                        g = g + NU[k + 1, j]
-                        l00 = L[slots[s], j, j]
-                        s1 = -g / l00 if l00 > 0.0 else 0.0
-                        for i in range(n):
-                            q1[i] += KinvWT[slots[s], j, i] * s1
-                        status = OK if l00 > 0.0 else PROJECTION_FAILED
-                    else:
-                        status = project_positions(k + 1, act, a, slots[s], Wp, Wi, Wv, NU, KinvWT, L, q1, sig,
-                                                   gp, sp_, Gp, Lf)
-                    if status != OK:
-                        return s, k, status
-            for i in range(n):
-                qs[s, i] = q1[i]
-                us[s, i] = u1[i]
-            # --- the summary: the kernel's operations (observer.engines.compiled.kernel._advance_loop)
-            kg = k + 1
-            for i in range(n):                              # v, v̄ (wv[:n], wv[n:2n])
-                vi = us[s, i] - UM[kg, i]
-                wv[i] = vi
-                wv[n + i] = 0.5 * (vi + vprev[s, i])
-                vprev[s, i] = vi
-            qM = 0.0
-            qC = 0.0
-            qK = 0.0
-            for i in range(n):
-                rM = 0.0
-                rC = 0.0
-                for j in range(n):
-                    rM += Mq[i, j] * wv[j]
-                    rC += Cq[i, j] * wv[n + j]
-                qM += wv[i] * rM
-                qC += wv[n + i] * rC
-            for i in range(n):
-                wv[i] = qs[s, i] - QM[kg, i]                # e
-            for i in range(n):
-                rK = 0.0
-                for j in range(n):
-                    rK += Kq[i, j] * wv[j]
-                qK += wv[i] * rK
-            V = 0.5 * qM
-            damping = -h * qC
-            V += 0.5 * qK
-            impulse = 0.0                                   # (Wᵀv̄)ᵀ(P_s − P_m)
-            for j in range(m):
-                wv[2 * n + j] = -PM[kg, j]
-            for i in range(a):
-                wv[2 * n + act[i]] += P[i]
-            for j in range(m):
-                dP = wv[2 * n + j]
-                if dP != 0.0:
-                    g = 0.0
-                    for p in range(Wp[j], Wp[j + 1]):
-                        g += Wv[p] * wv[n + Wi[p]]
-                    impulse += g * dP
-            Vp = Vlast
-            dV = V - Vp
-            if kg - 1 >= k_on and kg <= k_off:
-                if dV > 0.0:
-                    ninc += 1
-                    if Vp > 0.0 and dV / Vp > maxinc:
-                        maxinc = dV / Vp
-                damp += damping
-                imp += impulse
-                proj += dV - damping - impulse
-                if impulse > 0.0 and Vp > 0.0 and impulse / Vp > maximp:   # maximp ≥ 0
-                    maximp = impulse / Vp
-            Vlast = V
-            vend = V
-            if kg >= k_on and kg <= k_off:
-                if kg == k_on:
-                    von = V
-                    kon = kg
-                    vmax = V
-                if V > vmax:
-                    vmax = V
-                V0 = von
-                for i in range(nr):
-                    below = V <= rhos[i] * V0
-                    if below and marks[i] < 0:
-                        marks[i] = kg
-                    if not below:
-                        marks[nr + i] = kg
-            if prow >= 0 and kg % every == 0:
-                rec_V[prow, kg // every] = V
-        Vprev[s] = Vlast
-        summ[s, F_VON], summ[s, F_VMAX], summ[s, F_VEND], summ[s, F_KON] = von, vmax, vend, kon
-        summ[s, F_NINC], summ[s, F_MAXINC], summ[s, F_MAXIMP] = ninc, maxinc, maximp
-        summ[s, F_DAMP], summ[s, F_IMP], summ[s, F_PROJ] = damp, imp, proj
-        for i in range(2 * nr):
-            summ[s, SUMMARY_FIELDS + i] = marks[i]
-    return j1, steps, OK
+
+    q: np.ndarray
+    u: np.ndarray
+    P: np.ndarray
+    chi: np.ndarray
+    coupled: np.ndarray
+    fbar: np.ndarray
+    nu: np.ndarray
+    nu_dot: np.ndarray
+
+
+class PathBundle(NamedTuple):
+    """The V paths kept: member s's V after every ``every``-th step in ``V[row[s]]`` when
+    ``row[s] ≥ 0`` (row 0 of ``V``, V(t_0), written by the caller)."""
+
+    row: np.ndarray
+    every: int
+    V: np.ndarray
+
+
+advance_members = build("advance_members", {**vars(kernel), "__name__": __name__})
+"""``advance_members(n_, m_, r_, j0, j1, master, system, impact, observers, state, tally, paths)``:
+advance observers j0..j1−1 (rows of ``state.qs``, ``state.us``, ``tally.summ``; the master,
+row 0, is not advanced) over the whole grid, each alone, with the step of the kernel's loop
+(generated from the same template, :func:`observer.engines.compiled.step.members_source`): the
+closed set (χ_k of ``master.chi`` while ``master.coupled[k]``, else the observer's own
+prediction), u_free, the impulse, the positions and their jump, the summary against the
+master's state and impulse after the step (:class:`MasterTables`), the signals read at the
+global step. ``n_``, ``m_``, ``r_`` are tuples of n, m and ``len(rhos)`` zeros, so that these
+sizes are compile-time constants of the specialization (its loops unrolled: faster per step
+of double_mass than with n and m from the arrays), or empty for n and m taken from the arrays
+(:func:`sizes`). ``system``, ``impact``, ``observers``, ``tally`` are the kernel's bundles
+(:mod:`observer.engines.compiled.bundles`) of the observers' model; ``paths`` a
+:class:`PathBundle`. Returns ``(k, s, status)``: the step and observer that failed, or
+``status == OK`` when all are done."""
 
 
 def _member_input(sc, slaves, engine):
@@ -448,12 +278,11 @@ def member_summaries(sc, slaves, engine, workers: int, paths: tuple = ()):
     rec_V = np.zeros((len(paths), steps // every + 1))
     rec_V[:, 0] = tally.rec_V[[1 + i for i in paths], 0]
     n_, m_, r_ = sizes(st.system.n, st.system.m, len(RHOS), (S - 1) * steps)
-    args = (steps, *tables, FB, NU, NUD, state.qs, state.us, obs.jumps, obs.slots, bool(inp.master_projection),
-            tally.k_on, tally.k_off, tally.rhos, tally.summ, tally.vprev, tally.Vprev, tally.Mq, tally.Kq,
-            tally.Cq, law.code, system.h, system.theta, system.Bu, system.Bq, system.Bf, system.Wp, system.Wi,
-            system.Wv, system.AinvWT, system.Ghat, obs.KinvWT, obs.L, law.e, law.tol, path_row, every, rec_V)
+    master = MasterTables(*tables[:3], tables[3], tables[4], FB, NU, NUD)
+    kept = PathBundle(row=path_row, every=every, V=rec_V)
     bounds = np.linspace(1, S, min(workers, S - 1) + 1).round().astype(int)
-    chunk = lambda j: advance_members(n_, m_, r_, bounds[j], bounds[j + 1], *args)  # noqa: E731
+    chunk = lambda j: advance_members(n_, m_, r_, bounds[j], bounds[j + 1], master, system, law, obs,  # noqa: E731
+                                      state, tally, kept)
     with ThreadPoolExecutor(max_workers=len(bounds) - 1) as pool:
         done = list(pool.map(chunk, range(len(bounds) - 1)))
     if any(status != OK for *_, status in done) or not FiniteGuard(inp).state_ok(state.qs, state.us, tally.summ):
