@@ -60,7 +60,34 @@ def latency_quotes() -> list[str]:
             f"d = {lat[0]:.0e} … {lat[-1]:.0e} s".replace("e-0", "e-")]
 
 
-@pytest.mark.parametrize("quotes", [model_quotes, latency_quotes], ids=["model-error", "latency"])
+FOREST_NAMES = {"double_mass": "double mass", "grazing": "grazing",
+                "bouncing_ball (ball on a spring, K > 0)": "ball on a spring",
+                "impact_oscillator": "impact oscillator", "rocking_chain (N = 10)": "(N = 10)",
+                "random_system (seed 0, 2 DOF, 1 contact)": "seed 0", "random_system (seed 1, 3 DOF, 2 contacts)": "seed 1",
+                "random_system (seed 2, 4 DOF, 3 contacts)": "seed 2", "random_system (seed 3, 5 DOF, 4 contacts)": "seed 3",
+                "random_system (all 4 systems)": "pooled"}
+"""The forest rows the README quotes (label in ``quick_forest.csv`` → the README's name)."""
+
+
+def forest_quotes() -> list[str]:
+    import pandas as pd
+
+    meta = json.loads((STORED / "quick_forest.json").read_text())
+    assert meta["status"] == "ok"
+    f = pd.read_csv(STORED / "quick_forest.csv").set_index("label")
+    assert (f.loc[list(FOREST_NAMES), "status"] == "ok").all()
+    g = lambda x: f"{x:.3g}"                                     # noqa: E731
+    quotes = [f"{name} {g(f.at[label, 'estimate'])} [{g(f.at[label, 'low'])}, {g(f.at[label, 'high'])}]"
+              for label, name in FOREST_NAMES.items()]
+    slower = [label for label in FOREST_NAMES if f.at[label, "high"] < 1.0]
+    faster = [label for label in FOREST_NAMES if f.at[label, "low"] > 1.0 and label.startswith("random_system (seed")]
+    words = {2: "two"}
+    quotes += [f"slower on {words[len(slower)]} of four", f"faster on {words[len(faster)]} ("]
+    return quotes
+
+
+@pytest.mark.parametrize("quotes", [model_quotes, latency_quotes, forest_quotes],
+                         ids=["model-error", "latency", "jump-vs-nojump"])
 def test_the_readme_quotes_the_stored_result(quotes):
     text = section()
     missing = [q for q in quotes() if q not in text]
