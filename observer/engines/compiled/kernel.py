@@ -633,8 +633,8 @@ def advance_scalar(k0, k1, system, impact, signals, window, state, storage):
     :func:`_advance_scalar_loop` (the state in registers; bitwise the same trajectory) fed by
     the same bundles: the arrays it reads per step passed by name, the rest in three tuples
     (the grid's t0, h, θ; the signals' pointers; the scheme's and contact's arrays with the
-    tolerance). Passing the bundles themselves (unpacked in the loop) made its step 6–7 %
-    slower (issue 32); this form is as fast as the 33 positional parameters it replaces. Writes
+    tolerance): passing the bundles themselves, unpacked in the loop, made its step measurably
+    slower (``python -m bench.revisions --problem`` measures it). Writes
     the rows' times into ``storage.t`` when it has a row per record. Returns ``(k, 0, status)``.
     """
     return _advance_scalar_loop(
