@@ -607,15 +607,15 @@ def advance(k0, k1, s0, system, impact, signals, window, observers, state, stora
     system that failed (their state untouched).
 
     The loop is generated from the step's template (:mod:`observer.engines.compiled.step`:
-the same source as the members' loop) and takes the bundles: ``system``
-(:class:`SystemBundle`), ``impact`` (:class:`LawBundle`), ``signals``
-(:class:`SignalBundle`), ``window`` (:class:`WindowBundle`), ``observers``
-(:class:`ObserverBundle`), ``state`` (:class:`StateBundle`, advanced in place), ``storage``
-(:class:`StorageBundle`, the records written in place) and ``tally``
-(:class:`SummaryBundle`), each field bound to its name once per call
-(:data:`observer.engines.compiled.step.KERNEL_FIELDS`). This is a Python function on
-purpose: a compiled wrapper gets the loop inlined into it by LLVM, which compiles it again,
-differently.
+    the same source as the members' loop) and takes the bundles: ``system``
+    (:class:`SystemBundle`), ``impact`` (:class:`LawBundle`), ``signals``
+    (:class:`SignalBundle`), ``window`` (:class:`WindowBundle`), ``observers``
+    (:class:`ObserverBundle`), ``state`` (:class:`StateBundle`, advanced in place), ``storage``
+    (:class:`StorageBundle`, the records written in place) and ``tally``
+    (:class:`SummaryBundle`), each field bound to its name once per call
+    (:data:`observer.engines.compiled.step.KERNEL_FIELDS`). This is a Python function on
+    purpose: a compiled wrapper gets the loop inlined into it by LLVM, which compiles it again,
+    differently.
     """
     return _advance_loop(k0, k1, s0, system, impact, signals, window, observers, state, storage, tally, general)
 
