@@ -577,40 +577,47 @@ time.sleep(300)
 """
 
 
-def test_a_bench_client_behind_a_stopped_clients_lock_says_so_and_gives_up(tmp_path, monkeypatch, capsys):
-    """A client holds a case's lock and is stopped (SIGSTOP): another client says in one line
-    which case and lock it waits for and who holds it, waits at most $BENCH_LOCK_TIMEOUT s and
-    reports the case failed naming the lock — instead of waiting without a word."""
+def _behind_a_stopped_holder(folder, case_id: str, monkeypatch, action):
+    """Run ``action()`` in a thread while a SIGSTOPped client holds the case's lock, with
+    $BENCH_LOCK_TIMEOUT = 0.5 s; it must return within 15 s. Returns (its result, holder pid)."""
     import threading
 
-    from bench.run import execute_case, results_path
-    from bench.suites import Case
-
-    case = Case("work_precision", "bouncing_ball", law="newton", h=4e-3, t_end=0.3, observers=(),
-                reference="closed form")
-    folder = results_path("locked", tmp_path)
-    holder = subprocess.Popen([sys.executable, "-c", _HOLDER, str(folder), case.case_id],
+    holder = subprocess.Popen([sys.executable, "-c", _HOLDER, str(folder), case_id],
                               stdout=subprocess.PIPE, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
     try:
         assert holder.stdout.readline().strip() == "held"
         os.kill(holder.pid, signal.SIGSTOP)
         monkeypatch.setenv("BENCH_LOCK_TIMEOUT", "0.5")
         outcome = []
-        waiter = threading.Thread(target=lambda: outcome.append(
-            execute_case(case, "locked", tmp_path, {})), daemon=True)
+        waiter = threading.Thread(target=lambda: outcome.append(action()), daemon=True)
         t0 = time.monotonic()
         waiter.start()
         waiter.join(timeout=30)
-        assert not waiter.is_alive(), "the client still waits"
+        assert not waiter.is_alive(), "still waiting behind the lock"
         assert time.monotonic() - t0 < 15
     finally:
         os.kill(holder.pid, signal.SIGCONT)
         holder.kill()
         holder.wait(timeout=30)
     (out,) = outcome
+    return out, holder.pid
+
+
+def test_a_bench_client_behind_a_stopped_clients_lock_says_so_and_gives_up(tmp_path, monkeypatch, capsys):
+    """A client holds a case's lock and is stopped (SIGSTOP): another client says in one line
+    which case and lock it waits for and who holds it, waits at most $BENCH_LOCK_TIMEOUT s and
+    reports the case failed naming the lock — instead of waiting without a word."""
+    from bench.run import execute_case, results_path
+    from bench.suites import Case
+
+    case = Case("work_precision", "bouncing_ball", law="newton", h=4e-3, t_end=0.3, observers=(),
+                reference="closed form")
+    folder = results_path("locked", tmp_path)
+    out, pid = _behind_a_stopped_holder(folder, case.case_id, monkeypatch,
+                                        lambda: execute_case(case, "locked", tmp_path, {}))
     lock = folder / ".locks" / f"{case_key(case.case_id)}.lock"
     assert out.state == "failed" and str(lock) in out.message and "0.5 s" in out.message, out
-    assert f"pid {holder.pid} (stopped)" in out.message
+    assert f"pid {pid} (stopped)" in out.message
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert len(err) == 1 and case.case_id in err[0] and str(lock) in err[0] and "at most 0.5 s" in err[0], err
     assert not (folder.exists() and list(folder.glob("*.parquet")))
@@ -620,8 +627,6 @@ def test_quarantine_behind_a_stopped_clients_lock_says_so_and_leaves_the_file(tm
     """A damaged case file whose lock a stopped client holds: the quarantine says which file,
     lock and holder it waits for, gives up after $BENCH_LOCK_TIMEOUT s and leaves the file as
     it is (the next run moves it) — instead of waiting without a bound."""
-    import threading
-
     from bench.results import CaseStore
     from bench.run import execute_case, results_path
     from bench.suites import Case
@@ -633,28 +638,12 @@ def test_quarantine_behind_a_stopped_clients_lock_says_so_and_leaves_the_file(tm
     (path,) = CaseStore(folder).files()
     path.write_bytes(path.read_bytes()[:-7])                 # damaged: its checksum no longer holds
     assert CaseStore(folder).damaged()
-    holder = subprocess.Popen([sys.executable, "-c", _HOLDER, str(folder), case.case_id],
-                              stdout=subprocess.PIPE, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
-    try:
-        assert holder.stdout.readline().strip() == "held"
-        os.kill(holder.pid, signal.SIGSTOP)
-        monkeypatch.setenv("BENCH_LOCK_TIMEOUT", "0.5")
-        outcome = []
-        waiter = threading.Thread(target=lambda: outcome.append(CaseStore(folder).quarantine()), daemon=True)
-        t0 = time.monotonic()
-        waiter.start()
-        waiter.join(timeout=30)
-        assert not waiter.is_alive(), "the quarantine still waits"
-        assert time.monotonic() - t0 < 15
-    finally:
-        os.kill(holder.pid, signal.SIGCONT)
-        holder.kill()
-        holder.wait(timeout=30)
-    assert outcome == [[]] and path.exists()
+    out, pid = _behind_a_stopped_holder(folder, case.case_id, monkeypatch, CaseStore(folder).quarantine)
+    assert out == [] and path.exists()
     lock = folder / ".locks" / f"{case_key(case.case_id)}.lock"
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert len(err) == 2 and all(path.name in ln and str(lock) in ln for ln in err), err
-    assert "at most 0.5 s" in err[0] and f"pid {holder.pid} (stopped)" in err[1] and "left as it is" in err[1]
+    assert "at most 0.5 s" in err[0] and f"pid {pid} (stopped)" in err[1] and "left as it is" in err[1]
     assert CaseStore(folder).quarantine() and not path.exists()   # the holder gone: moved
 
 
