@@ -107,7 +107,10 @@ class TimeStepping(Engine):
         the plant's; V is measured against it in the model's ``error_metric``
         (:meth:`~observer.plant_model.ObserverModel.metric_system`), and
         ``metadata["observer_model"]`` records the model, the metric and the observers' own
-        health record. ``on_chunk`` receives no chunk (loop 2's rows carry the nominal
+        health record (loop 2's, recorded and not warned: its master is the nominal model,
+        which the plant's χ does not follow, so its observer-gap bound, whose premise is that
+        χ is that master's closed set, :func:`observer.health.observer_gaps`, says nothing
+        about the observers; the plant's health is warned as in every run). ``on_chunk`` receives no chunk (loop 2's rows carry the nominal
         master): the result is written whole at the end, as the event engine's. The per-step
         parts of ΔV (eq. (17)) are not given (the decomposition holds for one model: a
         mismatch adds a term of its own).
@@ -119,7 +122,9 @@ class TimeStepping(Engine):
             the loop's own master; :func:`observer.ensemble` has its own path).
         """
         import dataclasses
+        import warnings
 
+        from observer.health import RunHealthWarning
         from observer.plant_model import model_scenario
 
         if run.store == "summary":
@@ -136,7 +141,9 @@ class TimeStepping(Engine):
             chi = np.zeros((plant_stepper.steps, sc.system.m), dtype=bool)
             chi[:plant.active.shape[0] - 1] = plant.active[1:]
         nominal = dataclasses.replace(run, scenario=model_scenario(sc), chi=chi, on_chunk=None)
-        out = self._nominal_loop(nominal)
+        with warnings.catch_warnings():     # its health is recorded below, not warned (docstring)
+            warnings.simplefilter("ignore", RunHealthWarning)
+            out = self._nominal_loop(nominal)
         every, R = out.record_every, out.q.shape[1]
         rows = plant.q.shape[1]
         R = min(R, (rows - 1) // every + 1)

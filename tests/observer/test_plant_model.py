@@ -221,3 +221,21 @@ def test_a_log_source_and_sparse_rows_give_the_masters_run_on_the_same_rows():
         np.testing.assert_array_equal(every.slaves[d].q, full.slaves[d].q[::7])
         np.testing.assert_array_equal(every.slaves[d].V, full.slaves[d].V[::7])
         assert full.slaves[d].dV_damping is None                 # no ΔV parts with a model
+
+
+def test_the_nominal_loops_health_is_recorded_not_warned():
+    """With a model, loop 2's master is the nominal model, which the plant's χ does not follow:
+    its observer-gap bound (premise: χ is that master's closed set) fires on random_system with
+    K × 1.5 and must be recorded in ``metadata["observer_model"]``, not warned as if the log
+    had lost a closing; the plant's own health is still warned (none here)."""
+    import warnings
+
+    from observer.health import RunHealthWarning
+
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        res = observer.simulate("random_system", observers=["jump", "nojump"], t_end=5.0,
+                                model={"K": {"scale": 1.5}})
+    assert not [w for w in seen if issubclass(w.category, RunHealthWarning)]
+    recorded = res.metadata["observer_model"]["observers_health"]["warnings"]
+    assert len(recorded) == 1 and "while χ = 0" in recorded[0]
