@@ -24,6 +24,15 @@ IMAGE_SUFFIXES = (".png", ".svg", ".pdf")
 """Image formats ``plot --out`` writes."""
 
 
+UNDEFINED = "n/a"
+"""How the run's summary tables print a value that is not defined (never ``NaN``)."""
+
+
+def summary_table(frame) -> str:
+    """``frame`` as the terminal table ``run`` prints: three significant digits, a value that
+    is not defined as :data:`UNDEFINED`."""
+    return frame.to_string(index=False, float_format=lambda x: f"{x:.3g}", na_rep=UNDEFINED)
+
 def cmd_scenarios(args) -> int:
     from observer.scenarios import SCENARIOS
     width = max(len(k) for k in SCENARIOS)
@@ -75,13 +84,15 @@ def cmd_run(args) -> int:
     else:
         print(_stepping_message(sc, res, in_loop, timed.seconds))
     if res.summary is not None:
-        print("synchronization over every step (store=summary; times from t_on; inf = not reached):")
+        print("synchronization over every step (store=summary; times from t_on; inf = not reached; "
+              f"{UNDEFINED} = not defined):")
         cols = [c for c in res.summary.columns if c.startswith(("observer", "V_on", "V_end", "t_sync", "t_settle"))]
-        print(res.summary[cols].to_string(index=False, float_format=lambda x: f"{x:.3g}"))
+        print(summary_table(res.summary[cols]))
     elif res.slaves:
         summary = res.synchronization()
-        print("synchronization (times from t_on to V <= rho V(t_on); inf = not reached):")
-        print(summary.drop(columns=["master_closings"]).to_string(index=False, float_format=lambda x: f"{x:.3g}"))
+        print("synchronization (times from t_on to V <= rho V(t_on); inf = not reached; "
+              f"{UNDEFINED} = not defined, e.g. the rate of a run too short to fit):")
+        print(summary_table(summary.drop(columns=["master_closings"])))
     print(f"wrote {path}")
     if res.metadata.get("stopped"):
         print(f"error: {res.status.reason}; {path} holds every step up to there", file=sys.stderr)

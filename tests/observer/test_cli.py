@@ -386,3 +386,13 @@ def test_result_metadata_records_the_command_as_typed(tmp_path):
                     "--t-end 0.001 --out r.parquet")
     assert typed_command(["/opt/venv/bin/observer", "run", "a b.toml"]) == "observer run 'a b.toml'"
     assert typed_command(["examples/my_system.py", "--x"]) == "python examples/my_system.py --x"
+
+
+def test_the_run_summary_table_prints_no_nan():
+    """A run stopped before its first step has no decay rate: the table says n/a, not NaN."""
+    import pandas as pd
+
+    from observer.cli import UNDEFINED, summary_table
+
+    text = summary_table(pd.DataFrame({"observer": ["jump"], "rate": [float("nan")], "V_end": [0.06]}))
+    assert "nan" not in text.lower() and UNDEFINED in text and "0.06" in text
