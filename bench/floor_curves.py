@@ -9,7 +9,7 @@ model or ideal sensor: the floor of the grid and the window).
 The **fit range** is the sizes whose median floor is at least :data:`ABOVE_EXACT` times the
 median at size 0 (the uncertainty's floor, not the grid's) and below :data:`BROKEN` (above it
 the observer no longer synchronises); over it ``log10 floor = a + s·log10 size`` is fitted to the
-median floor by least squares, with two 95 % intervals: the regression's (slope ± t·standard
+median floor (log10 of the median over members) by least squares, with two 95 % intervals: the regression's (slope ± t·standard
 error, k − 2 degrees of freedom) and the members' (percentiles of the slope refitted on
 :data:`RESAMPLES` paired resamples of the members). Fewer than 3 sizes in range: no fit, and
 the status says so.
@@ -43,16 +43,16 @@ def fit_curve(sizes, F, exact, seed: int = 0) -> dict:
 
     sizes, F, exact = np.asarray(sizes, float), np.asarray(F, float), np.asarray(exact, float)
     keep = fit_range(sizes, F, exact)
-    x, logs = np.log10(sizes[keep]), np.log10(F[keep])
+    x, F = np.log10(sizes[keep]), F[keep]
     if x.size < 3:
         return {"status": f"not fitted: {x.size} size(s) in the power-law range (need 3)",
                 "sizes": sizes[keep].tolist(), "slope": None, "intercept": None, "interval": None}
-    reg = stats.linregress(x, np.median(logs, axis=1))
+    reg = stats.linregress(x, np.log10(np.median(F, axis=1)))
     a = (1.0 - CONFIDENCE) / 2
     half = float(stats.t.ppf(1 - a, x.size - 2) * reg.stderr)
     rng = np.random.default_rng(seed)
-    n = logs.shape[1]
-    boot = [np.polyfit(x, np.median(logs[:, rng.integers(0, n, n)], axis=1), 1)[0] for _ in range(RESAMPLES)]
+    n = F.shape[1]
+    boot = [np.polyfit(x, np.log10(np.median(F[:, rng.integers(0, n, n)], axis=1)), 1)[0] for _ in range(RESAMPLES)]
     return {"status": "ok", "sizes": sizes[keep].tolist(), "slope": float(reg.slope),
             "intercept": float(reg.intercept),
             "interval": {"regression": [float(reg.slope) - half, float(reg.slope) + half],
