@@ -56,8 +56,14 @@ OUT = Path(__file__).resolve().parent / "stored" / "latency_floor_double_mass.js
 def measure(latency: float, members: int = MEMBERS, h: float = H, t_end: float = T_END) -> pd.DataFrame:
     """One latency: per (design, member) ``V_on``, the floor and the peak of V over the tail
     (each absolute, ``*_V``, and relative to V_on)."""
+    out = measure_sensor({"latency": latency} if latency > 0 else None, members, h, t_end)
+    out.insert(0, "latency", latency)
+    return out
+
+
+def measure_sensor(sensor: dict | None, members: int = MEMBERS, h: float = H, t_end: float = T_END) -> pd.DataFrame:
+    """As :func:`measure` for any ``[observer.sensor]`` table (None: the ideal sensor)."""
     sc = observer.load_scenario("double_mass", {"observer.coupling": [0.0, t_end]})
-    sensor = {"latency": latency} if latency > 0 else None
     df = observer.ensemble(sc, designs=DESIGNS, n=members, seed=SEED, h=h, t_end=t_end, workers=1,
                            paths=members, sensor=sensor)
     paths = df.attrs["paths"]
@@ -67,7 +73,6 @@ def measure(latency: float, members: int = MEMBERS, h: float = H, t_end: float =
     out = df[["design", "member", "V_on", "status"]].merge(levels, on=["design", "member"], validate="one_to_one")
     out["floor"] = out["floor_V"] / out["V_on"]
     out["peak"] = out["peak_V"] / out["V_on"]
-    out.insert(0, "latency", latency)
     out["intervals_seen"] = df.attrs["metadata"].get("sensor", {}).get("intervals")
     return out
 

@@ -30,6 +30,11 @@ STORED = Path(__file__).resolve().parents[2] / "bench" / "stored"
 """Folder of the stored results (``bench/stored`` of the repository)."""
 MODEL_ERROR = "model_error_floor_double_mass.json"
 LATENCY = "latency_floor_double_mass.json"
+PARAMETERS = "model_error_parameters_double_mass.json"
+"""Per-parameter curves (M, C, K, W), ``python -m bench.model_error_parameters``."""
+SENSOR = "sensor_floor_double_mass.json"
+"""Sensor jitter and threshold curves, ``python -m bench.sensor_floor``."""
+PANELS_PER_ROW = 3
 TARGETS = (1e-6, 1e-3)
 """Target floors of V/V(t_on) for "what a user needs to know the model to"."""
 CONFIDENCE = 0.95
@@ -118,6 +123,75 @@ def latency_curves(path: Path) -> tuple[list[Curve], dict]:
     return curves, data
 
 
+def stored_curves(path: Path) -> tuple[list[Curve], dict]:
+    """The curves of a stored result in the format of ``bench/floor_curves.py`` (a list
+    ``curves``, each with its sizes and per design the member floors and the fit; a design not
+    fitted has ``slope`` NaN and no fitted sizes), and the raw JSON."""
+    data = json.loads(Path(path).read_text(encoding="utf-8"))
+    out = []
+    for rec in data["curves"]:
+        what = Uncertainty(rec["key"], rec["label"], rec["unit"], data["command"])
+        sizes = np.asarray(rec["sizes"], dtype=float)
+        for d, r in rec["designs"].items():
+            fit = r["fit"]
+            ok = fit["status"] == "ok"
+            out.append(Curve(what, d, sizes, np.asarray(r["member_floors"], dtype=float),
+                             np.asarray(r["exact_member_floors"], dtype=float),
+                             float(fit["slope"]) if ok else float("nan"),
+                             float(fit["intercept"]) if ok else float("nan"),
+                             tuple(map(float, fit["interval"]["members"])) if ok else (float("nan"),) * 2,
+                             np.asarray(fit["sizes"] if ok else [], dtype=float)))
+    return out, data
+
+
+def crossings(a: Curve, b: Curve) -> list[tuple[float, float, float, str]]:
+    """Every sign change of log10(a's median floor / b's) between consecutive stored sizes:
+    (lower size, upper size, log-log interpolated size, design with the lower floor above)."""
+    d = np.log10(a.median) - np.log10(b.median)
+    out = []
+    for i in np.flatnonzero(d[:-1] * d[1:] < 0):
+        w = d[i] / (d[i] - d[i + 1])
+        at = 10.0 ** (np.log10(a.sizes[i]) + w * np.log10(a.sizes[i + 1] / a.sizes[i]))
+        out.append((float(a.sizes[i]), float(a.sizes[i + 1]), float(at), a.design if d[i + 1] < 0 else b.design))
+    return out
+
+
+def crossing_cell(a: Curve, b: Curve) -> str:
+    """The crossings of :func:`crossings` as one cell, or which design is lower at every size."""
+    u = a.what.unit
+    found = crossings(a, b)
+    if not found:
+        lower = a.design if np.median(np.log10(a.median) - np.log10(b.median)) < 0 else b.design
+        return f"no crossing on the stored sizes ({registry.label(lower)} lower throughout)"
+    return "; ".join(f"between {_value(lo, u)} and {_value(hi, u)} (at {_value(at, u)}; "
+                     f"{registry.label(low)} lower above)" for lo, hi, at, low in found)
+
+
+def curves_table(curves: list[Curve], data: dict) -> Table:
+    """One stored result's fitted laws per (uncertainty, design) and each uncertainty's crossover."""
+    pct = f"{100 * CONFIDENCE:.0f} %"
+    t = Table(f"{data['what']} ({data['scenario']}; {data['command']}): fitted laws log10(floor) = a + "
+              f"s·log10(size), {pct} intervals, and crossovers",
+              ["uncertainty", "observer", "slope s [members]", "slope s [regression]", "a", "fitted sizes",
+               "floor at size 0 (median)", "crossover of the designs"])
+    cross = {a.what: crossing_cell(a, b) for a, b in pairs(curves)}
+    for c in curves:
+        if c.fit_sizes.size:
+            fit = [slope_cell(c.slope, c.slope_members), slope_cell(c.slope, regression_interval(c)),
+                   fmt(c.intercept), f"{_value(c.fit_sizes.min(), c.what.unit)} … "
+                   f"{_value(c.fit_sizes.max(), c.what.unit)} ({c.fit_sizes.size} points)"]
+        else:
+            fit = ["not fitted (fewer than 3 sizes between 10 × the floor at size 0 and 0.1)", "–", "–", "–"]
+        t.add([c.what.label, registry.label(c.design), *fit, fmt(float(np.median(c.exact))),
+               cross.get(c.what, "–")])
+    t.note = (f"{data['members'] if 'members' in data else data['settings']['members']} paired members "
+              f"(seed {data.get('seed', data.get('settings', {}).get('seed'))}); floor = {data['floor']}; "
+              f"status {data['status']}. Fitted sizes: the median floor at least 10 × the one at size 0 "
+              "and below 0.1 (the stored fit's range). Crossover: a sign change of the designs' median "
+              "floor ratio between consecutive stored sizes, log-log interpolated.")
+    return t
+
+
 def fit_rows(c: Curve, F: np.ndarray | None = None) -> np.ndarray:
     """Rows of ``F`` (default the curve's member floors) at the fitted sizes."""
     F = c.floors if F is None else F
@@ -175,12 +249,10 @@ def crossover(a: Curve, b: Curve) -> dict:
     ratio a/b over the sizes)."""
     d = np.log10(a.median) - np.log10(b.median)
     ratio = 10.0 ** d
-    for i in range(len(d) - 1):
-        if d[i] * d[i + 1] < 0:
-            w = d[i] / (d[i] - d[i + 1])
-            at = 10.0 ** (np.log10(a.sizes[i]) + w * np.log10(a.sizes[i + 1] / a.sizes[i]))
-            return {"between": (float(a.sizes[i]), float(a.sizes[i + 1])), "at": float(at),
-                    "lower_after": a.design if d[i + 1] < 0 else b.design}
+    found = crossings(a, b)
+    if found:
+        lo, hi, at, lower = found[0]
+        return {"between": (lo, hi), "at": at, "lower_after": lower}
     return {"between": None, "lower": a.design if d[0] < 0 else b.design,
             "ratio": (float(ratio.min()), float(ratio.max()))}
 
@@ -324,22 +396,29 @@ def floor_figure(curves: list[Curve]) -> Figure | None:
     whats = list(dict.fromkeys(c.what for c in curves))
     if not whats:
         return None
-    fig, axes = plt.subplots(1, len(whats), figsize=(5.2 * len(whats), 3.8), squeeze=False)
-    for ax, what in zip(axes[0], whats):
+    cols = min(len(whats), PANELS_PER_ROW)
+    rows = -(-len(whats) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 3.8 * rows), squeeze=False)
+    for ax in axes.ravel()[len(whats):]:
+        ax.set_visible(False)
+    for ax, what in zip(axes.ravel(), whats):
         for c in (c for c in curves if c.what == what):
             lk = registry.look(c.design)
             ax.fill_between(c.sizes, c.floors.min(axis=1), c.floors.max(axis=1), color=lk.color, alpha=0.2)
+            fitted = c.fit_sizes.size > 0
             ax.loglog(c.sizes, c.median, "o", color=lk.color, ms=4,
-                      label=f"{lk.label} (s = {fmt(c.slope, digits=SLOPE_DIGITS)})")
-            x = np.geomspace(c.fit_sizes.min(), c.fit_sizes.max(), 20)
-            ax.loglog(x, 10.0 ** (c.intercept + c.slope * np.log10(x)), color=lk.color, ls="--", lw=1.0)
+                      label=f"{lk.label} (s = {fmt(c.slope, digits=SLOPE_DIGITS)})" if fitted else
+                      f"{lk.label} (not fitted)")
+            if fitted:
+                x = np.geomspace(c.fit_sizes.min(), c.fit_sizes.max(), 20)
+                ax.loglog(x, 10.0 ** (c.intercept + c.slope * np.log10(x)), color=lk.color, ls="--", lw=1.0)
             ax.axhline(float(np.median(c.exact)), color=lk.color, ls=":", lw=0.8)
         ax.set_xlabel(what.label + (f" ({what.unit})" if what.unit else ""), fontsize=8)
         ax.set_ylabel("floor of V / V(t_on)")
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7, loc="upper left")
-    fixed_layout(fig, top=0.2, wspace=0.9)
-    return Figure(to_data_uri(fig, fit=False), "floor of V/V(t_on) against the model error and the sensor latency",
+    fixed_layout(fig, top=0.2, wspace=0.9, hspace=0.8)
+    return Figure(to_data_uri(fig, fit=False), "floor of V/V(t_on) against " + ", ".join(w.key for w in whats),
                   "Markers: median floor over the paired members; shaded: the members' spread (min–max); "
                   "dashed: the stored fitted power law over its sizes; dotted: the floor at size 0 "
                   "(exact model, ideal sensor: the floor of the grid and the window).")
@@ -396,6 +475,11 @@ def build_from(stored: Path, key_numbers: list | None = None) -> Section:
         if draws_text(me):
             sec.p(draws_text(me))
     sec.table(needs_table(curves))
+    for name in (PARAMETERS, SENSOR):
+        if (Path(stored) / name).exists():
+            more, data = stored_curves(Path(stored) / name)
+            sec.figure(floor_figure(more), "No curves.")
+            sec.table(curves_table(more, data))
     if key_numbers is not None:
         scen = ", ".join(dict.fromkeys(x["scenario"] if "scenario" in x else x["settings"]["scenario"]
                                        for x in (me, lat) if x is not None))

@@ -1,0 +1,146 @@
+"""The per-parameter and sensor curves of the "Model error and sensors" section against values
+recomputed here from the stored JSON (numpy's own medians, fit range, fits and sign changes, not
+the section's or bench's code); doctored copies (a slope off by 0.01, floors just across or just
+short of a crossing) are caught."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from reports import registry
+from reports.sections import model_error
+
+STORED = Path(__file__).resolve().parents[2] / "bench" / "stored"
+FILES = (STORED / model_error.PARAMETERS, STORED / model_error.SENSOR)
+
+
+def numbers(text: str) -> list[float]:
+    return [float(x.replace("−", "-")) for x in re.findall(r"[−-]?\d+(?:\.\d+)?(?:e[−-]?\d+)?", text)]
+
+
+def expected(data: dict) -> dict:
+    """(uncertainty label, design) → (fitted sizes, slope, intercept, crossings), recomputed:
+    fit range = median floor ≥ 10 × the median at size 0 and < 0.1; crossings = sign changes
+    of log10(median a / median b) between consecutive sizes, as (lower, upper, design lower above)."""
+    out = {}
+    for rec in data["curves"]:
+        sizes = np.array(rec["sizes"])
+        meds = {d: np.median(np.array(r["member_floors"]), axis=1) for d, r in rec["designs"].items()}
+        (a, ma), (b, mb) = meds.items()
+        r = np.log10(ma / mb)
+        cross = [(sizes[i], sizes[i + 1], a if r[i + 1] < 0 else b) for i in range(len(r) - 1) if r[i] * r[i + 1] < 0]
+        for d, r_ in rec["designs"].items():
+            keep = (meds[d] >= 10 * np.median(r_["exact_member_floors"])) & (meds[d] < 0.1)
+            fit = np.polyfit(np.log10(sizes[keep]), np.log10(meds[d][keep]), 1) if keep.sum() >= 3 else (None, None)
+            out[rec["label"], d] = (sizes[keep], fit[0], fit[1], cross)
+    return out
+
+
+def table_of(sec, data: dict):
+    return next(b.content for b in sec.blocks if b.kind == "table" and b.content.title.startswith(data["what"]))
+
+
+def mismatches(sec, data: dict) -> list[str]:
+    """Rows of the section's table for ``data`` that differ from :func:`expected` beyond display rounding."""
+    exp, bad = expected(data), []
+    labels = {registry.label(d): d for d in registry.designs()}
+    rows = table_of(sec, data).rows
+    if len(rows) != len(exp):
+        bad.append(f"{len(rows)} rows for {len(exp)} curves")
+    for row in rows:
+        sizes, s, a, cross = exp[row[0], labels[row[1]]]
+        if s is None:
+            if not row[2].startswith("not fitted"):
+                bad.append(f"{row[:2]}: fitted, expected not")
+        elif (abs(numbers(row[2])[0] - s) > 6e-4 or abs(numbers(row[4])[0] - a) > 6e-3 * max(1.0, abs(a))
+              or numbers(row[5])[-1] != sizes.size):
+            bad.append(f"{row[:2]}: {row[2]} / {row[4]} / {row[5]} vs {s:.4f} / {a:.3f} / {sizes.size}")
+        if cross:
+            parts = row[7].split("; between")
+            got = [numbers(p)[:2] for p in parts]
+            if len(parts) != len(cross) or any(
+                    g != pytest.approx([lo, hi], rel=6e-3) or registry.label(low) + " lower above" not in p
+                    for g, p, (lo, hi, low) in zip(got, parts, cross)):
+                bad.append(f"{row[:2]} crossover {row[7]!r} vs {cross}")
+        elif not row[7].startswith("no crossing on the stored sizes"):
+            bad.append(f"{row[:2]} crossover {row[7]!r}, expected none")
+    return bad
+
+
+@pytest.fixture(scope="module")
+def section():
+    return model_error.build_from(STORED, [])
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: p.stem)
+def test_each_stored_curve_file_has_its_figure_and_its_table_equal_to_the_recomputed_fits(section, path):
+    data = json.loads(path.read_text())
+    assert mismatches(section, data) == []
+    figures = [b for b in section.blocks if b.kind == "figure"]
+    assert len(figures) == 3            # the K-error/latency panels, then one figure per new file
+    exp = expected(data)
+    assert any(v[1] is not None for v in exp.values())
+
+
+def test_the_stored_fits_are_the_recomputed_ones():
+    for path in FILES:
+        data = json.loads(path.read_text())
+        exp = expected(data)
+        for rec in data["curves"]:
+            for d, r in rec["designs"].items():
+                sizes, s, a, _ = exp[rec["label"], d]
+                assert r["fit"]["sizes"] == pytest.approx(sizes.tolist())
+                if s is None:
+                    assert r["fit"]["status"].startswith("not fitted")
+                else:
+                    assert r["fit"]["slope"] == pytest.approx(s, abs=1e-9)
+                    lo, hi = r["fit"]["interval"]["regression"]
+                    assert lo < s < hi
+
+
+def _doctored(tmp_path: Path, path: Path, change) -> tuple[dict, object]:
+    for f in STORED.glob("*_double_mass.*"):
+        shutil.copy(f, tmp_path / f.name)
+    data = json.loads(path.read_text())
+    change(data)
+    (tmp_path / path.name).write_text(json.dumps(data))
+    return data, model_error.build_from(tmp_path, [])
+
+
+def test_a_slope_off_by_a_hundredth_is_caught(tmp_path):
+    """Near miss: one stored slope + 0.01, the floors untouched: the section shows it, the check sees it."""
+    def change(data):
+        fit = data["curves"][0]["designs"]["jump"]["fit"]
+        fit["slope"] += 0.01
+    data, sec = _doctored(tmp_path, FILES[0], change)
+    assert len(mismatches(sec, data)) == 1
+    row = table_of(sec, data).rows[0]
+    assert numbers(row[2])[0] == pytest.approx(data["curves"][0]["designs"]["jump"]["fit"]["slope"], abs=6e-4)
+
+
+@pytest.mark.parametrize("factor, crosses", [(1.02, True), (0.98, False)])
+def test_floors_just_across_or_just_short_of_a_crossing(tmp_path, factor, crosses):
+    """The K curve (no crossing stored): the lower design's member floors at the last size raised
+    to 1.02 (crossing) or 0.98 (none) times the other's median there."""
+    def change(data):
+        rec = next(r for r in data["curves"] if r["key"] == "K")
+        meds = {d: np.median(np.array(r["member_floors"])[-1]) for d, r in rec["designs"].items()}
+        low, high = sorted(meds, key=meds.get)
+        F = np.array(rec["designs"][low]["member_floors"])
+        F[-1] *= factor * meds[high] / meds[low]
+        rec["designs"][low]["member_floors"] = F.tolist()
+    data, sec = _doctored(tmp_path, FILES[0], change)
+    assert mismatches(sec, data) == []
+    rec = next(r for r in data["curves"] if r["key"] == "K")
+    cell = next(row for row in table_of(sec, data).rows if row[0] == rec["label"])[7]
+    assert cell.startswith("between") == crosses, cell
+    if crosses:
+        assert numbers(cell)[:2] == pytest.approx(rec["sizes"][-2:], rel=6e-3)
+    stale = json.loads(FILES[0].read_text())
+    assert (mismatches(sec, stale) != []) == crosses
