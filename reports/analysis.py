@@ -32,6 +32,7 @@ import numpy as np
 import pandas as pd
 
 from bench.suites import BAND, SCALING_FIT_FROM
+from observer.engines import ENGINES
 from reports import registry
 from reports.tables import text
 
@@ -450,11 +451,14 @@ def micro_speedups(micro: pd.DataFrame) -> pd.DataFrame:
 
 def micro_loops(micro: pd.DataFrame) -> pd.DataFrame:
     """Loop benchmarks (``kind == "loop"``): one row per case with the median time per step
-    of each engine (median of the rounds ÷ steps), the speed-up compiled over python, the
-    steps, systems and compile time. Columns ``case, scenario, systems, steps, n, m,
-    compiled_s, python_s, speedup, rounds_compiled, rounds_python, compile_time_s``."""
-    cols = ["case", "scenario", "systems", "steps", "n", "m", "compiled_s", "python_s", "speedup",
-            "rounds_compiled", "rounds_python", "compile_time_s"]
+    of each engine of :data:`observer.ENGINES` (median of the rounds ÷ steps; NaN for an
+    engine the case has no benchmark of), the speed-up compiled over python, the steps,
+    systems and compile time. Columns ``case, scenario, systems, steps, n, m``, then
+    ``<engine>_s`` per engine, ``speedup``, ``rounds_<engine>`` per engine and
+    ``compile_time_s``."""
+    engines = list(ENGINES)
+    cols = ["case", "scenario", "systems", "steps", "n", "m", *(f"{e}_s" for e in engines), "speedup",
+            *(f"rounds_{e}" for e in engines), "compile_time_s"]
     if micro.empty or "kind" not in micro:
         return pd.DataFrame(columns=cols)
     lp = micro[micro["kind"] == "loop"]
@@ -463,11 +467,12 @@ def micro_loops(micro: pd.DataFrame) -> pd.DataFrame:
         rec = {"case": case, "scenario": g["scenario"].iloc[0], "systems": g["systems"].iloc[0],
                "steps": g["steps"].iloc[0], "n": g["n"].iloc[0], "m": g["m"].iloc[0],
                "compile_time_s": g["compile_time_s"].max()}
-        for engine in ("compiled", "python"):
+        for engine in engines:
             e = g[g["engine"] == engine]
             rec[f"{engine}_s"] = float(e["median_s"].iloc[0] / e["steps"].iloc[0]) if len(e) else float("nan")
             rec[f"rounds_{engine}"] = e["rounds"].iloc[0] if len(e) else float("nan")
-        rec["speedup"] = rec["python_s"] / rec["compiled_s"] if rec["compiled_s"] > 0 else float("nan")
+        compiled, python = rec.get("compiled_s", float("nan")), rec.get("python_s", float("nan"))
+        rec["speedup"] = python / compiled if compiled > 0 else float("nan")
         rows.append(rec)
     return pd.DataFrame(rows, columns=cols)
 

@@ -8,7 +8,8 @@ import pandas as pd
 import pytest
 
 import observer
-from bench import hard, schema
+from bench import hard
+from observer import row_schema
 from observer.closed_form import ball_position
 from reports.context import ReportContext
 from reports.sections import hard_cases as section
@@ -54,11 +55,11 @@ def test_cases_are_declared_once_and_quick_is_a_subset():
 
 
 def test_rows_fit_the_declared_columns(quick_rows):
-    """Every row passes :func:`bench.schema.check_row`, and the schema's declaration of the
+    """Every row passes :func:`observer.row_schema.check_row`, and the schema's declaration of the
     kind is the one :mod:`bench.hard` makes."""
-    assert schema.ROWS["hard"] == hard.columns()
+    assert row_schema.ROWS["hard"] == hard.columns()
     for row in quick_rows.to_dict("records"):
-        schema.check_row(row)
+        row_schema.check_row(row)
     assert set(hard.columns()) <= set(quick_rows.columns)
 
 

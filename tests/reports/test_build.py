@@ -1079,9 +1079,10 @@ def test_a_registered_design_shows_in_every_observer_table(tmp_path, monkeypatch
     assert [r["design"] for r in checks] == [toy.label, toy.label, "—"]
 
 
-def test_rows_are_ordered_whatever_the_storage_order():
+def test_rows_are_ordered_whatever_the_storage_order(tmp_path):
     """load order of case files carries no meaning: order_rows sorts by suite, the declared case
-    order (case id for an undeclared suite) and the row within the case."""
+    order (from the suite's metadata sidecar; case id without one) and the row within the case."""
+    from bench.run import write_suite_meta
     from reports.context import order_rows
 
     rows = pd.DataFrame([{"suite": "synthetic", "case_id": cid, "row": i, **r}
@@ -1090,9 +1091,13 @@ def test_rows_are_ordered_whatever_the_storage_order():
     a, b = order_rows(rows), order_rows(shuffled)
     assert a[["case_id", "row"]].values.tolist() == b[["case_id", "row"]].values.tolist()
     assert list(a["case_id"]) == sorted(rows["case_id"])      # undeclared suite: by case id
-    from bench.suites import SUITES
-    quick = [c.case_id for c in SUITES["quick"].cases][:5]
-    declared = pd.DataFrame({"suite": "quick", "case_id": quick[::-1], "row": 0})
+    from bench.suites import SUITES, Suite
+    cases = SUITES["quick"].cases[:5][::-1]                   # declared against case-id order
+    quick = [c.case_id for c in cases]
+    assert sorted(quick) != quick
+    declared = pd.DataFrame({"suite": "q", "case_id": sorted(quick), "row": 0, "results_dir": str(tmp_path)})
+    assert list(order_rows(declared)["case_id"]) == sorted(quick)   # no sidecar: by case id
+    write_suite_meta(Suite("q", "", cases), tmp_path)
     assert list(order_rows(declared)["case_id"]) == quick     # declared suite: declared order
 
 
@@ -1132,9 +1137,9 @@ def test_limitations_and_settings_quote_the_rows_and_the_registries(synthetic_re
 
 
 def test_context_rows_carry_every_schema_column_and_refuse_unknown_kinds(tmp_path):
-    """ReportContext.rows(kind): the rows of that kind with every column bench.schema declares
+    """ReportContext.rows(kind): the rows of that kind with every column observer.row_schema declares
     for it (NaN where missing); an unknown kind is an error naming it."""
-    from bench.schema import ROWS
+    from observer.row_schema import ROWS
     from reports.context import ReportContext
 
     df = pd.DataFrame([{"kind": "scaling", "N": 5, "status": "ok"}, {"kind": "checks", "status": "n/a"}])

@@ -1,0 +1,79 @@
+"""The report reads what a suite declares from the metadata sidecar bench writes beside its
+results (``OUT/<suite>.meta.json``); a results folder written before the sidecar still builds,
+and the page says the metadata is missing."""
+
+import json
+
+from bench.results import CaseStore
+from bench.run import results_path, run_suite
+from bench.suites import Case, Suite
+from observer.results_io import meta_path, read_suite_meta
+from reports.build import build_report
+from reports.context import load_context
+from reports.header import header_table
+
+MINI = Suite("mini", "two tiny cases, declared against case-id order", (
+    Case("work_precision", "bouncing_ball", law="newton", h=2e-3, t_end=0.5, observers=(),
+         reference="closed form"),
+    Case("work_precision", "bouncing_ball", law="newton", h=1e-3, t_end=0.5, observers=(),
+         reference="closed form")))
+
+ROW = {"kind": "observers", "scenario": "oscillator", "name": "osc", "status": "ok"}
+
+
+def _old_folder(tmp_path):
+    """A results folder as bench wrote it before the sidecar: case files, no meta.json."""
+    store = CaseStore(results_path("old", tmp_path))
+    store.write_case("old", "observers:b", [ROW])
+    store.write_case("old", "observers:a", [ROW])
+    return store.path
+
+
+def _header(ctx) -> dict:
+    return {r[0]: r[1] for r in header_table(ctx).rows}
+
+
+def test_run_suite_writes_the_declared_case_order(tmp_path):
+    ids = [c.case_id for c in MINI.cases]
+    assert sorted(ids) != ids                            # so a sorted listing would fail below
+    run_suite(MINI, tmp_path, progress=False, limit=0, micro=False)
+    meta = json.loads(meta_path("mini", tmp_path).read_text())
+    assert meta == {"suite": "mini", "cases": ids}
+
+
+def test_missing_or_damaged_sidecar_reads_as_none(tmp_path):
+    assert read_suite_meta("x", tmp_path) is None
+    meta_path("x", tmp_path).write_text("{not json")
+    assert read_suite_meta("x", tmp_path) is None
+    meta_path("x", tmp_path).write_text('{"suite": "x"}')              # no case list
+    assert read_suite_meta("x", tmp_path) is None
+    meta_path("x", tmp_path).write_text('{"suite": "x", "cases": ["b", "a"]}')
+    assert read_suite_meta("x", tmp_path) == {"suite": "x", "cases": ["b", "a"]}
+
+
+def test_old_results_without_sidecar_build_and_the_page_says_so(tmp_path):
+    folder = _old_folder(tmp_path)
+    ctx = load_context([folder], tmp_path / "r")
+    assert ctx.suites_without_meta() == ["old"]
+    said = _header(ctx)["suite metadata (<suite>.meta.json)"]
+    assert said.startswith("missing for old:")
+    assert list(ctx.df["case_id"]) == ["observers:a", "observers:b"]     # case-id order
+
+
+def test_a_real_folder_without_its_sidecar_builds_and_the_page_says_so(tmp_path):
+    run_suite(MINI, tmp_path, progress=False, limit=1, micro=False)
+    meta_path("mini", tmp_path).unlink()                  # as written before the sidecar
+    page = build_report([results_path("mini", tmp_path)], tmp_path / "page").read_text(encoding="utf-8")
+    assert "missing for mini" in page and "Traceback" not in page
+    run_suite(MINI, tmp_path, progress=False, limit=0, micro=False)      # records it again
+    page = build_report([results_path("mini", tmp_path)], tmp_path / "page2").read_text(encoding="utf-8")
+    assert "missing for mini" not in page
+
+
+def test_with_the_sidecar_the_declared_order_and_no_missing_note(tmp_path):
+    folder = _old_folder(tmp_path)
+    meta_path("old", tmp_path).write_text(json.dumps({"suite": "old", "cases": ["observers:b", "observers:a"]}))
+    ctx = load_context([folder], tmp_path / "r")
+    assert ctx.suites_without_meta() == []
+    assert _header(ctx)["suite metadata (<suite>.meta.json)"] == "present"
+    assert list(ctx.df["case_id"]) == ["observers:b", "observers:a"]
