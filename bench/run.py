@@ -341,12 +341,19 @@ def _record(summary: RunSummary, out: Outcome) -> None:
 def write_suite_meta(suite: Suite, out_dir: str | Path = RESULTS_DIR) -> Path:
     """Write ``OUT/<suite>.meta.json`` (:func:`observer.results_io.meta_path`): what the suite
     declares that its rows do not carry, for the report (which reads results, not
-    :mod:`bench`): ``"suite"`` and ``"cases"``, its case ids in declared order. Written whole
-    (a temporary file, then a rename)."""
+    :mod:`bench`): ``"suite"``; ``"cases"``, its case ids in declared order; its
+    ``"description"`` and ``"settings"`` (as text); the robustness ``"band"``
+    (:data:`bench.suites.BAND`) and ``"scaling_fit_from"`` (:data:`bench.suites.SCALING_FIT_FROM`).
+    Written whole (a temporary file, then a rename)."""
+    from bench.suites import BAND, SCALING_FIT_FROM
+
     path = meta_path(suite.name, out_dir)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps({"suite": suite.name, "cases": [c.case_id for c in suite.cases]}, indent=1))
+    meta = {"suite": suite.name, "cases": [c.case_id for c in suite.cases], "description": suite.description,
+            "settings": {str(k): str(v) for k, v in suite.settings.items()}, "band": list(BAND),
+            "scaling_fit_from": SCALING_FIT_FROM}
+    tmp.write_text(json.dumps(meta, indent=1))
     os.replace(tmp, path)
     return path
 

@@ -204,6 +204,19 @@ class ReportContext:
             self._ensemble = ensemble_view(self.df)
         return self._ensemble
 
+    def suite_meta(self, suite: str) -> dict | None:
+        """The metadata sidecar of ``suite`` (:func:`suite_meta`), None where it is missing."""
+        return suite_meta(suite, _suite_folders(self.df).get(suite))
+
+    def declared(self, key: str):
+        """The value of ``key`` in the first suite's metadata sidecar that has it (e.g.
+        ``"band"``), None where no sidecar has it."""
+        for s in _suite_folders(self.df):
+            meta = self.suite_meta(s)
+            if meta is not None and key in meta:
+                return meta[key]
+        return None
+
     def suites_without_meta(self) -> list[str]:
         """The suites of the rows whose results folder holds no metadata sidecar
         (:func:`suite_meta`): written before bench recorded it; the page says so."""

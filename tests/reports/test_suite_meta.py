@@ -6,7 +6,7 @@ import json
 
 from bench.results import CaseStore
 from bench.run import results_path, run_suite
-from bench.suites import Case, Suite
+from bench.suites import BAND, SCALING_FIT_FROM, Case, Suite
 from observer.results_io import meta_path, read_suite_meta
 from reports.build import build_report
 from reports.context import load_context
@@ -38,7 +38,28 @@ def test_run_suite_writes_the_declared_case_order(tmp_path):
     assert sorted(ids) != ids                            # so a sorted listing would fail below
     run_suite(MINI, tmp_path, progress=False, limit=0, micro=False)
     meta = json.loads(meta_path("mini", tmp_path).read_text())
-    assert meta == {"suite": "mini", "cases": ids}
+    assert meta == {"suite": "mini", "cases": ids, "description": MINI.description, "settings": {},
+                    "band": list(BAND), "scaling_fit_from": SCALING_FIT_FROM}
+
+
+def test_settings_section_reads_the_sidecar_and_says_when_it_is_missing(tmp_path):
+    from reports.sections.settings import MISSING, definitions_table, suite_tables
+
+    folder = _old_folder(tmp_path)
+    ctx = load_context([folder], tmp_path / "r")
+    (t,) = suite_tables(ctx)
+    assert [r[1] for r in t.rows] == [MISSING]
+    defs = {r[0]: r[1] for r in definitions_table(ctx).rows}
+    assert defs["robustness band"] == MISSING and MISSING in defs["scaling exponent"]
+    meta_path("old", tmp_path).write_text(json.dumps(
+        {"suite": "old", "cases": ["observers:b", "observers:a"], "description": "two old cases",
+         "settings": {"h": "0.001"}, "band": [0.25, 0.75], "scaling_fit_from": 7}))
+    ctx = load_context([folder], tmp_path / "r")
+    (t,) = suite_tables(ctx)
+    assert t.title.endswith("two old cases") and [r[:2] for r in t.rows] == [["cases", "2"], ["h", "0.001"]]
+    defs = {r[0]: r[1] for r in definitions_table(ctx).rows}
+    assert defs["robustness band"].startswith("median and 25–75 % quantiles")
+    assert "from N = 7 (" in defs["scaling exponent"]
 
 
 def test_missing_or_damaged_sidecar_reads_as_none(tmp_path):
