@@ -9,6 +9,7 @@ from reports import analysis, figures, registry
 from reports.analysis import ROBUST_FLOOR, ROBUST_RHOS
 from reports.blocks import Block, Section
 from reports.context import ReportContext
+from reports.sections.settings import MISSING
 from reports.tables import Table, band_cell, fmt, fmt_int, fmt_rho, fmt_time
 
 TITLE = "Robustness: observers under imperfect switching signals"
@@ -19,15 +20,10 @@ def _perturbations():
     return KINDS, LABELS, UNITS
 
 
-def _band_pct() -> tuple[str, str]:
-    from bench.suites import BAND
-    return tuple(f"{100 * q:.0f}" for q in BAND)
-
-
-def intro(rob: pd.DataFrame, bands: pd.DataFrame) -> str:
-    """Setting of the robustness runs, from the rows."""
+def intro(rob: pd.DataFrame, bands: pd.DataFrame, quantiles: tuple[float, float]) -> str:
+    """Setting of the robustness runs, from the rows and the suite's band ``quantiles``."""
     kinds, labels, _ = _perturbations()
-    lo, hi = _band_pct()
+    lo, hi = (f"{100 * q:.0f}" for q in quantiles)
     rnd = bands[bands["seeds"] > 1]
     seeds = int(rnd["seeds"].max()) if len(rnd) else 1
     random_kinds = ", ".join(dict.fromkeys(rnd["perturbation"])) or "none"
@@ -47,10 +43,10 @@ def intro(rob: pd.DataFrame, bands: pd.DataFrame) -> str:
             + "; ".join(f"{k}: {labels[k]}" for k in kinds) + ". " + seeds_text)
 
 
-def bands_table(bands: pd.DataFrame) -> Table:
-    """:func:`reports.analysis.robustness_bands` as a table."""
+def bands_table(bands: pd.DataFrame, quantiles: tuple[float, float]) -> Table:
+    """:func:`reports.analysis.robustness_bands` (over the band ``quantiles``) as a table."""
     _, _, units = _perturbations()
-    lo, hi = _band_pct()
+    lo, hi = (f"{100 * q:.0f}" for q in quantiles)
     t = Table(f"Robustness: floor and rate of V against the perturbation (median [{lo}–{hi} %] "
               f"over seeds)",
               ["perturbation", "size", "seeds", "observer", "floor / V(t_on)", "rate (1/s)"]
@@ -93,11 +89,15 @@ def build(ctx: ReportContext) -> Section:
     rob = ctx.rows_or_say(sec, "robustness", "robustness runs")
     if rob is None:
         return sec
+    quantiles = ctx.declared("band")
+    if quantiles is None:
+        sec.p(f"The robustness band is not shown: {MISSING}.")
+        return sec
     kinds, labels, units = _perturbations()
-    bands = analysis.robustness_bands(rob)
-    sec.p(intro(rob, bands))
+    bands = analysis.robustness_bands(rob, tuple(quantiles))
+    sec.p(intro(rob, bands, tuple(quantiles)))
     sec.figure(figures.robustness_figure(rob, list(kinds), labels, units, bands), "No robustness data.")
-    sec.table(bands_table(bands))
+    sec.table(bands_table(bands, tuple(quantiles)))
     items = summary_items(bands)
     sec.blocks.append(Block("list", items))
     if items:

@@ -783,9 +783,13 @@ def test_peers_section_ratios_are_recomputed(synthetic_report):
 def _rows_file(path: Path, cases: list[tuple[str, list[dict]]]) -> Path:
     """Hand-made rows stored as a suite named ``path.stem`` (bench.results' case store); the
     path build_report reads."""
+    from bench.run import write_suite_meta
+    from bench.suites import Suite
+
     store = ResultsFile(path)
     for case_id, rows in cases:
         store.append_case(path.stem, case_id, rows)
+    write_suite_meta(Suite(path.stem, "hand-made rows", ()), path.parent)    # as a bench run does
     return store.path
 
 
@@ -1022,7 +1026,7 @@ def test_analysis_robustness_summary_breaks_from_the_first_size_above_the_floor(
 
     rows = pd.DataFrame([r for _, rs in _synthetic_rows() for r in rs])
     rob = rows[rows["kind"] == "robustness"]
-    summ = robustness_summary(robustness_bands(rob))
+    summ = robustness_summary(robustness_bands(rob, (0.1, 0.9)))
     for _, r in summ.iterrows():
         g = rob[(rob["observer"] == r["observer"]) & (rob["perturbation"] == r["perturbation"])]
         medians = g.groupby("size")["floor_rel"].median()
@@ -1263,10 +1267,10 @@ def test_peak_memory_is_fitted_within_one_storage_mode():
     mem = np.where(sparse, 0.01, 0.1) * N
     rows = pd.DataFrame({"N": N, "cpu_per_step_s": 1e-6 * N, "peak_mem_mb": mem,
                          "h_record": np.where(sparse, 0.1, np.nan)})
-    fits = scaling_fits(rows).set_index("quantity")["exponent"]
+    fits = scaling_fits(rows, 10).set_index("quantity")["exponent"]
     assert fits["peak memory (every step stored)"] == pytest.approx(1.0, abs=1e-12)
     assert fits["peak memory (a row every 0.1 s)"] == pytest.approx(1.0, abs=1e-12)
     assert "peak memory" not in fits
     assert _fitted(N, mem) < 0.8                                  # what one fit across both says
-    one_mode = scaling_fits(rows.assign(h_record=np.nan)).set_index("quantity")["exponent"]
+    one_mode = scaling_fits(rows.assign(h_record=np.nan), 10).set_index("quantity")["exponent"]
     assert one_mode["peak memory"] == pytest.approx(_fitted(N, mem), abs=1e-12)

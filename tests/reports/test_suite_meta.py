@@ -4,6 +4,8 @@ and the page says the metadata is missing."""
 
 import json
 
+import pandas as pd
+
 from bench.results import CaseStore
 from bench.run import results_path, run_suite
 from bench.suites import BAND, SCALING_FIT_FROM, Case, Suite
@@ -98,3 +100,28 @@ def test_with_the_sidecar_the_declared_order_and_no_missing_note(tmp_path):
     assert ctx.suites_without_meta() == []
     assert _header(ctx)["suite metadata (<suite>.meta.json)"] == "present"
     assert list(ctx.df["case_id"]) == ["observers:b", "observers:a"]
+
+
+def test_scaling_and_robustness_say_the_metadata_is_missing_rather_than_guess(tmp_path):
+    """Without the sidecar the fit start and the band are unknown: the sections say so (no
+    table, no key number); with it they are built with the recorded values."""
+    from reports.context import ReportContext
+    from reports.sections import robustness, scaling
+    from reports.sections.settings import MISSING
+
+    rows = pd.DataFrame([{"suite": "old", "case_id": f"scaling:{n}", "kind": "scaling", "status": "ok",
+                          "N": n, "h": 1e-3, "t_end": 0.1, "cpu_per_step_s": 1e-6 * n, "peak_mem_mb": 0.1 * n, "structure": "banded",
+                          "results_dir": str(tmp_path)}
+                         for n in (5, 10, 20, 40)]
+                        + [{"suite": "old", "case_id": "robustness:none", "kind": "robustness", "status": "ok",
+                            "results_dir": str(tmp_path)}])
+    ctx = ReportContext(df=rows, files=[], micro=pd.DataFrame(), micro_meta={}, suites=["old"],
+                        command="", out_dir=tmp_path)
+    for module in (scaling, robustness):
+        sec = module.build(ctx)
+        assert [b.kind for b in sec.blocks] == ["p"] and MISSING in sec.blocks[0].content
+    assert ctx.key_numbers == []
+    meta_path("old", tmp_path).write_text(json.dumps({"suite": "old", "cases": [], "scaling_fit_from": 20}))
+    sec = scaling.build(ctx)
+    assert MISSING not in " ".join(str(b.content) for b in sec.blocks if b.kind == "p")
+    assert ctx.key_numbers and "from N = 20 to 40" in ctx.key_numbers[0]
