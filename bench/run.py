@@ -343,8 +343,10 @@ def write_suite_meta(suite: Suite, out_dir: str | Path = RESULTS_DIR) -> Path:
     declares that its rows do not carry, for the report (which reads results, not
     :mod:`bench`): ``"suite"``; ``"cases"``, its case ids in declared order; its
     ``"description"`` and ``"settings"`` (as text); the robustness ``"band"``
-    (:data:`bench.suites.BAND`) and ``"scaling_fit_from"`` (:data:`bench.suites.SCALING_FIT_FROM`).
+    (:data:`bench.suites.BAND`), ``"scaling_fit_from"`` (:data:`bench.suites.SCALING_FIT_FROM`)
+    and the robustness ``"perturbations"`` (``kinds``, ``labels``, ``units`` of :mod:`bench.perturb`).
     Written whole (a temporary file, then a rename)."""
+    from bench.perturb import KINDS, LABELS, UNITS
     from bench.suites import BAND, SCALING_FIT_FROM
 
     path = meta_path(suite.name, out_dir)
@@ -352,7 +354,8 @@ def write_suite_meta(suite: Suite, out_dir: str | Path = RESULTS_DIR) -> Path:
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     meta = {"suite": suite.name, "cases": [c.case_id for c in suite.cases], "description": suite.description,
             "settings": {str(k): str(v) for k, v in suite.settings.items()}, "band": list(BAND),
-            "scaling_fit_from": SCALING_FIT_FROM}
+            "scaling_fit_from": SCALING_FIT_FROM,
+            "perturbations": {"kinds": list(KINDS), "labels": dict(LABELS), "units": dict(UNITS)}}
     tmp.write_text(json.dumps(meta, indent=1))
     os.replace(tmp, path)
     return path

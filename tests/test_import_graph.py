@@ -49,7 +49,6 @@ ALLOWED_CYCLE_EDGES: set[tuple[str, str]] = set()
 """Edges left out of the cycle search, each to be deleted when its cycle is broken."""
 
 REPORTS_STILL_IMPORTING_BENCH = frozenset({
-    "reports.sections.robustness",     # bench.perturb KINDS, LABELS, UNITS
     "reports.sections.hard_cases",     # bench.hard columns, STATES
     "reports.sections.peers",          # bench.peers
 })

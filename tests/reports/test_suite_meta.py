@@ -7,6 +7,7 @@ import json
 import pandas as pd
 
 from bench.results import CaseStore
+from bench.perturb import KINDS, LABELS, UNITS
 from bench.run import results_path, run_suite
 from bench.suites import BAND, SCALING_FIT_FROM, Case, Suite
 from observer.results_io import meta_path, read_suite_meta
@@ -41,7 +42,8 @@ def test_run_suite_writes_the_declared_case_order(tmp_path):
     run_suite(MINI, tmp_path, progress=False, limit=0, micro=False)
     meta = json.loads(meta_path("mini", tmp_path).read_text())
     assert meta == {"suite": "mini", "cases": ids, "description": MINI.description, "settings": {},
-                    "band": list(BAND), "scaling_fit_from": SCALING_FIT_FROM}
+                    "band": list(BAND), "scaling_fit_from": SCALING_FIT_FROM,
+                    "perturbations": {"kinds": list(KINDS), "labels": LABELS, "units": UNITS}}
 
 
 def test_settings_section_reads_the_sidecar_and_says_when_it_is_missing(tmp_path):
