@@ -42,7 +42,6 @@ from bench.norms import trajectory_error
 from observer.row_schema import CASE, HARD, TIMING
 from observer.closed_form import closed_form_position
 from observer.errors import InputError
-from observer.result import RunState
 from observer.scenario import Scenario
 from observer.scenarios import SCENARIOS
 
@@ -58,10 +57,6 @@ NO_REFERENCE = "none: "
 """Prefix of ``HardCase.reference`` for a case without a reference; the reason follows."""
 
 ERROR_NORM = "max over samples / time average of max_i |q_i − q_ref,i|"
-
-STATES = (*(s.value for s in RunState), "refused")
-"""Values of a row's ``status``: the run's :class:`observer.result.RunState`, or ``refused``
-(an :class:`~observer.errors.InputError` before the first step)."""
 
 METRICS: dict[str, Any] = HARD
 """The columns of a ``hard`` row beyond ``CASE`` and ``TIMING`` (:data:`observer.row_schema.HARD`,

@@ -49,7 +49,6 @@ ALLOWED_CYCLE_EDGES: set[tuple[str, str]] = set()
 """Edges left out of the cycle search, each to be deleted when its cycle is broken."""
 
 REPORTS_STILL_IMPORTING_BENCH = frozenset({
-    "reports.sections.hard_cases",     # bench.hard columns, STATES
     "reports.sections.peers",          # bench.peers
 })
 """Report modules that still import ``bench`` (issue 32, item 3), each to be deleted when the

@@ -68,7 +68,7 @@ def test_every_quick_case_ends_clearly_without_nan(quick_rows):
     an error wherever a reference exists, NaN with a reason where none does."""
     assert len(quick_rows) == len(hard.hard_cases(False))
     for _, r in quick_rows.iterrows():
-        assert r["status"] in hard.STATES, r["name"]
+        assert r["status"] in row_schema.HARD_STATES, r["name"]
         assert r["status"] == "ok" or r["stop_reason"], r["name"]
         assert not r["has_nan"], r["name"]
         if r["status"] != "refused":
