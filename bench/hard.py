@@ -39,10 +39,9 @@ import numpy as np
 
 import observer
 from bench.norms import trajectory_error
-from bench.schema import CASE, HARD, TIMING
+from observer.row_schema import CASE, HARD, TIMING
 from observer.closed_form import closed_form_position
 from observer.errors import InputError
-from observer.result import RunState
 from observer.scenario import Scenario
 from observer.scenarios import SCENARIOS
 
@@ -59,17 +58,13 @@ NO_REFERENCE = "none: "
 
 ERROR_NORM = "max over samples / time average of max_i |q_i − q_ref,i|"
 
-STATES = (*(s.value for s in RunState), "refused")
-"""Values of a row's ``status``: the run's :class:`observer.result.RunState`, or ``refused``
-(an :class:`~observer.errors.InputError` before the first step)."""
-
 METRICS: dict[str, Any] = HARD
-"""The columns of a ``hard`` row beyond ``CASE`` and ``TIMING`` (:data:`bench.schema.HARD`,
+"""The columns of a ``hard`` row beyond ``CASE`` and ``TIMING`` (:data:`observer.row_schema.HARD`,
 declared with the other kinds' rows)."""
 
 
 def columns() -> dict[str, Any]:
-    """Every column of a ``hard`` row: ``CASE``, ``TIMING`` (:mod:`bench.schema`) and
+    """Every column of a ``hard`` row: ``CASE``, ``TIMING`` (:mod:`observer.row_schema`) and
     :data:`METRICS`."""
     return {**CASE, **TIMING, **METRICS}
 

@@ -7,6 +7,8 @@ Layout of a suite's output folder ``OUT`` (default ``bench/results``)::
     OUT/<suite>.cases/stale/          case files no longer in the suite, or written without a
                                       column the report now needs (kept, not loaded)
     OUT/<suite>.csv                   all rows as CSV, exported when a run of the suite ends
+    OUT/<suite>.meta.json             what the suite declares that its rows do not carry (its
+                                      case order), for the report (:func:`bench.run.write_suite_meta`)
     OUT/<suite>-micro.json            pytest-benchmark JSON of the micro-benchmarks
     OUT/<suite>/traj/<case>.parquet   downsampled trajectories for the report's figures
     OUT/<suite>/logs/<case>.csv       perturbed closing logs of the robustness suite
@@ -27,10 +29,8 @@ concatenates with NaN for a kind's missing columns.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import platform
-import subprocess
 import sys
 import time
 import uuid
@@ -40,22 +40,16 @@ from pathlib import Path
 from typing import Any, Iterable
 
 from observer.result import package_versions
+from observer.results_io import (  # the reading side, shared with the report
+    CASES_SUFFIX, CHECKSUM_KEY, DamagedCase, case_files, case_key, content_digest, cpu_model, frame_of,
+    git_commit, load_results, read_case)
 
 RESERVED = ("suite", "case_id", "case_rows", "row")
-#: Key of the rows' checksum in a case file's Parquet schema metadata.
-CHECKSUM_KEY = b"bench.rows_sha256"
 #: Suffix appended to a damaged case file when it is moved aside.
 DAMAGED_SUFFIX = ".damaged"
 #: Subfolder of the per-case lock files.
 LOCKS = ".locks"
-#: Suffix of a suite's folder of case files (``OUT/<suite>.cases``).
-CASES_SUFFIX = ".cases"
 STALE = "stale"
-
-
-def case_key(case_id: str) -> str:
-    """File name stem of a case: the first 20 hex digits of SHA-256 of its ``case_id``."""
-    return hashlib.sha256(case_id.encode("utf-8")).hexdigest()[:20]
 
 
 def _table(rows: list[dict]):
@@ -73,48 +67,6 @@ def _table(rows: list[dict]):
         except (pa.ArrowInvalid, pa.ArrowTypeError):
             columns[k] = pa.array([None if v is None else str(v) for v in values])
     return pa.table(columns)
-
-
-def content_digest(table) -> str:
-    """SHA-256 of a table's column names, types and values (:class:`observer.io.ContentHash`,
-    the checksum of the toolkit's own Parquet results): the same for the table written and the
-    table read back from Parquet, different as soon as one value, row or column differs."""
-    from observer.io import ContentHash
-
-    content = ContentHash()
-    content.add_table(table)
-    return content.hexdigest()
-
-
-def _read_case(path: Path):
-    """Read one case file; raise :class:`DamagedCase` if it does not open, has no checksum,
-    a checksum that does not match its rows, fewer/more rows than ``case_rows`` says, or rows
-    of a case other than the one its name stands for (the file name is :func:`case_key` of the
-    ``case_id`` its checksummed rows carry: a file copied under another case's name would
-    count as that case, leaving one missing and one twice)."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    try:
-        table = pq.read_table(path)
-    except (pa.ArrowException, OSError, ValueError) as exc:
-        raise DamagedCase(path, f"does not open ({type(exc).__name__}: {exc})") from None
-    stored = (table.schema.metadata or {}).get(CHECKSUM_KEY)
-    if stored is None:
-        raise DamagedCase(path, "has no checksum (written before checksums, or not by bench)")
-    if content_digest(table.replace_schema_metadata(None)) != stored.decode("ascii", "replace"):
-        raise DamagedCase(path, "checksum does not match its rows (altered)")
-    if "case_rows" not in table.column_names or table.num_rows == 0 \
-            or table.column("case_rows")[0].as_py() != table.num_rows:
-        raise DamagedCase(path, f"holds {table.num_rows} rows, not the case_rows it was written with")
-    ids = set(table.column("case_id").to_pylist()) if "case_id" in table.column_names else set()
-    if len(ids) != 1:
-        raise DamagedCase(path, f"holds the rows of {len(ids)} cases, not of one")
-    (case_id,) = ids
-    if case_key(str(case_id)) != path.stem:
-        raise DamagedCase(path, f"holds case {case_id!r}, whose file is {case_key(str(case_id))}.parquet: "
-                          "a case file copied or renamed under another case's name")
-    return table
 
 
 LOCK_TIMEOUT_S = 3600.0
@@ -160,14 +112,6 @@ def _say(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
 
-class DamagedCase(Exception):
-    """A case file that cannot count as done (see :func:`_read_case`)."""
-
-    def __init__(self, path: Path, reason: str):
-        self.path, self.reason = Path(path), reason
-        super().__init__(f"{path}: {reason}")
-
-
 class CaseStore:
     """The folder of one suite's case files.
 
@@ -193,11 +137,11 @@ class CaseStore:
 
     def files(self) -> list[Path]:
         """The case files, sorted by name (stale and damaged ones excluded), unverified."""
-        return sorted(self.folder.glob("*.parquet")) if self.folder.is_dir() else []
+        return case_files(self.folder)
 
     def problem(self, path: Path) -> str | None:
-        """Why the case file ``path`` is damaged (:func:`_read_case`), or None when it is
-        whole; remembered until the file changes (its mtime or size)."""
+        """Why the case file ``path`` is damaged (:func:`observer.results_io.read_case`), or
+        None when it is whole; remembered until the file changes (its mtime or size)."""
         try:
             st = path.stat()
         except FileNotFoundError:
@@ -209,10 +153,10 @@ class CaseStore:
         return self._read(path, stamp)[1]
 
     def _read(self, path: Path, stamp: tuple) -> tuple:
-        """``(table or None, reason or None)`` of the case file ``path`` (:func:`_read_case`),
-        its verdict remembered under ``stamp``."""
+        """``(table or None, reason or None)`` of the case file ``path``
+        (:func:`observer.results_io.read_case`), its verdict remembered under ``stamp``."""
         try:
-            table, reason = _read_case(path), None
+            table, reason = read_case(path), None
         except DamagedCase as exc:
             table, reason = None, exc.reason
         self._verified[path] = (*stamp, reason)
@@ -334,20 +278,16 @@ class CaseStore:
 
     def frame(self):
         """All rows of the done cases, one DataFrame (cases in file-name order)."""
-        import pandas as pd
+        return frame_of(self.files(), self._table)
 
-        frames = []
-        for f in self.files():              # each file read once: verified, then converted
-            try:
-                st = f.stat()
-            except FileNotFoundError:
-                continue
-            table, _ = self._read(f, (st.st_mtime_ns, st.st_size))
-            if table is not None and table.num_rows:
-                frames.append(table.to_pandas())
-        if not frames:
-            return pd.DataFrame()
-        return pd.concat(frames, ignore_index=True, sort=False)
+    def _table(self, path: Path):
+        """The table of the case file ``path`` (each file read once: verified, then converted),
+        or None when it is damaged or gone."""
+        try:
+            st = path.stat()
+        except FileNotFoundError:
+            return None
+        return self._read(path, (st.st_mtime_ns, st.st_size))[0]
 
     def rows(self) -> list[dict]:
         """The rows as written (Python values, NaN kept; a key absent from a row and null in
@@ -403,45 +343,6 @@ class CaseStore:
 ResultsFile = CaseStore
 
 
-def load_results(paths: Iterable[str | Path]):
-    """Read suite results into one DataFrame (a concat).
-
-    Parameters
-    ----------
-    paths : iterable of path
-        Case folders ``OUT/<suite>.cases`` (:func:`bench.run.results_path`), or exported
-        ``.csv``/``.parquet`` files.
-
-    Returns
-    -------
-    DataFrame
-        The rows, with a column ``results_dir``: the folder each row's artefact paths are
-        relative to (``OUT``). Empty when there is nothing.
-    """
-    import pandas as pd
-
-    frames = []
-    for p in map(Path, paths):
-        if p.is_dir():
-            df = CaseStore(p).frame()
-        elif p.suffix == ".csv":
-            df = pd.read_csv(p)
-        elif p.suffix == ".parquet":
-            df = pd.read_parquet(p)
-        elif not p.exists():
-            raise FileNotFoundError(f"{p}: no such results folder or file")
-        else:
-            from observer.errors import InputError      # (a ValueError: one line at a CLI)
-            raise InputError(str(p), f"not a results folder or file (expected OUT/<suite>{CASES_SUFFIX}, "
-                             ".csv or .parquet)")
-        if len(df):
-            df["results_dir"] = str(p.parent)
-            frames.append(df)
-    if not frames:
-        return pd.DataFrame()
-    return pd.concat(frames, ignore_index=True, sort=False)
-
-
 def export_csv(folder: str | Path, csv: str | Path | None = None) -> Path:
     """Write the rows of a case folder as one CSV (default ``OUT/<suite>.csv``)."""
     folder = Path(folder)
@@ -451,32 +352,6 @@ def export_csv(folder: str | Path, csv: str | Path | None = None) -> Path:
 
 
 # -- environment -----------------------------------------------------------------------------
-def cpu_model() -> str:
-    """CPU model name (``/proc/cpuinfo`` on Linux, else :func:`platform.processor`)."""
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as fh:
-            for line in fh:
-                if line.lower().startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine() or "unknown"
-
-
-def git_commit(root: str | Path | None = None) -> str:
-    """``git rev-parse --short=12 HEAD`` of the repository (``+dirty`` if the tracked tree
-    has changes), or ``"unknown"`` outside a git checkout."""
-    root = Path(root) if root is not None else Path(__file__).resolve().parent.parent
-    try:
-        sha = subprocess.run(["git", "rev-parse", "--short=12", "HEAD"], cwd=root, check=True,
-                             capture_output=True, text=True, timeout=10).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                               cwd=root, capture_output=True, text=True, timeout=10).stdout.strip()
-        return sha + ("+dirty" if dirty else "")
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-
-
 def _command() -> str:
     """The command line of this process, with ``python -m PKG`` restored for module runs."""
     argv = list(sys.argv)

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from observer.errors import InputError
+from observer.results_io import meta_path
 
 from bench import RESULTS_DIR
 from bench.results import (CASES_SUFFIX, DAMAGED_SUFFIX, STALE, CaseStore, LockTimeout, environment,
@@ -246,6 +247,7 @@ def run_suite(suite: str | Suite, out_dir: str | Path = RESULTS_DIR, *, progress
     summary.damaged = store.quarantine()
     summary.stale_rows = (store.retire_undeclared(c.case_id for c in suite.cases)
                           + store.retire(outdated_ids(store.rows())))
+    write_suite_meta(suite, out_dir)
     todo = [c for c in suite.cases if not store.has(c.case_id)]
     summary.skipped = len(suite.cases) - len(todo)
     if limit is not None:
@@ -334,6 +336,29 @@ def _record(summary: RunSummary, out: Outcome) -> None:
         summary.unavailable.append((out.case_id, out.message))
     else:
         summary.failed.append((out.case_id, out.message))
+
+
+def write_suite_meta(suite: Suite, out_dir: str | Path = RESULTS_DIR) -> Path:
+    """Write ``OUT/<suite>.meta.json`` (:func:`observer.results_io.meta_path`): what the suite
+    declares that its rows do not carry, for the report (which reads results, not
+    :mod:`bench`): ``"suite"``; ``"cases"``, its case ids in declared order; its
+    ``"description"`` and ``"settings"`` (as text); the robustness ``"band"``
+    (:data:`bench.suites.BAND`), ``"scaling_fit_from"`` (:data:`bench.suites.SCALING_FIT_FROM`)
+    and the robustness ``"perturbations"`` (``kinds``, ``labels``, ``units`` of :mod:`bench.perturb`).
+    Written whole (a temporary file, then a rename)."""
+    from bench.perturb import KINDS, LABELS, UNITS
+    from bench.suites import BAND, SCALING_FIT_FROM
+
+    path = meta_path(suite.name, out_dir)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    meta = {"suite": suite.name, "cases": [c.case_id for c in suite.cases], "description": suite.description,
+            "settings": {str(k): str(v) for k, v in suite.settings.items()}, "band": list(BAND),
+            "scaling_fit_from": SCALING_FIT_FROM,
+            "perturbations": {"kinds": list(KINDS), "labels": dict(LABELS), "units": dict(UNITS)}}
+    tmp.write_text(json.dumps(meta, indent=1))
+    os.replace(tmp, path)
+    return path
 
 
 def _write_unavailable(summary: RunSummary, note: Path) -> None:

@@ -48,7 +48,7 @@ from observer.closed_form import closed_form_position
 from bench.results import now_iso
 from observer.metrics import RHOS, above_column, settle_column
 
-from bench.schema import check_row
+from observer.row_schema import check_row
 from bench.suites import Case, engine_for
 
 ERROR_NORM = "mean over t of max_i |q_i − q_ref,i|"
@@ -158,7 +158,7 @@ def engine_columns(res) -> dict[str, Any]:
 
 
 def _finish(rows: list[dict], ctx: Context) -> list[dict]:
-    """The rows, each checked against its kind's schema (:mod:`bench.schema`), with the date
+    """The rows, each checked against its kind's schema (:mod:`observer.row_schema`), with the date
     and the environment."""
     date = now_iso()
     return [{**check_row(r), "date": date, **ctx.env} for r in rows]

@@ -32,6 +32,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any, Callable, Iterator
 
+from observer.engines import INTEGRATORS
 from observer.impact import IMPACT_LAWS
 from observer.metrics import RHOS  # noqa: F401  (the one threshold list; rows hold one column per ρ)
 from observer.observers import OBSERVER_DESIGNS
@@ -112,7 +113,7 @@ class Case:
     t_end: float | None = None
     seed: int = 0
     slave_offset: tuple | None = None
-    integrator: str = "time-stepping"
+    integrator: str = INTEGRATORS[0]
     engine: str | None = None
     target: str = "master"
     reference: str = ""

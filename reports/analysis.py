@@ -16,7 +16,7 @@ rows. Designs, ratio pairs, thresholds and solvers come from :mod:`reports.regis
   quantile band over seeds of the floor and the rate, the median settling times and how many
   seeds settle; :func:`robustness_summary` — where each perturbation breaks each observer;
 * :func:`scaling_fits` — fitted exponents of the chain's cost against N (the acceptance
-  exponent from N = ``SCALING_FIT_FROM`` to the largest N);
+  exponent from the suite's ``scaling_fit_from`` N to the largest N);
 * :func:`micro_speedups` — speed-ups of the fast contact solvers over the reference;
 * :func:`micro_loops` — time per step of every loop benchmark, per engine, and the speed-up
   of the compiled engine;
@@ -31,7 +31,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from bench.suites import BAND, SCALING_FIT_FROM
+from observer.engines import ENGINES
 from reports import registry
 from reports.tables import text
 
@@ -262,7 +262,7 @@ def settling_excursions(obs: pd.DataFrame) -> pd.DataFrame:
 
 
 # ----------------------------------------------------------------------------- robustness
-def band(values, quantiles: tuple[float, float] = BAND) -> tuple[float, float, float]:
+def band(values, quantiles: tuple[float, float]) -> tuple[float, float, float]:
     """``(median, q_lo, q_hi)`` of the finite values (numpy's linear quantiles); NaNs when none."""
     x = np.asarray(values, dtype=float)
     x = x[np.isfinite(x)]
@@ -279,7 +279,7 @@ ROBUST_FLOOR = 1e-6
 exceeds this value (:func:`robustness_summary`)."""
 
 
-def robustness_bands(rob: pd.DataFrame, quantiles: tuple[float, float] = BAND) -> pd.DataFrame:
+def robustness_bands(rob: pd.DataFrame, quantiles: tuple[float, float]) -> pd.DataFrame:
     """One row per (perturbation, size, observer) over its seeds (``ok`` rows).
 
     Columns: ``perturbation, size, observer, seeds``; for the floor (``floor_rel``) and the
@@ -370,11 +370,10 @@ def integrator_comparison(wp: pd.DataFrame) -> pd.DataFrame:
 ACCEPTANCE_EXPONENT = 1.1
 """Issue 9: the chain's time per step grows at most like N^1.1 from N = 10 to 1000."""
 ACCEPTANCE_N_MAX = 1000
-"""The largest N the acceptance exponent must hold up to (from ``SCALING_FIT_FROM``)."""
+"""The largest N the acceptance exponent must hold up to (from the suite's ``scaling_fit_from``)."""
 
 
-def scaling_fits(scal: pd.DataFrame, big_from: int = 50,
-                 fit_from: int = SCALING_FIT_FROM) -> pd.DataFrame:
+def scaling_fits(scal: pd.DataFrame, fit_from: int, big_from: int = 50) -> pd.DataFrame:
     """Fitted exponents p of quantity ∝ N^p: CPU time per step over all N, from N =
     ``fit_from`` (the acceptance fit: ``"CPU time per step (N ≥ 10)"``), over N ≥ ``big_from``
     (each with ≥ 2 points and only when it differs from the full range), the loop's wall time
@@ -450,11 +449,14 @@ def micro_speedups(micro: pd.DataFrame) -> pd.DataFrame:
 
 def micro_loops(micro: pd.DataFrame) -> pd.DataFrame:
     """Loop benchmarks (``kind == "loop"``): one row per case with the median time per step
-    of each engine (median of the rounds ÷ steps), the speed-up compiled over python, the
-    steps, systems and compile time. Columns ``case, scenario, systems, steps, n, m,
-    compiled_s, python_s, speedup, rounds_compiled, rounds_python, compile_time_s``."""
-    cols = ["case", "scenario", "systems", "steps", "n", "m", "compiled_s", "python_s", "speedup",
-            "rounds_compiled", "rounds_python", "compile_time_s"]
+    of each engine of :data:`observer.ENGINES` (median of the rounds ÷ steps; NaN for an
+    engine the case has no benchmark of), the speed-up compiled over python, the steps,
+    systems and compile time. Columns ``case, scenario, systems, steps, n, m``, then
+    ``<engine>_s`` per engine, ``speedup``, ``rounds_<engine>`` per engine and
+    ``compile_time_s``."""
+    engines = list(ENGINES)
+    cols = ["case", "scenario", "systems", "steps", "n", "m", *(f"{e}_s" for e in engines), "speedup",
+            *(f"rounds_{e}" for e in engines), "compile_time_s"]
     if micro.empty or "kind" not in micro:
         return pd.DataFrame(columns=cols)
     lp = micro[micro["kind"] == "loop"]
@@ -463,11 +465,12 @@ def micro_loops(micro: pd.DataFrame) -> pd.DataFrame:
         rec = {"case": case, "scenario": g["scenario"].iloc[0], "systems": g["systems"].iloc[0],
                "steps": g["steps"].iloc[0], "n": g["n"].iloc[0], "m": g["m"].iloc[0],
                "compile_time_s": g["compile_time_s"].max()}
-        for engine in ("compiled", "python"):
+        for engine in engines:
             e = g[g["engine"] == engine]
             rec[f"{engine}_s"] = float(e["median_s"].iloc[0] / e["steps"].iloc[0]) if len(e) else float("nan")
             rec[f"rounds_{engine}"] = e["rounds"].iloc[0] if len(e) else float("nan")
-        rec["speedup"] = rec["python_s"] / rec["compiled_s"] if rec["compiled_s"] > 0 else float("nan")
+        compiled, python = rec.get("compiled_s", float("nan")), rec.get("python_s", float("nan"))
+        rec["speedup"] = python / compiled if compiled > 0 else float("nan")
         rows.append(rec)
     return pd.DataFrame(rows, columns=cols)
 

@@ -1,7 +1,8 @@
 """What every report section reads: the result rows, the micro-benchmarks and the run's
 settings, loaded once (:func:`load_context`), plus the key-number lines sections add.
 
-:func:`load_rows` is the only place the report reads benchmark storage (:mod:`bench.results`).
+:func:`load_rows` is the only place the report reads benchmark storage, through
+:mod:`observer.results_io` (the reading side :mod:`bench.results` writes for).
 """
 
 from __future__ import annotations
@@ -13,13 +14,13 @@ from typing import Iterable
 
 import pandas as pd
 
+from observer.results_io import CASES_SUFFIX, load_results, read_suite_meta
 from reports import registry
 
 
 def load_rows(files: list[Path]) -> pd.DataFrame:
     """The tidy result rows of ``files`` (one DataFrame, a ``results_dir`` column per row), in
     a fixed order (:func:`order_rows`). The only place the report reads benchmark storage."""
-    from bench.results import load_results
     return order_rows(plain_strings(load_results(files)))
 
 
@@ -34,33 +35,45 @@ def plain_strings(df: pd.DataFrame) -> pd.DataFrame:
 
 def suite_results(suite: str, folder: str | Path) -> Path:
     """Where :mod:`bench` stores the results of ``suite`` under ``folder`` (what
-    :func:`load_rows` takes): the case folder ``<suite>.cases`` (one Parquet file per case), or
-    ``<suite>.jsonl`` where the storage predates it."""
-    try:
-        from bench.results import CASES_SUFFIX
-    except ImportError:  # pragma: no cover - JSON-lines storage
-        CASES_SUFFIX = ".jsonl"
+    :func:`load_rows` takes): the case folder ``<suite>.cases`` (one Parquet file per case,
+    :data:`observer.results_io.CASES_SUFFIX`)."""
     return Path(folder) / f"{suite}{CASES_SUFFIX}"
 
 
-def _declared_order(suite: str) -> dict[str, int]:
-    from bench.suites import SUITES
+def _suite_folders(df: pd.DataFrame) -> dict[str, str | None]:
+    """Suite → the results folder of its first row (None where the rows carry none), suites in
+    order of appearance."""
+    if df.empty or "suite" not in df:
+        return {}
+    first = df.drop_duplicates("suite")
+    dirs = first["results_dir"] if "results_dir" in df else [None] * len(first)
+    return {str(s): (str(d) if isinstance(d, (str, Path)) else None) for s, d in zip(first["suite"], dirs)}
 
-    declared = SUITES.get(suite)
-    return {c.case_id: i for i, c in enumerate(declared.cases)} if declared is not None else {}
+
+def suite_meta(suite: str, folder: str | Path | None) -> dict | None:
+    """The metadata bench wrote beside the suite's results
+    (:func:`observer.results_io.read_suite_meta`), None where there is none (results written
+    before it)."""
+    return read_suite_meta(suite, folder) if folder is not None else None
+
+
+def _declared_order(suite: str, folder: str | Path | None) -> dict[str, int]:
+    meta = suite_meta(suite, folder)
+    return {cid: i for i, cid in enumerate(meta["cases"])} if meta is not None else {}
 
 
 def order_rows(df: pd.DataFrame) -> pd.DataFrame:
-    """Rows sorted by suite (first appearance), the suite's declared case order (case id for a
-    suite :mod:`bench.suites` does not declare), then the row index within the case: storage
-    order (one file per case) carries no meaning, the page must not depend on it."""
+    """Rows sorted by suite (first appearance), the suite's declared case order (as its
+    metadata sidecar lists it; case id for a suite without one), then the row index within the
+    case: storage order (one file per case) carries no meaning, the page must not depend on it."""
     if df.empty or not {"suite", "case_id"} <= set(df.columns):
         return df
-    suites = list(dict.fromkeys(df["suite"].astype(str)))
+    folders = _suite_folders(df)
+    suites = list(folders)
     pos = pd.Series(float("inf"), index=df.index)
     for s in suites:
         sel = df["suite"].astype(str) == s
-        pos[sel] = df.loc[sel, "case_id"].map(_declared_order(s)).fillna(float("inf"))
+        pos[sel] = df.loc[sel, "case_id"].map(_declared_order(s, folders[s])).fillna(float("inf"))
     keys = pd.DataFrame({"suite": df["suite"].astype(str).map(suites.index), "pos": pos,
                          "case": df["case_id"].astype(str),
                          "row": df["row"] if "row" in df else pd.Series(range(len(df)), index=df.index)})
@@ -138,8 +151,8 @@ PEERS_KIND = "peers"
 
 
 def schema_columns(kind: str) -> tuple[str, ...]:
-    """The columns :mod:`bench.schema` declares for rows of ``kind`` (none for peer rows)."""
-    from bench.schema import ROWS
+    """The columns :mod:`observer.row_schema` declares for rows of ``kind`` (none for peer rows)."""
+    from observer.row_schema import ROWS
 
     if kind == PEERS_KIND:
         return ()
@@ -191,14 +204,32 @@ class ReportContext:
             self._ensemble = ensemble_view(self.df)
         return self._ensemble
 
+    def suite_meta(self, suite: str) -> dict | None:
+        """The metadata sidecar of ``suite`` (:func:`suite_meta`), None where it is missing."""
+        return suite_meta(suite, _suite_folders(self.df).get(suite))
+
+    def declared(self, key: str):
+        """The value of ``key`` in the first suite's metadata sidecar that has it (e.g.
+        ``"band"``), None where no sidecar has it."""
+        for s in _suite_folders(self.df):
+            meta = self.suite_meta(s)
+            if meta is not None and key in meta:
+                return meta[key]
+        return None
+
+    def suites_without_meta(self) -> list[str]:
+        """The suites of the rows whose results folder holds no metadata sidecar
+        (:func:`suite_meta`): written before bench recorded it; the page says so."""
+        return [s for s, folder in _suite_folders(self.df).items() if suite_meta(s, folder) is None]
+
     def rows(self, kind: str, ok_only: bool = False) -> pd.DataFrame:
-        """The rows of one case kind, with every column :mod:`bench.schema` declares for it
+        """The rows of one case kind, with every column :mod:`observer.row_schema` declares for it
         (NaN where the rows lack one); optionally only those with status ok.
 
         Raises
         ------
         ValueError
-            ``kind`` is not a kind of :data:`bench.schema.ROWS` (nor ``"peers"``).
+            ``kind`` is not a kind of :data:`observer.row_schema.ROWS` (nor ``"peers"``).
         """
         declared = schema_columns(kind)
         sel = self.df[self.df["kind"] == kind] if "kind" in self.df else pd.DataFrame()

@@ -262,17 +262,14 @@ def work_precision_figure(wp: pd.DataFrame, orders: dict[str, float]) -> Figure 
 
 
 def robustness_figure(rob: pd.DataFrame, kinds: list[str], labels: dict[str, str],
-                      units: dict[str, str], bands: pd.DataFrame | None = None) -> Figure | None:
+                      units: dict[str, str], bands: pd.DataFrame) -> Figure | None:
     """Floor (median of V/V(t_on) at the end of the window) and decay rate against the size of
     each perturbation, per observer: the median over seeds (markers) and the band of
     :func:`reports.analysis.robustness_bands` (shaded, where a point has several seeds); the
     unperturbed value as a horizontal line."""
-    from reports.analysis import robustness_bands
-
     rob = rob[rob["status"] == "ok"]
     if rob.empty:
         return None
-    bands = robustness_bands(rob) if bands is None else bands
     base = bands[bands["perturbation"] == "none"]
     kinds = [k for k in kinds if k != "none" and (bands["perturbation"] == k).any()]
     if not kinds:

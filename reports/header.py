@@ -7,6 +7,7 @@ from datetime import datetime, timezone
 
 import pandas as pd
 
+from observer.results_io import cpu_model, git_commit, package_versions
 from reports.context import ReportContext
 from reports.tables import Table
 
@@ -22,8 +23,6 @@ def _uniq(df: pd.DataFrame, col: str, default: str = "n/a") -> str:
 
 def header_table(ctx: ReportContext) -> Table:
     """Versions (of the runs, else of this interpreter), commits, dates, machine, inputs."""
-    from bench.results import cpu_model, git_commit, package_versions
-
     df, now = ctx.df, package_versions()
     dates = df["date"].dropna().astype(str) if "date" in df else pd.Series(dtype=str)
     t = Table("Report header: versions, commit, date and machine", ["item", "value"])
@@ -39,6 +38,10 @@ def header_table(ctx: ReportContext) -> Table:
     for pkg in PACKAGES:
         t.add([pkg, _uniq(df, f"v_{pkg}", now.get(pkg, "n/a"))])
     t.add(["suites", _uniq(df, "suite")])
+    missing = ctx.suites_without_meta()
+    t.add(["suite metadata (<suite>.meta.json)",
+           f"missing for {', '.join(missing)}: results written before bench recorded it, cases in "
+           "case-id order; run the suite again to record it" if missing else "present"])
     t.add(["results files", ", ".join(str(p) for p in ctx.files)])
     t.add(["micro-benchmark file", ctx.micro_meta.get("file", "none")])
     t.add(["rows", str(len(df))])

@@ -135,16 +135,15 @@ def scenario_notes(name: str) -> str:
     return info(name).notes if name in SCENARIOS else ""
 
 
-def default_integrator() -> str | None:
-    """The integrator a suite case uses unless it says otherwise (:class:`bench.suites.Case`)."""
-    from dataclasses import fields
+def default_integrator() -> str:
+    """The integrator a suite case uses unless it says otherwise: the first of
+    :data:`observer.engines.INTEGRATORS` (the default of ``bench.suites.Case``)."""
+    from observer.engines import INTEGRATORS
 
-    from bench.suites import Case
-
-    return next((f.default for f in fields(Case) if f.name == "integrator"), None)
+    return INTEGRATORS[0]
 
 
 def is_default_integrator(value) -> bool:
     """Whether a row's ``integrator`` is the suites' default one (missing counts as default)."""
     default = default_integrator()
-    return default is None or value is None or value != value or value in ("", default)
+    return value is None or value != value or value in ("", default)

@@ -19,6 +19,10 @@ Layer rules (README, "Layout"):
    module: the solver registry's names are in :mod:`observer.solver_registry`.
 4. A command line (``cli``, ``__main__``) is imported only by its own package: what the
    command lines share is in :mod:`observer.cli_common`.
+5. The report reads result rows only: no module of ``reports`` imports ``bench`` (the
+   storage's reading side and the rows' schema are :mod:`observer.results_io` and
+   :mod:`observer.row_schema`). :data:`REPORTS_STILL_IMPORTING_BENCH` lists the modules not
+   yet moved off it, each to be deleted from the list when it is.
 """
 
 from __future__ import annotations
@@ -43,6 +47,12 @@ CLI_NAMES = ("cli", "__main__")
 
 ALLOWED_CYCLE_EDGES: set[tuple[str, str]] = set()
 """Edges left out of the cycle search, each to be deleted when its cycle is broken."""
+
+REPORTS_STILL_IMPORTING_BENCH = frozenset({
+    "reports.sections.peers",          # bench.peers
+})
+"""Report modules that still import ``bench`` (issue 32, item 3), each to be deleted when the
+suite metadata it reads is written by bench into the results."""
 
 
 def module_files(root: Path, packages=PACKAGES) -> dict[str, Path]:
@@ -213,3 +223,40 @@ def test_command_lines_are_imported_only_by_their_own_package(graph):
     bad = [f"{a} → {b} (line {graph[a][b]})" for a in graph for b in graph[a]
            if b in clis and a.split(".")[0] != b.split(".")[0]]
     assert not bad, "a command line imports another package's:\n" + "\n".join(bad)
+
+
+def _reports_importing_bench(graph) -> dict[str, list[str]]:
+    """Module of ``reports`` → its imports of ``bench`` (``"bench.x (line n)"``)."""
+    out: dict[str, list[str]] = {}
+    for a, deps in graph.items():
+        if _within(a, "reports"):
+            hits = [f"{b} (line {line})" for b, line in deps.items() if _within(b, "bench")]
+            if hits:
+                out[a] = hits
+    return out
+
+
+def test_walker_finds_a_report_module_importing_bench_even_deferred(tmp_path):
+    for pkg in ("bench", "reports"):
+        (tmp_path / pkg).mkdir()
+        (tmp_path / pkg / "__init__.py").write_text("")
+    (tmp_path / "bench" / "suites.py").write_text("BAND = 1\n")
+    (tmp_path / "reports" / "ok.py").write_text("import json\nfrom reports import bad\n")
+    (tmp_path / "reports" / "bad.py").write_text("def f():\n    from bench.suites import BAND\n    return BAND\n")
+    g = import_graph(tmp_path, ("bench", "reports"))
+    assert _reports_importing_bench(g) == {"reports.bad": ["bench.suites (line 2)"]}
+
+
+def test_reports_do_not_import_bench(graph):
+    found = _reports_importing_bench(graph)
+    bad = [f"{a} → {', '.join(hits)}" for a, hits in sorted(found.items())
+           if a not in REPORTS_STILL_IMPORTING_BENCH]
+    assert not bad, ("a report module imports bench (the report reads result rows only: "
+                     "observer.results_io, observer.row_schema):\n" + "\n".join(bad))
+
+
+def test_reports_still_importing_bench_still_do(graph):
+    found = _reports_importing_bench(graph)
+    assert REPORTS_STILL_IMPORTING_BENCH <= set(graph), "a listed report module no longer exists"
+    gone = sorted(REPORTS_STILL_IMPORTING_BENCH - set(found))
+    assert not gone, f"no longer import bench: delete from REPORTS_STILL_IMPORTING_BENCH: {gone}"

@@ -7,8 +7,9 @@ from __future__ import annotations
 
 import pandas as pd
 
+from observer.row_schema import HARD_STATES
 from reports.blocks import Section
-from reports.context import ReportContext
+from reports.context import ReportContext, schema_columns
 from reports.tables import Table, fmt, fmt_int, text
 
 TITLE = "Hard cases: status, NaN, residual and error against the reference"
@@ -30,13 +31,12 @@ INTRO = ("Each hard case runs the master alone with the compiled time-stepping e
 
 
 def hard_rows(ctx: ReportContext) -> pd.DataFrame:
-    """The ``hard`` rows with every column :func:`bench.hard.columns` declares (NaN where a
-    row lacks one), in the order of ``ctx.df`` (the suite's declared order)."""
-    from bench.hard import columns
-
+    """The ``hard`` rows with every column the row schema declares for them
+    (:data:`observer.row_schema.ROWS`; NaN where a row lacks one), in the order of ``ctx.df``
+    (the suite's declared order)."""
     df = ctx.df
     rows = df[df["kind"] == KIND].copy() if "kind" in df else pd.DataFrame()
-    for c in columns():
+    for c in schema_columns(KIND):
         if c not in rows:
             rows[c] = float("nan")
     return rows.reset_index(drop=True)
@@ -45,10 +45,8 @@ def hard_rows(ctx: ReportContext) -> pd.DataFrame:
 def clear_outcome(row) -> bool:
     """The case ran to the end (status ok) or stopped with a stated reason (any other known
     status and a non-empty stop reason)."""
-    from bench.hard import STATES
-
     status = text(row.get("status"))
-    return status == "ok" or (status in STATES and text(row.get("stop_reason")) != "")
+    return status == "ok" or (status in HARD_STATES and text(row.get("stop_reason")) != "")
 
 
 def has_reference(row) -> bool:

@@ -9,25 +9,23 @@ from reports import analysis, figures, registry
 from reports.analysis import ROBUST_FLOOR, ROBUST_RHOS
 from reports.blocks import Block, Section
 from reports.context import ReportContext
+from reports.sections.settings import MISSING
 from reports.tables import Table, band_cell, fmt, fmt_int, fmt_rho, fmt_time
 
 TITLE = "Robustness: observers under imperfect switching signals"
 
 
-def _perturbations():
-    from bench.perturb import KINDS, LABELS, UNITS
-    return KINDS, LABELS, UNITS
+def _perturbations(meta: dict) -> tuple[list[str], dict[str, str], dict[str, str]]:
+    """``(kinds, labels, units)`` of the perturbations as the suite's metadata sidecar records
+    them (``"perturbations"``, written by bench from :mod:`bench.perturb`)."""
+    return list(meta["kinds"]), dict(meta["labels"]), dict(meta["units"])
 
 
-def _band_pct() -> tuple[str, str]:
-    from bench.suites import BAND
-    return tuple(f"{100 * q:.0f}" for q in BAND)
-
-
-def intro(rob: pd.DataFrame, bands: pd.DataFrame) -> str:
-    """Setting of the robustness runs, from the rows."""
-    kinds, labels, _ = _perturbations()
-    lo, hi = _band_pct()
+def intro(rob: pd.DataFrame, bands: pd.DataFrame, quantiles: tuple[float, float], kinds: list[str],
+          labels: dict[str, str]) -> str:
+    """Setting of the robustness runs, from the rows, the suite's band ``quantiles`` and its
+    perturbation ``kinds`` and ``labels``."""
+    lo, hi = (f"{100 * q:.0f}" for q in quantiles)
     rnd = bands[bands["seeds"] > 1]
     seeds = int(rnd["seeds"].max()) if len(rnd) else 1
     random_kinds = ", ".join(dict.fromkeys(rnd["perturbation"])) or "none"
@@ -47,10 +45,10 @@ def intro(rob: pd.DataFrame, bands: pd.DataFrame) -> str:
             + "; ".join(f"{k}: {labels[k]}" for k in kinds) + ". " + seeds_text)
 
 
-def bands_table(bands: pd.DataFrame) -> Table:
-    """:func:`reports.analysis.robustness_bands` as a table."""
-    _, _, units = _perturbations()
-    lo, hi = _band_pct()
+def bands_table(bands: pd.DataFrame, quantiles: tuple[float, float], units: dict[str, str]) -> Table:
+    """:func:`reports.analysis.robustness_bands` (over the band ``quantiles``) as a table, sizes
+    in the perturbations' ``units``."""
+    lo, hi = (f"{100 * q:.0f}" for q in quantiles)
     t = Table(f"Robustness: floor and rate of V against the perturbation (median [{lo}–{hi} %] "
               f"over seeds)",
               ["perturbation", "size", "seeds", "observer", "floor / V(t_on)", "rate (1/s)"]
@@ -70,9 +68,8 @@ def bands_table(bands: pd.DataFrame) -> Table:
     return t
 
 
-def summary_items(bands: pd.DataFrame) -> list[str]:
-    """One line per observer (:func:`reports.analysis.robustness_summary`)."""
-    _, _, units = _perturbations()
+def summary_items(bands: pd.DataFrame, units: dict[str, str]) -> list[str]:
+    """One line per observer (:func:`reports.analysis.robustness_summary`), sizes in ``units``."""
     summ = analysis.robustness_summary(bands)
     items = []
     for name, g in summ.groupby("observer", sort=False):
@@ -93,12 +90,16 @@ def build(ctx: ReportContext) -> Section:
     rob = ctx.rows_or_say(sec, "robustness", "robustness runs")
     if rob is None:
         return sec
-    kinds, labels, units = _perturbations()
-    bands = analysis.robustness_bands(rob)
-    sec.p(intro(rob, bands))
+    quantiles, perturbations = ctx.declared("band"), ctx.declared("perturbations")
+    if quantiles is None or perturbations is None:
+        sec.p(f"The robustness bands are not shown: {MISSING}.")
+        return sec
+    kinds, labels, units = _perturbations(perturbations)
+    bands = analysis.robustness_bands(rob, tuple(quantiles))
+    sec.p(intro(rob, bands, tuple(quantiles), kinds, labels))
     sec.figure(figures.robustness_figure(rob, list(kinds), labels, units, bands), "No robustness data.")
-    sec.table(bands_table(bands))
-    items = summary_items(bands)
+    sec.table(bands_table(bands, tuple(quantiles), units))
+    items = summary_items(bands, units)
     sec.blocks.append(Block("list", items))
     if items:
         rnd = bands[bands["seeds"] > 1]

@@ -1,5 +1,5 @@
 """Scaling: the rocking chain's CPU time per step and memory against N, fitted exponents and
-the acceptance exponent (issue 9) from N = ``SCALING_FIT_FROM``."""
+the acceptance exponent (issue 9) from the N the suite's metadata names (``scaling_fit_from``)."""
 
 from __future__ import annotations
 
@@ -9,14 +9,10 @@ from reports import analysis, figures
 from reports.analysis import ACCEPTANCE_EXPONENT, ACCEPTANCE_N_MAX
 from reports.blocks import Section
 from reports.context import ReportContext
+from reports.sections.settings import MISSING
 from reports.tables import Table, fmt, fmt_int
 
 TITLE = "Scaling: rocking_chain against N"
-
-
-def _fit_from() -> int:
-    from bench.suites import SCALING_FIT_FROM
-    return SCALING_FIT_FROM
 
 
 def intro(scal: pd.DataFrame) -> str:
@@ -57,9 +53,10 @@ def fits_table(fits: pd.DataFrame) -> Table:
     return t
 
 
-def key_sentence(scal: pd.DataFrame, fits: pd.DataFrame, key: str, p_acc: float) -> str:
-    """The scaling key number: the acceptance exponent, the other time fits and the verdict."""
-    fit_from, acc = _fit_from(), f"CPU time per step (N ≥ {_fit_from()})"
+def key_sentence(scal: pd.DataFrame, fits: pd.DataFrame, key: str, p_acc: float, fit_from: int) -> str:
+    """The scaling key number: the acceptance exponent (fitted from N = ``fit_from``), the other
+    time fits and the verdict."""
+    acc = f"CPU time per step (N ≥ {fit_from})"
     n_lo, n_hi = int(scal["N"].min()), int(scal["N"].max())
     msg = f"Chain scaling: CPU time per step ∝ N^{p_acc:.2f}"
     if key == acc:
@@ -89,23 +86,28 @@ def build(ctx: ReportContext) -> Section:
     scal = ctx.rows_or_say(sec, "scaling", "scaling runs")
     if scal is None:
         return sec
+    fit_from = ctx.declared("scaling_fit_from")
+    if fit_from is None:
+        sec.p(f"The scaling fits are not shown: {MISSING}.")
+        return sec
+    fit_from = int(fit_from)
     scal = scal.sort_values("N")
-    fits = analysis.scaling_fits(scal).set_index("quantity")
-    acc = f"CPU time per step (N ≥ {_fit_from()})"
+    fits = analysis.scaling_fits(scal, fit_from).set_index("quantity")
+    acc = f"CPU time per step (N ≥ {fit_from})"
     key = acc if acc in fits.index else "CPU time per step"
     p_acc, c_acc = _fit(fits, key) or (float("nan"), float("nan"))
     sec.p(intro(scal))
-    whole_key = f"whole call CPU time (N ≥ {_fit_from()})"
+    whole_key = f"whole call CPU time (N ≥ {fit_from})"
     whole = _fit(fits, whole_key)
     sec.figure(figures.scaling_figure(scal, (p_acc, c_acc), _fit(fits, "peak memory"),
-                                      _fit_from() if key == acc else None,
-                                      (*whole, _fit_from()) if whole else None), "No scaling data.")
+                                      fit_from if key == acc else None,
+                                      (*whole, fit_from) if whole else None), "No scaling data.")
     sec.table(per_n_table(scal))
     sec.table(fits_table(fits))
-    msg = key_sentence(scal, fits, key, p_acc)
+    msg = key_sentence(scal, fits, key, p_acc, fit_from)
     if whole:
         msg += (f"; the whole call (load_scenario + simulate: builder, validation, setup, loop, "
-                f"health) ∝ N^{whole[0]:.2f} from N = {_fit_from()} to {int(scal['N'].max())}")
+                f"health) ∝ N^{whole[0]:.2f} from N = {fit_from} to {int(scal['N'].max())}")
     ctx.key_numbers.append(msg + ".")
     sec.p(msg + ". The step costs O(n) for the banded free velocity and O(n|A| + |A|³) for |A| "
                 "closed contacts; 'mean closed contacts' says how many there are.")

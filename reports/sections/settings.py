@@ -13,19 +13,24 @@ from reports.tables import Table, fmt
 TITLE = "Settings and tolerances"
 
 
-def suite_tables(suites: list[str]) -> list[Table]:
-    """One table per known suite: its case count and settings."""
-    from bench.suites import SUITES
+MISSING = "n/a (suite metadata missing: results written before bench recorded <suite>.meta.json)"
+"""What the settings say of a value the suites' metadata sidecar would carry, without it."""
 
+
+def suite_tables(ctx: ReportContext) -> list[Table]:
+    """One table per suite of the rows: its case count and settings, as bench recorded them in
+    the suite's metadata sidecar (:meth:`reports.context.ReportContext.suite_meta`)."""
     out = []
-    for s in suites:
-        suite = SUITES.get(s)
-        if suite is None:
-            continue
-        t = Table(f"Settings of suite {s}: {suite.description}", ["setting", "value"])
-        t.add(["cases", str(len(suite.cases))])
-        for k, v in suite.settings.items():
-            t.add([k, str(v)])
+    for s in ctx.suites:
+        meta = ctx.suite_meta(s)
+        if meta is None:
+            t = Table(f"Settings of suite {s}", ["setting", "value"])
+            t.add(["settings", MISSING])
+        else:
+            t = Table(f"Settings of suite {s}: {meta.get('description', '')}", ["setting", "value"])
+            t.add(["cases", str(len(meta["cases"]))])
+            for k, v in (meta.get("settings") or {}).items():
+                t.add([k, str(v)])
         out.append(t)
     return out
 
@@ -44,8 +49,9 @@ def _value(ctx: ReportContext, kind: str, col: str, default: str = "n/a") -> str
 
 def definitions_table(ctx: ReportContext) -> Table:
     """Definitions of V, the thresholds, times, norms and bands."""
-    from bench.suites import BAND, SCALING_FIT_FROM
     from observer import stats
+
+    band, fit_from = ctx.declared("band"), ctx.declared("scaling_fit_from")
 
     t = Table("Tolerances and definitions used by the suites", ["quantity", "definition / value"])
     t.add(["V", "½(û−u)ᵀM(û−u) + ½(q̂−q)ᵀK(q̂−q), observer minus master (paper (16), ½ on both terms)"])
@@ -69,10 +75,11 @@ def definitions_table(ctx: ReportContext) -> Table:
     t.add(["work-precision error", _value(ctx, "work_precision", "norm") + " (time average, "
            "trapezoid on the stored grid: every step, or every k-th step at spacing h_record)"])
     t.add(["references of the work-precision points", _value(ctx, "work_precision", "reference")])
-    t.add(["robustness band", f"median and {100 * BAND[0]:.0f}–{100 * BAND[1]:.0f} % quantiles "
-           "(numpy, linear) over the seeds of a point"])
+    t.add(["robustness band", MISSING if band is None else f"median and {100 * band[0]:.0f}–"
+           f"{100 * band[1]:.0f} % quantiles (numpy, linear) over the seeds of a point"])
     t.add(["scaling exponent", "least-squares slope of log(CPU time per step) against log N from "
-           f"N = {SCALING_FIT_FROM} (acceptance ≤ {ACCEPTANCE_EXPONENT} up to N = {ACCEPTANCE_N_MAX})"])
+           f"N = {MISSING if fit_from is None else fit_from} (acceptance ≤ {ACCEPTANCE_EXPONENT} up to "
+           f"N = {ACCEPTANCE_N_MAX})"])
     t.add(["contact solvers", ", ".join(registry.contact_solvers())
            + f" (compared against {registry.REFERENCE_SOLVER})"])
     t.add(["contact-solve acceptance", "relative LCP residual ‖min(x, Gx+b)‖∞ / max(‖b‖∞, ‖Gx‖∞) "
@@ -98,7 +105,7 @@ def _largest_residual(ctx: ReportContext) -> str:
 def build(ctx: ReportContext) -> Section:
     """The settings section."""
     sec = Section("settings", TITLE)
-    for t in suite_tables(ctx.suites):
+    for t in suite_tables(ctx):
         sec.table(t)
     sec.table(definitions_table(ctx))
     return sec

@@ -10,7 +10,7 @@ import pytest
 
 import observer
 from bench.runners import Context, run_case
-from bench.schema import check_row
+from observer.row_schema import check_row
 from bench.suites import Case, get_suite, random_family
 from observer.ensemble import energy_metric
 from observer.observers import OBSERVER_DESIGNS

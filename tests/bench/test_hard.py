@@ -8,7 +8,8 @@ import pandas as pd
 import pytest
 
 import observer
-from bench import hard, schema
+from bench import hard
+from observer import row_schema
 from observer.closed_form import ball_position
 from reports.context import ReportContext
 from reports.sections import hard_cases as section
@@ -54,11 +55,11 @@ def test_cases_are_declared_once_and_quick_is_a_subset():
 
 
 def test_rows_fit_the_declared_columns(quick_rows):
-    """Every row passes :func:`bench.schema.check_row`, and the schema's declaration of the
+    """Every row passes :func:`observer.row_schema.check_row`, and the schema's declaration of the
     kind is the one :mod:`bench.hard` makes."""
-    assert schema.ROWS["hard"] == hard.columns()
+    assert row_schema.ROWS["hard"] == hard.columns()
     for row in quick_rows.to_dict("records"):
-        schema.check_row(row)
+        row_schema.check_row(row)
     assert set(hard.columns()) <= set(quick_rows.columns)
 
 
@@ -67,7 +68,7 @@ def test_every_quick_case_ends_clearly_without_nan(quick_rows):
     an error wherever a reference exists, NaN with a reason where none does."""
     assert len(quick_rows) == len(hard.hard_cases(False))
     for _, r in quick_rows.iterrows():
-        assert r["status"] in hard.STATES, r["name"]
+        assert r["status"] in row_schema.HARD_STATES, r["name"]
         assert r["status"] == "ok" or r["stop_reason"], r["name"]
         assert not r["has_nan"], r["name"]
         if r["status"] != "refused":

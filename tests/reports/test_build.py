@@ -783,9 +783,13 @@ def test_peers_section_ratios_are_recomputed(synthetic_report):
 def _rows_file(path: Path, cases: list[tuple[str, list[dict]]]) -> Path:
     """Hand-made rows stored as a suite named ``path.stem`` (bench.results' case store); the
     path build_report reads."""
+    from bench.run import write_suite_meta
+    from bench.suites import Suite
+
     store = ResultsFile(path)
     for case_id, rows in cases:
         store.append_case(path.stem, case_id, rows)
+    write_suite_meta(Suite(path.stem, "hand-made rows", ()), path.parent)    # as a bench run does
     return store.path
 
 
@@ -1022,7 +1026,7 @@ def test_analysis_robustness_summary_breaks_from_the_first_size_above_the_floor(
 
     rows = pd.DataFrame([r for _, rs in _synthetic_rows() for r in rs])
     rob = rows[rows["kind"] == "robustness"]
-    summ = robustness_summary(robustness_bands(rob))
+    summ = robustness_summary(robustness_bands(rob, (0.1, 0.9)))
     for _, r in summ.iterrows():
         g = rob[(rob["observer"] == r["observer"]) & (rob["perturbation"] == r["perturbation"])]
         medians = g.groupby("size")["floor_rel"].median()
@@ -1079,9 +1083,10 @@ def test_a_registered_design_shows_in_every_observer_table(tmp_path, monkeypatch
     assert [r["design"] for r in checks] == [toy.label, toy.label, "—"]
 
 
-def test_rows_are_ordered_whatever_the_storage_order():
+def test_rows_are_ordered_whatever_the_storage_order(tmp_path):
     """load order of case files carries no meaning: order_rows sorts by suite, the declared case
-    order (case id for an undeclared suite) and the row within the case."""
+    order (from the suite's metadata sidecar; case id without one) and the row within the case."""
+    from bench.run import write_suite_meta
     from reports.context import order_rows
 
     rows = pd.DataFrame([{"suite": "synthetic", "case_id": cid, "row": i, **r}
@@ -1090,9 +1095,13 @@ def test_rows_are_ordered_whatever_the_storage_order():
     a, b = order_rows(rows), order_rows(shuffled)
     assert a[["case_id", "row"]].values.tolist() == b[["case_id", "row"]].values.tolist()
     assert list(a["case_id"]) == sorted(rows["case_id"])      # undeclared suite: by case id
-    from bench.suites import SUITES
-    quick = [c.case_id for c in SUITES["quick"].cases][:5]
-    declared = pd.DataFrame({"suite": "quick", "case_id": quick[::-1], "row": 0})
+    from bench.suites import SUITES, Suite
+    cases = SUITES["quick"].cases[:5][::-1]                   # declared against case-id order
+    quick = [c.case_id for c in cases]
+    assert sorted(quick) != quick
+    declared = pd.DataFrame({"suite": "q", "case_id": sorted(quick), "row": 0, "results_dir": str(tmp_path)})
+    assert list(order_rows(declared)["case_id"]) == sorted(quick)   # no sidecar: by case id
+    write_suite_meta(Suite("q", "", cases), tmp_path)
     assert list(order_rows(declared)["case_id"]) == quick     # declared suite: declared order
 
 
@@ -1132,9 +1141,9 @@ def test_limitations_and_settings_quote_the_rows_and_the_registries(synthetic_re
 
 
 def test_context_rows_carry_every_schema_column_and_refuse_unknown_kinds(tmp_path):
-    """ReportContext.rows(kind): the rows of that kind with every column bench.schema declares
+    """ReportContext.rows(kind): the rows of that kind with every column observer.row_schema declares
     for it (NaN where missing); an unknown kind is an error naming it."""
-    from bench.schema import ROWS
+    from observer.row_schema import ROWS
     from reports.context import ReportContext
 
     df = pd.DataFrame([{"kind": "scaling", "N": 5, "status": "ok"}, {"kind": "checks", "status": "n/a"}])
@@ -1258,10 +1267,10 @@ def test_peak_memory_is_fitted_within_one_storage_mode():
     mem = np.where(sparse, 0.01, 0.1) * N
     rows = pd.DataFrame({"N": N, "cpu_per_step_s": 1e-6 * N, "peak_mem_mb": mem,
                          "h_record": np.where(sparse, 0.1, np.nan)})
-    fits = scaling_fits(rows).set_index("quantity")["exponent"]
+    fits = scaling_fits(rows, 10).set_index("quantity")["exponent"]
     assert fits["peak memory (every step stored)"] == pytest.approx(1.0, abs=1e-12)
     assert fits["peak memory (a row every 0.1 s)"] == pytest.approx(1.0, abs=1e-12)
     assert "peak memory" not in fits
     assert _fitted(N, mem) < 0.8                                  # what one fit across both says
-    one_mode = scaling_fits(rows.assign(h_record=np.nan)).set_index("quantity")["exponent"]
+    one_mode = scaling_fits(rows.assign(h_record=np.nan), 10).set_index("quantity")["exponent"]
     assert one_mode["peak memory"] == pytest.approx(_fitted(N, mem), abs=1e-12)

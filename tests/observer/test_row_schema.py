@@ -1,9 +1,9 @@
-"""bench.schema: one typed row per case kind; the runners' rows are checked against it."""
+"""observer.row_schema: one typed row per case kind; the runners' rows are checked against it."""
 
 import numpy as np
 import pytest
 
-from bench.schema import ROWS, check_row
+from observer.row_schema import ROWS, check_row
 from observer.metrics import RHOS, settle_column, sync_column
 
 

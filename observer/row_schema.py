@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from observer.metrics import RHOS, above_column, settle_column, sync_column
+from observer.result import RunState
 
 Columns = dict[str, Any]
 
@@ -41,6 +42,11 @@ HARD: Columns = {
 """The columns of a ``hard`` row (:mod:`bench.hard`) beyond :data:`CASE` and :data:`TIMING`,
 with their types (:func:`check_row` conventions: ``float`` columns may hold NaN;
 ``residual_held`` is None for a refused case, which ran no step)."""
+
+
+HARD_STATES = (*(s.value for s in RunState), "refused")
+"""Values of a ``hard`` row's ``status``: the run's :class:`observer.result.RunState`, or
+``refused`` (an :class:`~observer.errors.InputError` before the first step)."""
 
 
 def sync_columns() -> Columns:
