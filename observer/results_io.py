@@ -1,7 +1,7 @@
 """Reading the benchmark suites' stored results, and the machine a run describes.
 
-What both the writer of the results (:mod:`bench.results`) and their reader (:mod:`reports`)
-need, so that the report reads result rows without importing :mod:`bench`: the layout names
+What both the writer of the results (``bench.results``) and their reader (``reports``)
+need, so that the report reads result rows without importing ``bench``: the layout names
 of a suite's case folder (``OUT/<suite>.cases/<key>.parquet``), the check that a case file is
 whole (:func:`read_case`: it opens, its SHA-256 checksum matches its rows, it holds
 ``case_rows`` rows of the one case its name stands for), :func:`load_results` (a concat of
@@ -119,7 +119,7 @@ def load_results(paths: Iterable[str | Path]):
     Parameters
     ----------
     paths : iterable of path
-        Case folders ``OUT/<suite>.cases`` (:func:`bench.run.results_path`), or exported
+        Case folders ``OUT/<suite>.cases`` (``bench.run.results_path``), or exported
         ``.csv``/``.parquet`` files.
 
     Returns
@@ -161,7 +161,7 @@ def load_results(paths: Iterable[str | Path]):
 
 def meta_path(suite: str, folder: str | Path) -> Path:
     """``OUT/<suite>.meta.json``: what the suite declares that its rows do not carry, written
-    by :mod:`bench` when it runs the suite."""
+    by ``bench`` when it runs the suite."""
     return Path(folder) / f"{suite}{META_SUFFIX}"
 
 
@@ -183,7 +183,7 @@ def read_suite_meta(suite: str, folder: str | Path) -> dict | None:
 
 # -- the machine -------------------------------------------------------------------------------
 def cpu_model() -> str:
-    """CPU model name (``/proc/cpuinfo`` on Linux, else :func:`platform.processor`)."""
+    """CPU model name (``/proc/cpuinfo`` on Linux, else ``platform.processor()``)."""
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as fh:
             for line in fh:

@@ -1,7 +1,7 @@
 """The rows of the benchmark suites, one typed row per case kind, defined once.
 
-:mod:`bench.runners` builds rows and checks each against :func:`check_row` before it is
-written; :mod:`reports` reads the columns named here. A column is declared with its Python
+``bench.runners`` builds rows and checks each against :func:`check_row` before it is
+written; ``reports`` reads the columns named here. A column is declared with its Python
 type (``float`` columns may hold NaN or inf; ``int | None`` may be missing as None).
 Synchronization columns are named by :func:`observer.metrics.sync_column` and
 :func:`observer.metrics.settle_column` over the one threshold list
@@ -24,13 +24,13 @@ CASE: Columns = {"kind": str, "scenario": str, "name": str, "params": str, "solv
                  "law": str, "h": float, "t_end": float, "seed": int, "N": (int, type(None)),
                  "n": int, "m": int, "status": str, "note": str}
 """Every row: the case's declared fields and the effective scenario settings
-(:func:`bench.runners.base_row`), its status and a note."""
+(``bench.runners.base_row``), its status and a note."""
 
 TIMING: Columns = {"cpu_time_s": float, "wall_time_s": float, "cpu_scope": str}
 
 ENGINE: Columns = {"engine": str, "structure": str, "loop_time_s": float,
                    "loop_per_step_s": float, "run_compile_time_s": float, "solver_fallbacks": int}
-"""The time loop's engine, structure, own wall time and fallbacks (:func:`bench.runners.engine_columns`)."""
+"""The time loop's engine, structure, own wall time and fallbacks (``bench.runners.engine_columns``)."""
 
 HARD: Columns = {
     "description": str, "stop_reason": str, "has_nan": bool, "steps": int, "store": str,
@@ -39,7 +39,7 @@ HARD: Columns = {
     "warnings": str, "reference": str, "reference_note": str, "norm": str, "err_max": float,
     "err_mean": float, "ref_cpu_time_s": float,
 }
-"""The columns of a ``hard`` row (:mod:`bench.hard`) beyond :data:`CASE` and :data:`TIMING`,
+"""The columns of a ``hard`` row (``bench.hard``) beyond :data:`CASE` and :data:`TIMING`,
 with their types (:func:`check_row` conventions: ``float`` columns may hold NaN;
 ``residual_held`` is None for a refused case, which ran no step)."""
 
@@ -63,7 +63,7 @@ SYNC: Columns = {"observer": str, "t_on": float, "t_off": float, "V_on": float, 
                  "V_end": float, "floor": float, "master_closings": float, "floor_rel": float,
                  "V_end_rel": float, "e_q_end": float, "e_u_end": float, "chi_closings": int,
                  "V_min": float, "master_closed_fraction": float, **sync_columns()}
-"""Synchronization of one observer (:func:`bench.runners.sync_metrics`)."""
+"""Synchronization of one observer (``bench.runners.sync_metrics``)."""
 
 ROWS: dict[str, Columns] = {
     "observers": {**CASE, **SYNC, **ENGINE, **TIMING, "steps": int, "steps_per_s": float,
@@ -94,7 +94,7 @@ ROWS: dict[str, Columns] = {
                  "rate": float, "rate_points": int, "rate_t_fit": float, "rate_floor_stop": bool, "master": int, "floor": float, **{c(r): float for r in RHOS for c in (settle_column, sync_column)}, "paths": str},
 }
 """Kind → the columns of its rows and their types (``peers`` rows are declared by
-:mod:`bench.peers`, whose columns depend on the peer's run). An ``ensemble`` row is one
+``bench.peers``, whose columns depend on the peer's run). An ``ensemble`` row is one
 (design, member) of :func:`observer.ensemble` (its members' initial errors ``dq0_j``, ``du0_j``
 as extra columns)."""
 
