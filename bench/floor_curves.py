@@ -100,3 +100,21 @@ def write_json(result: dict, out) -> None:
     tmp = out.with_suffix(".tmp")
     tmp.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
     tmp.replace(out)
+
+
+def floor_arguments(argv, prog: str, description: str, out, out_help: str, members: int):
+    """The ``--out FILE --members N`` command line of the floor scripts
+    (:mod:`bench.latency_floor`, :mod:`bench.sensor_floor`): the parsed arguments, or None
+    after one ``error: --members: ...`` line on stderr for fewer than one member."""
+    import argparse
+    import sys
+    from pathlib import Path
+
+    p = argparse.ArgumentParser(prog=prog, description=description)
+    p.add_argument("--out", type=Path, default=out, help=out_help)
+    p.add_argument("--members", type=int, default=members)
+    args = p.parse_args(argv)
+    if args.members < 1:
+        print(f"error: --members: must be an integer ≥ 1, got {args.members}", file=sys.stderr)
+        return None
+    return args

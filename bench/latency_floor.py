@@ -20,7 +20,6 @@ stored result ``bench/stored/latency_floor_double_mass.{json,csv}`` that the REA
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -142,12 +141,11 @@ def run(out: Path, members: int = MEMBERS, h: float = H, t_end: float = T_END,
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m bench.latency_floor", description=__doc__.splitlines()[0])
-    p.add_argument("--out", type=Path, default=OUT, help="the JSON result (the rows go to the .csv beside it)")
-    p.add_argument("--members", type=int, default=MEMBERS)
-    args = p.parse_args(argv)
-    if args.members < 1:
-        print(f"error: --members: must be an integer ≥ 1, got {args.members}", file=sys.stderr)
+    from bench.floor_curves import floor_arguments
+
+    args = floor_arguments(argv, "python -m bench.latency_floor", __doc__.splitlines()[0], OUT,
+                           "the JSON result (the rows go to the .csv beside it)", MEMBERS)
+    if args is None:
         return 2
     if args.out.suffix != ".json":
         print("error: --out: must end in .json (the rows go to the .csv beside it)", file=sys.stderr)

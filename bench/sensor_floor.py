@@ -17,14 +17,13 @@ the latency result).
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from bench.floor_curves import curve_record, write_json
+from bench.floor_curves import curve_record, floor_arguments, write_json
 from bench.latency_floor import DESIGNS, H, MEMBERS, SEED, T_END, TAIL, measure_sensor
 
 JITTERS = (1e-5, 2e-5, 5e-5, 1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2)
@@ -65,12 +64,9 @@ def measure(members: int = MEMBERS, t_end: float = T_END) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m bench.sensor_floor", description=__doc__.splitlines()[0])
-    p.add_argument("--out", type=Path, default=STORED, help="the JSON result (default: the stored one)")
-    p.add_argument("--members", type=int, default=MEMBERS)
-    args = p.parse_args(argv)
-    if args.members < 1:
-        print(f"error: --members: must be an integer ≥ 1, got {args.members}", file=sys.stderr)
+    args = floor_arguments(argv, "python -m bench.sensor_floor", __doc__.splitlines()[0], STORED,
+                           "the JSON result (default: the stored one)", MEMBERS)
+    if args is None:
         return 2
     result = measure(args.members)
     write_json(result, args.out)
