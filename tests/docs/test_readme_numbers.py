@@ -57,7 +57,8 @@ def latency_quotes() -> list[str]:
     lat = r["settings"]["latencies"]
     return [interval(j["slope"], *j["interval"]["regression"], 3) + " with jumps",
             interval(n["slope"], *n["interval"]["regression"], 3) + " without",
-            f"d = {lat[0]:.0e} … {lat[-1]:.0e} s".replace("e-0", "e-")]
+            f"d = {lat[0]:.0e} … {lat[-1]:.0e} s".replace("e-0", "e-"),
+            f"regression intervals over {r['settings']['members']} paired members"]
 
 
 FOREST_NAMES = {"double_mass": "double mass", "grazing": "grazing",
@@ -81,6 +82,11 @@ def forest_quotes() -> list[str]:
               for label, name in FOREST_NAMES.items()]
     slower = [label for label in FOREST_NAMES if f.at[label, "high"] < 1.0]
     faster = [label for label in FOREST_NAMES if f.at[label, "low"] > 1.0 and label.startswith("random_system (seed")]
+    quoted = f.loc[[label for label in FOREST_NAMES if label != "random_system (all 4 systems)"]]
+    (members,) = set(quoted["members"])
+    masters = set(quoted["masters"])
+    assert masters == {1, 5} and set(quoted.index[quoted["masters"] == 1]) == {"grazing"}
+    quotes.append(f"{members} paired initial errors per scenario over 5 masters, grazing's over 1")
     words = {2: "two"}
     quotes += [f"slower on {words[len(slower)]} of four", f"faster on {words[len(faster)]} ("]
     return quotes
