@@ -427,28 +427,14 @@ def _base_log(sc, ctx: Context, key) -> pd.DataFrame:
 
 
 def run_robustness(case: Case, ctx: Context) -> list[dict]:
-    """Both observers driven by the master's closing log after a perturbation (one run:
-    ``cpu_time_s`` covers the master and both observers)."""
+    """One level of one sensor perturbation as a paired ensemble over ``case.masters`` masters
+    (:func:`_ensemble_masters`) × ``case.members`` initial errors, both designs
+    (:func:`bench.perturb.robustness_case_rows`): one row per (design, master, member);
+    ``cpu_time_s`` covers every master's sensed run and its members."""
+    from bench.perturb import robustness_case_rows
+
     sc = observer.load_scenario(case.scenario, case.overrides())
-    base = _base_log(sc, ctx, ("log", case.scenario, case.params, case.law, case.h, case.t_end))
-    log = perturb_log(base, case.perturbation, case.size, seed=case.seed, m=sc.system.m,
-                      t_end=float(sc.t_end), h=sc.h)
-    path = ctx.artefacts / "logs" / f"{safe_name(case.case_id)}.csv"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    log.to_csv(path, index=False, float_format="%.17g")
-    res, cpu, wall = simulate(sc, case, observers=_slaves(case, sc, case.observers),
-                              source="log", log=path)
-    steps = res.metadata["steps"]
-    rows = []
-    for name in case.observers:
-        rows.append({**base_row(case, sc), "observer": name, "perturbation": case.perturbation,
-                     "size": case.size, **sync_metrics(res, name), **engine_columns(res),
-                     "log_intervals": int(len(log)), "true_intervals": int(len(base)),
-                     "log_file": str(path.relative_to(ctx.out_dir)), "status": "ok", "note": "",
-                     "cpu_time_s": cpu, "wall_time_s": wall, "steps": steps,
-                     "steps_per_s": steps / cpu if cpu > 0 else float("nan"),
-                     "cpu_scope": "master + both observers"})
-    return rows
+    return [{**base_row(case, sc), **r} for r in robustness_case_rows(case, _ensemble_masters(case, sc))]
 
 
 # ------------------------------------------------------------------------------- ensembles

@@ -6,8 +6,9 @@ Running the suite is :func:`bench.run.run_suite`; the kinds of cases are
 
 ``observers``       jump vs no-jump observer on one scenario (one row per observer);
 ``work_precision``  error against a stated reference vs CPU time, one step size;
-``robustness``      observers driven by a perturbed closing log (delay, jitter, missed
-                    impacts, false closings);
+``robustness``      both designs with χ from a contact sensor (latency, jitter, missed and
+                    false detections, threshold δ, sampling period) at one level, as a
+                    paired ensemble over several masters × initial errors;
 ``scaling``         the master of ``rocking_chain`` for one N: CPU time per step, memory;
 ``checks``          the proof-step checks of :mod:`proofs_checks` on one scenario;
 ``peers``           one problem in Siconos and in the toolkit (:mod:`bench.peers`): time per
@@ -65,7 +66,8 @@ class Case:
     h, t_end : float or None
         Step and horizon; None keeps the scenario's.
     seed : int
-        Seed of the case's random generator (robustness perturbations, checks).
+        Seed of the case's random generator (robustness: the masters, the initial errors and the
+        sensors' seeds, :func:`bench.perturb.sensor_seed`; checks).
     slave_offset : tuple or None
         ``((dq...), (du...))``: observer initial state = master initial state + offset, for
         scenarios without an ``[observer]`` table; None uses the scenario's table.
@@ -87,17 +89,17 @@ class Case:
     perturbation : str
         robustness: one of :data:`bench.perturb.KINDS`.
     size : float
-        robustness: size of the perturbation (s, probability or 1/s): the value of its sensor
-        setting (:data:`bench.perturb.SETTINGS`).
+        robustness: size of the perturbation (s, probability, 1/s or m): the value of its
+        sensor setting (:data:`bench.perturb.SETTINGS`).
     memory : bool
         scaling: also measure the peak traced memory (a second, traced run).
     members : int
-        ensemble: initial errors per design (the same for every design: paired).
+        ensemble, robustness: initial errors per design (the same for every design: paired).
     paths : int
         ensemble: members per design (the first ``paths``) whose V(t) is kept, thinned
         (:func:`bench.runners.ensemble_paths`), for the report's V(t) bands.
     masters : int
-        ensemble: master trajectories (the scenario's and ``masters − 1`` initial states sampled
+        ensemble, robustness: master trajectories (the scenario's and ``masters − 1`` initial states sampled
         around it, :func:`observer.compare.master_scenarios`), ``members`` split evenly over
         them; the rows' ``master`` column is the cluster the report's intervals resample.
     """
@@ -366,34 +368,40 @@ def work_precision_cases(full: bool) -> list[Case]:
 
 # ------------------------------------------------------------------------------- robustness
 ROBUSTNESS_LEVELS = {
-    "quick": {"delay": (1e-3, 5e-3, 2e-2), "jitter": (1e-3, 5e-3),
-              "missed": (0.1, 0.3), "false": (1.0, 5.0)},
-    "full": {"delay": (1e-4, 5e-4, 1e-3, 5e-3, 1e-2, 2e-2, 5e-2),
-             "jitter": (1e-4, 5e-4, 1e-3, 5e-3, 1e-2, 2e-2),
-             "missed": (0.05, 0.1, 0.2, 0.3, 0.5), "false": (0.5, 1.0, 2.0, 5.0, 10.0)},
+    "quick": {"delay": (2e-4, 1e-3, 5e-3, 2e-2), "jitter": (1e-5, 1e-4, 1e-3, 1e-2),
+              "missed": (0.01, 0.03, 0.1, 0.3), "false": (0.1, 0.3, 1.0, 3.0),
+              "threshold": (1e-6, 1e-5, 1e-4, 1e-3), "sampling": (2e-4, 1e-3, 5e-3, 2e-2)},
+    "full": {"delay": (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2),
+             "jitter": (1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2),
+             "missed": (0.01, 0.03, 0.1, 0.2, 0.3, 0.5), "false": (0.1, 0.3, 1.0, 3.0, 10.0),
+             "threshold": (1e-7, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2),
+             "sampling": (1e-4, 5e-4, 1e-3, 5e-3, 1e-2, 2e-2)},
 }
+"""Levels of each sensor perturbation (:data:`bench.perturb.SETTINGS`), spanning decades. A
+latency moves χ by whole steps (:mod:`observer.sensor`), so its levels start at one step
+(quick h = 2e-4 s, full 1e-4 s); jitter, being drawn per endpoint, acts below a step too."""
 RANDOM_KINDS = ("jitter", "missed", "false")
-ROBUSTNESS_SEEDS = {"quick": 3, "full": 20}
-"""Seeds per point of the random perturbations (a delay is deterministic: one run)."""
+"""The perturbations that draw random numbers (the sensor's seed matters)."""
+ROBUSTNESS_ENSEMBLE = {"quick": {"masters": 5, "members": 20}, "full": {"masters": 10, "members": 100}}
+"""Masters and initial errors (in all, split evenly over the masters) of every robustness point:
+the same masters and errors at every level of every kind (the case seed is 0 throughout)."""
+ROBUSTNESS_RUN = {"quick": (2e-4, 8.0), "full": (1e-4, 10.0)}
+"""(h, T) of the robustness runs (double_mass, coupled over the whole run)."""
 BAND = (0.1, 0.9)
-"""Quantiles of the band the report draws over the seeds of a point (with the median)."""
+"""Quantiles of the band the suites' metadata declares (``band``; the robustness section now
+gives cluster bootstrap intervals over masters instead)."""
 
 
 def robustness_cases(full: bool) -> list[Case]:
-    """double_mass (coupled from t = 0) with χ from the master's own closing log, perturbed.
-
-    Random perturbations are repeated over :data:`ROBUSTNESS_SEEDS` seeds (20 in ``full``);
-    the report shows their median and the 10–90 % band (:data:`BAND`).
-    """
+    """double_mass (coupled from t = 0) with χ from a contact sensor (:mod:`bench.perturb`): per
+    kind and level of :data:`ROBUSTNESS_LEVELS` (and the ideal sensor) one paired ensemble of
+    :data:`ROBUSTNESS_ENSEMBLE` masters × initial errors, both designs."""
     key = "full" if full else "quick"
-    h, T = (1e-4, 10.0) if full else (2e-4, 8.0)
-    seeds = tuple(range(ROBUSTNESS_SEEDS[key]))
-    cases = [Case("robustness", "double_mass", h=h, t_end=T)]
+    h, T = ROBUSTNESS_RUN[key]
+    kw = dict(h=h, t_end=T, **ROBUSTNESS_ENSEMBLE[key])
+    cases = [Case("robustness", "double_mass", **kw)]
     for kind, sizes in ROBUSTNESS_LEVELS[key].items():
-        for size in sizes:
-            for seed in (seeds if kind in RANDOM_KINDS else (0,)):
-                cases.append(Case("robustness", "double_mass", h=h, t_end=T, perturbation=kind,
-                                  size=size, seed=seed))
+        cases += [Case("robustness", "double_mass", perturbation=kind, size=size, **kw) for size in sizes]
     return cases
 
 
@@ -495,13 +503,15 @@ RANDOM_SETTINGS = (2.5e-4, 10.0)
 their clearance, above the run-health bound of 1 %)."""
 ENSEMBLE_ROBUSTNESS = {
     "quick": {"levels": {"jitter": (1e-3,)}, "seeds": 1, "members": 100},
-    "full": {"levels": {k: v for k, v in ROBUSTNESS_LEVELS["full"].items() if k != "false"},
+    "full": {"levels": {"delay": (1e-4, 5e-4, 1e-3, 5e-3, 1e-2, 2e-2, 5e-2),
+                        "jitter": (1e-4, 5e-4, 1e-3, 5e-3, 1e-2, 2e-2), "missed": (0.05, 0.1, 0.2, 0.3, 0.5)},
              "seeds": 3, "members": 100},
 }
 """Robustness to an imperfect χ as ensembles (double_mass, coupled from t = 0, jump and
 nojump): per level and seed one perturbed closing log (``perturb_log`` seeded by the case's
-seed) and the members' initial errors (sampled from the same seed). False closings stay with
-the single-error robustness cases (their 5 levels × 3 seeds would add a third to the cost)."""
+seed) and the members' initial errors (sampled from the same seed): the levels the robustness
+suite had before it became paired ensembles over masters (:func:`robustness_cases`), kept so
+that these ensembles' case ids and rows stay as they were."""
 
 
 def random_family(count: int) -> list[tuple[int, int, int]]:
@@ -632,16 +642,18 @@ def _settings(full: bool) -> dict:
                                 "Newton's to round-off on these sweeps; full runs both)"))
     sw += (f"; errors on a grid of spacing max(h, {H_RECORD['closed form']:.3g} s) against a "
            f"closed form, max(h, {H_RECORD['event solution']:.3g} s) against the event solution")
-    nseeds = ROBUSTNESS_SEEDS[key]
+    rob = ROBUSTNESS_ENSEMBLE[key]
     return {
         "engine": "compiled (numba kernel; compile time measured once per run, apart) for every "
                   "run with the pivoting solver; numpy engine for the other contact solvers",
         "observers": "; ".join(f"{c.name}: h = {c.h:g} s, T = {c.t_end:g} s" for c in obs),
         "synchronization thresholds ρ": ", ".join(f"{r:g}" for r in RHOS),
         "work-precision sweep": sw,
-        "robustness": ("double_mass, " + ("h = 1e-4 s, T = 10 s" if full else "h = 2e-4 s, T = 8 s")
-                       + f", {nseeds} seeds per random perturbation (median and "
-                         f"{100 * BAND[0]:.0f}–{100 * BAND[1]:.0f} % band), delay deterministic"),
+        "robustness": (f"double_mass, h = {ROBUSTNESS_RUN[key][0]:g} s, T = {ROBUSTNESS_RUN[key][1]:g} s; "
+                       f"χ from a contact sensor, per level {rob['masters']} masters × "
+                       f"{rob['members'] // rob['masters']} initial errors, both designs paired; levels "
+                       + "; ".join(f"{k} {', '.join(f'{v:g}' for v in vs)}"
+                                   for k, vs in ROBUSTNESS_LEVELS[key].items())),
         "scaling": "rocking_chain master, h = 1e-3 s, " + ("T = 4 s" if full else "T = 2 s")
                    + ", N = " + ", ".join(str(n) for n in SCALING_N[key])
                    + f"; exponent fitted from N = {SCALING_FIT_FROM}",
@@ -686,8 +698,9 @@ def smoke_suite() -> Suite:
              reference="closed form"),
         Case("work_precision", "bouncing_ball", law="newton", h=5e-4, t_end=1.0, observers=(),
              reference="closed form", h_record=1e-3),
-        Case("robustness", "double_mass", h=1e-3, t_end=1.0),
-        Case("robustness", "double_mass", h=1e-3, t_end=1.0, perturbation="delay", size=5e-3),
+        Case("robustness", "double_mass", h=1e-3, t_end=1.0, masters=2, members=2),
+        Case("robustness", "double_mass", h=1e-3, t_end=1.0, perturbation="delay", size=5e-3,
+             masters=2, members=2),
         Case("scaling", "rocking_chain", params=(("param.N", 2),), observers=(), h=1e-3, t_end=0.2),
         Case("scaling", "rocking_chain", params=(("param.N", 4),), observers=(), h=1e-3, t_end=0.2),
         Case("checks", "bouncing_ball", observers=()),

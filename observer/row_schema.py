@@ -75,9 +75,10 @@ ROWS: dict[str, Columns] = {
                        "h_ref": (float, type(None)), "ref_cpu_time_s": float, "steps": int,
                        "steps_per_s": float, "contact_solves": int, "samples": int,
                        "error_grid_s": float},
-    "robustness": {**CASE, **SYNC, **ENGINE, **TIMING, "perturbation": str, "size": float,
-                   "log_intervals": int, "true_intervals": int, "log_file": str, "steps": int,
-                   "steps_per_s": float},
+    "robustness": {**CASE, **TIMING, "design": str, "member": int, "master": int, "members": int,
+                   "masters": int, "perturbation": str, "size": float, "setting": str,
+                   "sensor_seed": int, "tail": float, "V_on": float, "floor": float, "peak": float,
+                   "V_end": float, "log_intervals": float, **{settle_column(r): float for r in RHOS}},
     "scaling": {**CASE, **ENGINE, **TIMING, "steps": int, "setup_steps": int, "setup_cpu_time_s": float,
                 "cpu_per_step_s": float, "cpu_per_step_total_s": float, "wall_per_step_s": float,
                 "steps_per_s": float, "contact_solves": int, "closed_step_fraction": float,
@@ -96,7 +97,9 @@ ROWS: dict[str, Columns] = {
 """Kind → the columns of its rows and their types (``peers`` rows are declared by
 ``bench.peers``, whose columns depend on the peer's run). An ``ensemble`` row is one
 (design, member) of :func:`observer.ensemble` (its members' initial errors ``dq0_j``, ``du0_j``
-as extra columns)."""
+as extra columns). A ``robustness`` row is one (design, master, member) of a paired ensemble
+with χ from a contact sensor (``bench.perturb``): its ``floor`` is the median of V/V(t_on) over
+the window's last ``tail``."""
 
 OPTIONAL: dict[str, frozenset] = {
     "observers": frozenset(SYNC) | frozenset(ENGINE) | frozenset(

@@ -12,9 +12,6 @@ rows. Designs, ratio pairs, thresholds and solvers come from :mod:`reports.regis
 * :func:`design_summary` — per registered design: runs, applicable runs, median final V;
 * :func:`wp_orders` — fitted orders of the work-precision sweeps; :func:`solver_comparison`
   — each fast contact solver against the reference on the same method;
-* :func:`robustness_bands` — per perturbation point and observer: the median and the
-  quantile band over seeds of the floor and the rate, the median settling times and how many
-  seeds settle; :func:`robustness_summary` — where each perturbation breaks each observer;
 * :func:`scaling_fits` — fitted exponents of the chain's cost against N (the acceptance
   exponent from the suite's ``scaling_fit_from`` N to the largest N);
 * :func:`micro_speedups` — speed-ups of the fast contact solvers over the reference;
@@ -261,56 +258,6 @@ def settling_excursions(obs: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["name", "observer", "rho", "first", "settle", "above_after"])
 
 
-# ----------------------------------------------------------------------------- robustness
-def band(values, quantiles: tuple[float, float]) -> tuple[float, float, float]:
-    """``(median, q_lo, q_hi)`` of the finite values (numpy's linear quantiles); NaNs when none."""
-    x = np.asarray(values, dtype=float)
-    x = x[np.isfinite(x)]
-    if x.size == 0:
-        return float("nan"), float("nan"), float("nan")
-    lo, hi = np.quantile(x, quantiles)
-    return float(np.median(x)), float(lo), float(hi)
-
-
-ROBUST_RHOS = (1e-3, 1e-6)
-"""Thresholds whose settling times the robustness table shows (median over seeds)."""
-ROBUST_FLOOR = 1e-6
-"""A perturbation "breaks" an observer from the smallest size whose median floor / V(t_on)
-exceeds this value (:func:`robustness_summary`)."""
-
-
-def robustness_bands(rob: pd.DataFrame, quantiles: tuple[float, float]) -> pd.DataFrame:
-    """One row per (perturbation, size, observer) over its seeds (``ok`` rows).
-
-    Columns: ``perturbation, size, observer, seeds``; for the floor (``floor_rel``) and the
-    rate: ``floor_median, floor_lo, floor_hi, rate_median, rate_lo, rate_hi`` (median and the
-    ``quantiles`` band, :func:`band`); per ρ in :data:`ROBUST_RHOS`: ``settle_<ρ>_median`` (median
-    settling time over the seeds, ``inf`` when at least half do not settle) and
-    ``settled_<ρ>`` (how many seeds settle within the window); ``log_intervals`` (median) and
-    ``true_intervals``.
-    """
-    cols = ["perturbation", "size", "observer", "seeds", "floor_median", "floor_lo", "floor_hi",
-            "rate_median", "rate_lo", "rate_hi"]
-    for rho in ROBUST_RHOS:
-        cols += [rho_col("settle", rho, "_median"), rho_col("settled", rho)]
-    cols += ["log_intervals", "true_intervals"]
-    rows = []
-    ok = rob[rob["status"] == "ok"] if "status" in rob else rob
-    for (kind, size, name), g in ok.groupby(["perturbation", "size", "observer"], sort=False):
-        rec = {"perturbation": kind, "size": float(size), "observer": name, "seeds": int(g["seed"].nunique())}
-        rec["floor_median"], rec["floor_lo"], rec["floor_hi"] = band(g["floor_rel"], quantiles)
-        rec["rate_median"], rec["rate_lo"], rec["rate_hi"] = band(g["rate"], quantiles)
-        for rho in ROBUST_RHOS:
-            col = SETTLE[rho]
-            t = g[col].astype(float).to_numpy() if col in g else np.full(len(g), np.nan)
-            rec[rho_col("settle", rho, "_median")] = float(np.median(t)) if len(t) else float("nan")
-            rec[rho_col("settled", rho)] = int(np.isfinite(t).sum())
-        rec["log_intervals"] = float(g["log_intervals"].median()) if "log_intervals" in g else float("nan")
-        rec["true_intervals"] = float(g["true_intervals"].iloc[0]) if "true_intervals" in g else float("nan")
-        rows.append(rec)
-    return pd.DataFrame(rows, columns=cols)
-
-
 # ------------------------------------------------------------------------- work-precision
 def wp_orders(wp: pd.DataFrame) -> pd.DataFrame:
     """Per method (scenario · target · law · solver): fitted order p of the mean-norm error
@@ -494,29 +441,6 @@ def peer_summary(pe: pd.DataFrame) -> pd.DataFrame:
                      "ratio_loop": sic / loop if loop > 0 else float("nan"),
                      "ratio_run": run / tk,
                      "max_diff": max(float(r["max_abs_diff_q"]), float(r["max_abs_diff_u"]))})
-    return pd.DataFrame(rows, columns=cols)
-
-
-def robustness_summary(bands: pd.DataFrame, floor: float = ROBUST_FLOOR) -> pd.DataFrame:
-    """Per observer with an unperturbed run: its floor and rate with the exact χ
-    (``base_floor, base_rate``) and, per perturbation kind, the smallest size whose median
-    floor exceeds ``floor`` (``breaks_from``; NaN: every size stays below). One row per
-    (observer, perturbation)."""
-    cols = ["observer", "perturbation", "base_floor", "base_rate", "breaks_from"]
-    rows = []
-    for name in registry.in_registry_order(bands["observer"]):
-        base = bands[(bands["perturbation"] == "none") & (bands["observer"] == name)]
-        if base.empty:
-            continue
-        b0 = base.iloc[0]
-        for kind in dict.fromkeys(bands["perturbation"]):
-            g = bands[(bands["perturbation"] == kind) & (bands["observer"] == name)]
-            if kind == "none" or g.empty:
-                continue
-            over = g[g["floor_median"] > floor]
-            rows.append({"observer": name, "perturbation": kind, "base_floor": b0["floor_median"],
-                         "base_rate": b0["rate_median"],
-                         "breaks_from": float(over["size"].min()) if len(over) else float("nan")})
     return pd.DataFrame(rows, columns=cols)
 
 

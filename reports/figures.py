@@ -22,7 +22,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.ticker import FuncFormatter, LogFormatterSciNotation, NullFormatter  # noqa: E402
+from matplotlib.ticker import FuncFormatter, LogFormatterSciNotation  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
@@ -259,53 +259,6 @@ def work_precision_figure(wp: pd.DataFrame, orders: dict[str, float]) -> Figure 
                   "cvxpy/OSQP reference solver (same errors, more CPU time). Colours: master black, "
                   + ", ".join(f"{look(t).label} {look(t).color.replace('tab:', '')}"
                               for t in dict.fromkeys(wp["target"]) if t != MASTER) + ".")
-
-
-def robustness_figure(rob: pd.DataFrame, kinds: list[str], labels: dict[str, str],
-                      units: dict[str, str], bands: pd.DataFrame) -> Figure | None:
-    """Floor (median of V/V(t_on) at the end of the window) and decay rate against the size of
-    each perturbation, per observer: the median over seeds (markers) and the band of
-    :func:`reports.analysis.robustness_bands` (shaded, where a point has several seeds); the
-    unperturbed value as a horizontal line."""
-    rob = rob[rob["status"] == "ok"]
-    if rob.empty:
-        return None
-    base = bands[bands["perturbation"] == "none"]
-    kinds = [k for k in kinds if k != "none" and (bands["perturbation"] == k).any()]
-    if not kinds:
-        return None
-    fig, axes = plt.subplots(2, len(kinds), figsize=(3.6 * len(kinds), 6.0), squeeze=False)
-    for j, kind in enumerate(kinds):
-        sub = bands[bands["perturbation"] == kind].sort_values("size")
-        for name, g in sub.groupby("observer", sort=False):
-            x = g["size"].to_numpy(dtype=float)
-            c, lab = look(name).color, look(name).label
-            axes[0, j].loglog(x, _positive(g["floor_median"]), "o-", color=c, ms=4, label=lab)
-            axes[1, j].semilogx(x, g["rate_median"], "o-", color=c, ms=4, label=lab)
-            if g["seeds"].max() > 1:
-                axes[0, j].fill_between(x, _positive(g["floor_lo"]), _positive(g["floor_hi"]), color=c,
-                                        alpha=0.15)
-                axes[1, j].fill_between(x, g["rate_lo"], g["rate_hi"], color=c, alpha=0.15)
-            b = base[base["observer"] == name]
-            if not b.empty:
-                axes[0, j].axhline(float(b["floor_median"].iloc[0]), color=c, lw=0.8, ls=":")
-                axes[1, j].axhline(float(b["rate_median"].iloc[0]), color=c, lw=0.8, ls=":")
-        sizes = np.sort(sub["size"].unique().astype(float))
-        for a in axes[:, j]:
-            a.set_xticks(sizes, [f"{x:g}" for x in sizes], fontsize=7)
-            a.xaxis.set_minor_formatter(NullFormatter())
-        unit = units.get(kind, "")
-        axes[1, j].set_xlabel(f"{labels.get(kind, kind)}" + (f" ({unit})" if unit else ""), fontsize=8)
-        axes[0, j].set_title(kind, fontsize=10)
-        axes[0, j].set_ylabel("floor / V(t_on)")
-        axes[1, j].set_ylabel("decay rate of V (1/s)")
-        for a in axes[:, j]:
-            a.grid(alpha=0.3, which="both")
-    axes[0, 0].legend(fontsize=7)
-    fixed_layout(fig, top=0.35, hspace=0.55)
-    return Figure(to_data_uri(fig, fit=False), "robustness: floor and rate against the perturbation size",
-                  "Dotted horizontal lines: the same observer with the exact switching signal. "
-                  "Markers: median over seeds; shaded band: 10–90 % of the seeds.")
 
 
 def _whole_call_panel(ax, sc: pd.DataFrame, fit: tuple[float, float, int] | None) -> None:

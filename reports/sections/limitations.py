@@ -90,9 +90,9 @@ def robustness_item(ctx: ReportContext) -> list[str]:
     rob = ctx.rows("robustness")
     if rob.empty:
         return []
-    return [f"Robustness uses {_uniq(rob, 'name')} and perturbations of the master's own closing "
-            "log on the same grid; a real sensor also has a detection threshold on the gap, which "
-            "is not modelled."]
+    return [f"Robustness uses {_uniq(rob, 'name')} only, one sensor setting at a time (a real sensor "
+            "combines them), on the master's own grid; where an observer breaks is known only to "
+            "within the levels tried."]
 
 
 def scaling_item(ctx: ReportContext) -> list[str]:

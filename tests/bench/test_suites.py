@@ -29,19 +29,21 @@ from bench.runners import Context, _event_reference, record_every, reference_gro
 from bench.suites import RANDOM_KINDS, SUITES, Case, Suite, check_scenarios, engine_for, get_suite
 from observer.errors import InputError
 from observer.scenarios import bouncing_ball as bb
-from observer.switching import read_log, validate_log
+from observer.switching import validate_log
 
 REPO = Path(__file__).resolve().parents[2]
 SMOKE = get_suite("smoke")
 
 
 def smoke_rows_expected() -> int:
-    """Rows of the smoke suite: observers 2 per case, robustness 2 per case, else 1 (the
-    checks case writes one row per registered check, counted separately)."""
+    """Rows of the smoke suite: observers 2 per case, robustness one per design and member
+    (of every master), else 1 (the checks case writes one row per registered check, counted
+    separately)."""
     n = 0
     for c in SMOKE.cases:
-        n += {"observers": len(c.observers), "robustness": len(c.observers)}.get(c.kind, 1) \
-            if c.kind != "checks" else 0
+        if c.kind != "checks":
+            n += {"observers": len(c.observers)}.get(c.kind, 1) if c.kind != "robustness" \
+                else len(c.observers) * c.members
     return n
 
 
@@ -110,11 +112,18 @@ def test_quick_and_full_cover_every_kind_and_the_issue_grid(name):
         if c.h_record is not None:     # the grids of h and h_record nest (powers of two)
             k = max(c.h, c.h_record) / min(c.h, c.h_record)
             assert abs(k - round(k)) < 1e-9 and (round(k) & (round(k) - 1)) == 0
-    # robustness: every perturbation kind; full: ≥ 20 seeds per random point
+    # robustness: every perturbation kind at ≥ 4 levels spanning ≥ 30×, each level a
+    # paired ensemble over ≥ 5 masters (full: 10) × ≥ 4 errors per master, the same seed (so the
+    # same masters and errors) at every level
     rob = suite.of_kind("robustness")
     assert {c.perturbation for c in rob} == set(KINDS)
-    seeds = Counter((c.perturbation, c.size) for c in rob if c.perturbation in RANDOM_KINDS)
-    assert min(seeds.values()) >= (20 if full else 3)
+    levels = {k: sorted(c.size for c in rob if c.perturbation == k) for k in KINDS if k != "none"}
+    assert all(len(v) >= 4 and v[-1] / v[0] >= 30 - 1e-9 for v in levels.values()), levels
+    assert min(c.masters for c in rob) >= (10 if full else 5)
+    assert min(c.members // c.masters for c in rob) >= 4
+    assert {(c.seed, c.masters, c.members, c.h, c.t_end) for c in rob} == {(0, rob[0].masters, rob[0].members,
+                                                                            rob[0].h, rob[0].t_end)}
+    assert len({c.case_id for c in rob}) == len(rob)
     # scaling: up to N = 10⁵ in full (issue 23), from N = 5; stored rows bounded at large N
     Ns = [dict(c.params)["param.N"] for c in suite.of_kind("scaling")]
     assert Ns == ([5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 10_000, 20_000, 50_000, 100_000]
@@ -269,16 +278,17 @@ def test_smoke_suite_rows_are_tidy_and_complete(smoke_run):
     assert (wp["err_mean"] > 0).all() and wp["reference"].str.startswith("closed form").all()
     rob = df[df["kind"] == "robustness"]
     assert set(rob["perturbation"]) == {"none", "delay"}
-    for f in rob["log_file"]:
-        read_log(out / f, 1)
+    assert set(rob["master"]) == {0, 1} and (rob["floor"] > 0).all()
+    # paired: both designs on the same (master, member) at both levels, the same initial V
+    von = rob.pivot_table(index=["master", "member"], columns=["perturbation", "design"], values="V_on")
+    assert von.notna().all().all() and np.allclose(von.to_numpy(), von.to_numpy()[:, :1])
     sc = df[df["kind"] == "scaling"]
     assert (sc["peak_mem_mb"] > 0).all() and (sc["cpu_per_step_s"] > 0).all()
     # the whole call (issue 23): load + simulate, at least its load part and the run's own CPU
     assert (sc["load_cpu_s"] > 0).all() and (sc["whole_call_cpu_s"] > sc["load_cpu_s"]).all()
     assert (sc["whole_call_wall_s"] > 0).all()
     # compiled engine everywhere (pivoting solver), compile time measured once and apart
-    timed = df[(df["status"] == "ok") & df["kind"].isin(["observers", "work_precision", "robustness",
-                                                          "scaling"])]
+    timed = df[(df["status"] == "ok") & df["kind"].isin(["observers", "work_precision", "scaling"])]
     assert (timed["engine"] == "compiled").all()
     assert (timed["run_compile_time_s"] == 0).all()               # no row paid the compile
     assert df["compile_time_s"].notna().all() and df["compile_time_s"].nunique() == 1
@@ -573,11 +583,11 @@ def _legacy_perturb(log, kind, size, rng, m, t_max, h):
 
 
 def test_the_suite_s_delay_jitter_and_false_logs_are_those_before_the_sensor():
-    """The robustness suite's delay, jitter and false-closing logs (its quick levels and seeds,
+    """The robustness suite's delay, jitter and false-closing logs (its quick levels, seeds 0–2,
     on a master's own log of double_mass) are, to the bit, those of its perturbations before
     they were sensor settings: its results are unchanged there. (``missed`` changed meaning:
     a probability per closing, no longer a fraction of the impacts.)"""
-    from bench.suites import ROBUSTNESS_LEVELS, ROBUSTNESS_SEEDS
+    from bench.suites import ROBUSTNESS_LEVELS
     from observer.switching import log_from_active
 
     res = observer.simulate("double_mass", h=1e-3, t_end=4.0)
@@ -587,7 +597,7 @@ def test_the_suite_s_delay_jitter_and_false_logs_are_those_before_the_sensor():
     for kind in ("delay", "jitter", "false"):
         sizes = ROBUSTNESS_LEVELS["quick"].get(kind, ROBUSTNESS_LEVELS["full"][kind])
         for size in sizes:
-            for seed in range(ROBUSTNESS_SEEDS["quick"] if kind in RANDOM_KINDS else 1):
+            for seed in range(3 if kind in RANDOM_KINDS else 1):
                 new = perturb_log(base, kind, size, seed=seed, m=1, t_end=4.0, h=1e-3)
                 old = _legacy_perturb(base, kind, size, np.random.default_rng(seed), 1, 4.0, 1e-3)
                 assert np.array_equal(new.to_numpy(), old.to_numpy()), (kind, size, seed)

@@ -403,9 +403,10 @@ WP_NOISE = (1.0, 1.04, 0.97, 1.02, 0.99)
 SCALING_N = (5, 10, 20, 50, 100, 200, 500, 1000)
 SCALING_NOISE = (1.6, 0.95, 1.05, 1.0, 0.98, 1.03, 0.97, 1.02)
 """N = 5 is off the power law (fixed costs), so the fit from N = 10 differs from the fit over all N."""
-ROB_SEEDS = 20
-ROB_POINTS = (("none", 0.0, 1), ("delay", 1e-3, 1), ("delay", 1e-2, 1), ("jitter", 1e-3, ROB_SEEDS),
-              ("jitter", 1e-2, ROB_SEEDS), ("missed", 0.3, ROB_SEEDS))
+ROB_MASTERS, ROB_ERRORS = 5, 4
+ROB_POINTS = (("none", 0.0), ("delay", 1e-3), ("delay", 1e-2), ("jitter", 1e-3), ("jitter", 1e-2),
+              ("missed", 0.3))
+"""Robustness points, each a paired ensemble of ROB_MASTERS masters × ROB_ERRORS initial errors."""
 PEERS = (("impact_oscillator", 1, 1, 2e5, 7700.0, 5600.0, 300.0, 60.0, 0.0, 0.0),
          ("double_mass", 2, 1, 1e5, 9200.0, 12100.0, 800.0, 150.0, 3e-15, 2e-13),
          ("rocking_chain", 20, 20, 2e4, 97000.0, 74000.0, 9000.0, 2500.0, 4e-12, 8e-10))
@@ -472,18 +473,19 @@ def _synthetic_rows() -> list[tuple[str, list[dict]]]:
             "trajectory_mb": 0.01 * N, "whole_call_cpu_s": 1e-3 * N ** 1.06 * noise ** 2,
             "whole_call_wall_s": 1.1e-3 * N ** 1.06, "load_cpu_s": 1e-5 * N}]))
     rng = np.random.default_rng(2024)
-    for kind, size, seeds in ROB_POINTS:
-        for seed in range(seeds):
-            rows = []
-            for name, scale in (("jump", 1e-8), ("nojump", 1e-4)):
-                t1, t6 = rng.uniform(0.5, 4.0), (rng.uniform(2.0, 9.0) if rng.uniform() < 0.6 else INF)
-                rows.append({"kind": "robustness", "scenario": "double_mass", "name": "double_mass",
-                             "observer": name, "perturbation": kind, "size": size, "seed": seed,
-                             "status": "ok", "h": 1e-4, "t_end": 10.0, "law": "poisson",
-                             "solver": "pivoting", "floor_rel": scale * (1 + 1e3 * size) * rng.lognormal(0, 1),
-                             "rate": rng.normal(3.0, 0.5), "t_settle_0.001": t1, "t_settle_1e-06": t6,
-                             "log_intervals": int(rng.integers(30, 50)), "true_intervals": 40})
-            cases.append((f"robustness:{kind}:{size}:{seed}", rows))
+    for kind, size in ROB_POINTS:
+        rows = []
+        for name, scale in (("jump", 1e-8), ("nojump", 1e-4)):
+            for j in range(ROB_MASTERS):
+                for i in range(ROB_ERRORS):
+                    rows.append({"kind": "robustness", "scenario": "double_mass", "name": "double_mass",
+                                 "design": name, "perturbation": kind, "size": size, "seed": 0,
+                                 "master": j, "member": j * ROB_ERRORS + i, "masters": ROB_MASTERS,
+                                 "members": ROB_MASTERS * ROB_ERRORS, "status": "ok", "h": 1e-4,
+                                 "t_end": 10.0, "law": "poisson", "solver": "pivoting", "tail": 0.25,
+                                 "floor": scale * (1 + 1e3 * size) * rng.lognormal(0, 1),
+                                 "t_settle_0.001": rng.uniform(0.5, 4.0), "t_settle_1e-06": INF})
+        cases.append((f"robustness:{kind}:{size}", rows))
     for prob, n, m, steps, sic, run, tk, loop, dq, du in PEERS:
         cases.append((f"peers:{prob}", [{
             "kind": "peers", "scenario": prob, "name": prob, "problem": prob, "status": "ok",
@@ -710,42 +712,30 @@ def test_scaling_exponents_are_recomputed(synthetic_report):
     assert [_num(c) for c in per_step] == pytest.approx(list(sc["cpu_per_step_s"] * 1e6), rel=5e-3)
 
 
-def test_robustness_median_and_band_are_recomputed(synthetic_report):
-    """Each cell 'median [q10 – q90]' of the robustness table against numpy's median and
-    10/90 % quantiles of the seeds' rows, the seed counts, the median settling time and how many
-    seeds settle; deterministic points (one seed) show the value alone."""
+def test_robustness_medians_are_recomputed(synthetic_report):
+    """Each floor cell of the robustness table starts with numpy's median of its point's rows
+    (every master and initial error of the design), the table has one row per point, and the
+    key number names the masters per level (the intervals are those of
+    tests/reports/test_robustness_section.py)."""
     page, rows = synthetic_report
     rob = rows[rows["kind"] == "robustness"]
-    table = page.table("robustness", "Robustness: floor and rate").dicts()
-    assert len(table) == 2 * len(ROB_POINTS)
+    table = page.table("robustness", "Robustness: floor of V/V(t_on) per level").dicts()
+    assert len(table) == len(ROB_POINTS)
     for cells in table:
         kind = "none" if cells["perturbation"].startswith("none") else cells["perturbation"]
-        name = next(n for n, d in OBSERVER_DESIGNS.items() if d.label == cells["observer"])
-        g = rob[(rob["perturbation"] == kind) & (rob["observer"] == name)]
-        if kind != "none":
-            g = g[np.isclose(g["size"].astype(float), _num(cells["size"]), rtol=5e-3)]
-        seeds = next(n for k, sz, n in ROB_POINTS if k == kind and (kind == "none" or
-                                                                     np.isclose(sz, g["size"].iloc[0])))
-        assert len(g) == seeds and cells["seeds"] == str(seeds)
-        for col, values in (("floor / V(t_on)", g["floor_rel"]), ("rate (1/s)", g["rate"])):
-            x = values.astype(float).to_numpy()
-            nums = _nums(cells[col])
-            if seeds == 1:
-                assert "[" not in cells[col] and nums[0] == pytest.approx(x[0], rel=5e-3)
-            else:
-                lo, hi = np.quantile(x, [0.1, 0.9])
-                assert nums == pytest.approx([np.median(x), lo, hi], rel=5e-3)
-        t6 = g["t_settle_1e-06"].astype(float).to_numpy()
-        cell = cells["settles below 1e−6 (median; seeds settled)"]
-        assert cell.endswith(f"; {int(np.isfinite(t6).sum())}/{seeds}")
-        med = np.median(t6)
-        if np.isinf(med):
-            assert cell.startswith("not reached")
-        else:
-            assert _num(cell) == pytest.approx(med, rel=5e-3)
+        assert cells["masters × errors"] == f"{ROB_MASTERS} × {ROB_ERRORS}"
+        for name, d in OBSERVER_DESIGNS.items():
+            col = next((c for c in cells if c.startswith(f"{d.label}: floor")), None)
+            if col is None:
+                continue
+            g = rob[(rob["perturbation"] == kind) & (rob["design"] == name)]
+            if kind != "none":
+                g = g[np.isclose(g["size"].astype(float), _num(cells["level"]), rtol=5e-3)]
+            assert len(g) == ROB_MASTERS * ROB_ERRORS
+            assert _nums(cells[col])[0] == pytest.approx(np.median(g["floor"].astype(float)), rel=5e-3)
     key = next(i for i in page.sections["all-key-numbers"].items if i.startswith("Robustness ("))
-    assert key.startswith(f"Robustness ({ROB_SEEDS} seeds per random perturbation")
-    assert "10–90 % band" in page.sections["robustness"].paragraphs[0]
+    assert key.startswith(f"Robustness ({ROB_MASTERS} masters per level")
+    assert "cluster bootstrap interval over masters" in page.sections["robustness"].paragraphs[0]
 
 
 def _peer_cells(page) -> dict:
@@ -1019,22 +1009,6 @@ def test_solver_comparison_uses_only_the_step_sizes_both_sweeps_ran():
     assert comp["best_err_solver"] == pytest.approx(piv["err_mean"].min())
     whole = solver_comparison(wp_orders(wp)).iloc[0]
     assert whole["best_err_solver"] < comp["best_err_solver"]     # the extra small steps
-
-
-def test_analysis_robustness_summary_breaks_from_the_first_size_above_the_floor():
-    from reports.analysis import ROBUST_FLOOR, robustness_bands, robustness_summary
-
-    rows = pd.DataFrame([r for _, rs in _synthetic_rows() for r in rs])
-    rob = rows[rows["kind"] == "robustness"]
-    summ = robustness_summary(robustness_bands(rob, (0.1, 0.9)))
-    for _, r in summ.iterrows():
-        g = rob[(rob["observer"] == r["observer"]) & (rob["perturbation"] == r["perturbation"])]
-        medians = g.groupby("size")["floor_rel"].median()
-        above = medians[medians > ROBUST_FLOOR]
-        if len(above):
-            assert r["breaks_from"] == above.index.min()
-        else:
-            assert np.isnan(r["breaks_from"])
 
 
 # ----------------------------------------------------------------------------- registries
