@@ -11,7 +11,7 @@ Layout of a suite's output folder ``OUT`` (default ``bench/results``)::
                                       case order), for the report (:func:`bench.run.write_suite_meta`)
     OUT/<suite>-micro.json            pytest-benchmark JSON of the micro-benchmarks
     OUT/<suite>/traj/<case>.parquet   downsampled trajectories for the report's figures
-    OUT/<suite>/logs/<case>.csv       perturbed closing logs of the robustness suite
+    OUT/<suite>/logs/<case>.csv       perturbed closing logs of the perturbed-χ ensembles
 
 A case file is written under a temporary name in the same folder and renamed: it appears
 complete or not at all, whatever kills the writer. Its Parquet schema metadata carries a
