@@ -253,7 +253,9 @@ def intro(rob: pd.DataFrame, kinds: list[str], labels: dict[str, str]) -> str:
             + "; ".join(f"{k}: {labels[k]}" for k in kinds if k in labels) + ". Every level is a paired "
             f"ensemble of {masters} masters (the scenario's initial state and others sampled around it) × "
             f"{members // max(masters, 1)} initial errors per master, the same for both designs and at every "
-            f"level. A member's floor is the median of V/V(t_on) over the last {tail} of the window; a "
+            f"level. A member's floor is the median of V/V(t_on) over the last {tail} of the window (for a "
+            f"design still decaying at the window's end, where its decay stands then rather than a floor; "
+            f"compare the ideal sensor's row); a "
             f"cell gives the median over every (master, error) and its 95 % cluster bootstrap interval "
             f"over masters. An observer holds at a level when that interval lies below "
             f"{fmt_rho(BREAK_LEVEL)}, breaks when it lies above, and is undecided otherwise; where it "
@@ -284,6 +286,7 @@ def build(ctx: ReportContext) -> Section:
         sec.p("These robustness rows come from the earlier suite (one initial error and a few seeds per "
               "level, no masters): no interval over masters can be given. Rerun the robustness suite.")
         return sec
+    rob = rob[rob["master"].notna()]              # rows of the earlier suite beside new ones: left out
     kinds, labels, units = _perturbations(perturbations)
     designs = list(dict.fromkeys(rob["design"].astype(str)))
     levels = level_floors(rob)

@@ -182,3 +182,18 @@ def test_bracket_of_verdicts():
     r = b(s, ["holds", "undecided", "undecided", "undecided"])
     assert (r["low"], r["high"]) == (1.0, np.inf)
     assert np.isnan(b(s, ["one master"] * 4)["low"])
+
+
+def test_rows_of_the_earlier_suite_beside_new_ones_are_left_out(tmp_path):
+    """An old row (no master, no design, its floor an absolute V) in the same results changes no
+    cell: the designs and the floors are the new rows'."""
+    rows = rows_of(power_law, levels=LEVELS[:2])
+    old = {"suite": "syn", "case_id": "robustness:double_mass:perturbation=delay", "kind": "robustness",
+           "name": "double_mass", "status": "ok", "perturbation": "delay", "size": 1e-3, "observer": "jump",
+           "floor": 50.0, "h": 2e-4, "t_end": 8.0}
+    sec = robustness.build(context(pd.concat([rows, pd.DataFrame([old])], ignore_index=True), tmp_path))
+    tab = table(sec, "Robustness: floor of V/V(t_on) per level")
+    assert not any("nan" in c for c in tab.columns)
+    cell = next(r for r in tab.rows if r[0] == "delay" and r[1] == "0.001 s")[3]
+    g = rows[(rows["perturbation"] == "delay") & (rows["size"] == 1e-3) & (rows["design"] == "jump")]
+    assert float(cell.split(" ")[0].replace("−", "-")) == pytest.approx(np.median(g["floor"]), rel=5e-3)
