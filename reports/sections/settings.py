@@ -76,7 +76,9 @@ def definitions_table(ctx: ReportContext) -> Table:
            "trapezoid on the stored grid: every step, or every k-th step at spacing h_record)"])
     t.add(["references of the work-precision points", _value(ctx, "work_precision", "reference")])
     t.add(["robustness band", MISSING if band is None else f"median and {100 * band[0]:.0f}–"
-           f"{100 * band[1]:.0f} % quantiles (numpy, linear) over the seeds of a point"])
+           f"{100 * band[1]:.0f} % quantiles, the band the suite declares (the robustness section "
+           "gives instead the median over masters × initial errors with its 95 % cluster bootstrap "
+           "interval over masters, observer.stats.cluster_ci)"])
     t.add(["scaling exponent", "least-squares slope of log(CPU time per step) against log N from "
            f"N = {MISSING if fit_from is None else fit_from} (acceptance ≤ {ACCEPTANCE_EXPONENT} up to "
            f"N = {ACCEPTANCE_N_MAX})"])
