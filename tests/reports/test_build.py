@@ -1096,7 +1096,7 @@ def test_limitations_and_settings_quote_the_rows_and_the_registries(synthetic_re
     assert f"the deepest threshold ({fmt_rho(min(RHOS))})" in lim
     scal = rows[rows["kind"] == "scaling"]
     assert f"from rest over T = {fmt(float(scal['t_end'].iloc[0]))} s;" in lim
-    assert "Robustness uses double_mass and" in lim
+    assert "Robustness uses double_mass only" in lim
     assert "an unrecorded number of BLAS thread(s)" in lim        # the synthetic rows have none
     ball = rows[(rows["name"] == "ball") & (rows["status"] != "ok")].iloc[0]
     assert f"ball: the design {ball['observer']} does not apply ({ball['note']})" in lim
