@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
 import pandas as pd
 
 from observer.sensor import Sensor, sense_log
