@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -85,6 +86,49 @@ def check_uncertainty(uncertainty: Any) -> dict[str, float]:
             raise InputError(f"model.{name}", f"must be {{relative_std = σ}} (the seeds are drawn), got {spec!r}")
         out[name] = as_scalar(f"model.{name}.relative_std", spec["relative_std"], low=0.0)
     return out
+
+
+UNCERTAINTY_FLAG = "--uncertainty"
+"""The command-line option of an uncertainty (``--uncertainty K=0.01``, repeatable)."""
+
+
+def parse_uncertainty(items: list[str] | None) -> dict | None:
+    """``["K=0.01", "M=1e-3"]`` (``--uncertainty``) → ``{"K": {"relative_std": 0.01}, ...}``
+    (a value that is not a number is passed on as text, for :func:`check_uncertainty` to refuse);
+    None without items.
+
+    Raises
+    ------
+    InputError
+        Naming ``--uncertainty`` (not ``NAME=σ``) or ``--uncertainty NAME`` (given twice).
+    """
+    from observer.cli_common import parse_pairs
+
+    if not items:
+        return None
+    out: dict = {}
+    for item in items:
+        (name, value), = parse_pairs([item], UNCERTAINTY_FLAG).items()
+        if name in out:
+            raise InputError(f"{UNCERTAINTY_FLAG} {name}", "given twice")
+        try:
+            out[name] = {"relative_std": float(value)}
+        except ValueError:
+            out[name] = {"relative_std": value}
+    return out
+
+
+@contextmanager
+def flag_names():
+    """Re-raise an :class:`~observer.errors.InputError` on ``model.NAME`` (or ``model.NAME.relative_std``)
+    as one on ``--uncertainty NAME``: the command line's spelling of the same field."""
+    try:
+        yield
+    except InputError as exc:
+        parts = exc.field.split(".")
+        if parts[0] != "model" or len(parts) < 2:
+            raise
+        raise InputError(f"{UNCERTAINTY_FLAG} {parts[1]}", exc.problem) from None
 
 
 def plant_seeds(seed, plants: int, names: tuple[str, ...]) -> tuple[np.random.Generator, list[dict]]:
