@@ -368,9 +368,6 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
     designs, integrator = _check_arguments(designs, integrator, n, masters, seed, rho, spread, grid_jitter)
     draw = plant_draw(model, plants, sample, seed)
     sc, sensed = compared_scenario(scenario, overrides, h, t_end, sensor, None if draw else model)
-    if draw is not None and sc.model is not None:
-        raise InputError("model", "plants= draws the plants from model=; the scenario has an [observer.model] "
-                                  "table of its own: remove one of them")
     master_seed, *member_seeds = np.random.SeedSequence(seed).spawn(masters + 1)
     scs = master_scenarios(sc, masters, spread, grid_jitter, np.random.default_rng(master_seed))
     runs = plant_runs(scs, draw)
@@ -378,11 +375,7 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
     jobs = [(s, designs, n, int(member_seeds[k].generate_state(1)[0]), integrator, engine, workers,
              initial_errors, V0, c, positions and c == 0) for c, (_j, k, s) in enumerate(runs)]
     done = _run_jobs(jobs, scheduler)
-    for d, (j, k, _s) in zip(done, runs):
-        if draw is not None:
-            d["members"].insert(1, "plant", j)
-            d["members"].insert(2, "master", k)
-    level = "plants" if draw is not None and len(draw["seeds"]) >= 2 else "masters"
+    level = _label_plants(done, runs, draw)
     result = _assemble(sc, designs, rho, done, confidence, n_resamples, seed, level)
     result.metadata = _metadata(sc, sensed, done, dict(designs=list(designs), n=n, masters=masters, seed=seed,
                                 spread=spread, grid_jitter=grid_jitter, integrator=integrator, engine=engine,
@@ -390,6 +383,17 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
     if draw is not None:
         result.metadata.update(_plant_metadata(draw, runs, masters, level))
     return result
+
+
+def _label_plants(done: list, runs: list, draw: dict | None) -> str:
+    """Give each run's members their ``plant`` and ``master`` (over drawn plants); the level the
+    intervals resample: ``"plants"`` with two or more drawn plants, else ``"masters"``."""
+    if draw is None:
+        return "masters"
+    for d, (j, k, _s) in zip(done, runs):
+        d["members"].insert(1, "plant", j)
+        d["members"].insert(2, "master", k)
+    return "plants" if len(draw["seeds"]) >= 2 else "masters"
 
 
 def _check_arguments(designs, integrator, n, masters, seed, rho, spread, grid_jitter) -> tuple:
@@ -449,6 +453,10 @@ def plant_runs(scs: list, draw: dict | None) -> list[tuple]:
     if draw is None:
         return [(None, k, s) for k, s in enumerate(scs)]
     from observer.uncertainty import drawn_scenario
+
+    if scs[0].model is not None:
+        raise InputError("model", "plants= draws the plants from model=; the scenario has an [observer.model] "
+                                  "table of its own: remove one of them")
 
     return [(j, k, drawn_scenario(s, draw["sigmas"], seeds, draw["sample"]))
             for j, seeds in enumerate(draw["seeds"]) for k, s in enumerate(scs)]

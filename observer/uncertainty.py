@@ -29,7 +29,7 @@ and :func:`drawn_scenario` (from its own child of the seed, :data:`PLANT_SPAWN_K
 recorded sample of the coupling window with V ≤ level·V(t_on), seconds from t_on: the
 definition of :func:`observer.metrics.sync_time`); a member that does not reach it inside the
 window is right-censored at the window's length. Per design the median is the Kaplan–Meier
-median with its cluster bootstrap interval over plants (:func:`observer.stats.settling_summary`),
+median (:func:`observer.stats.kaplan_meier`) with its cluster bootstrap interval over plants (:func:`observer.stats.cluster_ci`),
 "not reached" (NaN) where the curve stays above one half, never 0 or ∞. The default level is
 :data:`LEVEL_FACTOR` times the largest member floor (over every design and plant), rounded up
 to the grid :data:`LEVEL_GRID` (tenths of a decade): above every member's floor. A level at or
@@ -274,14 +274,15 @@ def level_times(members, floors, level: float | None, window: float, *, confiden
     -------
     DataFrame
         One row per design: ``level``, ``t_level`` (the Kaplan–Meier median, seconds from t_on)
-        with ``t_level_low``, ``t_level_high`` (cluster bootstrap over plants), ``t_level_reached``
+        with ``t_level_low``, ``t_level_high`` (cluster bootstrap over plants, :func:`observer.stats.cluster_ci`,
+        of the median of :func:`observer.stats.kaplan_meier`; NaN = an end not reached), ``t_level_reached``
         (members that reach it) and ``t_level_status``: "ok"; "not reached" (the Kaplan–Meier
         curve stays above ½: NaN, never 0 or ∞); "undecided" when the level is at or below the
         design's ``floor_V_high`` (the time would measure the floor) or there is no level (NaN).
     """
     import pandas as pd
 
-    from observer.stats import settling_summary
+    from observer.stats import _km_stats, cluster_ci
 
     rows = []
     for r in floors.to_dict("records"):
@@ -295,10 +296,13 @@ def level_times(members, floors, level: float | None, window: float, *, confiden
             row["t_level_status"] = (f"undecided: level {level:.3g} is at or below the floor's upper end "
                                      f"{r['floor_V_high']:.3g} (the time would measure the floor)")
         else:
-            km = settling_summary(g.assign(cluster=g["plant"]), "t_level", window, confidence=confidence,
-                                  n_resamples=n_resamples, seed=seed).iloc[0]
-            row.update(t_level=km["median"], t_level_low=km["median_low"], t_level_high=km["median_high"],
-                       t_level_status="ok" if np.isfinite(km["median"]) else "not reached")
+            times = g["t_level"].to_numpy(dtype=float)
+            median = lambda i, times=times: _km_stats(times[i], window)[0]  # noqa: E731
+            lo, hi, _unit = cluster_ci(median, g["plant"].to_numpy(), confidence=confidence,
+                                       n_resamples=n_resamples, seed=seed)
+            fin = lambda x: float(x) if np.isfinite(x) else np.nan  # noqa: E731
+            row.update(t_level=fin(median(np.arange(times.size))), t_level_low=fin(lo), t_level_high=fin(hi))
+            row["t_level_status"] = "ok" if np.isfinite(row["t_level"]) else "not reached"
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -371,12 +375,7 @@ def uncertainty_ensemble(scenario, designs=("jump", "nojump"), *, model: dict, p
     X, V0 = sample_errors(sc, n, "energy_sphere", rng, None)
     members, plant_meta = _run_plants(sc, sigmas, seeds, sample, designs, X, tail, every,
                                       LEVEL_GRID if level is None else np.array([level]))
-    passage = np.vstack(members.pop("passage").to_numpy())
-    rule = "given" if level is not None else f"{LEVEL_FACTOR:g} x the largest member floor, rounded up to 10^(-k/10)"
-    if level is None:
-        level = default_level(members["floor_V"].to_numpy())
-    col = 0 if rule == "given" or level is None else int(np.flatnonzero(LEVEL_GRID == level)[0])
-    members["t_level"] = passage[:, col] if level is not None else np.nan
+    level, rule = _level_column(members, level)
     t_on, t_off = window_of(sc)
     out = _summary(members, designs, confidence, n_resamples, int(seed), level, t_off - t_on)
     out.attrs["members"] = members
@@ -387,6 +386,18 @@ def uncertainty_ensemble(scenario, designs=("jump", "nojump"), *, model: dict, p
                              "level_rule": rule, "confidence": confidence, "n_resamples": n_resamples,
                              "metric": METRIC, **_status(members, t0)}
     return out
+
+
+def _level_column(members, level: float | None) -> tuple[float | None, str]:
+    """Replace the members' ``passage`` by ``t_level``, the first passage below the given level
+    or the default one (:func:`default_level`); the level and its rule."""
+    passage = np.vstack(members.pop("passage").to_numpy())
+    if level is not None:
+        members["t_level"] = passage[:, 0]
+        return level, "given"
+    level = default_level(members["floor_V"].to_numpy())
+    members["t_level"] = np.nan if level is None else passage[:, int(np.flatnonzero(LEVEL_GRID == level)[0])]
+    return level, f"{LEVEL_FACTOR:g} x the largest member floor, rounded up to 10^(-k/10)"
 
 
 def _run_plants(sc, sigmas, seeds, sample, designs, X, tail, every, levels):

@@ -190,3 +190,37 @@ def test_censored_members_enter_the_kaplan_meier_median_as_censored():
     assert np.isnan(r["t_level"]) and r["t_level_status"] == "not reached" and r["t_level_reached"] == 2
     r = level_times(members, floors.assign(floor_V_high=1e-3), 1e-3, 5.0).iloc[0]    # at the floor
     assert np.isnan(r["t_level"]) and r["t_level_status"].startswith("undecided")
+
+
+def test_cli_writes_the_members_and_the_summary_and_never_overwrites_its_input(tmp_path, capsys):
+    """``observer uncertainty``: the rows are the API's members (same call), the metadata beside
+    them holds the settings and the per-design summary; an --out that is the scenario file is
+    refused before any run (exit 2, the file untouched)."""
+    import json
+
+    import pandas as pd
+
+    from observer.cli import main
+
+    out = tmp_path / "u.csv"
+    argv = ["uncertainty", "double_mass", "--uncertainty", "K=0.001", "--plants", "2", "--n", "3", "--seed", "5",
+            "--t-end", "8", "--h", "1e-3", "--tail", "0.5", "--record-every", "1", "--out", str(out)]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "3 members x 2 plants (plant drawn)" in text and f"wrote {out}" in text
+    rows, meta = pd.read_csv(out), json.loads(out.with_suffix(".json").read_text())
+    api = uncertainty_ensemble("double_mass", DESIGNS, model={"K": {"relative_std": 0.001}}, plants=2, n=3, seed=5,
+                               t_end=8.0, h=1e-3, tail=0.5, record_every=1)
+    members = api.attrs["members"]
+    np.testing.assert_array_equal(rows["floor_V"].to_numpy(), members["floor_V"].to_numpy())
+    np.testing.assert_array_equal(rows["t_level"].to_numpy(), members["t_level"].to_numpy())
+    assert meta["uncertainty"] == {"K": {"relative_std": 0.001}} and meta["level"] == api.attrs["metadata"]["level"]
+    assert [r["design"] for r in meta["summary"]] == list(DESIGNS)
+    assert meta["summary"][0]["t_level"] == api["t_level"].iloc[0]
+    scenario = tmp_path / "s.toml"
+    assert main(["show", "double_mass"]) == 0
+    scenario.write_text(capsys.readouterr().out)
+    before = scenario.read_bytes()
+    assert main(["uncertainty", str(scenario), "--uncertainty", "K=0.001", "--out", str(scenario)]) == 2
+    assert "would overwrite the input scenario" in capsys.readouterr().err
+    assert scenario.read_bytes() == before
