@@ -137,7 +137,8 @@ def cmd_uncertainty(args) -> int:
     with flag_names():
         df = uncertainty_ensemble(sc, split_names("--designs", args.designs), model=table, plants=args.plants,
                                   n=args.n, seed=args.seed, sample=args.sample, h=args.h, t_end=args.t_end,
-                                  tail=args.tail, record_every=args.record_every, level=args.level)
+                                  tail=args.tail, record_every=args.record_every, level=args.level,
+                                  n_resamples=args.n_resamples)
     meta = df.attrs["metadata"]
     rows = df.attrs["members"].copy()
     rows.attrs = {**meta, "summary": df.to_dict("records")}
@@ -357,6 +358,7 @@ def _add_uncertainty(sub) -> None:
     s.add_argument("--level", type=float, default=None, help="level of V/V(t_on) whose first-passage time is "
                                                               "summarized (default: 10x the largest member floor)")
     s.add_argument("--tail", type=float, default=0.25, help="floors over this last fraction of the window")
+    s.add_argument("--n-resamples", type=int, default=999, help="bootstrap resamples of the intervals (default 999)")
     s.add_argument("--h", type=float, help="step size")
     s.add_argument("--t-end", type=float, help="final time")
     s.add_argument("--record-every", type=int, default=None, metavar="K", help="record every K-th step")

@@ -366,7 +366,7 @@ def uncertainty_ensemble(scenario, designs=("jump", "nojump"), *, model: dict, p
 
     t0 = time.perf_counter()
     designs, sigmas = _check_designs(designs), check_uncertainty(model)
-    plants, n = _count("plants", plants, 1), _count("n", n, 1)
+    plants, n, n_resamples = _count("plants", plants, 1), _count("n", n, 1), _count("n_resamples", n_resamples, 1)
     tail, level = _check_options(sample, tail, seed, level)
     sc = _load(scenario, h, t_end)
     every = _count("record_every", record_every, 1) if record_every is not None else \

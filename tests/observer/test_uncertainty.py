@@ -204,19 +204,21 @@ def test_cli_writes_the_members_and_the_summary_and_never_overwrites_its_input(t
 
     out = tmp_path / "u.csv"
     argv = ["uncertainty", "double_mass", "--uncertainty", "K=0.001", "--plants", "2", "--n", "3", "--seed", "5",
-            "--t-end", "8", "--h", "1e-3", "--tail", "0.5", "--record-every", "1", "--out", str(out)]
+            "--t-end", "8", "--h", "1e-3", "--tail", "0.5", "--record-every", "1", "--n-resamples", "19",
+            "--out", str(out)]
     assert main(argv) == 0
     text = capsys.readouterr().out
     assert "3 members x 2 plants (plant drawn)" in text and f"wrote {out}" in text
     rows, meta = pd.read_csv(out), json.loads(out.with_suffix(".json").read_text())
     api = uncertainty_ensemble("double_mass", DESIGNS, model={"K": {"relative_std": 0.001}}, plants=2, n=3, seed=5,
-                               t_end=8.0, h=1e-3, tail=0.5, record_every=1)
+                               t_end=8.0, h=1e-3, tail=0.5, record_every=1, n_resamples=19)
     members = api.attrs["members"]
     np.testing.assert_array_equal(rows["floor_V"].to_numpy(), members["floor_V"].to_numpy())
     np.testing.assert_array_equal(rows["t_level"].to_numpy(), members["t_level"].to_numpy())
     assert meta["uncertainty"] == {"K": {"relative_std": 0.001}} and meta["level"] == api.attrs["metadata"]["level"]
     assert [r["design"] for r in meta["summary"]] == list(DESIGNS)
     assert meta["summary"][0]["t_level"] == api["t_level"].iloc[0]
+    assert meta["summary"][0]["t_level_low"] == api["t_level_low"].iloc[0] and meta["n_resamples"] == 19
     scenario = tmp_path / "s.toml"
     assert main(["show", "double_mass"]) == 0
     scenario.write_text(capsys.readouterr().out)
