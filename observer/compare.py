@@ -10,6 +10,12 @@ with its cluster bootstrap interval (clusters = masters) and "faster in k of m m
 censored settling summary per design at ρ·V(t_on), the sign test on which design settles
 first, and the flags that say when a comparison is decided by a floor, a window or the grid.
 
+With ``plants=`` (``--uncertainty NAME=σ --plants P``) every master and member runs against each
+of P plants drawn from a stated relative uncertainty (:func:`plant_draw`, :func:`plant_runs`:
+the draws of :mod:`observer.uncertainty`), the observers carrying the nominal model (or the
+reverse, ``sample="model"``); the intervals then resample plants, the masters and members
+nested in them (:func:`bootstrap_frame`).
+
 ``python -m observer compare SCENARIO|FILE.toml`` prints it (:func:`cmd_compare`), ``--json``
 writes it for scripts, ``--report DIR`` writes a one-page HTML report (:func:`write_report`).
 """
