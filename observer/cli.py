@@ -1,4 +1,4 @@
-"""Command line: ``python -m observer {scenarios, show, run, ensemble, compare, log, plot}``.
+"""Command line: ``python -m observer {scenarios, show, run, ensemble, compare, uncertainty, log, plot}``.
 
 Errors in input exit with status 2 and one line on stderr (``error: FIELD: PROBLEM``),
 never a traceback.
@@ -117,6 +117,45 @@ def cmd_ensemble(args) -> int:
     print(df.groupby("design", sort=False)[cols].median().to_string(float_format=lambda x: f"{x:.3g}"))
     print(f"wrote {args.out}")
     return 0
+
+
+def cmd_uncertainty(args) -> int:
+    """``uncertainty``: the designs' floors and times to a level over plants drawn from
+    ``--uncertainty`` (:func:`observer.uncertainty.uncertainty_ensemble`); the rows (one per
+    plant, design and member) to ``--out`` with the metadata and the per-design summary
+    (``metadata["summary"]``) beside them (:func:`observer.io.write_frame`)."""
+    from observer.io import SUFFIXES, write_frame
+    from observer.scenario import load_scenario
+    from observer.uncertainty import flag_names, parse_uncertainty, uncertainty_ensemble
+    check_outputs({"--out": args.out}, {"scenario": args.scenario})
+    check_output_path("--out", args.out, SUFFIXES)
+    table = parse_uncertainty(args.uncertainty)
+    if table is None:
+        raise InputError("--uncertainty", "give the relative uncertainty of at least one matrix, e.g. "
+                                          "--uncertainty K=0.01")
+    sc = load_scenario(args.scenario, parse_pairs(args.set))
+    with flag_names():
+        df = uncertainty_ensemble(sc, split_names("--designs", args.designs), model=table, plants=args.plants,
+                                  n=args.n, seed=args.seed, sample=args.sample, h=args.h, t_end=args.t_end,
+                                  tail=args.tail, record_every=args.record_every, level=args.level,
+                                  n_resamples=args.n_resamples)
+    meta = df.attrs["metadata"]
+    rows = df.attrs["members"].copy()
+    rows.attrs = {**meta, "summary": df.to_dict("records")}
+    write_frame(rows, args.out)
+    print(f"{printable(sc.name)}: {meta['n']} members x {len(meta['plants'])} plants ({meta['sample']} drawn) "
+          f"per design; floors of V/V(t_on) over the window's last {meta['tail']:g}, medians with "
+          f"{int(100 * meta['confidence'])} % intervals over plants; time to V <= {_level(meta['level'])} "
+          f"V(t_on) ({meta['level_rule']}):")
+    cols = ["design", "floor_V", "floor_V_low", "floor_V_high", "floor_q", "t_level", "t_level_low",
+            "t_level_high", "t_level_reached", "t_level_status"]
+    print(summary_table(df[cols]))
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _level(level) -> str:
+    return UNDEFINED if level is None else f"{level:.3g}"
 
 
 def observer_list(text: str | None):
@@ -289,6 +328,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_ensemble)
     from observer.compare import add_parser as add_compare
     add_compare(sub)
+    _add_uncertainty(sub)
     s = sub.add_parser("log", help="write the closing log (contact,t_close,t_open) of a run, "
                                    "the input of --source log")
     s.add_argument("result", help="result file written by run")
@@ -300,6 +340,32 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--dof", type=int, default=0, help="coordinate to plot (default 0)")
     s.set_defaults(func=cmd_plot)
     return p
+
+
+def _add_uncertainty(sub) -> None:
+    """The ``uncertainty`` subcommand's arguments."""
+    s = sub.add_parser("uncertainty", help="the designs' floors and times to a level over plants drawn "
+                                           "from a relative uncertainty of the matrices, to a CSV or Parquet file")
+    s.add_argument("scenario", help="built-in name or .toml path")
+    s.add_argument("--uncertainty", action="append", metavar="NAME=SIGMA", required=True,
+                   help="relative uncertainty of matrix NAME (M, C, K, W), e.g. K=0.01; repeatable")
+    s.add_argument("--plants", type=int, default=20, help="plants drawn (default 20)")
+    s.add_argument("--n", type=int, default=20, help="paired members per design (default 20)")
+    s.add_argument("--designs", default="jump,nojump", help="comma-separated observer designs")
+    s.add_argument("--seed", type=int, default=0, help="seed of the plants and the initial errors (default 0)")
+    s.add_argument("--sample", choices=["plant", "model"], default="plant",
+                   help="draw the master's plant (default; observers nominal) or the observers' model")
+    s.add_argument("--level", type=float, default=None, help="level of V/V(t_on) whose first-passage time is "
+                                                              "summarized (default: 10x the largest member floor)")
+    s.add_argument("--tail", type=float, default=0.25, help="floors over this last fraction of the window")
+    s.add_argument("--n-resamples", type=int, default=999, help="bootstrap resamples of the intervals (default 999)")
+    s.add_argument("--h", type=float, help="step size")
+    s.add_argument("--t-end", type=float, help="final time")
+    s.add_argument("--record-every", type=int, default=None, metavar="K", help="record every K-th step")
+    s.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override (param.NAME for builder parameters, else dotted TOML key)")
+    s.add_argument("--out", required=True, help="output file (.csv or .parquet)")
+    s.set_defaults(func=cmd_uncertainty)
 
 
 def main(argv: list[str] | None = None) -> int:

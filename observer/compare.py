@@ -10,6 +10,12 @@ with its cluster bootstrap interval (clusters = masters) and "faster in k of m m
 censored settling summary per design at ρ·V(t_on), the sign test on which design settles
 first, and the flags that say when a comparison is decided by a floor, a window or the grid.
 
+With ``plants=`` (``--uncertainty NAME=σ --plants P``) every master and member runs against each
+of P plants drawn from a stated relative uncertainty (:func:`plant_draw`, :func:`plant_runs`:
+the draws of :mod:`observer.uncertainty`), the observers carrying the nominal model (or the
+reverse, ``sample="model"``); the intervals then resample plants, the masters and members
+nested in them (:func:`bootstrap_frame`).
+
 ``python -m observer compare SCENARIO|FILE.toml`` prints it (:func:`cmd_compare`), ``--json``
 writes it for scripts, ``--report DIR`` writes a one-page HTML report (:func:`write_report`).
 """
@@ -185,7 +191,9 @@ def window_of(sc) -> tuple[float, float]:
 @dataclass
 class Comparison:
     """What :func:`compare` returns: the per-member frame, the floors, and the estimands
-    (one DataFrame each), the warnings and the metadata."""
+    (one DataFrame each), the warnings and the metadata. ``cluster_level`` names what the
+    intervals resample: ``"masters"``, or ``"plants"`` for a comparison over two or more drawn
+    plants (``members`` then has ``plant`` and ``master`` columns; its ``cluster`` is the run)."""
 
     scenario: str
     designs: tuple
@@ -202,13 +210,23 @@ class Comparison:
     positions: pd.DataFrame | None
     warnings: list = field(default_factory=list)
     metadata: dict = field(default_factory=dict)
+    cluster_level: str = "masters"
 
     @property
     def evidence(self) -> dict:
-        """Members per master, masters, and pairs (members × masters) per design pair."""
-        n_masters = int(self.members["cluster"].nunique())
+        """Members per master, masters, and pairs (members × masters) per design pair; over
+        drawn plants also ``plants`` (pairs = members × masters × plants)."""
         per = int(self.members.groupby(["cluster", "design"]).size().iloc[0])
-        return {"members_per_master": per, "masters": n_masters, "pairs": per * n_masters}
+        if "plant" not in self.members:
+            n_masters = int(self.members["cluster"].nunique())
+            return {"members_per_master": per, "masters": n_masters, "pairs": per * n_masters}
+        n_masters, n_plants = int(self.members["master"].nunique()), int(self.members["plant"].nunique())
+        return {"members_per_master": per, "masters": n_masters, "plants": n_plants,
+                "pairs": per * n_masters * n_plants}
+
+    def _unit(self, unit: str) -> str:
+        """What an interval resampled: the cluster level for "clusters", else ``unit``."""
+        return self.cluster_level if unit == "clusters" else unit
 
     def to_dict(self) -> dict:
         """JSON-ready: per pair ``rate_ratio`` {estimate, low, high}, per design the censored
@@ -220,9 +238,10 @@ class Comparison:
         for (a, b), rr, od in zip(self.pairs, self.rate_ratios.to_dict("records"), self.order.to_dict("records")):
             pairs.append({"a": a, "b": b,
                           "rate_ratio": {"estimate": num(rr["estimate"]), "low": num(rr["low"]),
-                                         "high": num(rr["high"]), "resampled": rr["unit"], "status": rr["status"]},
-                          "faster_masters": {"k": rr["k_clusters"], "m": rr["clusters"], "low": rr["k_low"],
-                                             "high": rr["k_high"]},
+                                         "high": num(rr["high"]), "resampled": self._unit(rr["unit"]),
+                                         "status": rr["status"]},
+                          f"faster_{self.cluster_level}": {"k": rr["k_clusters"], "m": rr["clusters"],
+                                                           "low": rr["k_low"], "high": rr["k_high"]},
                           "settles_first": {k: num(v) for k, v in od.items() if k not in ("a", "b")}})
         settling = {r["design"]: {k: num(v) for k, v in r.items() if k != "design"}
                     for r in self.settling.to_dict("records")}
@@ -238,14 +257,17 @@ class Comparison:
     def lines(self) -> list[str]:
         """The few lines the command line prints."""
         ev, meta = self.evidence, self.metadata
-        out = [f"{self.scenario}: {ev['members_per_master']} members x {ev['masters']} masters per design "
+        drawn = "" if "plants" not in ev else (
+            f" x {ev['plants']} plants ({meta['sample']} drawn: "
+            + ", ".join(f"{k} relative_std {v['relative_std']:g}" for k, v in meta["uncertainty"].items()) + ")")
+        out = [f"{self.scenario}: {ev['members_per_master']} members x {ev['masters']} masters{drawn} per design "
                f"({meta['integrator']}, h = {meta['h']:g}, window [{self.window[0]:g}, {self.window[1]:g}] s); "
                f"intervals {int(100 * meta['confidence'])} %"]
         for (a, b), rr, od in zip(self.pairs, self.rate_ratios.to_dict("records"), self.order.to_dict("records")):
             if rr["status"] == "ok":
                 out.append(f"decay-rate ratio {a}/{b}: {rr['estimate']:.3g} [{rr['low']:.3g}, {rr['high']:.3g}] "
-                           f"(resampling {rr['unit']}); {a}'s rate larger in {rr['k_clusters']} of "
-                           f"{rr['clusters']} masters [{100 * rr['k_low']:.0f}-{100 * rr['k_high']:.0f} %]")
+                           f"(resampling {self._unit(rr['unit'])}); {a}'s rate larger in {rr['k_clusters']} of "
+                           f"{rr['clusters']} {self.cluster_level} [{100 * rr['k_low']:.0f}-{100 * rr['k_high']:.0f} %]")
             else:
                 out.append(f"decay-rate ratio {a}/{b}: {rr['status']}")
             untied = od["a_first"] + od["b_first"]
@@ -293,7 +315,7 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
             grid_jitter: float = 0.0, initial_errors: str = "energy_sphere", V0: float | None = None,
             workers: int | None = None, scheduler: str | None = None, confidence: float | None = None,
             n_resamples: int | None = None, sensor: dict | None = None,
-            model: dict | None = None) -> Comparison:
+            model: dict | None = None, plants: int | None = None, sample: str | None = None) -> Comparison:
     """Compare observer designs on ``scenario`` with paired members against several masters.
 
     Parameters
@@ -313,7 +335,16 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
         Seeds the masters and every master's errors.
     overrides, model : dict, optional
         Dotted-key overrides (``--set``); ``h``, ``t_end`` override the step and horizon;
-        ``model``: the observers' own model (:mod:`observer.plant_model`), the masters the plant.
+        ``model``: the observers' own model (:mod:`observer.plant_model`), the masters the plant;
+        with ``plants``, the uncertainty the plants are drawn from (``{"K": {"relative_std": 0.01}}``,
+        :func:`observer.uncertainty.check_uncertainty`).
+    plants : int, optional
+        Draw this many plants from the uncertainty ``model`` (:func:`plant_runs`): every design
+        runs the same masters and members against each; the plant becomes the cluster the
+        intervals resample (with two or more plants), the masters and members nested in it.
+    sample : {"plant", "model"}, optional
+        With ``plants``: draw the masters' plant, the observers carrying the nominal model
+        (default), or the observers' model, the plant nominal.
     integrator : {"time-stepping", "event"}
         The masters' and observers' integrator; ``"event"`` is the exact event-driven
         reference, free of discretization floors.
@@ -336,11 +367,45 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
         Naming the argument that is not valid.
     """
     from observer import stats
-    from observer.ensemble import _check_designs, integrator_name
 
     confidence = stats.CONFIDENCE if confidence is None else confidence
     n_resamples = stats.N_RESAMPLES if n_resamples is None else n_resamples
     t0 = time.perf_counter()
+    designs, integrator = _check_arguments(designs, integrator, n, masters, seed, rho, spread, grid_jitter)
+    draw = plant_draw(model, plants, sample, seed)
+    sc, sensed = compared_scenario(scenario, overrides, h, t_end, sensor, None if draw else model)
+    master_seed, *member_seeds = np.random.SeedSequence(seed).spawn(masters + 1)
+    scs = master_scenarios(sc, masters, spread, grid_jitter, np.random.default_rng(master_seed))
+    runs = plant_runs(scs, draw)
+    positions = not sc.system.is_stiffness_definite()
+    jobs = [(s, designs, n, int(member_seeds[k].generate_state(1)[0]), integrator, engine, workers,
+             initial_errors, V0, c, positions and c == 0) for c, (_j, k, s) in enumerate(runs)]
+    done = _run_jobs(jobs, scheduler)
+    level = _label_plants(done, runs, draw)
+    result = _assemble(sc, designs, rho, done, confidence, n_resamples, seed, level)
+    result.metadata = _metadata(sc, sensed, done, dict(designs=list(designs), n=n, masters=masters, seed=seed,
+                                spread=spread, grid_jitter=grid_jitter, integrator=integrator, engine=engine,
+                                confidence=confidence, n_resamples=n_resamples), time.perf_counter() - t0)
+    if draw is not None:
+        result.metadata.update(_plant_metadata(draw, runs, masters, level))
+    return result
+
+
+def _label_plants(done: list, runs: list, draw: dict | None) -> str:
+    """Give each run's members their ``plant`` and ``master`` (over drawn plants); the level the
+    intervals resample: ``"plants"`` with two or more drawn plants, else ``"masters"``."""
+    if draw is None:
+        return "masters"
+    for d, (j, k, _s) in zip(done, runs):
+        d["members"].insert(1, "plant", j)
+        d["members"].insert(2, "master", k)
+    return "plants" if len(draw["seeds"]) >= 2 else "masters"
+
+
+def _check_arguments(designs, integrator, n, masters, seed, rho, spread, grid_jitter) -> tuple:
+    """The designs and the integrator's name, once every argument of :func:`compare` is valid."""
+    from observer.ensemble import _check_designs, integrator_name
+
     designs = _check_designs(designs)
     integrator = integrator_name(integrator)
     if len(designs) < 2:
@@ -353,19 +418,68 @@ def compare(scenario, designs=("jump", "nojump"), n: int = 200, masters: int = 5
     for name, value in (("spread", spread), ("grid_jitter", grid_jitter)):
         if not (isinstance(value, (int, float)) and 0.0 <= value < 1.0):
             raise InputError(name, f"must be a number in [0, 1), got {value!r}")
-    sc, sensed = compared_scenario(scenario, overrides, h, t_end, sensor, model)
-    ss = np.random.SeedSequence(seed)
-    master_seed, *member_seeds = ss.spawn(masters + 1)
-    scs = master_scenarios(sc, masters, spread, grid_jitter, np.random.default_rng(master_seed))
-    positions = not sc.system.is_stiffness_definite()
-    jobs = [(s, designs, n, int(member_seeds[j].generate_state(1)[0]), integrator, engine, workers,
-             initial_errors, V0, j, positions and j == 0) for j, s in enumerate(scs)]
-    done = _run_jobs(jobs, scheduler)
-    result = _assemble(sc, designs, rho, done, confidence, n_resamples, seed)
-    result.metadata = _metadata(sc, sensed, done, dict(designs=list(designs), n=n, masters=masters, seed=seed,
-                                spread=spread, grid_jitter=grid_jitter, integrator=integrator, engine=engine,
-                                confidence=confidence, n_resamples=n_resamples), time.perf_counter() - t0)
-    return result
+    return designs, integrator
+
+
+def plant_draw(model, plants, sample, seed) -> dict | None:
+    """None without ``plants``; else the uncertainty ``{"sigmas", "seeds", "sample"}``: σ per
+    matrix (:func:`observer.uncertainty.check_uncertainty`) and, per plant, ``{matrix: seed}``
+    from :func:`observer.uncertainty.plant_seeds` of ``SeedSequence(seed, spawn_key=(2**31,))``
+    (:data:`observer.uncertainty.PLANT_SPAWN_KEY`: a child of the seed no master's seed is).
+
+    Raises
+    ------
+    InputError
+        Naming ``plants`` (not an integer ≥ 1), ``model`` (missing, or not an uncertainty) or
+        ``sample`` (given without ``plants``, or not one of "plant", "model").
+    """
+    from observer.uncertainty import PLANT_SPAWN_KEY, SAMPLES, check_uncertainty, plant_seeds
+
+    if plants is None:
+        if sample is not None:
+            raise InputError("sample", "says what plants= draws: give plants= (and the uncertainty as model=)")
+        return None
+    if isinstance(plants, bool) or not isinstance(plants, (int, np.integer)) or plants < 1:
+        raise InputError("plants", f"must be an integer ≥ 1, got {plants!r}")
+    if model is None:
+        raise InputError("model", "plants= draws the plants from the uncertainty model= "
+                                  "{matrix: {relative_std: σ}}: give it")
+    sigmas = check_uncertainty(model)
+    sample = "plant" if sample is None else sample
+    if sample not in SAMPLES:
+        raise InputError("sample", f"must be one of {list(SAMPLES)}, got {sample!r}")
+    ss = np.random.SeedSequence(int(seed), spawn_key=(PLANT_SPAWN_KEY,))
+    return {"sigmas": sigmas, "seeds": plant_seeds(ss, int(plants), tuple(sigmas))[1], "sample": sample}
+
+
+def plant_runs(scs: list, draw: dict | None) -> list[tuple]:
+    """``(plant, master, scenario)`` per run: the masters ``scs`` as they are (plant None), or each
+    master with each drawn plant's matrices (:func:`observer.uncertainty.drawn_scenario`),
+    plant-major. Every plant is drawn, and checked, before any run."""
+    if draw is None:
+        return [(None, k, s) for k, s in enumerate(scs)]
+    from observer.uncertainty import drawn_scenario
+
+    if scs[0].model is not None:
+        raise InputError("model", "plants= draws the plants from model=; the scenario has an [observer.model] "
+                                  "table of its own: remove one of them")
+
+    return [(j, k, drawn_scenario(s, draw["sigmas"], seeds, draw["sample"]))
+            for j, seeds in enumerate(draw["seeds"]) for k, s in enumerate(scs)]
+
+
+def _plant_metadata(draw: dict, runs: list, masters: int, level: str) -> dict:
+    """What a comparison over drawn plants adds to the metadata: the uncertainty, what is drawn,
+    per plant its seeds and the relative difference of the observers' matrices from the master's
+    (master 0's run), the seed rule and the level the intervals resample."""
+    plants = []
+    for j, seeds in enumerate(draw["seeds"]):
+        s = runs[j * masters][2]
+        plants.append({"plant": j, "seeds": seeds, "relative_difference":
+                       s.model.metadata(s.system)["relative_difference"]})
+    return {"uncertainty": {k: {"relative_std": v} for k, v in draw["sigmas"].items()}, "sample": draw["sample"],
+            "plants": plants, "cluster_level": level,
+            "plant_seeds": "observer.uncertainty.plant_seeds(SeedSequence(seed, spawn_key=(2**31,)), plants, matrices)"}
 
 
 def _metadata(sc, sensed, done, settings: dict, wall: float) -> dict:
@@ -411,7 +525,18 @@ def _run_jobs(jobs, scheduler):
         return client.gather([client.submit(run_master, *job, pure=False) for job in jobs])
 
 
-def _assemble(sc, designs, rho, done, confidence, n_resamples, seed) -> Comparison:
+def bootstrap_frame(members: pd.DataFrame, level: str) -> pd.DataFrame:
+    """The members as the estimands of :mod:`observer.stats` read them: ``cluster`` the unit the
+    intervals resample. ``level="masters"``: the frame itself (cluster = the run's master);
+    ``"plants"``: cluster = the plant, and ``member`` = master·n + member (the pairs across designs
+    are still one (plant, master, member) each)."""
+    if level != "plants":
+        return members
+    per = int(members["member"].max()) + 1
+    return members.assign(cluster=members["plant"], member=members["master"] * per + members["member"])
+
+
+def _assemble(sc, designs, rho, done, confidence, n_resamples, seed, level: str = "masters") -> Comparison:
     import pandas as pd
     from observer import stats
     members = pd.concat([d["members"] for d in done], ignore_index=True)
@@ -422,14 +547,15 @@ def _assemble(sc, designs, rho, done, confidence, n_resamples, seed) -> Comparis
     col = settle_column(rho)
     pairs = tuple((a, designs[-1]) for a in designs[:-1])
     kw = dict(confidence=confidence, n_resamples=n_resamples, seed=seed)
-    rr = pd.concat([stats.rate_ratio(members, a, b, **kw) for a, b in pairs], ignore_index=True)
-    order = pd.concat([stats.settle_order(members, col, a, b, **kw) for a, b in pairs], ignore_index=True)
-    settling = stats.settling_summary(members, col, W, **kw)
+    boot = bootstrap_frame(members, level)
+    rr = pd.concat([stats.rate_ratio(boot, a, b, **kw) for a, b in pairs], ignore_index=True)
+    order = pd.concat([stats.settle_order(boot, col, a, b, **kw) for a, b in pairs], ignore_index=True)
+    settling = stats.settling_summary(boot, col, W, **kw)
     ff = stats.floor_flags(members, floors, rho)
     bf = stats.band_flags(members, col, max(d["h"] for d in done))
     warnings = _warnings(members, rr, settling, ff, bf, positions, rho)
     return Comparison(sc.name, designs, pairs, rho, window, members, floors, rr, settling, order, ff, bf,
-                      positions, warnings)
+                      positions, warnings, cluster_level=level)
 
 
 def _warnings(members, rr, settling, ff, bf, positions, rho) -> list[str]:
@@ -490,14 +616,44 @@ def add_parser(sub) -> None:
     s.add_argument("--scheduler", default=None, help="Dask scheduler address to run the masters on")
     s.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override (param.NAME for builder parameters, else dotted TOML key)")
+    s.add_argument("--uncertainty", action="append", metavar="NAME=SIGMA",
+                   help="draw the plants from this relative uncertainty of matrix NAME (M, C, K, W), "
+                        "e.g. K=0.01; repeatable (with --plants)")
+    s.add_argument("--plants", type=int, default=None, help="plants drawn from --uncertainty (default 20); "
+                                                            "the intervals then resample plants")
+    s.add_argument("--sample", choices=["plant", "model"], default=None,
+                   help="with --uncertainty: draw the masters' plant (default; observers nominal) or the "
+                        "observers' model (plant nominal)")
     s.add_argument("--json", default=None, metavar="FILE", help="write the estimands as JSON")
     s.add_argument("--report", default=None, metavar="DIR", help="write a one-page HTML report there")
     s.set_defaults(func=cmd_compare)
 
 
+def plant_options(args) -> dict:
+    """``model``, ``plants``, ``sample`` of :func:`compare` from ``--uncertainty``, ``--plants``,
+    ``--sample`` (no keyword without ``--uncertainty``; ``--plants`` defaults to 20 with it).
+
+    Raises
+    ------
+    InputError
+        Naming ``--plants`` or ``--sample`` given without ``--uncertainty``, or ``--uncertainty``
+        not ``NAME=σ`` (:func:`observer.uncertainty.parse_uncertainty`).
+    """
+    from observer.uncertainty import parse_uncertainty
+
+    table = parse_uncertainty(args.uncertainty)
+    if table is None:
+        for flag, value in (("--plants", args.plants), ("--sample", args.sample)):
+            if value is not None:
+                raise InputError(flag, "draws plants from an uncertainty: give --uncertainty NAME=SIGMA too")
+        return {}
+    return {"model": table, "plants": 20 if args.plants is None else args.plants, "sample": args.sample}
+
+
 def cmd_compare(args) -> int:
     """``compare``: print the estimands; ``--json`` and ``--report`` write them."""
     from observer.cli_common import parse_pairs
+    from observer.uncertainty import flag_names
     from observer.validation import check_output_path
 
     if args.json is not None:
@@ -505,9 +661,12 @@ def cmd_compare(args) -> int:
     if args.report is not None and Path(args.report).exists() and not Path(args.report).is_dir():
         raise InputError("--report", f"{args.report} exists and is not a directory")
     designs = [d.strip() for d in args.designs.split(",") if d.strip()]
-    res = compare(args.scenario, designs, n=args.n, masters=args.masters, rho=args.rho, seed=args.seed,
-                  overrides=parse_pairs(args.set) or None, h=args.h, t_end=args.t_end, integrator=args.integrator,
-                  spread=args.spread, grid_jitter=args.grid_jitter, V0=args.V0, workers=args.workers, scheduler=args.scheduler)
+    drawn = plant_options(args)
+    with flag_names():
+        res = compare(args.scenario, designs, n=args.n, masters=args.masters, rho=args.rho, seed=args.seed,
+                      overrides=parse_pairs(args.set) or None, h=args.h, t_end=args.t_end,
+                      integrator=args.integrator, spread=args.spread, grid_jitter=args.grid_jitter, V0=args.V0,
+                      workers=args.workers, scheduler=args.scheduler, **drawn)
     for line in res.lines():
         print(line)
     if args.json is not None:

@@ -154,3 +154,95 @@ def test_scheduler_runs_the_masters_on_dask_with_the_same_estimands():
     assert meta_remote["master_steps"] == meta_local["master_steps"]
     other, _ = estimands(observer.compare("double_mass", seed=1, **kw))
     assert other["pairs"] != local["pairs"]
+
+
+# --- issue 33: compare over plants drawn from a stated uncertainty --------------------------------------
+PLANTS_RUN = dict(n=3, masters=2, t_end=3.0, h=1e-3, n_resamples=99)
+
+
+def drawn_K(K: np.ndarray, sigma: float, seed: int) -> np.ndarray:
+    """K ∘ (1 + σZ), Z standard normal from default_rng(seed), its upper triangle mirrored."""
+    Z = np.random.default_rng(seed).standard_normal(K.shape)
+    return K * (1.0 + sigma * (np.triu(Z) + np.triu(Z, 1).T))
+
+
+def test_with_zero_spread_every_plant_repeats_the_plain_comparison():
+    """σ = 0: each plant's runs are the plain comparison's (same masters, same members, the plant
+    the nominal one), so the rate ratio is the plain one and resampling identical plants gives a
+    zero-width interval."""
+    plain = observer.compare("double_mass", **PLANTS_RUN)
+    res = observer.compare("double_mass", model={"K": {"relative_std": 0.0}}, plants=2, **PLANTS_RUN)
+    assert res.cluster_level == "plants" and res.evidence == {"members_per_master": 3, "masters": 2, "plants": 2,
+                                                              "pairs": 12}
+    for j in range(2):
+        for k in range(2):
+            mine = res.members[(res.members["plant"] == j) & (res.members["master"] == k)]
+            theirs = plain.members[plain.members["cluster"] == k]
+            np.testing.assert_array_equal(mine.sort_values(["design", "member"])[["V_on", "rate"]].to_numpy(),
+                                          theirs.sort_values(["design", "member"])[["V_on", "rate"]].to_numpy())
+    rr, pr = res.rate_ratios.iloc[0], plain.rate_ratios.iloc[0]
+    assert rr["estimate"] == pytest.approx(pr["estimate"], rel=1e-12)
+    assert rr["low"] == pytest.approx(rr["estimate"], rel=1e-12) == rr["high"]
+    assert rr["clusters"] == 2                                           # plants, not the 4 runs
+
+
+def test_the_plants_are_the_seeded_draws_and_the_clusters_resampled():
+    """σ = 1e-2 over 3 plants: the plants' K seeds are the SeedSequence(seed, spawn_key=(2**31,))
+    draws (recomputed with numpy), plant 1's master-0 members are those of a plain comparison on a
+    plant with that drawn K and observers carrying the nominal K, and the rate-ratio interval is
+    the cluster bootstrap over plants (recomputed with observer.stats.cluster_ci on the plant
+    labels; resampling the 6 runs instead gives another interval)."""
+    from observer.stats import cluster_ci
+
+    res = observer.compare("double_mass", model={"K": {"relative_std": 1e-2}}, plants=3, seed=4, **PLANTS_RUN)
+    want = np.random.SeedSequence(4, spawn_key=(2 ** 31,)).spawn(2)[1].generate_state(3, dtype=np.uint32)
+    meta = res.metadata
+    assert [p["seeds"]["K"] for p in meta["plants"]] == [int(s) for s in want]
+    assert meta["sample"] == "plant" and meta["cluster_level"] == "plants"
+    sc = observer.load_scenario("double_mass")
+    K = np.asarray(sc.system.K, dtype=float)
+    Kp = drawn_K(K, 1e-2, int(want[1]))
+    assert meta["plants"][1]["relative_difference"]["K"] == pytest.approx(
+        np.linalg.norm(K - Kp) / np.linalg.norm(Kp), rel=1e-12)
+    alone = observer.compare(sc.with_overrides({"system.K": Kp.tolist()}), model={"K": K.tolist()},
+                             **{**PLANTS_RUN, "masters": 1, "seed": 4})
+    mine = res.members[(res.members["plant"] == 1) & (res.members["master"] == 0)]
+    np.testing.assert_array_equal(mine.sort_values(["design", "member"])[["V_on", "rate"]].to_numpy(),
+                                  alone.members.sort_values(["design", "member"])[["V_on", "rate"]].to_numpy())
+    m = res.members.assign(member=res.members["master"] * 3 + res.members["member"])
+    w = m.pivot_table(index=["plant", "member"], columns="design", values="rate", aggfunc="first")
+    ra, rb, plant = w["jump"].to_numpy(), w["nojump"].to_numpy(), w.index.get_level_values("plant").to_numpy()
+    stat = lambda i: float(ra[i].sum() / rb[i].sum())  # noqa: E731
+    lo, hi, unit = cluster_ci(stat, plant, n_resamples=99, seed=4)
+    rr = res.rate_ratios.iloc[0]
+    assert (rr["low"], rr["high"], rr["clusters"]) == (lo, hi, 3) and unit == "clusters"
+    runs = m.pivot_table(index=["cluster", "member"], columns="design", values="rate", aggfunc="first")
+    lo6, hi6, _ = cluster_ci(lambda i: float(runs["jump"].to_numpy()[i].sum() / runs["nojump"].to_numpy()[i].sum()),
+                             runs.index.get_level_values("cluster").to_numpy(), n_resamples=99, seed=4)
+    assert (lo6, hi6) != (lo, hi)
+    doc = res.to_dict()
+    assert doc["pairs"][0]["rate_ratio"]["resampled"] == "plants" and doc["pairs"][0]["faster_plants"]["m"] == 3
+    assert doc["evidence"]["plants"] == 3
+
+
+def test_sample_model_draws_the_observers_model_and_keeps_the_plant():
+    res = observer.compare("double_mass", model={"K": {"relative_std": 1e-2}}, plants=2, sample="model", seed=4,
+                           **{**PLANTS_RUN, "masters": 1})
+    K = np.asarray(observer.load_scenario("double_mass").system.K, dtype=float)
+    for p in res.metadata["plants"]:
+        Km = drawn_K(K, 1e-2, p["seeds"]["K"])                         # the observers' K; the plant's is K
+        assert p["relative_difference"]["K"] == pytest.approx(np.linalg.norm(Km - K) / np.linalg.norm(K), rel=1e-12)
+    assert res.metadata["sample"] == "model"
+
+
+def test_cli_compare_over_plants_writes_the_plants_in_the_json(tmp_path, capsys):
+    out = tmp_path / "c.json"
+    rc = main(["compare", "double_mass", "--uncertainty", "K=0.01", "--plants", "2", "--n", "3", "--masters", "2",
+               "--t-end", "3", "--h", "1e-3", "--json", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0
+    assert "3 members x 2 masters x 2 plants (plant drawn: K relative_std 0.01)" in text
+    assert "(resampling plants)" in text and "of 2 plants" in text
+    doc = json.loads(out.read_text())
+    assert doc["metadata"]["uncertainty"] == {"K": {"relative_std": 0.01}} and len(doc["metadata"]["plants"]) == 2
+    assert doc["evidence"] == {"members_per_master": 3, "masters": 2, "plants": 2, "pairs": 12}

@@ -111,3 +111,118 @@ def test_bad_input_names_the_keyword(kwargs, field):
     with pytest.raises(observer.InputError) as exc:
         uncertainty_ensemble("double_mass", **kwargs)
     assert exc.value.field == field
+
+
+# --- the time to a level (issue 33, item 3) ---------------------------------------------------------
+LEVEL_RUN = dict(plants=2, n=3, seed=5, t_end=8.0, h=1e-3, tail=0.5, record_every=1, n_resamples=99)
+
+
+def km_median(times: np.ndarray) -> float:
+    """The Kaplan–Meier median when every censored time (inf) lies after every event: S drops by
+    1/N at each event, so the median is the ⌈N/2⌉-th smallest event time, NaN with fewer events."""
+    finite = np.sort(times[np.isfinite(times)])
+    k = int(np.ceil(times.size / 2))
+    return float(finite[k - 1]) if finite.size >= k else float("nan")
+
+
+def test_with_zero_spread_the_level_times_are_the_plain_ensembles_first_passages():
+    """σ = 0 at level 1e-3: every member's time is the plain ensemble's t_sync_0.001 for the same
+    initial errors (the kernel's streaming summary, another code path), and a design whose floor
+    lies below the level gets the Kaplan–Meier median of those times."""
+    df = uncertainty_ensemble("double_mass", DESIGNS, model={"K": {"relative_std": 0.0}}, level=1e-3, **LEVEL_RUN)
+    X = np.asarray(df.attrs["metadata"]["initial_errors"])
+    plain = observer.ensemble("double_mass", DESIGNS, n=3, initial_errors=X, t_end=8.0, h=1e-3)
+    want = plain.set_index(["design", "member"])["t_sync_0.001"]
+    members = df.attrs["members"]
+    for _, r in members.iterrows():
+        assert r["t_level"] == want[r["design"], r["member"]]
+    assert not np.allclose(plain["t_sync_0.001"], plain["t_sync_1e-05"])      # the level matters
+    s = df.set_index("design")
+    assert df.attrs["metadata"]["level"] == 1e-3 and df.attrs["metadata"]["level_rule"] == "given"
+    decided = [d for d in DESIGNS if s.loc[d, "floor_V_high"] < 1e-3]
+    assert decided, "no design below the level: the test checks nothing"
+    for d in DESIGNS:
+        if d in decided:
+            times = members.loc[members["design"] == d, "t_level"].to_numpy()
+            assert s.loc[d, "t_level"] == km_median(times) and s.loc[d, "t_level_status"] == "ok"
+            assert s.loc[d, "t_level_low"] <= s.loc[d, "t_level"] <= s.loc[d, "t_level_high"]
+        else:
+            assert np.isnan(s.loc[d, "t_level"]) and s.loc[d, "t_level_status"].startswith("undecided")
+
+
+def test_the_default_level_lies_above_every_members_floor():
+    """The default: 10 × the largest member floor rounded up to 10^(−k/10); no member is then
+    censored, and each design's time is a number."""
+    df = uncertainty_ensemble("double_mass", DESIGNS, model={"K": {"relative_std": 1e-3}}, **LEVEL_RUN)
+    members = df.attrs["members"]
+    F = 10.0 * members["floor_V"].max()
+    k = np.floor(-10.0 * np.log10(F) + 1e-9)
+    assert df.attrs["metadata"]["level"] == pytest.approx(10.0 ** (-k / 10.0), rel=1e-12)
+    assert F <= df.attrs["metadata"]["level"] < F * 10 ** 0.1
+    assert np.isfinite(members["t_level"]).all() and (df["t_level_reached"] == len(members) // 2).all()
+    assert (df["t_level_status"] == "ok").all() and np.isfinite(df["t_level"]).all()
+
+
+def test_a_level_below_the_floor_is_undecided_not_a_number():
+    df = uncertainty_ensemble("double_mass", DESIGNS, model={"K": {"relative_std": 1e-2}}, level=1e-9, **LEVEL_RUN)
+    assert (df["floor_V_high"] >= 1e-9).all()
+    assert df["t_level"].isna().all() and df["t_level_status"].str.startswith("undecided").all()
+
+
+def test_censored_members_enter_the_kaplan_meier_median_as_censored():
+    """observer.uncertainty.level_times on members of known times: two of six never reach the level
+    (inf): the median is the Kaplan–Meier one (the 3rd smallest time), not the median of the four
+    that reach it nor one counting inf as a time; with four of six censored it is "not reached"."""
+    import pandas as pd
+
+    from observer.uncertainty import level_times
+
+    times = np.array([0.4, np.inf, 0.1, 0.3, np.inf, 0.2])
+    members = pd.DataFrame({"design": "jump", "plant": [0, 0, 1, 1, 2, 2], "member": [0, 1] * 3, "t_level": times})
+    floors = pd.DataFrame({"design": ["jump"], "floor_V_high": [1e-4]})
+    r = level_times(members, floors, 1e-3, 5.0, n_resamples=199).iloc[0]
+    assert r["t_level"] == km_median(times) == 0.3
+    assert r["t_level"] != np.median(times[np.isfinite(times)])           # dropping the censored: 0.25
+    assert r["t_level_reached"] == 4 and r["t_level_status"] == "ok"
+    assert r["t_level_low"] <= 0.3 <= r["t_level_high"]
+    worse = members.assign(t_level=np.array([0.4, np.inf, np.inf, 0.3, np.inf, np.inf]))
+    r = level_times(worse, floors, 1e-3, 5.0, n_resamples=199).iloc[0]
+    assert np.isnan(r["t_level"]) and r["t_level_status"] == "not reached" and r["t_level_reached"] == 2
+    r = level_times(members, floors.assign(floor_V_high=1e-3), 1e-3, 5.0).iloc[0]    # at the floor
+    assert np.isnan(r["t_level"]) and r["t_level_status"].startswith("undecided")
+
+
+def test_cli_writes_the_members_and_the_summary_and_never_overwrites_its_input(tmp_path, capsys):
+    """``observer uncertainty``: the rows are the API's members (same call), the metadata beside
+    them holds the settings and the per-design summary; an --out that is the scenario file is
+    refused before any run (exit 2, the file untouched)."""
+    import json
+
+    import pandas as pd
+
+    from observer.cli import main
+
+    out = tmp_path / "u.csv"
+    argv = ["uncertainty", "double_mass", "--uncertainty", "K=0.001", "--plants", "2", "--n", "3", "--seed", "5",
+            "--t-end", "8", "--h", "1e-3", "--tail", "0.5", "--record-every", "1", "--n-resamples", "19",
+            "--out", str(out)]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "3 members x 2 plants (plant drawn)" in text and f"wrote {out}" in text
+    rows, meta = pd.read_csv(out), json.loads(out.with_suffix(".json").read_text())
+    api = uncertainty_ensemble("double_mass", DESIGNS, model={"K": {"relative_std": 0.001}}, plants=2, n=3, seed=5,
+                               t_end=8.0, h=1e-3, tail=0.5, record_every=1, n_resamples=19)
+    members = api.attrs["members"]
+    np.testing.assert_array_equal(rows["floor_V"].to_numpy(), members["floor_V"].to_numpy())
+    np.testing.assert_array_equal(rows["t_level"].to_numpy(), members["t_level"].to_numpy())
+    assert meta["uncertainty"] == {"K": {"relative_std": 0.001}} and meta["level"] == api.attrs["metadata"]["level"]
+    assert [r["design"] for r in meta["summary"]] == list(DESIGNS)
+    assert meta["summary"][0]["t_level"] == api["t_level"].iloc[0]
+    assert meta["summary"][0]["t_level_low"] == api["t_level_low"].iloc[0] and meta["n_resamples"] == 19
+    scenario = tmp_path / "s.toml"
+    assert main(["show", "double_mass"]) == 0
+    scenario.write_text(capsys.readouterr().out)
+    before = scenario.read_bytes()
+    assert main(["uncertainty", str(scenario), "--uncertainty", "K=0.001", "--out", str(scenario)]) == 2
+    assert "would overwrite the input scenario" in capsys.readouterr().err
+    assert scenario.read_bytes() == before

@@ -698,6 +698,69 @@ CASES += [
                                       model={"K": {"scale": 1.01}}), kind="api"),
 ]
 
+# --- issue 33: ensembles and comparisons over plants drawn from an uncertainty ---------------------
+
+
+def _uncertainty(model, **kw):
+    return lambda tmp: observer.uncertainty_ensemble("double_mass", model=model, **{"n": 2, "t_end": 0.01, **kw})
+
+
+def _compare_plants(model, **kw):
+    return lambda tmp: observer.compare("double_mass", **{"n": 2, "masters": 1, "t_end": 0.01, "model": model,
+                                                           "plants": 2, **kw})
+
+
+UNCERTAINTY_ARGV = ["uncertainty", "double_mass", "--n", "2", "--t-end", "0.01", "--out", OUT]
+COMPARE_ARGV = ["compare", "double_mass", "--n", "2", "--masters", "1", "--t-end", "0.01"]
+NOT_SPD = {"K": {"relative_std": 1.0}}
+"""σ = 1 on K: the draws of seed 0 leave a plant's K indefinite."""
+CASES += [
+    Bad("uncertainty-sigma-negative", "model.K.relative_std", "must be >= 0.0",
+        _uncertainty({"K": {"relative_std": -0.01}}), [*UNCERTAINTY_ARGV, "--uncertainty", "K=-0.01"],
+        cli_field="--uncertainty K", kind="cli"),
+    Bad("uncertainty-sigma-text", "model.K.relative_std", "string 'abc'",
+        _uncertainty({"K": {"relative_std": "abc"}}), [*UNCERTAINTY_ARGV, "--uncertainty", "K=abc"],
+        cli_field="--uncertainty K", kind="cli"),
+    Bad("uncertainty-sigma-nan", "model.K.relative_std", "NaN",
+        _uncertainty({"K": {"relative_std": float("nan")}}), [*UNCERTAINTY_ARGV, "--uncertainty", "K=nan"],
+        cli_field="--uncertainty K", kind="cli"),
+    Bad("uncertainty-unknown-matrix", "model.Q", "unknown matrix",
+        _uncertainty({"Q": {"relative_std": 0.01}}), [*UNCERTAINTY_ARGV, "--uncertainty", "Q=0.01"],
+        cli_field="--uncertainty Q", kind="cli"),
+    Bad("uncertainty-plants-zero", "plants", "integer ≥ 1", _uncertainty({"K": {"relative_std": 0.01}}, plants=0),
+        [*UNCERTAINTY_ARGV, "--uncertainty", "K=0.01", "--plants", "0"], kind="cli"),
+    Bad("uncertainty-not-spd-draw", "model.K", "positive semi-definite", _uncertainty(NOT_SPD, plants=5),
+        [*UNCERTAINTY_ARGV, "--uncertainty", "K=1.0", "--plants", "5"], cli_field="--uncertainty K", kind="cli"),
+    Bad("uncertainty-level-above-one", "level", "must be below 1",
+        _uncertainty({"K": {"relative_std": 0.01}}, level=2.0),
+        [*UNCERTAINTY_ARGV, "--uncertainty", "K=0.01", "--level", "2"], kind="cli"),
+    Bad("uncertainty-resamples-zero", "n_resamples", "integer ≥ 1",
+        _uncertainty({"K": {"relative_std": 0.01}}, n_resamples=0),
+        [*UNCERTAINTY_ARGV, "--uncertainty", "K=0.01", "--n-resamples", "0"], kind="cli"),
+    Bad("uncertainty-pair-malformed", "--uncertainty", "expected KEY=VALUE", None,
+        [*UNCERTAINTY_ARGV, "--uncertainty", "K"], kind="cli"),
+    Bad("uncertainty-matrix-twice", "--uncertainty K", "given twice", None,
+        [*UNCERTAINTY_ARGV, "--uncertainty", "K=0.01", "--uncertainty", "K=0.02"], kind="cli"),
+    Bad("compare-uncertainty-negative", "model.K.relative_std", "must be >= 0.0",
+        _compare_plants({"K": {"relative_std": -1.0}}), [*COMPARE_ARGV, "--uncertainty", "K=-1"],
+        cli_field="--uncertainty K", kind="cli"),
+    Bad("compare-uncertainty-unknown-matrix", "model.Q", "unknown matrix", _compare_plants({"Q": {"relative_std": 0.1}}),
+        [*COMPARE_ARGV, "--uncertainty", "Q=0.1"], cli_field="--uncertainty Q", kind="cli"),
+    Bad("compare-plants-zero", "plants", "integer ≥ 1", _compare_plants({"K": {"relative_std": 0.01}}, plants=0),
+        [*COMPARE_ARGV, "--uncertainty", "K=0.01", "--plants", "0"], kind="cli"),
+    Bad("compare-not-spd-draw", "model.K", "positive semi-definite", _compare_plants(NOT_SPD, plants=5),
+        [*COMPARE_ARGV, "--uncertainty", "K=1.0", "--plants", "5"], cli_field="--uncertainty K", kind="cli"),
+    api_case("compare-plants-without-uncertainty", _compare_plants(None), "model", "plants= draws"),
+    Bad("compare-plants-without-uncertainty-cli", "--plants", "give --uncertainty", None,
+        [*COMPARE_ARGV, "--plants", "3"], kind="cli"),
+    api_case("compare-sample-without-plants", _compare_plants(None, plants=None, sample="model"), "sample",
+             "give plants="),
+    Bad("compare-sample-without-plants-cli", "--sample", "give --uncertainty", None,
+        [*COMPARE_ARGV, "--sample", "model"], kind="cli"),
+    Bad("compare-model-seeded-with-plants", "model.K", "the seeds are drawn",
+        _compare_plants({"K": {"relative_std": 0.01, "seed": 3}}), kind="api"),
+]
+
 
 def _prepare(case: Bad, tmp: Path) -> None:
     for name, content in case.files.items():
