@@ -17,6 +17,26 @@ the status says so.
 The **crossover** of two designs is every pair of consecutive sizes between which the sign of
 log10(median floor a / median floor b) changes, with the log-log interpolated size of the
 change and the design that has the lower floor above it.
+
+The **crossover with an interval** (:func:`crossover_intervals`) uses the pairing instead: per
+size the paired statistic ``r = median over members of log10(F_a/F_b)`` (member i is the same
+initial error, master and plant in both designs, so what they share cancels), its zero
+interpolated linearly in log10 size between the bracketing sizes, and a percentile interval
+from the cluster bootstrap (:func:`observer.stats.cluster_ci`: whole clusters resampled, the
+same members at every size and in both designs; by default each member its own cluster, the
+stored curves having one master and one plant). In a resample the crossover is sought in the
+point estimate's own window (between its neighbouring crossovers, or the swept range); a
+resample in which the sign does not change there puts it beyond an end of the window (±∞). A
+crossover whose interval reaches an end is **undecided**, not a number; with no sign change
+in the point estimate the answer is **none** ("no crossover in [a, b]") when fewer than
+(1 − confidence)/2 of the resamples change sign, else undecided.
+
+**What the model must be known to** (:func:`tolerance`): for a target floor, the largest size
+at which the fitted law ``floor = 10^a·size^s`` stays at or below it, ``10^((log10 target −
+a)/s)``, with the percentile interval of the same inversion refitted on cluster resamples. A
+target at or below the median floor at size 0 (the exact model's floor: the discretisation
+and window floor at this h) is **not reachable** at any size; a size outside the fitted sizes
+is flagged as extrapolated.
 """
 
 from __future__ import annotations
@@ -29,6 +49,9 @@ BROKEN = 0.1
 """… and below this V/V(t_on)."""
 CONFIDENCE = 0.95
 RESAMPLES = 2000
+TARGETS = (1e-9, 1e-6, 1e-4, 1e-2)
+"""Target floors of V/V(t_on) for :func:`tolerances`: the report's two thresholds (1e-9, 1e-6)
+and two coarser accuracies."""
 
 
 def fit_range(sizes: np.ndarray, F: np.ndarray, exact: np.ndarray) -> np.ndarray:
@@ -71,6 +94,175 @@ def crossovers(sizes, median_a, median_b, a: str, b: str) -> list[dict]:
             out.append({"between": [float(sizes[i]), float(sizes[i + 1])], "at": float(at),
                         "lower_above": a if d[i + 1] < 0 else b})
     return out
+
+
+def paired_log_ratio(Fa, Fb, idx=None) -> np.ndarray:
+    """Per size, the median over members of log10(F_a/F_b) (``Fa``, ``Fb``: sizes × members,
+    paired; ``idx``: the members to use, repetitions allowed; default all)."""
+    L = np.log10(np.asarray(Fa, float)) - np.log10(np.asarray(Fb, float))
+    return np.median(L if idx is None else L[:, np.asarray(idx, int)], axis=1)
+
+
+def sign_changes(x: np.ndarray, r: np.ndarray) -> list[tuple[int, float, float]]:
+    """Every i with ``r[i]·r[i+1] < 0``: ``(i, zero, sign of r above it)``, the zero of the
+    straight line through (x[i], r[i]) and (x[i+1], r[i+1])."""
+    out = []
+    for i in np.flatnonzero(r[:-1] * r[1:] < 0):
+        w = r[i] / (r[i] - r[i + 1])
+        out.append((int(i), float(x[i] + w * (x[i + 1] - x[i])), float(np.sign(r[i + 1]))))
+    return out
+
+
+def _located(x: np.ndarray, r: np.ndarray, window: tuple[int, int], after: float, near: float) -> float:
+    """One resample's crossover in ``window`` (indices, inclusive) towards the sign ``after``:
+    the zero of that direction nearest ``near``; −∞ when r has the sign ``after`` throughout
+    the window (it crossed below it), +∞ when it has the other sign throughout (above it), NaN
+    otherwise (only changes the other way)."""
+    lo, hi = window
+    xs, rs = x[lo:hi + 1], r[lo:hi + 1]
+    zeros = [z for _, z, s in sign_changes(xs, rs) if s == after]
+    if zeros:
+        return min(zeros, key=lambda z: abs(z - near))
+    if np.all(rs * after > 0):
+        return -np.inf
+    if np.all(rs * after < 0):
+        return np.inf
+    return np.nan
+
+
+def _first_change(x: np.ndarray, r: np.ndarray, sign: float) -> float:
+    """One resample's first sign change (either way) when the point estimate has the sign
+    ``sign`` throughout: its zero; +∞ when r keeps ``sign`` throughout, −∞ when it has the
+    other sign throughout, NaN otherwise (a zero sample)."""
+    found = sign_changes(x, r)
+    if found:
+        return found[0][1]
+    return np.inf if np.all(r * sign > 0) else (-np.inf if np.all(r * sign < 0) else np.nan)
+
+
+def _interval(stat, clusters, confidence, resamples, seed) -> tuple[float, float, str]:
+    """The cluster bootstrap interval of ``stat`` with a NaN resample counted against the
+    interval at both ends (−∞ for the lower end, +∞ for the upper: the resample places nothing)."""
+    from observer.stats import cluster_ci
+
+    def at(fill):
+        return lambda idx: fill if np.isnan(v := stat(idx)) else v
+
+    lo, _, unit = cluster_ci(at(-np.inf), clusters, confidence=confidence, n_resamples=resamples, seed=seed)
+    _, hi, _ = cluster_ci(at(np.inf), clusters, confidence=confidence, n_resamples=resamples, seed=seed)
+    return lo, hi, unit
+
+
+def _end(v: float, lo: float, hi: float) -> float | None:
+    """A log10 interval end as a size, or None where it is not inside the window [lo, hi]
+    (an end the data do not reach; NaN from a percentile between infinite resamples too)."""
+    return float(10.0 ** v) if np.isfinite(v) and lo <= v <= hi else None
+
+
+def crossover_intervals(sizes, Fa, Fb, a: str, b: str, clusters=None, confidence: float = CONFIDENCE,
+                        resamples: int = 999, seed: int = 0) -> dict:
+    """The crossovers of designs ``a`` and ``b`` with intervals (module docstring).
+
+    Parameters
+    ----------
+    sizes : array_like
+        Ascending sizes > 0 (k of them).
+    Fa, Fb : array_like
+        Member floors of the two designs, shape (k, members), paired by member.
+    clusters : array_like, optional
+        A cluster label per member (its master or plant); default each member its own.
+
+    Returns
+    -------
+    dict
+        ``status``: ``"crossovers"`` (each ``placed`` or ``undecided``), ``"none"`` or
+        ``"undecided"``; ``range``, the swept sizes' ends; ``crossovers``: per point-estimate
+        sign change ``at`` (the size), ``between`` (the bracketing sizes), ``interval``
+        ([low, high], an end None where the data do not reach it), ``window``, ``status`` and
+        ``lower_above`` (the design with the lower paired floor above it); without one,
+        ``lower_throughout`` and the resamples' ``interval`` of the first sign change.
+    """
+    x = np.log10(np.asarray(sizes, float))
+    Fa, Fb = np.asarray(Fa, float), np.asarray(Fb, float)
+    clusters = np.arange(Fa.shape[1]) if clusters is None else np.asarray(clusters)
+    r = paired_log_ratio(Fa, Fb)
+    found = sign_changes(x, r)
+    out = {"designs": [a, b], "range": [float(10 ** x[0]), float(10 ** x[-1])], "confidence": confidence,
+           "resamples": resamples, "seed": seed,
+           "statistic": "median over members of log10(floor a / floor b), zero interpolated in log10 size",
+           "crossovers": []}
+    for k, (i, z, after) in enumerate(found):
+        window = (found[k - 1][0] + 1 if k else 0, found[k + 1][0] if k + 1 < len(found) else x.size - 1)
+        lo, hi, unit = _interval(lambda idx: _located(x, paired_log_ratio(Fa, Fb, idx), window, after, z),
+                                 clusters, confidence, resamples, seed)
+        ends = [_end(lo, x[window[0]], x[window[1]]), _end(hi, x[window[0]], x[window[1]])]
+        out["crossovers"].append({"at": float(10 ** z), "between": [float(10 ** x[i]), float(10 ** x[i + 1])],
+                                  "interval": ends, "window": [float(10 ** x[window[0]]), float(10 ** x[window[1]])],
+                                  "status": "placed" if None not in ends else "undecided",
+                                  "lower_above": a if after < 0 else b})
+        out["unit"] = unit
+    if found:
+        out["status"] = "crossovers"
+        return out
+    sign = float(np.sign(np.median(r)))
+    lo, hi, out["unit"] = _interval(lambda idx: _first_change(x, paired_log_ratio(Fa, Fb, idx), sign),
+                                    clusters, confidence, resamples, seed)
+    out["lower_throughout"] = a if sign < 0 else b
+    out["interval"] = [_end(lo, x[0], x[-1]), _end(hi, x[0], x[-1])]
+    out["status"] = "none" if lo == np.inf else "undecided"
+    return out
+
+
+def tolerance(sizes, F, exact, target: float, fit_sizes=None, clusters=None, confidence: float = CONFIDENCE,
+              resamples: int = 999, seed: int = 0) -> dict:
+    """The largest size at which one design's fitted floor law stays at or below ``target``
+    (module docstring), with its interval.
+
+    Parameters
+    ----------
+    sizes, F, exact
+        As :func:`fit_curve`: ascending sizes, member floors (sizes × members), floors at size 0.
+    target : float
+        The floor of V/V(t_on) aimed at.
+    fit_sizes : array_like, optional
+        The sizes the law is fitted on (default :func:`fit_range`).
+
+    Returns
+    -------
+    dict
+        ``status``: ``"ok"`` (the size lies in the fitted sizes), ``"extrapolated"``, ``"not
+        reachable"`` (target ≤ the median floor at size 0), ``"whole range"`` (no law, every
+        median floor at or below the target: the size is at least the largest swept) or
+        ``"not fitted"``; ``size`` and ``interval`` ([low, high], None where not reached).
+    """
+    sizes, F, exact = np.asarray(sizes, float), np.asarray(F, float), np.asarray(exact, float)
+    out = {"target": float(target), "exact_floor": float(np.median(exact)), "size": None, "interval": None}
+    if target <= out["exact_floor"]:
+        return {**out, "status": "not reachable"}
+    keep = fit_range(sizes, F, exact) if fit_sizes is None else np.isin(sizes, np.asarray(fit_sizes, float))
+    if keep.sum() < 3:
+        whole = bool(np.all(np.median(F, axis=1) <= target))
+        return {**out, "status": "whole range" if whole else "not fitted", "at_least": float(sizes[-1]) if whole else None}
+    x, Fk = np.log10(sizes[keep]), F[keep]
+    clusters = np.arange(F.shape[1]) if clusters is None else np.asarray(clusters)
+
+    def size_at(idx=None) -> float:
+        s, a = np.polyfit(x, np.log10(np.median(Fk if idx is None else Fk[:, idx], axis=1)), 1)
+        return float(10.0 ** ((np.log10(target) - a) / s)) if s > 0 else np.inf
+
+    from observer.stats import cluster_ci
+
+    value = size_at()
+    lo, hi, unit = cluster_ci(size_at, clusters, confidence=confidence, n_resamples=resamples, seed=seed)
+    inside = 10 ** x[0] * (1 - 1e-12) <= value <= 10 ** x[-1] * (1 + 1e-12)
+    return {**out, "status": "ok" if inside else "extrapolated", "size": value, "unit": unit,
+            "interval": [float(lo) if np.isfinite(lo) else None, float(hi) if np.isfinite(hi) else None],
+            "fit_sizes": [float(10 ** x[0]), float(10 ** x[-1])]}
+
+
+def tolerances(sizes, F, exact, targets=TARGETS, **kw) -> list[dict]:
+    """:func:`tolerance` for each target of ``targets``."""
+    return [tolerance(sizes, F, exact, t, **kw) for t in targets]
 
 
 def curve_record(key: str, label: str, unit: str, sizes, per_size: list[dict], exact: dict,
