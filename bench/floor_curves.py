@@ -22,8 +22,9 @@ The **crossover with an interval** (:func:`crossover_intervals`) uses the pairin
 size the paired statistic ``r = median over members of log10(F_a/F_b)`` (member i is the same
 initial error, master and plant in both designs, so what they share cancels), its zero
 interpolated linearly in log10 size between the bracketing sizes, and a percentile interval
-from the cluster bootstrap (:func:`observer.stats.cluster_ci`: whole clusters resampled, the
-same members at every size and in both designs; by default each member its own cluster, the
+from the cluster bootstrap (:func:`cluster_resamples`, the scheme of
+:func:`observer.stats.cluster_ci`: whole clusters resampled, the same members at every size and
+in both designs; by default each member its own cluster, the
 stored curves having one master and one plant). In a resample the crossover is sought in the
 point estimate's own window (between its neighbouring crossovers, or the swept range); a
 resample in which the sign does not change there puts it beyond an end of the window (±∞). A
@@ -31,7 +32,7 @@ crossover whose interval reaches an end is **undecided**, not a number; with no 
 in the point estimate the answer is **none** ("no crossover in [a, b]") when fewer than
 (1 − confidence)/2 of the resamples change sign, else undecided.
 
-**What the model must be known to** (:func:`tolerance`): for a target floor, the largest size
+**What the model must be known to** (:func:`tolerances`): for a target floor, the largest size
 at which the fitted law ``floor = 10^a·size^s`` stays at or below it, ``10^((log10 target −
 a)/s)``, with the percentile interval of the same inversion refitted on cluster resamples. A
 target at or below the median floor at size 0 (the exact model's floor: the discretisation
@@ -140,17 +141,39 @@ def _first_change(x: np.ndarray, r: np.ndarray, sign: float) -> float:
     return np.inf if np.all(r * sign > 0) else (-np.inf if np.all(r * sign < 0) else np.nan)
 
 
+def cluster_resamples(clusters, resamples: int, seed: int):
+    """The member indices of ``resamples`` cluster-bootstrap resamples, and the unit resampled.
+
+    The scheme of :func:`observer.stats.cluster_ci`: with two or more distinct cluster labels
+    whole clusters are drawn with replacement (all members of a drawn cluster enter, as often
+    as it is drawn); with one, the members. Drawn here once so that every statistic of one
+    curve (both ends of an interval, every target) is read off the same resamples."""
+    clusters = np.asarray(clusters)
+    labels, inverse = np.unique(clusters, return_inverse=True)
+    rng = np.random.default_rng(seed)
+    if labels.size < 2:
+        return [rng.integers(0, clusters.size, clusters.size) for _ in range(resamples)], "members"
+    members_of = [np.flatnonzero(inverse == c) for c in range(labels.size)]
+    return [np.concatenate([members_of[c] for c in rng.integers(0, labels.size, labels.size)])
+            for _ in range(resamples)], "clusters"
+
+
+def percentile_interval(values, confidence: float) -> tuple[float, float]:
+    """The percentile interval of resampled ``values`` (±∞ allowed: an end not reached), the
+    order statistics either side (no interpolation across an infinite value); a NaN resample
+    (nothing placed) counts as −∞ for the lower end and +∞ for the upper."""
+    v = np.asarray(values, float)
+    a = (1.0 - confidence) / 2
+    lo = np.quantile(np.where(np.isnan(v), -np.inf, v), a, method="lower")
+    hi = np.quantile(np.where(np.isnan(v), np.inf, v), 1 - a, method="higher")
+    return float(lo), float(hi)
+
+
 def _interval(stat, clusters, confidence, resamples, seed) -> tuple[float, float, str]:
-    """The cluster bootstrap interval of ``stat`` with a NaN resample counted against the
-    interval at both ends (−∞ for the lower end, +∞ for the upper: the resample places nothing)."""
-    from observer.stats import cluster_ci
-
-    def at(fill):
-        return lambda idx: fill if np.isnan(v := stat(idx)) else v
-
-    lo, _, unit = cluster_ci(at(-np.inf), clusters, confidence=confidence, n_resamples=resamples, seed=seed)
-    _, hi, _ = cluster_ci(at(np.inf), clusters, confidence=confidence, n_resamples=resamples, seed=seed)
-    return lo, hi, unit
+    """:func:`percentile_interval` of ``stat`` (a function of member indices) over
+    :func:`cluster_resamples`."""
+    picks, unit = cluster_resamples(clusters, resamples, seed)
+    return (*percentile_interval([stat(idx) for idx in picks], confidence), unit)
 
 
 def _end(v: float, lo: float, hi: float) -> float | None:
@@ -213,56 +236,65 @@ def crossover_intervals(sizes, Fa, Fb, a: str, b: str, clusters=None, confidence
     return out
 
 
-def tolerance(sizes, F, exact, target: float, fit_sizes=None, clusters=None, confidence: float = CONFIDENCE,
-              resamples: int = 999, seed: int = 0) -> dict:
-    """The largest size at which one design's fitted floor law stays at or below ``target``
-    (module docstring), with its interval.
+def tolerances(sizes, F, exact, targets=TARGETS, fit_sizes=None, clusters=None,
+               confidence: float = CONFIDENCE, resamples: int = 999, seed: int = 0) -> list[dict]:
+    """Per target floor of ``targets``, the largest size at which one design's fitted floor law
+    stays at or below it (module docstring), with its interval; every target read off the same
+    resamples.
 
     Parameters
     ----------
     sizes, F, exact
         As :func:`fit_curve`: ascending sizes, member floors (sizes × members), floors at size 0.
-    target : float
-        The floor of V/V(t_on) aimed at.
+    targets : sequence of float
+        Floors of V/V(t_on) aimed at.
     fit_sizes : array_like, optional
         The sizes the law is fitted on (default :func:`fit_range`).
+    clusters : array_like, optional
+        A cluster label per member; default each member its own.
 
     Returns
     -------
-    dict
-        ``status``: ``"ok"`` (the size lies in the fitted sizes), ``"extrapolated"``, ``"not
-        reachable"`` (target ≤ the median floor at size 0), ``"whole range"`` (no law, every
-        median floor at or below the target: the size is at least the largest swept) or
-        ``"not fitted"``; ``size`` and ``interval`` ([low, high], None where not reached).
+    list of dict
+        Per target: ``status`` ``"ok"`` (the size lies in the fitted sizes), ``"extrapolated"``,
+        ``"not reachable"`` (target ≤ the median floor at size 0), ``"whole range"`` (no growing
+        law, every median floor at or below the target: the size is at least the largest
+        swept, ``at_least``) or ``"not fitted"``; ``size`` and ``interval`` ([low, high], an end
+        None where the resamples do not reach it).
     """
     sizes, F, exact = np.asarray(sizes, float), np.asarray(F, float), np.asarray(exact, float)
-    out = {"target": float(target), "exact_floor": float(np.median(exact)), "size": None, "interval": None}
-    if target <= out["exact_floor"]:
-        return {**out, "status": "not reachable"}
     keep = fit_range(sizes, F, exact) if fit_sizes is None else np.isin(sizes, np.asarray(fit_sizes, float))
-    if keep.sum() < 3:
-        whole = bool(np.all(np.median(F, axis=1) <= target))
-        return {**out, "status": "whole range" if whole else "not fitted", "at_least": float(sizes[-1]) if whole else None}
     x, Fk = np.log10(sizes[keep]), F[keep]
-    clusters = np.arange(F.shape[1]) if clusters is None else np.asarray(clusters)
+    base = float(np.median(exact))
+    slope = np.polyfit(x, np.log10(np.median(Fk, axis=1)), 1)[0] if x.size >= 3 else 0.0
+    lines = None
+    if slope > 0:
+        picks, unit = cluster_resamples(np.arange(F.shape[1]) if clusters is None else clusters, resamples, seed)
+        Y = np.log10(np.stack([np.median(Fk, axis=1)] + [np.median(Fk[:, i], axis=1) for i in picks], axis=1))
+        lines = np.polyfit(x, Y, 1)                         # row 0 slopes, row 1 intercepts; column 0 the data
+    out = []
+    for target in map(float, targets):
+        t = {"target": target, "exact_floor": base, "size": None, "interval": None}
+        if target <= base:
+            t["status"] = "not reachable"
+        elif lines is None:
+            whole = bool(np.all(np.median(F, axis=1) <= target))
+            t.update(status="whole range" if whole else "not fitted", at_least=float(sizes[-1]) if whole else None)
+        else:
+            with np.errstate(divide="ignore", over="ignore"):
+                v = np.where(lines[0] > 0, 10.0 ** ((np.log10(target) - lines[1]) / lines[0]), np.inf)
+            lo, hi = percentile_interval(v[1:], confidence)
+            inside = 10 ** x[0] * (1 - 1e-12) <= v[0] <= 10 ** x[-1] * (1 + 1e-12)
+            t.update(status="ok" if inside else "extrapolated", size=float(v[0]), unit=unit,
+                     interval=[lo if np.isfinite(lo) else None, hi if np.isfinite(hi) else None],
+                     fit_sizes=[float(10 ** x[0]), float(10 ** x[-1])])
+        out.append(t)
+    return out
 
-    def size_at(idx=None) -> float:
-        s, a = np.polyfit(x, np.log10(np.median(Fk if idx is None else Fk[:, idx], axis=1)), 1)
-        return float(10.0 ** ((np.log10(target) - a) / s)) if s > 0 else np.inf
 
-    from observer.stats import cluster_ci
-
-    value = size_at()
-    lo, hi, unit = cluster_ci(size_at, clusters, confidence=confidence, n_resamples=resamples, seed=seed)
-    inside = 10 ** x[0] * (1 - 1e-12) <= value <= 10 ** x[-1] * (1 + 1e-12)
-    return {**out, "status": "ok" if inside else "extrapolated", "size": value, "unit": unit,
-            "interval": [float(lo) if np.isfinite(lo) else None, float(hi) if np.isfinite(hi) else None],
-            "fit_sizes": [float(10 ** x[0]), float(10 ** x[-1])]}
-
-
-def tolerances(sizes, F, exact, targets=TARGETS, **kw) -> list[dict]:
-    """:func:`tolerance` for each target of ``targets``."""
-    return [tolerance(sizes, F, exact, t, **kw) for t in targets]
+def tolerance(sizes, F, exact, target: float, **kw) -> dict:
+    """:func:`tolerances` for one target."""
+    return tolerances(sizes, F, exact, (target,), **kw)[0]
 
 
 def curve_record(key: str, label: str, unit: str, sizes, per_size: list[dict], exact: dict,

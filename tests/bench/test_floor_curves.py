@@ -6,7 +6,8 @@ import numpy as np
 
 import pytest
 
-from bench.floor_curves import ABOVE_EXACT, BROKEN, crossover_intervals, crossovers, fit_curve, fit_range, tolerance
+from bench.floor_curves import (ABOVE_EXACT, BROKEN, crossover_intervals, crossovers, fit_curve, fit_range,
+                                percentile_interval, tolerance)
 
 SIZES = np.logspace(-4, -1, 10)
 
@@ -197,3 +198,17 @@ def test_without_a_law_the_floor_below_the_target_everywhere_is_the_whole_range(
     assert t["status"] == "whole range" and t["at_least"] == SIZES[-1] and t["size"] is None
     step = np.where(SIZES[:, None] < 1e-2, 3e-8, 0.5) * np.ones((1, 4))     # exact, then broken
     assert tolerance(SIZES, step, flat[0], 1e-6, **QUICK)["status"] == "not fitted"
+
+
+def test_a_resample_that_places_nothing_counts_against_both_ends_of_the_interval():
+    """Percentile interval of resampled crossings: NaN (no same-direction change) is −∞ for the
+    lower end and +∞ for the upper; the ends are order statistics, never interpolated."""
+    values = np.arange(1.0, 201.0)
+    assert percentile_interval(values, 0.95) == (5.0, 196.0)        # the 2.5 % and 97.5 % order statistics
+    few = np.concatenate([values, [np.nan] * 3])                    # 1.5 % NaN: both ends placed
+    lo, hi = percentile_interval(few, 0.95)
+    assert np.isfinite(lo) and np.isfinite(hi)
+    many = np.concatenate([values, [np.nan] * 20])                  # 9 % NaN: neither end placed
+    assert percentile_interval(many, 0.95) == (-np.inf, np.inf)
+    low = np.concatenate([values, [-np.inf] * 20])                  # −∞: only the lower end is lost
+    assert percentile_interval(low, 0.95)[0] == -np.inf and np.isfinite(percentile_interval(low, 0.95)[1])
