@@ -97,13 +97,6 @@ def crossovers(sizes, median_a, median_b, a: str, b: str) -> list[dict]:
     return out
 
 
-def paired_log_ratio(Fa, Fb, idx=None) -> np.ndarray:
-    """Per size, the median over members of log10(F_a/F_b) (``Fa``, ``Fb``: sizes × members,
-    paired; ``idx``: the members to use, repetitions allowed; default all)."""
-    L = np.log10(np.asarray(Fa, float)) - np.log10(np.asarray(Fb, float))
-    return np.median(L if idx is None else L[:, np.asarray(idx, int)], axis=1)
-
-
 def sign_changes(x: np.ndarray, r: np.ndarray) -> list[tuple[int, float, float]]:
     """Every i with ``r[i]·r[i+1] < 0``: ``(i, zero, sign of r above it)``, the zero of the
     straight line through (x[i], r[i]) and (x[i+1], r[i+1])."""
@@ -158,6 +151,15 @@ def cluster_resamples(clusters, resamples: int, seed: int):
             for _ in range(resamples)], "clusters"
 
 
+def resampled_medians(F: np.ndarray, picks: list) -> np.ndarray:
+    """The median over the members of each resample of ``picks`` (:func:`cluster_resamples`),
+    per row of ``F`` (rows × members): shape (rows, resamples); one array operation when the
+    resamples have one length (members, or clusters of one size)."""
+    if len({len(i) for i in picks}) == 1:
+        return np.median(F[:, np.stack(picks)], axis=2)
+    return np.stack([np.median(F[:, i], axis=1) for i in picks], axis=1)
+
+
 def percentile_interval(values, confidence: float) -> tuple[float, float]:
     """The percentile interval of resampled ``values`` (±∞ allowed: an end not reached), the
     order statistics either side (no interpolation across an infinite value); a NaN resample
@@ -169,11 +171,12 @@ def percentile_interval(values, confidence: float) -> tuple[float, float]:
     return float(lo), float(hi)
 
 
-def _interval(stat, clusters, confidence, resamples, seed) -> tuple[float, float, str]:
-    """:func:`percentile_interval` of ``stat`` (a function of member indices) over
-    :func:`cluster_resamples`."""
+def _interval(stat, L: np.ndarray, clusters, confidence, resamples, seed) -> tuple[float, float, str]:
+    """:func:`percentile_interval` of ``stat`` (a function of the paired statistic r, one value
+    per size) over the :func:`cluster_resamples` of the members of ``L`` (the log10 ratios)."""
     picks, unit = cluster_resamples(clusters, resamples, seed)
-    return (*percentile_interval([stat(idx) for idx in picks], confidence), unit)
+    R = resampled_medians(L, picks)
+    return (*percentile_interval([stat(R[:, j]) for j in range(R.shape[1])], confidence), unit)
 
 
 def _end(v: float, lo: float, hi: float) -> float | None:
@@ -208,7 +211,8 @@ def crossover_intervals(sizes, Fa, Fb, a: str, b: str, clusters=None, confidence
     x = np.log10(np.asarray(sizes, float))
     Fa, Fb = np.asarray(Fa, float), np.asarray(Fb, float)
     clusters = np.arange(Fa.shape[1]) if clusters is None else np.asarray(clusters)
-    r = paired_log_ratio(Fa, Fb)
+    L = np.log10(Fa) - np.log10(Fb)
+    r = np.median(L, axis=1)
     found = sign_changes(x, r)
     out = {"designs": [a, b], "range": [float(10 ** x[0]), float(10 ** x[-1])], "confidence": confidence,
            "resamples": resamples, "seed": seed,
@@ -216,8 +220,8 @@ def crossover_intervals(sizes, Fa, Fb, a: str, b: str, clusters=None, confidence
            "crossovers": []}
     for k, (i, z, after) in enumerate(found):
         window = (found[k - 1][0] + 1 if k else 0, found[k + 1][0] if k + 1 < len(found) else x.size - 1)
-        lo, hi, unit = _interval(lambda idx: _located(x, paired_log_ratio(Fa, Fb, idx), window, after, z),
-                                 clusters, confidence, resamples, seed)
+        lo, hi, unit = _interval(lambda rs: _located(x, rs, window, after, z), L, clusters, confidence,
+                                 resamples, seed)
         ends = [_end(lo, x[window[0]], x[window[1]]), _end(hi, x[window[0]], x[window[1]])]
         out["crossovers"].append({"at": float(10 ** z), "between": [float(10 ** x[i]), float(10 ** x[i + 1])],
                                   "interval": ends, "window": [float(10 ** x[window[0]]), float(10 ** x[window[1]])],
@@ -228,8 +232,8 @@ def crossover_intervals(sizes, Fa, Fb, a: str, b: str, clusters=None, confidence
         out["status"] = "crossovers"
         return out
     sign = float(np.sign(np.median(r)))
-    lo, hi, out["unit"] = _interval(lambda idx: _first_change(x, paired_log_ratio(Fa, Fb, idx), sign),
-                                    clusters, confidence, resamples, seed)
+    lo, hi, out["unit"] = _interval(lambda rs: _first_change(x, rs, sign), L, clusters, confidence,
+                                    resamples, seed)
     out["lower_throughout"] = a if sign < 0 else b
     out["interval"] = [_end(lo, x[0], x[-1]), _end(hi, x[0], x[-1])]
     out["status"] = "none" if lo == np.inf else "undecided"
@@ -270,7 +274,7 @@ def tolerances(sizes, F, exact, targets=TARGETS, fit_sizes=None, clusters=None,
     lines = None
     if slope > 0:
         picks, unit = cluster_resamples(np.arange(F.shape[1]) if clusters is None else clusters, resamples, seed)
-        Y = np.log10(np.stack([np.median(Fk, axis=1)] + [np.median(Fk[:, i], axis=1) for i in picks], axis=1))
+        Y = np.log10(np.column_stack([np.median(Fk, axis=1), resampled_medians(Fk, picks)]))
         lines = np.polyfit(x, Y, 1)                         # row 0 slopes, row 1 intercepts; column 0 the data
     out = []
     for target in map(float, targets):

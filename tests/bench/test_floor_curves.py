@@ -114,6 +114,18 @@ def test_parallel_laws_have_no_crossover_and_name_the_lower_design():
     assert swapped["status"] == "none" and swapped["lower_throughout"] == "nojump"
 
 
+def test_the_statistic_is_the_median_of_the_paired_ratios_not_the_ratio_of_the_medians():
+    """Five members, a/b = 0.5 for three of them and 2 for two: a is lower for the majority
+    (the paired statistic), although a's median floor is twice b's (b = 1, 2, 3, 4, 100 →
+    a = 0.5, 1, 6, 8, 50)."""
+    b = np.array([1.0, 2.0, 3.0, 4.0, 100.0])
+    a = b * np.array([0.5, 0.5, 2.0, 2.0, 0.5])
+    assert np.median(a) == 2 * np.median(b)
+    law = 10.0 * SIZES[:, None] ** 2
+    res = crossover_intervals(SIZES, law * a, law * b, "jump", "nojump", **QUICK)
+    assert res["crossovers"] == [] and res["lower_throughout"] == "jump"
+
+
 @pytest.mark.parametrize("offset, status", [(0.04, "undecided"), (0.3, "none")])
 def test_a_sign_change_the_point_estimate_lacks_but_resamples_have_is_undecided(offset, status):
     """log10(a/b) = offset + 0.1·(decades above the first size), noise 0.03 decade: the
