@@ -343,7 +343,7 @@ def paired_cell(res: dict, unit: str) -> str:
         else:
             end = "lower" if c["interval"][0] is None else "upper"
             parts.append(f"undecided between {_value(lo, unit)} and {_value(hi, unit)} (the interval reaches "
-                         f"the {end} end of {_value(c['window'][0], unit)} … {_value(c['window'][1], unit)}; "
+                         f"the {end} end of {_value(c['window'][0], unit)} … {_value(c['window'][1], unit)}, "
                          f"{low} lower above)")
     return "; ".join(parts)
 
