@@ -339,7 +339,8 @@ def paired_cell(res: dict, unit: str) -> str:
         low, (lo, hi) = registry.label(c["lower_above"]), c["between"]
         if c["status"] == "placed":
             parts.append(f"at {_value(c['at'], unit)} [{_value(c['interval'][0], unit)} – "
-                         f"{_value(c['interval'][1], unit)}] ({low} lower above)")
+                         f"{_value(c['interval'][1], unit)}] (between the sizes {_value(lo, unit)} and "
+                         f"{_value(hi, unit)}, {low} lower above)")
         else:
             end = "lower" if c["interval"][0] is None else "upper"
             parts.append(f"undecided between {_value(lo, unit)} and {_value(hi, unit)} (the interval reaches "
@@ -362,7 +363,10 @@ def crossover_table(found: dict, title: str) -> Table:
               "resamples the members, the same at every size and in both designs. Undecided: the interval "
               "reaches an end of the swept range (or of the span between neighbouring crossovers), or the "
               "paired medians keep their sign but resamples do not: the data cannot place it, so no number "
-              "is given. No crossover: fewer than 2.5 % of the resamples change sign.")
+              f"is given. No crossover: fewer than {100 * (1 - CONFIDENCE) / 2:g} % of the resamples change sign. "
+              "The interval is the "
+              "spread over the members (initial errors) only: it does not include the error of interpolating "
+              "between the two swept sizes that bracket the crossover, nor other masters or plants.")
     return t
 
 
