@@ -196,7 +196,8 @@ def test_a_doctored_paired_crossing_is_placed_with_an_interval_inside_its_bracke
     assert row[2].startswith("at ") and at == pytest.approx(zero, rel=6e-3), row
     assert eps[2] <= lo <= at <= hi <= eps[3], row
     above = a if r[-1] < 0 else b
-    assert f"({registry.label(above)} lower above)" in row[2]
+    assert f"{registry.label(above)} lower above)" in row[2]
+    assert numbers(row[2].split("between the sizes")[1])[:2] == pytest.approx(eps[2:4], rel=6e-3)
 
 
 def test_the_crossover_sentences_name_the_design_lower_everywhere(section):
