@@ -224,3 +224,22 @@ def test_a_resample_that_places_nothing_counts_against_both_ends_of_the_interval
     assert percentile_interval(many, 0.95) == (-np.inf, np.inf)
     low = np.concatenate([values, [-np.inf] * 20])                  # −∞: only the lower end is lost
     assert percentile_interval(low, 0.95)[0] == -np.inf and np.isfinite(percentile_interval(low, 0.95)[1])
+
+
+def test_resamples_draw_whole_clusters_and_members_only_within_one():
+    """Clusters of 2, 3 and 1 members: every resample holds each drawn cluster whole (all its
+    members, equally often) and as many clusters as there are; one cluster: the members."""
+    from bench.floor_curves import cluster_resamples
+
+    clusters = np.repeat(["a", "b", "c"], [2, 3, 1])
+    picks, unit = cluster_resamples(clusters, 200, seed=1)
+    assert unit == "clusters" and len(picks) == 200
+    sizes = {"a": 2, "b": 3, "c": 1}
+    for p in picks:
+        counts = {c: np.bincount(p, minlength=6)[clusters == c] for c in sizes}
+        assert all(len(set(v)) == 1 for v in counts.values()), p          # a drawn cluster enters whole
+        assert sum(v[0] for v in counts.values()) == 3                      # three clusters drawn
+    assert len({tuple(np.sort(p)) for p in picks}) > 3
+    single, unit = cluster_resamples(np.zeros(5), 50, seed=1)
+    assert unit == "members" and all(len(p) == 5 for p in single)
+    assert any(len(set(p)) < 5 for p in single)
