@@ -3,12 +3,15 @@ plant (a relative stiffness error ε, ``[observer.model]``) and when χ comes fr
 latency d (``[observer.sensor]``), read from the two stored results of ``bench/stored``.
 
 The stored results are read here as data files (JSON, and the member rows' CSV beside the
-latency result): the report imports nothing from ``bench``. Per uncertainty and design the
-section draws the floor against the size (median over the paired members, band = the members'
-spread), states the stored power law ``log10 floor = a + s·log10 size`` with its intervals, the
-crossover where one design's floor drops below the other's, the sensitivity table of the
-model-error result and, inverting the fitted law, the size a user must keep the uncertainty
-below for a target floor.
+latency result); from ``bench`` the section takes only the statistics of ``bench/floor_curves.py``
+(no simulation), applied to the stored member floors. Per uncertainty and design the section
+draws the floor against the size (median over the paired members, band = the members' spread),
+states the stored power law ``log10 floor = a + s·log10 size`` with its intervals, the crossover
+where one design's floor drops below the other's — on the designs' medians, and on the paired
+member ratio with a cluster-bootstrap interval (placed, undecided or none) — the sensitivity
+table of the model-error result and, inverting the fitted law, the largest size a user may
+leave the uncertainty at for a target floor (not reachable where the target is at or below the
+exact model's floor at this step).
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench import floor_curves
 from reports import registry
 from reports.blocks import Block, Section
 from reports.context import ReportContext
@@ -35,7 +39,7 @@ PARAMETERS = "model_error_parameters_double_mass.json"
 SENSOR = "sensor_floor_double_mass.json"
 """Sensor jitter and threshold curves, ``python -m bench.sensor_floor``."""
 PANELS_PER_ROW = 3
-TARGETS = (1e-6, 1e-3)
+TARGETS = floor_curves.TARGETS
 """Target floors of V/V(t_on) for "what a user needs to know the model to"."""
 CONFIDENCE = 0.95
 SLOPE_DIGITS = 4
@@ -209,40 +213,6 @@ def regression_interval(c: Curve) -> tuple[float, float]:
     return float(reg.slope) - half, float(reg.slope) + half
 
 
-def size_for(target: float, slope: float, intercept: float) -> float:
-    """The size at which the fitted law reaches the floor ``target``: ``10^((log10 target − a)/s)``."""
-    return float(10.0 ** ((np.log10(target) - intercept) / slope))
-
-
-def needed_size(c: Curve, target: float) -> tuple[float, float, float]:
-    """The size giving the floor ``target`` on the stored fitted line, with the 95 % interval of
-    the same inversion refitted on resampled members (:func:`observer.stats.cluster_ci`, each
-    member a cluster, paired across sizes)."""
-    from observer.stats import cluster_ci
-
-    x = np.log10(c.fit_sizes)
-    F = fit_rows(c)
-
-    def refit(idx: np.ndarray) -> float:
-        y = np.log10(np.median(F[:, idx], axis=1))
-        s = float(np.dot(x - x.mean(), y - y.mean()) / np.dot(x - x.mean(), x - x.mean()))
-        return size_for(target, s, float(y.mean() - s * x.mean()))
-
-    lo, hi, _ = cluster_ci(refit, np.arange(F.shape[1]), confidence=CONFIDENCE)
-    return size_for(target, c.slope, c.intercept), lo, hi
-
-
-def interpolated_size(c: Curve, target: float) -> float | None:
-    """The size where the stored median floors cross ``target`` (log-log interpolation between
-    the bracketing points); None when the target lies outside the measured floors."""
-    m = c.median
-    for i in range(len(m) - 1):
-        if (m[i] - target) * (m[i + 1] - target) <= 0 and m[i] != m[i + 1]:
-            w = (np.log10(target) - np.log10(m[i])) / (np.log10(m[i + 1]) - np.log10(m[i]))
-            return float(10.0 ** (np.log10(c.sizes[i]) + w * np.log10(c.sizes[i + 1] / c.sizes[i])))
-    return None
-
-
 def crossover(a: Curve, b: Curve) -> dict:
     """Where ``a``'s median floor crosses ``b``'s on the stored sizes: the bracketing sizes and
     the log-log interpolated crossing of the first sign change, or none (then the range of the
@@ -312,24 +282,91 @@ def laws_table(curves: list[Curve]) -> Table:
     return t
 
 
-def needs_table(curves: list[Curve]) -> Table:
-    """The size each uncertainty must stay below for a target floor, per design."""
-    t = Table("What the model and the sensor must be known to: the size at which the floor reaches a target",
-              ["uncertainty", "observer", "target floor", "size (fitted law) [members 95 %]",
-               "size (interpolated between stored points)", "within the fitted sizes"])
+def tolerance_cell(t: dict, unit: str) -> str:
+    """One target's cell: the largest size with its interval, or why there is none."""
+    u = f" {unit}" if unit else ""
+    if t["status"] == "not reachable":
+        return f"not reachable at this h (floor {fmt(t['exact_floor'])} without error)"
+    if t["status"] == "whole range":
+        return f"any size up to {fmt(t['at_least'])}{u} (floor at or below the target at every size)"
+    if t["status"] == "not fitted":
+        return "no fitted law"
+    lo, hi = (fmt(v) if v is not None else "not reached" for v in t["interval"])
+    return f"≤ {fmt(t['size'])} [{lo} – {hi}]{u}" + (" (extrapolated)" if t["status"] == "extrapolated" else "")
+
+
+def tolerance_table(curves: list[Curve], title: str) -> Table:
+    """Per (uncertainty, design) and target floor: the largest size at which the fitted law
+    keeps the floor at or below the target (``bench/floor_curves.py``: ``tolerances``, the
+    members resampled)."""
+    pct = f"{100 * CONFIDENCE:.0f} %"
+    t = Table(f"{title}: the largest size with a floor of V/V(t_on) at or below each target (fitted law, "
+              f"{pct} interval)", ["uncertainty", "observer", "floor at size 0 (median)", "fitted sizes",
+                                   *[f"floor ≤ {fmt_rho(x)}" for x in TARGETS]])
     for c in curves:
-        for target in TARGETS:
-            v, lo, hi = needed_size(c, target)
-            u = c.what.unit
-            inter = interpolated_size(c, target)
-            inside = c.fit_sizes.min() <= v <= c.fit_sizes.max()
-            t.add([c.what.label, registry.label(c.design), fmt_rho(target),
-                   f"{fmt(v)} [{fmt(lo)} – {fmt(hi)}]" + (f" {u}" if u else ""),
-                   _value(inter, u) if inter is not None else "n/a (target outside the stored floors)",
-                   "yes" if inside else "no (extrapolated)"])
-    t.note = ("The interval resamples the members (paired across sizes) and refits the line: the "
-              "spread over initial errors of one master and one plant, not over other plants; the "
-              "interpolated column reads the stored medians without the fitted law.")
+        found = floor_curves.tolerances(c.sizes, c.floors, c.exact, TARGETS, fit_sizes=c.fit_sizes,
+                                        confidence=CONFIDENCE)
+        span = (f"{_value(c.fit_sizes.min(), c.what.unit)} … {_value(c.fit_sizes.max(), c.what.unit)}"
+                if c.fit_sizes.size else "– (not fitted)")
+        t.add([c.what.label, registry.label(c.design), fmt(float(np.median(c.exact))), span,
+               *[tolerance_cell(x, c.what.unit) for x in found]])
+    t.note = ("Size = 10^((log10 target − a)/s) on the stored fitted law; the interval refits the law on "
+              "resampled members (paired across sizes: the spread over initial errors of one master and "
+              "one plant, not over other plants). Extrapolated: outside the fitted sizes. Not reachable: "
+              "the target is at or below the floor with the exact model or ideal sensor (the grid's and "
+              "the window's floor at this step), so no accuracy of the model reaches it.")
+    return t
+
+
+def paired_crossovers(curves: list[Curve]) -> dict:
+    """Per declared design pair of each uncertainty, the paired crossover with its interval
+    (``bench/floor_curves.py``: ``crossover_intervals``, the members resampled): a dict keyed by
+    (uncertainty, baseline design, candidate design)."""
+    return {(a.what, a.design, b.design): floor_curves.crossover_intervals(
+        a.sizes, a.floors, b.floors, a.design, b.design, confidence=CONFIDENCE) for a, b in pairs(curves)}
+
+
+def paired_cell(res: dict, unit: str) -> str:
+    """The paired crossover as one cell: placed (size and interval), undecided or none."""
+    span = f"[{_value(res['range'][0], unit)}, {_value(res['range'][1], unit)}]"
+    if res["status"] == "none":
+        return f"no crossover in {span} ({registry.label(res['lower_throughout'])} lower throughout)"
+    if res["status"] == "undecided":
+        return (f"undecided: {registry.label(res['lower_throughout'])} lower at every size on the paired "
+                f"medians, but resamples change sign in {span}")
+    parts = []
+    for c in res["crossovers"]:
+        low, (lo, hi) = registry.label(c["lower_above"]), c["between"]
+        if c["status"] == "placed":
+            parts.append(f"at {_value(c['at'], unit)} [{_value(c['interval'][0], unit)} – "
+                         f"{_value(c['interval'][1], unit)}] (between the sizes {_value(lo, unit)} and "
+                         f"{_value(hi, unit)}, {low} lower above)")
+        else:
+            end = "lower" if c["interval"][0] is None else "upper"
+            parts.append(f"undecided between {_value(lo, unit)} and {_value(hi, unit)} (the interval reaches "
+                         f"the {end} end of {_value(c['window'][0], unit)} … {_value(c['window'][1], unit)}, "
+                         f"{low} lower above)")
+    return "; ".join(parts)
+
+
+def crossover_table(found: dict, title: str) -> Table:
+    """The paired crossovers of :func:`paired_crossovers`, one row per uncertainty and pair."""
+    pct = f"{100 * CONFIDENCE:.0f} %"
+    t = Table(f"{title}: where one design overtakes the other, paired members ({pct} interval)",
+              ["uncertainty", "designs", "crossover [interval]", "resampled"])
+    for (what, a, b), res in found.items():
+        t.add([what.label, f"{registry.label(a)} vs {registry.label(b)}", paired_cell(res, what.unit),
+               f"{res['resamples']} resamples of the {res.get('unit', 'members')} (each member its own "
+               "cluster: one master, one plant)"])
+    t.note = ("Per size the median over members of log10(floor a / floor b) (member i: the same initial "
+              "error, master and plant in both designs), its zero interpolated in log size; the interval "
+              "resamples the members, the same at every size and in both designs. Undecided: the interval "
+              "reaches an end of the swept range (or of the span between neighbouring crossovers), or the "
+              "paired medians keep their sign but resamples do not: the data cannot place it, so no number "
+              f"is given. No crossover: fewer than {100 * (1 - CONFIDENCE) / 2:g} % of the resamples change sign. "
+              "The interval is the "
+              "spread over the members (initial errors) only: it does not include the error of interpolating "
+              "between the two swept sizes that bracket the crossover, nor other masters or plants.")
     return t
 
 
@@ -390,9 +427,22 @@ def pairs(curves: list[Curve]) -> list[tuple[Curve, Curve]]:
     return out
 
 
-def floor_figure(curves: list[Curve]) -> Figure | None:
+def draw_crossovers(ax, found: dict, what: Uncertainty) -> None:
+    """The placed paired crossovers of ``what`` (vertical line at the size, its interval shaded)
+    and the brackets of the undecided ones (hatched)."""
+    for (w, _, _), res in found.items():
+        for c in res["crossovers"] if w == what else []:
+            if c["status"] == "placed":
+                ax.axvspan(*c["interval"], color="0.4", alpha=0.25, lw=0)
+                ax.axvline(c["at"], color="0.2", ls="-.", lw=0.9)
+            else:
+                ax.axvspan(*c["between"], facecolor="none", edgecolor="0.5", hatch="//", lw=0)
+
+
+def floor_figure(curves: list[Curve], found: dict | None = None) -> Figure | None:
     """One panel per uncertainty: per design the median floor (markers), the members' spread
-    (band), the stored fitted line over its sizes (dashed) and the floor at size 0 (dotted)."""
+    (band), the stored fitted line over its sizes (dashed), the floor at size 0 (dotted) and
+    the paired crossovers of ``found`` (:func:`paired_crossovers`; :func:`draw_crossovers`)."""
     whats = list(dict.fromkeys(c.what for c in curves))
     if not whats:
         return None
@@ -413,6 +463,7 @@ def floor_figure(curves: list[Curve]) -> Figure | None:
                 x = np.geomspace(c.fit_sizes.min(), c.fit_sizes.max(), 20)
                 ax.loglog(x, 10.0 ** (c.intercept + c.slope * np.log10(x)), color=lk.color, ls="--", lw=1.0)
             ax.axhline(float(np.median(c.exact)), color=lk.color, ls=":", lw=0.8)
+        draw_crossovers(ax, found or {}, what)
         ax.set_xlabel(what.label + (f" ({what.unit})" if what.unit else ""), fontsize=8)
         ax.set_ylabel("floor of V / V(t_on)")
         ax.grid(alpha=0.3, which="both")
@@ -421,7 +472,9 @@ def floor_figure(curves: list[Curve]) -> Figure | None:
     return Figure(to_data_uri(fig, fit=False), "floor of V/V(t_on) against " + ", ".join(w.key for w in whats),
                   "Markers: median floor over the paired members; shaded: the members' spread (min–max); "
                   "dashed: the stored fitted power law over its sizes; dotted: the floor at size 0 "
-                  "(exact model, ideal sensor: the floor of the grid and the window).")
+                  "(exact model, ideal sensor: the floor of the grid and the window); dash-dotted "
+                  "vertical line and grey band: a crossover of the paired designs placed with its "
+                  f"{100 * CONFIDENCE:.0f} % interval; hatched: the bracket of an undecided one.")
 
 
 def intro(me: dict | None, lat: dict | None) -> str:
@@ -463,10 +516,12 @@ def build_from(stored: Path, key_numbers: list | None = None) -> Section:
               f"{SENSOR_LATENCY.command}).")
         return sec
     sec.p(intro(me, lat))
-    sec.figure(floor_figure(curves), "No curves.")
+    found = paired_crossovers(curves)
+    sec.figure(floor_figure(curves, found), "No curves.")
     sec.table(laws_table(curves))
     cross = [crossover_text(a, b) for a, b in pairs(curves)]
     sec.blocks.append(Block("list", cross))
+    sec.table(crossover_table(found, "Crossovers with intervals"))
     if me is not None:
         table = sensitivity_table(me)
         if table is not None:
@@ -474,12 +529,15 @@ def build_from(stored: Path, key_numbers: list | None = None) -> Section:
             sec.items(sensitivity_items(me))
         if draws_text(me):
             sec.p(draws_text(me))
-    sec.table(needs_table(curves))
+    sec.table(tolerance_table(curves, "What the model and the sensor must be known to"))
     for name in (PARAMETERS, SENSOR):
         if (Path(stored) / name).exists():
             more, data = stored_curves(Path(stored) / name)
-            sec.figure(floor_figure(more), "No curves.")
+            found = paired_crossovers(more)
+            sec.figure(floor_figure(more, found), "No curves.")
             sec.table(curves_table(more, data))
+            sec.table(crossover_table(found, f"Crossovers with intervals, {data['command']}"))
+            sec.table(tolerance_table(more, f"Known to for a target floor, {data['command']}"))
     if key_numbers is not None:
         scen = ", ".join(dict.fromkeys(x["scenario"] if "scenario" in x else x["settings"]["scenario"]
                                        for x in (me, lat) if x is not None))

@@ -144,3 +144,76 @@ def test_floors_just_across_or_just_short_of_a_crossing(tmp_path, factor, crosse
         assert numbers(cell)[:2] == pytest.approx(rec["sizes"][-2:], rel=6e-3)
     stale = json.loads(FILES[0].read_text())
     assert (mismatches(sec, stale) != []) == crosses
+
+
+def _pair(rec: dict) -> tuple[str, str]:
+    (pair,) = [p for p in registry.ratio_pairs() if p[0] in rec["designs"] and p[1] in rec["designs"]]
+    return pair
+
+
+def _rows(sec, title: str) -> dict:
+    return {r[0]: r for b in sec.blocks if b.kind == "table" and b.content.title.startswith(title)
+            for r in b.content.rows}
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: p.stem)
+def test_the_paired_crossovers_of_each_file_are_the_recomputed_sign_changes(section, path):
+    """Per curve: the zeros of the median over members of log10(floor a / floor b) (recomputed
+    here, log-log interpolated), each either placed (the zero, inside its interval) or
+    undecided between its bracketing sizes; without a zero, no crossover or undecided, naming
+    the design the paired medians put lower."""
+    data = json.loads(path.read_text())
+    rows = _rows(section, f"Crossovers with intervals, {data['command']}")
+    assert len(rows) == len(data["curves"])
+    for rec in data["curves"]:
+        a, b = _pair(rec)
+        sizes, x = np.array(rec["sizes"]), np.log10(rec["sizes"])
+        r = np.median(np.log10(np.array(rec["designs"][a]["member_floors"]) / np.array(rec["designs"][b]["member_floors"])), axis=1)
+        brackets = [i for i in range(len(r) - 1) if r[i] * r[i + 1] < 0]
+        cell = rows[rec["label"]][2]
+        if not brackets:
+            lower = registry.label(a if r[0] < 0 else b)
+            assert (cell.startswith("no crossover in") and f"({lower} lower throughout)" in cell) or \
+                cell.startswith(f"undecided: {lower} lower at every size"), cell
+            continue
+        parts = cell.split("; ")
+        assert len(parts) == len(brackets), cell
+        for i, part in zip(brackets, parts):
+            zero = 10 ** (x[i] + r[i] / (r[i] - r[i + 1]) * (x[i + 1] - x[i]))
+            if part.startswith("at "):
+                at, lo, hi = numbers(part)[:3]
+                assert at == pytest.approx(zero, rel=6e-3) and lo <= at * 1.006 and hi >= at / 1.006, part
+            else:
+                assert part.startswith("undecided between") and numbers(part)[:2] == pytest.approx(sizes[i:i + 2], rel=6e-3)
+            above = registry.label(a if r[i + 1] < 0 else b)
+            assert f"{above} lower above" in part, part
+
+
+def test_the_threshold_crossovers_are_placed_and_the_model_parameters_know_to_table_holds(section):
+    """The stored sensor-threshold curve crosses twice, both placed; in the per-parameter file,
+    every target at or below a design's exact floor is not reachable, and a design whose floor
+    never leaves the exact one (W for the observer without jumps) allows any size in the range
+    for a target above it."""
+    sensor = json.loads(FILES[1].read_text())
+    thr = next(r for r in sensor["curves"] if r["key"] == "threshold")
+    cell = _rows(section, f"Crossovers with intervals, {sensor['command']}")[thr["label"]][2]
+    assert [p.startswith("at ") for p in cell.split("; ")] == [True, True], cell
+    params = json.loads(FILES[0].read_text())
+    known = [b.content for b in section.blocks if b.kind == "table"
+             and b.content.title.startswith(f"Known to for a target floor, {params['command']}")]
+    (table,) = known
+    targets = [float(c.split("≤")[1].replace("−", "-")) for c in table.columns[4:]]
+    labels = {registry.label(d): d for d in registry.designs()}
+    by_label = {rec["label"]: rec for rec in params["curves"]}
+    flat = 0
+    for row in table.rows:
+        rec = by_label[row[0]]
+        r = rec["designs"][labels[row[1]]]
+        exact = float(np.median(r["exact_member_floors"]))
+        meds = np.median(np.array(r["member_floors"]), axis=1)
+        for target, c in zip(targets, row[4:]):
+            assert c.startswith("not reachable at this h") == (target <= exact), (row[:2], target, c)
+            if target > exact and np.all(meds <= target) and r["fit"]["status"] != "ok":
+                assert c.startswith(f"any size up to {rec['sizes'][-1]:g}"), c
+                flat += 1
+    assert flat >= 1

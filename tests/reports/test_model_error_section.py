@@ -107,25 +107,97 @@ def test_the_regression_interval_is_the_stored_one_for_latency(section):
         assert numbers(rows[registry.label(fit["design"])][2])[1:] == pytest.approx(fit["interval"]["members"], abs=6e-4)
 
 
-def test_the_sizes_needed_for_a_target_invert_the_fitted_law_and_match_the_stored_points(section):
-    exp = expected_laws()
+def exact_floors() -> dict:
+    """(uncertainty key, design) → the median member floor at size 0, from the stored files."""
+    me = json.loads(MODEL.read_text())
+    rows = pd.read_csv(LATENCY.with_suffix(".csv"))
+    out = {("K", d): float(np.median(r["exact_member_floors"])) for d, r in me["designs"].items()}
+    for d in rows.design.unique():
+        out["latency", d] = float(rows[(rows.design == d) & (rows.latency == 0)]["floor"].median())
+    return out
+
+
+def test_the_largest_sizes_for_a_target_invert_the_fitted_law_or_are_not_reachable(section):
+    """Per curve and target: at or below the exact model's floor, "not reachable at this h";
+    else the size 10^((log10 target − a)/s) of the refitted line, inside its interval, flagged
+    extrapolated exactly when outside the fitted sizes, and — inside them — within 25 % of the
+    log-log interpolation of the stored medians (the law describes the data there)."""
+    exp, base = expected_laws(), exact_floors()
     keys = {model_error.K_ERROR.label: "K", model_error.SENSOR_LATENCY.label: "latency"}
     labels = {registry.label(d): d for d in registry.designs()}
-    rows = tables(section)["What the model and the sensor must be known to"].rows
-    assert len(rows) == 8
-    for r in rows:
-        s, a, fitted, med, sizes = exp[keys[r[0]], labels[r[1]]]
-        target = number(r[2])
-        want = 10 ** ((np.log10(target) - a) / s)
-        v, lo, hi = numbers(r[3])[:3]
-        assert v == pytest.approx(want, rel=6e-3) and lo <= v * 1.006 and hi >= v / 1.006
-        inside = fitted.min() <= want <= fitted.max()
-        assert r[5] == ("yes" if inside else "no (extrapolated)")
-        if med.min() <= target <= med.max():        # log-log interpolation of the stored medians
-            interp = 10 ** np.interp(np.log10(target), np.log10(med), np.log10(sizes))
-            assert number(r[4]) == pytest.approx(interp, rel=6e-3)
-        else:
-            assert r[4].startswith("n/a (target outside")
+    t = tables(section)["What the model and the sensor must be known to"]
+    targets = [float(c.split("≤")[1].replace("−", "-").strip()) for c in t.columns[4:]]
+    assert targets == [1e-9, 1e-6, 1e-4, 1e-2] and len(t.rows) == 4
+    seen = set()
+    for r in t.rows:
+        key = keys[r[0]], labels[r[1]]
+        s, a, fitted, med, sizes = exp[key]
+        assert number(r[2]) == pytest.approx(base[key], rel=6e-3)
+        for target, cell in zip(targets, r[4:]):
+            if target <= base[key]:
+                assert cell.startswith("not reachable at this h"), cell
+                seen.add("not reachable")
+                continue
+            want = 10 ** ((np.log10(target) - a) / s)
+            v, lo, hi = numbers(cell)[:3]
+            assert v == pytest.approx(want, rel=6e-3) and lo <= v * 1.006 and hi >= v / 1.006, cell
+            inside = fitted.min() <= want <= fitted.max()
+            assert cell.endswith("(extrapolated)") == (not inside), cell
+            if inside:
+                interp = 10 ** np.interp(np.log10(target), np.log10(med), np.log10(sizes))
+                assert abs(np.log10(v / interp)) < np.log10(1.25), (cell, interp)
+            seen.add("inside" if inside else "extrapolated")
+    assert seen == {"not reachable", "inside", "extrapolated"}
+
+
+def paired_zeros(Fa: np.ndarray, Fb: np.ndarray, sizes: np.ndarray) -> tuple[np.ndarray, list]:
+    """The median over members of log10(Fa/Fb) per size and its zeros (log-log interpolated
+    sizes), recomputed here."""
+    r = np.median(np.log10(Fa / Fb), axis=1)
+    x = np.log10(sizes)
+    return r, [10 ** (x[i] + r[i] / (r[i] - r[i + 1]) * (x[i + 1] - x[i])) for i in range(len(r) - 1)
+               if r[i] * r[i + 1] < 0]
+
+
+def crossover_rows(sec) -> dict:
+    return {r[0]: r for r in tables(sec)["Crossovers with intervals"].rows}
+
+
+def test_the_paired_crossover_table_says_none_where_the_paired_ratio_keeps_its_sign(section):
+    me = json.loads(MODEL.read_text())
+    (a, b), = [p for p in registry.ratio_pairs() if p[0] in me["designs"] and p[1] in me["designs"]]
+    Fa, Fb = (np.array(me["designs"][d]["member_floors"]) for d in (a, b))
+    r, zeros = paired_zeros(Fa, Fb, np.array(me["epsilons"]))
+    assert zeros == [] and (np.all(r < 0) or np.all(r > 0))
+    row = crossover_rows(section)[model_error.K_ERROR.label]
+    lower = a if r[0] < 0 else b
+    assert row[2].startswith("no crossover in [") and f"({registry.label(lower)} lower throughout)" in row[2], row
+    assert numbers(row[2])[:2] == pytest.approx([me["epsilons"][0], me["epsilons"][-1]], rel=6e-3)
+
+
+def test_a_doctored_paired_crossing_is_placed_with_an_interval_inside_its_bracket(tmp_path):
+    """The lower design's floors times 3 from the fourth ε on (every member alike): the paired
+    ratio now changes sign between the third and the fourth ε; the table gives the zero,
+    recomputed here, inside an interval inside that bracket (the members barely differ)."""
+    folder = _copy(tmp_path)
+    data = json.loads(MODEL.read_text())
+    meds = {d: np.median(np.array(r["member_floors"]), axis=1) for d, r in data["designs"].items()}
+    lower = min(meds, key=lambda d: meds[d][0])
+    F = np.array(data["designs"][lower]["member_floors"])
+    F[3:] *= 3.0
+    data["designs"][lower]["member_floors"] = F.tolist()
+    (folder / MODEL.name).write_text(json.dumps(data))
+    (a, b), = [p for p in registry.ratio_pairs() if p[0] in data["designs"] and p[1] in data["designs"]]
+    r, zeros = paired_zeros(*(np.array(data["designs"][d]["member_floors"]) for d in (a, b)), np.array(data["epsilons"]))
+    (zero,) = zeros
+    row = crossover_rows(model_error.build_from(folder, []))[model_error.K_ERROR.label]
+    at, lo, hi = numbers(row[2])[:3]
+    eps = data["epsilons"]
+    assert row[2].startswith("at ") and at == pytest.approx(zero, rel=6e-3), row
+    assert eps[2] <= lo <= at <= hi <= eps[3], row
+    above = a if r[-1] < 0 else b
+    assert f"{registry.label(above)} lower above)" in row[2]
+    assert numbers(row[2].split("between the sizes")[1])[:2] == pytest.approx(eps[2:4], rel=6e-3)
 
 
 def test_the_crossover_sentences_name_the_design_lower_everywhere(section):
