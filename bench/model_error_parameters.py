@@ -7,8 +7,8 @@ the others exact, while the master is the true plant; both designs run the paire
 :data:`bench.model_error.MEMBERS` initial errors on the energy sphere, seed
 :data:`bench.model_error.SEED`, the floor = max V/V(t_on) over the last quarter of the coupling
 window). Per parameter and design: the median floor, the power-law fit over the sizes where the
-floor is the parameter's (:func:`bench.floor_curves.fit_curve`) and the crossover of the two
-designs (:func:`bench.floor_curves.crossovers`).
+floor is the parameter's (:func:`observer.floor_curves.fit_curve`) and the crossover of the two
+designs (:func:`observer.floor_curves.crossovers`).
 
 ``python -m bench.model_error_parameters [--out FILE]`` writes the result (default
 :data:`STORED`); ``--quick`` runs 4 members over 2 s (a check that it runs, not the measurement).

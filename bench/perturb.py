@@ -141,7 +141,7 @@ def robustness_rows(case, masters) -> tuple[list[dict], float, float]:
         errors (``bench.runners`` ``_ensemble_masters``).
     """
     import observer
-    from observer.compare import window_of
+    from observer.metrics import window_of
     from observer.ensemble import sample_errors
     from observer.metrics import RHOS, settle_column
 

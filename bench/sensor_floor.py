@@ -8,8 +8,8 @@ opening time moved by an independent N(0, σ²) error, sensor seed :data:`SENSOR
 from ``{"threshold": δ}`` for δ of :data:`THRESHOLDS` (a contact is seen closed as soon as the
 plant's predicted gap falls below δ), :mod:`observer.sensor`. Per uncertainty and design: the
 median floor, the power-law fit over the sizes where the floor is the sensor's
-(:func:`bench.floor_curves.fit_curve`) and the crossover of the two designs
-(:func:`bench.floor_curves.crossovers`).
+(:func:`observer.floor_curves.fit_curve`) and the crossover of the two designs
+(:func:`observer.floor_curves.crossovers`).
 
 ``python -m bench.sensor_floor [--out FILE]`` writes the result (default :data:`STORED`, beside
 the latency result).

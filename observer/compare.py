@@ -38,7 +38,7 @@ if TYPE_CHECKING:                  # pandas is imported where a table is built: 
     import pandas as pd
 
 from observer.errors import InputError
-from observer.metrics import RHOS, settle_column
+from observer.metrics import RHOS, settle_column, window_of
 
 SPREAD = 0.05
 """Default size of the masters' initial-state perturbations: ½δxᵀAδx = SPREAD²·½x₀ᵀAx₀
@@ -177,12 +177,6 @@ def _positions(sc, designs, X, integrator, cluster) -> pd.DataFrame:
         e_off = np.array([res.slaves[member_name(d, i)].q[k_off] - res.q[k_off] for i in range(X.shape[0])])
         frames.append(stats.position_errors(e_off, e_on, d).assign(cluster=cluster))
     return pd.concat(frames, ignore_index=True)
-
-
-def window_of(sc) -> tuple[float, float]:
-    """The coupling window [t_on, t_off] of the scenario, cut at t_end."""
-    t_on, t_off = sc.observer.get("coupling", (0.0, sc.t_end))
-    return float(t_on), min(float(t_off), float(sc.t_end))
 
 
 # ---------------------------------------------------------------------------------------

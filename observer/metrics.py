@@ -131,3 +131,9 @@ def switchings(active: np.ndarray) -> int:
     """Number of 0→1 switches (closings) summed over contacts, for (N+1, m) bool arrays."""
     a = active.astype(np.int8)
     return int(np.sum(np.diff(a, axis=0) == 1))
+
+
+def window_of(sc) -> tuple[float, float]:
+    """The coupling window [t_on, t_off] of the scenario, cut at t_end."""
+    t_on, t_off = sc.observer.get("coupling", (0.0, sc.t_end))
+    return float(t_on), min(float(t_off), float(sc.t_end))

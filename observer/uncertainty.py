@@ -176,7 +176,7 @@ def member_floors(sc, designs: tuple[str, ...], X: np.ndarray, tail: float, reco
     health checks read a V that rises as a χ that is not the master's, which a model error
     also makes). With ``levels``, each row's ``passage`` holds the first-passage times below
     each level (:func:`passage_times`)."""
-    from observer.compare import window_of
+    from observer.metrics import window_of
     from observer.ensemble import member_name, member_slaves
     from observer.health import RunHealthWarning
     from observer.simulate import simulate
@@ -361,7 +361,7 @@ def uncertainty_ensemble(scenario, designs=("jump", "nojump"), *, model: dict, p
         positive definite: choose another seed or a smaller σ); every plant is drawn, and
         checked, before any run.
     """
-    from observer.compare import window_of
+    from observer.metrics import window_of
     from observer.ensemble import _check_designs, _count, _load, sample_errors
 
     t0 = time.perf_counter()

@@ -3,8 +3,8 @@ plant (a relative stiffness error ε, ``[observer.model]``) and when χ comes fr
 latency d (``[observer.sensor]``), read from the two stored results of ``bench/stored``.
 
 The stored results are read here as data files (JSON, and the member rows' CSV beside the
-latency result); from ``bench`` the section takes only the statistics of ``bench/floor_curves.py``
-(no simulation), applied to the stored member floors. Per uncertainty and design the section
+latency result): the report imports nothing from ``bench``; the statistics are
+:mod:`observer.floor_curves`'s (no simulation), applied to the stored member floors. Per uncertainty and design the section
 draws the floor against the size (median over the paired members, band = the members' spread),
 states the stored power law ``log10 floor = a + s·log10 size`` with its intervals, the crossover
 where one design's floor drops below the other's — on the designs' medians, and on the paired
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench import floor_curves
+from observer import floor_curves
 from reports import registry
 from reports.blocks import Block, Section
 from reports.context import ReportContext
@@ -128,7 +128,7 @@ def latency_curves(path: Path) -> tuple[list[Curve], dict]:
 
 
 def stored_curves(path: Path) -> tuple[list[Curve], dict]:
-    """The curves of a stored result in the format of ``bench/floor_curves.py`` (a list
+    """The curves of a stored result in the format of :mod:`observer.floor_curves` (a list
     ``curves``, each with its sizes and per design the member floors and the fit; a design not
     fitted has ``slope`` NaN and no fitted sizes), and the raw JSON."""
     data = json.loads(Path(path).read_text(encoding="utf-8"))
@@ -297,7 +297,7 @@ def tolerance_cell(t: dict, unit: str) -> str:
 
 def tolerance_table(curves: list[Curve], title: str) -> Table:
     """Per (uncertainty, design) and target floor: the largest size at which the fitted law
-    keeps the floor at or below the target (``bench/floor_curves.py``: ``tolerances``, the
+    keeps the floor at or below the target (:mod:`observer.floor_curves`: ``tolerances``, the
     members resampled)."""
     pct = f"{100 * CONFIDENCE:.0f} %"
     t = Table(f"{title}: the largest size with a floor of V/V(t_on) at or below each target (fitted law, "
@@ -320,7 +320,7 @@ def tolerance_table(curves: list[Curve], title: str) -> Table:
 
 def paired_crossovers(curves: list[Curve]) -> dict:
     """Per declared design pair of each uncertainty, the paired crossover with its interval
-    (``bench/floor_curves.py``: ``crossover_intervals``, the members resampled): a dict keyed by
+    (:mod:`observer.floor_curves`: ``crossover_intervals``, the members resampled): a dict keyed by
     (uncertainty, baseline design, candidate design)."""
     return {(a.what, a.design, b.design): floor_curves.crossover_intervals(
         a.sizes, a.floors, b.floors, a.design, b.design, confidence=CONFIDENCE) for a, b in pairs(curves)}

@@ -1,4 +1,4 @@
-"""The power-law fit and the crossover of bench/floor_curves.py on floors of known laws."""
+"""The power-law fit and the crossover of observer/floor_curves.py on floors of known laws."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 
 import pytest
 
-from bench.floor_curves import (ABOVE_EXACT, BROKEN, crossover_intervals, crossovers, fit_curve, fit_range,
+from observer.floor_curves import (ABOVE_EXACT, BROKEN, crossover_intervals, crossovers, fit_curve, fit_range,
                                 percentile_interval, tolerance)
 
 SIZES = np.logspace(-4, -1, 10)
@@ -229,7 +229,7 @@ def test_a_resample_that_places_nothing_counts_against_both_ends_of_the_interval
 def test_resamples_draw_whole_clusters_and_members_only_within_one():
     """Clusters of 2, 3 and 1 members: every resample holds each drawn cluster whole (all its
     members, equally often) and as many clusters as there are; one cluster: the members."""
-    from bench.floor_curves import cluster_resamples
+    from observer.floor_curves import cluster_resamples
 
     clusters = np.repeat(["a", "b", "c"], [2, 3, 1])
     picks, unit = cluster_resamples(clusters, 200, seed=1)
