@@ -795,8 +795,8 @@ def _rows_file(path: Path, cases: list[tuple[str, list[dict]]]) -> Path:
 
 def test_peers_section_without_siconos(tmp_path, monkeypatch):
     """No peer rows: with the suite's 'Siconos absent' notes the section says so and how to get
-    it; without peer cases it says where the comparison runs and whether Siconos is here (not,
-    when its interpreter is missing)."""
+    it; without peer cases it says where the comparison runs and whether the suite found
+    Siconos (not, when its interpreter was missing: the suite's metadata records it)."""
     from bench import peers
     from bench.run import unavailable_path
 
@@ -815,7 +815,7 @@ def test_peers_section_without_siconos(tmp_path, monkeypatch):
     page = _parse(build_report([path], tmp_path / "r2"))
     text = page.sections["peers"].text()
     assert "python -m bench run peers" in text
-    assert "Siconos is not available here" in text and peers.HOW_TO_GET in text
+    assert "Siconos was not available when the suite ran" in text and peers.HOW_TO_GET in text
 
 
 def test_loop_micro_benchmarks_per_step_are_recomputed(synthetic_report):

@@ -36,14 +36,21 @@ def _header(ctx) -> dict:
     return {r[0]: r[1] for r in header_table(ctx).rows}
 
 
-def test_run_suite_writes_the_declared_case_order(tmp_path):
+def test_run_suite_writes_the_declared_case_order(tmp_path, monkeypatch):
+    from bench import peers
+
+    monkeypatch.setattr(peers, "SICONOS_PYTHON", "/nonexistent/bin/python3")
     ids = [c.case_id for c in MINI.cases]
     assert sorted(ids) != ids                            # so a sorted listing would fail below
     run_suite(MINI, tmp_path, progress=False, limit=0, micro=False)
     meta = json.loads(meta_path("mini", tmp_path).read_text())
+    siconos = {"available": False, "version": None, "python": "/nonexistent/bin/python3",
+               "reason": f"no interpreter at /nonexistent/bin/python3; {peers.HOW_TO_GET}",
+               "how_to_get": peers.HOW_TO_GET}
     assert meta == {"suite": "mini", "cases": ids, "description": MINI.description, "settings": {},
                     "band": list(BAND), "scaling_fit_from": SCALING_FIT_FROM,
-                    "perturbations": {"kinds": list(KINDS), "labels": LABELS, "units": UNITS}}
+                    "perturbations": {"kinds": list(KINDS), "labels": LABELS, "units": UNITS},
+                    "siconos": siconos}
 
 
 def test_settings_section_reads_the_sidecar_and_says_when_it_is_missing(tmp_path):
