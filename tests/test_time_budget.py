@@ -29,12 +29,12 @@ def test_over_budget_names_the_tests_above_it_costliest_first():
     assert tb.over_budget({}) == []
 
 
-def test_enforced_under_ci_only():
-    assert not tb.enforced({})
-    for off in ("", "0", "false", "False", "no"):
-        assert not tb.enforced({"CI": off}), off
-    for on in ("true", "1", "yes", "GitHub"):
-        assert tb.enforced({"CI": on}), on
+def test_enforced_only_when_asked():
+    assert not tb.enforced({}) and not tb.enforced({"CI": "true"})
+    for off in ("", "0", "report", "no"):
+        assert not tb.enforced({tb.ENFORCE: off}), off
+    for on in ("fail", "FAIL", " fail "):
+        assert tb.enforced({tb.ENFORCE: on}), on
 
 
 def test_this_session_measures_every_test(request):
