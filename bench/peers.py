@@ -125,6 +125,37 @@ def siconos_available(python: str | None = None, timeout: float = 120.0) -> tupl
     return True, _last_json(proc.stdout)["siconos_version"]
 
 
+_RECORDS: dict[str, dict[str, Any]] = {}
+""":func:`siconos_record` per interpreter, probed once per process."""
+
+
+def siconos_record(python: str | None = None) -> dict[str, Any]:
+    """What a suite's metadata records about Siconos when the suite runs, for the report
+    (which reads results, not :mod:`bench`).
+
+    The probe (:func:`siconos_available`, one subprocess) runs once per interpreter and
+    process; later calls return a copy of the first answer.
+
+    Parameters
+    ----------
+    python : str, optional
+        Interpreter to try (default :data:`SICONOS_PYTHON`).
+
+    Returns
+    -------
+    dict
+        ``"available"`` (bool), ``"version"`` (its version, None when absent), ``"reason"``
+        (why it is absent, with how to get it; None when available), ``"python"`` (the
+        interpreter tried) and ``"how_to_get"`` (:data:`HOW_TO_GET`).
+    """
+    python = python or SICONOS_PYTHON
+    if python not in _RECORDS:
+        ok, info = siconos_available(python)
+        _RECORDS[python] = {"available": ok, "version": info if ok else None,
+                            "reason": None if ok else info, "python": python, "how_to_get": HOW_TO_GET}
+    return dict(_RECORDS[python])
+
+
 def _last_json(stdout: str) -> dict:
     """The driver's output: the last non-empty line of its stdout, a JSON object."""
     lines = [line for line in stdout.splitlines() if line.strip()]

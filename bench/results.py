@@ -8,7 +8,7 @@ Layout of a suite's output folder ``OUT`` (default ``bench/results``)::
                                       column the report now needs (kept, not loaded)
     OUT/<suite>.csv                   all rows as CSV, exported when a run of the suite ends
     OUT/<suite>.meta.json             what the suite declares that its rows do not carry (its
-                                      case order), for the report (:func:`bench.run.write_suite_meta`)
+                                      case order, Siconos), for the report (:func:`bench.run.write_suite_meta`)
     OUT/<suite>-micro.json            pytest-benchmark JSON of the micro-benchmarks
     OUT/<suite>/traj/<case>.parquet   downsampled trajectories for the report's figures
     OUT/<suite>/logs/<case>.csv       perturbed closing logs of the perturbed-χ ensembles

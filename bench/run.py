@@ -344,8 +344,10 @@ def write_suite_meta(suite: Suite, out_dir: str | Path = RESULTS_DIR) -> Path:
     :mod:`bench`): ``"suite"``; ``"cases"``, its case ids in declared order; its
     ``"description"`` and ``"settings"`` (as text); the robustness ``"band"``
     (:data:`bench.suites.BAND`), ``"scaling_fit_from"`` (:data:`bench.suites.SCALING_FIT_FROM`)
-    and the robustness ``"perturbations"`` (``kinds``, ``labels``, ``units`` of :mod:`bench.perturb`).
-    Written whole (a temporary file, then a rename)."""
+    and the robustness ``"perturbations"`` (``kinds``, ``labels``, ``units`` of :mod:`bench.perturb`);
+    ``"siconos"``, whether the peer suite's Siconos could be driven when the suite ran
+    (:func:`bench.peers.siconos_record`). Written whole (a temporary file, then a rename)."""
+    from bench.peers import siconos_record
     from bench.perturb import KINDS, LABELS, UNITS
     from bench.suites import BAND, SCALING_FIT_FROM
 
@@ -355,7 +357,8 @@ def write_suite_meta(suite: Suite, out_dir: str | Path = RESULTS_DIR) -> Path:
     meta = {"suite": suite.name, "cases": [c.case_id for c in suite.cases], "description": suite.description,
             "settings": {str(k): str(v) for k, v in suite.settings.items()}, "band": list(BAND),
             "scaling_fit_from": SCALING_FIT_FROM,
-            "perturbations": {"kinds": list(KINDS), "labels": dict(LABELS), "units": dict(UNITS)}}
+            "perturbations": {"kinds": list(KINDS), "labels": dict(LABELS), "units": dict(UNITS)},
+            "siconos": siconos_record()}
     tmp.write_text(json.dumps(meta, indent=1))
     os.replace(tmp, path)
     return path

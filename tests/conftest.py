@@ -8,6 +8,8 @@ an engine that refuses the case (:meth:`observer.engines.base.Engine.accepts`) s
 refusal as its reason. When every engine refused a test's case (all of its engine variants
 skipped by a refusal), the session fails and names the test: a physics test must run
 somewhere.
+
+It also registers the per-test CPU budget (``tests/time_budget.py``).
 """
 
 from __future__ import annotations
@@ -129,3 +131,13 @@ def pytest_terminal_summary(terminalreporter, config):
 def pytest_sessionfinish(session, exitstatus):
     if not hasattr(session.config, "workerinput") and _unrun() and exitstatus == 0:
         session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
+
+# ---------------------------------------------------------------------------------------
+# the per-test CPU budget (tests/time_budget.py)
+# ---------------------------------------------------------------------------------------
+def pytest_configure(config):
+    import time_budget
+
+    if not config.pluginmanager.is_registered(time_budget):
+        config.pluginmanager.register(time_budget, "time_budget")

@@ -1,7 +1,8 @@
 """The scripts in ``examples/`` run as a researcher runs them and produce what they promise.
 
 Each script is run once (``python examples/X.py --quick --out DIR`` from the project root,
-in a subprocess) by a module fixture; the tests then check the files and the printed
+in a subprocess), when a test first asks for it (a module fixture, :class:`_Runs`); the
+tests then check the files and the printed
 numbers: figures that are real images with the paper's colours, the full proof-check table
 with an exit status that matches its verdicts, finite settling times of both observers
 under a measured contact log. Interpreter start-up and imports dominate the cost (a few
@@ -36,27 +37,58 @@ def _run(script: str, out: Path, *extra: str) -> subprocess.CompletedProcess:
                           cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
 
 
-@pytest.fixture(scope="module")
-def runs(tmp_path_factory) -> dict:
-    """name -> (CompletedProcess, output directory) for the four scripts, plus ``my_system.py``
-    on one rocking block with per-contact Newton restitution [0.1, 0.95] exported as TOML
-    (``failing``: A3 is violated there, the impact map is not monotone on the coupled
-    contacts) and on a file with a
-    missing key (``bad_input``)."""
-    out = {}
-    for script in ("paper_figures.py", "my_system.py", "measured_log.py", "compare_designs.py"):
-        d = tmp_path_factory.mktemp(script.removesuffix(".py"))
-        out[script] = (_run(script, d), d)
-    d = tmp_path_factory.mktemp("failing")
-    toml = subprocess.run([sys.executable, "-m", "observer", "show", "rocking_chain", "--set", "param.N=1",
-                           "--set", "impact.law=newton", "--set", "impact.restitution=[0.1,0.95]"], cwd=REPO,
-                          capture_output=True, text=True, timeout=300, check=True).stdout
-    (d / "rocking_chain.toml").write_text(toml)
-    out["failing"] = (_run("my_system.py", d, str(d / "rocking_chain.toml")), d)
-    d = tmp_path_factory.mktemp("bad_input")
+def _failing(d: Path) -> tuple[str, ...]:
+    """``my_system.py``'s arguments for one rocking block with per-contact Newton restitution
+    [0.1, 0.95], exported as TOML by ``python -m observer show`` (in this process: the file
+    is the input, not what is tested)."""
+    import contextlib
+    import io
+
+    from observer.cli import main
+
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert main(["show", "rocking_chain", "--set", "param.N=1", "--set", "impact.law=newton",
+                     "--set", "impact.restitution=[0.1,0.95]"]) == 0
+    (d / "rocking_chain.toml").write_text(buf.getvalue())
+    return (str(d / "rocking_chain.toml"),)
+
+
+def _bad_input(d: Path) -> tuple[str, ...]:
+    """``my_system.py``'s arguments for a file with a missing key (``system.C``)."""
     (d / "bad.toml").write_text("[system]\nM = [[1.0]]\nK = [[1.0]]\nW = [[1.0]]\n")
-    out["bad_input"] = (_run("my_system.py", d, str(d / "bad.toml")), d)
-    return out
+    return (str(d / "bad.toml"),)
+
+
+RUNS = {"paper_figures.py": ("paper_figures.py", None), "my_system.py": ("my_system.py", None),
+        "measured_log.py": ("measured_log.py", None), "compare_designs.py": ("compare_designs.py", None),
+        "failing": ("my_system.py", _failing), "bad_input": ("my_system.py", _bad_input)}
+"""Run name → (script, function writing its input files into the run's folder and returning
+its extra arguments): the four scripts, plus ``my_system.py`` on one rocking block whose
+impact map is not monotone on the coupled contacts (``failing``: A3 is violated) and on a
+file with a missing key (``bad_input``)."""
+
+
+class _Runs:
+    """name → (CompletedProcess, output directory) of :data:`RUNS`, each script run once, when
+    a test first asks for it: a test waits for its own script only (not for all six), and a
+    pytest-xdist worker runs only the scripts of the tests it was given."""
+
+    def __init__(self, tmp_path_factory):
+        self._factory, self._done = tmp_path_factory, {}
+
+    def __getitem__(self, name: str) -> tuple[subprocess.CompletedProcess, Path]:
+        if name not in self._done:
+            script, inputs = RUNS[name]
+            d = self._factory.mktemp(name.removesuffix(".py"))
+            self._done[name] = (_run(script, d, *(inputs(d) if inputs else ())), d)
+        return self._done[name]
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory) -> _Runs:
+    """The example runs of :data:`RUNS` (:class:`_Runs`), shared by the module's tests."""
+    return _Runs(tmp_path_factory)
 
 
 def _table(stdout: str, first_col: str) -> pd.DataFrame:

@@ -48,11 +48,10 @@ CLI_NAMES = ("cli", "__main__")
 ALLOWED_CYCLE_EDGES: set[tuple[str, str]] = set()
 """Edges left out of the cycle search, each to be deleted when its cycle is broken."""
 
-REPORTS_STILL_IMPORTING_BENCH = frozenset({
-    "reports.sections.peers",          # bench.peers
-})
-"""Report modules that still import ``bench`` (issue 32, item 3), each to be deleted when the
-suite metadata it reads is written by bench into the results."""
+REPORTS_STILL_IMPORTING_BENCH: frozenset[str] = frozenset()
+"""Report modules that still import ``bench``, each to be deleted when what it reads is
+written by bench into the results (empty since issue 32, item 3: the peers section reads
+Siconos' availability from the suite's metadata)."""
 
 
 def module_files(root: Path, packages=PACKAGES) -> dict[str, Path]:

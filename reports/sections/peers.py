@@ -1,5 +1,7 @@
-"""Peers: Siconos against the toolkit on the same problems (:mod:`bench.peers`): per-step
-times, their ratios and the largest trajectory difference; without Siconos, how to get it."""
+"""Peers: Siconos against the toolkit on the same problems (the rows of ``bench.peers``):
+per-step times, their ratios and the largest trajectory difference; without Siconos, whether
+it was available when the suite ran and how to get it, as the suite's metadata records it
+(the report reads results only: it does not probe this machine)."""
 
 from __future__ import annotations
 
@@ -24,20 +26,50 @@ INTRO = ("Siconos {version} and the toolkit run the same discrete scheme (Moreau
          "toolkit is faster).")
 
 
-def _without_results(ctx: ReportContext, sec: Section, notes: list[str]) -> Section:
-    from bench import peers
+UNKNOWN = ("These results do not record whether the suite found Siconos when it ran (they "
+           "were written before bench recorded it in the suite's metadata)")
+"""What the page says when no suite's metadata records Siconos (:func:`siconos_recorded`)."""
 
+
+def siconos_recorded(ctx: ReportContext) -> dict | None:
+    """The Siconos record bench wrote in the suite's metadata when the suite ran
+    (``bench.peers.siconos_record``: ``available``, ``version``, ``reason``, ``how_to_get``),
+    None where no suite's metadata has a readable one (older results): the page then says it
+    does not know, rather than probe this machine."""
+    rec = ctx.declared("siconos")
+    if not isinstance(rec, dict) or not isinstance(rec.get("available"), bool):
+        return None
+    key = "version" if rec["available"] else "reason"
+    return rec if isinstance(rec.get(key), str) and isinstance(rec.get("how_to_get"), str) else None
+
+
+def siconos_sentence(rec: dict | None) -> str:
+    """Whether Siconos was available when the suite ran (its version, or why not and how to
+    get it), or :data:`UNKNOWN`."""
+    if rec is None:
+        return UNKNOWN
+    if rec["available"]:
+        return f"Siconos was available when the suite ran ({rec['version']})"
+    return f"Siconos was not available when the suite ran: {rec['reason']}"
+
+
+def _without_results(ctx: ReportContext, sec: Section, notes: list[str]) -> Section:
+    rec = siconos_recorded(ctx)
     if notes:
-        sec.p(f"No peer results: Siconos was not available when the suite ran. To get it: "
-              f"{peers.HOW_TO_GET}; then run the suite again (finished cases are skipped).")
+        if rec is None:
+            why = f"the peer cases were skipped when the suite ran (each says why below). {UNKNOWN}"
+        elif rec["available"]:
+            why = f"the peer cases were skipped although Siconos was found ({rec['version']}); each says why below"
+        else:
+            why = f"Siconos was not available when the suite ran. To get it: {rec['how_to_get']}"
+        sec.p(f"No peer results: {why}; then run the suite again (finished cases are skipped).")
         sec.items(notes)
-        ctx.key_numbers.append("Peers: no Siconos results — Siconos was absent (the Peers section "
-                               "says how to get it).")
+        ctx.key_numbers.append("Peers: no Siconos results — the peer cases were skipped (the Peers "
+                               "section says why and how to get Siconos).")
         return sec
-    ok, info = peers.siconos_available()
-    where = f"Siconos is available here ({info})" if ok else f"Siconos is not available here: {info}"
     sec.p("No peer results: these suites have no peer cases. The comparison with Siconos is the "
-          "suite `python -m bench run peers` (also part of `nox -s report -- full`). " + where + ".")
+          "suite `python -m bench run peers` (also part of `nox -s report -- full`). "
+          + siconos_sentence(rec) + ".")
     return sec
 
 

@@ -51,6 +51,38 @@ def test_missing_interpreter_is_reported_with_how_to_get_it(no_siconos):
     assert "/nonexistent/bin/python3" in info and peers.HOW_TO_GET in info
 
 
+def test_siconos_record_of_a_missing_interpreter(no_siconos):
+    assert peers.siconos_record() == {
+        "available": False, "version": None, "python": "/nonexistent/bin/python3",
+        "reason": f"no interpreter at /nonexistent/bin/python3; {peers.HOW_TO_GET}",
+        "how_to_get": peers.HOW_TO_GET}
+
+
+def test_siconos_record_probes_once_per_interpreter(monkeypatch):
+    """A suite run writes the record at every start: the subprocess runs once per
+    interpreter and process, and a caller's changes do not reach the cached answer."""
+    calls = []
+
+    def probe(python=None):
+        calls.append(python)
+        return True, f"1.0 ({python})"
+    monkeypatch.setattr(peers, "_RECORDS", {})
+    monkeypatch.setattr(peers, "siconos_available", probe)
+    first = peers.siconos_record("/a/python3")
+    first["version"] = "changed"
+    assert peers.siconos_record("/a/python3") == {"available": True, "version": "1.0 (/a/python3)",
+                                                  "reason": None, "python": "/a/python3",
+                                                  "how_to_get": peers.HOW_TO_GET}
+    assert peers.siconos_record("/b/python3")["version"] == "1.0 (/b/python3)"
+    assert calls == ["/a/python3", "/b/python3"]
+
+
+@needs_siconos
+def test_siconos_record_of_the_installed_siconos():
+    rec = peers.siconos_record()
+    assert rec["available"] is True and rec["version"] == SICONOS_INFO and rec["reason"] is None
+
+
 @pytest.mark.skipif(importlib.util.find_spec("siconos") is not None,
                     reason="the test interpreter itself has Siconos")
 def test_interpreter_without_siconos_is_reported():

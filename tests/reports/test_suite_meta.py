@@ -36,14 +36,21 @@ def _header(ctx) -> dict:
     return {r[0]: r[1] for r in header_table(ctx).rows}
 
 
-def test_run_suite_writes_the_declared_case_order(tmp_path):
+def test_run_suite_writes_the_declared_case_order(tmp_path, monkeypatch):
+    from bench import peers
+
+    monkeypatch.setattr(peers, "SICONOS_PYTHON", "/nonexistent/bin/python3")
     ids = [c.case_id for c in MINI.cases]
     assert sorted(ids) != ids                            # so a sorted listing would fail below
     run_suite(MINI, tmp_path, progress=False, limit=0, micro=False)
     meta = json.loads(meta_path("mini", tmp_path).read_text())
+    siconos = {"available": False, "version": None, "python": "/nonexistent/bin/python3",
+               "reason": f"no interpreter at /nonexistent/bin/python3; {peers.HOW_TO_GET}",
+               "how_to_get": peers.HOW_TO_GET}
     assert meta == {"suite": "mini", "cases": ids, "description": MINI.description, "settings": {},
                     "band": list(BAND), "scaling_fit_from": SCALING_FIT_FROM,
-                    "perturbations": {"kinds": list(KINDS), "labels": LABELS, "units": UNITS}}
+                    "perturbations": {"kinds": list(KINDS), "labels": LABELS, "units": UNITS},
+                    "siconos": siconos}
 
 
 def test_settings_section_reads_the_sidecar_and_says_when_it_is_missing(tmp_path):
@@ -91,8 +98,9 @@ def test_a_real_folder_without_its_sidecar_builds_and_the_page_says_so(tmp_path)
     page = build_report([results_path("mini", tmp_path)], tmp_path / "page").read_text(encoding="utf-8")
     assert "missing for mini" in page and "Traceback" not in page
     run_suite(MINI, tmp_path, progress=False, limit=0, micro=False)      # records it again
-    page = build_report([results_path("mini", tmp_path)], tmp_path / "page2").read_text(encoding="utf-8")
-    assert "missing for mini" not in page
+    # the page shows the header table (above), the one place that says "missing for"
+    ctx = load_context([results_path("mini", tmp_path)], tmp_path / "page2")
+    assert _header(ctx)["suite metadata (<suite>.meta.json)"] == "present"
 
 
 def test_with_the_sidecar_the_declared_order_and_no_missing_note(tmp_path):
