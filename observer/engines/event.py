@@ -9,6 +9,8 @@ directly (no DataFrame is built unless a user reads one); the master's and the o
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from observer.engines.base import Engine, Refusal, RunDescription
@@ -101,10 +103,13 @@ def master_status(master) -> RunStatus:
 
 
 def _event_run(run: RunDescription, signalled) -> RunRecord:
+    from observer.event.frame import GapFrame
     from observer.event.master import run_master
 
     sc = run.scenario
-    master = run_master(sc, t0=run.t0, should_stop=signalled)   # overflow is a stop (status), silenced inside
+    frame = GapFrame.of(sc.system)          # the run in x = q − q*, origin on the contacts
+    master = run_master(sc if frame is None else frame.scenario(sc), t0=run.t0,
+                        should_stop=signalled)   # overflow is a stop (status), silenced inside
     master_signal = signalled()
     t, q, u, P, active = master.t, master.q, master.u, master.P, master.active
     n, m = sc.system.n, sc.system.m
@@ -116,7 +121,7 @@ def _event_run(run: RunDescription, signalled) -> RunRecord:
     status = master_status(master)
     slaves, chi, observers_whole = {}, None, True
     if run.slaves:
-        slaves, chi, obs = _observers(run, master, master_signal, signalled)
+        slaves, chi, obs = _observers(run, master, master_signal, signalled, frame)
         meta.update(observers=list(obs.runs), source=run.source,
                     observer_events={name: len(r.event_rows) for name, r in obs.runs.items()})
         observers_whole = all(r.status.ok for r in obs.runs.values())
@@ -124,6 +129,9 @@ def _event_run(run: RunDescription, signalled) -> RunRecord:
             meta["observer_model"] = sc.model.metadata(sc.system)
         if not obs.status.ok and status.ok:
             status = RunStatus(RunState.STOPPED, f"observer {obs.status.reason}")
+    if frame is not None:                   # the rows back in the run's coordinates q = x + q*
+        q = frame.output(q)
+        slaves = {name: dataclasses.replace(r, q=frame.output(r.q)) for name, r in slaves.items()}
     sig = signalled()
     keep, bad = _event_finite_rows(t, q, u, P, slaves)
     if bad is not None:                     # rows an observer did not reach or where it overflowed
@@ -155,19 +163,26 @@ def _event_run(run: RunDescription, signalled) -> RunRecord:
                      StepStats.from_metadata(meta), meta, events)
 
 
-def _observers(run: RunDescription, master, master_signal, signalled):
+def _observers(run: RunDescription, master, master_signal, signalled, frame=None):
     """The event-driven observers of ``run`` against ``master``: ``(slaves, χ, result)``. With an
     observer model (:mod:`observer.plant_model`) the master is the plant and the observers
     advance the nominal scenario (:func:`~observer.plant_model.model_scenario`) switched at the
-    plant's exact closing and opening times (or the log's); V is measured against the plant."""
+    plant's exact closing and opening times (or the log's); V is measured against the plant.
+    With a gap frame (:class:`observer.event.frame.GapFrame`) the master ran in it, and so do
+    the observers (their own scenario shifted by the same origin, with its own K and W; their
+    states shifted, the errors q̂ − q unchanged): the rows are in the frame."""
     from observer.event.observers import run_observers
     from observer.observers import lyapunov
     from observer.plant_model import model_scenario
 
     sc = run.scenario                       # with an observer model: the observers run on it
     own = sc if sc.model is None else model_scenario(sc)
+    slaves = list(run.slaves)
+    if frame is not None:
+        own = frame.scenario(own)
+        slaves = [dataclasses.replace(s, q0=frame.state(s.q0)) for s in slaves]
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # overflow: stopped by the caller
-        obs = run_observers(master, own, list(run.slaves), intervals=_intervals(run),
+        obs = run_observers(master, own, slaves, intervals=_intervals(run),
                             coupling=run.coupling, should_stop=None if master_signal else signalled)
         if sc.model is not None:            # V against the plant, in the model's error metric
             for r in obs.runs.values():

@@ -1,0 +1,218 @@
+"""The gap frame (issue 34, "translations beyond what float64 forces"): the event engine runs
+a translated system in coordinates whose origin lies on the contacts
+(:mod:`observer.event.frame`), so that a translation by c costs no more than the float64
+representation of the inputs (ulp(c)), checked against closed forms evaluated in mpmath from
+the float inputs, independently of the engine:
+
+* a ball translated by c ∈ {−100, 100, 1e6, 1e8} (and the ball q₀ = 1 − ν, ν = 100, e = 0.9)
+  reaches its Zeno limit t∞ = t₁ + 2v e/(g(1 − e)) within 4 ulp(c)/v;
+* the grazing orbit translated by 100 with the wall a clearance of 2.2e-15 m or a depth of
+  2.5e-12 m from its top gives graze rows with the true minimum's depth, and the same
+  decisions (graze, miss, impact) as the untranslated orbit at ±3e-11 m;
+* observers run in the same frame: their rows are the untranslated ones moved by c;
+* the frame's exact arithmetic: ``b + A x`` correctly rounded (against ``fractions``), the
+  origin's residual at the rounding of q*.
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import mpmath as mp
+import numpy as np
+import pytest
+
+import observer
+from observer.event import frame as frame_module
+from observer.event.frame import GapFrame, exact_affine, origin
+from observer.event.master import run_master
+from observer.scenario import Scenario
+from observer.scenarios import grazing
+
+G0 = 9.81
+
+
+def no_frame(monkeypatch):
+    """The engine without its gap frame (the known-bad case: the run in the given coordinates)."""
+    monkeypatch.setattr(frame_module.GapFrame, "of", staticmethod(lambda system: None))
+
+
+# -- exact arithmetic ------------------------------------------------------------------------------
+
+def exact_rounded(b, A, x) -> np.ndarray:
+    return np.array([float(Fraction(float(bi)) + sum(Fraction(float(a)) * Fraction(float(xj))
+                                                     for a, xj in zip(row, x)))
+                     for bi, row in zip(b, A)])
+
+
+@pytest.mark.parametrize("case", ["cancel", "random", "tiny", "huge"])
+def test_b_plus_a_x_is_the_exact_value_rounded_once(case):
+    """Against ``fractions``: ν₀ + Wᵀq* with ν₀ = −Wᵀq* rounded cancels to the rounding of the
+    products (float64 evaluation leaves n ulp of |q*| there), random data, and factors outside
+    the two-product's window (the rational path)."""
+    rng = np.random.default_rng(34)
+    A = rng.normal(size=(4, 5))
+    x = rng.normal(size=5) * 1e6
+    b = -(A @ x)
+    if case == "random":
+        b = rng.normal(size=4)
+    elif case == "tiny":
+        x = x * 1e-300
+        b = -(A @ x)
+    elif case == "huge":
+        x = x * 1e290
+        b = -(A @ x)
+    got = exact_affine(b, A, x)
+    assert np.array_equal(got, exact_rounded(b, A, x))
+    if case == "cancel":                          # float64 gets these wrong
+        assert not np.array_equal(b + A @ x, exact_rounded(b, A, x))
+
+
+def test_the_origin_cancels_the_gap_offset_to_the_rounding_of_the_origin():
+    """W with mixed columns (3 DOF, 2 contacts), ν₀ of size 1e8: q* in the range of W (the
+    minimum-norm solution: q* = Wy) and |ν₀ + Wᵀq*| within a few ulp of |q*| (exact residual)."""
+    W = np.array([[1.0, 0.3], [0.2, 1.0], [-0.7, 0.1]])
+    nu0 = np.array([1e8 + 0.3, -3.7e7])
+    q = origin(W, nu0)
+    res = exact_rounded(nu0, W.T, q)
+    assert np.max(np.abs(res)) <= 4 * np.spacing(np.max(np.abs(q))) * np.abs(W).sum(axis=0).max()
+    y = np.linalg.lstsq(W, q, rcond=None)[0]
+    assert np.allclose(W @ y, q, rtol=1e-14, atol=0)
+    assert not np.any(origin(W, np.zeros(2))) and GapFrame.of(
+        observer.load_scenario("bouncing_ball").system) is None
+
+
+# -- the ball translated ----------------------------------------------------------------------------
+
+def ball(q0: float, nu: float, e: float, t_end: float) -> Scenario:
+    doc = {"scenario": {"name": "translated_ball"},
+           "system": {"M": [[1.0]], "C": [[0.0]], "K": [[0.0]], "W": [[1.0]],
+                      "forcing": {"constant": [-G0]}, "gap": {"offset": [nu]}},
+           "impact": {"law": "newton", "restitution": e},
+           "initial": {"q": [q0], "u": [0.0]},
+           "simulation": {"t_end": t_end, "h": 0.01}}
+    return Scenario.from_dict(doc)
+
+
+def ball_t_inf(sc: Scenario, e: float):
+    """t∞ = t₁ + 2v e/(g(1 − e)) (t₁ = √(2g₀/g), v = √(2g g₀)) in 50 digits from the float
+    inputs (g₀ = q₀ + ν exactly), and v."""
+    with mp.workdps(50):
+        g0 = mp.mpf(float(sc.q0[0])) + mp.mpf(float(sc.system.gap.constant[0]))
+        g, e = mp.mpf(G0), mp.mpf(e)
+        v = mp.sqrt(2 * g * g0)
+        return mp.sqrt(2 * g0 / g) + 2 * v * e / (g * (1 - e)), v
+
+
+def run_t_inf(sc: Scenario) -> float:
+    res = observer.simulate(sc, integrator="event")
+    assert res.status.ok, res.status
+    acc = res.events[res.events["kind"] == "accumulation"]
+    assert len(acc) == 1
+    return float(acc["time"].iloc[0])
+
+
+@pytest.mark.parametrize("c", [-100.0, 100.0, 1e6, 1e8])
+def test_a_translated_ball_reaches_t_inf_within_4_ulp_of_c_over_v(c):
+    """A ball 0.3 m over the ground, q → q + c, ν = −c (q₀ = fl(0.3 + c): the float input
+    decides the height): t∞ within 4·ulp(c)/v of the closed form (before the frame: 1.8e-9 s
+    off at 1e6, 1.2e-7 s at 1e8, against 4.2e-10 and 5.4e-8)."""
+    e = 0.5
+    sc = ball(0.3 + c, -c, e, 2.0)
+    ref, v = ball_t_inf(sc, e)
+    assert abs(run_t_inf(sc) - ref) <= 4 * np.spacing(abs(c)) / v
+
+
+def test_the_ball_from_another_origin_rests_where_the_ball_at_the_origin_does():
+    """q₀ = 1 − ν, ν = 100, e = 0.9 (dropped 1 m, measured from another origin; before the
+    frame 3.3e-8 s off): t∞ within 4·ulp(ν)/v of the run at ν = 0 (a translation costs what
+    float64 forces, here nothing: q₀ + ν is exact), which is within 1e-12 s of the closed form."""
+    e, nu = 0.9, 100.0
+    sc = ball(1.0 - nu, nu, e, 40.0)
+    ref, v = ball_t_inf(sc, e)
+    at_origin = run_t_inf(ball(1.0, 0.0, e, 40.0))
+    assert abs(at_origin - ref) <= 1e-12
+    assert abs(run_t_inf(sc) - at_origin) <= 4 * np.spacing(nu) / v
+
+
+@pytest.mark.parametrize("c", [1e6, 1e8, "readme"])
+def test_without_the_frame_the_translated_ball_misses_the_bound(c, monkeypatch):
+    """The known-bad case of the bounds above: the run in the given coordinates."""
+    no_frame(monkeypatch)
+    e, sc = (0.9, ball(-99.0, 100.0, 0.9, 40.0)) if c == "readme" else (0.5, ball(0.3 + c, -c, 0.5, 2.0))
+    ref, v = ball_t_inf(sc, e)
+    c = 100.0 if c == "readme" else c
+    assert abs(run_t_inf(sc) - ref) > 4 * np.spacing(abs(c)) / v
+
+
+# -- grazing translated by 100 ------------------------------------------------------------------------
+
+ZETA, F, OMEGA = 0.05, 1.0, 0.8
+
+
+def grazing_orbit(c: float, wall: float, t_end: float = 20.0) -> Scenario:
+    """The grazing scenario (ẍ + 2ζẋ + x = F cos ωt from its steady state, g = σ − x) with the
+    wall at σ = X + ``wall`` (X the steady amplitude), translated by c (q → q + c, ν → ν + c,
+    f → f + c: W = −1, K = 1)."""
+    doc = grazing.document(t_end=t_end, h=1e-2)
+    X, _ = grazing.steady_state(ZETA, F, OMEGA)
+    doc["system"]["gap"]["offset"] = [X + wall + c]
+    doc["system"]["forcing"]["constant"] = [c]
+    doc["initial"]["q"] = [doc["initial"]["q"][0] + c]
+    return Scenario.from_dict(doc)
+
+
+def first_minimum_gap(sc: Scenario):
+    """The gap's first local minimum (time, value) in 40 digits from the float inputs:
+    x = c₀ + Re(H e^{iωt}) + e^{−ζt}(A cos ω_d t + B sin ω_d t), H = F/(1 − ω² + 2iζω),
+    ω_d = √(1 − ζ²); the minimum of σ − x where ẋ = 0 near the steady orbit's top."""
+    s = sc.system
+    with mp.workdps(40):
+        zeta = mp.mpf(float(s.C[0, 0])) / 2
+        c0, amp = mp.mpf(float(s.forcing.constant[0])), mp.mpf(float(s.forcing.amplitude[0, 0]))
+        w, sigma = mp.mpf(float(s.forcing.omega[0])), mp.mpf(float(s.gap.constant[0]))
+        x0, u0 = mp.mpf(float(sc.q0[0])), mp.mpf(float(sc.u0[0]))
+        H = amp / (1 - w * w + 2j * zeta * w)
+        wd = mp.sqrt(1 - zeta ** 2)
+        A = x0 - c0 - mp.re(H)
+        B = (u0 - mp.re(1j * w * H) + zeta * A) / wd
+
+        def x(t):
+            return c0 + mp.re(H * mp.expj(w * t)) + mp.exp(-zeta * t) * (A * mp.cos(wd * t) + B * mp.sin(wd * t))
+        t_top = mp.atan2(2 * zeta * w, 1 - w * w) / w        # ωt − δ = 0: the first top
+        t_star = mp.findroot(lambda t: mp.diff(x, t), t_top)
+        return float(t_star), float(sigma - x(t_star))
+
+
+@pytest.mark.parametrize("g_min", [2.2e-15, -2.5e-12])
+def test_a_graze_translated_by_100_inside_the_band_is_a_graze_row_at_the_true_depth(g_min):
+    """A clearance of 2.2e-15 m and a depth of 2.5e-12 m (the gap's minimum g_min: the wall
+    2.2e-15 above, 2.5e-12 below the orbit's top; the minimum from the float inputs, which translated by 100 decide it to
+    ulp(100)): every event a graze with zero impulse, the first at the 40-digit minimum's time
+    and depth (to 1e-14 m: the frame's shifted problem is the translated one exactly here)."""
+    sc = grazing_orbit(100.0, g_min)
+    t_star, depth = first_minimum_gap(sc)
+    assert abs(depth - g_min) <= 2e-14                  # what was asked, to ulp(100)
+    ev = observer.simulate(sc, integrator="event").events
+    assert len(ev) >= 2 and set(ev["kind"]) == {"graze"} and (ev["impulse"] == 0.0).all()
+    assert abs(ev["time"].iloc[0] - t_star) <= 1e-6
+    master = run_master(GapFrame.of(sc.system).scenario(sc))   # the engine's run, with depths
+    first = master.events.iloc[0]
+    assert first["kind"] == "graze" and abs(first["depth"] - depth) <= 1e-14, (first["depth"], depth)
+
+
+@pytest.mark.parametrize("wall", [3e-11, -3e-11])
+def test_a_crossing_and_a_miss_3e_11_from_the_top_are_decided_as_at_the_origin(wall, monkeypatch):
+    """The wall 3e-11 m below the top (a crossing) and above it (a miss): translated by 100 the
+    same events as untranslated (an impact; no event), which the band decides at the size of
+    the motion; in the given coordinates (no frame) both were grazes, the band there grown
+    with ulp(100) (±5.9e-11)."""
+    def kinds(c):
+        return observer.simulate(grazing_orbit(c, -wall, 10.0), integrator="event").events["kind"].tolist()
+    expected = ["impact"] if wall > 0 else []
+    assert kinds(0.0)[:1] == expected
+    assert kinds(100.0)[:1] == expected
+    no_frame(monkeypatch)
+    assert kinds(100.0)[:1] == ["graze"]
+
+
