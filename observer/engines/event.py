@@ -1,6 +1,12 @@
 """The exact event-driven engine (:mod:`observer.event`): exact flow between events, impact
 times to round-off, Zeno resolved into persistent contact; sampled on the grid t_k = k·h.
 
+The master and the observers run in the gap frame (:class:`observer.event.frame.GapFrame`):
+coordinates x = q − q* with the origin q* on the contacts (``Wᵀq* + ν₀ ≈ 0``), the shifted
+problem the same problem (its forcing and gap-offset constants exact, then rounded), so that
+a translation of the coordinates by c costs only what float64 forces on the inputs (ulp(c)),
+not ulp(c) in every gap evaluation, enclosure and touch band; the rows are moved back to q.
+
 The master's and the observers' arrays go into the :class:`~observer.result.RunRecord`
 directly (no DataFrame is built unless a user reads one); the master's and the observers'
 :class:`~observer.result.RunStatus` are decided where each stopped (:mod:`observer.event.master`,
