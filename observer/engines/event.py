@@ -113,7 +113,7 @@ def _event_run(run: RunDescription, signalled) -> RunRecord:
     from observer.event.master import run_master
 
     sc = run.scenario
-    frame = GapFrame.of(sc.system)          # the run in x = q − q*, origin on the contacts
+    frame = GapFrame.for_scenario(sc)       # the run in x = q − q*, origin on the contacts
     master = run_master(sc if frame is None else frame.scenario(sc), t0=run.t0,
                         should_stop=signalled)   # overflow is a stop (status), silenced inside
     master_signal = signalled()

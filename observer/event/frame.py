@@ -28,8 +28,9 @@ roundings are those of ``x₀``, ``f₀'`` and ``ν₀'``, each relative to its 
 numbers with no cancellation left in them, since Wᵀq* cancels ν₀ to the rounding of q*.
 q* itself need not be exact (it is not an input of the problem): its accuracy decides only
 how small ν₀' is, not which problem is solved. The output rows ``x + q*`` are rounded to
-ulp(q), which is the representation of the answer. The frame is the identity (no shift, the
-run unchanged bit for bit) when ν₀ = 0 or its origin is 0.
+ulp(q), which is the representation of the answer. No frame (the run unchanged bit for bit)
+when ν₀ = 0, or when the frame does not lower the gaps' representation floor at the initial
+state (:meth:`GapFrame.for_scenario`).
 """
 
 from __future__ import annotations
@@ -165,6 +166,24 @@ class GapFrame:
             _FRAMES.clear()
         _FRAMES[id(system)] = (system, frame)
         return frame
+
+    @staticmethod
+    def for_scenario(sc) -> "GapFrame | None":
+        """The frame a run of ``sc`` (a :class:`observer.scenario.Scenario`) takes: that of its
+        system (:meth:`of`) when it lowers the gaps' representation floor at the initial
+        state, ``Σ_j (Σ_i |W_ij q_i| + |ν_j|)`` — the sum the engine's round-off bounds and
+        touch bands scale with (:func:`observer.event.roots.tolerance`) — else None (a motion
+        away from its contacts, a spring's rest position 10 m off the wall, is left in its
+        coordinates: there the frame would only move the state away from its origin)."""
+        frame = GapFrame.of(sc.system)
+        if frame is None:
+            return None
+        W, nu0 = np.abs(np.asarray(sc.system.W)), sc.system.gap.constant
+        x0 = frame.state(sc.q0)
+        nu1 = exact_affine(nu0, np.asarray(sc.system.W).T, frame.origin)
+        given = float(np.sum(np.abs(sc.q0) @ W + np.abs(nu0)))
+        shifted = float(np.sum(np.abs(x0) @ W + np.abs(nu1)))
+        return frame if shifted < given else None
 
     def state(self, q: np.ndarray) -> np.ndarray:
         """``x = q − q*`` (correctly rounded per component)."""
