@@ -132,6 +132,10 @@ def origin(W: np.ndarray, nu0: np.ndarray) -> np.ndarray:
     return best
 
 
+_KEPT = 8
+"""Systems whose frame and shifted system are kept (a run of one of them again reuses its
+flows); the caches are emptied when full (each entry holds its system's matrices)."""
+
 _FRAMES: dict = {}
 """``id(system) → (system, frame)`` (:meth:`GapFrame.of`)."""
 
@@ -162,7 +166,7 @@ class GapFrame:
             return hit[1]
         q = origin(system.W, system.gap.constant)
         frame = GapFrame(q) if np.any(q) else None
-        if len(_FRAMES) > 64:
+        if len(_FRAMES) >= _KEPT:
             _FRAMES.clear()
         _FRAMES[id(system)] = (system, frame)
         return frame
@@ -203,12 +207,13 @@ class GapFrame:
         if hit is not None and hit[0] is system:
             return hit[1]
         shifted = self._shift(system)
-        if len(_SHIFTED) > 64:
+        if len(_SHIFTED) >= _KEPT:
             _SHIFTED.clear()
         _SHIFTED[key] = (system, shifted)
         return shifted
 
     def _shift(self, system: LinearSystem) -> LinearSystem:
+        """The shifted system, built (:meth:`system` keeps it)."""
         f0 = exact_affine(system.forcing.constant, -np.asarray(system.K), self.origin)
         nu0 = exact_affine(system.gap.constant, np.asarray(system.W).T, self.origin)
         shifted = dataclasses.replace(

@@ -71,16 +71,54 @@ def test_b_plus_a_x_is_the_exact_value_rounded_once(case):
 
 def test_the_origin_cancels_the_gap_offset_to_the_rounding_of_the_origin():
     """W with mixed columns (3 DOF, 2 contacts), ν₀ of size 1e8: q* in the range of W (the
-    minimum-norm solution: q* = Wy) and |ν₀ + Wᵀq*| within a few ulp of |q*| (exact residual)."""
+    minimum-norm solution: q* = Wy) and |ν₀ + Wᵀq*| at the rounding of q* (exact residual)."""
     W = np.array([[1.0, 0.3], [0.2, 1.0], [-0.7, 0.1]])
     nu0 = np.array([1e8 + 0.3, -3.7e7])
     q = origin(W, nu0)
     res = exact_rounded(nu0, W.T, q)
-    assert np.max(np.abs(res)) <= 4 * np.spacing(np.max(np.abs(q))) * np.abs(W).sum(axis=0).max()
+    # q* within ulp/2 of the exact solution per component leaves |res| ≤ ½·ulp·Σ_i|W_ij|
+    # (twice that allowed; the least-squares start alone left 4.2e-8 = 3 times it)
+    assert np.max(np.abs(res)) <= np.spacing(np.max(np.abs(q))) * np.abs(W).sum(axis=0).max()
     y = np.linalg.lstsq(W, q, rcond=None)[0]
     assert np.allclose(W @ y, q, rtol=1e-14, atol=0)
     assert not np.any(origin(W, np.zeros(2))) and GapFrame.of(
         observer.load_scenario("bouncing_ball").system) is None
+
+
+def test_the_shifted_problem_is_the_given_one_with_three_vectors_rounded_once():
+    """The coupled pair translated by (2^20, −2^21): in the frame, f₀' = f₀ − Kq* and
+    ν₀' = ν₀ + Wᵀq* are the exact values rounded once, x₀ = q₀ − q* likewise, and everything
+    else (M, C, K, W, the harmonic terms, u₀) is the given problem's; ν₀' is at the rounding of
+    q* (|ν₀'| ≤ a few ulp(2^21), where ν₀ is 2.4e6)."""
+    sc = coupled_pair((2.0 ** 20, -2.0 ** 21))
+    fr = GapFrame.for_scenario(sc)
+    assert fr is not None
+    moved = fr.scenario(sc)
+    s, m = sc.system, moved.system
+    q = fr.origin
+    assert np.array_equal(m.forcing.constant, exact_rounded(s.forcing.constant, -s.K, q))
+    assert np.array_equal(m.gap.constant, exact_rounded(s.gap.constant, s.W.T, q))
+    assert np.array_equal(moved.q0, [float(Fraction(a) - Fraction(b)) for a, b in zip(sc.q0, q)])
+    assert np.max(np.abs(m.gap.constant)) <= 8 * np.spacing(2.0 ** 21)
+    for name in ("M", "C", "K", "W"):
+        assert np.array_equal(getattr(m, name), getattr(s, name))
+    for name in ("amplitude", "omega", "phase"):
+        assert np.array_equal(getattr(m.forcing, name), getattr(s.forcing, name))
+        assert np.array_equal(getattr(m.gap, name), getattr(s.gap, name))
+    assert np.array_equal(moved.u0, sc.u0)
+
+
+def test_a_motion_away_from_its_contacts_is_left_in_its_coordinates():
+    """A spring whose rest position is 10 m from the wall (q₀ = 1, ν = 10): the frame (origin
+    −10, the state at 11) does not lower the gaps' floor Σ|W q| + |ν| = 11: no frame; the same
+    ball translated by 1e6 is framed (floor 2e6 → 0.3)."""
+    doc = {"scenario": {"name": "quiet"},
+           "system": {"M": [[1.0]], "C": [[0.0]], "K": [[1e6]], "W": [[1.0]], "gap": {"offset": [10.0]}},
+           "impact": {"law": "newton", "restitution": 0.5}, "initial": {"q": [1.0], "u": [0.0]},
+           "simulation": {"t_end": 1.0, "h": 1e-2}}
+    sc = Scenario.from_dict(doc)
+    assert GapFrame.of(sc.system) is not None and GapFrame.for_scenario(sc) is None
+    assert GapFrame.for_scenario(ball(0.3 + 1e6, -1e6, 0.5, 1.0)).origin.tolist() == [1e6]
 
 
 # -- the ball translated ----------------------------------------------------------------------------
