@@ -6,6 +6,8 @@ coordinates x = q − q* with the origin q* on the contacts (``Wᵀq* + ν₀ �
 problem the same problem (its forcing and gap-offset constants exact, then rounded), so that
 a translation of the coordinates by c costs only what float64 forces on the inputs (ulp(c)),
 not ulp(c) in every gap evaluation, enclosure and touch band; the rows are moved back to q.
+``metadata["gap_frame"]`` is the origin q* of a run so carried (absent: the run in its own
+coordinates, :meth:`~observer.event.frame.GapFrame.for_scenario`).
 
 The master's and the observers' arrays go into the :class:`~observer.result.RunRecord`
 directly (no DataFrame is built unless a user reads one); the master's and the observers'
@@ -124,6 +126,8 @@ def _event_run(run: RunDescription, signalled) -> RunRecord:
             "steps": int(t.size - 1), "master_status": str(master.status),
             "events": len(master.event_rows), "zeno": master.zeno,
             "versions": package_versions(), "engine": "event"}
+    if frame is not None:
+        meta["gap_frame"] = frame.origin.tolist()
     status = master_status(master)
     slaves, chi, observers_whole = {}, None, True
     if run.slaves:

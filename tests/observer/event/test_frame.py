@@ -160,6 +160,7 @@ def test_a_translated_ball_reaches_t_inf_within_4_ulp_of_c_over_v(c):
     sc = ball(0.3 + c, -c, e, 2.0)
     ref, v = ball_t_inf(sc, e)
     assert abs(run_t_inf(sc) - ref) <= 4 * np.spacing(abs(c)) / v
+    assert observer.simulate(sc, integrator="event", t_end=0.1).metadata["gap_frame"] == [c]
 
 
 def test_the_ball_from_another_origin_rests_where_the_ball_at_the_origin_does():
