@@ -1,7 +1,8 @@
 """The exact event-driven engine (:mod:`observer.event`): exact flow between events, impact
 times to round-off, Zeno resolved into persistent contact; sampled on the grid t_k = k·h.
 
-The master and the observers run in the gap frame (:class:`observer.event.frame.GapFrame`):
+The master and the observers run in the gap frame (:class:`observer.event.frame.GapFrame`)
+when it lowers the gaps' representation floor at the initial state:
 coordinates x = q − q* with the origin q* on the contacts (``Wᵀq* + ν₀ ≈ 0``), the shifted
 problem the same problem (its forcing and gap-offset constants exact, then rounded), so that
 a translation of the coordinates by c costs only what float64 forces on the inputs (ulp(c)),
