@@ -224,17 +224,23 @@ def first_minimum_gap(sc: Scenario):
         B = (u0 - mp.re(1j * w * H) + zeta * A) / wd
 
         def x(t):
-            return c0 + mp.re(H * mp.expj(w * t)) + mp.exp(-zeta * t) * (A * mp.cos(wd * t) + B * mp.sin(wd * t))
+            decay = mp.exp(-zeta * t) * (A * mp.cos(wd * t) + B * mp.sin(wd * t))
+            return c0 + mp.re(H * mp.expj(w * t)) + decay
+
+        def v(t):                                         # ẋ, analytic
+            decay = mp.exp(-zeta * t) * ((B * wd - zeta * A) * mp.cos(wd * t)
+                                         - (A * wd + zeta * B) * mp.sin(wd * t))
+            return mp.re(1j * w * H * mp.expj(w * t)) + decay
         t_top = mp.atan2(2 * zeta * w, 1 - w * w) / w        # ωt − δ = 0: the first top
-        t_star = mp.findroot(lambda t: mp.diff(x, t), t_top)
+        t_star = mp.findroot(v, t_top)
         return float(t_star), float(sigma - x(t_star))
 
 
 @pytest.mark.parametrize("g_min", [2.2e-15, -2.5e-12])
 def test_a_graze_translated_by_100_inside_the_band_is_a_graze_row_at_the_true_depth(g_min):
     """A clearance of 2.2e-15 m and a depth of 2.5e-12 m (the gap's minimum g_min: the wall
-    2.2e-15 above, 2.5e-12 below the orbit's top; the minimum from the float inputs, which translated by 100 decide it to
-    ulp(100)): every event a graze with zero impulse, the first at the 40-digit minimum's time
+    2.2e-15 above, 2.5e-12 below the orbit's top; the minimum from the float inputs, which
+    translated by 100 decide it to ulp(100)): every event a graze with zero impulse, the first at the 40-digit minimum's time
     and depth (to 1e-16 m, measured 5e-18 and 4e-18; in the given coordinates, without the
     frame, 6.5e-15 and 2.2e-14: the frame's shifted problem is the translated one exactly here)."""
     sc = grazing_orbit(100.0, g_min)
@@ -347,8 +353,9 @@ def test_an_exact_translation_of_a_coupled_pair_moves_no_event(c):
     """Translated by about 1e6 and 6.7e7 (exactly: the same problem), the fast impacts where the
     untranslated run has them to 1e-13 s, both contacts' rest times (t∞ of their
     accumulations, extrapolated where each run's round-off cuts the tail) to 1e-10 s (measured
-    1.0e-11 s; the untranslated run is not framed: its floor is not lowered); in the given coordinates, without the frame, the fast impacts moved by
-    7e-8 and 3e-6 s, the rest times by 1.8e-6 and 3.6e-5 s."""
+    1.0e-11 s; the untranslated run is not framed: its floor is not lowered); in the given
+    coordinates, without the frame, the fast impacts moved by 7e-8 and 3e-6 s, the rest times
+    by 1.8e-6 and 3.6e-5 s."""
     contacts, times, rests = untranslated_pair()
     moved = fast_impacts_and_rests(coupled_pair(c))
     assert len(contacts) >= 6 and moved[0] == contacts
