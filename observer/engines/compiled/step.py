@@ -62,7 +62,7 @@ from __future__ import annotations
 
 import textwrap
 
-from observer.codegen import compile_function, fill
+from observer.codegen import compile_function, expand, fill
 from observer.primitives import JIT, LCP_FAILED, OK, PROJECT_ONE, RESIDUAL_EXCEEDED, TINY
 
 CLOSED_SET = """
@@ -77,9 +77,9 @@ else:
     a = 0                                           # Siconos' predictor
     for j in range(m):
         g = 0.0
-        for p in range(Wp[j], Wp[j + 1]):
-            g += predicted_term(Wv[p], qs[s, Wi[p]], us[s, Wi[p]], h)
-        if predicted_closed(g, nu[kl, j], nu_dot[kl, j], h):
+        for p in $WCOL(j):
+            g += predicted_term($WV(p), $QS(Wi[p]), $US(Wi[p]), h)
+        if predicted_closed(g, $NU(kl, j), $NUD(kl, j), h):
             act[a] = j
             a += 1
     project = master_projection
@@ -90,48 +90,59 @@ step follows χ_k, ``$CHI_J``: contact j in χ_k)."""
 
 DYNAMICS = """
 status = OK
-if dense:
+if $DENSE:
     for i in range(n):
         s1 = 0.0
         s2 = 0.0
         s3 = 0.0
         for j in range(n):
-            s1 += Bu[i, j] * us[s, j]
+            s1 += $BU(i, j) * $US(j)
         for j in range(n):
-            s2 += Bq[i, j] * qs[s, j]
+            s2 += $BQ(i, j) * $QS(j)
         for j in range(n):
-            s3 += Bf[i, j] * fbar[kl, j]
+            s3 += $BF(i, j) * $FB(kl, j)
         ufi = s1 + s2 + s3
-        uf[i] = ufi
+        $UF(i) = ufi
         if a == 0:                                  # the common step: done in this pass
-            u1[i] = ufi
-            q1[i] = qs[s, i] + h * ((1.0 - theta) * us[s, i] + theta * ufi)
+            $U1(i) = ufi
+            $Q1(i) = $QS(i) + h * ((1.0 - theta) * $US(i) + theta * ufi)
 else:
     banded_free_velocity(kl, s, qs, us, h, Ru_b, Rq_b, Ach_b, bw, fbar, uf)
-if a > 0 or not dense:
-    if factored and a > G.shape[0]:
+if a > 0 or not $DENSE:
+    if $FACTORED and a > G.shape[0]:
         mb = min(m, 2 * a)
         G, Gs, Lf, Gp = np.empty((mb, mb)), np.empty((mb, mb)), np.empty((mb, mb)), np.empty((mb, mb))
-    if factored and a > 0:
+    if $FACTORED and a > 0:
         status = factored_impulse(kl, s, us, uf, act, a, code, (Wp, Wi, Wv), nu_dot, Ach_b, bw,
                                   (Acache, Aslot, Aowner, Astamp), e, tol, stats,
                                   (gk, bvec, x, lc, le, gc, rhs, sol, basic, infeas, du), (G, Gs, Lf), u1, P, col)
     elif a == 1:
         $IMPULSE_ONE
-    elif a > 1:
+    elif $SEVERAL:
         status = contact_impulse(kl, s, us, uf, act, a, code, (Wp, Wi, Wv), nu_dot, AinvWT, Ghat, e, tol, stats,
                                  (gk, bvec, x, lc, le, gc, rhs, sol, basic, infeas, du), (G, Gs, Lf), u1, P)
     if a > 0:
         $HEALTH
-        if status != OK:
-            stats[3], stats[4] = gmin, gstep
-            return k, s, status
+        $FAIL
     else:
         for i in range(n):
-            u1[i] = uf[i]
+            $U1(i) = $UF(i)
     for i in range(n):
-        q1[i] = qs[s, i] + h * ((1.0 - theta) * us[s, i] + theta * u1[i])
+        $Q1(i) = $QS(i) + h * ((1.0 - theta) * $US(i) + theta * $U1(i))
 projected = project and a > 0
+$PROJECTION
+for i in range(n):
+    $QS(i) = $Q1(i)
+    $US(i) = $U1(i)
+"""
+"""One step of system s on its closed set: ``u_free``, the impulse, the positions, the jump
+(:data:`PROJECTION`); the state written back. A failed step returns ``(k, s, status)`` with
+the system's state untouched (:data:`FAIL`). ``$DENSE``, ``$FACTORED``, ``$SEVERAL`` (several
+closed contacts): the conditions of the rarer paths, literal ``True``/``False`` in a loop that
+has none of them (CPython drops a branch on a literal condition from the bytecode: the names
+it reads need not exist there)."""
+
+PROJECTION = """
 if projected:
     $KEEP_PRE
     if factored:
@@ -141,16 +152,18 @@ if projected:
         $PROJECT_ONE
     else:
         status = project_positions(kl + 1, act, a, slots[s], Wp, Wi, Wv, nu, KinvWT, L, q1, sig, gp, sp_, Gp, Lf)
-    if status != OK:
-        stats[3], stats[4] = gmin, gstep
-        return k, s, status
-for i in range(n):
-    qs[s, i] = q1[i]
-    us[s, i] = u1[i]
+    $FAIL
 """
-"""One step of system s on its closed set: ``u_free``, the impulse, the positions, the jump;
-the state written back. A failed step returns ``(k, s, status)`` with the system's state
-untouched."""
+"""The position jump of eqs. (13)-(14) on the step's closed set, when the step projects."""
+
+FAIL = """
+if status != OK:
+    stats[3], stats[4] = gmin, gstep
+    $SAVE_STATE
+    return k, s, status
+"""
+"""A failed step's return: the master's smallest gap kept, the state (``$SAVE_STATE``: kept in
+registers by the scalar loop) as it was before the step."""
 
 OBSERVER_SUMMARY = """
 kg = k + 1
@@ -313,6 +326,90 @@ def unpack(fields: dict) -> str:
     return "\n".join(lines)
 
 
+ARRAYS = {"QS": "qs[s, {0}]", "US": "us[s, {0}]", "Q1": "q1[{0}]", "U1": "u1[{0}]", "UF": "uf[{0}]",
+          "FSIG": "fsig[{0}, {1}]", "NU": "nu[{0}, {1}]", "NUD": "nu_dot[{0}, {1}]", "FB": "fbar[{0}, {1}]",
+          "BU": "Bu[{0}, {1}]", "BQ": "Bq[{0}, {1}]", "BF": "Bf[{0}, {1}]", "WV": "Wv[{0}]",
+          "WCOL": "range(Wp[{0}], Wp[{0} + 1])", "VCOL": "v_col[{0}]"}
+"""The step's accesses (macros, :func:`observer.codegen.expand`) in the array form: system s's
+state ``$QS(i)``, ``$US(i)`` (rows of ``qs``, ``us``), the step's new state and free velocity
+``$Q1(i)``, ``$U1(i)``, ``$UF(i)``, the signals f, ν, ν̇ and f̄ at a row (``$FSIG(row, j)``,
+``$NU``, ``$NUD``, ``$FB``), the scheme's matrices ``$BU(i, j)``, ``$BQ``, ``$BF``, W's entries
+``$WV(p)`` over a column ``$WCOL(j)`` and the varying signal columns ``$VCOL(c)``."""
+
+
+def _rows(r0: str, r1: str):
+    """The register of a signal at t_k (row ``0`` or ``kl``) or t_{k+1} (``1``, ``kl + 1``)."""
+    return lambda row, col: {"0": r0, "kl": r0, "1": r1, "kl + 1": r1}[row]
+
+
+REGISTERS = {"QS": "qr", "US": "ur", "Q1": "q1r", "U1": "u1r", "UF": "ufr", "FSIG": _rows("fs0", "fs1"),
+             "NU": _rows("nv0", "nv1"), "NUD": _rows("nd0", "nd1"), "FB": "fbr", "BU": "bu", "BQ": "bq",
+             "BF": "bf", "WV": "wr", "WCOL": "range(wn)", "VCOL": "0"}
+"""The same accesses in the scalar form (n = m = 1, the master alone): each a scalar, held in a
+register across the loop (:data:`SCALAR_UNPACK` binds them), W's column its one entry ``wr``
+(``wn`` = 1) or none (every gap is ν); the index arguments drop out."""
+
+ARRAY_FORM = {"DENSE": "dense", "FACTORED": "factored", "SEVERAL": "a > 1", "PROJECTS": "yes",
+              "PROJECTED": "projected", "SUMMARY": "summary", "RECORD_PRE": "record_pre", "OBSERVERS": "S > 1",
+              "SAVE_STATE": "", "RECORD_TIME": "",
+              "STRUCTURE": "dense = structure == STRUCTURE_DENSE\nif general is None:\n    dense = True"}
+"""The conditions of the step and of :data:`KERNEL_LOOP` in the kernel's and the members' loops:
+the run's flags (numba prunes those the lean specialization fixes)."""
+SCALAR_FORM = {"DENSE": "True", "FACTORED": "False", "SEVERAL": "False", "PROJECTS": "", "PROJECTED": "False",
+               "SUMMARY": "False", "RECORD_PRE": "False", "OBSERVERS": "False",
+               "SAVE_STATE": "qs[0, 0] = qr\nus[0, 0] = ur",
+               "RECORD_TIME": "if times:\n    rec_t[r] = float(r * record_every) * h + t0", "STRUCTURE": ""}
+"""The scalar form's: the lean specialization's flags as literals (dense, one contact, no
+projection, no summary, no observer: CPython drops those branches), the state written back
+from its registers on a failed step and at the end, and each recorded row's time
+``t0 + k·h`` computed as :meth:`observer.stepping.MoreauJean.time` computes it (when
+``rec_t`` has a row per record)."""
+
+KERNEL_DEF = '''
+def _advance_loop(k0, k1, s0, system, impact, signals, window, observers, state, storage, tally, general):
+    """The kernel's step loop (generated by :mod:`observer.engines.compiled.step`):
+    :func:`observer.engines.compiled.kernel.advance` says what it does."""
+'''
+KERNEL_SIZES = """
+S, n = qs.shape
+if general is None:             # the lean specialization: pruned at compile time
+    S = 1
+    summary = False
+    record_pre = False
+    master_projection = False
+m = Wp.shape[0] - 1
+nr = rhos.shape[0]
+factored = contacts == CONTACTS_FACTORED
+if general is None:
+    factored = False
+"""
+SCALAR_DEF = '''
+def _advance_scalar_loop(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, rec_act, rec_t, grid, waves, ptrs,
+                         e_coef, e_wave, f_c, nu_c, contact, stats):
+    """The kernel's loop for the master alone with n = m = 1 (generated by
+    :mod:`observer.engines.compiled.step`, :func:`scalar_source`):
+    :func:`observer.engines.compiled.kernel.advance_scalar` says what it does."""
+'''
+SCALAR_UNPACK = """
+t0, h, theta = grid
+e_ptr, v_ptr = ptrs
+Bu, Bq, Bf, Wp, Wi, Wv, AinvWT, Ghat, e, tol = contact
+qr, ur = qs[0, 0], us[0, 0]                 # the state, the signals and the 1×1 matrices in registers
+q1r = u1r = ufr = 0.0
+fs0 = fs1 = fbr = nv0 = nv1 = nd0 = nd1 = 0.0
+bu, bq, bf = Bu[0, 0], Bq[0, 0], Bf[0, 0]
+wn = Wp[1] - Wp[0]                          # W's entries: one, or none (every gap is ν)
+wr = Wv[Wp[0]] if wn > 0 else 0.0
+times = rec_t.shape[0] > 0
+"""
+SCALAR_SIZES = """
+S, n, m, s0 = 1, 1, 1, 0
+factored = False
+master_projection = False
+"""
+"""The scalar loop's header: its arguments (:func:`observer.engines.compiled.kernel.advance_scalar`
+passes the arrays it reads, the rest in tuples), the registers and the sizes as constants."""
+
 KERNEL_SUMMARY = {"MASTER_U": "us[0, i]", "MASTER_Q": "qs[0, i]", "MASTER_P": "Pfull_m[j]", "V_PREV": "Vprev[s]",
                   "NINC": "summ[s, F_NINC]", "MAXINC": "summ[s, F_MAXINC]", "DAMP": "summ[s, F_DAMP]",
                   "IMP": "summ[s, F_IMP]", "PROJ": "summ[s, F_PROJ]", "MAXIMP": "summ[s, F_MAXIMP]",
@@ -329,35 +426,21 @@ MEMBER_SUMMARY = {"MASTER_U": "UM[kg, i]", "MASTER_Q": "QM[kg, i]", "MASTER_P": 
 an array value after every store to an array, :func:`members_source`)."""
 
 KERNEL_LOOP = '''
-def _advance_loop(k0, k1, s0, system, impact, signals, window, observers, state, storage, tally, general):
-    """The kernel's step loop (generated by :mod:`observer.engines.compiled.step`):
-    :func:`observer.engines.compiled.kernel.advance` says what it does."""
+$DEF
     $UNPACK
-    S, n = qs.shape
-    if general is None:             # the lean specialization: pruned at compile time
-        S = 1
-        summary = False
-        record_pre = False
-        master_projection = False
-    m = Wp.shape[0] - 1
-    nr = rhos.shape[0]
-    factored = contacts == CONTACTS_FACTORED
-    if general is None:
-        factored = False
+    $SIZES
     $BUFFERS
     Pfull_m = np.zeros(m)
     # the signals at t_k (row 0) and t_{k+1} (row 1); f̄_k in row 0 of fbar
     fsig, nu, nu_dot, fbar = np.zeros((2, n)), np.zeros((2, m)), np.zeros((2, m)), np.zeros((1, n))
     for j in range(n):
-        fsig[0, j] = f_c[j]
-        fsig[1, j] = f_c[j]
-        fbar[0, j] = (1.0 - theta) * f_c[j] + theta * f_c[j]
+        $FSIG(0, j) = f_c[j]
+        $FSIG(1, j) = f_c[j]
+        $FB(0, j) = (1.0 - theta) * f_c[j] + theta * f_c[j]
     for j in range(m):
-        nu[0, j] = nu_c[j]
-        nu[1, j] = nu_c[j]
-    dense = structure == STRUCTURE_DENSE
-    if general is None:
-        dense = True
+        $NU(0, j) = nu_c[j]
+        $NU(1, j) = nu_c[j]
+    $STRUCTURE
     vp0, vp1, vp2, vp3 = v_ptr[0], v_ptr[1], v_ptr[2], v_ptr[3]     # loop bounds as scalars
     ep0, ep1, ep2, ep3 = e_ptr[0], e_ptr[1], e_ptr[2], e_ptr[3]
     gmin, gstep = stats[3], stats[4]           # the master's smallest gap, kept in registers
@@ -372,26 +455,26 @@ def _advance_loop(k0, k1, s0, system, impact, signals, window, observers, state,
         for rep in range(nrep):
             kt = kw + 1 + rep - (nrep - 1)                  # column of the grid point in waves
             for c in range(vp0, vp1):                       # the varying columns restart
-                j = v_col[c]
-                fsig[0, j] = fsig[1, j]
-                fsig[1, j] = f_c[j]
+                j = $VCOL(c)
+                $FSIG(0, j) = $FSIG(1, j)
+                $FSIG(1, j) = f_c[j]
             for c in range(vp1, vp2):
-                j = v_col[c]
-                nu[0, j] = nu[1, j]
-                nu[1, j] = nu_c[j]
+                j = $VCOL(c)
+                $NU(0, j) = $NU(1, j)
+                $NU(1, j) = nu_c[j]
             for c in range(vp2, vp3):
-                j = v_col[c]
-                nu_dot[0, j] = nu_dot[1, j]
-                nu_dot[1, j] = 0.0
+                j = $VCOL(c)
+                $NUD(0, j) = $NUD(1, j)
+                $NUD(1, j) = 0.0
             for i in range(ep0, ep1):                       # entries in summation order
-                fsig[1, e_col[i]] += e_coef[i] * waves[e_wave[i], kt]
+                $FSIG(1, e_col[i]) += e_coef[i] * waves[e_wave[i], kt]
             for i in range(ep1, ep2):
-                nu[1, e_col[i]] += e_coef[i] * waves[e_wave[i], kt]
+                $NU(1, e_col[i]) += e_coef[i] * waves[e_wave[i], kt]
             for i in range(ep2, ep3):
-                nu_dot[1, e_col[i]] += e_coef[i] * waves[e_wave[i], kt]
+                $NUD(1, e_col[i]) += e_coef[i] * waves[e_wave[i], kt]
         for c in range(vp0, vp1):
-            j = v_col[c]
-            fbar[0, j] = (1.0 - theta) * fsig[0, j] + theta * fsig[1, j]
+            j = $VCOL(c)
+            $FB(0, j) = (1.0 - theta) * $FSIG(0, j) + theta * $FSIG(1, j)
         kl = 0                                              # row of t_k in the signal buffers
         until -= 1
         rec = until == 0
@@ -406,7 +489,7 @@ def _advance_loop(k0, k1, s0, system, impact, signals, window, observers, state,
             $DYNAMICS
             # --- bookkeeping: the master's closings and penetration, the observers' summary
             if s == 0:
-                if summary:                                 # the master's impulse and closings
+                if $SUMMARY:                                 # the master's impulse and closings
                     for j in range(m):
                         Pfull_m[j] = 0.0
                     for i in range(a):
@@ -420,32 +503,34 @@ def _advance_loop(k0, k1, s0, system, impact, signals, window, observers, state,
                         prev_act[act[i]] = True
                 for j in range(m):
                     g = 0.0
-                    for p in range(Wp[j], Wp[j + 1]):
-                        g += Wv[p] * q1[Wi[p]]
-                    g += nu[kl + 1, j]
+                    for p in $WCOL(j):
+                        g += $WV(p) * $Q1(Wi[p])
+                    g += $NU(kl + 1, j)
                     if g < gmin:
                         gmin = g
                         gstep = k + 1
-            elif summary:
+            elif $SUMMARY:
                 $OBSERVER_SUMMARY
             # --- the records
             if rec:
                 for i in range(n):
-                    rec_q[s, r, i] = q1[i]
-                    rec_u[s, r, i] = u1[i]
-                if record_pre:
+                    rec_q[s, r, i] = $Q1(i)
+                    rec_u[s, r, i] = $U1(i)
+                $RECORD_TIME
+                if $RECORD_PRE:
                     for i in range(n):
-                        rec_qpre[s, r, i] = qpre[i] if projected else q1[i]
+                        rec_qpre[s, r, i] = qpre[i] if projected else $Q1(i)
                 for i in range(a):                          # rows are zero-filled (caller)
                     rec_P[s, r, act[i]] = P[i]
-                    if projected:
+                    if $PROJECTED:
                         rec_sig[s, r, act[i]] = sig[i]
                 if s == 0:
                     for i in range(a):
                         rec_act[r, act[i]] = True
-                    if S > 1:
+                    if $OBSERVERS:
                         for j in range(m):
                             rec_chi[r, j] = chi_now[j]
+    $SAVE_STATE
     stats[3], stats[4] = gmin, gstep
     return k1, 0, OK
 '''
@@ -498,12 +583,12 @@ j1 = $J
 pa, pb = Wp[j1], Wp[j1 + 1]
 gk1 = 0.0                                                               # (Wᵀu_k)_j
 for p1 in range(pa, pb):
-    gk1 += Wv[p1] * us[s, Wi[p1]]
-gk1 = gk1 + nu_dot[$ROW, j1]
+    gk1 += $WV(p1) * $US(Wi[p1])
+gk1 = gk1 + $NUD($ROW, j1)
 gc1 = 0.0                                                               # γ_free
 for p1 in range(pa, pb):
-    gc1 += Wv[p1] * uf[Wi[p1]]
-gc1 = gc1 + nu_dot[$ROW + 1, j1]
+    gc1 += $WV(p1) * $UF(Wi[p1])
+gc1 = gc1 + $NUD($ROW + 1, j1)
 gjj = Ghat[j1, j1]
 b1 = gc1 + e[j1] * gk1
 x1 = -b1 / gjj if b1 < 0.0 else 0.0
@@ -514,11 +599,11 @@ if v1 > r1:
     r1 = v1
 res1 = r1 / max(abs(b1) if abs(b1) > 0.0 else 0.0, abs(gx1) if abs(gx1) > 0.0 else 0.0, TINY)
 for i1 in range(n):
-    u1[i1] = uf[i1] + (0.0 + AinvWT[j1, i1] * x1)                       # u_free + δu
+    $U1(i1) = $UF(i1) + (0.0 + AinvWT[j1, i1] * x1)                       # u_free + δu
 P[0] = x1
 d1 = 0.0                                                                # (Wᵀδu)_j: applied_residual
 for p1 in range(pa, pb):
-    d1 += Wv[p1] * (0.0 + AinvWT[j1, Wi[p1]] * x1)
+    d1 += $WV(p1) * (0.0 + AinvWT[j1, Wi[p1]] * x1)
 r1 = 0.0
 v1 = abs(min(x1, b1 + d1))
 if v1 > r1:
@@ -554,7 +639,7 @@ def impulse_one(k, s, us, uf, j, Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats
     """The impulse of system s's step on its one closed contact j, in closed form
     (:data:`IMPULSE_ONE`); returns the status."""
     n = uf.shape[0]
-{textwrap.indent(fill(IMPULSE_ONE, {"J": "j", "ROW": "k", "COUNT_ONE": COUNT_ONE}), "    ")}
+{textwrap.indent(expand(fill(IMPULSE_ONE, {"J": "j", "ROW": "k", "COUNT_ONE": COUNT_ONE}), ARRAYS), "    ")}
     return status
 ''', {"__name__": __name__, "OK": OK, "LCP_FAILED": LCP_FAILED,
                                                        "RESIDUAL_EXCEEDED": RESIDUAL_EXCEEDED, "TINY": TINY},
@@ -591,24 +676,45 @@ members keep a summary only): per contact step, 7 stores fewer, which measured 2
 1000-member double_mass ensemble's time (issue 32)."""
 
 
+def step_source(one: dict, form: dict) -> str:
+    """:data:`DYNAMICS` with the one-contact fragments ``one`` and the loop's ``form`` (its
+    conditions, :data:`ARRAY_FORM` or :data:`SCALAR_FORM`), the projection and the failure
+    return placed."""
+    fail = fill(FAIL, form)
+    projection = fill(PROJECTION, {**one, "FAIL": fail}) if form["PROJECTS"] else ""
+    return fill(DYNAMICS, {**one, **form, "FAIL": fail, "PROJECTION": projection})
+
+
 def kernel_source() -> str:
     """The source of the kernel's loop :func:`_advance_loop` (:data:`KERNEL_LOOP`)."""
     closed = fill(CLOSED_SET, {"COUPLED": "s > 0 and coupled[kw]", "CHI_J": "chi_now[j]",
                                "AFTER_PREDICTION": KERNEL_CHI})
-    return fill(KERNEL_LOOP, {"UNPACK": unpack(KERNEL_FIELDS), "BUFFERS": BUFFERS, "CLOSED_SET": closed,
-                              "DYNAMICS": fill(DYNAMICS, ONE_CONTACT),
-                              "OBSERVER_SUMMARY": fill(OBSERVER_SUMMARY, KERNEL_SUMMARY)})
+    return expand(fill(KERNEL_LOOP, {**ARRAY_FORM, "DEF": KERNEL_DEF, "UNPACK": unpack(KERNEL_FIELDS),
+                                     "SIZES": KERNEL_SIZES, "BUFFERS": BUFFERS, "CLOSED_SET": closed,
+                                     "DYNAMICS": step_source(ONE_CONTACT, ARRAY_FORM),
+                                     "OBSERVER_SUMMARY": fill(OBSERVER_SUMMARY, KERNEL_SUMMARY)}), ARRAYS)
+
+
+def scalar_source() -> str:
+    """The source of the scalar loop :func:`_advance_scalar_loop`: :data:`KERNEL_LOOP` for the
+    master alone with n = m = 1 (:data:`SCALAR_FORM`), its accesses in registers
+    (:data:`REGISTERS`)."""
+    closed = fill(CLOSED_SET, {"COUPLED": "False", "CHI_J": "False", "AFTER_PREDICTION": ""})
+    return expand(fill(KERNEL_LOOP, {**SCALAR_FORM, "DEF": SCALAR_DEF, "UNPACK": SCALAR_UNPACK,
+                                     "SIZES": SCALAR_SIZES, "BUFFERS": BUFFERS, "CLOSED_SET": closed,
+                                     "DYNAMICS": step_source(ONE_CONTACT, SCALAR_FORM),
+                                     "OBSERVER_SUMMARY": "pass"}), REGISTERS)
 
 
 def members_source() -> str:
     """The source of the members' loop (:data:`MEMBERS_LOOP`)."""
     closed = fill(CLOSED_SET, {"COUPLED": "COUP[k]", "CHI_J": "CHI[k, j]", "AFTER_PREDICTION": ""})
-    return fill(MEMBERS_LOOP, {"UNPACK": unpack(MEMBER_FIELDS), "BUFFERS": BUFFERS, "CLOSED_SET": closed,
-                               "DYNAMICS": fill(DYNAMICS, MEMBER_ONE),
-                               "OBSERVER_SUMMARY": fill(OBSERVER_SUMMARY, MEMBER_SUMMARY)})
+    return expand(fill(MEMBERS_LOOP, {"UNPACK": unpack(MEMBER_FIELDS), "BUFFERS": BUFFERS, "CLOSED_SET": closed,
+                                      "DYNAMICS": step_source(MEMBER_ONE, ARRAY_FORM),
+                                      "OBSERVER_SUMMARY": fill(OBSERVER_SUMMARY, MEMBER_SUMMARY)}), ARRAYS)
 
 
-SOURCES = {"_advance_loop": kernel_source, "advance_members": members_source}
+SOURCES = {"_advance_loop": kernel_source, "_advance_scalar_loop": scalar_source, "advance_members": members_source}
 """Each generated loop's name → the function giving its source."""
 
 
