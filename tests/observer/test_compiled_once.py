@@ -223,7 +223,7 @@ def placed_fragments(loop: str) -> dict:
     from observer.engines.compiled import step
 
     kernel, scalar = loop == "_advance_loop", loop == "_advance_scalar_loop"
-    one = step.MEMBER_ONE if loop == "advance_members" else step.ONE_CONTACT
+    one = step.MEMBER_ONE if loop == "advance_members" else step.SCALAR_ONE if scalar else step.ONE_CONTACT
     form = step.SCALAR_FORM if scalar else step.ARRAY_FORM
     closed = {"COUPLED": "False" if scalar else "s > 0 and coupled[kw]" if kernel else "COUP[k]",
               "CHI_J": "False" if scalar else "chi_now[j]" if kernel else "CHI[k, j]",

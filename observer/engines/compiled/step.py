@@ -398,7 +398,7 @@ qr, ur = qs[0, 0], us[0, 0]                 # the state, the signals and the 1×
 q1r = u1r = ufr = 0.0
 fs0 = fs1 = fbr = nv0 = nv1 = nd0 = nd1 = 0.0
 bu, bq, bf = Bu[0, 0], Bq[0, 0], Bf[0, 0]
-wn = Wp[1] - Wp[0]                          # W's entries: one, or none (every gap is ν)
+wn = 1 if Wp[1] > Wp[0] else 0              # W's entries: one, or none (every gap is ν)
 wr = Wv[Wp[0]] if wn > 0 else 0.0
 times = rec_t.shape[0] > 0
 """
@@ -674,6 +674,17 @@ MEMBER_ONE = {"IMPULSE_ONE": fill(IMPULSE_ONE, {"J": "act[0]", "ROW": "kl", "COU
 """The members': the same fragments without what only a run's records and health read (the
 members keep a summary only): per contact step, 7 stores fewer, which measured 2–3 % of the
 1000-member double_mass ensemble's time (issue 32)."""
+SCALAR_ONE = {"IMPULSE_ONE": """
+us[0, 0] = ur
+uf[0] = ufr
+nu_dot[0, 0], nu_dot[1, 0] = nd0, nd1
+status = impulse_one(0, 0, us, uf, act[0], Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats, u1, P)
+u1r = u1[0]
+""", "PROJECT_ONE": "", "HEALTH": ONE_CONTACT["HEALTH"], "KEEP_PRE": ""}
+"""The scalar loop's: the one-contact impulse a call of :func:`impulse_one` (:data:`IMPULSE_ONE`
+compiled) on the one-element buffers, the registers it reads stored there first — placed inline,
+its code in the loop made every step of the 1-DOF oscillator slower (issue 32) — and the health
+statistics; no projection (the master alone does not project in this form)."""
 
 
 def step_source(one: dict, form: dict) -> str:
@@ -702,7 +713,7 @@ def scalar_source() -> str:
     closed = fill(CLOSED_SET, {"COUPLED": "False", "CHI_J": "False", "AFTER_PREDICTION": ""})
     return expand(fill(KERNEL_LOOP, {**SCALAR_FORM, "DEF": SCALAR_DEF, "UNPACK": SCALAR_UNPACK,
                                      "SIZES": SCALAR_SIZES, "BUFFERS": BUFFERS, "CLOSED_SET": closed,
-                                     "DYNAMICS": step_source(ONE_CONTACT, SCALAR_FORM),
+                                     "DYNAMICS": step_source(SCALAR_ONE, SCALAR_FORM),
                                      "OBSERVER_SUMMARY": "pass"}), REGISTERS)
 
 
