@@ -54,7 +54,8 @@ solvers that return ``(iterations, status, residual)``.
   function (``general=None``), in which numba prunes the observers', summary's and
   projection's branches at compile time; with one degree of freedom and one contact,
   :func:`advance_scalar` runs that loop on scalars (numba reloads every array value after
-  each store to a record: it cannot tell they do not alias), about twice as fast. The entry
+  each store to a record: it cannot tell they do not alias), about twice as fast: the same
+  template in its scalar form (:func:`observer.engines.compiled.step.scalar_source`). The entry
   points take their arguments in a few named bundles (:class:`SystemBundle`, …); the step
   loops are generated from one template (:mod:`observer.engines.compiled.step`) and bind each
   field to its name once per call. Every function uses numba's ``error_model="numpy"`` (IEEE
@@ -657,4 +658,5 @@ per record (else it is empty), each recorded row's time ``t0 + k·h`` is written
 computed as :meth:`observer.stepping.MoreauJean.time` computes it (bitwise its values).
 
 ``grid`` is ``(t0, h, θ)``, ``ptrs`` ``(e_ptr, v_ptr)`` and ``contact`` ``(Bu, Bq, Bf, Wp, Wi,
-Wv, AinvWT, Ghat, e, tol)`` (:func:`advance_scalar`). Called only by :func:`advance_scalar`."""
+Wv, AinvWT, Ghat, e, tol)`` (:func:`advance_scalar`). A contact step calls :func:`impulse_one` on
+one-element buffers. Called only by :func:`advance_scalar`."""
