@@ -106,15 +106,23 @@ def lcp_residual(G, b, x, a):
         gx = 0.0
         for j in range(a):
             gx += G[i, j] * x[j]
-        w = gx + b[i]
-        v = abs(min(x[i], w))
-        if v > r:
-            r = v
-        if abs(b[i]) > sb:
-            sb = abs(b[i])
-        if abs(gx) > sg:
-            sg = abs(gx)
+        r, sb, sg = _residual_row(x[i], b[i], gx, r, sb, sg)
     return r / max(sb, sg, TINY)
+
+
+@njit(**JIT, inline="always")
+def _residual_row(z, b, d, r, sb, sd):
+    """One row of a relative natural residual (:func:`lcp_residual`, :func:`applied_residual`):
+    the running maxima ``r`` of ``|min(z, b + d)|``, ``sb`` of ``|b|`` and ``sd`` of ``|d|``
+    updated (``b + d`` is ``d + b``: IEEE addition commutes)."""
+    v = abs(min(z, b + d))
+    if v > r:
+        r = v
+    if abs(b) > sb:
+        sb = abs(b)
+    if abs(d) > sd:
+        sd = abs(d)
+    return r, sb, sd
 
 
 # ---------------------------------------------------------------------------------------
@@ -154,15 +162,8 @@ def applied_residual(Wp, Wi, Wv, act, a, du, bvec, z):
     sb = 0.0
     sd = 0.0
     for r in range(a):
-        j = act[r]
-        d = _wt(Wp, Wi, Wv, du, j)
-        v = abs(min(z[r], bvec[r] + d))
-        if v > r_:
-            r_ = v
-        if abs(bvec[r]) > sb:
-            sb = abs(bvec[r])
-        if abs(d) > sd:
-            sd = abs(d)
+        d = _wt(Wp, Wi, Wv, du, act[r])
+        r_, sb, sd = _residual_row(z[r], bvec[r], d, r_, sb, sd)
     return r_ / max(sb, sd, TINY)
 
 

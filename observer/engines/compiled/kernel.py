@@ -54,7 +54,8 @@ solvers that return ``(iterations, status, residual)``.
   function (``general=None``), in which numba prunes the observers', summary's and
   projection's branches at compile time; with one degree of freedom and one contact,
   :func:`advance_scalar` runs that loop on scalars (numba reloads every array value after
-  each store to a record: it cannot tell they do not alias), about twice as fast. The entry
+  each store to a record: it cannot tell they do not alias), about twice as fast: the same
+  template in its scalar form (:func:`observer.engines.compiled.step.scalar_source`). The entry
   points take their arguments in a few named bundles (:class:`SystemBundle`, …); the step
   loops are generated from one template (:mod:`observer.engines.compiled.step`) and bind each
   field to its name once per call. Every function uses numba's ``error_model="numpy"`` (IEEE
@@ -645,108 +646,17 @@ def advance_scalar(k0, k1, system, impact, signals, window, state, storage):
          impact.tol), state.stats)
 
 
-@njit(**JIT)
-def _advance_scalar_loop(k0, k1, kb, qs, us, record_every, rec_q, rec_u, rec_P, rec_act, rec_t, grid, waves, ptrs,
-                         e_coef, e_wave, f_c, nu_c, contact, stats):
-    """:func:`advance`'s lean loop for n = m = 1 (the master alone, dense): the same
-    operations on the same values, with the state, the signals and the scheme's 1×1 matrices
-    held in scalars instead of arrays (numba cannot tell that a store to a record does not
-    change an array it reads, and reloads every array value after each store; scalars stay in
-    registers). Bitwise the same trajectory as :func:`advance`; the same arguments' meanings
-    and the same return value ``(k, 0, status)``. A contact step calls :func:`impulse_one`
-    on one-element buffers. When ``rec_t`` has a row per record (else it is empty), each
-    recorded row's time ``t0 + k·h`` is written there too, computed as
-    :meth:`observer.stepping.MoreauJean.time` computes it (bitwise its values).
+_advance_scalar_loop = build("_advance_scalar_loop", globals())
+""":func:`advance`'s lean loop for n = m = 1 (the master alone, dense), generated from the same
+template as :func:`_advance_loop` (:func:`observer.engines.compiled.step.scalar_source`): the same
+operations on the same values, with the state, the signals and the scheme's 1×1 matrices held
+in scalars instead of arrays (numba cannot tell that a store to a record does not change an
+array it reads, and reloads every array value after each store; scalars stay in registers).
+Bitwise the same trajectory as :func:`advance`; the same return value ``(k, 0, status)``, the
+state written back to ``qs``, ``us`` at the end and on a failed step. When ``rec_t`` has a row
+per record (else it is empty), each recorded row's time ``t0 + k·h`` is written there too,
+computed as :meth:`observer.stepping.MoreauJean.time` computes it (bitwise its values).
 
-    ``grid`` is ``(t0, h, θ)``, ``ptrs`` ``(e_ptr, v_ptr)`` and ``contact`` ``(Bu, Bq, Bf, Wp,
-    Wi, Wv, AinvWT, Ghat, e, tol)`` (:func:`advance_scalar`).
-
-    Called only by :func:`advance_scalar`. One function because it is a step loop, for the
-    reason of :func:`_advance_loop`.
-    """
-    t0, h, theta = grid
-    e_ptr, v_ptr = ptrs
-    Bu, Bq, Bf, Wp, Wi, Wv, AinvWT, Ghat, e, tol = contact
-    q, u = qs[0, 0], us[0, 0]
-    bu, bq, bf = Bu[0, 0], Bq[0, 0], Bf[0, 0]
-    wnz = Wp[1] > Wp[0]                              # W's one entry (none: every gap is ν)
-    w = Wv[Wp[0]] if wnz else 0.0
-    fv, nv, dv = v_ptr[1] > v_ptr[0], v_ptr[2] > v_ptr[1], v_ptr[3] > v_ptr[2]
-    ep0, ep1, ep2, ep3 = e_ptr[0], e_ptr[1], e_ptr[2], e_ptr[3]
-    f0 = f1 = f_c[0]
-    fb = (1.0 - theta) * f_c[0] + theta * f_c[0]
-    n0 = n1 = nu_c[0]
-    d0 = d1 = 0.0
-    ufa, u1a, P = np.empty(1), np.empty(1), np.zeros(1)
-    nu_dot = np.zeros((2, 1))
-    gmin, gstep = stats[3], stats[4]
-    times = rec_t.shape[0] > 0
-    d = (record_every - (k0 + 1) % record_every) % record_every
-    until = d + 1
-    r = (k0 + 1 + d) // record_every - 1
-    for k in range(k0, k1):
-        kw = k - kb
-        nrep = 2 if k == k0 else 1
-        for rep in range(nrep):
-            kt = kw + 1 + rep - (nrep - 1)
-            if fv:
-                f0 = f1
-                f1 = f_c[0]
-            if nv:
-                n0 = n1
-                n1 = nu_c[0]
-            if dv:
-                d0 = d1
-                d1 = 0.0
-            for i in range(ep0, ep1):
-                f1 += e_coef[i] * waves[e_wave[i], kt]
-            for i in range(ep1, ep2):
-                n1 += e_coef[i] * waves[e_wave[i], kt]
-            for i in range(ep2, ep3):
-                d1 += e_coef[i] * waves[e_wave[i], kt]
-        if fv:
-            fb = (1.0 - theta) * f0 + theta * f1
-        until -= 1
-        rec = until == 0
-        if rec:
-            r += 1
-            until = record_every
-        g = 0.0                                     # Siconos' predictor
-        if wnz:
-            g += predicted_term(w, q, u, h)
-        closed = predicted_closed(g, n0, d0, h)
-        uf = (0.0 + bu * u) + (0.0 + bq * q) + (0.0 + bf * fb)
-        if closed:
-            qs[0, 0], us[0, 0] = q, u
-            ufa[0] = uf
-            nu_dot[0, 0], nu_dot[1, 0] = d0, d1
-            status = impulse_one(0, 0, us, ufa, 0, Wp, Wi, Wv, nu_dot, AinvWT, Ghat, e, tol, stats, u1a, P)
-            if stats[7] > stats[5]:
-                stats[5] = stats[7]
-                stats[6] = k + 1
-            if status != OK:
-                stats[3], stats[4] = gmin, gstep
-                return k, 0, status
-            u1 = u1a[0]
-        else:
-            u1 = uf
-        q1 = q + h * ((1.0 - theta) * u + theta * u1)
-        q, u = q1, u1
-        g = 0.0                                     # the smallest gap after a step
-        if wnz:
-            g += w * q1
-        g += n1
-        if g < gmin:
-            gmin = g
-            gstep = k + 1
-        if rec:
-            rec_q[0, r, 0] = q1
-            rec_u[0, r, 0] = u1
-            if times:
-                rec_t[r] = float(r * record_every) * h + t0
-            if closed:
-                rec_P[0, r, 0] = P[0]
-                rec_act[r, 0] = True
-    qs[0, 0], us[0, 0] = q, u
-    stats[3], stats[4] = gmin, gstep
-    return k1, 0, OK
+``grid`` is ``(t0, h, θ)``, ``ptrs`` ``(e_ptr, v_ptr)`` and ``contact`` ``(Bu, Bq, Bf, Wp, Wi,
+Wv, AinvWT, Ghat, e, tol)`` (:func:`advance_scalar`). A contact step calls :func:`impulse_one` on
+one-element buffers. Called only by :func:`advance_scalar`."""
