@@ -274,14 +274,24 @@ class Flow:
         w = self._freq_array
         if not w.size:
             return np.empty(0)
-        out = np.empty(2 * len(w))
-        out[0::2] = np.cos(w * t)
-        out[1::2] = np.sin(w * t)
+        out = np.empty(2 * w.size)
+        wt = w * t
+        out[0::2] = np.cos(wt)
+        out[1::2] = np.sin(wt)
         return out
 
     def z(self, t: float, x: np.ndarray) -> np.ndarray:
         """Augmented state at time t of the mechanical state ``x = (q, u)``."""
-        return np.concatenate([x, self.oscillators(t), [1.0]])
+        out = np.empty(self.N)
+        k = 2 * self.n
+        out[:k] = x
+        w = self._freq_array
+        if w.size:
+            wt = w * t
+            out[k:-1:2] = np.cos(wt)
+            out[k + 1:-1:2] = np.sin(wt)
+        out[-1] = 1.0
+        return out
 
     def x_of(self, z: np.ndarray) -> np.ndarray:
         """Mechanical state ``(q, u)`` of an augmented state."""
@@ -440,12 +450,29 @@ def norm_upper_reference(v: np.ndarray) -> float:
 
 
 def exp_upper(x: float) -> float:
-    """A proved upper bound of ``e^x`` (ball arithmetic, python-flint ``arb``)."""
+    """A proved upper bound of ``e^x`` (ball arithmetic, python-flint ``arb``); the last
+    :data:`EXP_UPPER_CACHE` arguments' bounds are kept, per working precision of flint (a
+    run asks for the same window's growth at every search)."""
+    x = float(x)
+    key = (x, flint.ctx.prec)                           # the bound arb gives at this precision
+    hit = _EXP_UPPER.get(key)
+    if hit is not None:
+        return hit
     if np.isnan(x) or x == np.inf:
         return np.inf                                   # no bound: the search cannot proceed
     if x == -np.inf:
         return 0.0
-    return up(float(flint.arb(float(x)).exp().upper()), 1)
+    hit = up(float(flint.arb(x).exp().upper()), 1)
+    if len(_EXP_UPPER) >= EXP_UPPER_CACHE:
+        _EXP_UPPER.clear()
+    _EXP_UPPER[key] = hit
+    return hit
+
+
+EXP_UPPER_CACHE = 256
+"""Arguments of :func:`exp_upper` whose bounds are kept (all dropped when full)."""
+
+_EXP_UPPER: dict = {}
 
 
 CANCELLED = 64.0 * np.finfo(float).eps
