@@ -58,6 +58,27 @@ def test_blocked_expm_is_the_flow_exponential():
     assert np.array_equal(fl.expm(dt), E)
 
 
+def test_blocked_expm_undoes_the_balancing():
+    """With a scaling T = diag(2^k) that is not the identity and two blocks of a permuted
+    block-diagonal A, ``blocked_expm(T⁻¹AT, T, …)`` is exp(A dt) (40-digit mpmath)."""
+    rng = np.random.default_rng(11)
+    N, dt = 6, 0.8
+    blocks = [np.array([0, 3, 5]), np.array([1, 2, 4])]
+    B = np.zeros((N, N))                               # the balanced matrix: entries O(1)
+    for b in blocks:
+        B[np.ix_(b, b)] = rng.standard_normal((b.size, b.size))
+    scale = 2.0 ** rng.integers(-10, 10, N).astype(float)
+    A = B * scale[:, None] / scale[None, :]            # A = T B T⁻¹ (exact: powers of two)
+    order, starts = np.concatenate(blocks), np.array([0, 3, 6])
+    E = kernels.blocked_expm(B, scale, order, starts, dt)
+    with mpmath.workdps(40):
+        ref = mpmath.expm(mpmath.matrix(A.tolist()) * dt)
+        ref = np.array([[float(ref[i, j]) for j in range(N)] for i in range(N)])
+    ratio = scale[:, None] / scale[None, :]          # compared in the balanced coordinates
+    assert np.max(np.abs(E - ref) / ratio) <= 1e-14 * np.max(np.abs(ref / ratio))
+    assert np.all(E[np.ix_(blocks[0], blocks[1])] == 0.0)
+
+
 def test_exact_sum_is_fsum():
     """The correctly rounded sum: CPython's math.fsum on cancelling sums of widely spread
     magnitudes (where a plain sum loses every digit)."""
