@@ -59,6 +59,14 @@ PROBLEMS = {
     "chain": {"scenario": "rocking_chain", "overrides": {"param.N": 100}, "kind": "simulate", "observers": []},
     "ensemble": {"scenario": "double_mass", "overrides": {}, "kind": "ensemble", "observers": None,
                  "members": 1000},
+    **{f"event_{name}": {"scenario": base, "overrides": overrides, "kind": "event", "observers": []}
+       for name, (base, overrides) in {
+           "oscillator": ("impact_oscillator", {}),
+           "table": ("bouncing_ball", {"param.h0": 0.0, "param.restitution": 0.5, "param.t_end": 0.5,
+                                       "system.gap.amplitude": [-1e-3],
+                                       "system.gap.omega": 2.0 * 3.141592653589793 * 20.0}),
+           "ball": ("bouncing_ball", {}), "grazing": ("grazing", {}),
+           "double_mass": ("double_mass", {})}.items()},
 }
 """The timed problems (``--problem``), each one whole public call per timing: ``oscillator`` (the
 peers suite's: Newton's law, the master alone), ``double_mass`` with both of its scenario's
@@ -66,7 +74,15 @@ observers, the ``chain`` (``rocking_chain``, N = 100, the master alone) and the 
 1000 members per design of ``double_mass``'s observers (:func:`observer.ensemble`, one worker,
 seed 0; its warm-up is one whole call, since the members' loop is compiled for the run's size,
 :func:`observer.engines.compiled.members.sizes`). ``observers: None``: the scenario's own. ns/step
-is the call's time per grid step."""
+is the call's time per grid step.
+
+The ``event_*`` problems are ``simulate(..., integrator="event")`` of the master alone over the
+scenario's own t_end (``--steps`` unused): ``event_oscillator``, ``event_ball``,
+``event_grazing``, ``event_double_mass`` (the built-ins) and ``event_table``, the ball on a
+vibrating table of ``bench/micro/test_event_cost.py`` (``bouncing_ball`` with the gap
+``q − A sin ωt``, A = 1 mm, ω = 2π·20 rad/s, e = 0.5, from rest on the table, 0.5 s). Their
+"steps" are the call's event rows (impacts, grazes, accumulations, sticks, lift-offs), so that
+ns/step reads ns per event; the ``impacts`` column counts the impact rows alone."""
 
 CHILD = r"""
 import gc, importlib.util, json, pathlib, sys, time
@@ -77,7 +93,9 @@ if not pathlib.Path(origin).resolve().is_relative_to(pathlib.Path(args["tree"]).
     sys.exit(0)
 import observer
 sc = observer.load_scenario(args["scenario"], args["overrides"])
-sc = sc.with_overrides({"simulation.t_end": args["steps"] * sc.h})
+event = args["kind"] == "event"
+if not event:
+    sc = sc.with_overrides({"simulation.t_end": args["steps"] * sc.h})
 obs = args["observers"]
 if obs is None:
     obs = list((sc.observer or {}).get("observers", ()))
@@ -85,6 +103,8 @@ def call(t_end=None):
     if args["kind"] == "ensemble":
         return observer.ensemble(sc, designs=tuple(obs), n=args["members"] if t_end is None else 2, seed=0,
                                  workers=1, t_end=t_end)
+    if event:
+        return observer.simulate(sc, observers=obs, t_end=t_end, integrator="event")
     return observer.simulate(sc, observers=obs, t_end=t_end)
 t0 = time.perf_counter()
 res = call() if args["kind"] == "ensemble" else call(10 * sc.h)   # an ensemble's loop is specialized by size
@@ -95,10 +115,12 @@ for line in sys.stdin:                                    # one timed call per l
     gc.collect()
     w0, c0 = time.perf_counter(), time.process_time()
     res = call()
+    wall, cpu = time.perf_counter() - w0, time.process_time() - c0
     meta = getattr(res, "metadata", {})
-    print(json.dumps({"wall_s": time.perf_counter() - w0, "cpu_s": time.process_time() - c0,
-                      "loop_s": meta.get("wall_time_s", float("nan")),
-                      "steps": int(meta.get("steps", args["steps"]))}), flush=True)
+    ev = res.events if event else None
+    print(json.dumps({"wall_s": wall, "cpu_s": cpu, "loop_s": meta.get("wall_time_s", float("nan")),
+                      "steps": len(ev) if event else int(meta.get("steps", args["steps"])),
+                      "impacts": int((ev.kind == "impact").sum()) if event else 0}), flush=True)
 """
 """The timing process's script (run with the tree first on ``PYTHONPATH``; public API only,
 so that it runs on any revision that has ``load_scenario`` and ``simulate``): it reports the
@@ -193,7 +215,8 @@ def compare(revision: str, steps: int = 1_000_000, rounds: int = 3, repeats: int
     one by one, ``repeats`` each (the first of each pair swapped every call and every round),
     so that both trees see the same load of the machine. Columns: ``tree`` ("current" or
     "revision"), ``commit`` (the revision's hash; "working tree" for this one), ``round``,
-    ``process``, ``call``, ``steps``, ``ns_per_step`` (wall), ``cpu_ns_per_step``,
+    ``process``, ``call``, ``steps`` (an ``event_*`` problem's: its event rows), ``impacts`` (an
+``event_*`` problem's impact rows, else 0), ``ns_per_step`` (wall), ``cpu_ns_per_step``,
     ``loop_ns_per_step`` (the loop's own wall time), ``warmup_s`` (the process's warm-up call:
     compilation or cache load), ``engine``, ``problem`` (:data:`PROBLEMS`).
     """
@@ -216,7 +239,8 @@ def compare(revision: str, steps: int = 1_000_000, rounds: int = 3, repeats: int
                         timer, process = timers[name]
                         c = timer.call()
                         rows.append({"tree": name, "commit": trees[name][1], "round": r, "process": process,
-                                     "call": i, "steps": c["steps"], "ns_per_step": 1e9 * c["wall_s"] / c["steps"],
+                                     "call": i, "steps": c["steps"], "impacts": c.get("impacts", 0),
+                                     "ns_per_step": 1e9 * c["wall_s"] / c["steps"],
                                      "cpu_ns_per_step": 1e9 * c["cpu_s"] / c["steps"],
                                      "loop_ns_per_step": 1e9 * c["loop_s"] / c["steps"],
                                      "warmup_s": timer.warmup_s, "engine": timer.engine, "problem": problem})

@@ -29,6 +29,7 @@ import flint
 import numpy as np
 import scipy.linalg as sla
 
+from observer.event import kernels
 from observer.model import Harmonic, LinearSystem
 
 FREQUENCY_MATCH = 1e-14
@@ -45,8 +46,8 @@ def expm_pade13(A: np.ndarray) -> np.ndarray:
     """Matrix exponential by scaling and squaring with the [13/13] Padé approximant (Higham 2005).
 
     A small-matrix numpy version of ``scipy.linalg.expm`` (same algorithm, degree 13
-    always): scipy's compiled routine can cost much more per call on a loaded
-    machine than this one for the toolkit's N ≤ 20.
+    always): the reference of the compiled :func:`observer.event.kernels.expm_pade13`,
+    which the flow uses (the same products and solve, without a Python call per product).
     """
     N = A.shape[0]
     nrm = float(np.abs(A).sum(axis=0).max())
@@ -252,6 +253,14 @@ class Flow:
             out.append(np.array(sorted(comp)))
         return out if len(out) > 1 else [np.arange(self.N)]
 
+    @cached_property
+    def _block_layout(self) -> tuple[np.ndarray, np.ndarray]:
+        """:attr:`blocks` as ``(order, starts)`` for :func:`observer.event.kernels.blocked_expm`:
+        block k is ``order[starts[k]:starts[k + 1]]``."""
+        order = np.concatenate(self.blocks).astype(np.int64)
+        starts = np.cumsum([0] + [b.size for b in self.blocks]).astype(np.int64)
+        return order, starts
+
     @property
     def certified_norm(self) -> float:
         """A proved upper bound of ``‖T⁻¹AT‖₂`` (:func:`spectral_norm_upper`), cached."""
@@ -265,14 +274,24 @@ class Flow:
         w = self._freq_array
         if not w.size:
             return np.empty(0)
-        out = np.empty(2 * len(w))
-        out[0::2] = np.cos(w * t)
-        out[1::2] = np.sin(w * t)
+        out = np.empty(2 * w.size)
+        wt = w * t
+        out[0::2] = np.cos(wt)
+        out[1::2] = np.sin(wt)
         return out
 
     def z(self, t: float, x: np.ndarray) -> np.ndarray:
         """Augmented state at time t of the mechanical state ``x = (q, u)``."""
-        return np.concatenate([x, self.oscillators(t), [1.0]])
+        out = np.empty(self.N)
+        k = 2 * self.n
+        out[:k] = x
+        w = self._freq_array
+        if w.size:
+            wt = w * t
+            out[k:-1:2] = np.cos(wt)
+            out[k + 1:-1:2] = np.sin(wt)
+        out[-1] = 1.0
+        return out
 
     def x_of(self, z: np.ndarray) -> np.ndarray:
         """Mechanical state ``(q, u)`` of an augmented state."""
@@ -288,12 +307,8 @@ class Flow:
         if hit is None:
             # balanced: exp(A dt) = T exp(B dt) T⁻¹, B = T⁻¹AT of smaller norm; per block of
             # the sparsity of A (:attr:`blocks`: a mode coupled to nothing is exponentiated
-            # alone, so its frequency sets no scaling of the others)
-            hit = np.zeros((self.N, self.N))
-            for b in self.blocks:
-                sub = np.ix_(b, b)
-                hit[sub] = expm_pade13(self._balanced[sub] * dt)
-            hit *= self.scale[:, None] / self.scale[None, :]
+            # alone, so its frequency sets no scaling of the others); compiled
+            hit = kernels.blocked_expm(self._balanced, self.scale, *self._block_layout, dt)
             self._expm_cache[dt] = hit
             if len(self._expm_cache) > 8:
                 self._expm_cache.popitem(last=False)
@@ -308,7 +323,7 @@ class Flow:
             big = np.zeros((2 * N, 2 * N))
             big[:N, :N] = self.A
             big[:N, N:] = np.eye(N)
-            hit = expm_pade13(big * dt)[:N, N:]
+            hit = kernels.expm_pade13(big * dt)[:N, N:]
             self._phi_cache[dt] = hit
             if len(self._phi_cache) > 8:
                 self._phi_cache.popitem(last=False)
@@ -329,7 +344,7 @@ class Flow:
         big = np.zeros((N + 1, N + 1))
         big[:N, :N] = self._balanced * dt
         big[:N, N] = b / size                  # a unit border: it does not set the scaling
-        return expm_pade13(big)[:N, N] * (dt * size) * self.scale
+        return kernels.expm_pade13(big)[:N, N] * (dt * size) * self.scale
 
     def power_stack(self, dt: float, count: int) -> np.ndarray:
         """``exp(A j dt)`` for j = 1..count, shape (count, N, N): a whole block of equally
@@ -412,8 +427,15 @@ def norm_upper(v: np.ndarray) -> float:
     v is scaled by a power of two 2^-e (exact) to ``max|v_i| ∈ [1/2, 1)``; each square is
     rounded (relative error ≤ u), ``math.fsum`` rounds the sum once (≤ u) and ``sqrt``
     once (≤ u), so ``‖v/2^e‖₂ ≤ r/(1 − u)² ≤ r(1 + 3u)``, rounded up by ulps; squares that
-    underflow add at most ``N·2^-1074`` to the sum. Overflow cannot occur.
+    underflow add at most ``N·2^-1074`` to the sum. Overflow cannot occur. Compiled
+    (:func:`observer.event.kernels.norm_upper`, the same float as
+    :func:`norm_upper_reference`).
     """
+    return kernels.norm_upper(np.ascontiguousarray(v, dtype=float).ravel())
+
+
+def norm_upper_reference(v: np.ndarray) -> float:
+    """:func:`norm_upper` in Python (``math.fsum``): the reference of the compiled kernel."""
     v = np.asarray(v, dtype=float).ravel()
     if not np.isfinite(v).all():
         return np.inf
@@ -428,12 +450,29 @@ def norm_upper(v: np.ndarray) -> float:
 
 
 def exp_upper(x: float) -> float:
-    """A proved upper bound of ``e^x`` (ball arithmetic, python-flint ``arb``)."""
+    """A proved upper bound of ``e^x`` (ball arithmetic, python-flint ``arb``); the last
+    :data:`EXP_UPPER_CACHE` arguments' bounds are kept, per working precision of flint (a
+    run asks for the same window's growth at every search)."""
+    x = float(x)
+    key = (x, flint.ctx.prec)                           # the bound arb gives at this precision
+    hit = _EXP_UPPER.get(key)
+    if hit is not None:
+        return hit
     if np.isnan(x) or x == np.inf:
         return np.inf                                   # no bound: the search cannot proceed
     if x == -np.inf:
         return 0.0
-    return up(float(flint.arb(float(x)).exp().upper()), 1)
+    hit = up(float(flint.arb(x).exp().upper()), 1)
+    if len(_EXP_UPPER) >= EXP_UPPER_CACHE:
+        _EXP_UPPER.clear()
+    _EXP_UPPER[key] = hit
+    return hit
+
+
+EXP_UPPER_CACHE = 256
+"""Arguments of :func:`exp_upper` whose bounds are kept (all dropped when full)."""
+
+_EXP_UPPER: dict = {}
 
 
 CANCELLED = 64.0 * np.finfo(float).eps

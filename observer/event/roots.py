@@ -89,6 +89,7 @@ Lagrange remainder over a window (``‖T⁻¹AT‖ s ≤`` :data:`WINDOW`) is at
 ``e^0.5·0.5^16/16! ≈ 1.2e-17`` of ``‖r T‖‖T⁻¹z‖``, below round-off."""
 
 _U = np.finfo(float).eps / 2.0
+_TINY = np.finfo(float).tiny
 """Unit round-off u. The certified bounds use proved upper bounds of their norms, not
 estimates: ``‖T⁻¹AT‖₂`` by Gershgorin in ball arithmetic (:attr:`Flow.certified_norm`),
 vector norms with outward rounding (:func:`~observer.event.flow.norm_upper`), ``e^x`` in
@@ -522,7 +523,7 @@ def time_resolution(t: float) -> float:
     """Time resolution of the search at t: ``TIME_RTOL·|t|`` (two ulp of t; the smallest
     normal float at t = 0): a time step below it does not move t. No time scale of the
     system enters (issue 34): a slow mode anywhere does not coarsen it."""
-    return TIME_RTOL * max(abs(float(t)), np.finfo(float).tiny)
+    return TIME_RTOL * max(abs(float(t)), _TINY)
 
 
 def _refine(fs: FunctionalSet, i: int, k: int, a: float, za: np.ndarray, lo: float, hi: float,

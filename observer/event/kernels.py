@@ -1,0 +1,173 @@
+"""Compiled kernels of the exact event integrator's hot path (numba).
+
+The event loop (:mod:`observer.event.master`, :mod:`observer.event.roots`) advances the exact
+flow ``z(a + s) = exp(As) z(a)`` (:class:`observer.event.flow.Flow`) by a new step length s at
+almost every safe step of the root isolation, so the matrix exponential of a small matrix
+(the toolkit's N ≤ 2n + 2F + 1) is computed afresh each time: in numpy each of its fifteen
+small products and its solve pays a Python call. The functions here are the same
+arithmetic compiled, operation for operation:
+
+* :func:`expm_pade13` — scaling and squaring with the [13/13] Padé approximant (Higham 2005),
+  the same expression tree, products and solve as the numpy version it replaces (numba's
+  ``@`` and ``np.linalg.solve`` call the same BLAS/LAPACK routines, ``dgemm`` and ``dgesv``);
+* :func:`blocked_expm` — ``exp(A dt) = T exp(B dt) T⁻¹`` exponentiated per block of the
+  sparsity of A (:attr:`observer.event.flow.Flow.blocks`), B = T⁻¹AT balanced;
+* :func:`norm_upper` — the proved upper bound of ``‖v‖₂`` of
+  :func:`observer.event.flow.norm_upper`, with CPython's correctly rounded ``math.fsum``
+  (Shewchuk's exact partial sums, the same final rounding): a correctly rounded sum has one
+  value, so the bound is the same float.
+
+The results are the numpy versions' to the bit where the BLAS/LAPACK kernels agree (checked
+in ``tests/observer/event/test_kernels.py``); no decision of the event engine is made here.
+Compiled with ``cache=True`` (numba's on-disk cache, :mod:`observer.numba_cache`): the first
+call of a process compiles or loads them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from observer.numba_cache import install as _install_cache_guard
+
+_install_cache_guard()
+
+JIT = {"cache": True, "error_model": "numpy", "nogil": True}
+"""numba options of every kernel (as :data:`observer.primitives.JIT`)."""
+
+PADE13 = np.array([64764752532480000., 32382376266240000., 7771770303897600., 1187353796428800.,
+                   129060195264000., 10559470521600., 670442572800., 33522128640., 1323241920.,
+                   40840800., 960960., 16380., 182., 1.])
+"""Coefficients b_0 … b_13 of the [13/13] Padé approximant of exp (Higham 2005, Table 10.4)."""
+
+THETA13 = 5.371920351148152
+"""θ_13: the 1-norm up to which the [13/13] approximant is used unscaled (Higham 2005)."""
+
+
+@njit(**JIT)
+def expm_pade13(A: np.ndarray) -> np.ndarray:
+    """Matrix exponential of the square matrix A by scaling and squaring with the [13/13]
+    Padé approximant (Higham 2005): ``2^-s A`` with ``‖2^-s A‖₁ ≤ θ_13``,
+    ``r_13 = (V − U)⁻¹(V + U)`` and s squarings; the evaluation of
+    :func:`observer.event.flow.expm_pade13`, term by term."""
+    N = A.shape[0]
+    nrm = 0.0
+    for j in range(N):
+        col = 0.0
+        for i in range(N):
+            col += abs(A[i, j])
+        nrm = max(nrm, col)
+    s = 0 if nrm <= THETA13 else int(np.ceil(np.log2(nrm / THETA13)))
+    A = np.ascontiguousarray(A) / (2.0 ** s)
+    b = PADE13
+    ident = np.eye(N)
+    A2 = A @ A
+    A4 = A2 @ A2
+    A6 = A4 @ A2
+    U = A @ (A6 @ (b[13] * A6 + b[11] * A4 + b[9] * A2) + b[7] * A6 + b[5] * A4 + b[3] * A2
+             + b[1] * ident)
+    V = A6 @ (b[12] * A6 + b[10] * A4 + b[8] * A2) + b[6] * A6 + b[4] * A4 + b[2] * A2 + b[0] * ident
+    E = np.ascontiguousarray(np.linalg.solve(V - U, V + U))    # numba's solve: Fortran order
+    for _ in range(s):
+        E = E @ E
+    return E
+
+
+@njit(**JIT)
+def blocked_expm(balanced: np.ndarray, scale: np.ndarray, order: np.ndarray, starts: np.ndarray,
+                 dt: float) -> np.ndarray:
+    """``exp(A dt) = T exp(B dt) T⁻¹`` (B = ``balanced`` = T⁻¹AT, T = diag(``scale``)), with
+    ``exp(B dt)`` block diagonal over the index sets ``order[starts[k]:starts[k + 1]]`` (the
+    connected components of the sparsity of A): each block exponentiated alone
+    (:func:`expm_pade13`), the entries outside the blocks exactly zero."""
+    N = balanced.shape[0]
+    out = np.zeros((N, N))
+    for k in range(starts.size - 1):
+        idx = order[starts[k]:starts[k + 1]]
+        nb = idx.size
+        sub = np.empty((nb, nb))
+        for p in range(nb):
+            for q in range(nb):
+                sub[p, q] = balanced[idx[p], idx[q]] * dt
+        E = expm_pade13(sub)
+        for p in range(nb):
+            for q in range(nb):
+                out[idx[p], idx[q]] = E[p, q]
+    for i in range(N):
+        for j in range(N):
+            out[i, j] *= scale[i] / scale[j]
+    return out
+
+
+@njit(**JIT)
+def exact_sum(x: np.ndarray) -> float:
+    """The correctly rounded sum of the finite floats x: CPython's ``math.fsum`` (Shewchuk's
+    non-overlapping partial sums, then the round-half-even correction of its final step)."""
+    partials = np.empty(x.size + 1)
+    n = 0
+    for k in range(x.size):
+        v = x[k]
+        i = 0
+        for j in range(n):
+            y = partials[j]
+            if abs(v) < abs(y):
+                v, y = y, v
+            hi = v + y
+            lo = y - (hi - v)
+            if lo != 0.0:
+                partials[i] = lo
+                i += 1
+            v = hi
+        partials[i] = v
+        n = i + 1
+    if n == 0:
+        return 0.0
+    n -= 1
+    hi = partials[n]
+    lo = 0.0
+    while n > 0:
+        v = hi
+        n -= 1
+        y = partials[n]
+        hi = v + y
+        yr = hi - v
+        lo = y - yr
+        if lo != 0.0:
+            break
+    if n > 0 and ((lo < 0.0 and partials[n - 1] < 0.0) or (lo > 0.0 and partials[n - 1] > 0.0)):
+        y = lo * 2.0
+        v = hi + y
+        yr = v - hi
+        if y == yr:
+            hi = v
+    return hi
+
+
+_U = np.finfo(np.float64).eps / 2.0
+
+
+@njit(**JIT)
+def norm_upper(v: np.ndarray) -> float:
+    """A proved upper bound of ‖v‖₂ (v a 1-D float array): the bound, and the float, of
+    :func:`observer.event.flow.norm_upper` (scaling by 2^-e, squares, correctly rounded sum
+    :func:`exact_sum` plus ``size·2^-1074``, two ulps up; sqrt raised by 4u, two ulps up)."""
+    big = 0.0
+    for k in range(v.size):
+        a = v[k]
+        if not math.isfinite(a):
+            return np.inf
+        big = max(big, abs(a))
+    if big == 0.0:
+        return 0.0
+    e = math.frexp(big)[1]
+    w = np.empty(v.size)
+    for k in range(v.size):
+        c = math.ldexp(v[k], -e)
+        w[k] = c * c
+    s = exact_sum(w) + v.size * 5e-324
+    s = np.nextafter(np.nextafter(s, np.inf), np.inf)
+    r = math.sqrt(s) * (1.0 + 4.0 * _U)
+    r = np.nextafter(np.nextafter(r, np.inf), np.inf)
+    return math.ldexp(r, e)
