@@ -40,9 +40,14 @@ SINGLE_THREAD_BLAS = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_
 ``lu_solve`` of a 2×2 took orders of magnitude longer with threaded OpenBLAS on busy cores)."""
 
 
-WARM_KERNEL = "from observer.loop import compile_time; print(f'kernel compiled or loaded in {compile_time():.1f} s')"
-"""Compile the kernel once (numba's on-disk cache, ``__pycache__``) before the test workers
-start: the workers then only load it, so no two of them compile (and write) the same entry."""
+WARM_KERNEL = ("import time, observer; from observer.loop import compile_time; "
+               "print(f'kernel compiled or loaded in {compile_time():.1f} s'); t = time.perf_counter(); "
+               "observer.simulate('bouncing_ball', integrator='event', t_end=0.1); "
+               "print(f'event kernels compiled or loaded in {time.perf_counter() - t:.1f} s')")
+"""Compile the time-stepping kernel and the event integrator's kernels (``observer.event.kernels``,
+through a short event run) once (numba's on-disk cache, ``__pycache__``) before the test
+workers start: the workers then only load them, so no two of them compile (and write) the
+same entry."""
 
 PARALLEL = ["-n", "2", "--durations=50"]
 """pytest-xdist over the two cores of CI, with the 50 slowest tests listed; replaced by
