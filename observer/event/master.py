@@ -280,6 +280,7 @@ class _Run:
         self.should_stop = None        # callable → a signal name (SIGINT/SIGTERM) or None
         self.hop_end = None            # (contact, t_k, t_last, x_last) of the last hop_tail
         self.halted: str | None = None # the signal that stopped the sampling (no row after)
+        self.exact_delassus: dict[tuple, dict] = {}   # contact set → {bits: exact G} (exact_solve)
 
     # -- sampling --------------------------------------------------------------------------
     def fill(self, flow: Flow, t_a: float, x_a: np.ndarray, t_b: float, include_end: bool) -> None:
@@ -385,10 +386,11 @@ class _Run:
         if len(A) < 2:
             return self.solve
         W, M = self.system.W[:, list(A)], self.system.M
+        cache = self.exact_delassus.setdefault(tuple(A), {})
 
         def solve(G, b):
             sol = self.solve(G, b)
-            x = polish_lcp(M, W, b, sol.x)
+            x = polish_lcp(M, W, b, sol.x, cache=cache)
             return sol if x is None else sol._replace(x=x)
         return solve
 
