@@ -22,10 +22,11 @@ a note stating the enclosure, δ and the guaranteed crossing depth δ* = δ + it
 A crossing with ``|γ⁻| ≤`` CONTACT_TOL motion
 tolerances of γ is labelled a graze too, and its (tiny) impulse is applied. A minimum above
 the touch band is a miss: no event. An open contact is impacted together with the one
-that triggers an impact (simultaneous impact) when their impact times cannot be ordered at
-the precision of their enclosures (:meth:`_Run.unordered`, three-valued, no tolerance), and
-a multi-contact impact is solved from the exact Delassus matrix (:meth:`_Run.exact_solve`),
-so that a body landing flat on exactly symmetric supports stays symmetric (issue 34).
+that triggers an impact (simultaneous impact) when its gap is within FLOOR_FACTOR round-offs
+of its representation or what CONTACT_TOL time resolutions hide at its speed, and never
+beyond CONTACT_TOL motion tolerances (:func:`observer.event.roots.motion_tolerance`, which do
+not shrink with the gap when the contact sits at the coordinate origin, ν = 0):
+:meth:`_Run.simultaneous_band`.
 
 Zeno: a run of impacts of one contact set whose intervals shrink geometrically (consecutive
 ratios equal within :data:`ZENO_RATIO_SPREAD`) is stopped once the impact velocity has
@@ -68,9 +69,8 @@ import numpy as np
 from observer.contact import get_solver
 from observer.event.enclosures import dot_sign, polish_lcp
 from observer.event.flow import Flow, flow_for
-from observer.event.roots import (ROUNDOFF, NonFiniteFlow, RootIsolationError,
-                                  SearchStopped, first_zero, motion_tolerance, time_resolution,
-                                  tolerance)
+from observer.event.roots import (FLOOR_FACTOR, ROUNDOFF, NonFiniteFlow, RootIsolationError,
+                                  SearchStopped, first_zero, motion_tolerance, resolution, tolerance)
 from observer.event.tails import JointTail, horner, joint_due, joint_tail
 from observer.impact import ImpactLaw, impact
 from observer.result import RunState, RunStatus
@@ -433,8 +433,10 @@ class _Run:
         fl = self.free_flow
         z = fl.z(t, x)
         g, gam = fl.gap_rows @ z, fl.velocity_rows @ z
+        tol_g = CONTACT_TOL * self.tol(fl.gap_rows, z, t)
         tol_v = CONTACT_TOL * self.tol(fl.velocity_rows, z, t)
-        closing = self.unordered(t, z, set(trigger), set(persistent))
+        near = self.simultaneous_band(t, z, gam, tol_g)
+        closing = {j for j in range(self.m) if abs(g[j]) <= near[j] and gam[j] < tol_v[j]}
         A = sorted(set(persistent) | set(trigger) | closing)
         idx = np.array(A, dtype=int)
         G = self.delassus(A)
@@ -467,48 +469,24 @@ class _Run:
         self.add_impulse(t, A, lam)
         return x, tuple(stick), A, gm, lam
 
-    def unordered(self, t: float, z: np.ndarray, trigger: set[int], held: set[int] = frozenset()
-                  ) -> set[int]:
-        """The open contacts impacted together with ``trigger`` at t (issue 34, item 3): those
-        whose first zero cannot be ordered after the trigger's at the precision of their
-        enclosures, three-valued (:func:`observer.event.enclosures.dot_sign`: float64 with
-        its certified error, ball arithmetic where it cannot decide), no tolerance.
+    def simultaneous_band(self, t: float, z: np.ndarray, gam: np.ndarray,
+                          tol_g: np.ndarray) -> np.ndarray:
+        """The gaps within which an open contact is impacted together with the one that
+        triggered an impact at t (:meth:`collide`): FLOOR_FACTOR round-offs of the gap's
+        representation ``ROUNDOFF·Σ|r z|`` (what float64 cannot tell from zero in these
+        coordinates), or what CONTACT_TOL time resolutions hide at its approach speed
+        ``|γ|·δt``; never more than ``tol_g`` (CONTACT_TOL motion tolerances, the band of
+        persistent contact).
 
-        The trigger's zero is known to ``δ = max (|g| + e)/|γ|`` over the trigger (e the
-        certified error of its gap at the float state, γ its approach speed; 0 when not
-        approaching) plus the time coordinate's resolution
-        (:func:`observer.event.roots.time_resolution`). A contact k is unordered when its
-        velocity is not certainly leaving and either its gap is not certainly positive (it
-        is at its contact point, or past it), or its earliest possible zero, the first root of
-        ``g_lo + γ_lo s − |γ̇| s²/2`` (g_lo, γ_lo the lower ends of the enclosures, γ̇ its
-        acceleration), lies within δ of t. A contact landing later than what its and the
-        trigger's enclosures allow is impacted in order, however close. The held contacts
-        ``held`` are impacted anyway (they are closed)."""
+        Not CONTACT_TOL motion tolerances themselves: a contact in flight can sit that close
+        to its contact point long (≫ δt) before it lands (issue 19: a contact re-launched by
+        another's impacts, 9e-11 m above its contact point and landing 4e-6 s later, was
+        impacted early and its accumulation time moved by 5e-6 s; two contacts landing 5.5e-8 s
+        apart, 3e-12 m, were merged and t∞ moved by 1.6e-6 s)."""
         fl = self.free_flow
-        acc = (fl.velocity_rows @ fl.A) @ z
-        delta = 0.0
-        for j in trigger:
-            gj, vj = dot_sign(fl.gap_rows[j], z), dot_sign(fl.velocity_rows[j], z)
-            if vj.upper < 0.0:
-                delta = max(delta, max(abs(gj.lower), abs(gj.upper)) / -vj.upper)
-        reach = delta + time_resolution(t)
-        out = set()
-        for k in range(self.m):
-            if k in trigger or k in held:
-                continue
-            vk = dot_sign(fl.velocity_rows[k], z)
-            if vk.sign == 1:
-                continue                               # certainly leaving
-            gk = dot_sign(fl.gap_rows[k], z)
-            if gk.sign != 1:
-                out.add(k)                             # at its contact point, or past it
-                continue
-            speed, a = max(-vk.lower, 0.0), max(-float(acc[k]), 0.0)
-            disc = speed * speed + 2.0 * a * gk.lower
-            den = speed + np.sqrt(disc)
-            if den > 0.0 and 2.0 * gk.lower / den <= reach:
-                out.add(k)
-        return out
+        floor = tolerance(fl.gap_rows, z)
+        hidden = CONTACT_TOL * resolution(t - self.t0, self.tau) * np.abs(gam)
+        return np.minimum(tol_g, np.maximum(FLOOR_FACTOR * floor, hidden))
 
     # -- Zeno ------------------------------------------------------------------------------
     def zeno_check(self, key: tuple, t: float, x: np.ndarray, gm: np.ndarray,
