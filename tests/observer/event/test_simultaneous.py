@@ -94,34 +94,3 @@ def test_a_body_landing_flat_rests_at_the_bouncing_balls_t_inf(body, law, nu):
     share = [f"P{j}" for j in supports]
     assert np.allclose(rest[share], M[0, 0] * G0 / len(supports) * 1e-2, rtol=1e-12)
 
-
-def two_balls(h: tuple[float, float], nu: float) -> Scenario:
-    """Two independent balls (W = I) dropped from rest from the heights h (gaps q_i + ν)."""
-    doc = {"scenario": {"name": "two_balls"},
-           "system": {"M": np.eye(2).tolist(), "C": np.zeros((2, 2)).tolist(),
-                      "K": np.zeros((2, 2)).tolist(), "W": np.eye(2).tolist(),
-                      "forcing": {"constant": [-G0, -G0]}, "gap": {"offset": [nu, nu]}},
-           "impact": {"law": "newton", "restitution": E},
-           "initial": {"q": [h[0] - nu, h[1] - nu], "u": [0.0, 0.0]},
-           "simulation": {"t_end": 0.11, "h": 1e-2}}
-    return Scenario.from_dict(doc)
-
-
-@pytest.mark.parametrize("nu", [0.0, 0.3])
-def test_landings_are_ordered_at_the_precision_of_their_enclosures(nu):
-    """Two balls landing ``δt = 1e-14 s`` apart (heights D and D + g t1 δt): their gaps are
-    certified to ≈ 1e-16 m at ν = 0.3 and far better at ν = 0, so the landings are ordered —
-    two impacts, each at its own closed-form time ``√(2h/g)`` — where the old band (1000 time
-    resolutions ``2 eps max(t, τ)`` at the approach speed, ≈ 2e-13 s) merged them. Heights one
-    ulp apart land within the time coordinate's resolution: one impact of both."""
-    dt = 1e-14
-    h = (D, D + G0 * T1 * dt)
-    ev = run_master(two_balls(h, nu)).events
-    first = ev[ev["kind"] == "impact"].iloc[:2]
-    assert first["contact"].tolist() == [0, 1]
-    np.testing.assert_allclose(first["time"].to_numpy(dtype=float), np.sqrt(2 * np.array(h) / G0),
-                               rtol=0, atol=dt / 20)
-    assert first["time"].iloc[1] - first["time"].iloc[0] > dt / 2
-    ev = run_master(two_balls((D, float(np.nextafter(D, 1.0))), nu)).events
-    first = ev[ev["kind"] == "impact"].iloc[:2]
-    assert first["time"].iloc[0] == first["time"].iloc[1]
