@@ -166,3 +166,48 @@ def _outward(x: flint.arb) -> tuple[float, float]:
     """Float bounds of the ball x, rounded outwards (arf → float may round either way)."""
     lo, hi = float(x.lower()), float(x.upper())
     return float(np.nextafter(lo, -np.inf)), float(np.nextafter(hi, np.inf))
+
+
+def polish_lcp(M: np.ndarray, W: np.ndarray, b: np.ndarray, x: np.ndarray,
+               start: int = PRECISION_START, cache: dict | None = None) -> np.ndarray | None:
+    """The solution of the LCP ``0 ≤ Gλ + b ⊥ λ ≥ 0``, ``G = Wᵀ M⁻¹ W`` (the Delassus matrix
+    of paper eq. (5), formed exactly from the system's data M, W, not from its float64
+    product), on the active set of the float64 solution ``x`` (``S = {x > 0}``), solved in
+    ball arithmetic and rounded to float64 (ball midpoints), or None when it does not
+    certify: a component of λ_S not certainly positive, or ``(Gλ + b)_i`` of an inactive i
+    certainly negative, at :data:`PRECISION_CAP`.
+
+    Why: the float64 solve of a symmetric multi-contact impact (a bar landing flat on two
+    supports, a plate on three legs) returns impulses that differ in their last bits, and
+    the body starts to rotate by round-off (issue 34, item 3). The exact solution of
+    exactly symmetric data is symmetric, and its rounding too: equal exact values round to
+    the same float, so a symmetry of the data survives every impact. ``cache``: a dict kept
+    by the caller for one (M, W), holding the exact G per precision (a constant of the
+    system's contact set)."""
+    S = [i for i, v in enumerate(np.asarray(x, dtype=float).tolist()) if v > 0.0]
+    if not S:
+        return np.zeros(len(x))
+    R = [i for i in range(len(x)) if i not in S]
+    bits = max(int(start), 2)
+    while bits <= PRECISION_CAP:
+        with flint.ctx.workprec(bits):
+            G = None if cache is None else cache.get(bits)
+            if G is None:
+                Ma = flint.arb_mat(np.asarray(M, dtype=float).tolist())
+                Wa = flint.arb_mat(np.asarray(W, dtype=float).tolist())
+                G = Wa.transpose() * Ma.solve(Wa)
+                if cache is not None:
+                    cache[bits] = G
+            ba = [flint.arb(v) for v in np.asarray(b, dtype=float).tolist()]
+            lam = flint.arb_mat([[G[i, j] for j in S] for i in S]).solve(
+                flint.arb_mat([[-ba[i]] for i in S]))
+            ok = all(lam[k, 0] > 0 for k in range(len(S)))
+            w_ok = all(not (sum((G[i, j] * lam[k, 0] for k, j in enumerate(S)), ba[i]) < 0)
+                       for i in R)
+            if ok and w_ok:
+                out = np.zeros(len(x))
+                for k, i in enumerate(S):
+                    out[i] = float(lam[k, 0].mid())
+                return out
+        bits *= 2
+    return None

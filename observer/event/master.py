@@ -67,7 +67,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from observer.contact import get_solver
-from observer.event.enclosures import dot_sign
+from observer.event.enclosures import dot_sign, polish_lcp
 from observer.event.flow import Flow, flow_for
 from observer.event.roots import (FLOOR_FACTOR, ROUNDOFF, NonFiniteFlow, RootIsolationError,
                                   SearchStopped, first_zero, motion_tolerance, resolution, tolerance)
@@ -280,6 +280,7 @@ class _Run:
         self.should_stop = None        # callable → a signal name (SIGINT/SIGTERM) or None
         self.hop_end = None            # (contact, t_k, t_last, x_last) of the last hop_tail
         self.halted: str | None = None # the signal that stopped the sampling (no row after)
+        self.exact_delassus: dict[tuple, dict] = {}   # contact set → {bits: exact G} (exact_solve)
 
     # -- sampling --------------------------------------------------------------------------
     def fill(self, flow: Flow, t_a: float, x_a: np.ndarray, t_b: float, include_end: bool) -> None:
@@ -367,6 +368,32 @@ class _Run:
         W = self.system.W[:, list(idx)]
         return W.T @ self.Minv @ W
 
+    def velocity_jump(self, A: list[int], lam: np.ndarray) -> np.ndarray:
+        """``M⁻¹ W_A λ``, the velocity jump of the impulses λ on the contacts A. For several
+        contacts ``W_A λ`` is summed from its exact products ``W_ij λ_j`` without fused
+        multiply-adds (a BLAS product may contract ``a λ − a λ`` to the rounding error of
+        ``a λ``): equal impulses on exactly opposite lever arms give exactly no rotation."""
+        if len(A) < 2:
+            return self.Minv @ self.system.W[:, A] @ lam
+        return self.Minv @ (self.system.W[:, A] * np.asarray(lam, dtype=float)).sum(axis=1)
+
+    def exact_solve(self, A: list[int]):
+        """The contact solver for an impact on the contacts A: for several contacts, its
+        float64 answer re-solved on its active set from the exact Delassus matrix
+        (:func:`observer.event.enclosures.polish_lcp`), so that impulses of exactly symmetric
+        data are equal (a symmetric landing stays symmetric, issue 34 item 3); the float64
+        answer where that does not certify, and for one contact."""
+        if len(A) < 2:
+            return self.solve
+        W, M = self.system.W[:, list(A)], self.system.M
+        cache = self.exact_delassus.setdefault(tuple(A), {})
+
+        def solve(G, b):
+            sol = self.solve(G, b)
+            x = polish_lcp(M, W, b, sol.x, cache=cache)
+            return sol if x is None else sol._replace(x=x)
+        return solve
+
     def sticking(self, t: float, x: np.ndarray, cand: list[int]) -> list[int]:
         """Contacts of ``cand`` (g = γ = 0) that keep a positive force: the acceleration LCP
         ``0 ≤ λ ⊥ G λ + γ̇_free ≥ 0`` on cand."""
@@ -414,10 +441,11 @@ class _Run:
         idx = np.array(A, dtype=int)
         G = self.delassus(A)
         gm = gam[idx]
-        lam = impact(self.law, G, gm, idx, self.solve) if np.any(gm < 0.0) else np.zeros(len(A))
+        lam = impact(self.law, G, gm, idx, self.exact_solve(A)) if np.any(gm < 0.0) \
+            else np.zeros(len(A))
         lam = np.maximum(lam, 0.0)
         x = x.copy()
-        x[self.n:] += self.Minv @ self.system.W[:, A] @ lam
+        x[self.n:] += self.velocity_jump(A, lam)
         gp = fl.velocities(t, x)[idx]
         cand = [c for c, v in zip(A, gp) if v <= tol_v[c]]
         stick = self.sticking(t, x, cand)

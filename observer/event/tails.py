@@ -265,7 +265,7 @@ def _hop_impact(run, t: float, x: np.ndarray, held: tuple, landed: list, d: dict
         return None, None, None
     lam = np.maximum(impact(run.law, run.delassus(A), gm, idx, run.solve), 0.0)
     x = x.copy()
-    x[run.n:] += run.Minv @ run.system.W[:, A] @ lam
+    x[run.n:] += run.velocity_jump(A, lam)
     impulse[A] += lam
     gp = run.free_flow.velocities(t, x)[idx]
     small = 1e3 * np.finfo(float).eps * float(np.max(np.abs(gm)))
