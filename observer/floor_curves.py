@@ -50,7 +50,9 @@ ABOVE_EXACT = 10.0
 BROKEN = 0.1
 """… and below this V/V(t_on)."""
 CONFIDENCE = 0.95
+"""Confidence level of every interval here."""
 RESAMPLES = 2000
+"""Paired (cluster) resamples of the members behind each bootstrap interval."""
 TARGETS = (1e-9, 1e-6, 1e-4, 1e-2)
 """Target floors of V/V(t_on) for :func:`tolerances`: the report's two thresholds (1e-9, 1e-6)
 and two coarser accuracies."""
