@@ -1,6 +1,9 @@
 """Model error and sensors: the floor of V/V(t_on) when the observers' model differs from the
 plant (a relative stiffness error ε, ``[observer.model]``) and when χ comes from a sensor with a
-latency d (``[observer.sensor]``), read from the two stored results of ``bench/stored``.
+latency d (``[observer.sensor]``), read from the stored results of ``bench/stored``: the K error and
+the latency on double_mass, the sensor's jitter and threshold, and the per-parameter curves of
+every scenario stored (:data:`PARAMETERS_GLOB`, one set of tables and one figure per file, the
+scenario named in each caption).
 
 The stored results are read here as data files (JSON, and the member rows' CSV beside the
 latency result): the report imports nothing from ``bench``; the statistics are
@@ -35,7 +38,11 @@ STORED = Path(__file__).resolve().parents[2] / "bench" / "stored"
 MODEL_ERROR = "model_error_floor_double_mass.json"
 LATENCY = "latency_floor_double_mass.json"
 PARAMETERS = "model_error_parameters_double_mass.json"
-"""Per-parameter curves (M, C, K, W), ``python -m bench.model_error_parameters``."""
+"""Per-parameter curves (M, C, K, W) on double_mass, ``python -m bench.model_error_parameters``."""
+PARAMETERS_GLOB = "model_error_parameters_*.json"
+"""Per-parameter curves of every scenario stored (``--scenario NAME``), read in sorted order."""
+SENSITIVITY_SIZE = 1e-2
+"""The relative error of the per-scenario sensitivity ranking (the stored size nearest to it)."""
 SENSOR = "sensor_floor_double_mass.json"
 """Sensor jitter and threshold curves, ``python -m bench.sensor_floor``."""
 PANELS_PER_ROW = 3
@@ -439,10 +446,11 @@ def draw_crossovers(ax, found: dict, what: Uncertainty) -> None:
                 ax.axvspan(*c["between"], facecolor="none", edgecolor="0.5", hatch="//", lw=0)
 
 
-def floor_figure(curves: list[Curve], found: dict | None = None) -> Figure | None:
+def floor_figure(curves: list[Curve], found: dict | None = None, scenario: str | None = None) -> Figure | None:
     """One panel per uncertainty: per design the median floor (markers), the members' spread
     (band), the stored fitted line over its sizes (dashed), the floor at size 0 (dotted) and
-    the paired crossovers of ``found`` (:func:`paired_crossovers`; :func:`draw_crossovers`)."""
+    the paired crossovers of ``found`` (:func:`paired_crossovers`; :func:`draw_crossovers`);
+    the title names ``scenario`` if given."""
     whats = list(dict.fromkeys(c.what for c in curves))
     if not whats:
         return None
@@ -469,7 +477,8 @@ def floor_figure(curves: list[Curve], found: dict | None = None) -> Figure | Non
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7, loc="upper left")
     fixed_layout(fig, top=0.2, wspace=0.9, hspace=0.8)
-    return Figure(to_data_uri(fig, fit=False), "floor of V/V(t_on) against " + ", ".join(w.key for w in whats),
+    title = "floor of V/V(t_on) against " + ", ".join(w.key for w in whats) + (f" ({scenario})" if scenario else "")
+    return Figure(to_data_uri(fig, fit=False), title,
                   "Markers: median floor over the paired members; shaded: the members' spread (min–max); "
                   "dashed: the stored fitted power law over its sizes; dotted: the floor at size 0 "
                   "(exact model, ideal sensor: the floor of the grid and the window); dash-dotted "
@@ -493,6 +502,66 @@ def intro(me: dict | None, lat: dict | None) -> str:
                      f"{lat['status']} ({SENSOR_LATENCY.command}, {LATENCY} and its CSV)")
     return ("The master is the true plant; each observer design advances the nominal model or reads "
             "χ from the sensor. Stored results (bench/stored): " + "; ".join(parts) + ".")
+
+
+def curve_files(stored: Path) -> list[Path]:
+    """The stored curve files shown after the K-error and latency results: every
+    :data:`PARAMETERS_GLOB` of ``stored`` (sorted), then :data:`SENSOR`."""
+    return sorted(Path(stored).glob(PARAMETERS_GLOB)) + [Path(stored) / SENSOR]
+
+
+def caption(data: dict) -> str:
+    """A stored curve file's name in captions: its scenario and the command that regenerates it."""
+    return f"{data['scenario']}, {data['command']}"
+
+
+PARAMETER_WHAT = "floor of V/V(t_on) against a relative error of one parameter"
+"""How a per-parameter result's ``what`` begins (the files of :data:`PARAMETERS_GLOB`)."""
+
+
+def sensitivity_index(c: Curve) -> int:
+    """The index of the stored size nearest to :data:`SENSITIVITY_SIZE` (in log size)."""
+    return int(np.argmin(np.abs(np.log10(c.sizes) - np.log10(SENSITIVITY_SIZE))))
+
+
+def parameter_sensitivity_table(curves: list[Curve], data: dict) -> Table:
+    """Per parameter (one curve each) and design: the median floor at the size nearest to
+    :data:`SENSITIVITY_SIZE`, its ratio to the exact model's, and the fitted slope."""
+    designs = registry.in_registry_order(list(dict.fromkeys(c.design for c in curves)))
+    by = {(c.what.key, c.design): c for c in curves}
+    keys = list(dict.fromkeys(c.what.key for c in curves))
+    at = curves[0].sizes[sensitivity_index(curves[0])]
+    t = Table(f"Sensitivity per parameter, {caption(data)}: median floor with one parameter off by "
+              f"{fmt(at)} (relative), the others exact",
+              ["parameter", *[f"{registry.label(d)} floor (× exact; slope s)" for d in designs]])
+    for k in keys:
+        cells = []
+        for d in designs:
+            c = by[k, d]
+            f, e = float(c.median[sensitivity_index(c)]), float(np.median(c.exact))
+            s = fmt(c.slope, digits=SLOPE_DIGITS) if c.fit_sizes.size else "not fitted"
+            cells.append(f"{fmt(f)} (× {fmt(f / e)}; s = {s})")
+        t.add([k, *cells])
+    t.note = (f"{data['members']} paired members; the floor at the stored size nearest to "
+              f"{fmt(SENSITIVITY_SIZE)}; × exact: over the median floor with the exact model (the grid's "
+              "and window's floor). A parameter whose error leaves the floor at the exact one is not "
+              "fitted.")
+    return t
+
+
+def parameter_sensitivity_items(curves: list[Curve], data: dict) -> list[str]:
+    """Per design, the parameters of a per-parameter result ranked by their floor at the size
+    nearest to :data:`SENSITIVITY_SIZE` (largest first)."""
+    out = []
+    for d in registry.in_registry_order(list(dict.fromkeys(c.design for c in curves))):
+        mine = [c for c in curves if c.design == d]
+        floor = {c.what.key: float(c.median[sensitivity_index(c)]) for c in mine}
+        ranked = sorted(floor, key=floor.get, reverse=True)
+        at = fmt(mine[0].sizes[sensitivity_index(mine[0])])
+        out.append(f"{data['scenario']}, {registry.label(d)}: an error of {at} costs most in {ranked[0]} "
+                   f"(floor {fmt(floor[ranked[0]])}), least in {ranked[-1]} (floor {fmt(floor[ranked[-1]])}); "
+                   f"order: {', '.join(ranked)}.")
+    return out
 
 
 def load(stored: Path) -> tuple[list[Curve], dict | None, dict | None]:
@@ -530,14 +599,17 @@ def build_from(stored: Path, key_numbers: list | None = None) -> Section:
         if draws_text(me):
             sec.p(draws_text(me))
     sec.table(tolerance_table(curves, "What the model and the sensor must be known to"))
-    for name in (PARAMETERS, SENSOR):
-        if (Path(stored) / name).exists():
-            more, data = stored_curves(Path(stored) / name)
+    for path in curve_files(Path(stored)):
+        if path.exists():
+            more, data = stored_curves(path)
             found = paired_crossovers(more)
-            sec.figure(floor_figure(more, found), "No curves.")
+            sec.figure(floor_figure(more, found, data.get("scenario")), "No curves.")
             sec.table(curves_table(more, data))
-            sec.table(crossover_table(found, f"Crossovers with intervals, {data['command']}"))
-            sec.table(tolerance_table(more, f"Known to for a target floor, {data['command']}"))
+            sec.table(crossover_table(found, f"Crossovers with intervals, {caption(data)}"))
+            if data["what"].startswith(PARAMETER_WHAT):
+                sec.table(parameter_sensitivity_table(more, data))
+                sec.items(parameter_sensitivity_items(more, data))
+            sec.table(tolerance_table(more, f"Known to for a target floor, {caption(data)}"))
     if key_numbers is not None:
         scen = ", ".join(dict.fromkeys(x["scenario"] if "scenario" in x else x["settings"]["scenario"]
                                        for x in (me, lat) if x is not None))

@@ -121,3 +121,46 @@ def test_the_uncertainty_ensemble_is_recomputed_and_the_guide_quotes_it(stored):
     fraction = np.mean(np.array(u["draw_floor_median"]["nojump"]) < np.array(u["draw_floor_median"]["jump"]))
     assert u["nojump_lower_fraction"] == fraction
     assert f"lower floor in {round(100 * fraction)} % of the draws" in text
+
+
+def test_the_scenario_floors_are_the_double_mass_floors_on_double_mass():
+    """bench.model_error_parameters.scenario_floors (any scenario) on double_mass gives
+    bench.model_error.member_floors' floors bitwise (a short horizon, two members, M off by 1 %)."""
+    from bench.model_error_parameters import scenario_floors
+
+    a = scenario_floors("double_mass", 1e-2, 2, 0, 2.0, 1, "M")
+    b = member_floors(1e-2, 2, 0, 2.0, 1, "M")
+    assert a == b and a["jump"] != member_floors(0.0, 2, 0, 2.0, 1, "M")["jump"]
+
+
+def _other_scenarios() -> list:
+    from bench.model_error_parameters import STORED as PARAMS
+
+    return sorted(p for p in PARAMS.parent.glob("model_error_parameters_*.json") if p != PARAMS)
+
+
+@pytest.mark.parametrize("path", _other_scenarios(), ids=lambda p: p.stem)
+def test_the_stored_point_of_a_one_per_cent_stiffness_error_is_recomputed_on_each_other_scenario(path):
+    """The K curve's point at ε = 1e-2 of each stored scenario but double_mass (whose M point
+    tests/bench/test_stored_floor_curves.py recomputes), from the settings the file states."""
+    from bench.model_error_parameters import EPSILONS, SCENARIOS, scenario_floors
+
+    stored = json.loads(path.read_text())
+    s = stored["settings"]
+    assert {k: v for k, v in s.items() if v is not None} == SCENARIOS[stored["scenario"]]
+    rec = next(r for r in stored["curves"] if r["key"] == "K")
+    i = rec["sizes"].index(1e-2)
+    assert rec["sizes"] == list(EPSILONS)
+    again = scenario_floors(stored["scenario"], 1e-2, stored["members"], stored["seed"], s["t_end"], 1, "K",
+                            s["h"], s["V0"])
+    for d, r in rec["designs"].items():
+        np.testing.assert_allclose(again[d], r["member_floors"][i], rtol=1e-9)
+        assert not np.allclose(again[d], r["member_floors"][i - 1], rtol=1e-3)
+
+
+def test_an_unknown_scenario_is_one_line_and_exit_2(capsys):
+    from bench.model_error_parameters import main
+
+    assert main(["--scenario", "no_such_scenario"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("error: --scenario:") and "no_such_scenario" in err

@@ -17,7 +17,10 @@ from reports import registry
 from reports.sections import model_error
 
 STORED = Path(__file__).resolve().parents[2] / "bench" / "stored"
-FILES = (STORED / model_error.PARAMETERS, STORED / model_error.SENSOR)
+PARAMETER_FILES = tuple(sorted(STORED.glob("model_error_parameters_*.json")))
+"""Every stored per-parameter result (one per scenario), globbed here, not by the section."""
+DOUBLE = STORED / "model_error_parameters_double_mass.json"
+FILES = (*PARAMETER_FILES, STORED / model_error.SENSOR)
 
 
 def numbers(text: str) -> list[float]:
@@ -83,7 +86,7 @@ def test_each_stored_curve_file_has_its_figure_and_its_table_equal_to_the_recomp
     data = json.loads(path.read_text())
     assert mismatches(section, data) == []
     figures = [b for b in section.blocks if b.kind == "figure"]
-    assert len(figures) == 3            # the K-error/latency panels, then one figure per new file
+    assert len(figures) == 1 + len(FILES)   # the K-error/latency panels, then one figure per curve file
     exp = expected(data)
     assert any(v[1] is not None for v in exp.values())
 
@@ -105,8 +108,9 @@ def test_the_stored_fits_are_the_recomputed_ones():
 
 
 def _doctored(tmp_path: Path, path: Path, change) -> tuple[dict, object]:
-    for f in STORED.glob("*_double_mass.*"):
-        shutil.copy(f, tmp_path / f.name)
+    for f in STORED.iterdir():
+        if f.suffix in (".json", ".csv"):
+            shutil.copy(f, tmp_path / f.name)
     data = json.loads(path.read_text())
     change(data)
     (tmp_path / path.name).write_text(json.dumps(data))
@@ -118,7 +122,7 @@ def test_a_slope_off_by_a_hundredth_is_caught(tmp_path):
     def change(data):
         fit = data["curves"][0]["designs"]["jump"]["fit"]
         fit["slope"] += 0.01
-    data, sec = _doctored(tmp_path, FILES[0], change)
+    data, sec = _doctored(tmp_path, DOUBLE, change)
     assert len(mismatches(sec, data)) == 1
     row = table_of(sec, data).rows[0]
     assert numbers(row[2])[0] == pytest.approx(data["curves"][0]["designs"]["jump"]["fit"]["slope"], abs=6e-4)
@@ -135,14 +139,14 @@ def test_floors_just_across_or_just_short_of_a_crossing(tmp_path, factor, crosse
         F = np.array(rec["designs"][low]["member_floors"])
         F[-1] *= factor * meds[high] / meds[low]
         rec["designs"][low]["member_floors"] = F.tolist()
-    data, sec = _doctored(tmp_path, FILES[0], change)
+    data, sec = _doctored(tmp_path, DOUBLE, change)
     assert mismatches(sec, data) == []
     rec = next(r for r in data["curves"] if r["key"] == "K")
     cell = next(row for row in table_of(sec, data).rows if row[0] == rec["label"])[7]
     assert cell.startswith("between") == crosses, cell
     if crosses:
         assert numbers(cell)[:2] == pytest.approx(rec["sizes"][-2:], rel=6e-3)
-    stale = json.loads(FILES[0].read_text())
+    stale = json.loads(DOUBLE.read_text())
     assert (mismatches(sec, stale) != []) == crosses
 
 
@@ -163,7 +167,7 @@ def test_the_paired_crossovers_of_each_file_are_the_recomputed_sign_changes(sect
     undecided between its bracketing sizes; without a zero, no crossover or undecided, naming
     the design the paired medians put lower."""
     data = json.loads(path.read_text())
-    rows = _rows(section, f"Crossovers with intervals, {data['command']}")
+    rows = _rows(section, f"Crossovers with intervals, {data['scenario']}, {data['command']}:")
     assert len(rows) == len(data["curves"])
     for rec in data["curves"]:
         a, b = _pair(rec)
@@ -196,11 +200,11 @@ def test_the_threshold_crossovers_are_placed_and_the_model_parameters_know_to_ta
     for a target above it."""
     sensor = json.loads(FILES[1].read_text())
     thr = next(r for r in sensor["curves"] if r["key"] == "threshold")
-    cell = _rows(section, f"Crossovers with intervals, {sensor['command']}")[thr["label"]][2]
+    cell = _rows(section, f"Crossovers with intervals, {sensor['scenario']}, {sensor['command']}:")[thr["label"]][2]
     assert [p.startswith("at ") for p in cell.split("; ")] == [True, True], cell
-    params = json.loads(FILES[0].read_text())
-    known = [b.content for b in section.blocks if b.kind == "table"
-             and b.content.title.startswith(f"Known to for a target floor, {params['command']}")]
+    params = json.loads(DOUBLE.read_text())
+    known = [b.content for b in section.blocks if b.kind == "table" and b.content.title.startswith(
+        f"Known to for a target floor, {params['scenario']}, {params['command']}:")]
     (table,) = known
     targets = [float(c.split("≤")[1].replace("−", "-")) for c in table.columns[4:]]
     labels = {registry.label(d): d for d in registry.designs()}
@@ -217,3 +221,58 @@ def test_the_threshold_crossovers_are_placed_and_the_model_parameters_know_to_ta
                 assert c.startswith(f"any size up to {rec['sizes'][-1]:g}"), c
                 flat += 1
     assert flat >= 1
+
+
+def _shown(sec, data: dict) -> list[str]:
+    """What the section lacks of one stored per-parameter file: its figure (title naming the
+    scenario), curves table, crossover, sensitivity and known-to tables, and its ranking items."""
+    titles = [b.content.title for b in sec.blocks if b.kind in ("table", "figure")]
+    scen, cmd = data["scenario"], data["command"]
+    wanted = [f"floor of V/V(t_on) against M, C, K, W ({scen})", f"{data['what']} ({scen}; {cmd})",
+              f"Crossovers with intervals, {scen}, {cmd}:", f"Sensitivity per parameter, {scen}, {cmd}:",
+              f"Known to for a target floor, {scen}, {cmd}:"]
+    missing = [w for w in wanted if sum(t.startswith(w) for t in titles) != 1]
+    items = [t for b in sec.blocks if b.kind == "list" for t in b.content if t.startswith(f"{scen}, ")]
+    if len(items) != len(data["designs"]):
+        missing.append(f"{len(items)} ranking items for {scen}")
+    return missing
+
+
+def test_every_stored_parameter_file_is_shown_with_its_scenario(section):
+    """Each stored model_error_parameters_*.json (globbed here) has its figure and tables, the
+    scenario in each caption; at least two scenarios are stored."""
+    assert len(PARAMETER_FILES) >= 2 and DOUBLE in PARAMETER_FILES
+    scenarios = [json.loads(p.read_text())["scenario"] for p in PARAMETER_FILES]
+    assert len(set(scenarios)) == len(scenarios)
+    for path in PARAMETER_FILES:
+        assert _shown(section, json.loads(path.read_text())) == [], path.name
+
+
+def test_a_new_stored_parameter_file_is_shown_and_a_removed_one_is_not(tmp_path):
+    """Near miss: a copy of the double_mass file under another scenario's name appears in the
+    section built from a folder holding it, and not in one without it."""
+    data = json.loads(DOUBLE.read_text())
+    data["scenario"] = "copy_for_test"
+    _, sec = _doctored(tmp_path, DOUBLE, lambda d: None)
+    (tmp_path / "model_error_parameters_copy_for_test.json").write_text(json.dumps(data))
+    assert _shown(model_error.build_from(tmp_path, []), data) == []
+    assert _shown(sec, data) != []
+
+
+@pytest.mark.parametrize("path", PARAMETER_FILES, ids=lambda p: p.stem)
+def test_the_sensitivity_ranking_of_each_scenario_is_recomputed(section, path):
+    """Per design, the parameters ranked by their median floor (numpy's median of the stored
+    member floors) at the stored size nearest to 1e-2; the table's floors to 3 digits."""
+    data = json.loads(path.read_text())
+    rows = _rows(section, f"Sensitivity per parameter, {data['scenario']}, {data['command']}:")
+    assert list(rows) == [rec["key"] for rec in data["curves"]]
+    i = int(np.argmin(np.abs(np.log10(data["curves"][0]["sizes"]) + 2.0)))
+    items = [t for b in section.blocks if b.kind == "list" for t in b.content
+             if t.startswith(f"{data['scenario']}, ")]
+    for j, d in enumerate(data["designs"]):
+        floor = {rec["key"]: float(np.median(rec["designs"][d]["member_floors"][i])) for rec in data["curves"]}
+        ranked = sorted(floor, key=floor.get, reverse=True)
+        line_ = next(t for t in items if t.startswith(f"{data['scenario']}, {registry.label(d)}:"))
+        assert line_.endswith(f"order: {', '.join(ranked)}."), line_
+        for k, v in floor.items():
+            assert numbers(rows[k][1 + j])[0] == pytest.approx(v, rel=6e-3), (k, d, rows[k])
