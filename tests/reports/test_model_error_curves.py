@@ -226,7 +226,8 @@ def test_the_threshold_crossovers_are_placed_and_the_model_parameters_know_to_ta
 def _shown(sec, data: dict) -> list[str]:
     """What the section lacks of one stored per-parameter file: its figure (title naming the
     scenario), curves table, crossover, sensitivity and known-to tables, and its ranking items."""
-    titles = [b.content.title for b in sec.blocks if b.kind in ("table", "figure")]
+    titles = [b.content.title if b.kind == "table" else b.content.alt for b in sec.blocks
+              if b.kind in ("table", "figure")]
     scen, cmd = data["scenario"], data["command"]
     wanted = [f"floor of V/V(t_on) against M, C, K, W ({scen})", f"{data['what']} ({scen}; {cmd})",
               f"Crossovers with intervals, {scen}, {cmd}:", f"Sensitivity per parameter, {scen}, {cmd}:",
