@@ -46,7 +46,9 @@ def expected(data: dict) -> dict:
 
 
 def table_of(sec, data: dict):
-    return next(b.content for b in sec.blocks if b.kind == "table" and b.content.title.startswith(data["what"]))
+    head = f"{data['what']} ({data['scenario']}; {data['command']})"
+    (table,) = [b.content for b in sec.blocks if b.kind == "table" and b.content.title.startswith(head)]
+    return table
 
 
 def mismatches(sec, data: dict) -> list[str]:
@@ -198,7 +200,7 @@ def test_the_threshold_crossovers_are_placed_and_the_model_parameters_know_to_ta
     every target at or below a design's exact floor is not reachable, and a design whose floor
     never leaves the exact one (W for the observer without jumps) allows any size in the range
     for a target above it."""
-    sensor = json.loads(FILES[1].read_text())
+    sensor = json.loads(FILES[-1].read_text())
     thr = next(r for r in sensor["curves"] if r["key"] == "threshold")
     cell = _rows(section, f"Crossovers with intervals, {sensor['scenario']}, {sensor['command']}:")[thr["label"]][2]
     assert [p.startswith("at ") for p in cell.split("; ")] == [True, True], cell
