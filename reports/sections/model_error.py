@@ -43,6 +43,9 @@ PARAMETERS_GLOB = "model_error_parameters_*.json"
 """Per-parameter curves of every scenario stored (``--scenario NAME``), read in sorted order."""
 SENSITIVITY_SIZE = 1e-2
 """The relative error of the per-scenario sensitivity ranking (the stored size nearest to it)."""
+NO_EFFECT = 1e-6
+"""A parameter whose median floor is the exact model's to this relative difference has no effect
+(a zero matrix scaled, or an invariance: W scaled with a zero gap offset on one contact)."""
 SENSOR = "sensor_floor_double_mass.json"
 """Sensor jitter and threshold curves, ``python -m bench.sensor_floor``."""
 PANELS_PER_ROW = 3
@@ -551,16 +554,22 @@ def parameter_sensitivity_table(curves: list[Curve], data: dict) -> Table:
 
 def parameter_sensitivity_items(curves: list[Curve], data: dict) -> list[str]:
     """Per design, the parameters of a per-parameter result ranked by their floor at the size
-    nearest to :data:`SENSITIVITY_SIZE` (largest first)."""
+    nearest to :data:`SENSITIVITY_SIZE` (largest first); those within :data:`NO_EFFECT` of the
+    exact model's floor are named apart, unranked."""
     out = []
     for d in registry.in_registry_order(list(dict.fromkeys(c.design for c in curves))):
         mine = [c for c in curves if c.design == d]
+        exact = float(np.median(mine[0].exact))
         floor = {c.what.key: float(c.median[sensitivity_index(c)]) for c in mine}
-        ranked = sorted(floor, key=floor.get, reverse=True)
+        none = [k for k in floor if abs(floor[k] / exact - 1.0) <= NO_EFFECT]
+        ranked = sorted((k for k in floor if k not in none), key=floor.get, reverse=True)
         at = fmt(mine[0].sizes[sensitivity_index(mine[0])])
-        out.append(f"{data['scenario']}, {registry.label(d)}: an error of {at} costs most in {ranked[0]} "
-                   f"(floor {fmt(floor[ranked[0]])}), least in {ranked[-1]} (floor {fmt(floor[ranked[-1]])}); "
-                   f"order: {', '.join(ranked)}.")
+        tail = (f"; no effect (floor the exact model's to {fmt(NO_EFFECT)} relative): {', '.join(none)}."
+                if none else ".")
+        head = (f"an error of {at} costs most in {ranked[0]} (floor {fmt(floor[ranked[0]])}), least in "
+                f"{ranked[-1]} (floor {fmt(floor[ranked[-1]])}); order: {', '.join(ranked)}" if ranked
+                else f"no parameter's error of {at} changes the floor")
+        out.append(f"{data['scenario']}, {registry.label(d)}: {head}{tail}")
     return out
 
 
