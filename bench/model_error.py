@@ -79,6 +79,13 @@ def member_floors(eps: float, n: int, seed: int, t_end: float | None, workers: i
     sc = observer.load_scenario("double_mass")
     t_on, t_off = sc.observer["coupling"]
     t_off = min(float(t_off), float(df["t_end"].iloc[0]))
+    return path_floors(paths, n, t_on, t_off)
+
+
+def path_floors(paths, n: int, t_on: float, t_off: float) -> dict[str, list[float]]:
+    """Per design of :data:`DESIGNS`, the floors of members 0 … n−1 read from their recorded
+    paths (``t``, ``V`` per design and member): the largest V/V(t_on) over the window's last
+    :data:`TAIL` fraction, ``[t_off − TAIL·(t_off − t_on), t_off]``."""
     start = t_off - TAIL * (t_off - t_on)
     out = {}
     for d in DESIGNS:

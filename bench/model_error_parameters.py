@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.floor_curves import curve_record, write_json
-from bench.model_error import DESIGNS, MEMBERS, SEED, TAIL, member_floors
+from bench.model_error import DESIGNS, MEMBERS, SEED, member_floors, path_floors
 
 PARAMETERS = ("M", "C", "K", "W")
 EPSILONS = tuple(float(x) for x in np.logspace(-4, -1, 10))
@@ -68,17 +68,7 @@ def scenario_floors(scenario: str, eps: float, n: int, seed: int, t_end: float |
     t_end_run = float(df["t_end"].iloc[0])
     t_on, t_off = observer.load_scenario(scenario).observer.get("coupling") or (0.0, t_end_run)
     t_off = min(float(t_off), t_end_run)
-    start = t_off - TAIL * (t_off - t_on)
-    out = {}
-    for d in DESIGNS:
-        floors = []
-        for i in range(n):
-            p = paths[(paths.design == d) & (paths.member == i)]
-            t, V = p["t"].to_numpy(), p["V"].to_numpy()
-            V_on = V[np.searchsorted(t, t_on)]
-            floors.append(float(np.max(V[(t >= start) & (t <= t_off)]) / V_on))
-        out[d] = floors
-    return out
+    return path_floors(paths, n, t_on, t_off)
 
 
 def floors_of(scenario: str, settings: dict, n: int, seed: int, t_end: float | None, workers: int | None):
