@@ -401,6 +401,8 @@ class MoreauJean:
         self._fallback = None
         self._k = 0
         self._slices: dict[bytes, tuple] = {}
+        self._half_h = 0.5 * self.S.h
+        self._last_free: tuple | None = None
 
     MAX_CACHED_SETS = 4096
     """Active sets whose matrix slices are kept (cleared when full)."""
@@ -454,6 +456,8 @@ class MoreauJean:
     def time(self, k, out: np.ndarray | None = None) -> np.ndarray | float:
         """t_k = t0 + k h (the grid's value, without building the grid); written into ``out``
         when given (an array of k's shape)."""
+        if type(k) is int and out is None:             # the loop's step index: no array
+            return np.float64(self.t0 + k * self.S.h)
         k = np.asarray(k)
         if k.ndim == 0:
             return self.t0 + k * self.S.h
@@ -511,8 +515,8 @@ class MoreauJean:
     # -- the scheme ------------------------------------------------------------------------
     def predicted_active(self, k: int, q: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Closed set of the step k → k+1 (Siconos rule): ``g_k + (h/2)γ_k ≤ 0``, bool (m,)."""
-        S, grid = self.S, self.grid
-        g_pred = S.WT @ (q + 0.5 * S.h * u) + grid.nu[k] + 0.5 * S.h * grid.nu_dot[k]
+        S, grid, half_h = self.S, self.grid, self._half_h
+        g_pred = S.WT @ (q + half_h * u) + grid.nu[k] + half_h * grid.nu_dot[k]
         return g_pred <= 0.0
 
     def impulse(self, k: int, u: np.ndarray, u_free: np.ndarray,
@@ -525,9 +529,18 @@ class MoreauJean:
         γ_k = W_Aᵀu_k + ν̇_A(t_k), γ_free = W_Aᵀu_free + ν̇_A(t_{k+1}).
         """
         W_A, _, Ghat, _, _, _, e_A = self._active_slices(active)
-        gamma_k = u @ W_A + self.grid.nu_dot[k, active]
-        gamma_free = u_free @ W_A + self.grid.nu_dot[k + 1, active]
+        nu_dot = self.grid.nu_dot
+        gamma_k = u @ W_A + nu_dot[k, active]
+        gamma_free = u_free @ W_A + nu_dot[k + 1, active]
         return self.law.definition.step_map(Ghat, gamma_free, gamma_k, e_A, self._solve)
+
+    def last_free_velocity(self, k: int, q: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """:meth:`free_velocity` of step k from (q, u): the one the last :meth:`step` computed when
+        it was that step from these very arrays (unchanged since), else computed anew."""
+        last = self._last_free
+        if last is not None and last[0] == k and last[1] is q and last[2] is u:
+            return last[3]
+        return self.free_velocity(k, q, u)
 
     def free_velocity(self, k: int, q: np.ndarray, u: np.ndarray) -> np.ndarray:
         """u_free of step k (no contact impulse)."""
@@ -547,12 +560,13 @@ class MoreauJean:
         self._k = k
         h, theta = self.S.h, self.S.theta
         u_free = self.free_velocity(k, q, u)
-        if active.size and not np.all(np.isfinite(u_free)):
-            raise NonFiniteState(f"free velocity of step {k} is not finite")
+        self._last_free = (k, q, u, u_free)
         if active.size == 0:
             u1 = u_free
             P = np.zeros(0)
         else:
+            if not np.isfinite(u_free).all():
+                raise NonFiniteState(f"free velocity of step {k} is not finite")
             P = self.impulse(k, u, u_free, active)[0]
             u1 = u_free + self._active_slices(active)[1] @ P
         q1 = q + h * ((1.0 - theta) * u + theta * u1)

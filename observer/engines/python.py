@@ -131,7 +131,7 @@ def _python_health(stepper: MoreauJean, k: int, s: int, q, u, u1, P, act, q1, he
     (``residual_source = "applied+solver"``)."""
     if s == 0:
         g = stepper.system.gaps(q1, stepper.time(k + 1))
-        j = int(np.argmin(g)) if g.size else -1
+        j = int(g.argmin()) if g.size else -1
         if g.size and g[j] < health["min_gap"]:
             health["min_gap"], health["min_gap_step"] = float(g[j]), k + 1
     if act.size == 0:
@@ -152,11 +152,13 @@ def newton_residual(stepper: MoreauJean, k: int, q, u, u1, P, act) -> float:
     kernel's own :func:`observer.primitives.applied_residual` (one implementation for both engines)."""
     from observer.primitives import applied_residual
 
-    W_A = stepper.S.W[:, act]
-    u_free = stepper.free_velocity(k, q, u)
+    slices = stepper._active_slices(act)
+    W_A, e_A = stepper.S.W[:, act], slices[6]          # (W_A in this layout: the products' own rounding)
+    u_free = stepper.last_free_velocity(k, q, u)        # the step's own (the same arrays, unchanged)
     nd = stepper.grid.nu_dot
-    b = (u_free @ W_A + nd[k + 1, act]) + stepper.law.restitution[act] * (u @ W_A + nd[k, act])
-    du = stepper._active_slices(act)[1] @ P if stepper.S.factored else stepper.S.AinvW[:, act] @ P
+    b = (u_free @ W_A + nd[k + 1, act]) + e_A * (u @ W_A + nd[k, act])
+    du = slices[1] @ P if stepper.S.factored else stepper.S.AinvW[:, act] @ P
     Wp, Wi, Wv = stepper.csc
-    c = lambda x, dtype=np.float64: np.ascontiguousarray(x, dtype=dtype)  # noqa: E731
-    return float(applied_residual(Wp, Wi, Wv, c(act, np.int64), int(act.size), c(du), c(b), c(P)))
+    c = np.ascontiguousarray
+    return float(applied_residual(Wp, Wi, Wv, c(act, dtype=np.int64), int(act.size), c(du, dtype=np.float64),
+                                  c(b, dtype=np.float64), c(P, dtype=np.float64)))
