@@ -44,6 +44,12 @@ TOLERANCES = {"compiled": Tolerances(same_scheme=1e-10), "python": Tolerances(sa
 """Per engine (name → :class:`Tolerances`); a registered engine without an entry fails its
 tests (KeyError) until it is given one."""
 
+NUMPY_STEPPERS = frozenset({"python", "toy"})
+"""Engines that take every step in Python with the numpy stepper (tens of µs a step, about
+100× the compiled kernel): a convergence study may give them the coarse end of its step-size
+ladder, as many step sizes as its fitted order needs (:attr:`EngineUnderTest.numpy_stepping`;
+the test says which)."""
+
 ENGINE_NAMES = (*ENGINES, TOY_ENGINE.name)
 REFUSED = "refused by the engine: "
 """Prefix of the skip reason of a refused case (the session's check counts these skips)."""
@@ -59,6 +65,11 @@ class EngineUnderTest:
     @property
     def name(self) -> str:
         return self.engine.name
+
+    @property
+    def numpy_stepping(self) -> bool:
+        """Whether the engine steps in numpy, one Python-level step at a time (:data:`NUMPY_STEPPERS`)."""
+        return self.name in NUMPY_STEPPERS
 
     def refusal(self, scenario, **kwargs):
         """The engine's refusal of ``observer.simulate(scenario, **kwargs)`` on it, or None."""

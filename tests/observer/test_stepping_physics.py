@@ -25,6 +25,8 @@ problem's scale; 1e-9 is the toolkit's residual tolerance).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -143,11 +145,20 @@ SINGLE = [("bouncing_ball", {}), ("impact_oscillator", {}), ("grazing", {}),
           ("double_mass", {"simulation.t_end": 5.0, "simulation.h": 1e-3})]
 
 
+@functools.lru_cache(maxsize=None)
+def single_contact_run(engine, name: str, law: str, theta: float) -> tuple[Scenario, object]:
+    """The scenario ``name`` of :data:`SINGLE` (its overrides) with ``law`` and θ, and its
+    time-stepping run on ``engine``; cached per module, read only: the step-law tests and the
+    Poisson = Newton identity check the same runs."""
+    sc = observer.load_scenario(name, {**dict(SINGLE)[name], "impact.law": law, "simulation.theta": theta})
+    return sc, engine.simulate(sc, integrator="time-stepping")
+
+
 @pytest.mark.parametrize("theta", [0.5, 1.0])
 @pytest.mark.parametrize("name,over", SINGLE, ids=[s[0] for s in SINGLE])
 def test_newton_step_laws_single_contact(name, over, theta, engine):
-    sc = observer.load_scenario(name, {**over, "impact.law": "newton", "simulation.theta": theta})
-    res = engine.simulate(sc, integrator="time-stepping")
+    sc, res = single_contact_run(engine, name, "newton", theta)
+    assert sc.law.law == "newton" and sc.theta == theta
     assert_momentum_balance(sc, res)
     assert check_newton_steps(sc, res) > 0
 
@@ -155,8 +166,8 @@ def test_newton_step_laws_single_contact(name, over, theta, engine):
 @pytest.mark.parametrize("theta", [0.5, 1.0])
 @pytest.mark.parametrize("name,over", SINGLE, ids=[s[0] for s in SINGLE])
 def test_poisson_step_laws_single_contact(name, over, theta, engine):
-    sc = observer.load_scenario(name, {**over, "impact.law": "poisson", "simulation.theta": theta})
-    res = engine.simulate(sc, integrator="time-stepping")
+    sc, res = single_contact_run(engine, name, "poisson", theta)
+    assert sc.law.law == "poisson" and sc.theta == theta
     assert_momentum_balance(sc, res)
     assert check_poisson_steps(sc, res)["impacts"] > 0
 
@@ -240,12 +251,9 @@ def test_landed_block_rests_without_hopping(eps, engine):
 @pytest.mark.parametrize("theta", [0.5, 1.0])
 @pytest.mark.parametrize("name", ["bouncing_ball", "impact_oscillator", "grazing", "double_mass"])
 def test_poisson_equals_newton_for_one_contact(name, theta, engine):
-    over = {"simulation.theta": theta}
-    if name == "double_mass":       # the 5 s of SINGLE at h = 1e-3 (the identity holds at any h)
-        over.update({"simulation.t_end": 5.0, "simulation.h": 1e-3})
-    runs = {law: engine.simulate(observer.load_scenario(name, {**over, "impact.law": law}), integrator="time-stepping")
-            for law in ("newton", "poisson")}
-    a, b = runs["newton"], runs["poisson"]
+    # the runs of the step-law tests (double_mass: the 5 s of SINGLE at h = 1e-3; the
+    # identity holds at any h)
+    a, b = (single_contact_run(engine, name, law, theta)[1] for law in ("newton", "poisson"))
     assert a.P.max() > 0
     for x, y in ((a.q, b.q), (a.u, b.u), (a.P, b.P)):
         np.testing.assert_allclose(y, x, rtol=0, atol=1e-12 * max(np.abs(x).max(), 1.0))
