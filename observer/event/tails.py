@@ -22,8 +22,9 @@ increment ``Σ_{k≥1} g_c^{(k)} Δ^k/k!`` (degree :data:`HOP_ORDER`, the flow's
 derivatives, which do not carry |q| or |ν|), never re-read from the coordinates. The
 first landing is an impact of the run's law on the held set and the landing contact(s);
 a held contact that the impact lifts re-enters the cluster at d = 0; a contact whose next
-hop is below the time resolution ``TIME_RTOL·max(|t|, τ)`` is held (its remaining tail is
-below it too) if the acceleration LCP keeps its force positive. When every contact of the
+hop is within the time coordinate's resolution (:func:`observer.event.roots.time_resolution`,
+two ulp of t; decided from an enclosure of the hop's duration, :func:`hop_within`) is held
+(its remaining tail is below it too) if the acceleration LCP keeps its force positive. When every contact of the
 cluster is held, their common accumulation time t_∞ is reached. The tail lists what it
 resolves, as the event loop would: each impact, a held contact lifted by a hop above the
 time resolution (``liftoff``), each hold (``stick``), note ``joint tail of contacts …: exact
@@ -47,7 +48,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from observer.event.flow import Flow, flow_for
-from observer.event.roots import RootIsolationError, first_zero, resolution, tolerance
+from observer.event.enclosures import _gamma, _refine, arb_dot
+from observer.event.roots import RootIsolationError, first_zero, time_resolution, tolerance
 from observer.impact import impact
 
 HOP_ORDER = 8
@@ -211,7 +213,6 @@ def joint_tail(run, t: float, x: np.ndarray, held: tuple, cluster: list, key: tu
     held = held0 = tuple(sorted(held))
     x0 = x
     impulse = np.zeros(run.m)
-    res = resolution(t, run.tau)
     tail, hops, settled, rows = 0.0, 0, {}, []
     while hops < TAIL_HOPS:
         if all(c in held for c in cluster):
@@ -234,6 +235,7 @@ def joint_tail(run, t: float, x: np.ndarray, held: tuple, cluster: list, key: tu
             impulse[list(held)] += fl.force_rows @ fl.integral(dt, z)
         x = fl.x_of(fl.propagate(t + tail, z, dt))
         tail += dt
+        res = time_resolution(t + tail)
         landed = [c for c in d if s[c] - dt <= res]
         for c in d:
             d[c] = 0.0 if c in landed else max(advance(d[c], D[c], dt), 0.0)
@@ -246,6 +248,25 @@ def joint_tail(run, t: float, x: np.ndarray, held: tuple, cluster: list, key: tu
         held = new
         hops += 1
     return None
+
+
+def hop_within(fl: Flow, c: int, z: np.ndarray, res: float) -> bool:
+    """Whether the next hop of contact c from the contact point, ``2γ⁺/α`` (γ⁺ = g_c'·z,
+    α = −g_c''·z > 0 on ``fl``), lasts no longer than ``res`` (the time coordinate's
+    resolution, :func:`observer.event.roots.time_resolution`): the sign of
+    ``w = −res·g_c''·z − 2·g_c'·z`` (w ≥ 0: within), decided from its enclosure — float64 with
+    the certified bound γ_N·(res·Σ|g_c'' z| + 2·Σ|g_c' z|) first, else ball arithmetic at
+    doubling precision from the same data (:func:`observer.event.enclosures._refine`, exact
+    for float64 data at the cap). No count of round-offs decides it."""
+    vr, ar = _rows(fl, c)[0], _rows(fl, c)[1]
+    w = -res * float(ar @ z) - 2.0 * float(vr @ z)
+    g = _gamma(z.size + 2)
+    err = (res * float(np.abs(ar) @ np.abs(z)) + 2.0 * float(np.abs(vr) @ np.abs(z))) \
+        * g * (1.0 + 2.0 * g) + z.size * 5e-324
+    if np.isfinite(w) and np.isfinite(err) and abs(w) > err:
+        return w > 0.0
+    dec = _refine(lambda: -arb_dot(ar, z) * res - 2 * arb_dot(vr, z))
+    return dec.sign is not None and dec.sign >= 0
 
 
 def _hop_impact(run, t: float, x: np.ndarray, held: tuple, landed: list, d: dict,
@@ -278,7 +299,8 @@ def _hop_impact(run, t: float, x: np.ndarray, held: tuple, landed: list, d: dict
     v = fl.velocity_rows @ z
     a = (fl.velocity_rows @ fl.A) @ z
     at_contact = sorted(set(landed) | {c for c in d if d[c] == 0.0})   # lifted ones too
-    settle = [c for c in at_contact if v[c] <= small or (a[c] < 0.0 and 2.0 * v[c] <= -a[c] * res)]
+    settle = [c for c in at_contact
+              if v[c] <= small or (a[c] < 0.0 and hop_within(fl, c, z, res))]
     if settle:
         stick = run.sticking(t, x, sorted(set(keep) | set(settle)))
         if not set(settle) <= set(stick):
@@ -307,8 +329,7 @@ def _clear(run, t: float, x: np.ndarray, held: tuple, cluster: list, t_inf: floa
     fl = flow_for(run.system, held)
     xp = run.project(t, x, list(held))
     try:
-        zero, _, _ = first_zero(fl, fl.gap_rows[others], t, fl.z(t, xp), min(t_inf, run.t_end),
-                                tau=run.tau)
+        zero, _, _ = first_zero(fl, fl.gap_rows[others], t, fl.z(t, xp), min(t_inf, run.t_end))
     except RootIsolationError:
         return False
     return zero is None

@@ -1,0 +1,49 @@
+"""The joint tails' decisions from enclosures (issue 34, item 1): whether a contact's next hop
+from its contact point, ``2γ⁺/α``, lasts no longer than the time coordinate's resolution is the
+sign of ``w = −res·α' − 2γ⁺`` decided from a certified enclosure (float64, else ball arithmetic),
+checked here against exact rational arithmetic on the same float64 data."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from observer.event.roots import time_resolution
+from observer.event.tails import hop_within
+
+
+def _flow() -> SimpleNamespace:
+    """A stand-in flow: contact 0's velocity row sums z0 + z1 + z2, its acceleration row
+    (velocity row · A) reads z3."""
+    A = np.zeros((4, 4))
+    A[0, 3] = 1.0
+    return SimpleNamespace(velocity_rows=np.array([[1.0, 1.0, 1.0, 0.0]]), A=A)
+
+
+def _exact_within(z: np.ndarray, res: float) -> bool:
+    q = [Fraction(float(v)) for v in z]
+    v, a = q[0] + q[1] + q[2], q[3]
+    return -Fraction(res) * a - 2 * v >= 0
+
+
+@pytest.mark.parametrize("scale", [0.0, 1e20])
+@pytest.mark.parametrize("factor", [0.25, 0.5, 1.0, 2.0])
+def test_the_hop_decision_is_the_exact_one_even_where_float64_cancels(scale, factor):
+    """γ⁺ = δ carried under a cancelling ±scale (float64 loses δ entirely at 1e20: its w
+    says "within" for every δ), α = 1: the hop 2δ lasts ≤ res exactly when δ ≤ res/2 —
+    hop_within agrees with the exact rational sign on both sides of the boundary, and at it."""
+    res = time_resolution(1.0)
+    delta = factor * res
+    z = np.array([scale, delta, -scale, -1.0])
+    assert hop_within(_flow(), 0, z, res) == _exact_within(z, res) == (factor <= 0.5)
+
+
+def test_the_hop_decision_uses_the_resolution_of_the_time_coordinate_only():
+    """The same hop (1e-12 s) is within the resolution at t = 1e4 (3.6e-12 s) and not at
+    t = 1 (4.4e-16 s): the decision reads t, nothing else (no time scale of the system)."""
+    z = np.array([0.0, 5e-13, 0.0, -1.0])
+    assert hop_within(_flow(), 0, z, time_resolution(1e4))
+    assert not hop_within(_flow(), 0, z, time_resolution(1.0))
