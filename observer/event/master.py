@@ -23,7 +23,8 @@ A crossing with ``|γ⁻| ≤`` CONTACT_TOL motion
 tolerances of γ is labelled a graze too, and its (tiny) impulse is applied. A minimum above
 the touch band is a miss: no event. An open contact is impacted together with the one
 that triggers an impact (simultaneous impact) when its gap is within FLOOR_FACTOR round-offs
-of its representation or what CONTACT_TOL time resolutions hide at its speed, and never
+of its representation, or what the time coordinate's resolution (two ulp of t) hides at its
+speed, or what the enclosure of the accumulated state error cannot order, and never
 beyond CONTACT_TOL motion tolerances (:func:`observer.event.roots.motion_tolerance`, which do
 not shrink with the gap when the contact sits at the coordinate origin, ν = 0):
 :meth:`_Run.simultaneous_band`.
@@ -70,7 +71,8 @@ from observer.contact import get_solver
 from observer.event.enclosures import dot_sign, polish_lcp
 from observer.event.flow import Flow, flow_for
 from observer.event.roots import (FLOOR_FACTOR, ROUNDOFF, NonFiniteFlow, RootIsolationError,
-                                  SearchStopped, first_zero, motion_tolerance, resolution, tolerance)
+                                  SearchStopped, first_zero, motion_tolerance, time_resolution,
+                                  tolerance)
 from observer.event.tails import JointTail, horner, joint_due, joint_tail
 from observer.impact import ImpactLaw, impact
 from observer.result import RunState, RunStatus
@@ -504,9 +506,11 @@ class _Run:
         """The gaps within which an open contact is impacted together with the one that
         triggered an impact at t (:meth:`collide`): FLOOR_FACTOR round-offs of the gap's
         representation ``ROUNDOFF·Σ|r z|`` (what float64 cannot tell from zero in these
-        coordinates), or what CONTACT_TOL time resolutions hide at its approach speed
-        ``|γ|·δt``; never more than ``tol_g`` (CONTACT_TOL motion tolerances, the band of
-        persistent contact).
+        coordinates), or what the time coordinate's resolution hides at its approach speed
+        ``|γ|·δt`` (δt two ulp of t, :func:`observer.event.roots.time_resolution`: no time
+        scale of the system), or what the enclosure of the accumulated state error
+        (:meth:`gap_error`) cannot tell from zero; never more than ``tol_g`` (CONTACT_TOL
+        motion tolerances, the band of persistent contact).
 
         Not CONTACT_TOL motion tolerances themselves: a contact in flight can sit that close
         to its contact point long (≫ δt) before it lands (issue 19: a contact re-launched by
@@ -515,7 +519,7 @@ class _Run:
         apart, 3e-12 m, were merged and t∞ moved by 1.6e-6 s)."""
         fl = self.free_flow
         floor = tolerance(fl.gap_rows, z)
-        hidden = CONTACT_TOL * resolution(t - self.t0, self.tau) * np.abs(gam)
+        hidden = time_resolution(t) * np.abs(gam)
         return np.minimum(tol_g, np.maximum(np.maximum(FLOOR_FACTOR * floor, hidden),
                                             self.gap_error(z)))
 
