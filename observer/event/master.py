@@ -23,7 +23,8 @@ A crossing with ``|γ⁻| ≤`` CONTACT_TOL motion
 tolerances of γ is labelled a graze too, and its (tiny) impulse is applied. A minimum above
 the touch band is a miss: no event. An open contact is impacted together with the one
 that triggers an impact (simultaneous impact) when its gap is within FLOOR_FACTOR round-offs
-of its representation or what CONTACT_TOL time resolutions hide at its speed, and never
+of its representation, or what the time coordinate's resolution (two ulp of t) hides at its
+speed, or what the enclosure of the accumulated state error cannot order, and never
 beyond CONTACT_TOL motion tolerances (:func:`observer.event.roots.motion_tolerance`, which do
 not shrink with the gap when the contact sits at the coordinate origin, ν = 0):
 :meth:`_Run.simultaneous_band`.
@@ -70,7 +71,8 @@ from observer.contact import get_solver
 from observer.event.enclosures import dot_sign, polish_lcp
 from observer.event.flow import Flow, flow_for
 from observer.event.roots import (FLOOR_FACTOR, ROUNDOFF, NonFiniteFlow, RootIsolationError,
-                                  SearchStopped, first_zero, motion_tolerance, resolution, tolerance)
+                                  SearchStopped, first_zero, motion_tolerance, time_resolution,
+                                  tolerance)
 from observer.event.tails import JointTail, horner, joint_due, joint_tail
 from observer.impact import ImpactLaw, impact
 from observer.result import RunState, RunStatus
@@ -281,6 +283,7 @@ class _Run:
         self.hop_end = None            # (contact, t_k, t_last, x_last) of the last hop_tail
         self.halted: str | None = None # the signal that stopped the sampling (no row after)
         self.exact_delassus: dict[tuple, dict] = {}   # contact set → {bits: exact G} (exact_solve)
+        self.err = np.zeros(2 * self.n)   # bound on |x − x_exact| (carry_error, jump_error)
 
     # -- sampling --------------------------------------------------------------------------
     def fill(self, flow: Flow, t_a: float, x_a: np.ndarray, t_b: float, include_end: bool) -> None:
@@ -362,6 +365,34 @@ class _Run:
     def touch(self, j: int, t: float) -> None:
         if j not in self.closed_since:
             self.intervals[j].append((t, t))
+
+    # -- the accumulated state error --------------------------------------------------------
+    def carry_error(self, flow: Flow, dt: float, z: np.ndarray) -> None:
+        """Carry :attr:`err`, the componentwise bound on the float state's distance to the
+        exact trajectory of the scenario's data, over a flight of dt from the augmented state
+        z: the error e of z moves to ``exp(A dt) e`` (bounded by ``|exp(A dt)|·|e|``; the
+        forcing's components of z are exact), and the flight's own evaluation adds
+        ``γ_{N+1}·|exp(A dt)|·|z|`` (a matrix-vector product, Higham §3.5)."""
+        if not dt > 0.0:
+            return
+        P = np.abs(flow.expm(dt))
+        k = 2 * self.n
+        g = _gamma(P.shape[0] + 1)
+        self.err = (P[:k, :k] @ self.err) * (1.0 + 2.0 * g) + g * (P[:k] @ np.abs(z))
+
+    def jump_error(self, A: list[int], lam: np.ndarray, u: np.ndarray) -> None:
+        """Add the rounding of a velocity jump ``u ← u + M⁻¹W_A λ`` to :attr:`err`:
+        ``γ_{n+|A|+1}·|M⁻¹|·|W_A|·|λ|`` for the products, ``u·|u|`` for the sum."""
+        n = self.n
+        W = np.abs(self.system.W[:, list(A)])
+        g = _gamma(n + len(A) + 1)
+        self.err[n:] += g * (np.abs(self.Minv) @ (W @ np.abs(lam))) + g * np.abs(u)
+
+    def gap_error(self, z: np.ndarray) -> np.ndarray:
+        """Bound on every gap's distance to its exact value: the accumulated state error
+        :attr:`err` seen through the gap rows (their own evaluation rounding aside)."""
+        k = 2 * self.n
+        return np.abs(self.free_flow.gap_rows[:, :k]) @ self.err
 
     # -- contact mechanics -----------------------------------------------------------------
     def delassus(self, idx) -> np.ndarray:
@@ -446,6 +477,7 @@ class _Run:
         lam = np.maximum(lam, 0.0)
         x = x.copy()
         x[self.n:] += self.velocity_jump(A, lam)
+        self.jump_error(A, lam, x[self.n:])
         gp = fl.velocities(t, x)[idx]
         cand = [c for c, v in zip(A, gp) if v <= tol_v[c]]
         stick = self.sticking(t, x, cand)
@@ -474,9 +506,11 @@ class _Run:
         """The gaps within which an open contact is impacted together with the one that
         triggered an impact at t (:meth:`collide`): FLOOR_FACTOR round-offs of the gap's
         representation ``ROUNDOFF·Σ|r z|`` (what float64 cannot tell from zero in these
-        coordinates), or what CONTACT_TOL time resolutions hide at its approach speed
-        ``|γ|·δt``; never more than ``tol_g`` (CONTACT_TOL motion tolerances, the band of
-        persistent contact).
+        coordinates), or what the time coordinate's resolution hides at its approach speed
+        ``|γ|·δt`` (δt two ulp of t, :func:`observer.event.roots.time_resolution`: no time
+        scale of the system), or what the enclosure of the accumulated state error
+        (:meth:`gap_error`) cannot tell from zero; never more than ``tol_g`` (CONTACT_TOL
+        motion tolerances, the band of persistent contact).
 
         Not CONTACT_TOL motion tolerances themselves: a contact in flight can sit that close
         to its contact point long (≫ δt) before it lands (issue 19: a contact re-launched by
@@ -485,8 +519,9 @@ class _Run:
         apart, 3e-12 m, were merged and t∞ moved by 1.6e-6 s)."""
         fl = self.free_flow
         floor = tolerance(fl.gap_rows, z)
-        hidden = CONTACT_TOL * resolution(t - self.t0, self.tau) * np.abs(gam)
-        return np.minimum(tol_g, np.maximum(FLOOR_FACTOR * floor, hidden))
+        hidden = time_resolution(t) * np.abs(gam)
+        return np.minimum(tol_g, np.maximum(np.maximum(FLOOR_FACTOR * floor, hidden),
+                                            self.gap_error(z)))
 
     # -- Zeno ------------------------------------------------------------------------------
     def zeno_check(self, key: tuple, t: float, x: np.ndarray, gm: np.ndarray,
@@ -843,6 +878,12 @@ class _Run:
         return self.project(t, x, stick), tuple(stick)
 
 
+def _gamma(n: int) -> float:
+    """γ_n = n·u/(1 − n·u), u = 2^-53 (Higham, *Accuracy and Stability*, §3.1)."""
+    u = np.finfo(float).eps / 2.0
+    return n * u / (1.0 - n * u)
+
+
 def _oscillator_block(flow: Flow, t: np.ndarray) -> np.ndarray:
     """Oscillator states ``(cos ω_k t, sin ω_k t)_k`` at the times t, shape (len(t), 2F)."""
     w = np.asarray(flow.freqs, dtype=float)
@@ -948,6 +989,7 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
             run.fill(flow, t, x, t_end, include_end=True)
             break
         run.fill(flow, t, x, zero.t, include_end=False)
+        run.carry_error(flow, zero.t - t, flow.z(t, x))
         t, x = zero.t, flow.x_of(zero.z)
         kind, j = keys[zero.index]
         n_events += 1
