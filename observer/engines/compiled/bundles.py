@@ -17,6 +17,7 @@ from typing import NamedTuple
 import numpy as np
 
 from observer.engines.compiled.kernel import WAVE_NAMES, fill_waves
+from observer.engines.compiled.step import MODEL_READS, MODEL_TABLES
 from observer.engines.loop import LoopInput, projection_slots
 from observer.errors import InputError
 from observer.model import grid_anchors
@@ -291,8 +292,9 @@ class SummaryBundle(NamedTuple):
     Cq: np.ndarray
 
 
-class ModelBundle(NamedTuple):
-    """The observers' own model in the kernel's layout (:func:`observer.engines.compiled.bundles.model_bundle`):
+ModelBundle = NamedTuple("ModelBundle", [(name, object) for name in MODEL_READS + MODEL_TABLES
+                                         + ("omega", "phase", "function")])
+ModelBundle.__doc__ = """The observers' own model in the kernel's layout (:func:`observer.engines.compiled.bundles.model_bundle`):
     what an observer's step reads of its system (dense structure and contacts).
 
     Attributes
@@ -309,29 +311,6 @@ class ModelBundle(NamedTuple):
     omega, phase, function : ndarray
         The model's distinct waves (to build ``waves`` per window).
     """
-
-    Bu: np.ndarray
-    Bq: np.ndarray
-    Bf: np.ndarray
-    Wp: np.ndarray
-    Wi: np.ndarray
-    Wv: np.ndarray
-    AinvWT: np.ndarray
-    Ghat: np.ndarray
-    code: int
-    e: np.ndarray
-    e_ptr: np.ndarray
-    e_col: np.ndarray
-    e_coef: np.ndarray
-    e_wave: np.ndarray
-    v_ptr: np.ndarray
-    v_col: np.ndarray
-    f_c: np.ndarray
-    nu_c: np.ndarray
-    waves: np.ndarray
-    omega: np.ndarray
-    phase: np.ndarray
-    function: np.ndarray
 
 
 def model_bundle(model_inp: LoopInput) -> "ModelBundle":
