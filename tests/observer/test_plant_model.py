@@ -239,3 +239,51 @@ def test_the_nominal_loops_health_is_recorded_not_warned():
     assert not [w for w in seen if issubclass(w.category, RunHealthWarning)]
     recorded = res.metadata["observer_model"]["observers_health"]["warnings"]
     assert len(recorded) == 1 and "while χ = 0" in recorded[0]
+
+
+# --- the compiled engine's one loop with the observers on their model (issue 32, item 2): each
+# observer's bundle carries its model's matrices, law and signals (bundles.model_bundle)
+def _captured_run(monkeypatch, sc, model):
+    """The RunDescription ``simulate`` hands the compiled engine for a model run."""
+    from observer.engines import compiled as compiled_pkg
+
+    seen = []
+    original = compiled_pkg.CompiledEngine.run_with_model
+
+    def spy(self, run):
+        seen.append(run)
+        return original(self, run)
+
+    monkeypatch.setattr(compiled_pkg.CompiledEngine, "run_with_model", spy)
+    observer.simulate(sc, observers="scenario", model=model, engine="compiled")
+    return seen[0]
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_one_model_loop_equals_the_plant_log_fed_to_separately_built_nominal_observers(case, monkeypatch):
+    name, T, model, written = CASES[case]
+    sc = load_scenario(name, {"simulation.t_end": T})
+    plant, ref = _reference(sc, written(sc), "compiled")
+    from observer.engines import compiled as compiled_pkg
+
+    run = _captured_run(monkeypatch, sc, model)
+    out = compiled_pkg.CompiledEngine().model_loop(run)
+    np.testing.assert_array_equal(out.q[0], plant.q)             # the master is the plant
+    np.testing.assert_array_equal(out.active, plant.active)
+    for i, s in enumerate(run.slaves, start=1):
+        np.testing.assert_allclose(out.q[i], ref.slaves[s.name].q, rtol=0, atol=1e-13)
+        np.testing.assert_allclose(out.u[i], ref.slaves[s.name].u, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(out.P[i], ref.slaves[s.name].P, rtol=0, atol=1e-12)
+    today = observer.simulate(sc, observers="scenario", engine="compiled")
+    assert np.max(np.abs(out.q[1] - today.slaves[run.slaves[0].name].q)) > 1e-6   # the model is seen
+
+
+def test_the_loops_without_a_model_carry_none_of_its_blocks():
+    """The model's per-system binding and second signal tables are only in the model loop."""
+    from observer.engines.compiled import step
+
+    for name in ("_advance_loop", "_advance_scalar_loop", "advance_members"):
+        src = step.SOURCES[name]()
+        assert "_o" not in {w[-2:] for w in src.replace("(", " ").split()} and "model" not in src.split("\n")[0]
+    src = step.model_source()
+    assert "Bu, Bq, Bf, Wp, Wi, Wv, AinvWT, Ghat, code, e = Bu_o" in src and "waves_o[" in src

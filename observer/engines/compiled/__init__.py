@@ -46,3 +46,28 @@ class CompiledEngine(TimeStepping):
 
         return run_compiled(inp, record_every, record_pre, store == "summary", tuple(RHOS if rhos is None else rhos),
                             on_chunk=on_chunk, stopper=stopper)
+
+    def model_loop(self, run: RunDescription, record_every: int = 1):
+        """The master (the plant) and the observers on their own model (``run.scenario.model``)
+        in one loop of the kernel (:func:`observer.engines.compiled.kernel.advance_model`):
+        each observer's bundle carries its model's matrices, law and signals, χ_k is the
+        plant's; returns the :class:`~observer.engines.loop.LoopOutput` (row 0 the plant; V
+        not computed: measure it against row 0 in the metric the model names).
+        ``store="full"``, dense schemes only (:func:`observer.engines.compiled.bundles.model_bundle`)."""
+        import dataclasses
+
+        from observer.engines.compiled.driver import run_compiled
+        from observer.engines.loop import Stopper, check_record_every
+        from observer.engines.timestepping import loop_input
+        from observer.plant_model import model_scenario
+        from observer.stepping import MoreauJean
+
+        sc = run.scenario
+        nominal = dataclasses.replace(run, scenario=model_scenario(sc))
+        steppers = [MoreauJean(s.system, s.law, s.h, s.t_end, s.theta, solver=s.solver,
+                               residual_tol=run.residual_tol, structure="dense") for s in (sc, nominal.scenario)]
+        other_metric = any(s.position_jumps and s.metric != "K" for s in run.slaves)
+        with Stopper(False) as stopper:
+            return run_compiled(loop_input(run, steppers[0]), check_record_every(record_every),
+                                run.record_pre or other_metric, stopper=stopper,
+                                model=loop_input(nominal, steppers[1]))

@@ -17,6 +17,7 @@ from typing import NamedTuple
 import numpy as np
 
 from observer.engines.compiled.kernel import WAVE_NAMES, fill_waves
+from observer.engines.compiled.step import MODEL_READS, MODEL_TABLES
 from observer.engines.loop import LoopInput, projection_slots
 from observer.errors import InputError
 from observer.model import grid_anchors
@@ -289,6 +290,65 @@ class SummaryBundle(NamedTuple):
     Mq: np.ndarray
     Kq: np.ndarray
     Cq: np.ndarray
+
+
+ModelBundle = NamedTuple("ModelBundle", [(name, object) for name in MODEL_READS + MODEL_TABLES
+                                         + ("omega", "phase", "function")])
+ModelBundle.__doc__ = """The observers' own model in the kernel's layout (:func:`observer.engines.compiled.bundles.model_bundle`):
+    what an observer's step reads of its system (dense structure and contacts).
+
+    Attributes
+    ----------
+    Bu, Bq, Bf, Wp, Wi, Wv, AinvWT, Ghat : ndarray
+        The model's :class:`SystemBundle` fields of the same names.
+    code : int
+    e : ndarray (m,)
+        The model's impact law and restitution.
+    e_ptr, e_col, e_coef, e_wave, v_ptr, v_col, f_c, nu_c : ndarray
+        The model's signal tables (:class:`SignalBundle`).
+    waves : ndarray (waves, k1 − kb + 1)
+        The model's waves at the current window's grid points (:func:`model_window`).
+    omega, phase, function : ndarray
+        The model's distinct waves (to build ``waves`` per window).
+    """
+
+
+def model_bundle(model_inp: LoopInput) -> "ModelBundle":
+    """The :class:`ModelBundle` of the observers' model (``model_inp``: the loop input on the
+    model's stepper); its waves empty until :func:`model_window`.
+
+    Raises
+    ------
+    InputError
+        Naming ``observer.model`` when the model's scheme is not dense (banded structure or
+        factored contacts: the model loop has the dense step only).
+    """
+    st = model_inp.stepper
+    if st.S.band is not None or st.S.factored:
+        raise InputError("observer.model", "the compiled model loop needs a dense scheme (n < "
+                         f"{FACTORED_MIN_N}, structure dense)")
+    sb, law, sig = system_bundle(model_inp), law_bundle(st), signal_tables(st.system)
+    return ModelBundle(Bu=sb.Bu, Bq=sb.Bq, Bf=sb.Bf, Wp=sb.Wp, Wi=sb.Wi, Wv=sb.Wv, AinvWT=sb.AinvWT, Ghat=sb.Ghat,
+                       code=law.code, e=law.e, e_ptr=sig.e_ptr, e_col=sig.e_col, e_coef=sig.e_coef,
+                       e_wave=sig.e_wave, v_ptr=sig.v_ptr, v_col=sig.v_col, f_c=sig.f_c, nu_c=sig.nu_c,
+                       waves=np.empty((sig.omega.size, 0)), omega=sig.omega, phase=sig.phase,
+                       function=sig.function)
+
+
+def model_window(model: "ModelBundle", t0: float, h: float, kb: int, k1: int) -> "ModelBundle":
+    """``model`` with the waves of the window kb..k1 (:func:`wave_table`)."""
+    return model._replace(waves=wave_table(t0, h, kb, k1, model.omega, model.phase, model.function))
+
+
+def model_observers(inp: LoopInput, model_inp: LoopInput) -> "ObserverBundle":
+    """The projection metrics of a model run: the master's of the plant (slot 0), every
+    observer's of the model (slots 1..: :func:`projection_slots` of ``model_inp``)."""
+    plant = observer_bundle(inp)
+    slots, NinvWT, L = projection_slots(model_inp)
+    p0 = plant.slots[0]
+    slots = np.concatenate([[0], 1 + slots[1:]]).astype(np.int64)
+    return plant._replace(slots=slots, KinvWT=np.ascontiguousarray(np.concatenate([plant.KinvWT[p0:p0 + 1], NinvWT])),
+                          L=np.ascontiguousarray(np.concatenate([plant.L[p0:p0 + 1], L])))
 
 
 def system_bundle(inp: LoopInput) -> "SystemBundle":

@@ -17,9 +17,9 @@ import time
 import numpy as np
 
 from observer.engines.compiled import kernel
-from observer.engines.compiled.bundles import (law_bundle, observer_bundle, signal_tables, specialization,
-                                               state_bundle, storage_bundle, summary_bundle, system_bundle,
-                                               window_bundle)
+from observer.engines.compiled.bundles import (law_bundle, model_bundle, model_observers, model_window,
+                                               observer_bundle, signal_tables, specialization, state_bundle,
+                                               storage_bundle, summary_bundle, system_bundle, window_bundle)
 from observer.engines.compiled.kernel import summary_start
 from observer.engines.loop import (FiniteGuard, LoopInput, LoopOutput, Stopper, allocate_records, emitter,
                                    finish, loop_records, python_step, stopped_text)
@@ -102,7 +102,7 @@ class CompiledRun:
     """
 
     def __init__(self, inp: LoopInput, record_every: int, record_pre: bool, summary: bool, rhos: tuple,
-                 warm: bool, on_chunk, stopper: Stopper | None):
+                 warm: bool, on_chunk, stopper: Stopper | None, model_inp: LoopInput | None = None):
 
         st = self.stepper = inp.stepper
         self.inp, self.warm, self.stopper, self.rhos = inp, warm, stopper, rhos
@@ -113,11 +113,14 @@ class CompiledRun:
         if self.t_rec is not None:
             self.t_rec[0] = st.time(np.zeros(1, np.int64))[0]   # row 0; rows 1.. by the loop (scalar) or tw
         self.system, self.law, self.signals = system_bundle(inp), law_bundle(st), signal_tables(st.system)
-        self.observers, self.state = observer_bundle(inp), state_bundle(inp)
+        self.model_inp = model_inp
+        self.model = None if model_inp is None else model_bundle(model_inp)
+        self.observers = observer_bundle(inp) if model_inp is None else model_observers(inp, model_inp)
+        self.state = state_bundle(inp)
         self.storage = storage_bundle(self.rec, record_every, record_pre, self.t_rec)
         self.tally = summary_bundle(inp, summary, rhos, R)
         self.spec = specialization(self.S, self.system.structure, summary, record_pre, inp.master_projection,
-                                   st.system.n, st.system.m)
+                                   st.system.n, st.system.m) if model_inp is None else "model"
         if summary:
             summary_start(self.state, self.system, self.tally)
         self.fallbacks: list[dict] = []
@@ -128,6 +131,11 @@ class CompiledRun:
 
     def kernel(self, window, k: int, k_end: int, s: int) -> tuple[int, int, int]:
         """One kernel call from (k, s) up to step k_end in the run's specialization."""
+        if self.spec == "model":
+            return kernel.advance_model(k, k_end, s, system=self.system, impact=self.law, signals=self.signals,
+                                        window=window, observers=self.observers, state=self.state,
+                                        storage=self.storage, tally=self.tally,
+                                        model=self.model_w)
         if self.spec == "scalar":
             return kernel.advance_scalar(k, k_end, system=self.system, impact=self.law, signals=self.signals,
                                          window=window, state=self.state, storage=self.storage)
@@ -175,7 +183,8 @@ class CompiledRun:
                              f"problem of step {k} (t = {float(st.time(k)):.6g}); run with "
                              'store="full", which re-solves such steps with the reference solver')
         kw = k - window.kb
-        fallback_step(self.inp, st, k, s, self.state.qs, self.state.us, self.state.chi_now,
+        inp = self.inp if self.model_inp is None or s == 0 else self.model_inp
+        fallback_step(inp, inp.stepper, k, s, self.state.qs, self.state.us, self.state.chi_now,
                        self.storage.record_every, self.storage.record_pre, self.rec,
                        self.S > 1 and bool(window.coupled[kw]), window.chi_log[kw] if window.use_log else None)
         self.fallbacks.append({"step": int(k), "t": float(st.time(k)), "system": int(s)})
@@ -193,6 +202,7 @@ class CompiledRun:
         if (self.t_rec is not None and self.spec != "scalar") or self.S > 1:
             tw = st.time(np.arange(kb, k1 + 1), out=None if self.t_rec is None else self.t_rec[kb:k1 + 1])
         window = window_bundle(self.inp, self.signals, kb, k1, tw)
+        self.model_w = None if self.model is None else model_window(self.model, st.t0, st.h, kb, k1)
         snap = _snapshot(self.mutable, self.fallbacks, st)
         k, s, stop, reason, finite = self.advance_to(window, k, s, k1)
         state = self.state
@@ -251,10 +261,13 @@ class CompiledRun:
 
 def run_compiled(inp: LoopInput, record_every: int, record_pre: bool, summary: bool = False,
                   rhos: tuple = (1e-3,), warm: bool = False, on_chunk=None,
-                  stopper: Stopper | None = None) -> LoopOutput:
+                  stopper: Stopper | None = None, model: LoopInput | None = None) -> LoopOutput:
     """Run ``inp`` on the compiled engine (:class:`CompiledRun`); ``warm``: a compile-only
-    run (no guard re-runs, no health record)."""
-    return CompiledRun(inp, record_every, record_pre, summary, rhos, warm, on_chunk, stopper).run()
+    run (no guard re-runs, no health record). ``model``: the observers on a model of their
+    own, one loop (:func:`observer.engines.compiled.kernel.advance_model`): the same
+    systems on the model's stepper (same grid; the observers' designs and metrics), the
+    master of ``inp`` the plant."""
+    return CompiledRun(inp, record_every, record_pre, summary, rhos, warm, on_chunk, stopper, model).run()
 
 
 def fallback_step(inp, stepper, k, s, qs, us, chi_now, record_every, record_pre, rec,

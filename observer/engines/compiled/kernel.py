@@ -622,6 +622,24 @@ def advance(k0, k1, s0, system, impact, signals, window, observers, state, stora
 
 
 _advance_loop = build("_advance_loop", globals())
+
+
+def advance_model(k0, k1, s0, system, impact, signals, window, observers, state, storage, tally, model):
+    """:func:`advance` (general specialization) with the observers on a model of their own: the
+    master (system 0) steps on ``system``, ``impact`` and ``signals`` (the plant), every
+    observer on the arrays of ``model`` (:class:`observer.engines.compiled.bundles.ModelBundle`:
+    its scheme's matrices, W, (Â⁻¹W)ᵀ, Ĝ, impact law, signal tables and the window's waves),
+    fed χ_k from the plant; ``observers`` holds the projection metrics of each system's own
+    model. The loop, :func:`_advance_model_loop`, is :func:`_advance_loop`'s template with the
+    per-system binding (:func:`observer.engines.compiled.step.model_form`): the loops of a run
+    without a model are not changed by it. Dense structure and contacts only. Returns
+    ``(k, s, status)`` as :func:`advance`."""
+    return _advance_model_loop(k0, k1, s0, system, impact, signals, window, observers, state, storage, tally,
+                               True, model)
+
+
+_advance_model_loop = build("_advance_model_loop", globals())
+""":func:`advance_model`'s loop (:func:`observer.engines.compiled.step.model_source`)."""
 """The step loop of :func:`advance`, generated from the step's template
 (:func:`observer.engines.compiled.step.kernel_source`)."""
 

@@ -436,6 +436,52 @@ MEMBER_SUMMARY = {"MASTER_U": "UM[kg, i]", "MASTER_Q": "QM[kg, i]", "MASTER_P": 
 """The members': the master's tables at row k + 1; the summary row in registers (numba reloads
 an array value after every store to an array, :func:`members_source`)."""
 
+
+SIGNALS_INIT = """
+fsig, nu, nu_dot, fbar = np.zeros((2, n)), np.zeros((2, m)), np.zeros((2, m)), np.zeros((1, n))
+for j in range(n):
+    $FSIG(0, j) = f_c[j]
+    $FSIG(1, j) = f_c[j]
+    $FB(0, j) = (1.0 - theta) * f_c[j] + theta * f_c[j]
+for j in range(m):
+    $NU(0, j) = nu_c[j]
+    $NU(1, j) = nu_c[j]
+"""
+"""The signal buffers at t_0: f and ν at their constants (rows 0 and 1), f̄_0, ν̇ zero."""
+SIGNALS_BOUNDS = """
+vp0, vp1, vp2, vp3 = v_ptr[0], v_ptr[1], v_ptr[2], v_ptr[3]     # loop bounds as scalars
+ep0, ep1, ep2, ep3 = e_ptr[0], e_ptr[1], e_ptr[2], e_ptr[3]
+"""
+"""The signal tables' pointers in scalars (the step's loop bounds)."""
+SIGNALS_STEP = """
+nrep = 2 if k == k0 else 1                          # the first step also needs t_k
+for rep in range(nrep):
+    kt = kw + 1 + rep - (nrep - 1)                  # column of the grid point in waves
+    for c in range(vp0, vp1):                       # the varying columns restart
+        j = $VCOL(c)
+        $FSIG(0, j) = $FSIG(1, j)
+        $FSIG(1, j) = f_c[j]
+    for c in range(vp1, vp2):
+        j = $VCOL(c)
+        $NU(0, j) = $NU(1, j)
+        $NU(1, j) = nu_c[j]
+    for c in range(vp2, vp3):
+        j = $VCOL(c)
+        $NUD(0, j) = $NUD(1, j)
+        $NUD(1, j) = 0.0
+    for i in range(ep0, ep1):                       # entries in summation order
+        $FSIG(1, e_col[i]) += e_coef[i] * waves[e_wave[i], kt]
+    for i in range(ep1, ep2):
+        $NU(1, e_col[i]) += e_coef[i] * waves[e_wave[i], kt]
+    for i in range(ep2, ep3):
+        $NUD(1, e_col[i]) += e_coef[i] * waves[e_wave[i], kt]
+for c in range(vp0, vp1):
+    j = $VCOL(c)
+    $FB(0, j) = (1.0 - theta) * $FSIG(0, j) + theta * $FSIG(1, j)
+"""
+"""The signals' step k: rows 0 ← 1 and row 1 ← t_{k+1} in the varying columns (both rows at
+the window's first step), from the tables' entries in summation order; f̄_k."""
+
 KERNEL_LOOP = '''
 $DEF
     $UNPACK
@@ -443,17 +489,10 @@ $DEF
     $BUFFERS
     Pfull_m = np.zeros(m)
     # the signals at t_k (row 0) and t_{k+1} (row 1); f̄_k in row 0 of fbar
-    fsig, nu, nu_dot, fbar = np.zeros((2, n)), np.zeros((2, m)), np.zeros((2, m)), np.zeros((1, n))
-    for j in range(n):
-        $FSIG(0, j) = f_c[j]
-        $FSIG(1, j) = f_c[j]
-        $FB(0, j) = (1.0 - theta) * f_c[j] + theta * f_c[j]
-    for j in range(m):
-        $NU(0, j) = nu_c[j]
-        $NU(1, j) = nu_c[j]
+    $SIGNALS_INIT
     $STRUCTURE
-    vp0, vp1, vp2, vp3 = v_ptr[0], v_ptr[1], v_ptr[2], v_ptr[3]     # loop bounds as scalars
-    ep0, ep1, ep2, ep3 = e_ptr[0], e_ptr[1], e_ptr[2], e_ptr[3]
+    $SIGNALS_BOUNDS
+    $MODEL_INIT
     gmin, gstep = stats[3], stats[4]           # the master's smallest gap, kept in registers
     # step k is recorded (row (k+1)/record_every) when (k+1) % record_every == 0: counted,
     # not divided, per step
@@ -462,30 +501,9 @@ $DEF
     r = (k0 + 1 + d) // record_every - 1
     for k in range(k0, k1):
         kw = k - kb
-        nrep = 2 if k == k0 else 1                          # the first step also needs t_k
-        for rep in range(nrep):
-            kt = kw + 1 + rep - (nrep - 1)                  # column of the grid point in waves
-            for c in range(vp0, vp1):                       # the varying columns restart
-                j = $VCOL(c)
-                $FSIG(0, j) = $FSIG(1, j)
-                $FSIG(1, j) = f_c[j]
-            for c in range(vp1, vp2):
-                j = $VCOL(c)
-                $NU(0, j) = $NU(1, j)
-                $NU(1, j) = nu_c[j]
-            for c in range(vp2, vp3):
-                j = $VCOL(c)
-                $NUD(0, j) = $NUD(1, j)
-                $NUD(1, j) = 0.0
-            for i in range(ep0, ep1):                       # entries in summation order
-                $FSIG(1, e_col[i]) += e_coef[i] * waves[e_wave[i], kt]
-            for i in range(ep1, ep2):
-                $NU(1, e_col[i]) += e_coef[i] * waves[e_wave[i], kt]
-            for i in range(ep2, ep3):
-                $NUD(1, e_col[i]) += e_coef[i] * waves[e_wave[i], kt]
-        for c in range(vp0, vp1):
-            j = $VCOL(c)
-            $FB(0, j) = (1.0 - theta) * $FSIG(0, j) + theta * $FSIG(1, j)
+        $BIND_PLANT
+        $SIGNALS_STEP
+        $MODEL_SIGNALS
         kl = 0                                              # row of t_k in the signal buffers
         until -= 1
         rec = until == 0
@@ -494,6 +512,7 @@ $DEF
             until = record_every
         first = s0 if k == k0 else 0
         for s in range(first, S):
+            $BIND_SYSTEM
             # --- the closed set A = act[:a] and whether the step projects
             $CLOSED_SET
             # --- u_free, the impulse, the positions
@@ -698,6 +717,58 @@ its code in the loop made every step of the 1-DOF oscillator slower (issue 32) �
 statistics; no projection (the master alone does not project in this form)."""
 
 
+ONE_MODEL = {"SIGNALS_INIT": SIGNALS_INIT, "SIGNALS_BOUNDS": SIGNALS_BOUNDS, "SIGNALS_STEP": SIGNALS_STEP,
+             "MODEL_INIT": "", "BIND_PLANT": "", "MODEL_SIGNALS": "", "BIND_SYSTEM": ""}
+"""The one-model loops' blocks: the signals of the one system, no rebinding (every system
+reads the plant's arrays, the loop's source that of a run without a model)."""
+
+MODEL_READS = ("Bu", "Bq", "Bf", "Wp", "Wi", "Wv", "AinvWT", "Ghat", "code", "e")
+"""The step's names an observer on its own model reads from the ``model`` bundle (with its
+signals ``nu``, ``nu_dot``, ``fbar``): the dense scheme's matrices, W, (Â⁻¹W)ᵀ, Ĝ, the law."""
+MODEL_TABLES = ("e_ptr", "e_col", "e_coef", "e_wave", "v_ptr", "v_col", "f_c", "nu_c", "waves")
+"""The model's signal tables and its window's waves (:class:`observer.engines.compiled.bundles.ModelBundle`)."""
+MODEL_FIELDS = tuple((f"{name}_o", name) for name in MODEL_READS + MODEL_TABLES)
+"""The ``model`` bundle's names in :func:`_advance_model_loop` (suffix ``_o``)."""
+MODEL_SIGNALS = ("fsig", "nu", "nu_dot", "fbar", "vp0", "vp1", "vp2", "vp3", "ep0", "ep1", "ep2", "ep3")
+"""The signal buffers and bounds the model's copy of the signal blocks renames (suffix ``_o``)."""
+
+MODEL_DEF = '''
+def _advance_model_loop(k0, k1, s0, system, impact, signals, window, observers, state, storage, tally, general,
+                        model):
+    """The kernel's step loop with the observers on their own model (generated by
+    :mod:`observer.engines.compiled.step`, :func:`model_source`):
+    :func:`observer.engines.compiled.kernel.advance` says what it does."""
+'''
+
+
+def _renamed(block: str, names) -> str:
+    """``block`` with every word of ``names`` suffixed ``_o`` (the model's copy)."""
+    import re
+
+    return re.sub(r"\b(" + "|".join(names) + r")\b", r"\1_o", block)
+
+
+def model_form() -> dict:
+    """The blocks of :data:`KERNEL_LOOP` for a loop whose observers carry their own model:
+    the model's signal buffers (:data:`SIGNALS_INIT`, :data:`SIGNALS_STEP` on its tables,
+    renamed), the plant's arrays kept under ``_p`` names, and per system the step's names
+    (:data:`MODEL_READS`, the signals) bound to the plant's (s = 0) or the model's."""
+    own = MODEL_SIGNALS + MODEL_TABLES
+    model_arrays = {**ARRAYS, **{k: _renamed(ARRAYS[k], own) for k in ("FSIG", "NU", "NUD", "FB", "VCOL")}}
+    copy = lambda block: expand(_renamed(fill(block, {}), own), model_arrays)  # noqa: E731
+    reads = ", ".join(MODEL_READS)
+    signals = "nu, nu_dot, fbar"
+    plant = f"{reads} = {', '.join(n + '_p' for n in MODEL_READS)}\n{signals} = nu_p, nu_dot_p, fbar_p"
+    model = f"{reads} = {', '.join(n + '_o' for n in MODEL_READS)}\n{signals} = nu_o, nu_dot_o, fbar_o"
+    init = "\n".join([f"{', '.join(n + '_p' for n in MODEL_READS)} = {reads}",
+                      f"nu_p, nu_dot_p, fbar_p = {signals}", copy(SIGNALS_INIT), copy(SIGNALS_BOUNDS)])
+    return {"SIGNALS_INIT": SIGNALS_INIT, "SIGNALS_BOUNDS": SIGNALS_BOUNDS, "SIGNALS_STEP": SIGNALS_STEP,
+            "MODEL_INIT": init, "BIND_PLANT": f"{signals} = nu_p, nu_dot_p, fbar_p",
+            "MODEL_SIGNALS": copy(SIGNALS_STEP),
+            "BIND_SYSTEM": "if s == 0:\n" + textwrap.indent(plant, "    ") + "\nelse:\n" + textwrap.indent(model, "    ")}
+
+
+
 def step_source(one: dict, form: dict) -> str:
     """:data:`DYNAMICS` with the one-contact fragments ``one`` and the loop's ``form`` (its
     conditions, :data:`ARRAY_FORM` or :data:`SCALAR_FORM`), the projection and the failure
@@ -711,7 +782,20 @@ def kernel_source() -> str:
     """The source of the kernel's loop :func:`_advance_loop` (:data:`KERNEL_LOOP`)."""
     closed = fill(CLOSED_SET, {"COUPLED": "s > 0 and coupled[kw]", "CHI_J": "chi_now[j]",
                                "AFTER_PREDICTION": KERNEL_CHI})
-    return expand(fill(KERNEL_LOOP, {**ARRAY_FORM, "DEF": KERNEL_DEF, "UNPACK": unpack(KERNEL_FIELDS),
+    return expand(fill(KERNEL_LOOP, {**ARRAY_FORM, **ONE_MODEL, "DEF": KERNEL_DEF, "UNPACK": unpack(KERNEL_FIELDS),
+                                     "SIZES": KERNEL_SIZES, "BUFFERS": BUFFERS, "CLOSED_SET": closed,
+                                     "DYNAMICS": step_source(ONE_CONTACT, ARRAY_FORM),
+                                     "OBSERVER_SUMMARY": fill(OBSERVER_SUMMARY, KERNEL_SUMMARY)}), ARRAYS)
+
+
+def model_source() -> str:
+    """The source of the kernel's loop with the observers on a model of their own,
+    :func:`_advance_model_loop` (:data:`KERNEL_LOOP` with :func:`model_form`'s blocks: the
+    master reads the plant's arrays, each observer the ``model`` bundle's)."""
+    closed = fill(CLOSED_SET, {"COUPLED": "s > 0 and coupled[kw]", "CHI_J": "chi_now[j]",
+                               "AFTER_PREDICTION": KERNEL_CHI})
+    return expand(fill(KERNEL_LOOP, {**ARRAY_FORM, **model_form(), "DEF": MODEL_DEF,
+                                     "UNPACK": unpack({**KERNEL_FIELDS, "model": MODEL_FIELDS}),
                                      "SIZES": KERNEL_SIZES, "BUFFERS": BUFFERS, "CLOSED_SET": closed,
                                      "DYNAMICS": step_source(ONE_CONTACT, ARRAY_FORM),
                                      "OBSERVER_SUMMARY": fill(OBSERVER_SUMMARY, KERNEL_SUMMARY)}), ARRAYS)
@@ -722,7 +806,7 @@ def scalar_source() -> str:
     master alone with n = m = 1 (:data:`SCALAR_FORM`), its accesses in registers
     (:data:`REGISTERS`)."""
     closed = fill(CLOSED_SET, {"COUPLED": "False", "CHI_J": "False", "AFTER_PREDICTION": ""})
-    return expand(fill(KERNEL_LOOP, {**SCALAR_FORM, "DEF": SCALAR_DEF, "UNPACK": SCALAR_UNPACK,
+    return expand(fill(KERNEL_LOOP, {**SCALAR_FORM, **ONE_MODEL, "DEF": SCALAR_DEF, "UNPACK": SCALAR_UNPACK,
                                      "SIZES": SCALAR_SIZES, "BUFFERS": BUFFERS, "CLOSED_SET": closed,
                                      "DYNAMICS": step_source(SCALAR_ONE, SCALAR_FORM),
                                      "OBSERVER_SUMMARY": "pass"}), REGISTERS)
@@ -736,7 +820,8 @@ def members_source() -> str:
                                       "OBSERVER_SUMMARY": fill(OBSERVER_SUMMARY, MEMBER_SUMMARY)}), ARRAYS)
 
 
-SOURCES = {"_advance_loop": kernel_source, "_advance_scalar_loop": scalar_source, "advance_members": members_source}
+SOURCES = {"_advance_loop": kernel_source, "_advance_scalar_loop": scalar_source, "advance_members": members_source,
+           "_advance_model_loop": model_source}
 """Each generated loop's name → the function giving its source."""
 
 
