@@ -67,16 +67,16 @@ the representation floor) and of the motion it describes (``ROUNDOFF · S``, :fu
 
 TOUCH_FACTOR = 1e3
 """The touch (graze) band of a local minimum of ψ_i is ``TOUCH_FACTOR · ROUNDOFF · S`` (S the
-motion scale of ψ_i at the minimum, :func:`touch_band`) plus ``FLOOR_FACTOR · ROUNDOFF ·
-Σ|r_ij z_j|``: round-off accumulated along a run (about 1e-13 of the orbit's size after 50 s
+motion scale of ψ_i at the minimum, :func:`touch_band`) plus the certified error of the
+float64 evaluation of ψ_i at the minimum (:meth:`FunctionalSet.errors`): round-off accumulated along a run (about 1e-13 of the orbit's size after 50 s
 on the grazing scenario) must not turn an exact graze into a miss or a crossing. A minimum
 certified above the band is a miss, below it a crossing (an impact, however shallow); the
 **guaranteed crossing depth** is the band plus the width of the minimum's certified
 enclosure (:func:`minimum_enclosure`): a crossing deeper than it is never a graze."""
 
 FLOOR_FACTOR = 16.0
-"""Multiple of the representation floor ``ROUNDOFF · Σ|r_ij z_j|`` in the touch band (it grows
-with the size of the coordinates |q|, |ν|, not with the motion: kept small)."""
+"""Multiple of the representation floor ``ROUNDOFF · Σ|r_ij z_j|`` in master.py's tolerances
+(no longer in the touch band, whose floor is the certified evaluation error of ψ_i: issue 34)."""
 
 TIME_RTOL = 2.0 * np.finfo(float).eps
 """Time resolution ``TIME_RTOL · max(|t|, τ)`` (τ the system's time scale,
@@ -258,11 +258,12 @@ def motion_tolerance(rows: np.ndarray, A: np.ndarray, z: np.ndarray, tau: float,
 
 
 def touch_band(d2, d3, floor, tau: float):
-    """Touch band at a local minimum (ψ' = 0) with ψ'' = d2, ψ''' = d3 and representation
-    floor ``floor = ROUNDOFF·Σ|r z|``: ``TOUCH_FACTOR·ROUNDOFF·(|d2|τ²/2 + |d3|τ³/6) +
-    FLOOR_FACTOR·floor``, the guaranteed crossing depth (:data:`TOUCH_FACTOR`)."""
+    """Touch band at a local minimum (ψ' = 0) with ψ'' = d2, ψ''' = d3 and floor ``floor``
+    (the certified error of the float64 value of ψ there, :func:`graze_band`):
+    ``TOUCH_FACTOR·ROUNDOFF·(|d2|τ²/2 + |d3|τ³/6) + floor``, the guaranteed crossing depth
+    (:data:`TOUCH_FACTOR`)."""
     return (TOUCH_FACTOR * ROUNDOFF * (np.abs(d2) * tau * tau / 2.0 + np.abs(d3) * tau ** 3 / 6.0)
-            + FLOOR_FACTOR * floor)
+            + floor)
 
 
 def first_cubic_zero(d0: float, d1: float, d2: float, bound: float, width: float) -> float:
@@ -602,9 +603,11 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
 def graze_band(fs: FunctionalSet, i: int, z: np.ndarray) -> float:
     """Touch band of functional i at its minimum state z: :func:`touch_band` with the
     functional set's time scale (the run's τ, of the part of the system the contacts see,
-    :meth:`observer.event.flow.Flow._coupled_scale`) and the representation floor
-    ``ROUNDOFF·Σ_j |r_ij z_j|``: the stated band of a graze (README)."""
-    floor = ROUNDOFF * float(fs.abs_d[0][i] @ np.abs(z))
+    :meth:`observer.event.flow.Flow._coupled_scale`) and, as its floor, the certified error
+    ``e_0`` of the float64 value of ψ_i at z (:meth:`FunctionalSet.errors`: a γ_N bound, not
+    a count of round-offs of ``Σ_j |r_ij z_j|``, which made a shallow crossing far from the
+    origin a touch): the stated band of a graze (README)."""
+    floor = float(fs.errors(z, 0)[0, i])
     return float(touch_band(fs.value(i, 2, z), fs.value(i, 3, z), floor, fs.tau))
 
 

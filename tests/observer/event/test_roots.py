@@ -48,3 +48,27 @@ def test_right_after_a_graze_an_open_contact_far_away_is_not_taken_as_the_zero(r
     else:
         assert zero is not None and zero.index == 1 and zero.kind == "cross"
         assert abs(zero.t - t_hit) <= 1e-14
+
+
+@pytest.mark.parametrize("offset", [0.0, 100.0])
+def test_a_shallow_crossing_far_from_the_origin_is_a_crossing_as_at_the_origin(offset):
+    """Issue 34: the graze band's floor is the certified error of the float64 evaluation of
+    ψ at the minimum (:meth:`~observer.event.roots.FunctionalSet.errors`), not a count of
+    round-offs of ``Σ|r z|``. An oscillator ``q = X + cos t`` (ω = 1, equilibrium X by a
+    constant force) with the gap ``g = q − X + 1 − D`` crosses zero by D = 1e-11 near t = π,
+    first at ``t* = arccos(D − 1)`` (closed form). Shifting the coordinates by X = 100 m
+    raised the old floor ``16·64·eps·Σ|r z|`` to 5.2e-11 > D: the same crossing was taken as
+    a touch at the minimum (t = π, 4.5e-6 s late)."""
+    depth = 1e-11
+    doc = {"scenario": {"name": "far-shallow-crossing"},
+           "system": {"M": [[1.0]], "C": [[0.0]], "K": [[1.0]], "W": [[1.0]],
+                      "forcing": {"constant": [offset]}, "gap": {"offset": [-offset + 1.0 - depth]}},
+           "impact": {"law": "newton", "restitution": 0.5},
+           "initial": {"q": [offset + 1.0], "u": [0.0]}, "simulation": {"t_end": 4.0, "h": 0.01}}
+    sc = Scenario.from_dict(doc)
+    fl = flow_for(sc.system, ())
+    z0 = fl.z(0.0, np.concatenate([sc.q0, sc.u0]))
+    zero, _, _ = first_zero(fl, fl.gap_rows, 0.0, z0, 4.0, {}, fl.time_scale)
+    t_star = np.pi - np.sqrt(2.0 * depth) * (1.0 + depth / 12.0)     # arccos(D − 1), series
+    assert zero is not None and zero.kind == "cross"
+    assert abs(zero.t - t_star) <= 1e-7
