@@ -66,7 +66,7 @@ class Decision:
                 f"at {self.bits} bits")
 
 
-def _gamma(n: int) -> float:
+def gamma(n: int) -> float:
     """γ_n = n·u/(1 − n·u) (Higham, *Accuracy and Stability*, §3.1)."""
     return n * _U / (1.0 - n * _U)
 
@@ -85,7 +85,7 @@ def dot_sign(row: np.ndarray, z: np.ndarray) -> Decision:
     val = float(r @ v)
     mag = float(np.abs(r) @ np.abs(v))
     if np.isfinite(val) and np.isfinite(mag):
-        g = _gamma(N + 1)
+        g = gamma(N + 1)
         err = mag * g * (1.0 + 2.0 * g) + N * 5e-324
         if val - err > 0.0:
             return Decision(1, val - err, val + err, 53)

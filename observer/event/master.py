@@ -68,7 +68,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from observer.contact import get_solver
-from observer.event.enclosures import dot_sign, polish_lcp
+from observer.event.enclosures import dot_sign, gamma, polish_lcp
 from observer.event.flow import Flow, flow_for
 from observer.event.roots import (FLOOR_FACTOR, ROUNDOFF, NonFiniteFlow, RootIsolationError,
                                   SearchStopped, first_zero, motion_tolerance, time_resolution,
@@ -377,7 +377,7 @@ class _Run:
             return
         P = np.abs(flow.expm(dt))
         k = 2 * self.n
-        g = _gamma(P.shape[0] + 1)
+        g = gamma(P.shape[0] + 1)
         self.err = (P[:k, :k] @ self.err) * (1.0 + 2.0 * g) + g * (P[:k] @ np.abs(z))
 
     def jump_error(self, A: list[int], lam: np.ndarray, u: np.ndarray) -> None:
@@ -385,7 +385,7 @@ class _Run:
         ``γ_{n+|A|+1}·|M⁻¹|·|W_A|·|λ|`` for the products, ``u·|u|`` for the sum."""
         n = self.n
         W = np.abs(self.system.W[:, list(A)])
-        g = _gamma(n + len(A) + 1)
+        g = gamma(n + len(A) + 1)
         self.err[n:] += g * (np.abs(self.Minv) @ (W @ np.abs(lam))) + g * np.abs(u)
 
     def gap_error(self, z: np.ndarray) -> np.ndarray:
@@ -876,12 +876,6 @@ class _Run:
             else:
                 self.touch(c, t)
         return self.project(t, x, stick), tuple(stick)
-
-
-def _gamma(n: int) -> float:
-    """γ_n = n·u/(1 − n·u), u = 2^-53 (Higham, *Accuracy and Stability*, §3.1)."""
-    u = np.finfo(float).eps / 2.0
-    return n * u / (1.0 - n * u)
 
 
 def _oscillator_block(flow: Flow, t: np.ndarray) -> np.ndarray:

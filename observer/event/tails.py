@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from observer.event.flow import Flow, flow_for
-from observer.event.enclosures import _gamma, _refine, arb_dot
+from observer.event.enclosures import _refine, arb_dot, gamma
 from observer.event.roots import RootIsolationError, first_zero, time_resolution, tolerance
 from observer.impact import impact
 
@@ -260,7 +260,7 @@ def hop_within(fl: Flow, c: int, z: np.ndarray, res: float) -> bool:
     for float64 data at the cap). No count of round-offs decides it."""
     vr, ar = _rows(fl, c)[0], _rows(fl, c)[1]
     w = -res * float(ar @ z) - 2.0 * float(vr @ z)
-    g = _gamma(z.size + 2)
+    g = gamma(z.size + 2)
     err = (res * float(np.abs(ar) @ np.abs(z)) + 2.0 * float(np.abs(vr) @ np.abs(z))) \
         * g * (1.0 + 2.0 * g) + z.size * 5e-324
     if np.isfinite(w) and np.isfinite(err) and abs(w) > err:
