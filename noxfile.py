@@ -41,13 +41,26 @@ SINGLE_THREAD_BLAS = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_
 
 
 WARM_KERNEL = ("import time, observer; from observer.loop import compile_time; "
-               "print(f'kernel compiled or loaded in {compile_time():.1f} s'); t = time.perf_counter(); "
+               "print(f'kernel compiled or loaded in {compile_time():.1f} s')")
+"""Compile the time-stepping kernel (its general, lean and scalar loops) once (numba's
+on-disk cache, ``__pycache__``) before the test workers start: the workers then only load
+it, so no two of them compile (and write) the same entry."""
+
+WARM_OTHERS = ("import time, observer; t = time.perf_counter(); "
                "observer.simulate('bouncing_ball', integrator='event', t_end=0.1); "
-               "print(f'event kernels compiled or loaded in {time.perf_counter() - t:.1f} s')")
-"""Compile the time-stepping kernel and the event integrator's kernels (``observer.event.kernels``,
-through a short event run) once (numba's on-disk cache, ``__pycache__``) before the test
-workers start: the workers then only load them, so no two of them compile (and write) the
-same entry."""
+               "print(f'event kernels compiled or loaded in {time.perf_counter() - t:.1f} s'); "
+               "t = time.perf_counter(); "
+               "observer.compare('double_mass', n=2, masters=2, t_end=0.05, h=1e-3, n_resamples=100); "
+               "print(f'ensemble members loop compiled or loaded in {time.perf_counter() - t:.1f} s')")
+"""The event integrator's kernels (``observer.event.kernels``, through a short event run)
+and the members loop of the ensembles (through a small :func:`observer.compare`), compiled
+in a second process beside :data:`WARM_KERNEL`: one per core."""
+
+WARM = ("import subprocess, sys; "
+        f"others = subprocess.Popen([sys.executable, '-c', {WARM_OTHERS!r}]); "
+        f"kernel = subprocess.run([sys.executable, '-c', {WARM_KERNEL!r}]).returncode; "
+        "sys.exit(kernel or others.wait())")
+"""Both warm-ups at once (the two cores of CI), failing if either fails."""
 
 PARALLEL = ["-n", "2", "--durations=50"]
 """pytest-xdist over the two cores of CI, with the 50 slowest tests listed; replaced by
@@ -60,7 +73,7 @@ def tests(session: nox.Session) -> None:
     warm the compiled kernel's cache, and run pytest on two workers (pass pytest args after
     --: they replace :data:`PARALLEL`)."""
     session.install("-c", CONSTRAINTS, "-e", ".[test]")
-    session.run("python", "-c", WARM_KERNEL, env=SINGLE_THREAD_BLAS)
+    session.run("python", "-c", WARM, env=SINGLE_THREAD_BLAS)
     session.run("python", "-m", "pytest", *(session.posargs or PARALLEL), env=SINGLE_THREAD_BLAS)
 
 
