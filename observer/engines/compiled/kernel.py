@@ -622,6 +622,8 @@ def advance(k0, k1, s0, system, impact, signals, window, observers, state, stora
 
 
 _advance_loop = build("_advance_loop", globals())
+"""The step loop of :func:`advance`, generated from the step's template
+(:func:`observer.engines.compiled.step.kernel_source`)."""
 
 
 def advance_model(k0, k1, s0, system, impact, signals, window, observers, state, storage, tally, model):
@@ -640,8 +642,6 @@ def advance_model(k0, k1, s0, system, impact, signals, window, observers, state,
 
 _advance_model_loop = build("_advance_model_loop", globals())
 """:func:`advance_model`'s loop (:func:`observer.engines.compiled.step.model_source`)."""
-"""The step loop of :func:`advance`, generated from the step's template
-(:func:`observer.engines.compiled.step.kernel_source`)."""
 
 
 # ---------------------------------------------------------------------------------------
