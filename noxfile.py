@@ -56,11 +56,32 @@ WARM_OTHERS = ("import time, observer; t = time.perf_counter(); "
 and the members loop of the ensembles (through a small :func:`observer.compare`), compiled
 in a second process beside :data:`WARM_KERNEL`: one per core."""
 
-WARM = ("import subprocess, sys; "
-        f"others = subprocess.Popen([sys.executable, '-c', {WARM_OTHERS!r}]); "
-        f"kernel = subprocess.run([sys.executable, '-c', {WARM_KERNEL!r}]).returncode; "
-        "sys.exit(kernel or others.wait())")
-"""Both warm-ups at once (the two cores of CI), failing if either fails."""
+WARM_COLLECT = "import pytest, sys; sys.exit(pytest.main(['--collect-only', '-q', '-p', 'no:cacheprovider']))"
+"""Collect the whole suite once: pytest's assertion rewriting of every test module (about
+14 CPU s) is then written to ``__pycache__`` (:data:`BYTECODE`) and loaded by each worker,
+instead of done by both."""
+
+
+def warm(collect: bool = True) -> str:
+    """The warm-ups at once (the two cores of CI): the kernel, then the collection of the whole
+    suite (``collect``: not when pytest is given its own arguments), in one process; the event
+    kernels and the members loop in the other; failing if any fails."""
+    tests = (f"subprocess.run([sys.executable, '-c', {WARM_COLLECT!r}], stdout=subprocess.DEVNULL).returncode"
+             if collect else "0")
+    return ("import subprocess, sys; "
+            f"others = subprocess.Popen([sys.executable, '-c', {WARM_OTHERS!r}]); "
+            f"kernel = subprocess.run([sys.executable, '-c', {WARM_KERNEL!r}]).returncode; "
+            f"tests = {tests}; "
+            "sys.exit(kernel or tests or others.wait())")
+
+
+WARM = warm()
+"""The whole suite's warm-up (:func:`warm`)."""
+
+BYTECODE = {"PYTHONDONTWRITEBYTECODE": ""}
+"""Bytecode caches on (an environment that sets ``PYTHONDONTWRITEBYTECODE`` turns them off, and
+with them the cache of pytest's rewritten test modules, so that every worker and every
+subprocess would compile them again)."""
 
 PARALLEL = ["-n", "2", "--durations=50"]
 """pytest-xdist over the two cores of CI, with the 50 slowest tests listed; replaced by
@@ -73,8 +94,9 @@ def tests(session: nox.Session) -> None:
     warm the compiled kernel's cache, and run pytest on two workers (pass pytest args after
     --: they replace :data:`PARALLEL`)."""
     session.install("-c", CONSTRAINTS, "-e", ".[test]")
-    session.run("python", "-c", WARM, env=SINGLE_THREAD_BLAS)
-    session.run("python", "-m", "pytest", *(session.posargs or PARALLEL), env=SINGLE_THREAD_BLAS)
+    env = {**SINGLE_THREAD_BLAS, **BYTECODE}
+    session.run("python", "-c", warm(collect=not session.posargs), env=env)
+    session.run("python", "-m", "pytest", *(session.posargs or PARALLEL), env=env)
 
 
 @nox.session
