@@ -15,10 +15,18 @@ arithmetic compiled, operation for operation:
 * :func:`norm_upper` — the proved upper bound of ``‖v‖₂`` of
   :func:`observer.event.flow.norm_upper`, with CPython's correctly rounded ``math.fsum``
   (Shewchuk's exact partial sums, the same final rounding): a correctly rounded sum has one
-  value, so the bound is the same float.
+  value, so the bound is the same float;
+* :func:`screen_step` — the elementwise work of one safe step of the root isolation
+  (:func:`observer.event.roots.first_zero`): finiteness, certified errors, the
+  third-derivative bounds and the quick test of ``_safe_step``, the numpy expressions'
+  operations in their order (no contraction into fused multiply-adds), so the same floats
+  and the same decisions.
 
 The results are the numpy versions' to the bit where the BLAS/LAPACK kernels agree (checked
-in ``tests/observer/event/test_kernels.py``); no decision of the event engine is made here.
+in ``tests/observer/event/test_kernels.py``); no decision of the event engine is made here
+(:func:`screen_step` computes the quick test's outcome, ``_safe_step`` acts on it). The
+matrix-vector products of the search stay in numpy (BLAS): a compiled loop sums them in
+another order.
 Compiled with ``cache=True`` (numba's on-disk cache, :mod:`observer.numba_cache`): the first
 call of a process compiles or loads them.
 """
