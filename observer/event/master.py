@@ -300,8 +300,13 @@ class _Run:
         if k < end:                                   # first sample: from the segment start
             z_cur = self._sample(flow, k, tg[k] - t_a, z_cur, forced)
             t_cur, k = tg[k], k + 1
-        k_osc = k                                     # the oscillator states of all of them, once
-        osc = _oscillator_block(flow, tg[k:end]) if k < end and flow.freqs else None
+        # the oscillator states of the samples, once: of all of them when the held forces'
+        # impulses need every row's, else of each block's last row (the next block's start)
+        k_osc, osc = k, None
+        if k < end and flow.freqs:
+            last = np.minimum(np.arange(k + SAMPLE_BLOCK - 1, end + SAMPLE_BLOCK - 1, SAMPLE_BLOCK),
+                              end - 1)
+            osc = _oscillator_block(flow, tg[k:end] if forced else tg[last])
         while k < end:                                # the rest: blocks of equal steps h
             if self.should_stop is not None and (sig := self.should_stop()):
                 self.halted, self.k_next = sig, k     # a signal: the rows so far are whole
@@ -311,8 +316,10 @@ class _Run:
             # (count, N): one matrix-vector product of the stacked rows (a stacked matmul pays a
             # BLAS call per sample; the samples' sums may differ in their last bit for N ≥ 9)
             Z = (stack.reshape(-1, stack.shape[-1]) @ z_cur).reshape(count, -1)
-            if osc is not None:
+            if osc is not None and forced:
                 Z[:, 2 * self.n:-1] = osc[k - k_osc:k - k_osc + count]
+            elif osc is not None:                     # the other rows' are not read
+                Z[-1, 2 * self.n:-1] = osc[(k - k_osc) // SAMPLE_BLOCK]
             Z[:, -1] = 1.0
             self.X[k:k + count] = Z[:, :2 * self.n]
             if forced:

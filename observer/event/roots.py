@@ -883,9 +883,10 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     window = WINDOW / fs.norm_bound if fs.norm_bound > 0.0 else np.inf   # inf: ψ polynomial
     growth = exp_upper(up(fs.certified_norm * min(window, t_end - a) * (1.0 + 2.0 * _U)))
     t_ok, z_ok = a, za                                # the last search point with finite values
+    res_end = time_resolution(t_end)
     for count in range(MAX_STEPS):
         _look(should_stop, count, a, za)
-        if t_end - a <= time_resolution(t_end):        # a remainder of a few ulp: flow
+        if t_end - a <= res_end:                      # a remainder of a few ulp: flow
             z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
             _check_finite(t_end, z, np.zeros((1, 1)), t_ok, z_ok)
             return None, t_end, z
@@ -899,7 +900,8 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
         if not bound_finite:                          # the certified bound overflows: no search
             i = int(np.flatnonzero(~np.isfinite(bound))[0])
             raise NonFiniteFlow(a, a, za, ("bound", 3, i), float(bound[i]))
-        step, found = _safe_step(fs, a, za, d, errs, bound, w, certified, quick)
+        step, found = (w, []) if quick.all() else _safe_step(fs, a, za, d, errs, bound, w, certified,
+                                                              quick)
         # no functional without a found zero vanishes in (a, a + step): the earliest found zero
         # within that reach is the first zero; one beyond it is recomputed later
         if found:
