@@ -151,6 +151,8 @@ t1 = time.perf_counter()
 K.expm_pade13(np.eye(3))
 K.blocked_expm(np.eye(2), np.ones(2), np.arange(2), np.array([0, 1, 2]), 0.5)
 K.norm_upper(np.ones(3))
+K.screen_step(np.ones((4, 1)), np.ones((6, 1)), np.ones(3), np.ones(3), np.arange(3), 1.0, np.ones(1),
+              1.0, 0.5, 0.125)
 print(time.perf_counter() - t1)
 """
 """A fresh process: import the kernels, call each once; prints the seconds of the calls."""

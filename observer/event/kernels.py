@@ -15,10 +15,18 @@ arithmetic compiled, operation for operation:
 * :func:`norm_upper` — the proved upper bound of ``‖v‖₂`` of
   :func:`observer.event.flow.norm_upper`, with CPython's correctly rounded ``math.fsum``
   (Shewchuk's exact partial sums, the same final rounding): a correctly rounded sum has one
-  value, so the bound is the same float.
+  value, so the bound is the same float;
+* :func:`screen_step` — the elementwise work of one safe step of the root isolation
+  (:func:`observer.event.roots.first_zero`): finiteness, certified errors, the
+  third-derivative bounds and the quick test of ``_safe_step``, the numpy expressions'
+  operations in their order (no contraction into fused multiply-adds), so the same floats
+  and the same decisions.
 
 The results are the numpy versions' to the bit where the BLAS/LAPACK kernels agree (checked
-in ``tests/observer/event/test_kernels.py``); no decision of the event engine is made here.
+in ``tests/observer/event/test_kernels.py``); no decision of the event engine is made here
+(:func:`screen_step` computes the quick test's outcome, ``_safe_step`` acts on it). The
+matrix-vector products of the search stay in numpy (BLAS): a compiled loop sums them in
+another order.
 Compiled with ``cache=True`` (numba's on-disk cache, :mod:`observer.numba_cache`): the first
 call of a process compiles or loads them.
 """
@@ -171,3 +179,51 @@ def norm_upper(v: np.ndarray) -> float:
     r = math.sqrt(s) * (1.0 + 4.0 * _U)
     r = np.nextafter(np.nextafter(r, np.inf), np.inf)
     return math.ldexp(r, e)
+
+
+@njit(**JIT)
+def screen_step(d: np.ndarray, both: np.ndarray, za: np.ndarray, scale: np.ndarray,
+                support: np.ndarray, inflate: float, third_norm: np.ndarray, growth: float,
+                w: float, w3: float):
+    """The elementwise work of one safe step of :func:`observer.event.roots.first_zero` on
+    the functionals' derivatives ``d`` (shape (4, p), ``ψ^{(k)}(a)``) and stacked sums
+    ``both`` (shape (6, p), :meth:`observer.event.roots.FunctionalSet.sums` before its
+    inflation) at the state ``za``, in one call: the same IEEE operations in the same order
+    as the numpy expressions they replace (``w3 = w ** 3``, Python's pow), so the same floats.
+
+    Returns ``(finite, errs, bound, bound_finite, quick)``: whether ``za`` and ``d`` are
+    finite; the certified errors ``inflate · both[3:]``; the third-derivative bounds
+    ``B_i = up(‖r_3 T‖_i · (growth · ‖(T⁻¹z)_S‖) · (1 + 4u))`` (the state norm
+    :func:`norm_upper` of ``za[S]/scale[S]``, S = ``support``); whether they are all finite;
+    and the quick test of :func:`observer.event.roots._safe_step` (the cubic lower bound
+    positive over the whole window ``w``)."""
+    finite = True
+    for j in range(za.size):
+        if not math.isfinite(za[j]):
+            finite = False
+    p = d.shape[1]
+    for k in range(d.shape[0]):
+        for i in range(p):
+            if not math.isfinite(d[k, i]):
+                finite = False
+    errs = np.empty((3, p))
+    for k in range(3):
+        for i in range(p):
+            errs[k, i] = inflate * both[3 + k, i]
+    zs = np.empty(support.size)
+    for j in range(support.size):
+        zs[j] = za[support[j]] / scale[support[j]]
+    grown = growth * norm_upper(zs)
+    bound = np.empty(p)
+    quick = np.empty(p, dtype=np.bool_)
+    bound_finite = True
+    for i in range(p):
+        b = np.nextafter(third_norm[i] * grown * (1.0 + 4.0 * _U), np.inf)
+        bound[i] = b
+        if not math.isfinite(b):
+            bound_finite = False
+        l0, l1, l2 = d[0, i] - errs[0, i], d[1, i] - errs[1, i], d[2, i] - errs[2, i]
+        m1 = l1 if l1 < 0.0 or math.isnan(l1) else 0.0    # np.minimum(l1, 0.0): its 0.0 on ties
+        m2 = l2 if l2 < 0.0 or math.isnan(l2) else 0.0
+        quick[i] = l0 > 0.0 and l0 + m1 * w + m2 * w * w / 2 - b * w3 / 6 > 0.0
+    return finite, errs, bound, bound_finite, quick

@@ -300,14 +300,26 @@ class _Run:
         if k < end:                                   # first sample: from the segment start
             z_cur = self._sample(flow, k, tg[k] - t_a, z_cur, forced)
             t_cur, k = tg[k], k + 1
+        # the oscillator states of the samples, once: of all of them when the held forces'
+        # impulses need every row's, else of each block's last row (the next block's start)
+        k_osc, osc = k, None
+        if k < end and flow.freqs:
+            last = np.minimum(np.arange(k + SAMPLE_BLOCK - 1, end + SAMPLE_BLOCK - 1, SAMPLE_BLOCK),
+                              end - 1)
+            osc = _oscillator_block(flow, tg[k:end] if forced else tg[last])
         while k < end:                                # the rest: blocks of equal steps h
             if self.should_stop is not None and (sig := self.should_stop()):
                 self.halted, self.k_next = sig, k     # a signal: the rows so far are whole
                 return
             count = min(end - k, SAMPLE_BLOCK)
             stack = flow.power_stack(self.h, count)
-            Z = stack @ z_cur                         # (count, N)
-            Z[:, 2 * self.n:-1] = _oscillator_block(flow, tg[k:k + count])
+            # (count, N): one matrix-vector product of the stacked rows (a stacked matmul pays a
+            # BLAS call per sample; the samples' sums may differ in their last bit for N ≥ 9)
+            Z = (stack.reshape(-1, stack.shape[-1]) @ z_cur).reshape(count, -1)
+            if osc is not None and forced:
+                Z[:, 2 * self.n:-1] = osc[k - k_osc:k - k_osc + count]
+            elif osc is not None:                     # the other rows' are not read
+                Z[-1, 2 * self.n:-1] = osc[(k - k_osc) // SAMPLE_BLOCK]
             Z[:, -1] = 1.0
             self.X[k:k + count] = Z[:, :2 * self.n]
             if forced:
@@ -880,10 +892,11 @@ class _Run:
 
 def _oscillator_block(flow: Flow, t: np.ndarray) -> np.ndarray:
     """Oscillator states ``(cos ω_k t, sin ω_k t)_k`` at the times t, shape (len(t), 2F)."""
-    w = np.asarray(flow.freqs, dtype=float)
+    w = flow._freq_array
     out = np.empty((t.size, 2 * w.size))
-    out[:, 0::2] = np.cos(np.outer(t, w))
-    out[:, 1::2] = np.sin(np.outer(t, w))
+    wt = np.outer(t, w)
+    out[:, 0::2] = np.cos(wt)
+    out[:, 1::2] = np.sin(wt)
     return out
 
 

@@ -55,7 +55,9 @@ import numpy as np
 
 from numba import njit
 
-from observer.event.enclosures import PRECISION_CAP, PRECISION_START, coupled, dot_sign, flow_value
+from observer.event import kernels
+from observer.event.enclosures import (PRECISION_CAP, PRECISION_START, Decision, coupled, dot_sign,
+                                       flow_sign, flow_value)
 from observer.event.flow import Flow, exp_upper, norm_upper, spectral_norm_upper, up
 
 WINDOW = 0.5
@@ -401,6 +403,7 @@ class FunctionalSet:
         mask = coupled(flow.A, np.any(self.rows != 0.0, axis=0))
         self.support = np.flatnonzero(mask)
         self._full = bool(mask.all())
+        self._screen_support = np.arange(flow.N) if self._full else self.support   # screen()
         if self._full:
             self.norm_bound = flow.norm_bound
         else:
@@ -439,6 +442,20 @@ class FunctionalSet:
         errors of :meth:`errors` (kmax = 2), k = 0..2, shape (3, p) each: one stacked product."""
         both = self._abs_rows @ np.abs(z)
         return both[:3], self._inflate * both[3:]
+
+    def screen(self, z: np.ndarray, growth: float, w: float) -> tuple:
+        """One safe step's evaluations at z over a window w (:func:`first_zero`): the
+        derivatives ψ^{(k)}, k = 0..3 (:meth:`derivatives`), then, in one compiled call
+        (:func:`observer.event.kernels.screen_step`, the same floats as the numpy expressions),
+        whether z and they are finite, the certified errors e_0..2 (:meth:`sums`), the
+        third-derivative bounds ``B_i`` (growth times :meth:`state_norm`) and whether they are
+        finite, and the quick test of :func:`_safe_step`. Returns ``(d, finite, errs, bound,
+        bound_finite, quick)``."""
+        d = self._d4 @ z
+        both = self._abs_rows @ np.abs(z)
+        out = kernels.screen_step(d, both, z, self.flow.scale, self._screen_support, self._inflate,
+                                  self.third_norm, float(growth), float(w), float(w) ** 3)
+        return (d,) + out
 
     def _extend(self, k: int) -> None:
         """Derivative rows and their error bounds up to order k."""
@@ -674,8 +691,11 @@ def minimum_enclosure(fs: FunctionalSet, i: int, za: np.ndarray, tau_m: float, s
     return float(lower), float(hi0)
 
 
-def _reset(flow: Flow, t: float, z: np.ndarray) -> np.ndarray:
-    z = z.copy()
+def _reset(flow: Flow, t: float, z: np.ndarray, copy: bool = True) -> np.ndarray:
+    """z with its oscillator states set from t analytically and its constant state 1 (a
+    copy; in place with ``copy=False``, for a state just computed)."""
+    if copy:
+        z = z.copy()
     z[2 * flow.n:-1] = flow.oscillators(t)
     z[-1] = 1.0
     return z
@@ -698,8 +718,6 @@ def derivative_sign(fs: FunctionalSet, i: int, k: int, za: np.ndarray, d: float,
     (e its certified error, :meth:`FunctionalSet.errors`) first, then ball arithmetic
     (``r·A^k·z`` from the float data, :func:`observer.event.enclosures.flow_sign` at s = 0).
     Returns the :class:`~observer.event.enclosures.Decision`."""
-    from observer.event.enclosures import Decision, flow_sign
-
     if d - e > 0.0:
         return Decision(1, d - e, d + e, 53)
     if d + e < 0.0:
@@ -745,7 +763,8 @@ def _near_zero(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d: np.ndarra
 
 
 def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, err: np.ndarray,
-               bound: np.ndarray, w: float, certified: dict[int, float]) -> tuple[float, list[Zero]]:
+               bound: np.ndarray, w: float, certified: dict[int, float], quick: np.ndarray | None = None
+               ) -> tuple[float, list[Zero]]:
     """Largest step from a over which no functional is certified to vanish, and the zeros
     found exactly on the way (convex minima, zeros at a). Vectorised quick test first: a
     functional whose cubic lower bound (the derivatives minus their certified errors
@@ -754,13 +773,17 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, err: 
 
     Every other decision is three-valued (:func:`derivative_sign`): ψ_i(a) certainly
     positive (its certified lower bound starts the cubic), or not — then it is at a zero
-    unless leaving (ψ_i' > 0, or ψ_i' = 0 exactly and ψ_i'' > 0); no tolerance."""
+    unless leaving (ψ_i' > 0, or ψ_i' = 0 exactly and ψ_i'' > 0); no tolerance. ``quick``:
+    the quick test's outcome when already computed (:meth:`FunctionalSet.screen`)."""
     d0, d1, d2 = d[0], d[1], d[2]
-    l0, l1, l2 = d0 - err[0], d1 - err[1], d2 - err[2]   # certified lower bounds
     step = w
     found: list[Zero] = []
-    quick = (l0 > 0.0) & (
-        l0 + np.minimum(l1, 0.0) * w + np.minimum(l2, 0.0) * w * w / 2 - bound * w ** 3 / 6 > 0.0)
+    if quick is not None and quick.all():
+        return step, found
+    l0, l1, l2 = d0 - err[0], d1 - err[1], d2 - err[2]   # certified lower bounds
+    if quick is None:
+        quick = (l0 > 0.0) & (l0 + np.minimum(l1, 0.0) * w + np.minimum(l2, 0.0) * w * w / 2
+                              - bound * w ** 3 / 6 > 0.0)
     todo = np.flatnonzero(~quick).tolist()
     if not todo:
         return step, found
@@ -860,24 +883,25 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     window = WINDOW / fs.norm_bound if fs.norm_bound > 0.0 else np.inf   # inf: ψ polynomial
     growth = exp_upper(up(fs.certified_norm * min(window, t_end - a) * (1.0 + 2.0 * _U)))
     t_ok, z_ok = a, za                                # the last search point with finite values
+    res_end = time_resolution(t_end)
     for count in range(MAX_STEPS):
         _look(should_stop, count, a, za)
-        if t_end - a <= time_resolution(t_end):        # a remainder of a few ulp: flow
+        if t_end - a <= res_end:                      # a remainder of a few ulp: flow
             z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
             _check_finite(t_end, z, np.zeros((1, 1)), t_ok, z_ok)
             return None, t_end, z
         w = min(window, t_end - a)
-        d = fs.derivatives(za)
-        _check_finite(a, za, d, t_ok, z_ok)           # overflow: a stop (NonFiniteFlow)
+        # derivatives, errors, bounds B_i and the quick test in one compiled call
+        d, finite, errs, bound, bound_finite, quick = fs.screen(za, growth, w)
+        if not finite:
+            _check_finite(a, za, d, t_ok, z_ok)       # overflow: a stop (NonFiniteFlow)
         t_ok, z_ok = a, za
-        _, errs = fs.sums(za)
         res = time_resolution(a)
-        bound = np.nextafter(fs.third_norm * (growth * fs.state_norm(za))
-                             * (1.0 + 4.0 * _U), np.inf)
-        if not np.isfinite(bound).all():              # the certified bound overflows: no search
+        if not bound_finite:                          # the certified bound overflows: no search
             i = int(np.flatnonzero(~np.isfinite(bound))[0])
             raise NonFiniteFlow(a, a, za, ("bound", 3, i), float(bound[i]))
-        step, found = _safe_step(fs, a, za, d, errs, bound, w, certified)
+        step, found = (w, []) if quick.all() else _safe_step(fs, a, za, d, errs, bound, w, certified,
+                                                              quick)
         # no functional without a found zero vanishes in (a, a + step): the earliest found zero
         # within that reach is the first zero; one beyond it is recomputed later
         if found:
@@ -890,7 +914,7 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
             if zero is not None:
                 return zero, zero.t, zero.z
             step = min(res, w)                       # nothing approaches: time moves on
-        a, za = a + step, _reset(flow, a + step, flow.expm(step) @ za)
+        a, za = a + step, _reset(flow, a + step, flow.expm(step) @ za, copy=False)
     raise RootIsolationError(f"root isolation stalled near t = {a!r} ({MAX_STEPS} safe steps)", a, za)
 
 

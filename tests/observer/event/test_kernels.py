@@ -112,3 +112,73 @@ def test_norm_upper_bounds_and_matches_reference():
         assert b == norm_upper_reference(v)
     assert kernels.norm_upper(np.array([1.0, np.nan])) == np.inf
     assert kernels.norm_upper(np.zeros(3)) == 0.0
+
+
+def _screen_reference(d, both, za, scale, support, inflate, third_norm, growth, w):
+    """The numpy expressions of :func:`observer.event.roots.first_zero` and ``_safe_step``
+    that :func:`kernels.screen_step` replaced (as they were written there)."""
+    from observer.event.flow import norm_upper
+
+    finite = bool(np.isfinite(za).all() and np.isfinite(d).all())
+    errs = inflate * both[3:]
+    U = np.finfo(float).eps / 2.0
+    bound = np.nextafter(third_norm * (growth * norm_upper(za[support] / scale[support]))
+                         * (1.0 + 4.0 * U), np.inf)
+    l0, l1, l2 = d[0] - errs[0], d[1] - errs[1], d[2] - errs[2]
+    quick = (l0 > 0.0) & (
+        l0 + np.minimum(l1, 0.0) * w + np.minimum(l2, 0.0) * w * w / 2 - bound * w ** 3 / 6 > 0.0)
+    return finite, errs, bound, bool(np.isfinite(bound).all()), quick
+
+
+def test_screen_step_is_the_numpy_expressions_bit_for_bit():
+    """``screen_step`` gives the very floats and booleans of the numpy expressions it
+    replaced in the safe step (errors, third-derivative bounds, quick test, finiteness), on
+    random data spanning 1e-12 … 1e12 with signed zeros, quick tests on both sides and
+    non-finite states; and it is the search's own: a flow's functional set screens a state
+    as the reference does."""
+    rng = np.random.default_rng(7)
+    quick_seen = set()
+    for trial in range(400):
+        p, N = int(rng.integers(1, 5)), int(rng.integers(2, 10))
+        mag = 10.0 ** rng.uniform(-12, 12, (4, p))
+        d = rng.standard_normal((4, p)) * mag
+        d[0] = np.abs(d[0])
+        if trial % 7 == 0:
+            d[1, 0] = -0.0
+            d[2, 0] = 0.0
+        both = np.abs(rng.standard_normal((6, p))) * mag[[0, 1, 2, 0, 1, 2]] * 10.0 ** rng.uniform(-16, -1)
+        za = rng.standard_normal(N) * 10.0 ** rng.uniform(-6, 6)
+        if trial % 50 == 0:
+            za[int(rng.integers(N))] = np.inf if trial % 100 else np.nan
+        scale = 2.0 ** rng.integers(-8, 8, N).astype(float)
+        support = np.sort(rng.choice(N, int(rng.integers(1, N + 1)), replace=False)).astype(np.int64)
+        third = np.abs(rng.standard_normal(p)) * 10.0 ** rng.uniform(-3, 3)
+        growth, w = float(rng.uniform(1.0, 1.7)), float(10.0 ** rng.uniform(-6, 1))
+        if trial % 2:                  # the quick test on its edge: ψ(a) just cancels the cubic's drop
+            errs, bound = _screen_reference(d, both, za, scale, support, 1.0 + 1e-15, third, growth,
+                                            w)[1:3]
+            d[1], d[2] = -np.abs(d[1]), -np.abs(d[2])
+            drop = ((d[1] - errs[1]) * w + (d[2] - errs[2]) * w * w / 2 - bound * w ** 3 / 6)
+            d[0] = errs[0] - drop * (1.0 + rng.integers(-4, 5, p) * np.finfo(float).eps)
+        args = (d, both, za, scale, support, 1.0 + 1e-15, third, growth, w)
+        got = kernels.screen_step(*args, w ** 3)
+        ref = _screen_reference(*args)
+        assert got[0] == ref[0] and got[3] == ref[3]
+        for a, b in ((got[1], ref[1]), (got[2], ref[2])):
+            assert np.array_equal(a, b, equal_nan=True) and np.array_equal(np.signbit(a), np.signbit(b))
+        assert np.array_equal(got[4], ref[4])
+        quick_seen.update(bool(q) for q in ref[4])
+    assert quick_seen == {True, False}
+    from observer.event.roots import WINDOW, functional_set
+
+    fl = flow_for(observer.load_scenario("impact_oscillator").system)
+    fs = functional_set(fl, fl.gap_rows, fl.time_scale)
+    z = fl.z(0.3, np.array([0.1, -0.2]))
+    d, *got = fs.screen(z, 1.3, WINDOW / fs.norm_bound)
+    assert np.array_equal(d, fs.derivatives(z))
+    S = np.arange(fl.N) if fs._full else fs.support      # the block of FunctionalSet.state_norm
+    ref = _screen_reference(d, fs._abs_rows @ np.abs(z), z, fl.scale, S, fs._inflate,
+                            fs.third_norm, 1.3, WINDOW / fs.norm_bound)
+    assert fs.state_norm(z) == norm_upper_reference(z[S] / fl.scale[S])
+    assert got[0] == ref[0] and np.array_equal(got[1], fs.sums(z)[1])
+    assert all(np.array_equal(a, b) for a, b in zip(got[1:], ref[1:]))
