@@ -237,13 +237,22 @@ def test_an_unwritable_numba_cache_is_a_warning(tmp_path, monkeypatch):
     monkeypatch.setattr(caching.IndexDataCacheFile, "save",
                         lambda self, key, data: (_ for _ in ()).throw(PermissionError(13, "Permission denied")))
     from numba import njit
-
-    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    from numba.core import config
 
     def g(x):
         return x * 3.0 + 0.5
-    with pytest.warns(CacheWarning, match="cannot be written"):
-        assert njit(cache=True)(g)(2.0) == 6.5
+    before = config.CACHE_DIR
+    try:
+        with monkeypatch.context() as env:
+            env.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+            with pytest.warns(CacheWarning, match="cannot be written"):
+                assert njit(cache=True)(g)(2.0) == 6.5
+    finally:
+        # numba's compiler re-read NUMBA_CACHE_DIR into its config: read it again now that the
+        # variable is back, or every function this process decorates later is looked up (and
+        # compiled, for tens of seconds) in tmp_path's empty cache
+        config.reload_config()
+    assert config.CACHE_DIR == before
 
 
 # -- item 19: hangs and silent waits --------------------------------------------------------
