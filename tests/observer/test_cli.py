@@ -1,16 +1,24 @@
-"""The command line ``python -m observer {scenarios, show, run, plot}`` in subprocesses.
+"""The command line ``python -m observer {scenarios, show, run, plot}``.
 
-Every command is independent, so a module fixture runs them all concurrently (a few at a
-time) in one temporary directory; the tests then inspect exit status, stdout, stderr and
-the files written. Interpreter start-up (about 1 s, mostly imports) dominates the cost.
+A module fixture runs the commands once in one temporary directory; the tests then inspect
+exit status, stdout, stderr and the files written. ``scenarios`` and the error cases of
+:data:`ERROR_CASES` run as real subprocesses (the interpreter's exit status and its whole
+stderr: one line, no traceback), a few at a time; the runs that write results and the plot
+run meanwhile in this process through :func:`observer.cli.main` (:func:`main_in_process`):
+a subprocess would add its start-up and the load of the compiled kernel (about 1.5 s of
+CPU each) to the same code. ``test_result_metadata_records_the_command_as_typed`` runs a
+result-writing command as a subprocess.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
+from unittest import mock
 from pathlib import Path
 
 import numpy as np
@@ -36,10 +44,19 @@ def run_cli(args, cwd):
                           capture_output=True, text=True, timeout=300)
 
 
-def run_all(commands: dict, cwd, workers=4) -> dict:
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        futures = {key: pool.submit(run_cli, args, cwd) for key, args in commands.items()}
-        return {key: f.result() for key, f in futures.items()}
+def main_in_process(args, cwd) -> subprocess.CompletedProcess:
+    """``python -m observer ARGS`` in ``cwd`` through :func:`observer.cli.main` in this process:
+    (status, stdout, stderr); ``sys.argv`` is the module run's (what the result records)."""
+    from observer.cli import main
+    args = [str(a) for a in args]
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.chdir(cwd), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
+            mock.patch.object(sys, "argv", [str(REPO / "observer" / "__main__.py"), *args]):
+        try:
+            rc = main(args)
+        except SystemExit as exc:
+            rc = exc.code
+    return subprocess.CompletedProcess(args, rc, out.getvalue(), err.getvalue())
 
 
 # Errors run as real subprocesses: name -> (arguments, text that the error line must contain)
@@ -89,12 +106,12 @@ MORE_ERROR_CASES = {
 
 @pytest.fixture(scope="module")
 def cli(tmp_path_factory):
-    """Run every subprocess command once; returns (working directory, {key: CompletedProcess})."""
+    """Run every command once (module docstring); returns (working directory, {key: CompletedProcess})."""
     d = tmp_path_factory.mktemp("cli")
     (d / "invalid.toml").write_text("[simulation]\nh = [1e-3,\n")
     (d / "afile.txt").write_text("not a directory\n")
-    wave1 = {
-        "scenarios": ["scenarios"],
+    subprocesses = {"scenarios": ["scenarios"], **{k: v[0] for k, v in ERROR_CASES.items()}}
+    in_process = {                      # in order: the plot reads obs.csv
         "run-csv": ["run", "bouncing_ball", "--h", "1e-3", "--t-end", "0.05", "--out", "bb.csv"],
         "run-parquet": ["run", "bouncing_ball", "--h", "1e-3", "--t-end", "0.05",
                         "--out", "out/bb.parquet"],
@@ -102,10 +119,12 @@ def cli(tmp_path_factory):
                       "--t-end", "0.5", "--out", "chain2.csv"],
         "run-observers": ["run", "double_mass", "--h", "1e-3", "--t-end", "1.0",
                           "--observers", "jump,nojump", "--out", "obs.csv"],
+        "plot": ["plot", "obs.csv", "--out", "figs/obs.png"],
     }
-    wave1.update({k: v[0] for k, v in ERROR_CASES.items()})
-    results = run_all(wave1, d)
-    results.update(run_all({"plot": ["plot", "obs.csv", "--out", "figs/obs.png"]}, d))
+    with ThreadPoolExecutor(max_workers=3) as pool:
+        futures = {key: pool.submit(run_cli, args, d) for key, args in subprocesses.items()}
+        results = {key: main_in_process(args, d) for key, args in in_process.items()}
+        results.update({key: f.result() for key, f in futures.items()})
     return d, results
 
 
