@@ -59,10 +59,16 @@ def _run_in_process(script: str, out: Path, *extra: str) -> subprocess.Completed
             warnings.catch_warnings(record=True) as said:
         warnings.resetwarnings()
         warnings.simplefilter("default")
+        plt = sys.modules.get("matplotlib.pyplot")
+        open_before = set(plt.get_fignums()) if plt else set()
         try:
             runpy.run_path(argv[0], run_name="__main__")
         except SystemExit as exc:
             code = 0 if exc.code is None else exc.code if isinstance(exc.code, int) else 1
+        finally:                                      # the script's figures (its process would end here)
+            plt = sys.modules.get("matplotlib.pyplot")
+            for num in set(plt.get_fignums()) - open_before if plt else ():
+                plt.close(num)
     err = stderr.getvalue() + "".join(warnings.formatwarning(w.message, w.category, w.filename, w.lineno)
                                       for w in said)
     return subprocess.CompletedProcess(argv, code, stdout.getvalue(), err)
