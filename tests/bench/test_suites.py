@@ -313,13 +313,16 @@ def test_rerun_of_a_finished_suite_computes_nothing(smoke_run):
     assert _snapshot(results_path("smoke", out)) == before
 
 
-def test_interrupted_suite_resumes_without_recomputing(tmp_path):
+def test_interrupted_suite_resumes_without_recomputing(tmp_path, capsys):
     """Kill `python -m bench run smoke` (in-process mode) after its first finished case, then
-    rerun: the case files written before the kill are kept byte for byte, the rest is added,
-    every case exactly once."""
+    rerun (here, through bench's main: the same command without a second interpreter start-up
+    and kernel load): the case files written before the kill are kept byte for byte, the rest
+    is added, every case exactly once."""
+    from bench.__main__ import main
+
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    cmd = [sys.executable, "-m", "bench", "run", "smoke", "--out", str(tmp_path), "--no-progress",
-           "--workers", "0"]
+    args = ["run", "smoke", "--out", str(tmp_path), "--no-progress", "--workers", "0"]
+    cmd = [sys.executable, "-m", "bench", *args]
     store = CaseStore(results_path("smoke", tmp_path))
     proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
@@ -335,15 +338,17 @@ def test_interrupted_suite_resumes_without_recomputing(tmp_path):
     if len(done_before) >= len(SMOKE.cases) - 1:
         pytest.skip("the suite finished before it could be killed")
     assert len(done_before) >= 1
-    res = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
-    assert res.returncode == 0, res.stdout + res.stderr
+    capsys.readouterr()
+    code = main(args)
+    res = capsys.readouterr()
+    assert code == 0, res.out + res.err
     after = _snapshot(store.folder)
     assert {k: after[k] for k in before} == before                        # not recomputed
     rows = store.rows()
     keys = [(r["case_id"], r["row"]) for r in rows]
     assert len(keys) == len(set(keys))                                    # no duplicates
     assert {r["case_id"] for r in rows} >= {c.case_id for c in SMOKE.cases if c.kind != "checks"}
-    assert f"{len(done_before)} already done" in res.stdout
+    assert f"{len(done_before)} already done" in res.out
 
 
 def test_limit_runs_only_the_first_cases_then_resume(tmp_path):
@@ -470,14 +475,19 @@ def test_failed_case_is_reported_and_retried(tmp_path):
     assert CaseStore(results_path("bad", tmp_path)).done_ids() == set()
 
 
-def test_cli_list_show_status(tmp_path):
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    out = subprocess.run([sys.executable, "-m", "bench", "list"], cwd=REPO, env=env,
-                         capture_output=True, text=True, check=True).stdout
+def test_cli_list_show_status(tmp_path, capsys):
+    """``list`` and ``status`` through bench's main (in this process), the refused suite as
+    ``python -m bench`` in a subprocess (the interpreter's exit status)."""
+    from bench.__main__ import main
+
+    capsys.readouterr()
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
     assert "quick" in out and "full" in out and "smoke" in out
-    out = subprocess.run([sys.executable, "-m", "bench", "status", "smoke", "--out", str(tmp_path)],
-                         cwd=REPO, env=env, capture_output=True, text=True, check=True).stdout
+    assert main(["status", "smoke", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
     assert f"0/{len(SMOKE.cases)}" in out
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
     bad = subprocess.run([sys.executable, "-m", "bench", "run", "nope"], cwd=REPO, env=env,
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "unknown suite" in bad.stderr

@@ -1,16 +1,24 @@
-"""The command line ``python -m observer {scenarios, show, run, plot}`` in subprocesses.
+"""The command line ``python -m observer {scenarios, show, run, plot}``.
 
-Every command is independent, so a module fixture runs them all concurrently (a few at a
-time) in one temporary directory; the tests then inspect exit status, stdout, stderr and
-the files written. Interpreter start-up (about 1 s, mostly imports) dominates the cost.
+A module fixture runs the commands once in one temporary directory; the tests then inspect
+exit status, stdout, stderr and the files written. ``scenarios`` and the error cases of
+:data:`SUBPROCESS_ERRORS` run as real subprocesses (the interpreter's exit status and its
+whole stderr: one line, no traceback), a few at a time; the other commands run meanwhile in
+this process through :func:`observer.cli.main` (:func:`main_in_process`): a subprocess
+would add its start-up (about 0.4 s of CPU) and, for a run, the load of the compiled kernel
+(about 1.5 s in all) to the same code. ``test_result_metadata_records_the_command_as_typed`` runs a
+result-writing command as a subprocess.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
+from unittest import mock
 from pathlib import Path
 
 import numpy as np
@@ -36,13 +44,31 @@ def run_cli(args, cwd):
                           capture_output=True, text=True, timeout=300)
 
 
-def run_all(commands: dict, cwd, workers=4) -> dict:
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        futures = {key: pool.submit(run_cli, args, cwd) for key, args in commands.items()}
-        return {key: f.result() for key, f in futures.items()}
+def main_in_process(args, cwd) -> subprocess.CompletedProcess:
+    """``python -m observer ARGS`` in ``cwd`` through :func:`observer.cli.main` in this process:
+    (status, stdout, stderr, its warnings under Python's default filters appended as an
+    interpreter prints them); ``sys.argv`` is the module run's (what the result records)."""
+    import warnings
+
+    from observer.cli import main
+    args = [str(a) for a in args]
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.chdir(cwd), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
+            mock.patch.object(sys, "argv", [str(REPO / "observer" / "__main__.py"), *args]), \
+            warnings.catch_warnings(record=True) as said:
+        warnings.resetwarnings()
+        warnings.simplefilter("default")
+        try:
+            rc = main(args)
+        except SystemExit as exc:
+            rc = exc.code
+    text = err.getvalue() + "".join(warnings.formatwarning(w.message, w.category, w.filename, w.lineno)
+                                    for w in said)
+    return subprocess.CompletedProcess(args, rc, out.getvalue(), text)
 
 
-# Errors run as real subprocesses: name -> (arguments, text that the error line must contain)
+# Errors, each with its whole stdout checked: name -> (arguments, text that the error line must
+# contain); those of SUBPROCESS_ERRORS run as real subprocesses, the others in-process
 ERROR_CASES = {
     "unknown-scenario": (["run", "no_such_scenario", "--out", "e1.csv"], "no_such_scenario"),
     "unknown-set-key": (["run", "rocking_chain", "--set", "param.foo=1", "--out", "e2.csv"],
@@ -52,6 +78,10 @@ ERROR_CASES = {
     "invalid-toml": (["run", "invalid.toml", "--out", "e5.csv"], "invalid TOML"),
     "xlsx": (["run", "bouncing_ball", "--t-end", "0.01", "--out", "e6.xlsx"], ".xlsx"),
 }
+
+SUBPROCESS_ERRORS = frozenset({"unknown-scenario", "invalid-toml"})
+"""The error cases run as ``python -m observer``: the interpreter's exit status and its whole
+stderr (a warning or a traceback printed beside the error line fails them)."""
 
 # More errors, run in-process through observer.cli.main (same code, no interpreter start-up)
 INPROCESS_ERROR_CASES = {
@@ -89,12 +119,13 @@ MORE_ERROR_CASES = {
 
 @pytest.fixture(scope="module")
 def cli(tmp_path_factory):
-    """Run every subprocess command once; returns (working directory, {key: CompletedProcess})."""
+    """Run every command once (module docstring); returns (working directory, {key: CompletedProcess})."""
     d = tmp_path_factory.mktemp("cli")
     (d / "invalid.toml").write_text("[simulation]\nh = [1e-3,\n")
     (d / "afile.txt").write_text("not a directory\n")
-    wave1 = {
-        "scenarios": ["scenarios"],
+    subprocesses = {"scenarios": ["scenarios"], **{k: ERROR_CASES[k][0] for k in SUBPROCESS_ERRORS}}
+    in_process = {                      # in order: the plot reads obs.csv
+        **{k: v[0] for k, v in ERROR_CASES.items() if k not in SUBPROCESS_ERRORS},
         "run-csv": ["run", "bouncing_ball", "--h", "1e-3", "--t-end", "0.05", "--out", "bb.csv"],
         "run-parquet": ["run", "bouncing_ball", "--h", "1e-3", "--t-end", "0.05",
                         "--out", "out/bb.parquet"],
@@ -102,10 +133,12 @@ def cli(tmp_path_factory):
                       "--t-end", "0.5", "--out", "chain2.csv"],
         "run-observers": ["run", "double_mass", "--h", "1e-3", "--t-end", "1.0",
                           "--observers", "jump,nojump", "--out", "obs.csv"],
+        "plot": ["plot", "obs.csv", "--out", "figs/obs.png"],
     }
-    wave1.update({k: v[0] for k, v in ERROR_CASES.items()})
-    results = run_all(wave1, d)
-    results.update(run_all({"plot": ["plot", "obs.csv", "--out", "figs/obs.png"]}, d))
+    with ThreadPoolExecutor(max_workers=3) as pool:
+        futures = {key: pool.submit(run_cli, args, d) for key, args in subprocesses.items()}
+        results = {key: main_in_process(args, d) for key, args in in_process.items()}
+        results.update({key: f.result() for key, f in futures.items()})
     return d, results
 
 

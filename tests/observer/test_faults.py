@@ -198,28 +198,40 @@ _CACHED = textwrap.dedent('''
 
 def _cached_call(tmp_path, cache_dir, env_extra=None):
     mod = tmp_path / "m.py"
-    mod.write_text(_CACHED)
+    if not mod.exists():
+        mod.write_text(_CACHED)
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache_dir), **(env_extra or {})}
     return subprocess.run([sys.executable, str(mod), str(ROOT)], capture_output=True, text=True,
                           env=env, timeout=120)
 
 
+@pytest.fixture(scope="module")
+def numba_cache_written(tmp_path_factory):
+    """A folder with ``m.py`` (:data:`_CACHED`) and the numba cache its first call wrote in
+    ``cache/`` (the same first call for every damage: made once): (folder, that call)."""
+    d = tmp_path_factory.mktemp("numba-cached")
+    return d, _cached_call(d, d / "cache")
+
+
 @pytest.mark.parametrize("damage", ["index", "data"])
-def test_a_damaged_numba_cache_is_a_warning_and_a_recompile(tmp_path, damage):
-    cache = tmp_path / "cache"
-    first = _cached_call(tmp_path, cache)
+def test_a_damaged_numba_cache_is_a_warning_and_a_recompile(tmp_path, damage, numba_cache_written):
+    import shutil
+
+    folder, first = numba_cache_written
     assert first.returncode == 0 and "7.0" in first.stdout, first.stderr
+    cache = tmp_path / "cache"                        # this test's copy (the cache follows m.py's folder)
+    shutil.copytree(folder / "cache", cache)
     files = sorted(cache.rglob("*.nbi" if damage == "index" else "*.nbc"))
     assert files
     for f in files:
         with open(f, "r+b") as fh:
             fh.truncate(0 if damage == "index" else min(1000, f.stat().st_size // 2))
-    second = _cached_call(tmp_path, cache)
+    second = _cached_call(folder, cache)
     assert second.returncode == 0, second.stderr
     assert "Traceback" not in second.stderr and "7.0" in second.stdout
     if damage == "data":
-        assert "damaged" in second.stdout
-    third = _cached_call(tmp_path, cache)             # the cache was rewritten whole
+        assert "is damaged (" in second.stdout       # the warning (the folder names "damaged" too)
+    third = _cached_call(folder, cache)               # the cache was rewritten whole
     assert third.returncode == 0 and "WARN []" in third.stdout, third.stdout + third.stderr
 
 
@@ -237,13 +249,22 @@ def test_an_unwritable_numba_cache_is_a_warning(tmp_path, monkeypatch):
     monkeypatch.setattr(caching.IndexDataCacheFile, "save",
                         lambda self, key, data: (_ for _ in ()).throw(PermissionError(13, "Permission denied")))
     from numba import njit
-
-    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    from numba.core import config
 
     def g(x):
         return x * 3.0 + 0.5
-    with pytest.warns(CacheWarning, match="cannot be written"):
-        assert njit(cache=True)(g)(2.0) == 6.5
+    before = config.CACHE_DIR
+    try:
+        with monkeypatch.context() as env:
+            env.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+            with pytest.warns(CacheWarning, match="cannot be written"):
+                assert njit(cache=True)(g)(2.0) == 6.5
+    finally:
+        # numba's compiler re-read NUMBA_CACHE_DIR into its config: read it again now that the
+        # variable is back, or every function this process decorates later is looked up (and
+        # compiled, for tens of seconds) in tmp_path's empty cache
+        config.reload_config()
+    assert config.CACHE_DIR == before
 
 
 # -- item 19: hangs and silent waits --------------------------------------------------------
