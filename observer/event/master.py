@@ -1091,16 +1091,28 @@ def _impact(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int, n_imp
 
 
 def _identically_zero(flow: Flow, row: np.ndarray, z: np.ndarray) -> bool:
-    """True if the functional ``row·z(t)`` vanishes along ``flow`` from z: its derivatives
-    ``row A^k z``, k < N (N the augmented dimension; Cayley–Hamilton: then every derivative
-    vanishes), each zero within its evaluation round-off ``ROUNDOFF·Σ|(row A^k)_i z_i|``
-    (a held contact whose force is zero along the flow: touching bodies, never a lift-off)."""
+    """True if the functional ``row·z(t)`` vanishes along ``flow`` from z, as far as float64
+    can certify: no derivative ``row A^k z``, k < N (N the augmented dimension; Cayley–Hamilton:
+    then every derivative vanishes), is certainly nonzero (a held contact whose force is zero
+    along the flow: touching bodies, never a lift-off).
+
+    ``ψ_k = r̂_k·z`` is certainly nonzero when ``|fl(r̂_k·z)|`` exceeds its certified error
+    ``(e_k + (γ_{N+1} + u)|r̂_k|)·|z|``, raised by ``1 + 2γ_{N+1}``: the float64 evaluation of
+    the product (γ_{N+1}, Higham §3.1), the float state's own representation of the exact one
+    (u per component) and the error ``e_k ≥ |r̂_k − r A^k|`` of the computed derivative row
+    (``e_{k+1} = (e_k + γ_{N+1}|r̂_k|)|A|``, raised alike, Higham §3.5). No count of round-offs:
+    inside that enclosure no precision decides, since z itself is known to no better."""
     r = np.asarray(row, dtype=float)
+    az, absA = np.abs(z), np.abs(flow.A)
+    g = gamma(z.size + 1)
+    raise_ = 1.0 + 2.0 * g
+    e = np.zeros_like(r)
     for _ in range(z.size):
-        if abs(float(r @ z)) > float(tolerance(r[None, :], z)[0]):
+        if abs(float(r @ z)) > raise_ * float((e + (g + 0.5 * np.finfo(float).eps) * np.abs(r)) @ az):
             return False
+        e = raise_ * ((e + g * np.abs(r)) @ absA)
         r = r @ flow.A
-        if not np.any(r):
+        if not (np.any(r) or np.any(e)):
             return True
     return True
 
