@@ -22,11 +22,9 @@ a note stating the enclosure, δ and the guaranteed crossing depth δ* = δ + it
 A crossing with ``|γ⁻| ≤`` CONTACT_TOL motion
 tolerances of γ is labelled a graze too, and its (tiny) impulse is applied. A minimum above
 the touch band is a miss: no event. An open contact is impacted together with the one
-that triggers an impact (simultaneous impact) when its gap is within FLOOR_FACTOR round-offs
-of its representation, or what the time coordinate's resolution (two ulp of t) hides at its
-speed, or what the enclosure of the accumulated state error cannot order, and never
-beyond CONTACT_TOL motion tolerances (:func:`observer.event.roots.motion_tolerance`, which do
-not shrink with the gap when the contact sits at the coordinate origin, ν = 0):
+that triggers an impact (simultaneous impact) when its gap is not certainly positive (its
+float64 value within its certified evaluation error, γ_{N+1}·Σ|r z|) or closes within what
+the time coordinate's resolution (two ulp of t) hides at its speed, no wider:
 :meth:`_Run.simultaneous_band`.
 
 Zeno: a run of impacts of one contact set whose intervals shrink geometrically (consecutive
@@ -70,7 +68,7 @@ import numpy as np
 from observer.contact import get_solver
 from observer.event.enclosures import dot_sign, gamma, polish_lcp
 from observer.event.flow import Flow, flow_for
-from observer.event.roots import (FLOOR_FACTOR, ROUNDOFF, NonFiniteFlow, RootIsolationError,
+from observer.event.roots import (ROUNDOFF, NonFiniteFlow, RootIsolationError,
                                   SearchStopped, first_zero, motion_tolerance, time_resolution,
                                   tolerance)
 from observer.event.tails import JointTail, horner, joint_due, joint_tail
@@ -501,27 +499,30 @@ class _Run:
         self.add_impulse(t, A, lam)
         return x, tuple(stick), A, gm, lam
 
-    def simultaneous_band(self, t: float, z: np.ndarray, gam: np.ndarray,
-                          tol_g: np.ndarray) -> np.ndarray:
+    def simultaneous_band(self, t: float, z: np.ndarray, gam: np.ndarray, cap: np.ndarray) -> np.ndarray:
         """The gaps within which an open contact is impacted together with the one that
-        triggered an impact at t (:meth:`collide`): FLOOR_FACTOR round-offs of the gap's
-        representation ``ROUNDOFF·Σ|r z|`` (what float64 cannot tell from zero in these
-        coordinates), or what the time coordinate's resolution hides at its approach speed
-        ``|γ|·δt`` (δt two ulp of t, :func:`observer.event.roots.time_resolution`: no time
-        scale of the system), or what the enclosure of the accumulated state error
-        (:meth:`gap_error`) cannot tell from zero; never more than ``tol_g`` (CONTACT_TOL
-        motion tolerances, the band of persistent contact).
+        triggered an impact at t (:meth:`collide`): a gap not certainly positive, or one that
+        closes within the time coordinate's resolution. From what is certified: the gap's
+        float64 value is known to its evaluation error and the state's own representation,
+        ``(γ_{N+1} + u)·Σ|r z|`` raised by ``1 + 2γ_{N+1}`` (Higham §3.1: within it no precision
+        tells the gap from zero, z being known to no better), to the enclosure of the
+        accumulated state error (:meth:`gap_error`), and the time coordinate's resolution
+        hides ``|γ|·δt`` at its approach speed (δt two ulp of t,
+        :func:`observer.event.roots.time_resolution`: no time scale of the system). No count
+        of round-offs of the representation (it was 16·64 eps·Σ|r z|, which merged landings
+        1e-11 s apart at a translation by 100): a contact in flight that close to its contact
+        point but certainly above it lands later, in order (issue 19: one 9e-11 m above its
+        contact point landing 4e-6 s later; two landings 5.5e-8 s apart, 3e-12 m).
 
-        Not CONTACT_TOL motion tolerances themselves: a contact in flight can sit that close
-        to its contact point long (≫ δt) before it lands (issue 19: a contact re-launched by
-        another's impacts, 9e-11 m above its contact point and landing 4e-6 s later, was
-        impacted early and its accumulation time moved by 5e-6 s; two contacts landing 5.5e-8 s
-        apart, 3e-12 m, were merged and t∞ moved by 1.6e-6 s)."""
+        ``cap`` (the persistent-contact band of :meth:`collide`) still bounds it: the
+        componentwise carry of the state error through ``|exp(A dt)|`` (:meth:`carry_error`)
+        grows like ``exp(‖|A|‖ t)`` (3.8e-6 m on rocking_chain at t = 0.91 s, 1e36 of the
+        state on double_mass), which uncapped merges every landing."""
         fl = self.free_flow
-        floor = tolerance(fl.gap_rows, z)
+        g = gamma(z.size + 1)
+        floor = (1.0 + 2.0 * g) * (g + 0.5 * np.finfo(float).eps) * (np.abs(fl.gap_rows) @ np.abs(z))
         hidden = time_resolution(t) * np.abs(gam)
-        return np.minimum(tol_g, np.maximum(np.maximum(FLOOR_FACTOR * floor, hidden),
-                                            self.gap_error(z)))
+        return np.minimum(cap, np.maximum(np.maximum(floor, hidden), self.gap_error(z)))
 
     # -- Zeno ------------------------------------------------------------------------------
     def zeno_check(self, key: tuple, t: float, x: np.ndarray, gm: np.ndarray,
