@@ -68,9 +68,9 @@ import numpy as np
 from observer.contact import get_solver
 from observer.event.enclosures import dot_sign, gamma, polish_lcp
 from observer.event.flow import Flow, flow_for
-from observer.event.roots import (ROUNDOFF, NonFiniteFlow, RootIsolationError,
-                                  SearchStopped, first_zero, motion_tolerance, time_resolution,
-                                  tolerance)
+from observer.event.roots import (ROUNDOFF, WINDOW, FunctionalSet, NonFiniteFlow,
+                                  RootIsolationError, SearchStopped, first_zero, motion_tolerance,
+                                  time_resolution, tolerance)
 from observer.event.tails import JointTail, horner, joint_due, joint_tail
 from observer.impact import ImpactLaw, impact
 from observer.result import RunState, RunStatus
@@ -1178,18 +1178,49 @@ def _liftoff(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int):
         run.open(c, t)
     new = tuple(stick)
     x = run.project(t, x, list(new))
-    # the gap of a lifting contact starts as g ≈ γ ≈ γ̇ ≈ 0 < γ̈ (g ≈ γ̈ s³/6): skip the
-    # round-off band of its cubic rise (up to 4 tolerances), where no sign is decidable
     flow = flow_for(run.system, new)
     z = flow.z(t, x)
     cert = {}
     for c in leaving:
-        r = flow.gap_rows[c]
-        d3 = float(r @ np.linalg.matrix_power(flow.A, 3) @ z)
-        tol = float(CONTACT_TOL * motion_tolerance(r[None, :], flow.A, z, run.tau, t)[0])
-        if d3 > 0.0:
-            cert[("g", c)] = t + (24.0 * tol / d3) ** (1.0 / 3.0)
+        until = _rise_band(flow, flow.gap_rows[c], z)
+        if until is not None:
+            cert[("g", c)] = t + until
     return x, new, cert
+
+
+RISE_DOUBLINGS = 64
+"""Doublings of the trial time in :func:`_rise_band` (from the first-order estimate)."""
+
+
+def _rise_band(flow: Flow, row: np.ndarray, z: np.ndarray) -> float | None:
+    """The undecidable start of a lifting contact's gap, from its certified enclosures: the
+    gap of a lift-off starts as ``g ≈ γ ≈ γ̇ ≈ 0 < γ̈`` (``g ≈ γ̈ s³/6``), each of the first three
+    within its certified float64 error (:meth:`observer.event.roots.FunctionalSet.errors`),
+    where no sign is decidable. With ``γ̈`` certainly positive, returns the first trial time s
+    (``(6 e/γ̈)^{1/3}`` from the certified errors e of g, γ, γ̇, doubled) at which the gap of the
+    exact flow from z is certainly positive (:meth:`~observer.event.roots.FunctionalSet.enclose`,
+    a Taylor model with Lagrange remainder), the search resuming from there; None when γ̈ is
+    not certainly positive or no trial within the Taylor model's window certifies.
+
+    No motion tolerance: the band is what the gap's own certified errors leave undecided (it
+    was 1000 motion tolerances on τ and 64 eps·Σ|r z|, which at a translation by 1e6 skipped
+    a whole hop of 0.011 s and took its landing late)."""
+    fs = FunctionalSet(flow, row[None, :])
+    err = fs.errors(z, 3)[:, 0]
+    d = [fs.value(0, k, z) for k in range(4)]
+    rate = d[3] - err[3]
+    if not rate > 0.0:
+        return None
+    low = sum(abs(d[k]) + err[k] for k in range(3))
+    s = (6.0 * max(low, np.finfo(float).tiny) / rate) ** (1.0 / 3.0)
+    reach = WINDOW / fs.norm_bound if fs.norm_bound > 0.0 else np.inf
+    for _ in range(RISE_DOUBLINGS):
+        if s > reach:
+            return None
+        if fs.enclose(0, 0, z, s)[0] > 0.0:
+            return s
+        s *= 2.0
+    return None
 
 
 def _flow_quantity(run: _Run, keys: list, exc: NonFiniteFlow) -> str:
