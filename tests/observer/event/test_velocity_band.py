@@ -9,10 +9,13 @@ m/s after the factor 1000). Its impacts accumulate at t∞ (an independent 30-di
 inside that band, 4.8e-8 s before t∞ (the Zeno tail ``2γ⁺/(g(1 − e))`` lost); decided on the
 certified error of γ⁺ (its evaluation, the state's representation and the velocity jump's
 rounding), the impacts go on until the Zeno extrapolation, which rests at t∞ (measured 3e-17
-s off). Not yet: that band alone (no bound on the error of the impulses the LCP solver
-returns) moved a rest time of a two-contact Zeno tail by 1.8e-4 s under a change of units
-(test_invariance); the test stays expected to fail until the band carries the impulses'
-certified error.
+s off). Not yet: that band alone (the current state's evaluation and representation errors
+and the jump's rounding) treats a held contact's velocity of -3.6e-29 m/s — the held flow's
+round-off, its generator's held rows cancelling to ~1e-17 — as a certain approach, so in one
+of test_invariance's two-contact tails under a change of units (1e-3, 1e3) the held contact
+was re-launched by the other's impacts six times and rested 1.8e-4 s late. The band needs the
+accumulated state error (``_Run.err``), whose componentwise carry grows like
+``exp(‖|A|‖ t)``; the test stays expected to fail until then.
 """
 
 from __future__ import annotations
@@ -44,9 +47,10 @@ def soft_ball() -> Scenario:
 
 
 @pytest.mark.xfail(strict=True, reason="issue 34 item 1: collide's velocity band is still 1000 "
-                   "motion tolerances on τ (a certified band alone split the two-contact Zeno "
-                   "tails of test_invariance under a change of units: the impulses' own error "
-                   "is not yet bounded)")
+                   "motion tolerances on τ (a band of the current state's certified errors "
+                   "alone re-launched a held contact on the held flow's round-off velocity, "
+                   "-3.6e-29 m/s, in test_invariance's two-contact tails under a change of "
+                   "units: it needs the accumulated state error, which grows without bound)")
 def test_a_ball_on_a_soft_spring_rests_at_the_30_digit_t_inf():
     """The ball's rest time (its ``stick`` row) is the reference's to 1e-9 s, the stated
     resolution of a Zeno limit (measured: 3e-17 s; 4.8e-8 s early before)."""
