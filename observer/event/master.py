@@ -1197,8 +1197,8 @@ def _rise_band(flow: Flow, row: np.ndarray, z: np.ndarray) -> float | None:
     gap of a lift-off starts as ``g ≈ γ ≈ γ̇ ≈ 0 < γ̈`` (``g ≈ γ̈ s³/6``), each of the first three
     within its certified float64 error (:meth:`observer.event.roots.FunctionalSet.errors`),
     where no sign is decidable. With ``γ̈`` certainly positive, returns the first trial time s
-    (``(6 e/γ̈)^{1/3}`` from the certified errors e of g, γ, γ̇, doubled) at which the gap of the
-    exact flow from z is certainly positive (:meth:`~observer.event.roots.FunctionalSet.enclose`,
+    (where ``γ̈ s³/6`` exceeds each ``(|ψ^(k)| + e_k) s^k/k!``, k < 3, then doubled) at which
+    the gap of the exact flow from z is certainly positive (:meth:`~observer.event.roots.FunctionalSet.enclose`,
     a Taylor model with Lagrange remainder), the search resuming from there; None when γ̈ is
     not certainly positive or no trial within the Taylor model's window certifies.
 
@@ -1211,8 +1211,11 @@ def _rise_band(flow: Flow, row: np.ndarray, z: np.ndarray) -> float | None:
     rate = d[3] - err[3]
     if not rate > 0.0:
         return None
-    low = sum(abs(d[k]) + err[k] for k in range(3))
-    s = (6.0 * max(low, np.finfo(float).tiny) / rate) ** (1.0 / 3.0)
+    # where the rise γ̈ s³/6 first exceeds each undecided term (|ψ^(k)| + e_k) s^k/k!: a
+    # guess in the unit of time whatever the units of g (dimensionally consistent)
+    s = max((6.0 * (abs(d[k]) + err[k]) / (rate * (1.0, 1.0, 2.0)[k])) ** (1.0 / (3 - k))
+            for k in range(3))
+    s = max(s, np.finfo(float).tiny)
     reach = WINDOW / fs.norm_bound if fs.norm_bound > 0.0 else np.inf
     for _ in range(RISE_DOUBLINGS):
         if s > reach:
