@@ -22,11 +22,9 @@ a note stating the enclosure, δ and the guaranteed crossing depth δ* = δ + it
 A crossing with ``|γ⁻| ≤`` CONTACT_TOL motion
 tolerances of γ is labelled a graze too, and its (tiny) impulse is applied. A minimum above
 the touch band is a miss: no event. An open contact is impacted together with the one
-that triggers an impact (simultaneous impact) when its gap is within FLOOR_FACTOR round-offs
-of its representation, or what the time coordinate's resolution (two ulp of t) hides at its
-speed, or what the enclosure of the accumulated state error cannot order, and never
-beyond CONTACT_TOL motion tolerances (:func:`observer.event.roots.motion_tolerance`, which do
-not shrink with the gap when the contact sits at the coordinate origin, ν = 0):
+that triggers an impact (simultaneous impact) when its gap is not certainly positive (its
+float64 value within its certified evaluation error, γ_{N+1}·Σ|r z|) or closes within what
+the time coordinate's resolution (two ulp of t) hides at its speed, no wider:
 :meth:`_Run.simultaneous_band`.
 
 Zeno: a run of impacts of one contact set whose intervals shrink geometrically (consecutive
@@ -70,9 +68,9 @@ import numpy as np
 from observer.contact import get_solver
 from observer.event.enclosures import dot_sign, gamma, polish_lcp
 from observer.event.flow import Flow, flow_for
-from observer.event.roots import (FLOOR_FACTOR, ROUNDOFF, NonFiniteFlow, RootIsolationError,
-                                  SearchStopped, first_zero, motion_tolerance, time_resolution,
-                                  tolerance)
+from observer.event.roots import (ROUNDOFF, WINDOW, FunctionalSet, NonFiniteFlow,
+                                  RootIsolationError, SearchStopped, first_zero, motion_tolerance,
+                                  time_resolution, tolerance)
 from observer.event.tails import JointTail, horner, joint_due, joint_tail
 from observer.impact import ImpactLaw, impact
 from observer.result import RunState, RunStatus
@@ -513,27 +511,30 @@ class _Run:
         self.add_impulse(t, A, lam)
         return x, tuple(stick), A, gm, lam
 
-    def simultaneous_band(self, t: float, z: np.ndarray, gam: np.ndarray,
-                          tol_g: np.ndarray) -> np.ndarray:
+    def simultaneous_band(self, t: float, z: np.ndarray, gam: np.ndarray, cap: np.ndarray) -> np.ndarray:
         """The gaps within which an open contact is impacted together with the one that
-        triggered an impact at t (:meth:`collide`): FLOOR_FACTOR round-offs of the gap's
-        representation ``ROUNDOFF·Σ|r z|`` (what float64 cannot tell from zero in these
-        coordinates), or what the time coordinate's resolution hides at its approach speed
-        ``|γ|·δt`` (δt two ulp of t, :func:`observer.event.roots.time_resolution`: no time
-        scale of the system), or what the enclosure of the accumulated state error
-        (:meth:`gap_error`) cannot tell from zero; never more than ``tol_g`` (CONTACT_TOL
-        motion tolerances, the band of persistent contact).
+        triggered an impact at t (:meth:`collide`): a gap not certainly positive, or one that
+        closes within the time coordinate's resolution. From what is certified: the gap's
+        float64 value is known to its evaluation error and the state's own representation,
+        ``(γ_{N+1} + u)·Σ|r z|`` raised by ``1 + 2γ_{N+1}`` (Higham §3.1: within it no precision
+        tells the gap from zero, z being known to no better), to the enclosure of the
+        accumulated state error (:meth:`gap_error`), and the time coordinate's resolution
+        hides ``|γ|·δt`` at its approach speed (δt two ulp of t,
+        :func:`observer.event.roots.time_resolution`: no time scale of the system). No count
+        of round-offs of the representation (it was 16·64 eps·Σ|r z|, which merged landings
+        1e-11 s apart at a translation by 100): a contact in flight that close to its contact
+        point but certainly above it lands later, in order (issue 19: one 9e-11 m above its
+        contact point landing 4e-6 s later; two landings 5.5e-8 s apart, 3e-12 m).
 
-        Not CONTACT_TOL motion tolerances themselves: a contact in flight can sit that close
-        to its contact point long (≫ δt) before it lands (issue 19: a contact re-launched by
-        another's impacts, 9e-11 m above its contact point and landing 4e-6 s later, was
-        impacted early and its accumulation time moved by 5e-6 s; two contacts landing 5.5e-8 s
-        apart, 3e-12 m, were merged and t∞ moved by 1.6e-6 s)."""
+        ``cap`` (the persistent-contact band of :meth:`collide`) still bounds it: the
+        componentwise carry of the state error through ``|exp(A dt)|`` (:meth:`carry_error`)
+        grows like ``exp(‖|A|‖ t)`` (3.8e-6 m on rocking_chain at t = 0.91 s, 1e36 of the
+        state on double_mass), which uncapped merges every landing."""
         fl = self.free_flow
-        floor = tolerance(fl.gap_rows, z)
+        g = gamma(z.size + 1)
+        floor = (1.0 + 2.0 * g) * (g + 0.5 * np.finfo(float).eps) * (np.abs(fl.gap_rows) @ np.abs(z))
         hidden = time_resolution(t) * np.abs(gam)
-        return np.minimum(tol_g, np.maximum(np.maximum(FLOOR_FACTOR * floor, hidden),
-                                            self.gap_error(z)))
+        return np.minimum(cap, np.maximum(np.maximum(floor, hidden), self.gap_error(z)))
 
     # -- Zeno ------------------------------------------------------------------------------
     def zeno_check(self, key: tuple, t: float, x: np.ndarray, gm: np.ndarray,
@@ -1104,16 +1105,28 @@ def _impact(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int, n_imp
 
 
 def _identically_zero(flow: Flow, row: np.ndarray, z: np.ndarray) -> bool:
-    """True if the functional ``row·z(t)`` vanishes along ``flow`` from z: its derivatives
-    ``row A^k z``, k < N (N the augmented dimension; Cayley–Hamilton: then every derivative
-    vanishes), each zero within its evaluation round-off ``ROUNDOFF·Σ|(row A^k)_i z_i|``
-    (a held contact whose force is zero along the flow: touching bodies, never a lift-off)."""
+    """True if the functional ``row·z(t)`` vanishes along ``flow`` from z, as far as float64
+    can certify: no derivative ``row A^k z``, k < N (N the augmented dimension; Cayley–Hamilton:
+    then every derivative vanishes), is certainly nonzero (a held contact whose force is zero
+    along the flow: touching bodies, never a lift-off).
+
+    ``ψ_k = r̂_k·z`` is certainly nonzero when ``|fl(r̂_k·z)|`` exceeds its certified error
+    ``(e_k + (γ_{N+1} + u)|r̂_k|)·|z|``, raised by ``1 + 2γ_{N+1}``: the float64 evaluation of
+    the product (γ_{N+1}, Higham §3.1), the float state's own representation of the exact one
+    (u per component) and the error ``e_k ≥ |r̂_k − r A^k|`` of the computed derivative row
+    (``e_{k+1} = (e_k + γ_{N+1}|r̂_k|)|A|``, raised alike, Higham §3.5). No count of round-offs:
+    inside that enclosure no precision decides, since z itself is known to no better."""
     r = np.asarray(row, dtype=float)
+    az, absA = np.abs(z), np.abs(flow.A)
+    g = gamma(z.size + 1)
+    raise_ = 1.0 + 2.0 * g
+    e = np.zeros_like(r)
     for _ in range(z.size):
-        if abs(float(r @ z)) > float(tolerance(r[None, :], z)[0]):
+        if abs(float(r @ z)) > raise_ * float((e + (g + 0.5 * np.finfo(float).eps) * np.abs(r)) @ az):
             return False
+        e = raise_ * ((e + g * np.abs(r)) @ absA)
         r = r @ flow.A
-        if not np.any(r):
+        if not (np.any(r) or np.any(e)):
             return True
     return True
 
@@ -1178,18 +1191,52 @@ def _liftoff(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int):
         run.open(c, t)
     new = tuple(stick)
     x = run.project(t, x, list(new))
-    # the gap of a lifting contact starts as g ≈ γ ≈ γ̇ ≈ 0 < γ̈ (g ≈ γ̈ s³/6): skip the
-    # round-off band of its cubic rise (up to 4 tolerances), where no sign is decidable
     flow = flow_for(run.system, new)
     z = flow.z(t, x)
     cert = {}
     for c in leaving:
-        r = flow.gap_rows[c]
-        d3 = float(r @ np.linalg.matrix_power(flow.A, 3) @ z)
-        tol = float(CONTACT_TOL * motion_tolerance(r[None, :], flow.A, z, run.tau, t)[0])
-        if d3 > 0.0:
-            cert[("g", c)] = t + (24.0 * tol / d3) ** (1.0 / 3.0)
+        until = _rise_band(flow, flow.gap_rows[c], z)
+        if until is not None:
+            cert[("g", c)] = t + until
     return x, new, cert
+
+
+RISE_DOUBLINGS = 64
+"""Doublings of the trial time in :func:`_rise_band` (from the first-order estimate)."""
+
+
+def _rise_band(flow: Flow, row: np.ndarray, z: np.ndarray) -> float | None:
+    """The undecidable start of a lifting contact's gap, from its certified enclosures: the
+    gap of a lift-off starts as ``g ≈ γ ≈ γ̇ ≈ 0 < γ̈`` (``g ≈ γ̈ s³/6``), each of the first three
+    within its certified float64 error (:meth:`observer.event.roots.FunctionalSet.errors`),
+    where no sign is decidable. With ``γ̈`` certainly positive, returns the first trial time s
+    (where ``γ̈ s³/6`` exceeds each ``(|ψ^(k)| + e_k) s^k/k!``, k < 3, then doubled) at which
+    the gap of the exact flow from z is certainly positive (:meth:`~observer.event.roots.FunctionalSet.enclose`,
+    a Taylor model with Lagrange remainder), the search resuming from there; None when γ̈ is
+    not certainly positive or no trial within the Taylor model's window certifies.
+
+    No motion tolerance: the band is what the gap's own certified errors leave undecided (it
+    was 1000 motion tolerances on τ and 64 eps·Σ|r z|, which at a translation by 1e6 skipped
+    a whole hop of 0.011 s and took its landing late)."""
+    fs = FunctionalSet(flow, row[None, :])
+    err = fs.errors(z, 3)[:, 0]
+    d = [fs.value(0, k, z) for k in range(4)]
+    rate = d[3] - err[3]
+    if not rate > 0.0:
+        return None
+    # where the rise γ̈ s³/6 first exceeds each undecided term (|ψ^(k)| + e_k) s^k/k!: a
+    # guess in the unit of time whatever the units of g (dimensionally consistent)
+    s = max((6.0 * (abs(d[k]) + err[k]) / (rate * (1.0, 1.0, 2.0)[k])) ** (1.0 / (3 - k))
+            for k in range(3))
+    s = max(s, np.finfo(float).tiny)
+    reach = WINDOW / fs.norm_bound if fs.norm_bound > 0.0 else np.inf
+    for _ in range(RISE_DOUBLINGS):
+        if s > reach:
+            return None
+        if fs.enclose(0, 0, z, s)[0] > 0.0:
+            return s
+        s *= 2.0
+    return None
 
 
 def _flow_quantity(run: _Run, keys: list, exc: NonFiniteFlow) -> str:

@@ -76,10 +76,6 @@ certified above the band is a miss, below it a crossing (an impact, however shal
 **guaranteed crossing depth** is the band plus the width of the minimum's certified
 enclosure (:func:`minimum_enclosure`): a crossing deeper than it is never a graze."""
 
-FLOOR_FACTOR = 16.0
-"""Multiple of the representation floor ``ROUNDOFF · Σ|r_ij z_j|`` in master.py's tolerances
-(no longer in the touch band, whose floor is the certified evaluation error of ψ_i: issue 34)."""
-
 TIME_RTOL = 2.0 * np.finfo(float).eps
 """Time resolution ``TIME_RTOL · max(|t|, τ)`` (τ the system's time scale,
 :attr:`observer.event.flow.Flow.time_scale`): Newton refinement stops at it, and a search

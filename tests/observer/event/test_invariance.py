@@ -356,9 +356,9 @@ def test_a_zeno_sequence_of_zeno_sequences_rests_at_the_30_digit_t_inf_in_any_co
 
 @pytest.mark.parametrize("c", [None, (3.25, -7.5)])
 def test_two_landings_55_ns_apart_are_two_impacts_at_their_30_digit_times(c):
-    """Issue 19: an open contact joins another's impact only within FLOOR_FACTOR round-offs of
-    its gap or what the time resolution hides at its speed, not within 1000 motion tolerances
-    (3e-12 m here): the two landings of :data:`MERGED` 5.5e-8 s apart are two impacts, each
+    """Issue 19: an open contact joins another's impact only within the certified error of its
+    gap (or of the accumulated state error) or what the time resolution hides at its speed,
+    not within 1000 motion tolerances (3e-12 m here): the two landings of :data:`MERGED` 5.5e-8 s apart are two impacts, each
     at the reference's time to 1e-9 s (the earlier accumulations' extrapolation errors carry
     over; measured 9e-12 s at c = 0, 2.3e-10 s translated)."""
     c = None if c is None else np.array(c)

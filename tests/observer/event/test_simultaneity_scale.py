@@ -47,3 +47,42 @@ def test_two_landings_5e_15_s_apart_stay_two_impacts_in_order():
     first = {int(c): float(ev[ev["contact"] == c]["time"].iloc[0]) for c in (0, 1)}
     assert abs(first[0] - t_a) <= 1e-15
     assert abs(first[1] - t_b) <= 1e-15
+
+
+C_FAR, DELTA_FAR = 100.0, 1e-11
+
+
+def two_balls_translated(c: float, delta: float) -> tuple[Scenario, float, float]:
+    """The two balls of :func:`two_balls_and_a_slow_spring` (no spring) with the ground
+    at q = c (gap offset −c), released at rest from c + D and c + D + delta: closed-form
+    landing times √(2D/g) and √(2(D + δ)/g) (from the float heights actually given)."""
+    q0 = [c + D, c + D + delta]
+    doc = {"scenario": {"name": "two_balls_far"},
+           "system": {"M": np.eye(2).tolist(), "C": np.zeros((2, 2)).tolist(),
+                      "K": np.zeros((2, 2)).tolist(), "W": np.eye(2).tolist(),
+                      "forcing": {"constant": [-G0, -G0]}, "gap": {"offset": [-c, -c]}},
+           "impact": {"law": "newton", "restitution": E},
+           "initial": {"q": q0, "u": [0.0, 0.0]},
+           "simulation": {"t_end": 0.12, "h": 1e-2}}
+    return Scenario.from_dict(doc), *(np.sqrt(2 * (q - c) / G0) for q in q0)
+
+
+def test_two_landings_1e_11_m_apart_at_translation_100_stay_two_impacts_in_order():
+    """Translated by 100 m, ball 1 starts 1e-11 m above ball 0 and lands 1e-11 s after it
+    (closed form). The gaps' float64 values are certified to (γ_{N+1} + u)·Σ|r z| ≈ 1e-13 m
+    and the time resolution hides 2e-16 m at 1 m/s, so the landings are two impacts, in
+    order, each at its closed-form time to the float resolution of the coordinates,
+    4 ulp(c)/v ≈ 5.7e-14 s (issue 34's acceptance; measured: 1.6e-14 s). The band of 16 round-offs of the gap's
+    representation (16·64 eps·Σ|r z| ≈ 4.5e-11 m here) merged them into one impact at the
+    first landing, 1e-11 s early."""
+    sc, t_a, t_b = two_balls_translated(C_FAR, DELTA_FAR)
+    assert t_b - t_a > 9e-12
+    res = run_master(sc)
+    assert res.status.ok
+    ev = res.events[res.events["kind"] == "impact"]
+    first = {int(c): float(ev[ev["contact"] == c]["time"].iloc[0]) for c in (0, 1)}
+    resolution = 4 * np.spacing(C_FAR) / np.sqrt(2 * G0 * D)
+    assert abs(first[0] - t_a) <= resolution, first[0] - t_a
+    assert abs(first[1] - t_b) <= resolution, first[1] - t_b
+    assert ev["time"].iloc[0] == first[0] and ev["contact"].iloc[0] == 0    # one each, in order
+    assert ev["time"].iloc[1] == first[1] and ev["contact"].iloc[1] == 1

@@ -87,3 +87,27 @@ def test_a_plastic_collision_of_two_free_masses_moves_them_together_to_t_end():
     assert np.allclose(res.u[after], 1.0 / 3.0, atol=1e-14)
     assert np.allclose(res.q[after, 0], 1.0 + (res.t[after] - 1.0) / 3.0, atol=1e-13)
     assert np.max(np.abs(res.g[after])) <= 1e-13
+
+
+def test_a_force_certainly_nonzero_in_float64_is_not_identically_zero():
+    """The identically-zero test of a held force (:func:`observer.event.master._identically_zero`)
+    decides from the certified error of its float64 evaluation, not from 64 eps·Σ|r z| (a
+    count of round-offs): ``z0 + z1 = 20 ulp(1e6) ≈ 2.3e-9`` is exact in float64 and above
+    the certified bound ``(γ_4 + u)·Σ|r z| ≈ 1.1e-9``, so the force is not zero (the old rule,
+    2.8e-8, called it zero and stopped watching it); an exact cancellation still is zero, and
+    so is a derivative row that is zero up to its own certified error."""
+    from types import SimpleNamespace
+
+    from observer.event.master import _identically_zero
+
+    big = 1e6
+    row = np.array([1.0, 1.0, 0.0])
+    z = np.array([big, -big + 20 * np.spacing(big), 1.0])
+    assert z[0] + z[1] == 20 * np.spacing(big)                  # exact: a certain 2.3e-9
+    still = SimpleNamespace(A=np.zeros((3, 3)))
+    assert not _identically_zero(still, row, z)
+    assert _identically_zero(still, row, np.array([big, -big, 1.0]))
+    # the velocity of a uniform motion: ψ = q0 + q1 = 0 exactly, ψ' = u-rows·z = 0 exactly
+    drift = SimpleNamespace(A=np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.0, 0.0, 0.0]]))
+    assert _identically_zero(drift, row, np.array([big, -big, 1.0]))
+    assert not _identically_zero(drift, np.array([1.0, 0.0, 0.0]), np.array([big, -big, 1.0]))
