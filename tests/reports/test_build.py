@@ -192,6 +192,29 @@ def _parse(index: Path) -> _Page:
     return page
 
 
+def _section_page(files: list[Path], out_dir: Path, *ids: str) -> Path:
+    """``out_dir/index.html`` holding only the registry's sections ``ids`` (in page order), each
+    built, its figures rendered and the page rendered as :func:`reports.build.build_report` does
+    with the whole registry: for the tests that read those sections only (a whole page costs
+    every section, the stored model-error figures alone ≈ 2 s CPU)."""
+    from reports.build import render, resolve_figures
+    from reports.context import load_context
+    from reports.header import header_table
+    from reports.sections import SECTIONS, build_sections
+
+    specs = tuple(s for s in SECTIONS if s.id in ids)
+    assert {s.id for s in specs} == set(ids), ids
+    ctx = load_context(files, out_dir)
+    ctx.out_dir.mkdir(parents=True, exist_ok=True)
+    sections = build_sections(ctx, specs)
+    resolve_figures(sections)
+    page = render(title="sections " + ", ".join(ids), header=header_table(ctx), command=ctx.command,
+                  sections=[s for s in sections if not s.lead], lead=[s for s in sections if s.lead])
+    index = ctx.out_dir / "index.html"
+    index.write_text(page, encoding="utf-8")
+    return index
+
+
 @pytest.fixture(scope="module")
 def smoke_report(tmp_path_factory):
     """The smoke suite, a small real micro-benchmark run, and the report built from them."""
@@ -288,7 +311,7 @@ def test_proof_check_section_shows_the_check_rows(smoke_report, tmp_path):
             assert _num(cells["margin"]) == pytest.approx(r["margin"], rel=5e-3, abs=1e-300)
     path = tmp_path / "nochecks.csv"
     rows[rows["kind"] != "checks"].drop(columns="results_dir").to_csv(path, index=False)
-    page = build_report([path], tmp_path / "r").read_text(encoding="utf-8")
+    page = _section_page([path], tmp_path / "r", "proof-checks").read_text(encoding="utf-8")
     assert "No proof-check results" in page and "Proof-check table" not in page
 
 
@@ -531,8 +554,14 @@ def synthetic_report(tmp_path_factory):
     out = tmp_path_factory.mktemp("synthetic")
     path = _rows_file(out / "synthetic.cases", _synthetic_rows())
     (out / "synthetic-micro.json").write_text(json.dumps(_micro_json()))
-    index = build_report([path], out / "report")
+    index = _section_page([path], out / "report", *SYNTHETIC_SECTIONS)
     return _parse(index), load_rows([path])
+
+
+SYNTHETIC_SECTIONS = ("ensemble", "scenarios", "all-key-numbers", "observers", "work-precision", "robustness",
+                      "scaling", "peers", "micro", "proof-checks", "settings", "limitations")
+"""The sections the tests of the synthetic rows read (the whole page of these rows is built and
+checked by tests/reports/test_report_ensemble.py)."""
 
 
 def _settle(name: str, observer: str, rho: float) -> float:
@@ -798,7 +827,7 @@ def test_peers_section_without_siconos(tmp_path, monkeypatch):
     unavailable_path("absent", tmp_path).write_text(json.dumps(
         {"peers:impact_oscillator:h=0.0001": "Siconos absent: no interpreter at /nonexistent/bin/python3; "
                                               + peers.HOW_TO_GET}))
-    page = _parse(build_report([path], tmp_path / "r1"))
+    page = _parse(_section_page([path], tmp_path / "r1", "peers", "all-key-numbers"))
     text = page.sections["peers"].text()
     assert "Siconos was not available when the suite ran" in text and peers.HOW_TO_GET in text
     assert "peers:impact_oscillator" in text and page.sections["peers"].tables == []
@@ -1042,7 +1071,8 @@ def test_a_registered_design_shows_in_every_observer_table(tmp_path, monkeypatch
                              for c, d, st, mg in (("lyapunov_decrease", "toy", "FAIL", -1.0),
                                                   ("proposition1_exact", "toy", "PASS", 0.0),
                                                   ("mass_spd", "", "PASS", 1.0))]))
-    page = _parse(build_report([_rows_file(tmp_path / "toy.cases", cases)], tmp_path / "r"))
+    page = _parse(_section_page([_rows_file(tmp_path / "toy.cases", cases)], tmp_path / "r", "observers",
+                                "proof-checks"))
     observers = [r for r in page.table("observers", "Observer table").dicts() if r["scenario"] == "dm"]
     assert [r["observer"] for r in observers] == [OBSERVER_DESIGNS[o].label for o in ("jump", "nojump")] \
         + [toy.label]
@@ -1152,7 +1182,7 @@ def test_a_registered_contact_solver_shows_in_the_micro_benchmarks(tmp_path, mon
                            for m, t in toy_means.items()]
     path = _rows_file(tmp_path / "solvers.cases", [c for c in _synthetic_rows() if c[0].startswith("checks")])
     (tmp_path / "solvers-micro.json").write_text(json.dumps(data))
-    page = _parse(build_report([path], tmp_path / "r"))
+    page = _parse(_section_page([path], tmp_path / "r", "micro"))
     table = {r["m"]: r for r in page.table("micro", "Speed-up of the fast contact solvers").dicts()}
     for m, t in toy_means.items():
         assert _num(table[str(m)]["speed-up toy"]) == pytest.approx(MICRO_MEANS[(m, "reference")] / t, rel=5e-3)
@@ -1171,7 +1201,8 @@ def test_a_registered_scenario_brings_its_description_and_notes(tmp_path, monkey
     toy.NOTES = "drawn: the toy coordinate."
     monkeypatch.setitem(SCENARIOS, "toy_scenario", toy)
     rows = [{**r, "scenario": "toy_scenario", "name": "toy run"} for r in _observer_rows()[0][1]]
-    page = _parse(build_report([_rows_file(tmp_path / "scn.cases", [("observers:toy", rows)])], tmp_path / "r"))
+    page = _parse(_section_page([_rows_file(tmp_path / "scn.cases", [("observers:toy", rows)])], tmp_path / "r",
+                                "scenarios"))
     intro = page.sections["scn-toy-run"].paragraphs[0]
     assert intro.startswith("Toy oscillator for the report test. Drawn: the toy coordinate. Settings: "
                             f"h = {fmt(rows[0]['h'])} s, T = {fmt(rows[0]['t_end'])} s")

@@ -22,7 +22,7 @@ from reports.ensemble_view import BAND_Q, member_rows, path_band, settling_matri
 from reports import forest
 from reports.sections import artifacts, claims, k_metric_claims
 from reports.sections.key_numbers import MAX_ITEMS, headlines
-from tests.reports.test_build import _parse, _rows_file, _synthetic_rows
+from tests.reports.test_build import _parse, _rows_file, _section_page, _synthetic_rows
 
 N = 60
 """Members per design and ensemble."""
@@ -339,7 +339,7 @@ def test_artifact_rises_count_jumps_up():
 
 def test_no_ensemble_rows_says_so(tmp_path):
     path = _rows_file(tmp_path / "plain.cases", _synthetic_rows()[:3])
-    page = _parse(build_report([path], tmp_path / "r"))
+    page = _parse(_section_page([path], tmp_path / "r", "claims"))
     assert page.sections["claims"].paragraphs[0].startswith("No claims: no ensemble results")
     assert page.sections["claims"].items == []
 
