@@ -29,6 +29,10 @@ from reports.browser import check_page, find_chromium
 from reports.build import build_report
 from reports.tables import fmt, fmt_ratio, fmt_rho, fmt_time
 
+pytestmark = pytest.mark.xdist_group("report_build")
+"""With ``--dist loadgroup`` the module runs on one worker: its module fixtures (the smoke page,
+the synthetic sections) are built once, not once per worker."""
+
 REPO = Path(__file__).resolve().parents[2]
 SECTIONS = ["Key numbers", "Scenarios: trajectories", "Observer table", "Work-precision",
             "Robustness", "Model error and sensors", "Hard cases", "Scaling", "Peers: Siconos", "Micro-benchmarks", "Proof-step checks",

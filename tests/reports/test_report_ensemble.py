@@ -24,6 +24,10 @@ from reports.sections import artifacts, claims, k_metric_claims
 from reports.sections.key_numbers import MAX_ITEMS, headlines
 from tests.reports.test_build import _parse, _rows_file, _section_page, _synthetic_rows
 
+pytestmark = pytest.mark.xdist_group("report_ensemble")
+"""With ``--dist loadgroup`` the module runs on one worker: its module fixture (the page of the
+ensemble rows) is built once, not once per worker."""
+
 N = 60
 """Members per design and ensemble."""
 RHO_COLS = {1e-3: "0.001", 1e-5: "1e-05", 1e-6: "1e-06", 1e-9: "1e-09"}
