@@ -7,6 +7,8 @@ it is skipped only when no Chromium is installed (``.ci/run`` installs it).
 from __future__ import annotations
 
 import base64
+import contextlib
+import io
 import json
 import os
 import re
@@ -220,8 +222,12 @@ def _section_page(files: list[Path], out_dir: Path, *ids: str) -> Path:
 
 
 @pytest.fixture(scope="module")
-def smoke_report(tmp_path_factory):
-    """The smoke suite, a small real micro-benchmark run, and the report built from them."""
+def smoke_build(tmp_path_factory):
+    """The smoke suite, a small real micro-benchmark run, and the report built from them by the
+    command line in this process (``reports.__main__.main``): the page's index, the results
+    folder, main's exit code and what it printed."""
+    from reports.__main__ import main
+
     out = tmp_path_factory.mktemp("results")
     summary = run_suite("smoke", out, progress=False)
     assert not summary.failed, summary.failed
@@ -235,7 +241,18 @@ def smoke_report(tmp_path_factory):
                           "-k", "compiled-double_mass] or solve and 1]"],
                          cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
-    index = build_report([results_path("smoke", out)], tmp_path_factory.mktemp("report"))
+    report = tmp_path_factory.mktemp("report")
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        code = main(["smoke", "--results", str(out), "--out", str(report)])
+    return report / "index.html", out, code, printed.getvalue()
+
+
+@pytest.fixture(scope="module")
+def smoke_report(smoke_build):
+    """The smoke page (:func:`smoke_build`) and its results folder."""
+    index, out, code, printed = smoke_build
+    assert code == 0, printed
     return index, out
 
 
@@ -319,16 +336,15 @@ def test_proof_check_section_shows_the_check_rows(smoke_report, tmp_path):
     assert "No proof-check results" in page and "Proof-check table" not in page
 
 
-def test_cli_builds_report_and_rejects_missing_results(smoke_report, tmp_path, capsys):
-    """The command line's build in this process (a new interpreter would import and build the
-    whole page again); its refusal through ``python -m reports``, the entry point itself."""
-    from reports.__main__ import main
-
-    _, out = smoke_report
+def test_cli_builds_report_and_rejects_missing_results(smoke_build, tmp_path):
+    """The command line's build in this process (:func:`smoke_build`: the smoke page the other
+    tests read is the one it built; a new interpreter would import and build the whole page
+    again); its refusal through ``python -m reports``, the entry point itself."""
+    index, out, code, printed = smoke_build
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    assert main(["smoke", "--results", str(out), "--out", str(tmp_path / "cli")]) == 0
-    assert capsys.readouterr().out.startswith(f"report: {tmp_path / 'cli' / 'index.html'} (")
-    assert (tmp_path / "cli" / "index.html").exists()
+    assert code == 0
+    assert printed.startswith(f"report: {index} (")
+    assert index.exists()
     res = subprocess.run([sys.executable, "-m", "reports", "nosuchsuite", "--results", str(tmp_path)],
                          cwd=REPO, env=env, capture_output=True, text=True)
     assert res.returncode == 2 and "python -m bench run nosuchsuite" in res.stderr
