@@ -420,7 +420,8 @@ def test_broken_proofs_checks_fails_its_case_and_the_report_still_builds(tmp_pat
     assert "checks under construction" in summary.failed[0][1]
     rows = load_rows([results_path("pc", tmp_path)])
     assert set(rows["case_id"]) == {suite.cases[0].case_id}
-    page = _parse(build_report([results_path("pc", tmp_path)], tmp_path / "r"))
+    # figures rendered in place (as the ensemble page: tests/reports/test_report_ensemble.py says why)
+    page = _parse(build_report([results_path("pc", tmp_path)], tmp_path / "r", workers=1))
     assert page.sections["proof-checks"].paragraphs[0].startswith("No proof-check results")
     assert page.sections["proof-checks"].tables == []
 

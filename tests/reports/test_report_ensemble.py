@@ -160,12 +160,17 @@ def _cases(out) -> list[tuple[str, list[dict]]]:
     return _synthetic_rows() + ens + _artifact_rows(out) + [_checks_row()]
 
 
+# The page is built with its figures rendered in place (workers=1): the default pool of forked
+# renderers costs ≈ 1.5 s CPU a page more and gains no wall time on a test worker that shares two
+# cores with another; the pool's path is the smoke page's (tests/reports/test_build.py, built by
+# the command line with the default workers) and gives the same PNG bytes
+# (tests/reports/test_figure_rendering.py).
 @pytest.fixture(scope="module")
 def ensemble_report(tmp_path_factory):
     out = tmp_path_factory.mktemp("ens")
     path = _rows_file(out / "quicklike.cases", _cases(out))
     start, cpu = time.perf_counter(), time.process_time()
-    index = build_report([path], out / "report")
+    index = build_report([path], out / "report", workers=1)
     build_s = time.perf_counter() - start
     print(f"\npage build (measured, reported; not asserted): {build_s:.1f} s wall, "
           f"{time.process_time() - cpu:.1f} s CPU")
