@@ -7,6 +7,8 @@ it is skipped only when no Chromium is installed (``.ci/run`` installs it).
 from __future__ import annotations
 
 import base64
+import contextlib
+import io
 import json
 import os
 import re
@@ -28,6 +30,12 @@ from reports.context import load_rows
 from reports.browser import check_page, find_chromium
 from reports.build import build_report
 from reports.tables import fmt, fmt_ratio, fmt_rho, fmt_time
+
+pytestmark = pytest.mark.xdist_group("report_build")
+"""With ``--dist loadgroup`` the module runs on one worker: its module fixtures (the smoke page, the
+synthetic sections) are built once, not once per worker. With pytest 9.2 and pytest-xdist 3.8 the
+group is ignored (the worker renames the node id through a field pytest no longer reads:
+pytest-xdist issue 1386); ``--dist loadscope`` keeps a module on one worker meanwhile."""
 
 REPO = Path(__file__).resolve().parents[2]
 SECTIONS = ["Key numbers", "Scenarios: trajectories", "Observer table", "Work-precision",
@@ -192,9 +200,36 @@ def _parse(index: Path) -> _Page:
     return page
 
 
+def _section_page(files: list[Path], out_dir: Path, *ids: str) -> Path:
+    """``out_dir/index.html`` holding only the registry's sections ``ids`` (in page order), each
+    built, its figures rendered and the page rendered as :func:`reports.build.build_report` does
+    with the whole registry: for the tests that read those sections only (a whole page costs
+    every section, the stored model-error figures alone ≈ 2 s CPU)."""
+    from reports.build import render, resolve_figures
+    from reports.context import load_context
+    from reports.header import header_table
+    from reports.sections import SECTIONS, build_sections
+
+    specs = tuple(s for s in SECTIONS if s.id in ids)
+    assert {s.id for s in specs} == set(ids), ids
+    ctx = load_context(files, out_dir)
+    ctx.out_dir.mkdir(parents=True, exist_ok=True)
+    sections = build_sections(ctx, specs)
+    resolve_figures(sections)
+    page = render(title="sections " + ", ".join(ids), header=header_table(ctx), command=ctx.command,
+                  sections=[s for s in sections if not s.lead], lead=[s for s in sections if s.lead])
+    index = ctx.out_dir / "index.html"
+    index.write_text(page, encoding="utf-8")
+    return index
+
+
 @pytest.fixture(scope="module")
-def smoke_report(tmp_path_factory):
-    """The smoke suite, a small real micro-benchmark run, and the report built from them."""
+def smoke_build(tmp_path_factory):
+    """The smoke suite, a small real micro-benchmark run, and the report built from them by the
+    command line in this process (``reports.__main__.main``): the page's index, the results
+    folder, main's exit code and what it printed."""
+    from reports.__main__ import main
+
     out = tmp_path_factory.mktemp("results")
     summary = run_suite("smoke", out, progress=False)
     assert not summary.failed, summary.failed
@@ -208,7 +243,18 @@ def smoke_report(tmp_path_factory):
                           "-k", "compiled-double_mass] or solve and 1]"],
                          cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
-    index = build_report([results_path("smoke", out)], tmp_path_factory.mktemp("report"))
+    report = tmp_path_factory.mktemp("report")
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        code = main(["smoke", "--results", str(out), "--out", str(report)])
+    return report / "index.html", out, code, printed.getvalue()
+
+
+@pytest.fixture(scope="module")
+def smoke_report(smoke_build):
+    """The smoke page (:func:`smoke_build`) and its results folder."""
+    index, out, code, printed = smoke_build
+    assert code == 0, printed
     return index, out
 
 
@@ -288,20 +334,19 @@ def test_proof_check_section_shows_the_check_rows(smoke_report, tmp_path):
             assert _num(cells["margin"]) == pytest.approx(r["margin"], rel=5e-3, abs=1e-300)
     path = tmp_path / "nochecks.csv"
     rows[rows["kind"] != "checks"].drop(columns="results_dir").to_csv(path, index=False)
-    page = build_report([path], tmp_path / "r").read_text(encoding="utf-8")
+    page = _section_page([path], tmp_path / "r", "proof-checks").read_text(encoding="utf-8")
     assert "No proof-check results" in page and "Proof-check table" not in page
 
 
-def test_cli_builds_report_and_rejects_missing_results(smoke_report, tmp_path, capsys):
-    """The command line's build in this process (a new interpreter would import and build the
-    whole page again); its refusal through ``python -m reports``, the entry point itself."""
-    from reports.__main__ import main
-
-    _, out = smoke_report
+def test_cli_builds_report_and_rejects_missing_results(smoke_build, tmp_path):
+    """The command line's build in this process (:func:`smoke_build`: the smoke page the other
+    tests read is the one it built; a new interpreter would import and build the whole page
+    again); its refusal through ``python -m reports``, the entry point itself."""
+    index, out, code, printed = smoke_build
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    assert main(["smoke", "--results", str(out), "--out", str(tmp_path / "cli")]) == 0
-    assert capsys.readouterr().out.startswith(f"report: {tmp_path / 'cli' / 'index.html'} (")
-    assert (tmp_path / "cli" / "index.html").exists()
+    assert code == 0
+    assert printed.startswith(f"report: {index} (")
+    assert index.exists()
     res = subprocess.run([sys.executable, "-m", "reports", "nosuchsuite", "--results", str(tmp_path)],
                          cwd=REPO, env=env, capture_output=True, text=True)
     assert res.returncode == 2 and "python -m bench run nosuchsuite" in res.stderr
@@ -375,7 +420,8 @@ def test_broken_proofs_checks_fails_its_case_and_the_report_still_builds(tmp_pat
     assert "checks under construction" in summary.failed[0][1]
     rows = load_rows([results_path("pc", tmp_path)])
     assert set(rows["case_id"]) == {suite.cases[0].case_id}
-    page = _parse(build_report([results_path("pc", tmp_path)], tmp_path / "r"))
+    # figures rendered in place (as the ensemble page: tests/reports/test_report_ensemble.py says why)
+    page = _parse(build_report([results_path("pc", tmp_path)], tmp_path / "r", workers=1))
     assert page.sections["proof-checks"].paragraphs[0].startswith("No proof-check results")
     assert page.sections["proof-checks"].tables == []
 
@@ -531,8 +577,14 @@ def synthetic_report(tmp_path_factory):
     out = tmp_path_factory.mktemp("synthetic")
     path = _rows_file(out / "synthetic.cases", _synthetic_rows())
     (out / "synthetic-micro.json").write_text(json.dumps(_micro_json()))
-    index = build_report([path], out / "report")
+    index = _section_page([path], out / "report", *SYNTHETIC_SECTIONS)
     return _parse(index), load_rows([path])
+
+
+SYNTHETIC_SECTIONS = ("ensemble", "scenarios", "all-key-numbers", "observers", "work-precision", "robustness",
+                      "scaling", "peers", "micro", "proof-checks", "settings", "limitations")
+"""The sections the tests of the synthetic rows read (the whole page of these rows is built and
+checked by tests/reports/test_report_ensemble.py)."""
 
 
 def _settle(name: str, observer: str, rho: float) -> float:
@@ -798,7 +850,7 @@ def test_peers_section_without_siconos(tmp_path, monkeypatch):
     unavailable_path("absent", tmp_path).write_text(json.dumps(
         {"peers:impact_oscillator:h=0.0001": "Siconos absent: no interpreter at /nonexistent/bin/python3; "
                                               + peers.HOW_TO_GET}))
-    page = _parse(build_report([path], tmp_path / "r1"))
+    page = _parse(_section_page([path], tmp_path / "r1", "peers", "all-key-numbers"))
     text = page.sections["peers"].text()
     assert "Siconos was not available when the suite ran" in text and peers.HOW_TO_GET in text
     assert "peers:impact_oscillator" in text and page.sections["peers"].tables == []
@@ -1042,7 +1094,8 @@ def test_a_registered_design_shows_in_every_observer_table(tmp_path, monkeypatch
                              for c, d, st, mg in (("lyapunov_decrease", "toy", "FAIL", -1.0),
                                                   ("proposition1_exact", "toy", "PASS", 0.0),
                                                   ("mass_spd", "", "PASS", 1.0))]))
-    page = _parse(build_report([_rows_file(tmp_path / "toy.cases", cases)], tmp_path / "r"))
+    page = _parse(_section_page([_rows_file(tmp_path / "toy.cases", cases)], tmp_path / "r", "observers",
+                                "proof-checks"))
     observers = [r for r in page.table("observers", "Observer table").dicts() if r["scenario"] == "dm"]
     assert [r["observer"] for r in observers] == [OBSERVER_DESIGNS[o].label for o in ("jump", "nojump")] \
         + [toy.label]
@@ -1152,7 +1205,7 @@ def test_a_registered_contact_solver_shows_in_the_micro_benchmarks(tmp_path, mon
                            for m, t in toy_means.items()]
     path = _rows_file(tmp_path / "solvers.cases", [c for c in _synthetic_rows() if c[0].startswith("checks")])
     (tmp_path / "solvers-micro.json").write_text(json.dumps(data))
-    page = _parse(build_report([path], tmp_path / "r"))
+    page = _parse(_section_page([path], tmp_path / "r", "micro"))
     table = {r["m"]: r for r in page.table("micro", "Speed-up of the fast contact solvers").dicts()}
     for m, t in toy_means.items():
         assert _num(table[str(m)]["speed-up toy"]) == pytest.approx(MICRO_MEANS[(m, "reference")] / t, rel=5e-3)
@@ -1171,7 +1224,8 @@ def test_a_registered_scenario_brings_its_description_and_notes(tmp_path, monkey
     toy.NOTES = "drawn: the toy coordinate."
     monkeypatch.setitem(SCENARIOS, "toy_scenario", toy)
     rows = [{**r, "scenario": "toy_scenario", "name": "toy run"} for r in _observer_rows()[0][1]]
-    page = _parse(build_report([_rows_file(tmp_path / "scn.cases", [("observers:toy", rows)])], tmp_path / "r"))
+    page = _parse(_section_page([_rows_file(tmp_path / "scn.cases", [("observers:toy", rows)])], tmp_path / "r",
+                                "scenarios"))
     intro = page.sections["scn-toy-run"].paragraphs[0]
     assert intro.startswith("Toy oscillator for the report test. Drawn: the toy coordinate. Settings: "
                             f"h = {fmt(rows[0]['h'])} s, T = {fmt(rows[0]['t_end'])} s")

@@ -16,6 +16,12 @@ import pytest
 from reports import registry
 from reports.sections import model_error
 
+pytestmark = pytest.mark.xdist_group("model_error_section")
+"""With ``--dist loadgroup``, this module and the other reading the stored section share a worker
+(so the session fixture is built once). With pytest 9.2 and pytest-xdist 3.8 the group is ignored
+(the worker renames the node id through a field pytest no longer reads: pytest-xdist issue 1386);
+``--dist loadscope`` keeps a module on one worker meanwhile."""
+
 STORED = Path(__file__).resolve().parents[2] / "bench" / "stored"
 PARAMETER_FILES = tuple(sorted(STORED.glob("model_error_parameters_*.json")))
 """Every stored per-parameter result (one per scenario), globbed here, not by the section."""
@@ -79,8 +85,10 @@ def mismatches(sec, data: dict) -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def section():
-    return model_error.build_from(STORED, [])
+def section(stored_model_error_section):
+    """The section of the stored results (tests/reports/conftest.py: one build for this module and
+    the other that reads it)."""
+    return stored_model_error_section
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.stem)
@@ -110,9 +118,13 @@ def test_the_stored_fits_are_the_recomputed_ones():
 
 
 def _doctored(tmp_path: Path, path: Path, change) -> tuple[dict, object]:
-    for f in STORED.iterdir():
-        if f.suffix in (".json", ".csv"):
-            shutil.copy(f, tmp_path / f.name)
+    """``change`` applied to a copy of the stored file ``path``, and the section of a folder
+    holding it beside the stored K-error and latency results (the results the section opens
+    with; the other curve files, each a figure of its own, are left out: the tests read the
+    doctored file's tables)."""
+    latency = STORED / model_error.LATENCY
+    for f in (STORED / model_error.MODEL_ERROR, latency, latency.with_suffix(".csv")):
+        shutil.copy(f, tmp_path / f.name)
     data = json.loads(path.read_text())
     change(data)
     (tmp_path / path.name).write_text(json.dumps(data))

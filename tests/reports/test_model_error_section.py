@@ -17,6 +17,12 @@ import pytest
 from reports import registry
 from reports.sections import model_error
 
+pytestmark = pytest.mark.xdist_group("model_error_section")
+"""With ``--dist loadgroup``, this module and the other reading the stored section share a worker
+(so the session fixture is built once). With pytest 9.2 and pytest-xdist 3.8 the group is ignored
+(the worker renames the node id through a field pytest no longer reads: pytest-xdist issue 1386);
+``--dist loadscope`` keeps a module on one worker meanwhile."""
+
 STORED = Path(__file__).resolve().parents[2] / "bench" / "stored"
 MODEL = STORED / "model_error_floor_double_mass.json"
 LATENCY = STORED / "latency_floor_double_mass.json"
@@ -86,8 +92,10 @@ def law_mismatches(sec) -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def section():
-    return model_error.build_from(STORED, [])
+def section(stored_model_error_section):
+    """The section of the stored results (tests/reports/conftest.py: one build for this module and
+    the other that reads it)."""
+    return stored_model_error_section
 
 
 def test_the_slopes_and_intercepts_are_the_fits_of_the_stored_floors(section):

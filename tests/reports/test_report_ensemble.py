@@ -22,7 +22,13 @@ from reports.ensemble_view import BAND_Q, member_rows, path_band, settling_matri
 from reports import forest
 from reports.sections import artifacts, claims, k_metric_claims
 from reports.sections.key_numbers import MAX_ITEMS, headlines
-from tests.reports.test_build import _parse, _rows_file, _synthetic_rows
+from tests.reports.test_build import _parse, _rows_file, _section_page, _synthetic_rows
+
+pytestmark = pytest.mark.xdist_group("report_ensemble")
+"""With ``--dist loadgroup`` the module runs on one worker: its module fixture (the page of the
+ensemble rows) is built once, not once per worker. With pytest 9.2 and pytest-xdist 3.8 the group is
+ignored (the worker renames the node id through a field pytest no longer reads: pytest-xdist issue
+1386); ``--dist loadscope`` keeps a module on one worker meanwhile."""
 
 N = 60
 """Members per design and ensemble."""
@@ -154,12 +160,17 @@ def _cases(out) -> list[tuple[str, list[dict]]]:
     return _synthetic_rows() + ens + _artifact_rows(out) + [_checks_row()]
 
 
+# The page is built with its figures rendered in place (workers=1): the default pool of forked
+# renderers costs ≈ 1.5 s CPU a page more and gains no wall time on a test worker that shares two
+# cores with another; the pool's path is the smoke page's (tests/reports/test_build.py, built by
+# the command line with the default workers) and gives the same PNG bytes
+# (tests/reports/test_figure_rendering.py).
 @pytest.fixture(scope="module")
 def ensemble_report(tmp_path_factory):
     out = tmp_path_factory.mktemp("ens")
     path = _rows_file(out / "quicklike.cases", _cases(out))
     start, cpu = time.perf_counter(), time.process_time()
-    index = build_report([path], out / "report")
+    index = build_report([path], out / "report", workers=1)
     build_s = time.perf_counter() - start
     print(f"\npage build (measured, reported; not asserted): {build_s:.1f} s wall, "
           f"{time.process_time() - cpu:.1f} s CPU")
@@ -339,7 +350,7 @@ def test_artifact_rises_count_jumps_up():
 
 def test_no_ensemble_rows_says_so(tmp_path):
     path = _rows_file(tmp_path / "plain.cases", _synthetic_rows()[:3])
-    page = _parse(build_report([path], tmp_path / "r"))
+    page = _parse(_section_page([path], tmp_path / "r", "claims"))
     assert page.sections["claims"].paragraphs[0].startswith("No claims: no ensemble results")
     assert page.sections["claims"].items == []
 
