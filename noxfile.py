@@ -83,11 +83,11 @@ BYTECODE = {"PYTHONDONTWRITEBYTECODE": ""}
 with them the cache of pytest's rewritten test modules, so that every worker and every
 subprocess would compile them again)."""
 
-PARALLEL = ["-n", "2", "--dist", "loadgroup", "--durations=50"]
+PARALLEL = ["-n", "2", "--durations=50"]
 """pytest-xdist over the two cores of CI, with the 50 slowest tests listed; replaced by
-whatever follows ``--`` (``nox -s tests -- -n 0 tests/observer`` runs serially). ``loadgroup``:
-the tests of a module marked ``pytest.mark.xdist_group`` run on one worker, so that its costly
-module fixture is built once, not once per worker; the others are dealt out as ``load`` does."""
+whatever follows ``--`` (``nox -s tests -- -n 0 tests/observer`` runs serially). Not
+``--dist loadgroup``: with pytest 9.2 and pytest-xdist 3.8 its ``xdist_group`` marks are
+ignored (pytest-xdist issue 1386; the marks in tests/reports/ take effect once it is fixed)."""
 
 
 @nox.session
