@@ -189,14 +189,12 @@ class Flow:
             G_I = W_I.T @ Minv @ W_I
             free_accel = (gap_rows @ A @ A)[list(self.active)]          # (γ̇_I) of the free flow
             force_rows = -np.linalg.solve(G_I, free_accel)
-            A = A.copy()
-            push = Minv @ W_I @ force_rows
-            size = np.abs(A[n:2 * n, :]) + np.abs(Minv @ W_I) @ np.abs(force_rows)
-            A[n:2 * n, :] += push
-            # zero to round-off: within CANCELLED of the row's largest term (the sum carries
-            # that much of its terms' rounding; a harmonic phase of 1e-176 gives 1e-189 terms)
-            cancelled[n:2 * n, :] = (np.abs(A[n:2 * n, :])
-                                     <= CANCELLED * np.max(size, axis=1, keepdims=True))
+            free_A, A = A, A.copy()
+            A[n:2 * n, :] += Minv @ W_I @ force_rows
+            # zero but for round-off: the exact held accelerations of the system's data are 0
+            loads = np.hstack([-system.K, -system.C, f_osc, f_const.reshape(n, 1)])
+            cancelled[n:2 * n, :] = held_zeros(free_A, system.M, loads, W_I,
+                                               gap_rows[list(self.active)])
         else:
             force_rows = np.zeros((0, N))
         cancelled |= np.abs(A) < np.finfo(float).tiny        # subnormal: no scale information
@@ -475,10 +473,78 @@ EXP_UPPER_CACHE = 256
 _EXP_UPPER: dict = {}
 
 
-CANCELLED = 64.0 * np.finfo(float).eps
-"""An entry of a held flow's accelerations ``A[n:2n] + M⁻¹W_I F_I`` within this fraction of
-the largest term of its row is zero but for round-off: the balancing ignores it, and any
-subnormal entry (a harmonic phase of 1e-309 gives its sine terms 1e-310)."""
+def _exact(x: np.ndarray) -> flint.fmpq_mat:
+    """The float64 matrix ``x`` as an exact rational matrix (every float is a rational)."""
+    x = np.atleast_2d(np.asarray(x, dtype=float))
+    return flint.fmpq_mat(x.shape[0], x.shape[1],
+                          [flint.fmpq(*v.as_integer_ratio()) for v in x.ravel().tolist()])
+
+
+def held_zeros(A: np.ndarray, M: np.ndarray, loads: np.ndarray, W_I: np.ndarray,
+               gap_rows_I: np.ndarray) -> np.ndarray:
+    """The entries of a held flow's accelerations ``A[n:2n] + M⁻¹W_I F_I`` that are zero but
+    for round-off: those whose exact value, from the system's own data, is 0.
+
+    The exact held accelerations are ``H = A_u − P G⁻¹X`` with ``A_u = M⁻¹L`` (L = ``loads``
+    = ``(−K, −C, the harmonic forcing's rows, the constant force)``), ``P = M⁻¹W_I``,
+    ``G = W_Iᵀ P`` and ``X = (gap rows of I)·A·A`` (the free gap accelerations' rows, A with
+    its rows n:2n replaced by A_u). They are computed here exactly, in rational arithmetic
+    (``flint.fmpq_mat``; every float is a rational: M, L, W_I, the gap rows and A's other
+    rows, the identity and the harmonic rotations, are taken as exact), and an entry is
+    cancelled iff its exact value is 0. The certified rounding bound of the computed entry
+    ``ĥ`` against its exact value ``h`` is ``|ĥ − h|`` itself, so ``ĥ`` cannot be told from
+    zero iff h = 0. No count of round-offs and no scale: an exact zero is cancelled whatever
+    its float residue (a held DOF's rows, ~1e-17 of their terms), a nonzero entry is kept
+    however small. The float M⁻¹ (``np.linalg.inv``) and ``A_u = fl(M⁻¹L)`` carry round-off
+    of their own, so the exact value is taken from M and L, not from them.
+
+    Why not a float64 a-priori bound. The last step alone, ``fl(A_u + fl(fl(M⁻¹ @ W_I) @ F̂))``
+    (n products and n − 1 additions per entry of ``fl(M⁻¹W_I)``, then p = |I| products and
+    p − 1 additions, then one addition; Higham §3.1, lemma 3.3), errs by at most
+    ``γ_{n+p+1}(|A_u| + |M⁻¹||W_I||F̂|)`` entrywise, with ``|M⁻¹||W_I|``, not
+    ``|fl(M⁻¹W_I)|``, which cancels. But F̂ is a float solve whose error is amplified by G's
+    conditioning, and A_u and M⁻¹ are rounded: in the held pair of
+    ``test_invariance.TINY_PHASE`` (both DOFs held, every exact entry 0) two entries are
+    6.4e-15 and 8.4e-14 of their own terms, 12 and 150 times γ_5: that bound keeps them, and
+    the balancing scaled a velocity by 2^-24. A bound of the solve would need a certified
+    ``|G⁻¹|``; the exact value needs no more (a few exact products of matrices of the flow's
+    size, once per flow: :func:`flow_for` caches flows).
+
+    Parameters
+    ----------
+    A : ndarray, shape (N, N)
+        The free flow's generator (its rows n:2n are replaced by the exact ``M⁻¹L``).
+    M : ndarray, shape (n, n)
+        Mass matrix.
+    loads : ndarray, shape (n, N)
+        L: ``M`` times the free accelerations' rows, ``(−K, −C, forcing rows, constant)``.
+    W_I : ndarray, shape (n, p)
+        The held contacts' columns of W.
+    gap_rows_I : ndarray, shape (p, N)
+        Their gap rows.
+
+    Returns
+    -------
+    ndarray of bool, shape (n, N)
+        True where the exact held acceleration is 0; all False if the data are not finite
+        or the exact M or G is singular (nothing is known to cancel)."""
+    n, N = loads.shape
+    none = np.zeros((n, N), dtype=bool)
+    if not all(np.all(np.isfinite(x)) for x in (A, M, loads, W_I, gap_rows_I)):
+        return none
+    try:
+        Mq = _exact(M)
+        A_u = Mq.solve(_exact(loads))
+        P = Mq.solve(_exact(W_I))
+        Aq = _exact(A)
+        for i in range(n):
+            for j in range(N):
+                Aq[n + i, j] = A_u[i, j]
+        F = (_exact(W_I).transpose() * P).solve(_exact(gap_rows_I) * Aq * Aq)
+    except ZeroDivisionError:
+        return none
+    H = A_u - P * F
+    return np.array([[H[i, j] == 0 for j in range(N)] for i in range(n)], dtype=bool)
 
 
 def balance(A: np.ndarray, cancelled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -437,7 +437,8 @@ TINY_PHASE = _pair(M=[1.7061716986606097, 1.1], K=[1.7098978604619472, 0.0], C=[
                    w=2.273894586042595, phi=3.2541865008425024e-176, e=0.322836174451987)
 """Drawn by :func:`two_contact_zeno`, run in mm and 0.1 s (α = 1000, β = 0.1): once both
 contacts rest, the held velocities' rows keep terms of 1e-189 (the sine terms of a phase of
-3e-176, not a cancellation of them): balanced by 3e-95, the search stalled."""
+3e-176; exactly 0, but 8e-14 of their own terms after the float solve): balanced by 3e-95,
+the search stalled."""
 
 
 @pytest.mark.parametrize("p, units", [(HELD_PAIR, (1.0, 1.0)), (SUBNORMAL_PHASE, (1.0, 1.0)),
@@ -445,8 +446,8 @@ contacts rest, the held velocities' rows keep terms of 1e-189 (the sine terms of
                          ids=["cancelled", "subnormal", "tiny-phase"])
 def test_a_flow_that_holds_every_dof_is_searched_in_ordinary_steps(p, units):
     """Both contacts held: the run goes on to t_end, resting on both (the balancing ignores
-    the held accelerations' entries that are round-off against their row's largest term, and
-    subnormal entries, :func:`observer.event.flow.balance`)."""
+    the held accelerations' entries whose exact value is 0, :func:`observer.event.flow.held_zeros`,
+    and subnormal entries, :func:`observer.event.flow.balance`)."""
     from observer.event.flow import flow_for
     sc = build(p, alpha=units[0], beta=units[1])
     held = flow_for(sc.system, (0, 1))
