@@ -45,10 +45,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import flint
 import numpy as np
 
 from observer.event.flow import Flow, flow_for
-from observer.event.enclosures import _refine, arb_dot, gamma
+from observer.event.enclosures import Decision, _refine, arb_dot, gamma
 from observer.event.roots import RootIsolationError, first_zero, time_resolution, tolerance
 from observer.impact import impact
 
@@ -269,6 +270,45 @@ def hop_within(fl: Flow, c: int, z: np.ndarray, res: float) -> bool:
     return dec.sign is not None and dec.sign >= 0
 
 
+def leaves(run, t: float, x_before: np.ndarray, x: np.ndarray, A: list, lam: np.ndarray,
+           c: int) -> Decision:
+    """Sign of contact c's velocity after the impulses ``lam`` on the contacts A took the state
+    from ``x_before`` to ``x`` (``u ← u + M⁻¹W_A λ``): +1 when it certainly leaves its contact
+    point. The quantity is the exact velocity of the jump from the float64 data (the state
+    before, λ, M⁻¹, W), ``r·z(x_before) + r_u·M⁻¹W_A λ``; its float64 value ``r·z(x)`` is
+    enclosed by the certified bound of its evaluation, γ_{N+1}·Σ|r z|, plus the rounding of
+    the jump seen through r, ``|r_u|·γ_{n+|A|+1}(|M⁻¹||W_A||λ| + |u|)`` (as
+    :meth:`observer.event.master._Run.jump_error`); where that contains 0, ball arithmetic at
+    doubling precision from the same data (:func:`observer.event.enclosures._refine`). No
+    count of round-offs of the impact speed decides it (it was 1e3·eps·max|γ⁻|)."""
+    fl, n = run.free_flow, run.n
+    r = fl.velocity_rows[c]
+    z = fl.z(t, x)
+    ru = np.abs(r[n:2 * n])
+    W = run.system.W[:, list(A)]
+    g = gamma(n + len(A) + 1)
+    jump = g * (np.abs(run.Minv) @ (np.abs(W) @ np.abs(lam)) + np.abs(x[n:]))
+    gz = gamma(z.size + 1)
+    val = float(r @ z)
+    err = (float(np.abs(r) @ np.abs(z)) * gz + float(ru @ jump)) * (1.0 + 2.0 * gz) \
+        + z.size * 5e-324
+    if np.isfinite(val) and np.isfinite(err) and abs(val) > err:
+        return Decision(1 if val > 0.0 else -1, val - err, val + err, 53)
+    zb = fl.z(t, x_before)
+    return _refine(lambda: arb_dot(r, zb) + _arb_jump(r[n:2 * n], run.Minv, W, lam))
+
+
+def _arb_jump(ru: np.ndarray, Minv: np.ndarray, W: np.ndarray, lam: np.ndarray):
+    """``ru·M⁻¹·W·λ`` of float64 data in ball arithmetic (the current precision)."""
+    wl = [arb_dot(row, lam) for row in np.asarray(W, dtype=float)]
+    s = flint.arb(0)
+    for i, a in enumerate(np.asarray(ru, dtype=float).tolist()):
+        if a != 0.0:
+            s += flint.arb(a) * sum((flint.arb(float(m)) * w for m, w in zip(Minv[i], wl)
+                                     if m != 0.0), flint.arb(0))
+    return s
+
+
 def _hop_impact(run, t: float, x: np.ndarray, held: tuple, landed: list, d: dict,
                 impulse: np.ndarray, res: float, rows: list):
     """The impact of the law at a landing of ``landed`` on the held set (generalized Newton,
@@ -285,22 +325,25 @@ def _hop_impact(run, t: float, x: np.ndarray, held: tuple, landed: list, d: dict
     if not np.any(gm < 0.0):
         return None, None, None
     lam = np.maximum(impact(run.law, run.delassus(A), gm, idx, run.solve), 0.0)
-    x = x.copy()
+    x_before, x = x, x.copy()
     x[run.n:] += run.velocity_jump(A, lam)
     impulse[A] += lam
-    gp = run.free_flow.velocities(t, x)[idx]
-    small = 1e3 * np.finfo(float).eps * float(np.max(np.abs(gm)))
-    keep = [c for c, v, l in zip(A, gp, lam) if c in held and (l > 0.0 or v <= small)]
+    rises = {}
+
+    def rising(c: int) -> bool:
+        if c not in rises:
+            rises[c] = leaves(run, t, x_before, x, A, lam, c)
+        return rises[c].sign == 1
+    keep = [c for c, l in zip(A, lam) if c in held and (l > 0.0 or not rising(c))]
     lifted = [c for c in held if c not in keep]
     for c in lifted:
         d[c] = 0.0                                          # lifted by the impact
     fl = flow_for(run.system, tuple(keep))
     z = fl.z(t, x)
-    v = fl.velocity_rows @ z
     a = (fl.velocity_rows @ fl.A) @ z
     at_contact = sorted(set(landed) | {c for c in d if d[c] == 0.0})   # lifted ones too
     settle = [c for c in at_contact
-              if v[c] <= small or (a[c] < 0.0 and hop_within(fl, c, z, res))]
+              if not rising(c) or (a[c] < 0.0 and hop_within(fl, c, z, res))]
     if settle:
         stick = run.sticking(t, x, sorted(set(keep) | set(settle)))
         if not set(settle) <= set(stick):

@@ -101,7 +101,7 @@ LEFT = Counter({
     ("roots.py", "motion_scale"): 2, ("roots.py", "motion_tolerance"): 1,
     ("roots.py", "resolution("): 2, ("roots.py", "self.tau"): 1, ("roots.py", "time_scale"): 2,
     ("roots.py", "tolerance("): 2, ("roots.py", "touch_band"): 2,
-    ("tails.py", "1e3 * np.finfo(float).eps"): 1, ("tails.py", "CLUSTER_NOISE"): 2,
+    ("tails.py", "CLUSTER_NOISE"): 2,
     ("tails.py", "MERGE_HOPS"): 2, ("tails.py", "TAIL_SPAN"): 2,
     ("tails.py", "run.tau"): 1, ("tails.py", "tail_noise"): 1, ("tails.py", "tolerance("): 1,
 })

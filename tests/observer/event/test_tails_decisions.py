@@ -47,3 +47,46 @@ def test_the_hop_decision_uses_the_resolution_of_the_time_coordinate_only():
     z = np.array([0.0, 5e-13, 0.0, -1.0])
     assert hop_within(_flow(), 0, z, time_resolution(1e4))
     assert not hop_within(_flow(), 0, z, time_resolution(1.0))
+
+
+def _jump_run(minv: float, w: float) -> SimpleNamespace:
+    """A stand-in run of one body on one contact: velocity row (0, w, 0) on z = (q, u, 1),
+    M⁻¹ = minv, W = w."""
+    flow = SimpleNamespace(velocity_rows=np.array([[0.0, w, 0.0]]),
+                           z=lambda t, x: np.concatenate([x, [1.0]]))
+    return SimpleNamespace(free_flow=flow, n=1, Minv=np.array([[minv]]),
+                           system=SimpleNamespace(W=np.array([[w]])))
+
+
+def _jump(run, u: float, lam: float) -> tuple[np.ndarray, np.ndarray]:
+    before = np.array([0.0, u])
+    after = before.copy()
+    after[1:] += run.Minv @ run.system.W @ np.array([lam])
+    return before, after
+
+
+def _exact_velocity(run, u: float, lam: float) -> Fraction:
+    w, m = Fraction(float(run.system.W[0, 0])), Fraction(float(run.Minv[0, 0]))
+    return w * (Fraction(u) + m * w * Fraction(lam))
+
+
+@pytest.mark.parametrize("minv, w, u, lam", [
+    (1.0, 1.0, -1.0, 1.0 + 1e-14),            # leaves at 1e-14·|γ⁻|: the old cut said "held"
+    (1.0, 1.0, -1.0, 1.0),                    # exactly zero
+    (1.0 / 3.0, 3.0, -0.1, 0.1),              # float64 gives 0, exactly −0.1·2⁻⁵⁴·9
+    (1.0 / 3.0, 3.0, -0.1, np.nextafter(0.1, 1.0)),
+    (1.0 / 7.0, 7.0, -1e3, 1e3),
+    (1.0 / 7.0, 7.0, -1e3, np.nextafter(1e3, 0.0)),
+])
+def test_whether_an_impact_lifts_a_contact_is_the_exact_sign_of_its_velocity(minv, w, u, lam):
+    """The velocity after the jump u + M⁻¹Wλ, from the float64 data (u, M⁻¹, W, λ), has the
+    exact rational sign: a contact left with 1e-14 of its impact speed certainly leaves (the
+    old cut, 1e3·eps·|γ⁻| = 2.2e-13, held it); one left exactly at rest, or at a velocity that
+    float64 rounds away, gets the exact sign (0, or the sign of what float64 lost)."""
+    from observer.event.tails import leaves
+    run = _jump_run(minv, w)
+    before, after = _jump(run, u, lam)
+    dec = leaves(run, 0.0, before, after, [0], np.array([lam]), 0)
+    v = _exact_velocity(run, u, lam)
+    assert dec.sign == (v > 0) - (v < 0)
+    assert Fraction(dec.lower) <= v <= Fraction(dec.upper)
