@@ -104,9 +104,10 @@ class JointTail:
     hops: int
     settled: dict
     rows: list
-    """The tail's events in order, ``(time, contact, kind, γ⁻, γ⁺, impulse)``: every impact
+    """The tail's events in order, ``(time, contact, kind, γ⁻, γ⁺, impulse, note)``: every impact
     it resolves, a held contact lifted by a hop it resolves (``liftoff``), a contact held
-    (``stick``) but for its last hold (``settled``), which the accumulation rows state."""
+    (``stick``) but for its last hold (``settled``), which the accumulation rows state; the
+    note states a decision left undecided at the precision cap, with its enclosure, else ""."""
 
 
 def _rows(flow: Flow, c: int) -> np.ndarray:
@@ -251,14 +252,16 @@ def joint_tail(run, t: float, x: np.ndarray, held: tuple, cluster: list, key: tu
     return None
 
 
-def hop_within(fl: Flow, c: int, z: np.ndarray, res: float) -> bool:
+def hop_within(fl: Flow, c: int, z: np.ndarray, res: float, notes: dict | None = None) -> bool:
     """Whether the next hop of contact c from the contact point, ``2γ⁺/α`` (γ⁺ = g_c'·z,
     α = −g_c''·z > 0 on ``fl``), lasts no longer than ``res`` (the time coordinate's
     resolution, :func:`observer.event.roots.time_resolution`): the sign of
     ``w = −res·g_c''·z − 2·g_c'·z`` (w ≥ 0: within), decided from its enclosure — float64 with
     the certified bound γ_N·(res·Σ|g_c'' z| + 2·Σ|g_c' z|) first, else ball arithmetic at
     doubling precision from the same data (:func:`observer.event.enclosures._refine`, exact
-    for float64 data at the cap). No count of round-offs decides it."""
+    for float64 data at the cap). No count of round-offs decides it. Undecided at the cap:
+    not within (the contact keeps hopping), and the enclosure goes to ``notes[c]`` (the note
+    of the contact's event row at this impact)."""
     vr, ar = _rows(fl, c)[0], _rows(fl, c)[1]
     w = -res * float(ar @ z) - 2.0 * float(vr @ z)
     g = gamma(z.size + 2)
@@ -267,6 +270,8 @@ def hop_within(fl: Flow, c: int, z: np.ndarray, res: float) -> bool:
     if np.isfinite(w) and np.isfinite(err) and abs(w) > err:
         return w > 0.0
     dec = _refine(lambda: -arb_dot(ar, z) * res - 2 * arb_dot(vr, z))
+    if dec.sign is None and notes is not None:
+        notes[c] = f"contact {c}: hop within the time resolution {dec.note}"
     return dec.sign is not None and dec.sign >= 0
 
 
@@ -330,9 +335,13 @@ def _hop_impact(run, t: float, x: np.ndarray, held: tuple, landed: list, d: dict
     impulse[A] += lam
     rises = {}
 
-    def rising(c: int) -> bool:
+    notes: dict = {}
+
+    def rising(c: int) -> bool:                   # undecided at the cap: not leaving
         if c not in rises:
             rises[c] = leaves(run, t, x_before, x, A, lam, c)
+            if rises[c].sign is None:
+                notes[c] = f"contact {c}: leaving its contact point {rises[c].note}"
         return rises[c].sign == 1
     keep = [c for c, l in zip(A, lam) if c in held and (l > 0.0 or not rising(c))]
     lifted = [c for c in held if c not in keep]
@@ -343,7 +352,7 @@ def _hop_impact(run, t: float, x: np.ndarray, held: tuple, landed: list, d: dict
     a = (fl.velocity_rows @ fl.A) @ z
     at_contact = sorted(set(landed) | {c for c in d if d[c] == 0.0})   # lifted ones too
     settle = [c for c in at_contact
-              if not rising(c) or (a[c] < 0.0 and hop_within(fl, c, z, res))]
+              if not rising(c) or (a[c] < 0.0 and hop_within(fl, c, z, res, notes))]
     if settle:
         stick = run.sticking(t, x, sorted(set(keep) | set(settle)))
         if not set(settle) <= set(stick):
@@ -353,13 +362,17 @@ def _hop_impact(run, t: float, x: np.ndarray, held: tuple, landed: list, d: dict
         d.pop(c, None)
     x = run.project(t, x, list(keep))
     gp = run.free_flow.velocities(t, x)[idx]
+    first = len(rows)
     for c, before, after, lc in zip(A, gm, gp, lam):
         if c in landed:
-            rows.append((t, c, "impact", before, after, lc))
+            rows.append((t, c, "impact", before, after, lc, notes.pop(c, "")))
         elif c in lifted and c not in keep:
-            rows.append((t, c, "liftoff", before, after, lc))
+            rows.append((t, c, "liftoff", before, after, lc, notes.pop(c, "")))
         if c in keep and c not in held:
-            rows.append((t, c, "stick", after, after, 0.0))
+            rows.append((t, c, "stick", after, after, 0.0, notes.pop(c, "")))
+    if notes and len(rows) > first:                # a contact without a row of its own here
+        row = rows[first]
+        rows[first] = (*row[:6], "; ".join(filter(None, [row[6], *notes.values()])))
     return x, tuple(sorted(keep)), lifted
 
 

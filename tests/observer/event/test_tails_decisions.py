@@ -5,6 +5,7 @@ checked here against exact rational arithmetic on the same float64 data."""
 
 from __future__ import annotations
 
+import re
 from fractions import Fraction
 from types import SimpleNamespace
 
@@ -90,3 +91,42 @@ def test_whether_an_impact_lifts_a_contact_is_the_exact_sign_of_its_velocity(min
     v = _exact_velocity(run, u, lam)
     assert dec.sign == (v > 0) - (v < 0)
     assert Fraction(dec.lower) <= v <= Fraction(dec.upper)
+
+
+def test_a_hop_undecided_at_the_precision_cap_is_not_within_and_states_its_enclosure(monkeypatch):
+    """γ⁺ = res/2 under a cancelling ±1e30 (the data span 153 binary orders), α = 1: the hop
+    lasts exactly res, within (the real cap decides the exact zero); with the cap lowered to
+    the first ball precision (128 bits) the sign is undecided: the hop is then not within,
+    and the note gives an enclosure of w (containing the exact 0) and the precision reached."""
+    import observer.event.enclosures as enclosures
+    res = time_resolution(1.0)
+    z = np.array([1e30, res / 2.0, -1e30, -1.0])
+    assert hop_within(_flow(), 0, z, res)
+    monkeypatch.setattr(enclosures, "PRECISION_CAP", 128)
+    notes: dict = {}
+    assert not hop_within(_flow(), 0, z, res, notes)
+    assert set(notes) == {0}
+    lo, hi = (float(v) for v in re.search(r"\[(\S+), (\S+)\] at 128 bits", notes[0]).groups())
+    assert lo < 0.0 < hi
+
+
+def test_an_undecided_decision_in_a_joint_tail_is_stated_in_its_event_rows(monkeypatch):
+    """Two balls whose tails overlap, translated by 100 (a joint tail): with every lift-off decision of its
+    impacts made undecided (the float64 enclosure kept, no sign), the tail's rows of those
+    impacts carry the enclosure in their note, after the joint tail's own."""
+    import observer.event.tails as tails
+    from observer.event.enclosures import Decision
+    from observer.event.master import run_master
+    from tests.observer.event.test_joint_tails import two_contacts
+    real = tails.leaves
+
+    def undecided(*args):
+        dec = real(*args)
+        return Decision(None, dec.lower, dec.upper, 4096)
+    monkeypatch.setattr(tails, "leaves", undecided)
+    res = run_master(two_contacts(np.eye(2), (0.005, 0.005001), 0.4, 100.0, 0.1))
+    ev = res.events
+    tail = ev[ev["note"].str.startswith("joint tail of contacts (0, 1): exact hop")]
+    assert len(tail) > 0
+    assert tail["note"].str.contains(r"leaving its contact point undecided: sign of a value in \[",
+                                     regex=True).all()
