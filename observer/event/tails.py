@@ -49,12 +49,13 @@ import flint
 import numpy as np
 
 from observer.event.flow import Flow, flow_for
-from observer.event.enclosures import Decision, _refine, arb_dot, gamma
+from observer.event.enclosures import Decision, _refine, arb_dot, coupled, gamma
 from observer.event.roots import RootIsolationError, first_zero, time_resolution, tolerance
 from observer.impact import impact
 
 HOP_ORDER = 8
-"""Degree of the Taylor polynomial of a hop (hops are ≪ τ: the truncation is (Δ/τ)^9)."""
+"""Degree of the Taylor polynomial of a hop. A hop whose truncation is not certainly below the
+polynomial's own float64 evaluation error (:func:`taylor_holds`) ends the joint tail (None)."""
 
 TAIL_HOPS = 20_000
 """Hops after which a joint tail that has not converged is abandoned (None)."""
@@ -84,8 +85,6 @@ of a pair translated by (−100, 3.25), 5.8e-9 s in t_∞ against the 30-digit r
 resolved by the joint tail from there on, each contact's gap is relative to its contact
 point and the error stays at its start's."""
 
-TAIL_SPAN = 0.25
-"""A joint tail longer than this fraction of the time scale τ is not a Zeno tail (None)."""
 
 
 @dataclass
@@ -122,6 +121,31 @@ def _rows(flow: Flow, c: int) -> np.ndarray:
 
 
 _FACT = np.cumprod(np.arange(1, HOP_ORDER + 1, dtype=float))
+
+
+def taylor_holds(flow: Flow, c: int, z: np.ndarray, d: float, D: np.ndarray, dt: float) -> bool:
+    """Whether the hop polynomial ``p(Δ) = d + Σ_{k≤K} D_k Δ^k/k!`` (K = :data:`HOP_ORDER`) of
+    contact c is the flow's relative gap over ``[0, dt]`` to within its own float64 evaluation
+    error: the Lagrange remainder ``|g_c^{(K+1)}(ξ)| dt^{K+1}/(K+1)!``, bounded by
+    ``‖r A_S^{K}‖₁·e^{‖A_S‖∞ dt}‖z_S‖∞`` (r A^K the row of g_c^{(K+1)}, S the components it
+    depends on, :func:`observer.event.enclosures.coupled`: a mode it does not see does not
+    shorten the hop), is at most ``γ_{2K+2}·(|d| + Σ|D_k| dt^k/k!)`` (Horner's bound,
+    Higham §5.1). Zero remainder (a polynomial motion: free fall) holds for any dt. Not a
+    time scale of the system: the hop's own data decide."""
+    cache = flow.__dict__.setdefault("_hop_remainder", {})
+    if c not in cache:
+        top = _rows(flow, c)[-1] @ flow.A              # row of g_c^(K+1)
+        S = coupled(flow.A, top != 0.0)
+        normA = float(np.max(np.abs(flow.A[np.ix_(S, S)]).sum(axis=1))) if S.any() else 0.0
+        cache[c] = (float(np.abs(top).sum()), S, normA)
+    top, S, normA = cache[c]
+    if top == 0.0:
+        return True
+    k = HOP_ORDER + 1
+    bound = top * float(np.max(np.abs(z[S]))) * np.exp(normA * dt) * dt ** k / (_FACT[-1] * k)
+    terms = abs(d) + float(np.abs(D) @ (dt ** np.arange(1, HOP_ORDER + 1) / _FACT))
+    g = gamma(2 * HOP_ORDER + 2)
+    return bool(bound * (1.0 + 4.0 * g) <= g * terms)
 
 
 def landing(d: float, D: np.ndarray) -> float:
@@ -231,7 +255,7 @@ def joint_tail(run, t: float, x: np.ndarray, held: tuple, cluster: list, key: tu
         if not d or any(np.isnan(v) for v in s.values()):
             return None
         dt = min(s.values())
-        if not np.isfinite(dt) or tail + dt > TAIL_SPAN * run.tau:
+        if not np.isfinite(dt) or not all(taylor_holds(fl, c, z, d[c], D[c], dt) for c in d):
             return None
         if held:                                            # ∫λ dt of the held forces
             impulse[list(held)] += fl.force_rows @ fl.integral(dt, z)

@@ -102,8 +102,8 @@ LEFT = Counter({
     ("roots.py", "resolution("): 2, ("roots.py", "self.tau"): 1, ("roots.py", "time_scale"): 2,
     ("roots.py", "tolerance("): 2, ("roots.py", "touch_band"): 2,
     ("tails.py", "CLUSTER_NOISE"): 2,
-    ("tails.py", "MERGE_HOPS"): 2, ("tails.py", "TAIL_SPAN"): 2,
-    ("tails.py", "run.tau"): 1, ("tails.py", "tail_noise"): 1, ("tails.py", "tolerance("): 1,
+    ("tails.py", "MERGE_HOPS"): 2,
+    ("tails.py", "tail_noise"): 1, ("tails.py", "tolerance("): 1,
 })
 """What is still left (issue 34 open): per module and name, the uses counted today (the
 simultaneity band, the graze band, the persistent-contact, sticking and lift-off

@@ -130,3 +130,37 @@ def test_an_undecided_decision_in_a_joint_tail_is_stated_in_its_event_rows(monke
     assert len(tail) > 0
     assert tail["note"].str.contains(r"leaving its contact point undecided: sign of a value in \[",
                                      regex=True).all()
+
+
+def test_a_hop_polynomial_is_taken_only_where_its_remainder_is_below_its_rounding():
+    """A contact on a spring of 10 rad/s (g = q): wherever :func:`taylor_holds` accepts a hop
+    of Δ, the degree-8 polynomial of the relative gap is within its own float64 evaluation
+    bound of the exact flow (mpmath, 40 digits, from the same float64 data); it accepts the
+    short hops (Δ ≤ 1e-3 s) and refuses Δ = 0.1 s, where the truncation is ~(ωΔ)⁹/9! ≈ 3e-6
+    of the motion."""
+    import mpmath as mp
+    from observer.event.flow import flow_for
+    from observer.event.tails import HOP_ORDER, _FACT, _rows, advance, taylor_holds
+    from observer.scenario import Scenario
+    from observer.event.enclosures import gamma
+    sc = Scenario.from_dict({
+        "scenario": {"name": "spring"},
+        "system": {"M": [[1.0]], "C": [[0.0]], "K": [[100.0]], "W": [[1.0]],
+                   "forcing": {"constant": [0.0]}, "gap": {"offset": [0.0]}},
+        "impact": {"law": "newton", "restitution": 0.5},
+        "initial": {"q": [0.3], "u": [1.7]}, "simulation": {"t_end": 1.0, "h": 0.1}})
+    fl = flow_for(sc.system, ())
+    z = fl.z(0.0, np.array([0.3, 1.7]))
+    D = _rows(fl, 0) @ z
+    accepted = []
+    for dt in [1e-6, 1e-4, 1e-3, 1e-2, 3e-2, 0.1, 0.5]:
+        with mp.workdps(40):
+            w = mp.mpf(10)
+            q, u = mp.mpf(float(z[0])), mp.mpf(float(z[1]))
+            exact = q * mp.cos(w * dt) + u / w * mp.sin(w * dt) - q
+        poly = advance(0.0, D, dt)
+        terms = float(np.abs(D) @ (dt ** np.arange(1, HOP_ORDER + 1) / _FACT))
+        if taylor_holds(fl, 0, z, 0.0, D, dt):
+            accepted.append(dt)
+            assert abs(mp.mpf(poly) - exact) <= 2 * gamma(2 * HOP_ORDER + 2) * terms, dt
+    assert {1e-6, 1e-4, 1e-3} <= set(accepted) and 0.1 not in accepted and 0.5 not in accepted
