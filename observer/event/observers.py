@@ -64,6 +64,7 @@ from typing import TYPE_CHECKING, Iterable
 import numpy as np
 
 from observer.contact import get_solver
+from observer.event.enclosures import gamma
 from observer.event.flow import expm_pade13
 from observer.errors import InputError
 from observer.impact import ImpactLaw
@@ -241,7 +242,7 @@ def _derivs(mode: Mode, row: np.ndarray, order: int) -> list[np.ndarray]:
     return rows
 
 
-def _safe_start(mode: Mode, mon: _Monitor, z: np.ndarray, delta: float) -> float:
+def _safe_start(mode: Mode, mon: _Monitor, z: np.ndarray, delta: float, zeros: int = 0) -> float:
     """Length of an initial interval on which φ certainly does not cross 0 from above.
 
     For φ(0) > 0 this is 0 (the search starts at once). For φ(0) ≈ 0 (the functional was just
@@ -250,13 +251,22 @@ def _safe_start(mode: Mode, mon: _Monitor, z: np.ndarray, delta: float) -> float
     ``φ(s) ≥ Σ_{j≤k} d_j s^j/j! − B s^{k+1}/(k+1)!`` with ``B = ‖c A^{k+1}‖ e^{‖A‖δ}‖z‖`` gives
     s₁ with φ increasing from round-off level to φ(s₁) > 0 on (0, s₁]. Returns −1 when no
     derivative up to the second is certifiably positive (degenerate: the caller stops).
+
+    ``zeros``: the derivatives d_0, …, d_{zeros−1} that the event which reset φ made exactly
+    zero (a stick of a free contact: γ = 0 at its root; a lift-off: γ = γ̇ = 0, the contact
+    was held and its force is zero at the root); the float state's values of them are the
+    round-off of the held flow and of the root's location, not of the motion, and are set to
+    0. The others are zero only within the certified float64 error of their evaluation,
+    γ_{N+1}·Σ|c_k z| (no count of round-offs: it was 1e3·eps·‖c_k‖‖z‖, which hid a
+    lift-off's γ = −3e-21, certainly negative in the float state, as zero).
     """
     rows = _derivs(mode, mon.row, 3)
-    d = [float(r @ z) for r in rows]
+    d = [0.0 if k < zeros else float(r @ z) for k, r in enumerate(rows)]
     if d[0] > 0.0:
         return 0.0
     nz = float(np.linalg.norm(z))
-    tiny = [1e3 * np.finfo(float).eps * float(np.linalg.norm(r)) * nz for r in rows]
+    g = gamma(z.size + 1)
+    tiny = [g * (1.0 + 2.0 * g) * float(np.abs(r) @ np.abs(z)) + z.size * 5e-324 for r in rows]
     if d[0] < -tiny[0]:
         return -1.0
     cap = min(delta, 1.0 / mode.norm) if mode.norm > 0.0 else delta   # e^{‖A‖s} ≤ e on (0, cap]
@@ -628,6 +638,7 @@ class _ObserverIntegrator:
         n, N1 = self.system.n, t.shape[0]
         count_here, last_event_t = 0, None
         z = None                                     # carried between samples (exogenous part exact)
+        zeros: dict = {}                             # monitor → derivatives its reset made zero
         while now < t_stop:
             md = self.mode(closed, active)
             if z is None:
@@ -649,7 +660,7 @@ class _ObserverIntegrator:
             delta = nxt - now
             hit = None
             for mon in mons:
-                s0 = _safe_start(md, mon, z, delta)
+                s0 = _safe_start(md, mon, z, delta, zeros.get((mon.kind, mon.contact), 0))
                 if s0 < 0.0:
                     return q, u, now, closed, active, k_next, _stopped(
                         f"degenerate {mon.kind} monitor of contact {mon.contact} at t = {now!r}")
@@ -665,6 +676,7 @@ class _ObserverIntegrator:
                     tau = _refine(md, mon.row, z, lo, tau)
                     if hit is None or tau < hit[0]:
                         hit = (tau, mon)
+            zeros = {}
             if hit is None:
                 z = md.propagator(delta) @ z
                 now = nxt
@@ -686,8 +698,10 @@ class _ObserverIntegrator:
             gam = float(self.system.contact_velocities(u, now)[mon.contact])
             if mon.kind == "stick":                 # LCP decides: held (λ > 0) or touched and free
                 active = self.select_active(now, q, u, closed)
+                zeros = {("stick", mon.contact): 1}  # free: γ = 0 at the root of its stick
             else:
                 active = active - {mon.contact}
+                zeros = {("stick", mon.contact): 2}  # released: γ = 0 held, γ̇ = −Gλ = 0
             self.events.append((now, mon.contact, mon.kind, gam, gam, 0.0))
         return q, u, now, closed, active, k_next, RunStatus()
 

@@ -95,7 +95,6 @@ LEFT = Counter({
     ("master.py", "run.tau"): 3, ("master.py", "self.tau"): 5, ("master.py", "tail_noise"): 1,
     ("master.py", "tail_noise_limit"): 3, ("master.py", "tau=self.tau"): 1,
     ("master.py", "time_scale"): 2, ("master.py", "time_ulp"): 3, ("master.py", "tolerance("): 4,
-    ("observers.py", "1e3 * np.finfo(float).eps"): 1,
     ("roots.py", "64.0 * np.finfo(float).eps"): 1, ("roots.py", "FLOOR_FACTOR"): 1,
     ("roots.py", "ROUNDOFF"): 4, ("roots.py", "TOUCH_FACTOR"): 2, ("roots.py", "fs.tau"): 1,
     ("roots.py", "motion_scale"): 2, ("roots.py", "motion_tolerance"): 1,

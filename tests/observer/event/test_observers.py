@@ -413,20 +413,25 @@ def test_observer_state_is_independent_of_the_output_grid(double_mass):
         np.testing.assert_allclose(a.u, b.u[::2], rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("g0, expected", [(1.0, 0.0), (0.0, 0.5), (-1.0, -1.0), (-1e-20, 0.5)])
-def test_safe_start_of_a_rising_gap_from_its_taylor_bound(g0, expected):
+@pytest.mark.parametrize("g0, zeros, expected", [
+    (1.0, 0, 0.0), (0.0, 0, 0.5), (-1.0, 0, -1.0), (-1e-20, 0, -1.0), (-1e-20, 1, 0.5),
+    (-1.0, 1, 0.5)])
+def test_safe_start_of_a_rising_gap_from_its_taylor_bound(g0, zeros, expected):
     """φ = g on the double integrator g' = v, v' = 0 (A² = 0, ‖A‖₂ = 1, so B = 0 and the
     bound is exact: s₁ = min(δ, 1/‖A‖) = 0.5 for δ = 0.5), rising at v = 10: φ(0) > 0 starts
-    the search at once (0); φ(0) = 0, or within the round-off band (1e3·eps·|z|), is certified
-    rising on (0, s₁] (s₁); φ(0) = −1, far below zero, is a violated functional, never a safe
-    start (−1, the caller stops), however fast it rises."""
+    the search at once (0); φ(0) = 0 is certified rising on (0, s₁] (s₁); φ(0) = −1, far below
+    zero, and φ(0) = −1e-20, certainly below zero in float64 (its evaluation error is
+    γ·1e-20), are violated functionals, never a safe start (−1, the caller stops), however
+    fast they rise (the old band 1e3·eps·|z| = 2.2e-12 took −1e-20 for zero). A functional
+    that the event resetting it made zero (``zeros = 1``: φ = 0 at its root) starts from
+    that zero, whatever round-off the float state carries."""
     from types import SimpleNamespace
 
     from observer.event.observers import _Monitor, _safe_start
     A = np.array([[0.0, 1.0], [0.0, 0.0]])
     mode = SimpleNamespace(A=A, norm=float(np.linalg.norm(A, 2)))
     mon = _Monitor(0, "stick", np.array([1.0, 0.0]))
-    assert _safe_start(mode, mon, np.array([g0, 10.0]), 0.5) == expected
+    assert _safe_start(mode, mon, np.array([g0, 10.0]), 0.5, zeros) == expected
 
 
 def test_safe_start_of_a_gap_released_at_rest_with_positive_curvature():
