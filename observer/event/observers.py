@@ -253,10 +253,13 @@ def _safe_start(mode: Mode, mon: _Monitor, z: np.ndarray, delta: float, zeros: i
     derivative up to the second is certifiably positive (degenerate: the caller stops).
 
     ``zeros``: the derivatives d_0, …, d_{zeros−1} that the event which reset φ made exactly
-    zero (a stick of a free contact: γ = 0 at its root; a lift-off: γ = γ̇ = 0, the contact
-    was held and its force is zero at the root); the float state's values of them are the
-    round-off of the held flow and of the root's location, not of the motion, and are set to
-    0. The others are zero only within the certified float64 error of their evaluation,
+    zero (a lift-off: γ = γ̇ = 0, the contact was held and its force is zero at the root; a
+    plastic impulse, e = 0 and Λ > 0: γ⁺ = 0 by the law); the float state's values of them
+    are the round-off of the held flow, of the root's location and of the jump, not of the
+    motion, and are set to 0. (Not a stick: its state may lie past the root, where the float
+    γ is certainly negative — a free contact of the chain at e = 0 then chattered between
+    stick events instead of stopping.) The others are zero only within the certified float64
+    error of their evaluation,
     γ_{N+1}·Σ|c_k z| (no count of round-offs: it was 1e3·eps·‖c_k‖‖z‖, which hid a
     lift-off's γ = −3e-21, certainly negative in the float state, as zero).
     """
@@ -488,6 +491,7 @@ class _ObserverIntegrator:
         self._hold_maps: dict[tuple, tuple] = {}
         self.events: list[tuple] = []
         self.should_stop = None        # callable → a signal name (stop between switchings) or None
+        self.zeros: dict = {}          # monitor → derivatives the last switching made zero
 
     def mode(self, closed: frozenset, active: frozenset) -> Mode:
         key = (tuple(sorted(closed)) if self.jumps else (), tuple(sorted(active)))
@@ -540,10 +544,14 @@ class _ObserverIntegrator:
             return u
         law = self.law.definition
         if law.event_closed_set == "all":
-            J, Lam = idx, law.impact_map(self._delassus(idx), gam, self.law.restitution[idx],
-                                         self.solver.solve)
+            J, e = idx, self.law.restitution[idx]
+            Lam = law.impact_map(self._delassus(idx), gam, e, self.solver.solve)
         else:
-            J, Lam = self._on_approaching(t, u, idx, gam)
+            J, Lam, e = self._on_approaching(t, u, idx, gam)
+        # a plastic impulse (e = 0, Λ > 0) leaves γ⁺ = 0 by the law: the stick monitor of a
+        # contact it leaves free starts from that zero, not from the jump's round-off
+        self.zeros = {("stick", int(j)): 1 for j, lam, ej in zip(J, Lam, e)
+                      if lam > 0.0 and ej == 0.0}
         u = u + self.Minv @ self.system.W[:, J] @ Lam
         gp = self.system.contact_velocities(u, t)
         gm = dict(zip(idx.tolist(), gam))
@@ -559,7 +567,8 @@ class _ObserverIntegrator:
         return W.T @ self.Minv @ W
 
     def _on_approaching(self, t, u, idx, gam):
-        """The law's impulse on J = {γ⁻ ≤ 0}, growing J (e = 0) by the separating contacts it pushes below 0."""
+        """The law's impulse on J = {γ⁻ ≤ 0}, growing J (e = 0) by the separating contacts it
+        pushes below 0: ``(J, Λ, e)``, e the restitution each contact of J got."""
         e_all = dict(zip(idx.tolist(), self.law.restitution[idx]))
         J = [int(i) for i, g in zip(idx, gam) if g <= 0.0]
         gm = dict(zip(idx.tolist(), gam))
@@ -575,7 +584,7 @@ class _ObserverIntegrator:
             for j in pushed:
                 e_all[j] = 0.0
             J = sorted(J + pushed)
-        return np.array(J), Lam
+        return np.array(J), Lam, np.array([e_all[j] for j in J])
 
     def select_active(self, t: float, q: np.ndarray, u: np.ndarray, closed: frozenset) -> frozenset:
         """A = {i ∈ I : γ_i = 0 and λ_i > 0} from ``0 ≤ γ̇_B ⊥ λ_B ≥ 0`` over B = {i ∈ I : γ_i ≤ tol}."""
@@ -638,7 +647,7 @@ class _ObserverIntegrator:
         n, N1 = self.system.n, t.shape[0]
         count_here, last_event_t = 0, None
         z = None                                     # carried between samples (exogenous part exact)
-        zeros: dict = {}                             # monitor → derivatives its reset made zero
+        zeros, self.zeros = self.zeros, {}          # monitor → derivatives its reset made zero
         while now < t_stop:
             md = self.mode(closed, active)
             if z is None:
@@ -698,7 +707,6 @@ class _ObserverIntegrator:
             gam = float(self.system.contact_velocities(u, now)[mon.contact])
             if mon.kind == "stick":                 # LCP decides: held (λ > 0) or touched and free
                 active = self.select_active(now, q, u, closed)
-                zeros = {("stick", mon.contact): 1}  # free: γ = 0 at the root of its stick
             else:
                 active = active - {mon.contact}
                 zeros = {("stick", mon.contact): 2}  # released: γ = 0 held, γ̇ = −Gλ = 0

@@ -446,3 +446,27 @@ def test_safe_start_of_a_gap_released_at_rest_with_positive_curvature():
     mon = _Monitor(0, "stick", np.array([1.0, 0.0, 0.0]))
     assert _safe_start(mode, mon, np.array([0.0, 0.0, 2.0]), 0.5) == 0.5
     assert _safe_start(mode, mon, np.array([0.0, 0.0, -2.0]), 0.5) == -1.0
+
+
+@pytest.mark.parametrize("e", [0.0, 0.5])
+def test_a_plastic_impulse_marks_the_zero_velocity_it_leaves_for_the_stick_monitors(e):
+    """rocking_chain (N = 2) closed on all four contacts at t = 0: the impact's plastic
+    impulses (e = 0, Λ > 0) leave γ⁺ = 0 by the law, and the monitors of those contacts start
+    from that zero (``zeros`` 1), not from the jump's round-off; at e = 0.5 no contact is left
+    at a zero by the law (the separating ones the impulse pushes get e = 0 and are marked)."""
+    from observer.event.observers import _ObserverIntegrator
+    from observer.contact import get_solver
+    sc = observer.load_scenario("rocking_chain", {"param.N": 2, "impact.law": "newton",
+                                                  "impact.restitution": e})
+    system = sc.system
+    integ = _ObserverIntegrator(system, sc.law, None, get_solver("lemke"))
+    integ.P = np.zeros((2, system.m))
+    u0 = np.random.default_rng(0).standard_normal(system.n) * 0.05
+    u = integ.collide(0.0, u0, frozenset(range(system.m)), 1)
+    rows = [r for r in integ.events if r[2] == "impact"]
+    gam = system.contact_velocities(u, 0.0)
+    plastic = {("stick", j): 1 for _, j, _, gm, _, lam in rows if lam > 0.0
+               and (e == 0.0 or gm > 0.0)}
+    assert integ.zeros == plastic
+    if e == 0.0:
+        assert plastic and all(abs(gam[j]) <= 1e-15 for _, j in plastic)
