@@ -300,7 +300,7 @@ def hop_within(fl: Flow, c: int, z: np.ndarray, res: float, notes: dict | None =
 
 
 def leaves(run, t: float, x_before: np.ndarray, x: np.ndarray, A: list, lam: np.ndarray,
-           c: int) -> Decision:
+           c: int, held: bool = False) -> Decision:
     """Sign of contact c's velocity after the impulses ``lam`` on the contacts A took the state
     from ``x_before`` to ``x`` (``u ← u + M⁻¹W_A λ``): +1 when it certainly leaves its contact
     point. The quantity is the exact velocity of the jump from the float64 data (the state
@@ -309,12 +309,19 @@ def leaves(run, t: float, x_before: np.ndarray, x: np.ndarray, A: list, lam: np.
     the jump seen through r, ``|r_u|·γ_{n+|A|+1}(|M⁻¹||W_A||λ| + |u|)`` (as
     :meth:`observer.event.master._Run.jump_error`); where that contains 0, ball arithmetic at
     doubling precision from the same data (:func:`observer.event.enclosures._refine`). No
-    count of round-offs of the impact speed decides it (it was 1e3·eps·max|γ⁻|)."""
+    count of round-offs of the impact speed decides it (it was 1e3·eps·max|γ⁻|).
+
+    ``held``: c was held before the impact, so its velocity was exactly 0 (the held flow
+    keeps γ_c = 0; the float state's γ_c is that flow's round-off, ~1e-17, not motion), and
+    the velocity after is the jump's alone, ``r_u·M⁻¹W_A λ`` (an impact of a decoupled contact
+    lifts no held contact)."""
     fl, n = run.free_flow, run.n
     r = fl.velocity_rows[c]
+    W = run.system.W[:, list(A)]
+    if held:
+        return _jump_sign(r[n:2 * n], run.Minv, W, lam)
     z = fl.z(t, x)
     ru = np.abs(r[n:2 * n])
-    W = run.system.W[:, list(A)]
     g = gamma(n + len(A) + 1)
     jump = g * (np.abs(run.Minv) @ (np.abs(W) @ np.abs(lam)) + np.abs(x[n:]))
     gz = gamma(z.size + 1)
@@ -325,6 +332,18 @@ def leaves(run, t: float, x_before: np.ndarray, x: np.ndarray, A: list, lam: np.
         return Decision(1 if val > 0.0 else -1, val - err, val + err, 53)
     zb = fl.z(t, x_before)
     return _refine(lambda: arb_dot(r, zb) + _arb_jump(r[n:2 * n], run.Minv, W, lam))
+
+
+def _jump_sign(ru: np.ndarray, Minv: np.ndarray, W: np.ndarray, lam: np.ndarray) -> Decision:
+    """Sign of ``ru·M⁻¹·W·λ`` (float64 data): float64 with its certified bound
+    γ_{n+k+2}·|ru|·|M⁻¹|·|W|·|λ|, else :func:`_arb_jump` at doubling precision."""
+    val = float(ru @ (Minv @ (W @ lam)))
+    g = gamma(Minv.shape[0] + W.shape[1] + 2)
+    err = float(np.abs(ru) @ (np.abs(Minv) @ (np.abs(W) @ np.abs(lam)))) * g * (1.0 + 2.0 * g) \
+        + (Minv.shape[0] + W.shape[1]) * 5e-324
+    if np.isfinite(val) and np.isfinite(err) and abs(val) > err:
+        return Decision(1 if val > 0.0 else -1, val - err, val + err, 53)
+    return _refine(lambda: _arb_jump(ru, Minv, W, lam))
 
 
 def _arb_jump(ru: np.ndarray, Minv: np.ndarray, W: np.ndarray, lam: np.ndarray):
@@ -363,7 +382,7 @@ def _hop_impact(run, t: float, x: np.ndarray, held: tuple, landed: list, d: dict
 
     def rising(c: int) -> bool:                   # undecided at the cap: not leaving
         if c not in rises:
-            rises[c] = leaves(run, t, x_before, x, A, lam, c)
+            rises[c] = leaves(run, t, x_before, x, A, lam, c, c in held)
             if rises[c].sign is None:
                 notes[c] = f"contact {c}: leaving its contact point {rises[c].note}"
         return rises[c].sign == 1
