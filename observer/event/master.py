@@ -811,7 +811,8 @@ class _Run:
         self.fill(flow_for(self.system, jt.held), t, self.project(t, x, list(jt.held)),
                   min(jt.t_inf, self.t_end), include_end=jt.t_inf >= self.t_end)
         hop_note = f"joint tail of contacts {tuple(cluster)}: exact hop"
-        rows = [(*row, hop_note) for row in jt.rows]    # the tail's own events
+        rows = [(*row[:6], "; ".join(filter(None, [hop_note, row[6]])))   # the tail's own
+                for row in jt.rows]                                          # events
         if jt.t_inf >= self.t_end:
             for row in rows:
                 if row[0] < self.t_end:

@@ -64,6 +64,7 @@ from typing import TYPE_CHECKING, Iterable
 import numpy as np
 
 from observer.contact import get_solver
+from observer.event.enclosures import gamma
 from observer.event.flow import expm_pade13
 from observer.errors import InputError
 from observer.impact import ImpactLaw
@@ -241,7 +242,7 @@ def _derivs(mode: Mode, row: np.ndarray, order: int) -> list[np.ndarray]:
     return rows
 
 
-def _safe_start(mode: Mode, mon: _Monitor, z: np.ndarray, delta: float) -> float:
+def _safe_start(mode: Mode, mon: _Monitor, z: np.ndarray, delta: float, zeros: int = 0) -> float:
     """Length of an initial interval on which φ certainly does not cross 0 from above.
 
     For φ(0) > 0 this is 0 (the search starts at once). For φ(0) ≈ 0 (the functional was just
@@ -250,13 +251,25 @@ def _safe_start(mode: Mode, mon: _Monitor, z: np.ndarray, delta: float) -> float
     ``φ(s) ≥ Σ_{j≤k} d_j s^j/j! − B s^{k+1}/(k+1)!`` with ``B = ‖c A^{k+1}‖ e^{‖A‖δ}‖z‖`` gives
     s₁ with φ increasing from round-off level to φ(s₁) > 0 on (0, s₁]. Returns −1 when no
     derivative up to the second is certifiably positive (degenerate: the caller stops).
+
+    ``zeros``: the derivatives d_0, …, d_{zeros−1} that the event which reset φ made exactly
+    zero (a lift-off: γ = γ̇ = 0, the contact was held and its force is zero at the root; a
+    plastic impulse, e = 0 and Λ > 0: γ⁺ = 0 by the law); the float state's values of them
+    are the round-off of the held flow, of the root's location and of the jump, not of the
+    motion, and are set to 0. (Not a stick: its state may lie past the root, where the float
+    γ is certainly negative — a free contact of the chain at e = 0 then chattered between
+    stick events instead of stopping.) The others are zero only within the certified float64
+    error of their evaluation,
+    γ_{N+1}·Σ|c_k z| (no count of round-offs: it was 1e3·eps·‖c_k‖‖z‖, which hid a
+    lift-off's γ = −3e-21, certainly negative in the float state, as zero).
     """
     rows = _derivs(mode, mon.row, 3)
-    d = [float(r @ z) for r in rows]
+    d = [0.0 if k < zeros else float(r @ z) for k, r in enumerate(rows)]
     if d[0] > 0.0:
         return 0.0
     nz = float(np.linalg.norm(z))
-    tiny = [1e3 * np.finfo(float).eps * float(np.linalg.norm(r)) * nz for r in rows]
+    g = gamma(z.size + 1)
+    tiny = [g * (1.0 + 2.0 * g) * float(np.abs(r) @ np.abs(z)) + z.size * 5e-324 for r in rows]
     if d[0] < -tiny[0]:
         return -1.0
     cap = min(delta, 1.0 / mode.norm) if mode.norm > 0.0 else delta   # e^{‖A‖s} ≤ e on (0, cap]
@@ -478,6 +491,7 @@ class _ObserverIntegrator:
         self._hold_maps: dict[tuple, tuple] = {}
         self.events: list[tuple] = []
         self.should_stop = None        # callable → a signal name (stop between switchings) or None
+        self.zeros: dict = {}          # monitor → derivatives the last switching made zero
 
     def mode(self, closed: frozenset, active: frozenset) -> Mode:
         key = (tuple(sorted(closed)) if self.jumps else (), tuple(sorted(active)))
@@ -530,10 +544,14 @@ class _ObserverIntegrator:
             return u
         law = self.law.definition
         if law.event_closed_set == "all":
-            J, Lam = idx, law.impact_map(self._delassus(idx), gam, self.law.restitution[idx],
-                                         self.solver.solve)
+            J, e = idx, self.law.restitution[idx]
+            Lam = law.impact_map(self._delassus(idx), gam, e, self.solver.solve)
         else:
-            J, Lam = self._on_approaching(t, u, idx, gam)
+            J, Lam, e = self._on_approaching(t, u, idx, gam)
+        # a plastic impulse (e = 0, Λ > 0) leaves γ⁺ = 0 by the law: the stick monitor of a
+        # contact it leaves free starts from that zero, not from the jump's round-off
+        self.zeros = {("stick", int(j)): 1 for j, lam, ej in zip(J, Lam, e)
+                      if lam > 0.0 and ej == 0.0}
         u = u + self.Minv @ self.system.W[:, J] @ Lam
         gp = self.system.contact_velocities(u, t)
         gm = dict(zip(idx.tolist(), gam))
@@ -549,7 +567,8 @@ class _ObserverIntegrator:
         return W.T @ self.Minv @ W
 
     def _on_approaching(self, t, u, idx, gam):
-        """The law's impulse on J = {γ⁻ ≤ 0}, growing J (e = 0) by the separating contacts it pushes below 0."""
+        """The law's impulse on J = {γ⁻ ≤ 0}, growing J (e = 0) by the separating contacts it
+        pushes below 0: ``(J, Λ, e)``, e the restitution each contact of J got."""
         e_all = dict(zip(idx.tolist(), self.law.restitution[idx]))
         J = [int(i) for i, g in zip(idx, gam) if g <= 0.0]
         gm = dict(zip(idx.tolist(), gam))
@@ -565,7 +584,7 @@ class _ObserverIntegrator:
             for j in pushed:
                 e_all[j] = 0.0
             J = sorted(J + pushed)
-        return np.array(J), Lam
+        return np.array(J), Lam, np.array([e_all[j] for j in J])
 
     def select_active(self, t: float, q: np.ndarray, u: np.ndarray, closed: frozenset) -> frozenset:
         """A = {i ∈ I : γ_i = 0 and λ_i > 0} from ``0 ≤ γ̇_B ⊥ λ_B ≥ 0`` over B = {i ∈ I : γ_i ≤ tol}."""
@@ -628,6 +647,7 @@ class _ObserverIntegrator:
         n, N1 = self.system.n, t.shape[0]
         count_here, last_event_t = 0, None
         z = None                                     # carried between samples (exogenous part exact)
+        zeros, self.zeros = self.zeros, {}          # monitor → derivatives its reset made zero
         while now < t_stop:
             md = self.mode(closed, active)
             if z is None:
@@ -649,22 +669,23 @@ class _ObserverIntegrator:
             delta = nxt - now
             hit = None
             for mon in mons:
-                s0 = _safe_start(md, mon, z, delta)
+                s0 = _safe_start(md, mon, z, delta, zeros.get((mon.kind, mon.contact), 0))
                 if s0 < 0.0:
                     return q, u, now, closed, active, k_next, _stopped(
-                        f"degenerate {mon.kind} monitor of contact {mon.contact} at t = {now!r}")
+                        f"degenerate {mon.kind} monitor of contact {mon.contact} at t = {float(now)!r}")
                 if s0 >= delta:
                     continue
                 try:
                     tau = _first_crossing(md, mon.row, z, delta, s0)
                 except _Stalled as exc:
                     return q, u, now, closed, active, k_next, _stopped(
-                        f"{exc} for the {mon.kind} monitor of contact {mon.contact} at t = {now!r}")
+                        f"{exc} for the {mon.kind} monitor of contact {mon.contact} at t = {float(now)!r}")
                 if tau is not None:
                     lo = self._bracket_left(md, mon.row, z, s0, tau)
                     tau = _refine(md, mon.row, z, lo, tau)
                     if hit is None or tau < hit[0]:
                         hit = (tau, mon)
+            zeros = {}
             if hit is None:
                 z = md.propagator(delta) @ z
                 now = nxt
@@ -682,12 +703,13 @@ class _ObserverIntegrator:
             count_here = count_here + 1 if now == last_event_t else 1
             last_event_t = now
             if count_here > MAX_EVENTS_PER_INSTANT:
-                return q, u, now, closed, active, k_next, _stopped(f"mode cycle at t = {now!r}")
+                return q, u, now, closed, active, k_next, _stopped(f"mode cycle at t = {float(now)!r}")
             gam = float(self.system.contact_velocities(u, now)[mon.contact])
             if mon.kind == "stick":                 # LCP decides: held (λ > 0) or touched and free
                 active = self.select_active(now, q, u, closed)
             else:
                 active = active - {mon.contact}
+                zeros = {("stick", mon.contact): 2}  # released: γ = 0 held, γ̇ = −Gλ = 0
             self.events.append((now, mon.contact, mon.kind, gam, gam, 0.0))
         return q, u, now, closed, active, k_next, RunStatus()
 

@@ -45,15 +45,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import flint
 import numpy as np
 
 from observer.event.flow import Flow, flow_for
-from observer.event.enclosures import _refine, arb_dot, gamma
+from observer.event.enclosures import Decision, _refine, arb_dot, coupled, gamma
 from observer.event.roots import RootIsolationError, first_zero, time_resolution, tolerance
 from observer.impact import impact
 
 HOP_ORDER = 8
-"""Degree of the Taylor polynomial of a hop (hops are ≪ τ: the truncation is (Δ/τ)^9)."""
+"""Degree of the Taylor polynomial of a hop. A hop whose truncation is not certainly below the
+polynomial's own float64 evaluation error (:func:`taylor_holds`) ends the joint tail (None)."""
 
 TAIL_HOPS = 20_000
 """Hops after which a joint tail that has not converged is abandoned (None)."""
@@ -83,8 +85,6 @@ of a pair translated by (−100, 3.25), 5.8e-9 s in t_∞ against the 30-digit r
 resolved by the joint tail from there on, each contact's gap is relative to its contact
 point and the error stays at its start's."""
 
-TAIL_SPAN = 0.25
-"""A joint tail longer than this fraction of the time scale τ is not a Zeno tail (None)."""
 
 
 @dataclass
@@ -103,9 +103,10 @@ class JointTail:
     hops: int
     settled: dict
     rows: list
-    """The tail's events in order, ``(time, contact, kind, γ⁻, γ⁺, impulse)``: every impact
+    """The tail's events in order, ``(time, contact, kind, γ⁻, γ⁺, impulse, note)``: every impact
     it resolves, a held contact lifted by a hop it resolves (``liftoff``), a contact held
-    (``stick``) but for its last hold (``settled``), which the accumulation rows state."""
+    (``stick``) but for its last hold (``settled``), which the accumulation rows state; the
+    note states a decision left undecided at the precision cap, with its enclosure, else ""."""
 
 
 def _rows(flow: Flow, c: int) -> np.ndarray:
@@ -120,6 +121,31 @@ def _rows(flow: Flow, c: int) -> np.ndarray:
 
 
 _FACT = np.cumprod(np.arange(1, HOP_ORDER + 1, dtype=float))
+
+
+def taylor_holds(flow: Flow, c: int, z: np.ndarray, d: float, D: np.ndarray, dt: float) -> bool:
+    """Whether the hop polynomial ``p(Δ) = d + Σ_{k≤K} D_k Δ^k/k!`` (K = :data:`HOP_ORDER`) of
+    contact c is the flow's relative gap over ``[0, dt]`` to within its own float64 evaluation
+    error: the Lagrange remainder ``|g_c^{(K+1)}(ξ)| dt^{K+1}/(K+1)!``, bounded by
+    ``‖r A_S^{K}‖₁·e^{‖A_S‖∞ dt}‖z_S‖∞`` (r A^K the row of g_c^{(K+1)}, S the components it
+    depends on, :func:`observer.event.enclosures.coupled`: a mode it does not see does not
+    shorten the hop), is at most ``γ_{2K+2}·(|d| + Σ|D_k| dt^k/k!)`` (Horner's bound,
+    Higham §5.1). Zero remainder (a polynomial motion: free fall) holds for any dt. Not a
+    time scale of the system: the hop's own data decide."""
+    cache = flow.__dict__.setdefault("_hop_remainder", {})
+    if c not in cache:
+        top = _rows(flow, c)[-1] @ flow.A              # row of g_c^(K+1)
+        S = coupled(flow.A, top != 0.0)
+        normA = float(np.max(np.abs(flow.A[np.ix_(S, S)]).sum(axis=1))) if S.any() else 0.0
+        cache[c] = (float(np.abs(top).sum()), S, normA)
+    top, S, normA = cache[c]
+    if top == 0.0:
+        return True
+    k = HOP_ORDER + 1
+    bound = top * float(np.max(np.abs(z[S]))) * np.exp(normA * dt) * dt ** k / (_FACT[-1] * k)
+    terms = abs(d) + float(np.abs(D) @ (dt ** np.arange(1, HOP_ORDER + 1) / _FACT))
+    g = gamma(2 * HOP_ORDER + 2)
+    return bool(bound * (1.0 + 4.0 * g) <= g * terms)
 
 
 def landing(d: float, D: np.ndarray) -> float:
@@ -229,7 +255,7 @@ def joint_tail(run, t: float, x: np.ndarray, held: tuple, cluster: list, key: tu
         if not d or any(np.isnan(v) for v in s.values()):
             return None
         dt = min(s.values())
-        if not np.isfinite(dt) or tail + dt > TAIL_SPAN * run.tau:
+        if not np.isfinite(dt) or not all(taylor_holds(fl, c, z, d[c], D[c], dt) for c in d):
             return None
         if held:                                            # ∫λ dt of the held forces
             impulse[list(held)] += fl.force_rows @ fl.integral(dt, z)
@@ -250,14 +276,16 @@ def joint_tail(run, t: float, x: np.ndarray, held: tuple, cluster: list, key: tu
     return None
 
 
-def hop_within(fl: Flow, c: int, z: np.ndarray, res: float) -> bool:
+def hop_within(fl: Flow, c: int, z: np.ndarray, res: float, notes: dict | None = None) -> bool:
     """Whether the next hop of contact c from the contact point, ``2γ⁺/α`` (γ⁺ = g_c'·z,
     α = −g_c''·z > 0 on ``fl``), lasts no longer than ``res`` (the time coordinate's
     resolution, :func:`observer.event.roots.time_resolution`): the sign of
     ``w = −res·g_c''·z − 2·g_c'·z`` (w ≥ 0: within), decided from its enclosure — float64 with
     the certified bound γ_N·(res·Σ|g_c'' z| + 2·Σ|g_c' z|) first, else ball arithmetic at
     doubling precision from the same data (:func:`observer.event.enclosures._refine`, exact
-    for float64 data at the cap). No count of round-offs decides it."""
+    for float64 data at the cap). No count of round-offs decides it. Undecided at the cap:
+    not within (the contact keeps hopping), and the enclosure goes to ``notes[c]`` (the note
+    of the contact's event row at this impact)."""
     vr, ar = _rows(fl, c)[0], _rows(fl, c)[1]
     w = -res * float(ar @ z) - 2.0 * float(vr @ z)
     g = gamma(z.size + 2)
@@ -266,7 +294,67 @@ def hop_within(fl: Flow, c: int, z: np.ndarray, res: float) -> bool:
     if np.isfinite(w) and np.isfinite(err) and abs(w) > err:
         return w > 0.0
     dec = _refine(lambda: -arb_dot(ar, z) * res - 2 * arb_dot(vr, z))
+    if dec.sign is None and notes is not None:
+        notes[c] = f"contact {c}: hop within the time resolution {dec.note}"
     return dec.sign is not None and dec.sign >= 0
+
+
+def leaves(run, t: float, x_before: np.ndarray, x: np.ndarray, A: list, lam: np.ndarray,
+           c: int, held: bool = False) -> Decision:
+    """Sign of contact c's velocity after the impulses ``lam`` on the contacts A took the state
+    from ``x_before`` to ``x`` (``u ← u + M⁻¹W_A λ``): +1 when it certainly leaves its contact
+    point. The quantity is the exact velocity of the jump from the float64 data (the state
+    before, λ, M⁻¹, W), ``r·z(x_before) + r_u·M⁻¹W_A λ``; its float64 value ``r·z(x)`` is
+    enclosed by the certified bound of its evaluation, γ_{N+1}·Σ|r z|, plus the rounding of
+    the jump seen through r, ``|r_u|·γ_{n+|A|+1}(|M⁻¹||W_A||λ| + |u|)`` (as
+    :meth:`observer.event.master._Run.jump_error`); where that contains 0, ball arithmetic at
+    doubling precision from the same data (:func:`observer.event.enclosures._refine`). No
+    count of round-offs of the impact speed decides it (it was 1e3·eps·max|γ⁻|).
+
+    ``held``: c was held before the impact, so its velocity was exactly 0 (the held flow
+    keeps γ_c = 0; the float state's γ_c is that flow's round-off, ~1e-17, not motion), and
+    the velocity after is the jump's alone, ``r_u·M⁻¹W_A λ`` (an impact of a decoupled contact
+    lifts no held contact)."""
+    fl, n = run.free_flow, run.n
+    r = fl.velocity_rows[c]
+    W = run.system.W[:, list(A)]
+    if held:
+        return _jump_sign(r[n:2 * n], run.Minv, W, lam)
+    z = fl.z(t, x)
+    ru = np.abs(r[n:2 * n])
+    g = gamma(n + len(A) + 1)
+    jump = g * (np.abs(run.Minv) @ (np.abs(W) @ np.abs(lam)) + np.abs(x[n:]))
+    gz = gamma(z.size + 1)
+    val = float(r @ z)
+    err = (float(np.abs(r) @ np.abs(z)) * gz + float(ru @ jump)) * (1.0 + 2.0 * gz) \
+        + z.size * 5e-324
+    if np.isfinite(val) and np.isfinite(err) and abs(val) > err:
+        return Decision(1 if val > 0.0 else -1, val - err, val + err, 53)
+    zb = fl.z(t, x_before)
+    return _refine(lambda: arb_dot(r, zb) + _arb_jump(r[n:2 * n], run.Minv, W, lam))
+
+
+def _jump_sign(ru: np.ndarray, Minv: np.ndarray, W: np.ndarray, lam: np.ndarray) -> Decision:
+    """Sign of ``ru·M⁻¹·W·λ`` (float64 data): float64 with its certified bound
+    γ_{n+k+2}·|ru|·|M⁻¹|·|W|·|λ|, else :func:`_arb_jump` at doubling precision."""
+    val = float(ru @ (Minv @ (W @ lam)))
+    g = gamma(Minv.shape[0] + W.shape[1] + 2)
+    err = float(np.abs(ru) @ (np.abs(Minv) @ (np.abs(W) @ np.abs(lam)))) * g * (1.0 + 2.0 * g) \
+        + (Minv.shape[0] + W.shape[1]) * 5e-324
+    if np.isfinite(val) and np.isfinite(err) and abs(val) > err:
+        return Decision(1 if val > 0.0 else -1, val - err, val + err, 53)
+    return _refine(lambda: _arb_jump(ru, Minv, W, lam))
+
+
+def _arb_jump(ru: np.ndarray, Minv: np.ndarray, W: np.ndarray, lam: np.ndarray):
+    """``ru·M⁻¹·W·λ`` of float64 data in ball arithmetic (the current precision)."""
+    wl = [arb_dot(row, lam) for row in np.asarray(W, dtype=float)]
+    s = flint.arb(0)
+    for i, a in enumerate(np.asarray(ru, dtype=float).tolist()):
+        if a != 0.0:
+            s += flint.arb(a) * sum((flint.arb(float(m)) * w for m, w in zip(Minv[i], wl)
+                                     if m != 0.0), flint.arb(0))
+    return s
 
 
 def _hop_impact(run, t: float, x: np.ndarray, held: tuple, landed: list, d: dict,
@@ -285,22 +373,29 @@ def _hop_impact(run, t: float, x: np.ndarray, held: tuple, landed: list, d: dict
     if not np.any(gm < 0.0):
         return None, None, None
     lam = np.maximum(impact(run.law, run.delassus(A), gm, idx, run.solve), 0.0)
-    x = x.copy()
+    x_before, x = x, x.copy()
     x[run.n:] += run.velocity_jump(A, lam)
     impulse[A] += lam
-    gp = run.free_flow.velocities(t, x)[idx]
-    small = 1e3 * np.finfo(float).eps * float(np.max(np.abs(gm)))
-    keep = [c for c, v, l in zip(A, gp, lam) if c in held and (l > 0.0 or v <= small)]
+    rises = {}
+
+    notes: dict = {}
+
+    def rising(c: int) -> bool:                   # undecided at the cap: not leaving
+        if c not in rises:
+            rises[c] = leaves(run, t, x_before, x, A, lam, c, c in held)
+            if rises[c].sign is None:
+                notes[c] = f"contact {c}: leaving its contact point {rises[c].note}"
+        return rises[c].sign == 1
+    keep = [c for c, l in zip(A, lam) if c in held and (l > 0.0 or not rising(c))]
     lifted = [c for c in held if c not in keep]
     for c in lifted:
         d[c] = 0.0                                          # lifted by the impact
     fl = flow_for(run.system, tuple(keep))
     z = fl.z(t, x)
-    v = fl.velocity_rows @ z
     a = (fl.velocity_rows @ fl.A) @ z
     at_contact = sorted(set(landed) | {c for c in d if d[c] == 0.0})   # lifted ones too
     settle = [c for c in at_contact
-              if v[c] <= small or (a[c] < 0.0 and hop_within(fl, c, z, res))]
+              if not rising(c) or (a[c] < 0.0 and hop_within(fl, c, z, res, notes))]
     if settle:
         stick = run.sticking(t, x, sorted(set(keep) | set(settle)))
         if not set(settle) <= set(stick):
@@ -310,13 +405,17 @@ def _hop_impact(run, t: float, x: np.ndarray, held: tuple, landed: list, d: dict
         d.pop(c, None)
     x = run.project(t, x, list(keep))
     gp = run.free_flow.velocities(t, x)[idx]
+    first = len(rows)
     for c, before, after, lc in zip(A, gm, gp, lam):
         if c in landed:
-            rows.append((t, c, "impact", before, after, lc))
+            rows.append((t, c, "impact", before, after, lc, notes.pop(c, "")))
         elif c in lifted and c not in keep:
-            rows.append((t, c, "liftoff", before, after, lc))
+            rows.append((t, c, "liftoff", before, after, lc, notes.pop(c, "")))
         if c in keep and c not in held:
-            rows.append((t, c, "stick", after, after, 0.0))
+            rows.append((t, c, "stick", after, after, 0.0, notes.pop(c, "")))
+    if notes and len(rows) > first:                # a contact without a row of its own here
+        row = rows[first]
+        rows[first] = (*row[:6], "; ".join(filter(None, [row[6], *notes.values()])))
     return x, tuple(sorted(keep)), lifted
 
 

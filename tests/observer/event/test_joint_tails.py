@@ -161,3 +161,33 @@ def test_two_balls_whose_tails_overlap_each_reach_their_closed_form_t_inf(c):
     got = accumulation_times(res)
     for k in (0, 1):
         assert abs(got[k] - ball_t_inf(h0[k], e)) <= 1e-9, (k, got[k])
+
+
+def test_a_fast_hum_on_the_balls_does_not_abandon_their_joint_tail():
+    """The two balls of the test above, translated by 100, each pushed by a hum of 1e-20 N at
+    1e4 rad/s (a displacement of 1e-28 m: the closed form stands): the hum sets the system's
+    time scale τ = 1e-4 s, which no longer bounds the joint tail (its hops are checked against
+    their own Taylor remainder, :func:`observer.event.tails.taylor_holds`): each ball reaches
+    its closed-form t∞ to 1e-9 (measured 4.5e-10; with the tail cut at τ/4, 3.3e-9)."""
+    h0, e, c = (0.005, 0.005001), 0.4, 100.0
+    hum = {"amplitude": [1e-20, 1e-20], "omega": 1e4}
+    res = run_master(_with_forcing_harmonic(h0, e, c, hum))
+    assert res.status.ok
+    got = accumulation_times(res)
+    assert res.events["note"].str.startswith("joint tail of contacts (0, 1)").any()
+    for k in (0, 1):
+        assert abs(got[k] - ball_t_inf(h0[k], e)) <= 1e-9, (k, got[k] - ball_t_inf(h0[k], e))
+
+
+def _with_forcing_harmonic(h0, e: float, c: float, harmonic: dict) -> Scenario:
+    """:func:`two_contacts` (W = I, t_end 0.1) with one more forcing term ``harmonic``."""
+    q0 = np.full(2, c)
+    doc = {"scenario": {"name": "joint-tails-hum"},
+           "system": {"M": np.eye(2).tolist(), "C": np.zeros((2, 2)).tolist(),
+                      "K": np.zeros((2, 2)).tolist(), "W": np.eye(2).tolist(),
+                      "forcing": {"constant": [-G, -G], "harmonics": [harmonic]},
+                      "gap": {"offset": (np.asarray(h0) - q0).tolist()}},
+           "impact": {"law": "newton", "restitution": e},
+           "initial": {"q": q0.tolist(), "u": [0.0, 0.0]},
+           "simulation": {"t_end": 0.1, "h": 0.1 / 8}}
+    return Scenario.from_dict(doc)

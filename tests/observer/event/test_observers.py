@@ -413,20 +413,25 @@ def test_observer_state_is_independent_of_the_output_grid(double_mass):
         np.testing.assert_allclose(a.u, b.u[::2], rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("g0, expected", [(1.0, 0.0), (0.0, 0.5), (-1.0, -1.0), (-1e-20, 0.5)])
-def test_safe_start_of_a_rising_gap_from_its_taylor_bound(g0, expected):
+@pytest.mark.parametrize("g0, zeros, expected", [
+    (1.0, 0, 0.0), (0.0, 0, 0.5), (-1.0, 0, -1.0), (-1e-20, 0, -1.0), (-1e-20, 1, 0.5),
+    (-1.0, 1, 0.5)])
+def test_safe_start_of_a_rising_gap_from_its_taylor_bound(g0, zeros, expected):
     """φ = g on the double integrator g' = v, v' = 0 (A² = 0, ‖A‖₂ = 1, so B = 0 and the
     bound is exact: s₁ = min(δ, 1/‖A‖) = 0.5 for δ = 0.5), rising at v = 10: φ(0) > 0 starts
-    the search at once (0); φ(0) = 0, or within the round-off band (1e3·eps·|z|), is certified
-    rising on (0, s₁] (s₁); φ(0) = −1, far below zero, is a violated functional, never a safe
-    start (−1, the caller stops), however fast it rises."""
+    the search at once (0); φ(0) = 0 is certified rising on (0, s₁] (s₁); φ(0) = −1, far below
+    zero, and φ(0) = −1e-20, certainly below zero in float64 (its evaluation error is
+    γ·1e-20), are violated functionals, never a safe start (−1, the caller stops), however
+    fast they rise (the old band 1e3·eps·|z| = 2.2e-12 took −1e-20 for zero). A functional
+    that the event resetting it made zero (``zeros = 1``: φ = 0 at its root) starts from
+    that zero, whatever round-off the float state carries."""
     from types import SimpleNamespace
 
     from observer.event.observers import _Monitor, _safe_start
     A = np.array([[0.0, 1.0], [0.0, 0.0]])
     mode = SimpleNamespace(A=A, norm=float(np.linalg.norm(A, 2)))
     mon = _Monitor(0, "stick", np.array([1.0, 0.0]))
-    assert _safe_start(mode, mon, np.array([g0, 10.0]), 0.5) == expected
+    assert _safe_start(mode, mon, np.array([g0, 10.0]), 0.5, zeros) == expected
 
 
 def test_safe_start_of_a_gap_released_at_rest_with_positive_curvature():
@@ -441,3 +446,27 @@ def test_safe_start_of_a_gap_released_at_rest_with_positive_curvature():
     mon = _Monitor(0, "stick", np.array([1.0, 0.0, 0.0]))
     assert _safe_start(mode, mon, np.array([0.0, 0.0, 2.0]), 0.5) == 0.5
     assert _safe_start(mode, mon, np.array([0.0, 0.0, -2.0]), 0.5) == -1.0
+
+
+@pytest.mark.parametrize("e", [0.0, 0.5])
+def test_a_plastic_impulse_marks_the_zero_velocity_it_leaves_for_the_stick_monitors(e):
+    """rocking_chain (N = 2) closed on all four contacts at t = 0: the impact's plastic
+    impulses (e = 0, Λ > 0) leave γ⁺ = 0 by the law, and the monitors of those contacts start
+    from that zero (``zeros`` 1), not from the jump's round-off; at e = 0.5 no contact is left
+    at a zero by the law (the separating ones the impulse pushes get e = 0 and are marked)."""
+    from observer.event.observers import _ObserverIntegrator
+    from observer.contact import get_solver
+    sc = observer.load_scenario("rocking_chain", {"param.N": 2, "impact.law": "newton",
+                                                  "impact.restitution": e})
+    system = sc.system
+    integ = _ObserverIntegrator(system, sc.law, None, get_solver("lemke"))
+    integ.P = np.zeros((2, system.m))
+    u0 = np.random.default_rng(0).standard_normal(system.n) * 0.05
+    u = integ.collide(0.0, u0, frozenset(range(system.m)), 1)
+    rows = [r for r in integ.events if r[2] == "impact"]
+    gam = system.contact_velocities(u, 0.0)
+    plastic = {("stick", j): 1 for _, j, _, gm, _, lam in rows if lam > 0.0
+               and (e == 0.0 or gm > 0.0)}
+    assert integ.zeros == plastic
+    if e == 0.0:
+        assert plastic and all(abs(gam[j]) <= 1e-15 for _, j in plastic)
