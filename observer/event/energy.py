@@ -150,8 +150,10 @@ class EnergyCarry:
     * :meth:`jump`: an impact's velocity map is M-non-expansive on velocities when it is
       averaged — Newton's law with one e ∈ [0, 1] on the impacted set,
       ``u⁺ = (1+e)·Π_C(u) − e·u`` with Π_C the M-projection onto ``{Wᵀu ≥ 0}`` (a convex
-      cone: ``2Π_C − I`` is non-expansive, and ``u⁺`` is its average with I), and one
-      contact of either law; P's velocity block is M, positions do not jump: ``ε`` is kept
+      cone, shifted by the gaps' own velocities: ``2Π_C − I`` is non-expansive, and ``u⁺``
+      is its average with I); Poisson's with one ε, ``u⁺ = Π_C((1+ε)Π_C(u) − ε·u)`` (its
+      compression ``Λ_C`` makes ``Π_C(u)``, its expansion LCP is again the M-projection onto
+      C: a composition of non-expansive maps); P's velocity block is M, positions do not jump: ``ε`` is kept
       and the jump's rounding added; any other jump sets ε = inf (no bound claimed);
     * :meth:`through`: ``|r·e| ≤ ‖r‖_{P⁻¹}·ε`` per row (:func:`dual_norm_bound`, cached).
 
