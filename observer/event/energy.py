@@ -163,7 +163,8 @@ class EnergyCarry:
 
     def __init__(self, system, duration: float) -> None:
         T = float(duration)
-        alpha = 1.0 / (T * T) if np.isfinite(T) and T > 0.0 and 1.0 / (T * T) > 0.0 else 1.0
+        inv = 1.0 / T if np.isfinite(T) and T > 0.0 else 1.0
+        alpha = min(max(inv * inv, 1e-300), 1e300)   # any α > 0 gives a proved bound
         self.n = system.n
         M = _dense(system.M)
         self.P = energy_matrix(M, system.K, alpha)

@@ -499,7 +499,7 @@ class _Run:
         z = fl.z(t, x)
         g, gam = fl.gap_rows @ z, fl.velocity_rows @ z
         tol_g = CONTACT_TOL * self.tol(fl.gap_rows, z, t)
-        tol_v = CONTACT_TOL * self.tol(fl.velocity_rows, z, t)
+        tol_v = np.minimum(CONTACT_TOL * self.tol(fl.velocity_rows, z, t), self.velocity_band(z))
         near = self.simultaneous_band(t, z, gam, tol_g)
         closing = {j for j in range(self.m) if abs(g[j]) <= near[j] and gam[j] < tol_v[j]}
         A = sorted(set(persistent) | set(trigger) | closing)
@@ -513,6 +513,7 @@ class _Run:
         x[self.n:] += self.velocity_jump(A, lam)
         self.jump_error(A, lam, x[self.n:])
         gp = fl.velocities(t, x)[idx]
+        tol_v = np.maximum(tol_v, self.velocity_band(fl.z(t, x)))   # with the jump's rounding
         cand = [c for c, v in zip(A, gp) if v <= tol_v[c]]
         stick = self.sticking(t, x, cand)
         x = self.project(t, x, stick)
@@ -534,6 +535,24 @@ class _Run:
                 self.touch(c, t)
         self.add_impulse(t, A, lam)
         return x, tuple(stick), A, gm, lam
+
+    def velocity_band(self, z: np.ndarray) -> np.ndarray:
+        """The certified distance of every contact's float64 relative velocity ``r_v·z`` to
+        its exact value on the exact trajectory: its evaluation and the state's
+        representation, ``(1 + 2γ)(γ + u/2)·Σ|r_v z|`` with γ = γ_{N+1}, the rounding of the
+        row ``r_v = r A`` itself, ``γ_{N+1}·(|r||A|)|z|``, and the accumulated state error
+        through the row (:attr:`err` componentwise, or the energy norm's
+        ``‖r_v‖_{P⁻¹}·ε``, the smaller). No time scale, no count of round-offs: a
+        contact's γ⁺ outside it is certainly nonzero (issue 34 item 1)."""
+        fl = self.free_flow
+        k = 2 * self.n
+        rows = fl.velocity_rows
+        g = gamma(z.size + 1)
+        az = np.abs(z)
+        own = (1.0 + 2.0 * g) * ((g + 0.5 * np.finfo(float).eps) * (np.abs(rows) @ az)
+                                 + g * (np.abs(fl.gap_rows) @ (np.abs(fl.A) @ az)))
+        carried = np.minimum(np.abs(rows[:, :k]) @ self.err, self.energy.through(rows[:, :k]))
+        return (own + carried) * (1.0 + 2.0 * g) + np.finfo(float).tiny
 
     def simultaneous_band(self, t: float, z: np.ndarray, gam: np.ndarray, cap: np.ndarray) -> np.ndarray:
         """The gaps within which an open contact is impacted together with the one that
