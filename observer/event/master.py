@@ -499,7 +499,7 @@ class _Run:
         z = fl.z(t, x)
         g, gam = fl.gap_rows @ z, fl.velocity_rows @ z
         tol_g = CONTACT_TOL * self.tol(fl.gap_rows, z, t)
-        tol_v = self.velocity_band(z)
+        tol_v = np.minimum(CONTACT_TOL * self.tol(fl.velocity_rows, z, t), self.velocity_band(z))
         near = self.simultaneous_band(t, z, gam, tol_g)
         closing = {j for j in range(self.m) if abs(g[j]) <= near[j] and gam[j] < tol_v[j]}
         A = sorted(set(persistent) | set(trigger) | closing)
