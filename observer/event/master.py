@@ -499,7 +499,8 @@ class _Run:
         z = fl.z(t, x)
         g, gam = fl.gap_rows @ z, fl.velocity_rows @ z
         tol_g = CONTACT_TOL * self.tol(fl.gap_rows, z, t)
-        tol_v = np.minimum(CONTACT_TOL * self.tol(fl.velocity_rows, z, t), self.velocity_band(z))
+        tau_v = CONTACT_TOL * self.tol(fl.velocity_rows, z, t)
+        tol_v = np.minimum(tau_v, self.velocity_band(z))
         near = self.simultaneous_band(t, z, gam, tol_g)
         closing = {j for j in range(self.m) if abs(g[j]) <= near[j] and gam[j] < tol_v[j]}
         A = sorted(set(persistent) | set(trigger) | closing)
@@ -513,8 +514,8 @@ class _Run:
         x[self.n:] += self.velocity_jump(A, lam)
         self.jump_error(A, lam, x[self.n:])
         gp = fl.velocities(t, x)[idx]
-        tol_v = np.maximum(tol_v, self.velocity_band(fl.z(t, x)))   # with the jump's rounding
-        cand = [c for c, v in zip(A, gp) if v <= tol_v[c]]
+        band_p = np.minimum(tau_v, np.maximum(tol_v, self.velocity_band(fl.z(t, x))))  # + the jump
+        cand = [c for c, v in zip(A, gp) if v <= band_p[c]]
         stick = self.sticking(t, x, cand)
         x = self.project(t, x, stick)
         gp = fl.velocities(t, x)[idx]
@@ -545,14 +546,12 @@ class _Run:
         ``‖r_v‖_{P⁻¹}·ε``, the smaller). No time scale, no count of round-offs: a
         contact's γ⁺ outside it is certainly nonzero (issue 34 item 1)."""
         fl = self.free_flow
-        k = 2 * self.n
         rows = fl.velocity_rows
         g = gamma(z.size + 1)
         az = np.abs(z)
         own = (1.0 + 2.0 * g) * ((g + 0.5 * np.finfo(float).eps) * (np.abs(rows) @ az)
                                  + g * (np.abs(fl.gap_rows) @ (np.abs(fl.A) @ az)))
-        carried = np.minimum(np.abs(rows[:, :k]) @ self.err, self.energy.through(rows[:, :k]))
-        return (own + carried) * (1.0 + 2.0 * g) + np.finfo(float).tiny
+        return (own + self.carried(rows)) * (1.0 + 2.0 * g) + np.finfo(float).tiny
 
     def simultaneous_band(self, t: float, z: np.ndarray, gam: np.ndarray, cap: np.ndarray) -> np.ndarray:
         """The gaps within which an open contact is impacted together with the one that

@@ -143,3 +143,16 @@ def test_an_averaged_impact_keeps_the_bound_and_another_drops_it():
     run.energy.jump(False, np.zeros(2))
     assert run.energy.eps == math.inf
     assert np.all(np.isfinite(run.gap_error(run.free_flow.z(0.0, np.array([1.0, 0.0])))))
+
+
+def test_an_overflowed_componentwise_carry_leaves_the_energy_bound():
+    """Once the componentwise carry has overflowed (inf, and inf·0 = nan through a row with
+    zeros), the gap and velocity bands are the energy norm's, finite: a nan band made every
+    comparison false (double_mass's impacts at −5e-7 m/s were labelled grazes)."""
+    run = _Run(oscillator(0.0, 2.0, 1.0), 1.0, 1.0, 10, ZENO_VELOCITY_RATIO)
+    run.err = np.array([np.inf, np.inf])
+    run.energy.eps = 1e-15
+    z = run.free_flow.z(0.0, np.array([1.0, 0.0]))
+    gap, vel = run.gap_error(z), run.velocity_band(z)
+    assert np.all(np.isfinite(gap)) and 0.0 < gap[0] <= 1e-15
+    assert np.all(np.isfinite(vel)) and 0.0 < vel[0] < 1e-14
