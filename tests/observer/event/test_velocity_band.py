@@ -9,13 +9,12 @@ m/s after the factor 1000). Its impacts accumulate at t∞ (an independent 30-di
 inside that band, 4.8e-8 s before t∞ (the Zeno tail ``2γ⁺/(g(1 − e))`` lost); decided on the
 certified error of γ⁺ (its evaluation, the state's representation and the velocity jump's
 rounding), the impacts go on until the Zeno extrapolation, which rests at t∞ (measured 3e-17
-s off). Not yet: that band alone (the current state's evaluation and representation errors
-and the jump's rounding) treats a held contact's velocity of -3.6e-29 m/s — the held flow's
-round-off, its generator's held rows cancelling to ~1e-17 — as a certain approach, so in one
-of test_invariance's two-contact tails under a change of units (1e-3, 1e3) the held contact
-was re-launched by the other's impacts six times and rested 1.8e-4 s late. The band needs the
-accumulated state error (``_Run.err``), whose componentwise carry grows like
-``exp(‖|A|‖ t)``; the test stays expected to fail until then.
+s off). The band includes the accumulated state error (``_Run.err`` componentwise, or its
+energy-norm bound, the smaller, :meth:`observer.event.master._Run.velocity_band`): a band of
+the current state's certified errors alone treated a held contact's velocity of -3.6e-29
+m/s — the held flow's round-off — as a certain approach (in one of test_invariance's
+two-contact tails under a change of units the held contact was re-launched six times and
+rested 1.8e-4 s late). collide still takes the smaller of it and the τ-based band.
 """
 
 from __future__ import annotations
@@ -24,7 +23,6 @@ import importlib.util
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from observer.event.master import run_master
 from observer.scenario import Scenario
@@ -46,11 +44,6 @@ def soft_ball() -> Scenario:
     return Scenario.from_dict(doc)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 34 item 1: collide's velocity band is still 1000 "
-                   "motion tolerances on τ (a band of the current state's certified errors "
-                   "alone re-launched a held contact on the held flow's round-off velocity, "
-                   "-3.6e-29 m/s, in test_invariance's two-contact tails under a change of "
-                   "units: it needs the accumulated state error, which grows without bound)")
 def test_a_ball_on_a_soft_spring_rests_at_the_30_digit_t_inf():
     """The ball's rest time (its ``stick`` row) is the reference's to 1e-9 s, the stated
     resolution of a Zeno limit (measured: 3e-17 s; 4.8e-8 s early before)."""
