@@ -71,6 +71,25 @@ def gamma(n: int) -> float:
     return n * _U / (1.0 - n * _U)
 
 
+def dot_error(row: np.ndarray, z: np.ndarray) -> float:
+    """Certified bound of ``|fl(row·z) − row·z|`` for float64 data of length N:
+    ``Σ|r_j z_j|·γ_{N+1}·(1 + 2γ_{N+1}) + N·2^-1074`` (Higham §3.1; the factor dominates the
+    rounding of the bound itself, the last term underflow)."""
+    r = np.asarray(row, dtype=float).ravel()
+    g = gamma(r.size + 1)
+    return float(np.abs(r) @ np.abs(np.asarray(z, dtype=float).ravel())) * g * (1.0 + 2.0 * g) \
+        + r.size * 5e-324
+
+
+def represented_error(rows: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Certified distance of each ``fl(r_i·z)`` to the exact ``r_i·z_exact`` of a float state z
+    that represents z_exact to u per component (relative): ``(1 + 2γ_{N+1})(γ_{N+1} + u)·Σ_j|r_ij z_j|``
+    (the evaluation and the representation; within it no precision tells the value from zero,
+    z being known to no better)."""
+    g = gamma(np.asarray(z).size + 1)
+    return (1.0 + 2.0 * g) * (g + _U) * (np.abs(rows) @ np.abs(z))
+
+
 def dot_sign(row: np.ndarray, z: np.ndarray) -> Decision:
     """Sign of the exact dot product ``row·z`` of float64 data.
 
@@ -85,8 +104,7 @@ def dot_sign(row: np.ndarray, z: np.ndarray) -> Decision:
     val = float(r @ v)
     mag = float(np.abs(r) @ np.abs(v))
     if np.isfinite(val) and np.isfinite(mag):
-        g = gamma(N + 1)
-        err = mag * g * (1.0 + 2.0 * g) + N * 5e-324
+        err = dot_error(r, v)
         if val - err > 0.0:
             return Decision(1, val - err, val + err, 53)
         if val + err < 0.0:

@@ -66,7 +66,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from observer.contact import get_solver
-from observer.event.enclosures import dot_sign, gamma, polish_lcp
+from observer.event.enclosures import dot_sign, gamma, polish_lcp, represented_error
 from observer.event.energy import EnergyCarry
 from observer.event.flow import Flow, flow_for
 from observer.event.roots import (ROUNDOFF, WINDOW, FunctionalSet, NonFiniteFlow,
@@ -540,7 +540,8 @@ class _Run:
     def velocity_band(self, z: np.ndarray) -> np.ndarray:
         """The certified distance of every contact's float64 relative velocity ``r_v·z`` to
         its exact value on the exact trajectory: its evaluation and the state's
-        representation, ``(1 + 2γ)(γ + u/2)·Σ|r_v z|`` with γ = γ_{N+1}, the rounding of the
+        representation, ``(1 + 2γ)(γ + u)·Σ|r_v z|`` with γ = γ_{N+1}
+        (:func:`~observer.event.enclosures.represented_error`), the rounding of the
         row ``r_v = r A`` itself, ``γ_{N+1}·(|r||A|)|z|``, and the accumulated state error
         through the row (:attr:`err` componentwise, or the energy norm's
         ``‖r_v‖_{P⁻¹}·ε``, the smaller). No time scale, no count of round-offs: a
@@ -548,9 +549,8 @@ class _Run:
         fl = self.free_flow
         rows = fl.velocity_rows
         g = gamma(z.size + 1)
-        az = np.abs(z)
-        own = (1.0 + 2.0 * g) * ((g + 0.5 * np.finfo(float).eps) * (np.abs(rows) @ az)
-                                 + g * (np.abs(fl.gap_rows) @ (np.abs(fl.A) @ az)))
+        row_rounding = (1.0 + 2.0 * g) * g * (np.abs(fl.gap_rows) @ (np.abs(fl.A) @ np.abs(z)))
+        own = represented_error(rows, z) + row_rounding
         return (own + self.carried(rows)) * (1.0 + 2.0 * g) + np.finfo(float).tiny
 
     def simultaneous_band(self, t: float, z: np.ndarray, gam: np.ndarray, cap: np.ndarray) -> np.ndarray:
@@ -577,8 +577,7 @@ class _Run:
         energy: 37-51 /s for rocking_chain's held sets, whose energy bound reaches 1.4e-3 m
         at t = 8 s and uncapped merged landings a millimetre apart)."""
         fl = self.free_flow
-        g = gamma(z.size + 1)
-        floor = (1.0 + 2.0 * g) * (g + 0.5 * np.finfo(float).eps) * (np.abs(fl.gap_rows) @ np.abs(z))
+        floor = represented_error(fl.gap_rows, z)
         hidden = time_resolution(t) * np.abs(gam)
         return np.minimum(cap, np.maximum(np.maximum(floor, hidden), self.gap_error(z)))
 

@@ -64,7 +64,7 @@ from typing import TYPE_CHECKING, Iterable
 import numpy as np
 
 from observer.contact import get_solver
-from observer.event.enclosures import gamma
+from observer.event.enclosures import dot_error
 from observer.event.flow import expm_pade13
 from observer.errors import InputError
 from observer.impact import ImpactLaw
@@ -268,8 +268,7 @@ def _safe_start(mode: Mode, mon: _Monitor, z: np.ndarray, delta: float, zeros: i
     if d[0] > 0.0:
         return 0.0
     nz = float(np.linalg.norm(z))
-    g = gamma(z.size + 1)
-    tiny = [g * (1.0 + 2.0 * g) * float(np.abs(r) @ np.abs(z)) + z.size * 5e-324 for r in rows]
+    tiny = [dot_error(r, z) for r in rows]
     if d[0] < -tiny[0]:
         return -1.0
     cap = min(delta, 1.0 / mode.norm) if mode.norm > 0.0 else delta   # e^{‖A‖s} ≤ e on (0, cap]
