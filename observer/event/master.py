@@ -570,12 +570,12 @@ class _Run:
 
         The accumulated state error is the smaller of its componentwise and energy-norm
         enclosures (:meth:`gap_error`); the energy norm's does not grow with ``‖|A|‖``
-        (:class:`observer.event.energy.EnergyCarry`): 1.5e-8 m on double_mass at t = 20 s
-        where the componentwise one is 7.6e34. ``cap`` (the persistent-contact band of
-        :meth:`collide`) still bounds it: a held flow's certified growth rate in P is large
+        (:class:`observer.event.energy.EnergyCarry`; tests/observer/event/test_energy_carry.py
+        holds it to a small multiple of the steps' rounding over 10⁴ periods of an oscillator,
+        where the componentwise one overflows). ``cap`` (the persistent-contact band of
+        :meth:`collide`) still bounds it: a held flow's certified growth rate in P can be large
         (its held force couples the error's component off the contact manifold into the
-        energy: 37-51 /s for rocking_chain's held sets, whose energy bound reaches 1.4e-3 m
-        at t = 8 s and uncapped merged landings a millimetre apart)."""
+        energy), and uncapped the band merged landings of the rocking chain."""
         fl = self.free_flow
         floor = represented_error(fl.gap_rows, z)
         hidden = time_resolution(t) * np.abs(gam)
@@ -1262,8 +1262,8 @@ def _rise_band(flow: Flow, row: np.ndarray, z: np.ndarray) -> float | None:
     not certainly positive or no trial within the Taylor model's window certifies.
 
     No motion tolerance: the band is what the gap's own certified errors leave undecided (it
-    was 1000 motion tolerances on τ and 64 eps·Σ|r z|, which at a translation by 1e6 skipped
-    a whole hop of 0.011 s and took its landing late)."""
+    was 1000 motion tolerances on τ and 64 eps·Σ|r z|, which at a translation skipped a whole
+    hop and took its landing late: tests/observer/event/test_liftoff_band.py)."""
     fs = FunctionalSet(flow, row[None, :])
     err = fs.errors(z, 3)[:, 0]
     d = [fs.value(0, k, z) for k in range(4)]
