@@ -1,10 +1,15 @@
 """Fingerprints of the compiled engine's trajectories on every built-in scenario.
 
-``python tests/kernel_fingerprint.py`` (from the repository root) writes
-``tests/data/kernel_fingerprints.json``: per built-in scenario and run variant, the sha256 of
-the recorded arrays of a 4000-step run (at most the scenario's horizon). The stored table was
-written by main at d26e40e, before the kernel took its arguments in bundles (issue 21);
-tests/observer/test_kernel.py recomputes it and requires every digest unchanged, bit for bit.
+``python tests/kernel_fingerprint.py`` (from the repository root) adds to
+``tests/data/kernel_fingerprints.json`` this machine's digests: per built-in scenario and run
+variant, the sha256 of the recorded arrays of a 4000-step run (at most the scenario's
+horizon), kept as a list of one digest per floating-point build (BLAS and LAPACK kernels round
+differently: an AVX-512 build's LAPACK solve gives other bits than another's). The stored
+table was written by main at d26e40e, before the kernel took its arguments in bundles
+(issue 21; ``random_system`` by 19073f2, which added it), on two builds: the machine of
+61480db and an AVX-512 Xeon (the same commits run there, the script copied into their trees).
+tests/observer/test_kernel.py recomputes it and requires every digest to be one of them, bit
+for bit.
 
 Variants (each takes a different compiled loop, :func:`observer.loop.specialization`):
 ``alone`` (the master alone: the lean or the scalar loop), ``observers`` (the scenario's
@@ -80,5 +85,11 @@ def fingerprints() -> dict:
 
 if __name__ == "__main__":
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-    PATH.write_text(json.dumps(fingerprints(), indent=1, sort_keys=True) + "\n")
+    table = json.loads(PATH.read_text()) if PATH.exists() else {}
+    for name, row in fingerprints().items():
+        for variant, d in row.items():
+            seen = table.setdefault(name, {}).setdefault(variant, [])
+            if d not in seen:
+                seen.append(d)
+    PATH.write_text(json.dumps(table, indent=1, sort_keys=True) + "\n")
     print(PATH.read_text())
