@@ -514,6 +514,19 @@ def test_zeno_cut_is_the_same_for_time_origins_in_one_binade_of_ulp_t():
         assert abs(t_inf - exact) <= 1e-9
 
 
+def test_zeno_run_at_a_time_origin_of_1e7_is_cut_while_its_times_are_resolved():
+    """At t0 = 1e7 the impact times are resolved only to ulp(1e7) ≈ 1.9e-9 s: the noise of an
+    impact's location includes the time resolution (``_Run.noisy_tail``), so the run is
+    extrapolated while its intervals still shrink geometrically, and t∞ − T is within
+    4 ulp(1e7) of the 50-digit closed form. (Without that term the hops fell below the time
+    resolution, the intervals were no longer geometric, and the run stopped at the event cap.)"""
+    T = 1e7
+    res = run_master(ball(1.0, e=0.5, t_end=2.0), t0=T, t_end=T + 2.0)
+    assert res.status.ok
+    (z,) = res.zeno
+    assert abs(z["t_inf"] - T - float(ball_t_inf(1.0, 0.5))) <= 4 * np.spacing(T)
+
+
 def test_zeno_cut_check_fails_a_cut_off_proportional_to_t(monkeypatch):
     """... and the same check fails a noise budget proportional to the absolute time |t|
     instead of the elapsed time (continuous in t, so a shift of the time origin within a
