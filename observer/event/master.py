@@ -98,8 +98,8 @@ ZENO_VELOCITY_RATIO = 1e-9
 
 ZENO_TAIL_RTOL = 2.0 ** 22
 """A geometric run of one contact is also extrapolated once the representation error of its
-gap would put more than ZENO_TAIL_RTOL ulps of max(t − t0, τ) into t_∞ (the run's elapsed
-time: 2^22 ulp ∈ (4.7e-10, 9.3e-10]·max(t − t0, τ); :func:`tail_noise_limit`,
+gap would put more than ZENO_TAIL_RTOL ulps of t − t0 into t_∞ (the run's elapsed
+time: 2^22 ulp ∈ (4.7e-10, 9.3e-10]·(t − t0); :func:`tail_noise_limit`,
 :meth:`_Run.noisy_tail`); a cluster's joint tail starts there too
 (:func:`observer.event.tails.joint_due`). The elapsed time, not t: a shift of the time
 origin changes no decision. (It was ulp(max(|t|, τ)): a time origin at 1e3 let 2^13 times
@@ -108,17 +108,12 @@ to 6e-9.) Where the run is cut depends on the coordinates, t_∞ does not
 (:meth:`_Run.hop_tail`)."""
 
 
-def tail_noise_limit(t: float, t0: float, tau: float) -> float:
-    """ZENO_TAIL_RTOL·ulp(max(t − t0, τ)): the most of the gap's representation error a Zeno
-    tail may carry into t_∞ (:data:`ZENO_TAIL_RTOL`), from the run's elapsed time t − t0 (the
-    same under any shift of the time origin; on a run from t0 = 0 the same as ulp(max(t, τ)))."""
-    return ZENO_TAIL_RTOL * time_ulp(float(t) - float(t0), tau)
-
-
-def time_ulp(t: float, tau: float) -> float:
-    """ulp(max(|t|, τ)) (``np.spacing``): the unit of :func:`tail_noise_limit`, taken of the
-    run's elapsed time."""
-    return float(np.spacing(max(abs(float(t)), float(tau))))
+def tail_noise_limit(t: float, t0: float) -> float:
+    """ZENO_TAIL_RTOL·ulp(t − t0): the most of the gaps' representation error a Zeno tail may
+    carry into t_∞ (:data:`ZENO_TAIL_RTOL`), from the run's elapsed time t − t0 alone (the same
+    under any shift of the time origin; no time scale of the system: a slow mode anywhere
+    does not loosen it)."""
+    return ZENO_TAIL_RTOL * float(np.spacing(abs(float(t) - float(t0))))
 
 
 HOP_ORDER = 8
@@ -697,16 +692,16 @@ class _Run:
         Not the carried state error (:meth:`gap_error`): that bounds the float trajectory's
         distance to the exact one of the scenario's data, a displacement of the whole
         trajectory that the hop's take-off and apex share, not an error of the hop; and its
-        enclosure grows far faster than the error (on double_mass it doubles every second of
-        the run, 1.2e-11 m at t = 10 s, 8.6e-10 m at 16.5 s), which would cut the impacts at
-        hops of 1e-9 m and leave tails of 1e-3 s that the observers treat as closed (a floor
-        in V: tests/observer/event/test_observers.py)."""
+        enclosure grows far faster than the error (on double_mass it grows exponentially over
+        the run), which would cut the late runs at large hops and leave long tails that the
+        observers treat as closed (a floor in V: tests/observer/event/test_observers.py fails
+        with the carried error added)."""
         return represented_error(fl.gap_rows[idx], z)
 
     def tail_noise(self, t: float) -> float:
-        """:func:`tail_noise_limit` at t for this run (its t0 and τ): what the joint tails of
+        """:func:`tail_noise_limit` at t for this run (its t0): what the joint tails of
         :mod:`observer.event.tails` compare with, without importing this module."""
-        return tail_noise_limit(t, self.t0, self.tau)
+        return tail_noise_limit(t, self.t0)
 
     def noisy_tail(self, key: tuple, fl: Flow, idx: list, z: np.ndarray, v_plus: np.ndarray,
                    t: float, d: np.ndarray) -> bool:
@@ -720,7 +715,7 @@ class _Run:
         contacts: the geometric tail ``d₂ρ/(1 − ρ)`` from the last three impact times, each
         located to δt (its largest over the contacts, v = γ⁺), errs by at most
         ``((1 + ρ)/(1 − ρ))²·δt`` (its derivatives in the three times). Once that reaches
-        :func:`tail_noise_limit` (ZENO_TAIL_RTOL ulps of the elapsed time max(t − t0, τ); a cut
+        :func:`tail_noise_limit` (ZENO_TAIL_RTOL ulps of the elapsed time t − t0; a cut
         there, not earlier, keeps the tail, which the observers treat as closed, short), the run
         is extrapolated from the current (still accurate) impact. A shift of the time origin
         does not change the decision."""
@@ -736,7 +731,7 @@ class _Run:
         else:
             rho = d[2] / d[1]
             noise = ((1.0 + rho) / (1.0 - rho)) ** 2 * (float(np.max(dg / v)) + time_resolution(t))
-        return noise >= tail_noise_limit(t, self.t0, self.tau)
+        return noise >= tail_noise_limit(t, self.t0)
 
     def velocity_tail(self, key: tuple, v_plus: np.ndarray, accel: np.ndarray,
                       jerk: np.ndarray) -> float | None:

@@ -533,7 +533,7 @@ def test_zeno_cut_check_fails_a_cut_off_proportional_to_t(monkeypatch):
     binade moves the cut; scaled by 1e-3 to the elapsed budget's size at t ≈ 1e3; the ball
     with ν = 100, whose gap's representation makes the noise budget the cut-off that decides)."""
     import observer.event.master as master
-    monkeypatch.setattr(master, "tail_noise_limit", lambda t, t0, tau: master.ZENO_TAIL_RTOL
+    monkeypatch.setattr(master, "tail_noise_limit", lambda t, t0: master.ZENO_TAIL_RTOL
                         * np.finfo(float).eps * abs(t) * 1e-3)
     same = _zeno_cuts([1100.0, 1500.0, 2000.0], nu=100.0)
     assert not same[0] == same[1] == same[2]
