@@ -29,10 +29,12 @@ the time coordinate's resolution (two ulp of t) hides at its speed, no wider:
 
 Zeno: a run of impacts of one contact set whose intervals shrink geometrically (consecutive
 ratios equal within :data:`ZENO_RATIO_SPREAD`) is stopped once the impact velocity has
-fallen by :data:`ZENO_VELOCITY_RATIO`, or the intervals reach the time resolution, or the
-hops reach the gap's round-off, or (one contact) resolving more impacts would put more of
-the gap's representation error than ZENO_TAIL_RTOL ulps of the elapsed time into t_∞
-(:func:`tail_noise_limit`); the accumulation time
+fallen by :data:`ZENO_VELOCITY_RATIO`, or the last interval is within the time coordinate's
+resolution (two ulp of t: the impact times no longer tell it from zero), or every next hop is
+within the certified error of its gap (not resolvable, :meth:`_Run.hop_error`), or resolving
+more impacts would put more of the gaps' representation error than ZENO_TAIL_RTOL ulps of the
+elapsed time into t_∞ (:meth:`_Run.noisy_tail`, :func:`tail_noise_limit`; one contact: the
+velocity tail's error, several: the geometric tail's); the accumulation time
 t_∞ is extrapolated from the velocity γ⁺ after the last resolved impact and the exact
 contact acceleration and its rate (:meth:`_Run.velocity_tail`: ``2γ⁺/(α(1 − e))`` for a
 constant acceleration α, exact for the ball, docs/theory/oracles.md §1; several contacts: geometric,
@@ -45,15 +47,15 @@ a few tail lengths of it (two bodies landing together, a contact re-launched by 
 impacts and accumulating again between them), or key's impact re-launches a held contact, or
 key bounces on a held set (the chain's
 blocks settling on each other), and one contact of key is resolved as far as
-its gap's representation allows (next hop within :data:`ZENO_HOP_ROUNDOFF` round-offs, or
+its gap's representation allows (next hop within the gap's certified error, or
 :func:`tail_noise_limit` reached; several contacts: a hop within
 :data:`observer.event.tails.MERGE_HOPS` motion tolerances), the cluster's **joint tail** (:mod:`observer.event.tails`)
 resolves it by exact hops of every contact relative to its contact point until all of them
 are held; each contact's ``accumulation`` row is at the time it was last held (its own t_∞)
 and its note says ``joint tail of contacts …``. A joint tail that does not converge or would
 skip another contact's event is not taken; the impacts are then resolved by their hops: an
-impact after which a contact's next hop ``γ⁺²/(2|γ̇|)`` is within :data:`ZENO_HOP_ROUNDOFF` round-offs of
-its gap lands that contact there (:meth:`_Run.land`: kind ``accumulation``, tail time 0),
+impact after which a contact's next hop ``γ⁺²/(2|γ̇|)`` is within the certified error of its
+gap (:meth:`_Run.hop_error`: its evaluation and the state's representation) lands that contact there (:meth:`_Run.land`: kind ``accumulation``, tail time 0),
 and the acceleration LCP decides whether it stays closed.
 """
 
@@ -94,20 +96,10 @@ ZENO_RATIO_SPREAD = 0.02
 ZENO_VELOCITY_RATIO = 1e-9
 """A geometric run is extrapolated once |γ⁻| has fallen below this fraction of its first value."""
 
-ZENO_MIN_INTERVAL = 2.0 ** 16
-"""... or once an interval is below this many ulps of max(|t|, τ) (:func:`time_ulp`; 2^16 ulp
-∈ (7.3e-12, 1.5e-11]·max(|t|, τ): the time resolution)."""
-
-ZENO_HOP_ROUNDOFF = 10.0
-"""... or once the next hop height is below this many round-offs of the gap (beyond it the
-impact sequence is driven by round-off, no longer by the dynamics). 10, not more: a tail cut
-at 1e4 round-offs (|γ⁻| ≈ 2e-5 on double_mass) leaves the extrapolated state ≈ 4e-10 off,
-which re-injects ≈ 1e-19 into the exact observers' V at every landing (a floor)."""
-
 ZENO_TAIL_RTOL = 2.0 ** 22
 """A geometric run of one contact is also extrapolated once the representation error of its
-gap would put more than ZENO_TAIL_RTOL ulps of max(t − t0, τ) into t_∞ (the run's elapsed
-time: 2^22 ulp ∈ (4.7e-10, 9.3e-10]·max(t − t0, τ); :func:`tail_noise_limit`,
+gap would put more than ZENO_TAIL_RTOL ulps of t − t0 into t_∞ (the run's elapsed
+time: 2^22 ulp ∈ (4.7e-10, 9.3e-10]·(t − t0); :func:`tail_noise_limit`,
 :meth:`_Run.noisy_tail`); a cluster's joint tail starts there too
 (:func:`observer.event.tails.joint_due`). The elapsed time, not t: a shift of the time
 origin changes no decision. (It was ulp(max(|t|, τ)): a time origin at 1e3 let 2^13 times
@@ -116,20 +108,12 @@ to 6e-9.) Where the run is cut depends on the coordinates, t_∞ does not
 (:meth:`_Run.hop_tail`)."""
 
 
-def tail_noise_limit(t: float, t0: float, tau: float) -> float:
-    """ZENO_TAIL_RTOL·ulp(max(t − t0, τ)): the most of the gap's representation error a Zeno
-    tail may carry into t_∞ (:data:`ZENO_TAIL_RTOL`), from the run's elapsed time t − t0 (the
-    same under any shift of the time origin; on a run from t0 = 0 the same as ulp(max(t, τ)))."""
-    return ZENO_TAIL_RTOL * time_ulp(float(t) - float(t0), tau)
-
-
-def time_ulp(t: float, tau: float) -> float:
-    """ulp(max(|t|, τ)) (``np.spacing``): the resolution of the time differences a Zeno run
-    forms (its intervals, t_∞ − t), a property of the float representation of t. The Zeno
-    cut-off :data:`ZENO_MIN_INTERVAL` is a multiple of it, so it depends on the time origin
-    only through the binade [2^k, 2^{k+1}) of max(|t|, τ): a shift within it changes no
-    decision, one across it scales the threshold by 2."""
-    return float(np.spacing(max(abs(float(t)), float(tau))))
+def tail_noise_limit(t: float, t0: float) -> float:
+    """ZENO_TAIL_RTOL·ulp(t − t0): the most of the gaps' representation error a Zeno tail may
+    carry into t_∞ (:data:`ZENO_TAIL_RTOL`), from the run's elapsed time t − t0 alone (the same
+    under any shift of the time origin; no time scale of the system: a slow mode anywhere
+    does not loosen it)."""
+    return ZENO_TAIL_RTOL * float(np.spacing(abs(float(t) - float(t0))))
 
 
 HOP_ORDER = 8
@@ -586,15 +570,18 @@ class _Run:
                    persistent: tuple = ()) -> float | None:
         """Accumulation time t_∞ if the run of impacts of the contact set ``key`` is geometric
         and resolved enough: its impact speed max|γ⁻| fell by ``zeno_velocity_ratio``, or its
-        intervals reach the time resolution, or its next hop ``γ⁺²/(2|γ̇|)`` is within
-        ZENO_HOP_ROUNDOFF round-offs of the gap."""
+        last interval is within the time coordinate's resolution (two ulp of t,
+        :func:`observer.event.roots.time_resolution`: the impact times no longer tell it from
+        zero), or every next hop ``γ⁺²/(2|γ̇|)`` is within the certified error of its gap
+        (:meth:`hop_error`: not resolvable), or resolving more impacts would put more of the
+        gaps' representation into t_∞ than the extrapolation from here (:meth:`noisy_tail`)."""
         fl = self.free_flow
         z = fl.z(t, x)
         idx = list(key)
         v_plus = fl.velocity_rows[idx] @ z
         accel = fl.velocity_rows[idx] @ fl.A @ z
         hop = np.where(accel < 0.0, v_plus * v_plus / (2.0 * np.abs(accel) + 1e-300), np.inf)
-        hop_small = bool(np.all(hop <= ZENO_HOP_ROUNDOFF * self.hop_tol(fl, idx, z)))
+        hop_small = bool(np.all(hop <= self.hop_error(fl, idx, z)))
         speed = float(np.max(np.abs(gm)))
         if self.last_key != key:
             self.history.clear()
@@ -611,8 +598,8 @@ class _Run:
             del hist[:-3]                      # not geometric: a new run starts
             return None
         v0 = hist[0][1]
-        if (speed > self.zeno_velocity_ratio * v0 and d[2] > ZENO_MIN_INTERVAL * time_ulp(t, self.tau)
-                and not hop_small and not self.noisy_tail(key, fl, idx, z, v_plus, t)):
+        if (speed > self.zeno_velocity_ratio * v0 and d[2] > time_resolution(t)
+                and not hop_small and not self.noisy_tail(key, fl, idx, z, v_plus, t, d)):
             return None
         tail = self.tail_after(key, t, x, persistent)
         t_inf = t + (tail if tail is not None else self.tail_time(key, d[1], d[2]))
@@ -694,36 +681,57 @@ class _Run:
             z[n:2 * n] -= push * (1.0 + e) * float(R[0] @ z)   # γ⁺ = −e γ⁻
         return guess
 
-    def hop_tol(self, fl: Flow, idx: list, z: np.ndarray) -> np.ndarray:
-        """Evaluation round-off of the gaps ``idx`` (:func:`observer.event.roots.tolerance`):
-        a hop below ZENO_HOP_ROUNDOFF of it is not resolvable. It grows with |q| and |ν|;
-        the extrapolated t_∞ does not (:meth:`velocity_tail` from an accurate impact)."""
-        return tolerance(fl.gap_rows[idx], z)
+    def hop_error(self, fl: Flow, idx: list, z: np.ndarray) -> np.ndarray:
+        """Certified error of the gaps ``idx`` of the float state z on ``fl``: their evaluation
+        and the state's representation (:func:`observer.event.enclosures.represented_error`).
+        A hop ``γ⁺²/(2|γ̇|)`` not certainly above it is not resolvable: its apex is not
+        certainly off the contact point, no precision of the same state tells it from zero.
+        It grows with |q| and |ν|; the extrapolated t_∞ does not (:meth:`hop_tail` from an
+        accurate impact).
+
+        Not the carried state error (:meth:`gap_error`): that bounds the float trajectory's
+        distance to the exact one of the scenario's data, a displacement of the whole
+        trajectory that the hop's take-off and apex share, not an error of the hop; and its
+        enclosure grows far faster than the error (on double_mass it grows exponentially over
+        the run), which would cut the late runs at large hops and leave long tails that the
+        observers treat as closed (a floor in V: tests/observer/event/test_observers.py fails
+        with the carried error added)."""
+        return represented_error(fl.gap_rows[idx], z)
 
     def tail_noise(self, t: float) -> float:
-        """:func:`tail_noise_limit` at t for this run (its t0 and τ): what the joint tails of
+        """:func:`tail_noise_limit` at t for this run (its t0): what the joint tails of
         :mod:`observer.event.tails` compare with, without importing this module."""
-        return tail_noise_limit(t, self.t0, self.tau)
+        return tail_noise_limit(t, self.t0)
 
     def noisy_tail(self, key: tuple, fl: Flow, idx: list, z: np.ndarray, v_plus: np.ndarray,
-                   t: float) -> bool:
+                   t: float, d: np.ndarray) -> bool:
         """True once resolving more impacts would make the extrapolated t_∞ less accurate.
 
         The gap is evaluated with an absolute error δg ≈ eps·Σ|r z| (its representation: it
-        grows with |q| and |ν|), so an impact at speed v is located to δg/v and its
-        γ⁺ to |γ̇|δg/v; the velocity tail (:meth:`velocity_tail`) then errs by about
-        ``(1 + 2/(1 − e))·δg/γ⁺``. Once that reaches :func:`tail_noise_limit` (ZENO_TAIL_RTOL
-        ulps of the elapsed time max(t − t0, τ); a cut there, not earlier, keeps the tail,
-        which the observers treat as closed, short), the run is extrapolated from the current
-        (still accurate) impact. A shift of the time origin does not change the decision."""
-        if len(key) != 1 or not self.law.definition.single_contact_is_newton:
-            return False
-        e = float(self.law.restitution[key[0]])
-        if not 0.0 <= e < 1.0:
-            return False
-        dg = float(np.finfo(float).eps * (np.abs(fl.gap_rows[idx]) @ np.abs(z))[0])
-        v = max(float(v_plus[0]), np.finfo(float).tiny)
-        return (1.0 + 2.0 / (1.0 - e)) * dg / v >= tail_noise_limit(t, self.t0, self.tau)
+        grows with |q| and |ν|), and the time coordinate resolves t to two ulp
+        (:func:`observer.event.roots.time_resolution`), so an impact at speed v is located to
+        δt = δg/v + that resolution. One contact (Newton's law): γ⁺ then errs by |γ̇|δt and
+        the velocity tail (:meth:`velocity_tail`) by about ``(1 + 2/(1 − e))·δt``. Several
+        contacts: the geometric tail ``d₂ρ/(1 − ρ)`` from the last three impact times, each
+        located to δt (its largest over the contacts, v = γ⁺), errs by at most
+        ``((1 + ρ)/(1 − ρ))²·δt`` (its derivatives in the three times). Once that reaches
+        :func:`tail_noise_limit` (ZENO_TAIL_RTOL ulps of the elapsed time t − t0; a cut
+        there, not earlier, keeps the tail, which the observers treat as closed, short), the run
+        is extrapolated from the current (still accurate) impact. A shift of the time origin
+        does not change the decision."""
+        dg = np.finfo(float).eps * (np.abs(fl.gap_rows[idx]) @ np.abs(z))
+        v = np.maximum(np.asarray(v_plus, dtype=float), np.finfo(float).tiny)
+        if len(key) == 1:
+            if not self.law.definition.single_contact_is_newton:
+                return False
+            e = float(self.law.restitution[key[0]])
+            if not 0.0 <= e < 1.0:
+                return False
+            noise = (1.0 + 2.0 / (1.0 - e)) * (float(dg[0] / v[0]) + time_resolution(t))
+        else:
+            rho = d[2] / d[1]
+            noise = ((1.0 + rho) / (1.0 - rho)) ** 2 * (float(np.max(dg / v)) + time_resolution(t))
+        return noise >= tail_noise_limit(t, self.t0)
 
     def velocity_tail(self, key: tuple, v_plus: np.ndarray, accel: np.ndarray,
                       jerk: np.ndarray) -> float | None:
@@ -888,14 +896,15 @@ class _Run:
 
     def tiny_hops(self, t: float, x: np.ndarray, contacts, persistent: tuple) -> list[int]:
         """Contacts of ``contacts`` falling back (γ̇ < 0 on the flow that holds ``persistent``)
-        whose next hop ``γ⁺²/(2|γ̇|)`` is within ZENO_HOP_ROUNDOFF round-offs of the gap:
-        below it the impact sequence is driven by round-off, no longer by the dynamics."""
+        whose next hop ``γ⁺²/(2|γ̇|)`` is within the certified error of the gap
+        (:meth:`hop_error`): such a hop is not resolvable, the impact sequence below it is
+        driven by round-off, no longer by the dynamics."""
         fl = flow_for(self.system, persistent)
         z = fl.z(t, x)
         idx = list(contacts)
         v = fl.velocity_rows[idx] @ z
         a = (fl.velocity_rows[idx] @ fl.A) @ z
-        tol = ZENO_HOP_ROUNDOFF * self.hop_tol(fl, idx, z)
+        tol = self.hop_error(fl, idx, z)
         return [c for c, vc, ac, tc in zip(idx, v, a, tol) if ac < 0.0 and vc * vc <= 2.0 * -ac * tc]
 
     def land(self, contacts: list[int], t: float, x: np.ndarray, persistent: tuple,

@@ -12,8 +12,9 @@ The same holds for one contact bouncing on a held set (a ball whose neighbour al
 the chain's blocks), which was landed likewise.
 
 What the engine does instead (:func:`joint_tail`): once one of the impacting contacts is
-resolved as far as its gap's representation allows (its next hop below ZENO_HOP_ROUNDOFF
-round-offs, or the gap's round-off over its speed above ZENO_TAIL_RTOL ulps of the elapsed time:
+resolved as far as its gap's representation allows (its next hop not certainly above the
+gap's certified error, :meth:`~observer.event.master._Run.hop_error`; or the gap's round-off
+over its speed, plus the time resolution, above ZENO_TAIL_RTOL ulps of the elapsed time:
 :func:`joint_due`), the tail of the whole cluster — that contact and every open contact
 landing within a few of its tail lengths — is resolved by **exact hops relative to the
 contact points**: each contact carries its own gap ``d_c`` (0 exactly after its impact, the
@@ -194,10 +195,12 @@ def horner(coefficients: list, x: float) -> float:
 def joint_due(run, key: tuple, t: float, x: np.ndarray, held: tuple, tiny: list) -> list | None:
     """The cluster whose joint tail starts after the impact of ``key`` at t (state x, held
     set ``held``), or None if it is not due: due once a contact of key is resolved as far as
-    its gap's representation allows (``tiny``: its next hop is within ZENO_HOP_ROUNDOFF
-    round-offs, :meth:`~observer.event.master._Run.tiny_hops`; or the gap's round-off δg over
-    its speed γ⁺ puts more than ZENO_TAIL_RTOL ulps of the elapsed time into the tail,
-    ``(1 + 2/(1 − e))·δg/γ⁺``, as :meth:`~observer.event.master._Run.noisy_tail`; ``run.tail_noise(t)``). The cluster
+    its gap's representation allows (``tiny``: its next hop is within the gap's certified
+    error, :meth:`~observer.event.master._Run.tiny_hops`; or the location error of its impact,
+    the gap's round-off δg over its speed γ⁺ plus the time resolution δt
+    (:func:`observer.event.roots.time_resolution`), puts more than ZENO_TAIL_RTOL ulps of the
+    elapsed time into the tail, ``(1 + 2/(1 − e))·(δg/γ⁺ + δt)``, as
+    :meth:`~observer.event.master._Run.noisy_tail`; ``run.tail_noise(t)``). The cluster
     is key and every open contact landing within :data:`CLUSTER_REACH` tail lengths
     ``2γ⁺/(α(1 − e))`` (parabolic estimate)."""
     fl = flow_for(run.system, held)
@@ -223,7 +226,7 @@ def joint_due(run, key: tuple, t: float, x: np.ndarray, held: tuple, tiny: list)
     budget = run.tail_noise(t) / (CLUSTER_NOISE if len(cluster) > 1 else 1.0)
     due = bool(tiny)
     for c in key:
-        due |= (1.0 + 2.0 / (1.0 - e[c])) * dg[c] / v[c] >= budget
+        due |= (1.0 + 2.0 / (1.0 - e[c])) * (dg[c] / v[c] + time_resolution(t)) >= budget
         due |= len(key) > 1 and v[c] * v[c] <= 2.0 * -a[c] * MERGE_HOPS * motion[c]
     return sorted(cluster) if due else None
 

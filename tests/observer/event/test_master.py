@@ -355,6 +355,31 @@ def test_flat_bar_hits_two_supports_at_once_and_comes_to_rest_on_both(law):
     assert np.max(np.abs(res.frame[["q1", "u1"]].to_numpy())) <= 1e-13
 
 
+@pytest.mark.parametrize("c", [100.0, 1e3])
+def test_flat_bar_translated_reaches_its_closed_form_t_inf_within_1e9(c):
+    """The flat bar of the test above with its coordinate translated by c (q₀ = −c, gap offset
+    d + c): its two contacts' geometric run is cut where the impact times' location errors
+    (the translated gaps' representation over the speed) would put the budget's worth of
+    noise into the geometric tail (``_Run.noisy_tail``), and t∞ stays within 1e-9 of the
+    closed form t₁(1 + e)/(1 − e). Cut by the hop size alone (as before), the run went on
+    until the last ratio was noise: 7.5e-9 s off at c = 100, 1.4e-8 s at c = 1e3."""
+    m, b, H, d, e = 1.0, 0.1, 0.1, 0.05, 0.5
+    J = m * (4 * b * b + H * H) / 12
+    doc = {"scenario": {"name": "flat_bar"},
+           "system": {"M": [[m, 0.0], [0.0, J]], "C": [[0.0, 0.0], [0.0, 0.0]],
+                      "K": [[0.0, 0.0], [0.0, 0.0]], "W": [[1.0, 1.0], [-b, b]],
+                      "forcing": {"constant": [-m * G0, 0.0]}, "gap": {"offset": [d + c, d + c]}},
+           "impact": {"law": "newton", "restitution": e},
+           "initial": {"q": [-c, 0.0], "u": [0.0, 0.0]},
+           "simulation": {"t_end": 1.2, "h": 1e-2}}
+    res = run_master(Scenario.from_dict(doc))
+    assert res.status.ok
+    (zeno,) = res.zeno
+    assert zeno["contact"] == (0, 1)
+    t1 = np.sqrt(2 * d / G0)
+    assert abs(zeno["t_inf"] - t1 * (1 + e) / (1 - e)) <= 1e-9
+
+
 # -- double mass ----------------------------------------------------------------------------------
 
 def test_double_mass_runs_twenty_seconds_with_liftoff_zeno_and_rest():
@@ -394,8 +419,9 @@ def test_zeno_extrapolation_does_not_depend_on_where_the_impact_run_is_cut(monke
     t_default = run_master(sc, h=0.05, t_end=3.0).zeno[0]["t_inf"]   # cut by noisy_tail
     monkeypatch.setattr(master, "ZENO_TAIL_RTOL", np.inf)   # only the hop cut-off cuts
     t_inf = []
-    for hop in (1e4, 1e2):
-        monkeypatch.setattr(master, "ZENO_HOP_ROUNDOFF", hop)
+    for hop in (1e4, 1e2):       # the cut at ``hop`` round-offs 64·eps·Σ|r z| of the gap
+        monkeypatch.setattr(master._Run, "hop_error", lambda run, fl, idx, z, hop=hop: hop * 64.0
+                            * np.finfo(float).eps * (np.abs(fl.gap_rows[idx]) @ np.abs(z)))
         res = run_master(sc, h=0.05, t_end=3.0)
         t_inf.append(res.zeno[0]["t_inf"])
         resolved = res.zeno[0]["impacts_resolved"]

@@ -498,21 +498,42 @@ def _zeno_cuts(origins, nu=0.0):
 
 
 def test_zeno_cut_is_the_same_for_time_origins_in_one_binade_of_ulp_t():
-    """The Zeno cut-offs are multiples of ulp(max(|t|, τ)), the resolution of the time
-    differences the run forms: time origins 1100, 1500 and 2000 (t in [1024, 2048)) resolve
-    the same impacts and give the same tail and t∞ − T bit for bit; across binades (origin
-    0, 1e5) the cut may move and t∞ − T stays within 1e-9 of the 50-digit closed form."""
+    """The Zeno cut-offs depend on the run's elapsed time and on the gap's certified error, not
+    on the time origin: time origins 1100, 1500 and 2000 (t in [1024, 2048)) resolve the same
+    impacts and give the same tail and t∞ − T bit for bit; origins 0 and 1e5 + 100 resolve the
+    same number of impacts too (the time resolution, two ulp of t, enters the noise of an
+    impact's location but is far below the noise budget there), and t∞ − T stays within 1e-9
+    of the 50-digit closed form. (The old interval cut-off, 2^16 ulp(max(|t|, τ)), cut the
+    run at 1e5 + 100 earlier than at 0: this check fails it.)"""
     same = _zeno_cuts([1100.0, 1500.0, 2000.0])
     assert same[0] == same[1] == same[2]
     exact = float(ball_t_inf(1.0, 0.5))
-    for _, _, t_inf in same + _zeno_cuts([0.0, 1e5 + 100.0]):
+    others = _zeno_cuts([0.0, 1e5 + 100.0])
+    assert {cut[0] for cut in same + others} == {same[0][0]}
+    for _, _, t_inf in same + others:
         assert abs(t_inf - exact) <= 1e-9
 
 
+def test_zeno_run_at_a_time_origin_of_1e7_is_cut_while_its_times_are_resolved():
+    """At t0 = 1e7 the impact times are resolved only to ulp(1e7) ≈ 1.9e-9 s: the noise of an
+    impact's location includes the time resolution (``_Run.noisy_tail``), so the run is
+    extrapolated while its intervals still shrink geometrically, and t∞ − T is within
+    4 ulp(1e7) of the 50-digit closed form. (Without that term the hops fell below the time
+    resolution, the intervals were no longer geometric, and the run stopped at the event cap.)"""
+    T = 1e7
+    res = run_master(ball(1.0, e=0.5, t_end=2.0), t0=T, t_end=T + 2.0)
+    assert res.status.ok
+    (z,) = res.zeno
+    assert abs(z["t_inf"] - T - float(ball_t_inf(1.0, 0.5))) <= 4 * np.spacing(T)
+
+
 def test_zeno_cut_check_fails_a_cut_off_proportional_to_t(monkeypatch):
-    """... and the same check fails the old rule, thresholds proportional to max(|t|, τ)
-    (continuous in t, so a shift of the time origin within a binade moves the cut)."""
+    """... and the same check fails a noise budget proportional to the absolute time |t|
+    instead of the elapsed time (continuous in t, so a shift of the time origin within a
+    binade moves the cut; scaled by 1e-3 to the elapsed budget's size at t ≈ 1e3; the ball
+    with ν = 100, whose gap's representation makes the noise budget the cut-off that decides)."""
     import observer.event.master as master
-    monkeypatch.setattr(master, "time_ulp", lambda t, tau: np.finfo(float).eps * max(abs(t), tau))
-    same = _zeno_cuts([1100.0, 1500.0, 2000.0])
+    monkeypatch.setattr(master, "tail_noise_limit", lambda t, t0: master.ZENO_TAIL_RTOL
+                        * np.finfo(float).eps * abs(t) * 1e-3)
+    same = _zeno_cuts([1100.0, 1500.0, 2000.0], nu=100.0)
     assert not same[0] == same[1] == same[2]
