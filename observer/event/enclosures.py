@@ -229,3 +229,110 @@ def polish_lcp(M: np.ndarray, W: np.ndarray, b: np.ndarray, x: np.ndarray,
                 return out
         bits *= 2
     return None
+
+
+def exact_delassus(M: np.ndarray, W: np.ndarray, bits: int, cache: dict | None = None):
+    """``Wᵀ M⁻¹ W`` as an ``arb_mat`` at the current precision, from the float64 data M, W
+    (exact), kept in ``cache`` per precision (a constant of the system's contact set)."""
+    G = None if cache is None else cache.get(bits)
+    if G is None:
+        Ma = flint.arb_mat(np.asarray(M, dtype=float).tolist())
+        Wa = flint.arb_mat(np.asarray(W, dtype=float).tolist())
+        G = Wa.transpose() * Ma.solve(Wa)
+        if cache is not None:
+            cache[bits] = G
+    return G
+
+
+def _stick_balls(G, vrows, A, z, radius, S, R):
+    """(λ_S, w_R, w_R of radius 0) in ball arithmetic at the current precision: ``b = r_v·A·z``
+    exact from the float data, widened by ``radius``; ``λ_S = −G_SS⁻¹ b_S``,
+    ``w_R = G_RS λ_S + b_R``; None when G_SS is not certainly invertible."""
+    Az = flint.arb_mat(np.asarray(A, dtype=float).tolist()) * \
+        flint.arb_mat([[v] for v in np.asarray(z, dtype=float).tolist()])
+    V = flint.arb_mat(np.asarray(vrows, dtype=float).tolist()) * Az
+    out = []
+    for rad in (radius, np.zeros(len(radius))):
+        b = [V[i, 0] + flint.arb(0, float(r)) if r > 0.0 else V[i, 0]
+             for i, r in enumerate(np.asarray(rad, dtype=float).tolist())]
+        try:
+            lam = flint.arb_mat([[G[i, j] for j in S] for i in S]).solve(
+                flint.arb_mat([[-b[i]] for i in S])) if S else None
+        except ZeroDivisionError:
+            return None
+        lam_S = [lam[k, 0] for k in range(len(S))] if S else []
+        w_R = [sum((G[i, j] * lam_S[k] for k, j in enumerate(S)), b[i]) for i in R]
+        out.append((lam_S, w_R))
+    return out[0][0], out[0][1], out[1][1]
+
+
+def _stick_status(balls, S, R, bits):
+    """(status, lift, notes) of the active set S from its balls: status ``1`` certified
+    (every λ_S > 0, every w_R ≥ 0 or exactly 0 on the exact float state), ``-1`` refuted
+    (some λ_S or w_R certainly negative: not the LCP's active set), ``0`` undecided."""
+    lam_S, w_R, w_exact = balls
+    if any(v < 0 for v in lam_S) or any(v < 0 for v in w_R):
+        return -1, set(), {}
+    notes, lift = {}, set()
+    for k, i in enumerate(S):
+        if not lam_S[k] > 0:
+            lo, hi = _outward(lam_S[k])
+            notes[i] = f"undecided stick: force in [{lo:.17g}, {hi:.17g}] at {bits} bits"
+    for k, i in enumerate(R):
+        if w_R[k] > 0:
+            lift.add(i)
+        elif not (w_exact[k].is_zero() or w_R[k] >= 0):
+            lo, hi = _outward(w_R[k])
+            notes[i] = (f"undecided stick: relative acceleration in [{lo:.17g}, {hi:.17g}] "
+                        f"at {bits} bits")
+    return (0 if notes else 1), lift, notes
+
+
+def _active_sets(lam) -> list[list[int]]:
+    """The float64 solution's active set first, then (up to 10 contacts) every other one."""
+    n = len(lam)
+    first = [i for i, v in enumerate(np.asarray(lam, dtype=float).tolist()) if v > 0.0]
+    if n > 10:
+        return [first]
+    others = [[i for i in range(n) if k >> i & 1] for k in range(2 ** n)]
+    return [first] + [S for S in others if S != first]
+
+
+def stick_decisions(M, W, vrows, A, z, radius, lam, cache: dict | None = None,
+                    start: int = PRECISION_START) -> tuple[list[bool], dict[int, str]]:
+    """Which contacts of a candidate set stay closed under the acceleration LCP
+    ``0 ≤ λ ⊥ w = Gλ + b ≥ 0`` (``G = Wᵀ M⁻¹ W`` exact, ``b = r_v·A·z`` exact from the float
+    data, widened by ``radius``), three-valued; see
+    :meth:`observer.event.master._Run.sticking`.
+
+    An active set S (the float64 solution's ``{lam > 0}`` first, then the others) is
+    certified when every ``λ_S = −G_SS⁻¹ b_S`` is certainly positive and every
+    ``w_R = G_RS λ_S + b_R`` (R the rest) certainly ≥ 0 or exactly 0 on the exact float
+    state, for every b in the ball: then S solves the LCP for all of them (G a P-matrix:
+    the solution is unique), k ∈ S keeps a positive force (kept), i ∈ R with w_i > 0 lifts
+    off, i ∈ R with w_i exactly 0 on the float state (identically closed: no force, no
+    relative acceleration, structurally — the state error alone cannot lift it) is kept.
+    A set with a λ or w certainly negative is refuted (not the LCP's). Precision is
+    doubled up to :data:`PRECISION_CAP`. Returns the keep flags and, when nothing
+    certified, the first undecided set's notes (its contacts with an enclosure holding 0,
+    kept: a w not certainly positive)."""
+    n = len(lam)
+    bits, fallback = max(int(start), 2), None
+    while bits <= PRECISION_CAP:
+        with flint.ctx.workprec(bits):
+            G = exact_delassus(M, W, bits, cache)
+            for S in _active_sets(lam):
+                R = [i for i in range(n) if i not in S]
+                balls = _stick_balls(G, vrows, A, z, radius, S, R)
+                if balls is None:
+                    continue
+                status, lift, notes = _stick_status(balls, S, R, bits)
+                if status == 1:
+                    return [i not in lift for i in range(n)], {}
+                if status == 0:
+                    fallback = (lift, notes)
+                    break
+        bits *= 2
+    lift, notes = fallback if fallback is not None else (set(), {
+        i: "undecided stick: no active set certified" for i in range(n)})
+    return [i not in lift for i in range(n)], notes

@@ -68,10 +68,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from observer.contact import get_solver
-from observer.event.enclosures import dot_sign, gamma, polish_lcp, represented_error
+from observer.event.enclosures import (dot_sign, gamma, polish_lcp, represented_error,
+                                       stick_decisions)
 from observer.event.energy import EnergyCarry
 from observer.event.flow import Flow, flow_for
-from observer.event.roots import (ROUNDOFF, WINDOW, FunctionalSet, NonFiniteFlow,
+from observer.event.roots import (WINDOW, FunctionalSet, NonFiniteFlow,
                                   RootIsolationError, SearchStopped, first_zero, motion_tolerance,
                                   time_resolution, tolerance)
 from observer.event.tails import JointTail, horner, joint_due, joint_tail
@@ -266,6 +267,7 @@ class _Run:
         self.hop_end = None            # (contact, t_k, t_last, x_last) of the last hop_tail
         self.halted: str | None = None # the signal that stopped the sampling (no row after)
         self.exact_delassus: dict[tuple, dict] = {}   # contact set → {bits: exact G} (exact_solve)
+        self.stick_notes: dict[int, str] = {}   # contact → undecided stick enclosure (sticking)
         self.err = np.zeros(2 * self.n)   # bound on |x − x_exact| (carry_error, jump_error)
         self.energy = EnergyCarry(self.system, t_end - t0)   # the same error in ‖·‖_P
 
@@ -444,24 +446,40 @@ class _Run:
         return solve
 
     def sticking(self, t: float, x: np.ndarray, cand: list[int]) -> list[int]:
-        """Contacts of ``cand`` (g = γ = 0) that keep a positive force: the acceleration LCP
-        ``0 ≤ λ ⊥ G λ + γ̇_free ≥ 0`` on cand."""
+        """Contacts of ``cand`` (g = γ = 0) that stay closed under the acceleration LCP
+        ``0 ≤ λ ⊥ w = Gλ + b ≥ 0`` on cand (``b = r_v A z``, the free relative
+        accelerations), decided from enclosures (issue 34 item 1), no tolerance.
+
+        The float64 LCP gives a first active set S = {λ > 0}. On S the exact solution is
+        ``λ_S = −G_SS⁻¹ b_S``, ``w_R = G_RS λ_S + b_R`` (R = cand ∖ S); it is enclosed in ball
+        arithmetic (:func:`~observer.event.enclosures.stick_decisions`) from the exact
+        Delassus matrix of M, W and the ball ``b`` around the exact ``r_v·A·z`` of the float
+        state z, of radius the accumulated state error through the rows (:meth:`carried`).
+        If every λ_S is certainly positive and every w_R certainly nonnegative, S solves the
+        LCP of every b in the ball (G a P-matrix: unique); a set refuted (a λ or w certainly
+        negative: the float64 solver's rounding chose it) gives way to the others. A contact
+        of S keeps a positive force (stays closed); one of R with w certainly positive lifts
+        off; one of R whose w is exactly 0 on the float state (identically closed, issue 34
+        item 2: touching bodies, bodies moving together) has no force and no relative
+        acceleration and stays closed. Undecided at
+        :data:`~observer.event.enclosures.PRECISION_CAP` (a ball holding 0): the contact is
+        kept closed (its held force is then watched for a lift-off) and the enclosure is
+        stated in its event row (:attr:`stick_notes`)."""
+        self.stick_notes = {}
         if not cand:
             return []
-        z = self.free_flow.z(t, x)
-        rows = self.free_flow.velocity_rows @ self.free_flow.A
+        fl = self.free_flow
+        z = fl.z(t, x)
+        rows = fl.velocity_rows @ fl.A
         b = rows[cand] @ z
         lam = self.solve(self.delassus(cand), b).x
-        tol = CONTACT_TOL * self.tol(rows[cand], z, t)
-        G = self.delassus(cand)
-        scale = np.abs(G) @ np.abs(lam) + tol
-        # identically closed (issue 34): no force and no relative acceleration, w = Gλ + b
-        # zero within its evaluation round-off (touching bodies, bodies moving together):
-        # the contact stays closed; its force is then zero along the held flow, never a lift-off
-        w = G @ lam + b
-        w_floor = ROUNDOFF * (np.abs(G) @ np.abs(lam) + tolerance(rows[cand], z) / ROUNDOFF)
-        return [c for c, l, s, wc, wf in zip(cand, lam, scale, w, w_floor)
-                if l > CONTACT_TOL * 1e-13 * s or abs(wc) <= wf]
+        g = gamma(z.size + 1)
+        radius = self.carried(rows[cand]) * (1.0 + 2.0 * g) ** 2
+        cache = self.exact_delassus.setdefault(tuple(cand), {})
+        keep, notes = stick_decisions(self.system.M, self.system.W[:, list(cand)],
+                                      fl.velocity_rows[cand], fl.A, z, radius, lam, cache)
+        self.stick_notes = {cand[k]: v for k, v in notes.items()}
+        return [c for c, k in zip(cand, keep) if k]
 
     def project(self, t: float, x: np.ndarray, idx: list[int]) -> np.ndarray:
         """M-metric projection of (q, u) onto g_idx = 0, γ_idx = 0 (a round-off correction)."""
@@ -506,7 +524,7 @@ class _Run:
         for c, a, b, l in zip(A, gm, gp, lam):
             if c in persistent:
                 if c not in stick:
-                    self.event(t, c, "liftoff", a, b, l)
+                    self.event(t, c, "liftoff", a, b, l, note=self.stick_notes.get(c))
                     self.open(c, t)
                 elif l > 0.0:
                     self.event(t, c, "impact", a, b, l)
@@ -514,7 +532,7 @@ class _Run:
             if a < -tol_v[c] or l > 0.0 or c not in stick:
                 self.event(t, c, "impact" if a < -tol_v[c] else "graze", a, b, l)
             if c in stick:
-                self.event(t, c, "stick", b, b, 0.0)
+                self.event(t, c, "stick", b, b, 0.0, note=self.stick_notes.get(c))
                 self.close(c, t)
             else:
                 self.touch(c, t)
