@@ -572,7 +572,8 @@ def _refine(fs: FunctionalSet, i: int, k: int, a: float, za: np.ndarray, lo: flo
 
 def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: float, d1: float,
                     d2: float, bound: float, width: float, e2: float = 0.0):
-    """Analyse functional i on a window where its minimum is near (d1 < 0 < d2).
+    """Analyse functional i on a window where its minimum is near (d1 < 0 < d2; d1 = 0 for a
+    functional not leaving a, :func:`_safe_step`: the minimum at a itself).
 
     Returns ``None`` when convexity cannot be certified on ``[a, a + 2s_m]`` (s_m = −d1/d2,
     within ``width``; ``curv = d2 − e2 − bound·2s_m > 0`` bounds ψ_i'' below on the span, e2
@@ -841,9 +842,9 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, err: 
             s1 = derivative_sign(fs, i, 1, za, D1[i], E1[i])
             leaving = s1.sign == 1 or (s1.sign == 0 and
                                        derivative_sign(fs, i, 2, za, D2[i], E2[i]).sign == 1)
-            if not leaving:
+            if not leaving:                    # a float64 slope 0 too: the minimum is at a
                 res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i]) \
-                    if convex else None
+                    if D1[i] <= 0.0 < D2[i] else None
                 if res is None:
                     found.append(_zero_now(fs, i, a, za, d, s0.note or s1.note))
                 elif res[0] == "positive":

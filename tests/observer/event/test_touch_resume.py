@@ -119,24 +119,61 @@ def test_a_touch_resumes_after_its_minimum_with_the_gap_above_its_band(monkeypat
         return out
 
     monkeypatch.setattr(master, "first_zero", recording)
-    sc = _scenario()
-    frame = GapFrame.for_scenario(sc)
-    run_sc = sc if frame is None else frame.scenario(sc)
+    run_sc = _run_scenario()
     res = run_master(run_sc)
     assert res.status.ok, res.status
     assert touches, "no touch: the case no longer exercises the resume"
-    n, free = sc.system.n, master.flow_for(run_sc.system, ())
+    free = master.flow_for(run_sc.system, ())
     for flow, rows, zero in touches:
-        assert zero.resume > zero.t
-        j = next(c for c in range(sc.system.m) if np.array_equal(rows[zero.index], flow.gap_rows[c]))
+        j = next(c for c in range(run_sc.system.m) if np.array_equal(rows[zero.index], flow.gap_rows[c]))
         assert np.array_equal(flow.A, free.A)           # no contact held: the free flow
-        x = flow.x_of(zero.z)
-        ref = Reference(run_sc.system, run_sc.law.restitution, x[:n], x[n:], t0=zero.t)
-        with mp.workdps(ref.dps):
-            A = ref.A([])
-            row = ref.gap_rows()[j]
-            span = mp.mpf(zero.resume) - mp.mpf(zero.t)
-            at_resume = row @ ref._at(A, ref.z, span)
-            assert at_resume > 2 * zero.band, (zero.t, zero.resume, at_resume, zero.band)
-            for k in range(1, 16):
-                assert row @ ref._at(A, ref.z, span * k / 16) >= -zero.band
+        _assert_certified_resume(run_sc, flow.x_of(zero.z), zero, j)
+
+
+POST_IMPACT = (0.20937296154758017,
+               [-0.05680061389303372, -0.13856703149932875, 0.10442319862531237,
+                -0.2381515950832827, -0.6476467517086224, 0.3676419303467368])
+"""The state (in the run's frame) right after contact 0's plastic impact, as the engine
+before the fix computed it on an AVX-512 machine: gap 0 = −1.8e-18, its float64 slope
+exactly 0.0, ψ'' ≈ 4 — a minimum at t that the slope cannot place."""
+
+
+def test_a_zero_float64_slope_at_a_minimum_is_a_touch_that_resumes_after_it():
+    """From POST_IMPACT the search's first zero is contact 0's touch at t, resuming strictly
+    after t with the gap of the reference flow above twice its band there. Before the fix
+    (convex minima only for a float64 slope ψ' < 0) it was a crossing at t itself, an impact
+    whose γ⁻ = 0 collide labels a graze and leaves the state as it was: 50 times."""
+    from observer.event.roots import first_zero, functional_set
+
+    run_sc = _run_scenario()
+    t, x = POST_IMPACT[0], np.array(POST_IMPACT[1])
+    flow = master.flow_for(run_sc.system, ())
+    z = flow.z(t, x)
+    d = functional_set(flow, flow.gap_rows, flow.time_scale).derivatives(z)   # what the search sees
+    assert d[0, 0] < 0.0 and d[1, 0] == 0.0 and d[2, 0] > 0.0                 # the degenerate state
+    zero, _, _ = first_zero(flow, flow.gap_rows, t, z, run_sc.t_end)
+    assert zero is not None and zero.kind == "touch" and zero.index == 0 and zero.t == t
+    _assert_certified_resume(run_sc, flow.x_of(zero.z), zero, 0)
+
+
+def _run_scenario() -> Scenario:
+    """The scenario in the frame the event engine runs it in (:class:`GapFrame`)."""
+    sc = _scenario()
+    frame = GapFrame.for_scenario(sc)
+    return sc if frame is None else frame.scenario(sc)
+
+
+def _assert_certified_resume(run_sc: Scenario, x: np.ndarray, zero, j: int) -> None:
+    """The touch ``zero`` of contact j's gap from state x: resume strictly after it, the
+    reference gap above 2·band at the resume and not below −band in between."""
+    assert zero.resume > zero.t
+    n = run_sc.system.n
+    ref = Reference(run_sc.system, run_sc.law.restitution, x[:n], x[n:], t0=zero.t)
+    with mp.workdps(ref.dps):
+        A = ref.A([])
+        row = ref.gap_rows()[j]
+        span = mp.mpf(zero.resume) - mp.mpf(zero.t)
+        at_resume = row @ ref._at(A, ref.z, span)
+        assert at_resume > 2 * zero.band, (zero.t, zero.resume, at_resume, zero.band)
+        for k in range(1, 16):
+            assert row @ ref._at(A, ref.z, span * k / 16) >= -zero.band
