@@ -54,9 +54,9 @@ DOC = {
 
 TIME_TOL = 1e-12
 """Impact times against the reference: the engine isolates each root to its time resolution
-(≈ 1e-17 s here); measured ≤ 1.1e-15 s."""
+(two ulp of t); the impact states carry the flow's rounding."""
 STATE_TOL = 1e-12
-"""The state at t_end against the reference (measured ≤ 1e-15)."""
+"""The state at t_end against the reference."""
 
 
 def _scenario() -> Scenario:
