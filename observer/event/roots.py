@@ -572,7 +572,8 @@ def _refine(fs: FunctionalSet, i: int, k: int, a: float, za: np.ndarray, lo: flo
 
 def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: float, d1: float,
                     d2: float, bound: float, width: float, e2: float = 0.0):
-    """Analyse functional i on a window where its minimum is near (d1 < 0 < d2).
+    """Analyse functional i on a window where its minimum is near (d1 < 0 < d2; d1 = 0 for a
+    functional not leaving a, :func:`_safe_step`: the minimum at a itself).
 
     Returns ``None`` when convexity cannot be certified on ``[a, a + 2s_m]`` (s_m = −d1/d2,
     within ``width``; ``curv = d2 − e2 − bound·2s_m > 0`` bounds ψ_i'' below on the span, e2
@@ -603,14 +604,51 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
     t_m = a + tau_m
     if upper >= -touch:
         z_m = _reset(flow, t_m, z_m)
-        # ψ ≥ lower + (curv/2)(t − t_m)² on the span: above 2·touch after resume (≤ the span)
-        resume = t_m + np.sqrt(max(2.0 * (2.0 * touch - lower), 0.0) / curv)
-        return "touch", Zero(t_m, i, "touch", z_m, m_star, fs.value(i, 1, z_m),
-                             float(min(resume, a + span)), band=touch, enclosure=(lower, upper),
-                             note=note)
+        resume = _resume(fs, i, a, za, tau_m, d2 - e2, bound, width, touch)
+        if resume is None:                      # not certified beyond the span: its end
+            resume = float(min(t_m + np.sqrt(max(2.0 * (2.0 * touch - lower), 0.0) / curv), a + span))
+        return "touch", Zero(t_m, i, "touch", z_m, m_star, fs.value(i, 1, z_m), resume,
+                             band=touch, enclosure=(lower, upper), note=note)
     tau = _refine(fs, i, 0, a, za, 0.0, tau_m, 0.5 * tau_m) if d0 > 0.0 else 0.0
     z = _reset(flow, a + tau, flow.expm(tau) @ za)
     return "cross", Zero(a + tau, i, "cross", z, fs.value(i, 0, z), fs.value(i, 1, z), a + tau)
+
+
+def _resume(fs: FunctionalSet, i: int, a: float, za: np.ndarray, tau_m: float, d2_low: float,
+            bound: float, width: float, band: float) -> float | None:
+    """A time after the touch at ``a + tau_m`` from which on ψ_i is certified above
+    ``2·band`` up to the end of a certified convex span (:func:`_convex_minimum`), or None
+    when convexity cannot be certified that far.
+
+    With ψ_i'' ≥ ``curv(S) = d2_low − bound·S > 0`` on ``[a, a + S]`` (d2_low the certified
+    lower bound of ψ_i''(a), bound that of the third derivative on the window ``width``) and
+    the enclosures ``ψ_i(a + tau_m) ≥ lo0``, ``|ψ_i'(a + tau_m)| ≤ s1``
+    (:meth:`FunctionalSet.enclose`): ``ψ_i(a + tau_m + x) ≥ lo0 − s1·x + curv·x²/2``, above
+    ``2·band`` for ``x ≥ x_r = (s1 + √(s1² + 2 curv (2·band − lo0)))/curv``. S starts at
+    ``tau_m + x_r(d2_low)`` and doubles until ``tau_m + x_r(curv(S)) ≤ S``. The resume,
+    ``a + tau_m + x_r`` rounded up, is strictly after the minimum: a touch whose minimum the
+    float64 slope cannot place (``−d1/d2`` below the time resolution, or ``d1 = 0``) resumes
+    the search after it, not at it (a resume capped at ``a + 2s_m`` equal to the touch's
+    time took the same touch again: tests/observer/event/test_touch_resume.py)."""
+    lo0, _ = fs.enclose(i, 0, za, tau_m)
+    lo1, hi1 = fs.enclose(i, 1, za, tau_m)
+    s1 = max(abs(lo1), abs(hi1))
+    t_m = a + tau_m
+
+    def reach(curv: float) -> float:
+        disc = s1 * s1 + 2.0 * curv * (2.0 * band - lo0)
+        return up(up(s1 + np.sqrt(max(disc, 0.0)), 2) / curv, 2)
+
+    span = tau_m + reach(d2_low) if d2_low > 0.0 else np.inf
+    while span <= width:
+        curv = d2_low - bound * span
+        if not curv > 0.0:
+            return None
+        need = reach(curv)
+        if tau_m + need <= span:
+            return float(max(up(t_m + need, 1), np.nextafter(t_m, np.inf)))
+        span = 2.0 * (tau_m + need)
+    return None
 
 
 def graze_band(fs: FunctionalSet, i: int, z: np.ndarray) -> float:
@@ -804,9 +842,9 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, err: 
             s1 = derivative_sign(fs, i, 1, za, D1[i], E1[i])
             leaving = s1.sign == 1 or (s1.sign == 0 and
                                        derivative_sign(fs, i, 2, za, D2[i], E2[i]).sign == 1)
-            if not leaving:
+            if not leaving:                    # a float64 slope 0 too: the minimum is at a
                 res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i]) \
-                    if convex else None
+                    if D1[i] <= 0.0 < D2[i] else None
                 if res is None:
                     found.append(_zero_now(fs, i, a, za, d, s0.note or s1.note))
                 elif res[0] == "positive":
