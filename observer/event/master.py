@@ -15,8 +15,10 @@ the impact instant (simultaneous impacts: the multi-contact law). After an impac
 contacts with ``γ⁺ = 0`` (within round-off) enter persistent contact if the
 acceleration LCP ``0 ≤ λ ⊥ γ̇ = G λ + γ̇_free ≥ 0`` gives them a positive force.
 
-Grazing (stated tolerances, on the scale of the motion): a **touch**, a local minimum m* of
-g_j whose certified enclosure meets the touch band ±δ (:func:`observer.event.roots.touch_band`)
+Grazing (certified bands, no scale of the motion): a **touch**, a local minimum m* of
+g_j whose certified enclosure meets the touch band ±δ (:func:`observer.event.roots.graze_band`:
+the evaluation error at the minimum, the run's accumulated state error carried there,
+:meth:`_Run.search_band`, and the data's representation in the user's coordinates)
 is a graze with zero impulse (the run continues past it); its row carries ``depth = m*`` and
 a note stating the enclosure, δ and the guaranteed crossing depth δ* = δ + its width.
 A crossing with ``|γ⁻| ≤`` CONTACT_TOL motion
@@ -76,6 +78,9 @@ from observer.event.tails import JointTail, horner, joint_due, joint_tail
 from observer.impact import ImpactLaw, impact
 from observer.result import RunState, RunStatus
 from observer.scenario import Scenario
+
+_U = np.finfo(float).eps / 2.0
+"""Unit round-off u (the data's representation, :meth:`_Run.search_band`)."""
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -284,6 +289,7 @@ class _Run:
         self.exact_delassus: dict[tuple, dict] = {}   # contact set → {bits: exact G} (exact_solve)
         self.err = np.zeros(2 * self.n)   # bound on |x − x_exact| (carry_error, jump_error)
         self.energy = EnergyCarry(self.system, t_end - t0)   # the same error in ‖·‖_P
+        self.origin: np.ndarray | None = None   # the gap frame's q* (run_master), for graze bands
 
     # -- sampling --------------------------------------------------------------------------
     def fill(self, flow: Flow, t_a: float, x_a: np.ndarray, t_b: float, include_end: bool) -> None:
@@ -427,6 +433,45 @@ class _Run:
             comp = np.abs(rows[:, :k]) @ self.err
         comp = np.where(np.isnan(comp), np.inf, comp)
         return np.minimum(comp, self.energy.through(rows[:, :k]))
+
+    def search_band(self, flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray):
+        """The data's part of the touch bands of a search from ``(t0, z0)`` along ``flow``
+        (:func:`observer.event.roots.graze_band` (b) and (c)): ``data(t, z)`` → per row of
+        ``rows``, (b) the accumulated state error carried from t0 to t as :meth:`carry_error`
+        would carry it (componentwise ``|r|·err``, or the energy norm's ``‖r‖_{P⁻¹}·ε``, the
+        smaller; :attr:`err` and ε are not changed), plus (c) the data's representation in
+        the user's coordinates, ``(1 + 2γ)·u·Σ_j|r_ij z_j|`` with z taken back out of the
+        gap frame (q = x + q*, :attr:`origin`) and the row's constant re-expressed there
+        (``c − r_q·q*``, raised by its own rounding): at a translation by c a gap is known
+        to ~u·|c| (issue 34: a graze at translation 100 inside that band is a graze).
+
+        The state error's scope is :meth:`carry_error`'s (the propagator as computed)."""
+        k, n = 2 * self.n, self.n
+        err0, az0 = self.err.copy(), np.abs(z0)
+        g = gamma(z0.size + 1)
+        ab = np.abs(rows)
+        if self.origin is not None:
+            q = self.origin
+            const = np.abs(rows[:, -1] - rows[:, :n] @ q) + g * (ab[:, -1] + ab[:, :n] @ np.abs(q))
+            ab = ab.copy()
+            ab[:, -1] = const * (1.0 + 2.0 * g)
+        mech = ab[:, :k]
+
+        def data(t: float, z: np.ndarray) -> np.ndarray:
+            E = np.abs(flow.expm(float(t) - t0)) if t > t0 else np.eye(z0.size)
+            new = g * (E[:k] @ az0)
+            err = (E[:k, :k] @ err0) * (1.0 + 2.0 * g) + new
+            with np.errstate(over="ignore", invalid="ignore"):
+                comp = mech @ err
+            comp = np.where(np.isnan(comp), np.inf, comp)
+            eps = self.energy.after(flow, max(float(t) - t0, 0.0), new * (1.0 + 2.0 * g))
+            carried = np.minimum(comp, self.energy.through(rows[:, :k], eps))
+            zu = np.abs(z)
+            if self.origin is not None:
+                zu = zu.copy()
+                zu[:n] = np.abs(z[:n] + self.origin) * (1.0 + _U)
+            return (carried + (1.0 + 2.0 * g) * _U * (ab @ zu)) * (1.0 + 2.0 * g)
+        return data
 
     # -- contact mechanics -----------------------------------------------------------------
     def delassus(self, idx) -> np.ndarray:
@@ -634,8 +679,7 @@ class _Run:
             return True
         xp = self.project(t, x, list(setp))
         try:
-            zero, _, _ = first_zero(flow, rows, t, flow.z(t, xp), min(t_inf, self.t_end),
-                                    tau=self.tau)
+            zero, _, _ = first_zero(flow, rows, t, flow.z(t, xp), min(t_inf, self.t_end))
         except RootIsolationError:
             return False
         return zero is None
@@ -950,7 +994,7 @@ def _oscillator_block(flow: Flow, t: np.ndarray) -> np.ndarray:
 def run_master(scenario: Scenario, h: float | None = None, t_end: float | None = None,
                max_events: int = 100_000,
                zeno_velocity_ratio: float = ZENO_VELOCITY_RATIO, t0: float = 0.0,
-               should_stop=None) -> MasterEventResult:
+               should_stop=None, origin: np.ndarray | None = None) -> MasterEventResult:
     """Exact event-driven run of the master of ``scenario`` (see module docstring).
 
     Parameters
@@ -972,6 +1016,10 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
         Called between events and between blocks of samples; a signal name (``"SIGINT"``)
         stops the run there (status ``"stopped: SIGINT at t = …"``, the frame up to the last
         sample computed): a streamed run interrupted keeps its finished rows.
+    origin : ndarray, optional
+        The gap frame's origin q* when ``scenario`` is the frame's
+        (:meth:`observer.event.frame.GapFrame.scenario`): the touch bands take the data's
+        resolution in the given coordinates q = x + q* (:meth:`_Run.search_band`).
 
     A run that stops (event cap, stalled isolation, no progress) returns the frame up to its
     stop time, never NaN rows, with the reason in ``status``. So does a state that leaves the
@@ -982,7 +1030,8 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
     state"``; overflow inside the engine is silenced (``np.errstate``), the stop says it.
     """
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        return _run_master(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, should_stop)
+        return _run_master(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, should_stop,
+                           origin)
 
 
 def _start(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_ratio: float,
@@ -1003,8 +1052,9 @@ def _start(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_ratio: f
 
 
 def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_ratio: float,
-                t0: float, should_stop) -> MasterEventResult:
+                t0: float, should_stop, origin=None) -> MasterEventResult:
     run, t_end, x, persistent = _start(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, should_stop)
+    run.origin = None if origin is None else np.asarray(origin, dtype=float)
     t0 = run.t0
     status, nonfinite = RunStatus(), False
     t = t0
@@ -1021,7 +1071,9 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
             break
         rows, keys, cert = _functionals(run, flow, t, x, persistent, certified)
         try:
-            zero, t_stop, _ = first_zero(flow, rows, t, flow.z(t, x), t_end, cert, run.tau, should_stop)
+            z_t = flow.z(t, x)
+            zero, t_stop, _ = first_zero(flow, rows, t, z_t, t_end, cert, should_stop,
+                                         run.search_band(flow, rows, t, z_t), run.energy)
         except SearchStopped as exc:                  # a signal mid-search: the certified rows are kept
             run.fill_certified(flow, t, x, exc.t_ok)
             run.halted = exc.signal

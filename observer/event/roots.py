@@ -31,7 +31,10 @@ floating point; when the minimum of ψ_i lies in a window on which ψ_i'' > 0 is
 simple zero of ψ_i'. A certified enclosure ``[lower, upper]`` of its value (a Taylor model
 with Lagrange remainder and the curvature bound, :func:`minimum_decision`; ball arithmetic
 where float64 cannot place it) decides against the touch band δ of ψ_i (:func:`graze_band`,
-the stated band of a graze): ``lower > δ``, the whole convex window is certified positive;
+the stated band of a graze: what the data do not decide about the minimum — the float64
+evaluation error of ψ_i there, the run's accumulated state error carried to t_m and the
+data's own representation in the user's coordinates, each a certified bound; no time scale,
+no count of round-offs): ``lower > δ``, the whole convex window is certified positive;
 ``upper < −δ``, a **cross** before t_m, isolated by the bracket ``[a, t_m]``; otherwise a
 **touch** (graze) at t_m. The guaranteed crossing depth is δ* = δ + (upper − lower): a
 deeper minimum is always a cross.
@@ -49,6 +52,7 @@ the event loop's contact decisions in :mod:`observer.event.master` and
 from __future__ import annotations
 
 from collections import OrderedDict
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,7 +61,7 @@ from numba import njit
 
 from observer.event import kernels
 from observer.event.enclosures import (PRECISION_CAP, PRECISION_START, Decision, coupled, dot_sign,
-                                       flow_sign, flow_value)
+                                       flow_sign, flow_value, representation_error)
 from observer.event.flow import Flow, exp_upper, norm_upper, spectral_norm_upper, up
 
 WINDOW = 0.5
@@ -66,15 +70,6 @@ WINDOW = 0.5
 ROUNDOFF = 64.0 * np.finfo(float).eps
 """Relative round-off of a functional: of its evaluation ``r·z`` (``ROUNDOFF · Σ_j |r_ij z_j|``,
 the representation floor) and of the motion it describes (``ROUNDOFF · S``, :func:`motion_scale`)."""
-
-TOUCH_FACTOR = 1e3
-"""The touch (graze) band of a local minimum of ψ_i is ``TOUCH_FACTOR · ROUNDOFF · S`` (S the
-motion scale of ψ_i at the minimum, :func:`touch_band`) plus the certified error of the
-float64 evaluation of ψ_i at the minimum (:meth:`FunctionalSet.errors`): round-off accumulated along a run (about 1e-13 of the orbit's size after 50 s
-on the grazing scenario) must not turn an exact graze into a miss or a crossing. A minimum
-certified above the band is a miss, below it a crossing (an impact, however shallow); the
-**guaranteed crossing depth** is the band plus the width of the minimum's certified
-enclosure (:func:`minimum_enclosure`): a crossing deeper than it is never a graze."""
 
 TIME_RTOL = 2.0 * np.finfo(float).eps
 """Time resolution ``TIME_RTOL · max(|t|, τ)`` (τ the system's time scale,
@@ -192,7 +187,7 @@ class Zero:
         For a touch, a time after which ψ_i is certified to exceed its round-off again
         (ψ_i is convex in between); t for a cross.
     band : float
-        For a touch, the touch band it was decided with (:func:`touch_band`).
+        For a touch, the touch band it was decided with (:func:`graze_band`).
     enclosure : tuple
         For a touch, ``(lower, upper)``: the certified enclosure of the minimum's value
         (:func:`minimum_enclosure`); the guaranteed crossing depth there is
@@ -253,15 +248,6 @@ def motion_tolerance(rows: np.ndarray, A: np.ndarray, z: np.ndarray, tau: float,
         d.append(R @ z)
     return (tolerance(rows, z) + ROUNDOFF * motion_scale(d, tau)
             + np.abs(d[1]) * resolution(t, tau))
-
-
-def touch_band(d2, d3, floor, tau: float):
-    """Touch band at a local minimum (ψ' = 0) with ψ'' = d2, ψ''' = d3 and floor ``floor``
-    (the certified error of the float64 value of ψ there, :func:`graze_band`):
-    ``TOUCH_FACTOR·ROUNDOFF·(|d2|τ²/2 + |d3|τ³/6) + floor``, the guaranteed crossing depth
-    (:data:`TOUCH_FACTOR`)."""
-    return (TOUCH_FACTOR * ROUNDOFF * (np.abs(d2) * tau * tau / 2.0 + np.abs(d3) * tau ** 3 / 6.0)
-            + floor)
 
 
 def first_cubic_zero(d0: float, d1: float, d2: float, bound: float, width: float) -> float:
@@ -364,9 +350,8 @@ class FunctionalSet:
     |r̂_k|)·|z|`` (:meth:`errors`), likewise inflated.
     """
 
-    def __init__(self, flow: Flow, rows: np.ndarray, tau: float | None = None) -> None:
+    def __init__(self, flow: Flow, rows: np.ndarray) -> None:
         self.flow = flow
-        self.tau = flow.time_scale if tau is None else float(tau)   # the motion's time scale
         self.rows = np.atleast_2d(np.asarray(rows, dtype=float))
         N = self.rows.shape[1]
         u = np.finfo(float).eps / 2.0
@@ -514,18 +499,18 @@ FUNCTIONAL_SETS = 64
 """Functional sets kept per flow by :func:`functional_set` (least recently used dropped)."""
 
 
-def functional_set(flow: Flow, rows: np.ndarray, tau: float) -> FunctionalSet:
-    """The :class:`FunctionalSet` of ``rows`` along ``flow`` with time scale τ, built once per
+def functional_set(flow: Flow, rows: np.ndarray) -> FunctionalSet:
+    """The :class:`FunctionalSet` of ``rows`` along ``flow``, built once per
     flow and reused by every search of the same functionals (a run searches the same gaps
     and forces of a contact set at every event): its derivative rows, their certified
     errors and the proved norms ``‖r_3 T‖`` are constants of the flow. Deterministic, so a
     reused set gives the same bits as a new one."""
     cache = flow.__dict__.setdefault("_functional_sets", OrderedDict())
     rows = np.ascontiguousarray(rows, dtype=float)
-    key = (rows.shape, rows.tobytes(), float(tau))
+    key = (rows.shape, rows.tobytes())
     hit = cache.get(key)
     if hit is None:
-        hit = cache[key] = FunctionalSet(flow, rows, tau)
+        hit = cache[key] = FunctionalSet(flow, rows)
         if len(cache) > FUNCTIONAL_SETS:
             cache.popitem(last=False)
     else:
@@ -571,13 +556,13 @@ def _refine(fs: FunctionalSet, i: int, k: int, a: float, za: np.ndarray, lo: flo
 
 
 def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: float, d1: float,
-                    d2: float, bound: float, width: float, e2: float = 0.0):
+                    d2: float, bound: float, width: float, e2: float = 0.0, data=None):
     """Analyse functional i on a window where its minimum is near (d1 < 0 < d2).
 
     Returns ``None`` when convexity cannot be certified on ``[a, a + 2s_m]`` (s_m = −d1/d2,
     within ``width``; ``curv = d2 − e2 − bound·2s_m > 0`` bounds ψ_i'' below on the span, e2
     the certified error of d2), else ``("positive", certified_until)``, ``("touch", Zero)``
-    or ``("cross", Zero)``.
+    or ``("cross", Zero)``. ``data``: the data's part of the band (:func:`graze_band`).
 
     The decision is three-valued on a certified enclosure ``[lower, upper]`` of the minimum
     m of the exact flow from ``za`` (:func:`minimum_decision`: float64 first, ball arithmetic
@@ -596,7 +581,7 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
     tau_m = _refine(fs, i, 1, a, za, 0.0, span, s_m)
     z_m = flow.expm(tau_m) @ za
     m_star = fs.value(i, 0, z_m)
-    touch = graze_band(fs, i, z_m)
+    touch = graze_band(fs, i, z_m, a + tau_m, data)
     lower, upper, note = minimum_decision(fs, i, za, tau_m, span, curv, touch)
     if lower > touch:
         return "positive", a + span
@@ -613,15 +598,35 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
     return "cross", Zero(a + tau, i, "cross", z, fs.value(i, 0, z), fs.value(i, 1, z), a + tau)
 
 
-def graze_band(fs: FunctionalSet, i: int, z: np.ndarray) -> float:
-    """Touch band of functional i at its minimum state z: :func:`touch_band` with the
-    functional set's time scale (the run's τ, of the part of the system the contacts see,
-    :meth:`observer.event.flow.Flow._coupled_scale`) and, as its floor, the certified error
-    ``e_0`` of the float64 value of ψ_i at z (:meth:`FunctionalSet.errors`: a γ_N bound, not
-    a count of round-offs of ``Σ_j |r_ij z_j|``, which made a shallow crossing far from the
-    origin a touch): the stated band of a graze (README)."""
+def graze_band(fs: FunctionalSet, i: int, z: np.ndarray, t: float = np.nan, data=None) -> float:
+    """The touch (graze) band δ of functional i at its minimum, the state z at time t: what
+    the data do not decide about ψ_i there, each part a certified bound (issue 34 item 1; no
+    time scale and no count of round-offs):
+
+    (a) the error ``e_0`` of the float64 evaluation of ψ_i at z
+        (:meth:`FunctionalSet.errors`: a γ_N bound, Higham §3.5);
+    (b) the distance of the search's state to the exact trajectory of the scenario's data,
+        seen through the row: the accumulated state error of the run carried to t
+        (``data``, :meth:`observer.event.master._Run.search_band`);
+    (c) the resolution of the data in the user's coordinates: the state and the gap's data
+        are floats known to their own representation, ``u·Σ_j|r_ij z_j|`` raised by
+        ``1 + 2γ`` (:func:`~observer.event.enclosures.representation_error`), z taken in the
+        coordinates the scenario was given in — the gap frame
+        (:class:`observer.event.frame.GapFrame`) makes the gaps coordinates and a
+        translation c disappear from the arithmetic, not from the data: there ψ_i is known
+        to no better than ``u·|c|``, and a minimum within it is undecidable from the data.
+
+    ``data(t, z)`` returns (b) + (c) for every functional (an array: :class:`SearchCarry`,
+    the search's own accumulated error plus what the master gives); without it (b) is 0 and
+    (c) is taken in the run's coordinates. A minimum certified above δ is a miss, below −δ a
+    crossing (an impact, however shallow), otherwise a graze (paper eq. (2): a gap touching
+    zero with zero relative velocity)."""
     floor = float(fs.errors(z, 0)[0, i])
-    return float(touch_band(fs.value(i, 2, z), fs.value(i, 3, z), floor, fs.tau))
+    if data is None:
+        extra = float(representation_error(fs.rows[i], z))
+    else:
+        extra = float(data(t, z)[i])
+    return floor + extra
 
 
 def minimum_decision(fs: FunctionalSet, i: int, za: np.ndarray, tau_m: float, span: float,
@@ -759,8 +764,8 @@ def _near_zero(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d: np.ndarra
 
 
 def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, err: np.ndarray,
-               bound: np.ndarray, w: float, certified: dict[int, float], quick: np.ndarray | None = None
-               ) -> tuple[float, list[Zero]]:
+               bound: np.ndarray, w: float, certified: dict[int, float], quick: np.ndarray | None = None,
+               data=None) -> tuple[float, list[Zero]]:
     """Largest step from a over which no functional is certified to vanish, and the zeros
     found exactly on the way (convex minima, zeros at a). Vectorised quick test first: a
     functional whose cubic lower bound (the derivatives minus their certified errors
@@ -770,7 +775,8 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, err: 
     Every other decision is three-valued (:func:`derivative_sign`): ψ_i(a) certainly
     positive (its certified lower bound starts the cubic), or not — then it is at a zero
     unless leaving (ψ_i' > 0, or ψ_i' = 0 exactly and ψ_i'' > 0); no tolerance. ``quick``:
-    the quick test's outcome when already computed (:meth:`FunctionalSet.screen`)."""
+    the quick test's outcome when already computed (:meth:`FunctionalSet.screen`); ``data``:
+    the data's part of the touch bands (:func:`graze_band`)."""
     d0, d1, d2 = d[0], d[1], d[2]
     step = w
     found: list[Zero] = []
@@ -805,7 +811,7 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, err: 
             leaving = s1.sign == 1 or (s1.sign == 0 and
                                        derivative_sign(fs, i, 2, za, D2[i], E2[i]).sign == 1)
             if not leaving:
-                res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i]) \
+                res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i], data) \
                     if convex else None
                 if res is None:
                     found.append(_zero_now(fs, i, a, za, d, s0.note or s1.note))
@@ -817,7 +823,7 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, err: 
                 continue
         s = first_cubic_zero(max(start, 0.0), L1[i], L2[i], BD[i], w)
         if s < w and convex:
-            res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i])
+            res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i], data)
             if res is not None:
                 if res[0] != "positive":
                     found.append(res[1])
@@ -834,9 +840,81 @@ def _row_norm(v: np.ndarray) -> float:
     return norm_upper(v) if float(np.max(np.abs(v))) < 2.0 ** 511 else np.inf
 
 
+class SearchCarry:
+    """The search's own accumulated state error and the data's part of its touch bands
+    (:func:`graze_band` (b) and (c)), for :func:`first_zero`.
+
+    The search advances its float state window by window, ``z ← fl(exp(A s) z)``, each step
+    rounding: :attr:`err` bounds ``|z_a − exact flow from z0 at a|`` componentwise (the
+    a-priori bound of a matrix-vector product, Higham §3.5, as ``_Run.carry_error``: ``err ←
+    |E|·err·(1 + 2γ) + γ·|E|·|z|``, E = exp(A s) as computed), the oscillator states
+    reset from ``fl(ω a)`` known to ``u·|ω a|`` plus their own rounding. :meth:`__call__`
+    at the minimum ``a + s``: that error carried over s through the rows, ``|r|·|exp(A s)|·err``,
+    plus ``data(t, z)`` (the run's carried error and the data's resolution in the user's
+    coordinates, given by the master) or, without it, the data's representation in the run's
+    coordinates (:func:`~observer.event.enclosures.representation_error`). With ``energy``
+    (the run's :class:`~observer.event.energy.EnergyCarry`), the same error of the mechanical
+    state is carried in its energy norm too, ``ε ← e^{μ s} ε + ‖w‖_P`` (w the step's rounding
+    and what the oscillators' error feeds in), and the smaller enclosure taken: the
+    componentwise one grows with ``‖|exp(A s)|‖`` per step, the energy norm's does not.
+
+    Parameters
+    ----------
+    flow : Flow
+    rows : ndarray, shape (p, N)
+    a : float
+        Start of the search.
+    data : callable or None
+        See :func:`first_zero`.
+    energy : EnergyCarry or None
+        See :func:`first_zero`.
+    """
+
+    def __init__(self, flow: Flow, rows: np.ndarray, a: float, data=None, energy=None) -> None:
+        self.flow, self.rows, self.a, self.data = flow, rows, float(a), data
+        self.abs_rows = np.abs(rows)
+        self.err = np.zeros(flow.N)
+        self.energy, self.eps = energy, 0.0
+        self.g = (flow.N + 1) * _U / (1.0 - (flow.N + 1) * _U)
+        self._osc = slice(2 * flow.n, flow.N - 1)
+        self._w = np.repeat(np.abs(flow._freq_array), 2)
+
+    def advance(self, step: float, za: np.ndarray) -> np.ndarray:
+        """The state ``step`` after the current one (``a``), with :attr:`err` carried."""
+        flow, g = self.flow, self.g
+        E = flow.expm(step)
+        absE = np.abs(E)
+        new = g * (absE @ np.abs(za)) * (1.0 + 2.0 * g)
+        if self.energy is not None and math.isfinite(self.eps):
+            k, osc = 2 * flow.n, self._osc      # the oscillators' reset error enters by E[:k, osc]
+            w = new[:k] + (absE[:k, osc] @ self.err[osc]) * (1.0 + 2.0 * g)
+            self.eps = self.energy.after(flow, step, w, self.eps)
+        self.err = (absE @ self.err) * (1.0 + 2.0 * g) + new
+        self.a = self.a + step
+        z = _reset(flow, self.a, E @ za, copy=False)
+        osc = z[self._osc]
+        self.err[self._osc] = (self._w * abs(self.a) + 2.0 * np.abs(osc)) * _U * (1.0 + 2.0 * g)
+        self.err[-1] = 0.0
+        return z
+
+    def __call__(self, t: float, z: np.ndarray) -> np.ndarray:
+        """(b) + (c) of :func:`graze_band` for every row at the state z at t ≥ a."""
+        s = float(t) - self.a
+        absE = np.abs(self.flow.expm(s)) if s > 0.0 else np.eye(self.flow.N)
+        own = (self.abs_rows @ (absE @ self.err)) * (1.0 + 2.0 * self.g) ** 2
+        if self.energy is not None:               # the smaller of two proved bounds
+            k, g = 2 * self.flow.n, self.g
+            w = (absE[:k, self._osc] @ self.err[self._osc]) * (1.0 + 2.0 * g)
+            eps = self.energy.after(self.flow, max(s, 0.0), w, self.eps)
+            osc = (self.abs_rows[:, self._osc] @ self.err[self._osc]) * (1.0 + 2.0 * g)
+            own = np.minimum(own, self.energy.through(self.rows[:, :k], eps) + osc)
+        rest = representation_error(self.rows, z) if self.data is None else self.data(t, z)
+        return own + rest
+
+
 def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: float,
-               certified: dict[int, float] | None = None, tau: float | None = None, should_stop=None
-               ) -> tuple[Zero | None, float, np.ndarray]:
+               certified: dict[int, float] | None = None, should_stop=None, data=None,
+               energy=None) -> tuple[Zero | None, float, np.ndarray]:
     """First zero in ``[t0, t_end]`` of any functional ``rows[i]·z(t)`` along ``flow``.
 
     Decisions are three-valued on certified enclosures (:func:`_safe_step`,
@@ -856,11 +934,18 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
         End of the search.
     certified : dict, optional
         ``{i: t}``: ψ_i is known to stay positive until t (after a touch).
-    tau : float, optional
-        Unused by the search's decisions (kept for the callers' signature; the functional
-        sets are cached per value).
     should_stop : callable, optional
         A signal name it returns (:func:`_look`) stops the search: :class:`SearchStopped`.
+    data : callable, optional
+        ``data(t, z)``: for every functional, the certified distance of its value at the
+        search's state z at time t to its value on the exact trajectory of the scenario's
+        data, beyond the float64 evaluation at z (the carried state error and the data's
+        resolution in the user's coordinates, :func:`graze_band` (b) and (c)); it enters
+        the touch band of a minimum only. Without it the state z0 is taken as exact data
+        in the run's coordinates.
+    energy : EnergyCarry, optional
+        The run's energy norm (:class:`observer.event.energy.EnergyCarry`): the search's own
+        accumulated rounding is then also carried in it (:class:`SearchCarry`).
 
     Returns
     -------
@@ -870,11 +955,11 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     """
     rows = np.atleast_2d(rows)
     a, za = float(t0), np.asarray(z0, dtype=float)
-    tau = flow.time_scale if tau is None else float(tau)
     if rows.shape[0] == 0 or t_end - a <= time_resolution(t_end):
         z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
         return None, t_end, z
-    fs = functional_set(flow, rows, tau)
+    fs = functional_set(flow, rows)
+    carry = SearchCarry(flow, fs.rows, a, data, energy)
     certified = dict(certified or {})
     window = WINDOW / fs.norm_bound if fs.norm_bound > 0.0 else np.inf   # inf: ψ polynomial
     growth = exp_upper(up(fs.certified_norm * min(window, t_end - a) * (1.0 + 2.0 * _U)))
@@ -897,7 +982,7 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
             i = int(np.flatnonzero(~np.isfinite(bound))[0])
             raise NonFiniteFlow(a, a, za, ("bound", 3, i), float(bound[i]))
         step, found = (w, []) if quick.all() else _safe_step(fs, a, za, d, errs, bound, w, certified,
-                                                              quick)
+                                                              quick, carry)
         # no functional without a found zero vanishes in (a, a + step): the earliest found zero
         # within that reach is the first zero; one beyond it is recomputed later
         if found:
@@ -910,7 +995,7 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
             if zero is not None:
                 return zero, zero.t, zero.z
             step = min(res, w)                       # nothing approaches: time moves on
-        a, za = a + step, _reset(flow, a + step, flow.expm(step) @ za, copy=False)
+        a, za = a + step, carry.advance(step, za)
     raise RootIsolationError(f"root isolation stalled near t = {a!r} ({MAX_STEPS} safe steps)", a, za)
 
 
