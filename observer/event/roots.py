@@ -194,6 +194,9 @@ class Zero:
         ``band + upper − lower``.
     note : str
         Empty, or how a decision that float64 cannot take was taken (``"unresolved: …"``).
+    carried : tuple
+        ``(err, eps)``: the search's own accumulated rounding at t (:meth:`SearchCarry.at`),
+        componentwise and in the energy norm, for the run to add to its carried error.
     """
 
     t: float
@@ -206,6 +209,7 @@ class Zero:
     band: float = 0.0
     note: str = ""
     enclosure: tuple = ()
+    carried: tuple = ()
 
 
 def tolerance(rows: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -874,7 +878,7 @@ class SearchCarry:
         self.flow, self.rows, self.a, self.data = flow, rows, float(a), data
         self.abs_rows = np.abs(rows)
         self.err = np.zeros(flow.N)
-        self.energy, self.eps = energy, 0.0
+        self.energy, self.eps, self.z = energy, 0.0, None
         self.g = (flow.N + 1) * _U / (1.0 - (flow.N + 1) * _U)
         self._osc = slice(2 * flow.n, flow.N - 1)
         self._w = np.repeat(np.abs(flow._freq_array), 2)
@@ -891,11 +895,27 @@ class SearchCarry:
             self.eps = self.energy.after(flow, step, w, self.eps)
         self.err = (absE @ self.err) * (1.0 + 2.0 * g) + new
         self.a = self.a + step
-        z = _reset(flow, self.a, E @ za, copy=False)
+        z = self.z = _reset(flow, self.a, E @ za, copy=False)
         osc = z[self._osc]
         self.err[self._osc] = (self._w * abs(self.a) + 2.0 * np.abs(osc)) * _U * (1.0 + 2.0 * g)
         self.err[-1] = 0.0
         return z
+
+    def at(self, t: float) -> tuple[np.ndarray, float]:
+        """``(err, eps)`` carried to t ≥ a, the flight from the current state included."""
+        s = float(t) - self.a
+        if not s > 0.0 or self.z is None:
+            return self.err.copy(), self.eps
+        g = self.g
+        absE = np.abs(self.flow.expm(s))
+        new = g * (absE @ np.abs(self.z)) * (1.0 + 2.0 * g)
+        err = (absE @ self.err) * (1.0 + 2.0 * g) + new
+        eps = self.eps
+        if self.energy is not None and math.isfinite(eps):
+            k = 2 * self.flow.n
+            w = new[:k] + (absE[:k, self._osc] @ self.err[self._osc]) * (1.0 + 2.0 * g)
+            eps = self.energy.after(self.flow, s, w, eps)
+        return err, eps
 
     def __call__(self, t: float, z: np.ndarray) -> np.ndarray:
         """(b) + (c) of :func:`graze_band` for every row at the state z at t ≥ a."""
@@ -988,11 +1008,13 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
         if found:
             first = min(found, key=lambda zr: zr.t)
             if first.t <= a + step:
+                first.carried = carry.at(first.t)
                 return first, first.t, first.z
         step = max(step, 0.0)
         if step < w and step <= res:
             zero = _unresolved(fs, a, za, d, certified, res)
             if zero is not None:
+                zero.carried = carry.at(zero.t)
                 return zero, zero.t, zero.z
             step = min(res, w)                       # nothing approaches: time moves on
         a, za = a + step, carry.advance(step, za)
