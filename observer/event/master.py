@@ -1079,9 +1079,8 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
             break
         rows, keys, cert = _functionals(run, flow, t, x, persistent, certified)
         try:
-            z_t = flow.z(t, x)
-            zero, t_stop, _ = first_zero(flow, rows, t, z_t, t_end, cert, should_stop,
-                                         run.search_band(flow, rows, t, z_t), run.energy)
+            zero, t_stop, _ = first_zero(flow, rows, t, flow.z(t, x), t_end, cert, should_stop,
+                                         run.search_band(flow, rows, t, flow.z(t, x)), run.energy)
         except SearchStopped as exc:                  # a signal mid-search: the certified rows are kept
             run.fill_certified(flow, t, x, exc.t_ok)
             run.halted = exc.signal

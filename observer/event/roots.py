@@ -917,6 +917,12 @@ class SearchCarry:
             eps = self.energy.after(self.flow, s, w, eps)
         return err, eps
 
+    def hand(self, zero: Zero) -> tuple:
+        """``(zero, zero.t, zero.z)`` with :attr:`Zero.carried` set (:meth:`at`): what
+        :func:`first_zero` returns."""
+        zero.carried = self.at(zero.t)
+        return zero, zero.t, zero.z
+
     def __call__(self, t: float, z: np.ndarray) -> np.ndarray:
         """(b) + (c) of :func:`graze_band` for every row at the state z at t ≥ a."""
         s = float(t) - self.a
@@ -938,10 +944,9 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     """First zero in ``[t0, t_end]`` of any functional ``rows[i]·z(t)`` along ``flow``.
 
     Decisions are three-valued on certified enclosures (:func:`_safe_step`,
-    :func:`minimum_decision`); a search interval (or its remainder) no longer than the
-    time resolution (:func:`time_resolution`) is integrated as a flow, not searched. The
-    windows and bounds are those of the block of the flow the functionals depend on
-    (:meth:`FunctionalSet._coupled`).
+    :func:`minimum_decision`); a search interval no longer than the time resolution
+    (:func:`time_resolution`) is integrated as a flow, not searched. The windows and bounds
+    are those of the block of the flow the functionals see (:meth:`FunctionalSet._coupled`).
 
     Parameters
     ----------
@@ -957,15 +962,11 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     should_stop : callable, optional
         A signal name it returns (:func:`_look`) stops the search: :class:`SearchStopped`.
     data : callable, optional
-        ``data(t, z)``: for every functional, the certified distance of its value at the
-        search's state z at time t to its value on the exact trajectory of the scenario's
-        data, beyond the float64 evaluation at z (the carried state error and the data's
-        resolution in the user's coordinates, :func:`graze_band` (b) and (c)); it enters
-        the touch band of a minimum only. Without it the state z0 is taken as exact data
-        in the run's coordinates.
+        ``data(t, z)``: per functional, the run's carried error and the data's resolution in
+        the user's coordinates at the state z at t (:func:`graze_band` (b), (c)), for the
+        touch bands only; without it z0 is exact data in the run's coordinates.
     energy : EnergyCarry, optional
-        The run's energy norm (:class:`observer.event.energy.EnergyCarry`): the search's own
-        accumulated rounding is then also carried in it (:class:`SearchCarry`).
+        The run's energy norm: the search's own rounding is carried in it too (:class:`SearchCarry`).
 
     Returns
     -------
@@ -1008,14 +1009,12 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
         if found:
             first = min(found, key=lambda zr: zr.t)
             if first.t <= a + step:
-                first.carried = carry.at(first.t)
-                return first, first.t, first.z
+                return carry.hand(first)
         step = max(step, 0.0)
         if step < w and step <= res:
             zero = _unresolved(fs, a, za, d, certified, res)
             if zero is not None:
-                zero.carried = carry.at(zero.t)
-                return zero, zero.t, zero.z
+                return carry.hand(zero)
             step = min(res, w)                       # nothing approaches: time moves on
         a, za = a + step, carry.advance(step, za)
     raise RootIsolationError(f"root isolation stalled near t = {a!r} ({MAX_STEPS} safe steps)", a, za)
