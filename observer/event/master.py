@@ -399,8 +399,9 @@ class _Run:
         ``search``: the search's own accumulated rounding to the zero
         (:attr:`observer.event.roots.Zero.carried`, ``(err, eps)``): the float state at the
         zero came from the search's many window steps, each rounding, not from one product
-        (on the grazing scenario the state drifted 1.3e-13 off the exact orbit by 47 s, more
-        than the one-product bound). It is carried apart, in :attr:`search_err` and
+        (without it a graze of the grazing scenario's steady orbit drifts out of its band:
+        tests/observer/event/test_master.py, every graze of the steady orbit found). It is
+        carried apart, in :attr:`search_err` and
         :attr:`search_eps` (propagated by the same flights, lost by a jump the energy bound
         does not hold), and enters the touch bands only (:meth:`search_band`): the
         simultaneity and velocity bands keep the one-product model (:meth:`carried`)."""
