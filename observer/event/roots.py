@@ -60,6 +60,7 @@ import numpy as np
 from numba import njit
 
 from observer.event import kernels
+from observer.event.energy import p_norm_bound
 from observer.event.enclosures import (PRECISION_CAP, PRECISION_START, Decision, coupled, dot_sign,
                                        flow_sign, flow_value, representation_error)
 from observer.event.flow import Flow, exp_upper, norm_upper, spectral_norm_upper, up
@@ -874,11 +875,13 @@ class SearchCarry:
         See :func:`first_zero`.
     """
 
-    def __init__(self, flow: Flow, rows: np.ndarray, a: float, data=None, energy=None) -> None:
+    def __init__(self, flow: Flow, rows: np.ndarray, a: float, z: np.ndarray, data=None,
+                 energy=None) -> None:
         self.flow, self.rows, self.a, self.data = flow, rows, float(a), data
         self.abs_rows = np.abs(rows)
         self.err = np.zeros(flow.N)
-        self.energy, self.eps, self.z = energy, 0.0, None
+        self.energy, self.eps, self.z = energy, 0.0, z
+        self._rate = energy.rate(flow) if energy is not None and energy.valid else math.inf
         self.g = (flow.N + 1) * _U / (1.0 - (flow.N + 1) * _U)
         self._osc = slice(2 * flow.n, flow.N - 1)
         self._w = np.repeat(np.abs(flow._freq_array), 2)
@@ -888,12 +891,17 @@ class SearchCarry:
         flow, g = self.flow, self.g
         E = flow.expm(step)
         absE = np.abs(E)
-        new = g * (absE @ np.abs(za)) * (1.0 + 2.0 * g)
-        if self.energy is not None and math.isfinite(self.eps):
+        both = absE @ np.stack((np.abs(za), self.err), axis=1)     # one product for the two
+        new = g * both[:, 0] * (1.0 + 2.0 * g)
+        if math.isfinite(self._rate) and math.isfinite(self.eps):
             k, osc = 2 * flow.n, self._osc      # the oscillators' reset error enters by E[:k, osc]
             w = new[:k] + (absE[:k, osc] @ self.err[osc]) * (1.0 + 2.0 * g)
-            self.eps = self.energy.after(flow, step, w, self.eps)
-        self.err = (absE @ self.err) * (1.0 + 2.0 * g) + new
+            x = self._rate * step
+            growth = math.exp(x) * (1.0 + 4.0 * _U) if x < 700.0 else math.inf
+            self.eps = (self.eps * growth + p_norm_bound(self.energy.absP, w)) * (1.0 + 4.0 * _U)
+        elif self.energy is not None:
+            self.eps = math.inf
+        self.err = both[:, 1] * (1.0 + 2.0 * g) + new
         self.a = self.a + step
         z = self.z = _reset(flow, self.a, E @ za, copy=False)
         osc = z[self._osc]
@@ -904,7 +912,7 @@ class SearchCarry:
     def at(self, t: float) -> tuple[np.ndarray, float]:
         """``(err, eps)`` carried to t ≥ a, the flight from the current state included."""
         s = float(t) - self.a
-        if not s > 0.0 or self.z is None:
+        if not s > 0.0:
             return self.err.copy(), self.eps
         g = self.g
         absE = np.abs(self.flow.expm(s))
@@ -980,7 +988,7 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
         z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
         return None, t_end, z
     fs = functional_set(flow, rows)
-    carry = SearchCarry(flow, fs.rows, a, data, energy)
+    carry = SearchCarry(flow, fs.rows, a, za, data, energy)
     certified = dict(certified or {})
     window = WINDOW / fs.norm_bound if fs.norm_bound > 0.0 else np.inf   # inf: ψ polynomial
     growth = exp_upper(up(fs.certified_norm * min(window, t_end - a) * (1.0 + 2.0 * _U)))
