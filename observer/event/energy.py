@@ -131,10 +131,17 @@ def dual_norm_bound(P: np.ndarray, r: np.ndarray) -> float:
     return math.inf
 
 
+def p_norm_gamma(k: int) -> float:
+    """γ of the float ``wᵀ(|P|w)`` of :func:`p_norm_bound` for k components: its k² terms
+    are nonnegative, each through at most ``k`` roundings of the inner sum, one product and
+    ``k − 1`` of the outer sum (Higham §3.1): ``γ_{2k+1}``."""
+    return gamma(2 * k + 1)
+
+
 def p_norm_bound(absP: np.ndarray, w: np.ndarray) -> float:
     """An upper bound of ``‖δ‖_P`` for every δ with ``|δ| ≤ w``: ``sqrt(wᵀ|P|w)`` (its terms
-    are nonnegative: the float sum is within ``γ_{k+1}`` of the exact one), raised."""
-    s = float(w @ (absP @ w)) * (1.0 + gamma(w.size + 2))
+    are nonnegative: the float sum is within :func:`p_norm_gamma` of the exact one), raised."""
+    s = float(w @ (absP @ w)) * (1.0 + p_norm_gamma(w.size))
     return float(np.nextafter(np.nextafter(math.sqrt(s), np.inf), np.inf))
 
 

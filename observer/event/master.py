@@ -464,18 +464,16 @@ class _Run:
 
         The state error's scope is :meth:`carry_error`'s (the propagator as computed)."""
         k, n = 2 * self.n, self.n
-        err0, az0 = self.err + self.search_err, np.abs(z0)
-        eps0 = self.energy.eps + self.search_eps
+        err0, eps0 = self.err + self.search_err, self.energy.eps + self.search_eps
         g = gamma(z0.size + 1)
-        ab = np.abs(rows)
-        if self.origin is not None:
-            q = self.origin
-            const = np.abs(rows[:, -1] - rows[:, :n] @ q) + g * (ab[:, -1] + ab[:, :n] @ np.abs(q))
-            ab = ab.copy()
-            ab[:, -1] = const * (1.0 + 2.0 * g)
-        mech = ab[:, :k]
 
-        def data(t: float, z: np.ndarray) -> np.ndarray:
+        def data(t: float, z: np.ndarray) -> np.ndarray:   # a touch decision: rare, so built here
+            az0, ab = np.abs(z0), np.abs(rows)
+            if self.origin is not None:
+                q = self.origin
+                const = np.abs(rows[:, -1] - rows[:, :n] @ q) + g * (ab[:, -1] + ab[:, :n] @ np.abs(q))
+                ab[:, -1] = const * (1.0 + 2.0 * g)
+            mech = ab[:, :k]
             E = np.abs(flow.expm(float(t) - t0)) if t > t0 else np.eye(z0.size)
             new = g * (E[:k] @ az0)
             err = (E[:k, :k] @ err0) * (1.0 + 2.0 * g) + new

@@ -60,7 +60,7 @@ import numpy as np
 from numba import njit
 
 from observer.event import kernels
-from observer.event.energy import p_norm_bound
+from observer.event.energy import p_norm_gamma
 from observer.event.enclosures import (PRECISION_CAP, PRECISION_START, Decision, coupled, dot_sign,
                                        flow_sign, flow_value, representation_error)
 from observer.event.flow import Flow, exp_upper, norm_upper, spectral_norm_upper, up
@@ -884,46 +884,34 @@ class SearchCarry:
         self._rate = energy.rate(flow) if energy is not None and energy.valid else math.inf
         self.g = (flow.N + 1) * _U / (1.0 - (flow.N + 1) * _U)
         self._osc = slice(2 * flow.n, flow.N - 1)
-        self._w = np.repeat(np.abs(flow._freq_array), 2)
+        self._w = np.repeat(np.abs(flow._freq_array), 2).astype(float)
+        k = 2 * flow.n
+        self._absP = energy.absP if energy is not None else np.zeros((k, k))
+        self._gp = p_norm_gamma(k)
 
     def advance(self, step: float, za: np.ndarray) -> np.ndarray:
-        """The state ``step`` after the current one (``a``), with :attr:`err` carried."""
-        flow, g = self.flow, self.g
+        """The state ``step`` after the current one (``a``), with :attr:`err` and :attr:`eps`
+        carried (:func:`observer.event.kernels.carry_step`, one compiled call)."""
+        flow = self.flow
         E = flow.expm(step)
-        absE = np.abs(E)
-        both = absE @ np.stack((np.abs(za), self.err), axis=1)     # one product for the two
-        new = g * both[:, 0] * (1.0 + 2.0 * g)
-        if math.isfinite(self._rate) and math.isfinite(self.eps):
-            k, osc = 2 * flow.n, self._osc      # the oscillators' reset error enters by E[:k, osc]
-            w = new[:k] + (absE[:k, osc] @ self.err[osc]) * (1.0 + 2.0 * g)
-            x = self._rate * step
-            growth = math.exp(x) * (1.0 + 4.0 * _U) if x < 700.0 else math.inf
-            self.eps = (self.eps * growth + p_norm_bound(self.energy.absP, w)) * (1.0 + 4.0 * _U)
-        elif self.energy is not None:
-            self.eps = math.inf
-        self.err = both[:, 1] * (1.0 + 2.0 * g) + new
         self.a = self.a + step
         z = self.z = _reset(flow, self.a, E @ za, copy=False)
-        osc = z[self._osc]
-        self.err[self._osc] = (self._w * abs(self.a) + 2.0 * np.abs(osc)) * _U * (1.0 + 2.0 * g)
-        self.err[-1] = 0.0
+        self.err, self.eps = self._step(E, za, z, step, True)
         return z
+
+    def _step(self, E: np.ndarray, za: np.ndarray, z: np.ndarray, step: float, reset: bool):
+        flow = self.flow
+        return kernels.carry_step(E, za, z, self.err, self.eps, self.g, 2 * flow.n,
+                                  self._osc.start, self._osc.stop, self._w, self.a,
+                                  self._absP, self._gp, self._rate, step,
+                                  self.energy is not None, reset)
 
     def at(self, t: float) -> tuple[np.ndarray, float]:
         """``(err, eps)`` carried to t ≥ a, the flight from the current state included."""
         s = float(t) - self.a
         if not s > 0.0:
             return self.err.copy(), self.eps
-        g = self.g
-        absE = np.abs(self.flow.expm(s))
-        new = g * (absE @ np.abs(self.z)) * (1.0 + 2.0 * g)
-        err = (absE @ self.err) * (1.0 + 2.0 * g) + new
-        eps = self.eps
-        if self.energy is not None and math.isfinite(eps):
-            k = 2 * self.flow.n
-            w = new[:k] + (absE[:k, self._osc] @ self.err[self._osc]) * (1.0 + 2.0 * g)
-            eps = self.energy.after(self.flow, s, w, eps)
-        return err, eps
+        return self._step(self.flow.expm(s), self.z, self.z, s, False)
 
     def hand(self, zero: Zero) -> tuple:
         """``(zero, zero.t, zero.z)`` with :attr:`Zero.carried` set (:meth:`at`): what
