@@ -1286,12 +1286,17 @@ def _initial_contacts(run: _Run, x: np.ndarray):
 
 
 def _graze_note(zero) -> str:
-    """The note of a graze row: the minimum m*, its certified enclosure, the touch band and the
-    guaranteed crossing depth δ* = band + enclosure width there
-    (:func:`observer.event.roots.minimum_enclosure`)."""
+    """The note of a graze row: the minimum m*, its certified enclosure, the touch band (and,
+    where the data's part of it dominates the evaluation's, that part: a minimum the data do
+    not decide, :func:`observer.event.roots.graze_band_parts`) and the guaranteed crossing
+    depth δ* = band + enclosure width there (:func:`observer.event.roots.minimum_enclosure`)."""
     lo, hi = zero.enclosure or (zero.value, zero.value)
+    by_data = zero.band_data > zero.band - zero.band_data
+    why = (f"; of the band {zero.band_data:.3g} the data's (the state's distance to the exact "
+           "trajectory of the data, and their resolution): the data do not decide this minimum"
+           ) if by_data else ""
     return (f"minimum {zero.value:.3g} in [{lo:.3g}, {hi:.3g}] (certified) within the touch band "
-            f"±{zero.band:.3g}; guaranteed crossing depth {zero.band + (hi - lo):.3g}")
+            f"±{zero.band:.3g}; guaranteed crossing depth {zero.band + (hi - lo):.3g}{why}")
 
 
 def _liftoff(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int):

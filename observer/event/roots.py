@@ -198,6 +198,9 @@ class Zero:
     carried : tuple
         ``(err, eps)``: the search's own accumulated rounding at t (:meth:`SearchCarry.at`),
         componentwise and in the energy norm, for the run to add to its carried error.
+    band_data : float
+        For a touch, the data's part of ``band`` (:func:`graze_band_parts`: the state's
+        distance to the exact trajectory of the data and the data's resolution).
     """
 
     t: float
@@ -211,6 +214,7 @@ class Zero:
     note: str = ""
     enclosure: tuple = ()
     carried: tuple = ()
+    band_data: float = 0.0
 
 
 def tolerance(rows: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -586,7 +590,8 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
     tau_m = _refine(fs, i, 1, a, za, 0.0, span, s_m)
     z_m = flow.expm(tau_m) @ za
     m_star = fs.value(i, 0, z_m)
-    touch = graze_band(fs, i, z_m, a + tau_m, data)
+    parts = graze_band_parts(fs, i, z_m, a + tau_m, data)
+    touch = parts[0] + parts[1]
     lower, upper, note = minimum_decision(fs, i, za, tau_m, span, curv, touch)
     if lower > touch:
         return "positive", a + span
@@ -597,7 +602,7 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
         resume = t_m + np.sqrt(max(2.0 * (2.0 * touch - lower), 0.0) / curv)
         return "touch", Zero(t_m, i, "touch", z_m, m_star, fs.value(i, 1, z_m),
                              float(min(resume, a + span)), band=touch, enclosure=(lower, upper),
-                             note=note)
+                             note=note, band_data=parts[1])
     tau = _refine(fs, i, 0, a, za, 0.0, tau_m, 0.5 * tau_m) if d0 > 0.0 else 0.0
     z = _reset(flow, a + tau, flow.expm(tau) @ za)
     return "cross", Zero(a + tau, i, "cross", z, fs.value(i, 0, z), fs.value(i, 1, z), a + tau)
@@ -626,12 +631,20 @@ def graze_band(fs: FunctionalSet, i: int, z: np.ndarray, t: float = np.nan, data
     (c) is taken in the run's coordinates. A minimum certified above δ is a miss, below −δ a
     crossing (an impact, however shallow), otherwise a graze (paper eq. (2): a gap touching
     zero with zero relative velocity)."""
+    floor, extra = graze_band_parts(fs, i, z, t, data)
+    return floor + extra
+
+
+def graze_band_parts(fs: FunctionalSet, i: int, z: np.ndarray, t: float = np.nan,
+                     data=None) -> tuple[float, float]:
+    """``(a, (b) + (c))`` of :func:`graze_band`: the float64 evaluation's part, and the data's
+    (the state's distance to the exact trajectory of the data, and the data's resolution)."""
     floor = float(fs.errors(z, 0)[0, i])
     if data is None:
         extra = float(representation_error(fs.rows[i], z))
     else:
         extra = float(data(t, z)[i])
-    return floor + extra
+    return floor, extra
 
 
 def minimum_decision(fs: FunctionalSet, i: int, za: np.ndarray, tau_m: float, span: float,
