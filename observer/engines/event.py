@@ -118,7 +118,8 @@ def _event_run(run: RunDescription, signalled) -> RunRecord:
     sc = run.scenario
     frame = GapFrame.for_scenario(sc)       # the run in x = q − q*, origin on the contacts
     master = run_master(sc if frame is None else frame.scenario(sc), t0=run.t0,
-                        should_stop=signalled)   # overflow is a stop (status), silenced inside
+                        should_stop=signalled,   # overflow is a stop (status), silenced inside
+                        origin=None if frame is None else frame.origin)
     master_signal = signalled()
     t, q, u, P, active = master.t, master.q, master.u, master.P, master.active
     n, m = sc.system.n, sc.system.m

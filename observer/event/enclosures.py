@@ -90,6 +90,15 @@ def represented_error(rows: np.ndarray, z: np.ndarray) -> np.ndarray:
     return (1.0 + 2.0 * g) * (g + _U) * (np.abs(rows) @ np.abs(z))
 
 
+def representation_error(rows: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """The resolution of the data ``r_i·z`` beyond its evaluation: a float state z (and
+    float rows) known to their own representation, u per component, leave ``r_i·z`` known
+    to ``u·Σ_j|r_ij z_j|``, raised by ``1 + 2γ_{N+1}`` to dominate the rounding of the bound
+    (the representation part of :func:`represented_error`)."""
+    g = gamma(np.asarray(z).size + 1)
+    return (1.0 + 2.0 * g) * _U * (np.abs(rows) @ np.abs(z))
+
+
 def dot_sign(row: np.ndarray, z: np.ndarray) -> Decision:
     """Sign of the exact dot product ``row·z`` of float64 data.
 

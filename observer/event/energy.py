@@ -131,10 +131,17 @@ def dual_norm_bound(P: np.ndarray, r: np.ndarray) -> float:
     return math.inf
 
 
+def p_norm_gamma(k: int) -> float:
+    """γ of the float ``wᵀ(|P|w)`` of :func:`p_norm_bound` for k components: its k² terms
+    are nonnegative, each through at most ``k`` roundings of the inner sum, one product and
+    ``k − 1`` of the outer sum (Higham §3.1): ``γ_{2k+1}``."""
+    return gamma(2 * k + 1)
+
+
 def p_norm_bound(absP: np.ndarray, w: np.ndarray) -> float:
     """An upper bound of ``‖δ‖_P`` for every δ with ``|δ| ≤ w``: ``sqrt(wᵀ|P|w)`` (its terms
-    are nonnegative: the float sum is within ``γ_{k+1}`` of the exact one), raised."""
-    s = float(w @ (absP @ w)) * (1.0 + gamma(w.size + 2))
+    are nonnegative: the float sum is within :func:`p_norm_gamma` of the exact one), raised."""
+    s = float(w @ (absP @ w)) * (1.0 + p_norm_gamma(w.size))
     return float(np.nextafter(np.nextafter(math.sqrt(s), np.inf), np.inf))
 
 
@@ -192,6 +199,16 @@ class EnergyCarry:
         growth = math.exp(x) * (1.0 + 4.0 * _U) if x < 700.0 else math.inf
         self.eps = (self.eps * growth + p_norm_bound(self.absP, w)) * (1.0 + 4.0 * _U)
 
+    def after(self, flow, dt: float, w: np.ndarray, eps: float | None = None) -> float:
+        """The ε a flight of dt along flow with new rounding w would give (:meth:`flight`)
+        from ε = ``eps`` (default the run's), which is left unchanged."""
+        eps = self.eps if eps is None else eps
+        if not (math.isfinite(eps) and self.valid):
+            return math.inf
+        x = self.rate(flow) * dt
+        growth = math.exp(x) * (1.0 + 4.0 * _U) if x < 700.0 else math.inf
+        return (eps * growth + p_norm_bound(self.absP, w)) * (1.0 + 4.0 * _U)
+
     def jump(self, averaged: bool, w: np.ndarray) -> None:
         """Carry ε through an impact (see the class); w bounds the jump's rounding."""
         if not (averaged and self.m_symmetric):
@@ -199,14 +216,16 @@ class EnergyCarry:
         if math.isfinite(self.eps):
             self.eps = (self.eps + p_norm_bound(self.absP, w)) * (1.0 + 4.0 * _U)
 
-    def through(self, rows: np.ndarray) -> np.ndarray:
-        """``‖r‖_{P⁻¹}·ε`` for every row r (inf where no bound is proved)."""
-        if not math.isfinite(self.eps):
+    def through(self, rows: np.ndarray, eps: float | None = None) -> np.ndarray:
+        """``‖r‖_{P⁻¹}·ε`` for every row r (inf where no bound is proved); ``eps``: another ε
+        (:meth:`after`) than the run's."""
+        eps = self.eps if eps is None else eps
+        if not math.isfinite(eps):
             return np.full(rows.shape[0], math.inf)
         key = rows.tobytes()
         dual = self._dual.get(key)
         if dual is None:
             dual = self._dual[key] = np.array([dual_norm_bound(self.P, r) for r in rows])
         with np.errstate(invalid="ignore"):
-            out = dual * self.eps * (1.0 + 4.0 * _U)
+            out = dual * eps * (1.0 + 4.0 * _U)
         return np.where(np.isnan(out), math.inf, out)

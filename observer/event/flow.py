@@ -137,8 +137,8 @@ class Flow:
     time_scale : float
         The time scale τ (:func:`_time_scale`) of the part of the system the gaps see
         (:meth:`_coupled_scale`: a mode no contact is coupled to sets none): the event loop's
-        contact tolerances in :mod:`observer.event.master` and the touch band are relative to
-        the motion over τ; the root search's sign decisions use no τ (issue 34).
+        contact tolerances in :mod:`observer.event.master` are relative to the motion over τ;
+        the root search's sign decisions and its touch band use no τ (issue 34).
     intrinsic : bool
         Whether the system has a time scale of its own (a natural frequency, a damping rate or
         a harmonic frequency); if not, ``time_scale`` is the flow's window, which is not

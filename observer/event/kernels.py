@@ -20,10 +20,17 @@ arithmetic compiled, operation for operation:
   (:func:`observer.event.roots.first_zero`): finiteness, certified errors, the
   third-derivative bounds and the quick test of ``_safe_step``, the numpy expressions'
   operations in their order (no contraction into fused multiply-adds), so the same floats
-  and the same decisions.
+  and the same decisions;
+* :func:`carry_step` — one window step of the search's carried rounding
+  (:class:`observer.event.roots.SearchCarry`): the a-priori bounds of the step's
+  matrix-vector product, componentwise and in the energy norm, in one call (bounds whose
+  factors dominate their own rounding in any summation order, so its loops need not be
+  BLAS's; checked against an exact rational chain in
+  ``tests/observer/event/test_search_carry.py``).
 
 The results are the numpy versions' to the bit where the BLAS/LAPACK kernels agree (checked
-in ``tests/observer/event/test_kernels.py``); no decision of the event engine is made here
+in ``tests/observer/event/test_kernels.py``; :func:`carry_step`'s bounds are proved, not
+bitwise); no decision of the event engine is made here
 (:func:`screen_step` computes the quick test's outcome, ``_safe_step`` acts on it). The
 matrix-vector products of the search stay in numpy (BLAS): a compiled loop sums them in
 another order.
@@ -227,3 +234,62 @@ def screen_step(d: np.ndarray, both: np.ndarray, za: np.ndarray, scale: np.ndarr
         m2 = l2 if l2 < 0.0 or math.isnan(l2) else 0.0
         quick[i] = l0 > 0.0 and l0 + m1 * w + m2 * w * w / 2 - b * w3 / 6 > 0.0
     return finite, errs, bound, bound_finite, quick
+
+
+@njit(**JIT)
+def carry_step(E: np.ndarray, za: np.ndarray, z: np.ndarray, err: np.ndarray, eps: float,
+               g: float, k: int, lo: int, hi: int, wfreq: np.ndarray, a: float,
+               absP: np.ndarray, gp: float, rate: float, step: float, energy: bool,
+               reset: bool):
+    """One step of the search's carried rounding (:class:`observer.event.roots.SearchCarry`)
+    in one call: the flight ``z = fl(E za)`` of a step, E = ``exp(A step)`` as computed.
+
+    Componentwise (Higham §3.5, a matrix-vector product of N terms): ``new = γ·|E|·|za|``
+    and ``err ← |E|·err·(1 + 2γ) + new``, new raised by ``1 + 2γ`` (γ = γ_{N+1}: the
+    factor dominates the rounding of the bound's own sums, whatever their order). With
+    ``energy`` (the run's :class:`~observer.event.energy.EnergyCarry`), the same error of
+    the k mechanical components in its norm: ``w = new[:k] + |E[:k, lo:hi]|·err[lo:hi]·(1 + 2γ)``
+    (what the oscillators' reset error feeds in), ``ε ← (ε·e^{rate·step}(1 + 4u) + ‖w‖_P)(1 + 4u)``,
+    ``‖w‖_P ≤ sqrt(wᵀ|P|w·(1 + gp))`` raised twice (:func:`observer.event.energy.p_norm_bound`,
+    gp = γ_{k+2}); ε = inf where the rate or ε is not finite. With ``reset``: the oscillator
+    states ``z[lo:hi]``, reset from ``fl(ω a)``, known to ``(ω·|a| + 2|z|)·u·(1 + 2γ)``
+    (``wfreq``: the ω per oscillator state), and the time component exact.
+
+    Returns ``(err, eps)``, new arrays."""
+    N = za.size
+    out = np.empty(N)
+    new = np.empty(N)
+    for i in range(N):
+        s1 = 0.0
+        s2 = 0.0
+        for j in range(N):
+            e = abs(E[i, j])
+            s1 += e * abs(za[j])
+            s2 += e * err[j]
+        new[i] = g * s1 * (1.0 + 2.0 * g)
+        out[i] = s2 * (1.0 + 2.0 * g) + new[i]
+    if energy:
+        if math.isfinite(rate) and math.isfinite(eps):
+            w = np.empty(k)
+            for i in range(k):
+                s = 0.0
+                for j in range(lo, hi):
+                    s += abs(E[i, j]) * err[j]
+                w[i] = new[i] + s * (1.0 + 2.0 * g)
+            x = rate * step
+            growth = math.exp(x) * (1.0 + 4.0 * _U) if x < 700.0 else math.inf
+            q = 0.0
+            for i in range(k):
+                r = 0.0
+                for j in range(k):
+                    r += absP[i, j] * w[j]
+                q += w[i] * r
+            pn = np.nextafter(np.nextafter(math.sqrt(q * (1.0 + gp)), np.inf), np.inf)
+            eps = (eps * growth + pn) * (1.0 + 4.0 * _U)
+        else:
+            eps = math.inf
+    if reset:
+        for m in range(lo, hi):
+            out[m] = (wfreq[m - lo] * abs(a) + 2.0 * abs(z[m])) * _U * (1.0 + 2.0 * g)
+        out[N - 1] = 0.0
+    return out, eps

@@ -15,8 +15,10 @@ the impact instant (simultaneous impacts: the multi-contact law). After an impac
 contacts with ``γ⁺ = 0`` (within round-off) enter persistent contact if the
 acceleration LCP ``0 ≤ λ ⊥ γ̇ = G λ + γ̇_free ≥ 0`` gives them a positive force.
 
-Grazing (stated tolerances, on the scale of the motion): a **touch**, a local minimum m* of
-g_j whose certified enclosure meets the touch band ±δ (:func:`observer.event.roots.touch_band`)
+Grazing (certified bands, no scale of the motion): a **touch**, a local minimum m* of
+g_j whose certified enclosure meets the touch band ±δ (:func:`observer.event.roots.graze_band`:
+the evaluation error at the minimum, the run's accumulated state error carried there,
+:meth:`_Run.search_band`, and the data's representation in the user's coordinates)
 is a graze with zero impulse (the run continues past it); its row carries ``depth = m*`` and
 a note stating the enclosure, δ and the guaranteed crossing depth δ* = δ + its width.
 A crossing with ``|γ⁻| ≤`` CONTACT_TOL motion
@@ -79,6 +81,9 @@ from observer.event.tails import JointTail, horner, joint_due, joint_tail
 from observer.impact import ImpactLaw, impact
 from observer.result import RunState, RunStatus
 from observer.scenario import Scenario
+
+_U = np.finfo(float).eps / 2.0
+"""Unit round-off u (the data's representation, :meth:`_Run.search_band`)."""
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -270,6 +275,8 @@ class _Run:
         self.stick_notes: dict[int, str] = {}   # contact → undecided stick enclosure (sticking)
         self.err = np.zeros(2 * self.n)   # bound on |x − x_exact| (carry_error, jump_error)
         self.energy = EnergyCarry(self.system, t_end - t0)   # the same error in ‖·‖_P
+        self.origin: np.ndarray | None = None   # the gap frame's q* (run_master), for graze bands
+        self.search_err, self.search_eps = np.zeros(2 * self.n), 0.0   # the searches' rounding
 
     # -- sampling --------------------------------------------------------------------------
     def fill(self, flow: Flow, t_a: float, x_a: np.ndarray, t_b: float, include_end: bool) -> None:
@@ -365,7 +372,7 @@ class _Run:
             self.intervals[j].append((t, t))
 
     # -- the accumulated state error --------------------------------------------------------
-    def carry_error(self, flow: Flow, dt: float, z: np.ndarray) -> None:
+    def carry_error(self, flow: Flow, dt: float, z: np.ndarray, search: tuple = ()) -> None:
         """Carry :attr:`err`, the componentwise bound on the float state's distance to the
         exact trajectory of the scenario's data, over a flight of dt from the augmented state
         z: the error e of z moves to ``exp(A dt) e`` (bounded by ``|exp(A dt)|·|e|``; the
@@ -373,15 +380,29 @@ class _Run:
         ``γ_{N+1}·|exp(A dt)|·|z|`` (a matrix-vector product, Higham §3.5). The same error
         in the energy norm (:attr:`energy`, :class:`EnergyCarry`): ``ε ← exp(μ dt)·ε + ‖that
         rounding‖_P``, which does not grow with ``‖|A|‖`` (:meth:`gap_error` takes the
-        smaller enclosure)."""
-        if not dt > 0.0:
-            return
-        E = np.abs(flow.expm(dt))
-        k = 2 * self.n
-        g = gamma(E.shape[0] + 1)
-        new = g * (E[:k] @ np.abs(z))
-        self.err = (E[:k, :k] @ self.err) * (1.0 + 2.0 * g) + new
-        self.energy.flight(flow, dt, new * (1.0 + 2.0 * g))
+        smaller enclosure).
+
+        ``search``: the search's own accumulated rounding to the zero
+        (:attr:`observer.event.roots.Zero.carried`, ``(err, eps)``): the float state at the
+        zero came from the search's many window steps, each rounding, not from one product
+        (without it a graze of the grazing scenario's steady orbit drifts out of its band:
+        tests/observer/event/test_master.py, every graze of the steady orbit found). It is
+        carried apart, in :attr:`search_err` and
+        :attr:`search_eps` (propagated by the same flights, lost by a jump the energy bound
+        does not hold), and enters the touch bands only (:meth:`search_band`): the
+        simultaneity and velocity bands keep the one-product model (:meth:`carried`)."""
+        if dt > 0.0:
+            E = np.abs(flow.expm(dt))
+            k = 2 * self.n
+            g = gamma(E.shape[0] + 1)
+            new = g * (E[:k] @ np.abs(z))
+            self.err = (E[:k, :k] @ self.err) * (1.0 + 2.0 * g) + new
+            self.energy.flight(flow, dt, new * (1.0 + 2.0 * g))
+            self.search_err = (E[:k, :k] @ self.search_err) * (1.0 + 2.0 * g)
+            self.search_eps = self.energy.after(flow, dt, np.zeros(k), self.search_eps)
+        if search:                    # the search's own steps, at the zero (roots.SearchCarry.at)
+            self.search_err = self.search_err + search[0][:2 * self.n]
+            self.search_eps = self.search_eps + search[1]
 
     def jump_error(self, A: list[int], lam: np.ndarray, u: np.ndarray) -> None:
         """Add the rounding of a velocity jump ``u ← u + M⁻¹W_A λ`` to :attr:`err`:
@@ -397,6 +418,8 @@ class _Run:
         averaged = (len(A) == 1 and law.single_contact_is_newton) or \
             (law.name in ("newton", "poisson") and bool(np.all(e == e[0])))
         self.energy.jump(averaged, np.concatenate([np.zeros(n), new]))
+        if not np.isfinite(self.energy.eps):
+            self.search_eps = np.inf
 
     def gap_error(self, z: np.ndarray) -> np.ndarray:
         """Bound on every gap's distance to its exact value: the accumulated state error
@@ -413,6 +436,44 @@ class _Run:
             comp = np.abs(rows[:, :k]) @ self.err
         comp = np.where(np.isnan(comp), np.inf, comp)
         return np.minimum(comp, self.energy.through(rows[:, :k]))
+
+    def search_band(self, flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray):
+        """The data's part of the touch bands of a search from ``(t0, z0)`` along ``flow``
+        (:func:`observer.event.roots.graze_band` (b) and (c)): ``data(t, z)`` → per row of
+        ``rows``, (b) the accumulated state error (the run's and its searches',
+        :attr:`search_err`) carried from t0 to t as :meth:`carry_error` would carry it (componentwise ``|r|·err``, or the energy norm's ``‖r‖_{P⁻¹}·ε``, the
+        smaller; :attr:`err` and ε are not changed), plus (c) the data's representation in
+        the user's coordinates, ``(1 + 2γ)·u·Σ_j|r_ij z_j|`` with z taken back out of the
+        gap frame (q = x + q*, :attr:`origin`) and the row's constant re-expressed there
+        (``c − r_q·q*``, raised by its own rounding): at a translation by c a gap is known
+        to ~u·|c| (issue 34: a graze at translation 100 inside that band is a graze).
+
+        The state error's scope is :meth:`carry_error`'s (the propagator as computed)."""
+        k, n = 2 * self.n, self.n
+        err0, eps0 = self.err + self.search_err, self.energy.eps + self.search_eps
+        g = gamma(z0.size + 1)
+
+        def data(t: float, z: np.ndarray) -> np.ndarray:   # a touch decision: rare, so built here
+            az0, ab = np.abs(z0), np.abs(rows)
+            if self.origin is not None:
+                q = self.origin
+                const = np.abs(rows[:, -1] - rows[:, :n] @ q) + g * (ab[:, -1] + ab[:, :n] @ np.abs(q))
+                ab[:, -1] = const * (1.0 + 2.0 * g)
+            mech = ab[:, :k]
+            E = np.abs(flow.expm(float(t) - t0)) if t > t0 else np.eye(z0.size)
+            new = g * (E[:k] @ az0)
+            err = (E[:k, :k] @ err0) * (1.0 + 2.0 * g) + new
+            with np.errstate(over="ignore", invalid="ignore"):
+                comp = mech @ err
+            comp = np.where(np.isnan(comp), np.inf, comp)
+            eps = self.energy.after(flow, max(float(t) - t0, 0.0), new * (1.0 + 2.0 * g), eps0)
+            carried = np.minimum(comp, self.energy.through(rows[:, :k], eps))
+            zu = np.abs(z)
+            if self.origin is not None:
+                zu = zu.copy()
+                zu[:n] = np.abs(z[:n] + self.origin) * (1.0 + _U)
+            return (carried + (1.0 + 2.0 * g) * _U * (ab @ zu)) * (1.0 + 2.0 * g)
+        return data
 
     # -- contact mechanics -----------------------------------------------------------------
     def delassus(self, idx) -> np.ndarray:
@@ -639,8 +700,7 @@ class _Run:
             return True
         xp = self.project(t, x, list(setp))
         try:
-            zero, _, _ = first_zero(flow, rows, t, flow.z(t, xp), min(t_inf, self.t_end),
-                                    tau=self.tau)
+            zero, _, _ = first_zero(flow, rows, t, flow.z(t, xp), min(t_inf, self.t_end))
         except RootIsolationError:
             return False
         return zero is None
@@ -977,7 +1037,7 @@ def _oscillator_block(flow: Flow, t: np.ndarray) -> np.ndarray:
 def run_master(scenario: Scenario, h: float | None = None, t_end: float | None = None,
                max_events: int = 100_000,
                zeno_velocity_ratio: float = ZENO_VELOCITY_RATIO, t0: float = 0.0,
-               should_stop=None) -> MasterEventResult:
+               should_stop=None, origin: np.ndarray | None = None) -> MasterEventResult:
     """Exact event-driven run of the master of ``scenario`` (see module docstring).
 
     Parameters
@@ -999,6 +1059,10 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
         Called between events and between blocks of samples; a signal name (``"SIGINT"``)
         stops the run there (status ``"stopped: SIGINT at t = …"``, the frame up to the last
         sample computed): a streamed run interrupted keeps its finished rows.
+    origin : ndarray, optional
+        The gap frame's origin q* when ``scenario`` is the frame's
+        (:meth:`observer.event.frame.GapFrame.scenario`): the touch bands take the data's
+        resolution in the given coordinates q = x + q* (:meth:`_Run.search_band`).
 
     A run that stops (event cap, stalled isolation, no progress) returns the frame up to its
     stop time, never NaN rows, with the reason in ``status``. So does a state that leaves the
@@ -1009,7 +1073,8 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
     state"``; overflow inside the engine is silenced (``np.errstate``), the stop says it.
     """
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        return _run_master(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, should_stop)
+        return _run_master(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, should_stop,
+                           origin)
 
 
 def _start(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_ratio: float,
@@ -1030,8 +1095,9 @@ def _start(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_ratio: f
 
 
 def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_ratio: float,
-                t0: float, should_stop) -> MasterEventResult:
+                t0: float, should_stop, origin=None) -> MasterEventResult:
     run, t_end, x, persistent = _start(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, should_stop)
+    run.origin = None if origin is None else np.asarray(origin, dtype=float)
     t0 = run.t0
     status, nonfinite = RunStatus(), False
     t = t0
@@ -1048,7 +1114,8 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
             break
         rows, keys, cert = _functionals(run, flow, t, x, persistent, certified)
         try:
-            zero, t_stop, _ = first_zero(flow, rows, t, flow.z(t, x), t_end, cert, run.tau, should_stop)
+            zero, t_stop, _ = first_zero(flow, rows, t, flow.z(t, x), t_end, cert, should_stop,
+                                         run.search_band(flow, rows, t, flow.z(t, x)), run.energy)
         except SearchStopped as exc:                  # a signal mid-search: the certified rows are kept
             run.fill_certified(flow, t, x, exc.t_ok)
             run.halted = exc.signal
@@ -1070,7 +1137,7 @@ def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_rat
             run.fill(flow, t, x, t_end, include_end=True)
             break
         run.fill(flow, t, x, zero.t, include_end=False)
-        run.carry_error(flow, zero.t - t, flow.z(t, x))
+        run.carry_error(flow, zero.t - t, flow.z(t, x), zero.carried)
         t, x = zero.t, flow.x_of(zero.z)
         kind, j = keys[zero.index]
         n_events += 1
@@ -1246,12 +1313,17 @@ def _initial_contacts(run: _Run, x: np.ndarray):
 
 
 def _graze_note(zero) -> str:
-    """The note of a graze row: the minimum m*, its certified enclosure, the touch band and the
-    guaranteed crossing depth δ* = band + enclosure width there
-    (:func:`observer.event.roots.minimum_enclosure`)."""
+    """The note of a graze row: the minimum m*, its certified enclosure, the touch band (and,
+    where the data's part of it dominates the evaluation's, that part: a minimum the data do
+    not decide, :func:`observer.event.roots.graze_band_parts`) and the guaranteed crossing
+    depth δ* = band + enclosure width there (:func:`observer.event.roots.minimum_enclosure`)."""
     lo, hi = zero.enclosure or (zero.value, zero.value)
+    by_data = zero.band_data > zero.band - zero.band_data
+    why = (f"; of the band {zero.band_data:.3g} the data's (the state's distance to the exact "
+           "trajectory of the data, and their resolution): the data do not decide this minimum"
+           ) if by_data else ""
     return (f"minimum {zero.value:.3g} in [{lo:.3g}, {hi:.3g}] (certified) within the touch band "
-            f"±{zero.band:.3g}; guaranteed crossing depth {zero.band + (hi - lo):.3g}")
+            f"±{zero.band:.3g}; guaranteed crossing depth {zero.band + (hi - lo):.3g}{why}")
 
 
 def _liftoff(run: _Run, t: float, x: np.ndarray, persistent: tuple, j: int):

@@ -31,7 +31,10 @@ floating point; when the minimum of ψ_i lies in a window on which ψ_i'' > 0 is
 simple zero of ψ_i'. A certified enclosure ``[lower, upper]`` of its value (a Taylor model
 with Lagrange remainder and the curvature bound, :func:`minimum_decision`; ball arithmetic
 where float64 cannot place it) decides against the touch band δ of ψ_i (:func:`graze_band`,
-the stated band of a graze): ``lower > δ``, the whole convex window is certified positive;
+the stated band of a graze: what the data do not decide about the minimum — the float64
+evaluation error of ψ_i there, the run's accumulated state error carried to t_m and the
+data's own representation in the user's coordinates, each a certified bound; no time scale,
+no count of round-offs): ``lower > δ``, the whole convex window is certified positive;
 ``upper < −δ``, a **cross** before t_m, isolated by the bracket ``[a, t_m]``; otherwise a
 **touch** (graze) at t_m. The guaranteed crossing depth is δ* = δ + (upper − lower): a
 deeper minimum is always a cross.
@@ -49,6 +52,7 @@ the event loop's contact decisions in :mod:`observer.event.master` and
 from __future__ import annotations
 
 from collections import OrderedDict
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,8 +60,9 @@ import numpy as np
 from numba import njit
 
 from observer.event import kernels
+from observer.event.energy import p_norm_gamma
 from observer.event.enclosures import (PRECISION_CAP, PRECISION_START, Decision, coupled, dot_sign,
-                                       flow_sign, flow_value)
+                                       flow_sign, flow_value, representation_error)
 from observer.event.flow import Flow, exp_upper, norm_upper, spectral_norm_upper, up
 
 WINDOW = 0.5
@@ -66,15 +71,6 @@ WINDOW = 0.5
 ROUNDOFF = 64.0 * np.finfo(float).eps
 """Relative round-off of a functional: of its evaluation ``r·z`` (``ROUNDOFF · Σ_j |r_ij z_j|``,
 the representation floor) and of the motion it describes (``ROUNDOFF · S``, :func:`motion_scale`)."""
-
-TOUCH_FACTOR = 1e3
-"""The touch (graze) band of a local minimum of ψ_i is ``TOUCH_FACTOR · ROUNDOFF · S`` (S the
-motion scale of ψ_i at the minimum, :func:`touch_band`) plus the certified error of the
-float64 evaluation of ψ_i at the minimum (:meth:`FunctionalSet.errors`): round-off accumulated along a run (about 1e-13 of the orbit's size after 50 s
-on the grazing scenario) must not turn an exact graze into a miss or a crossing. A minimum
-certified above the band is a miss, below it a crossing (an impact, however shallow); the
-**guaranteed crossing depth** is the band plus the width of the minimum's certified
-enclosure (:func:`minimum_enclosure`): a crossing deeper than it is never a graze."""
 
 TIME_RTOL = 2.0 * np.finfo(float).eps
 """Time resolution ``TIME_RTOL · max(|t|, τ)`` (τ the system's time scale,
@@ -192,13 +188,19 @@ class Zero:
         For a touch, a time after which ψ_i is certified to exceed its round-off again
         (ψ_i is convex in between); t for a cross.
     band : float
-        For a touch, the touch band it was decided with (:func:`touch_band`).
+        For a touch, the touch band it was decided with (:func:`graze_band`).
     enclosure : tuple
         For a touch, ``(lower, upper)``: the certified enclosure of the minimum's value
         (:func:`minimum_enclosure`); the guaranteed crossing depth there is
         ``band + upper − lower``.
     note : str
         Empty, or how a decision that float64 cannot take was taken (``"unresolved: …"``).
+    carried : tuple
+        ``(err, eps)``: the search's own accumulated rounding at t (:meth:`SearchCarry.at`),
+        componentwise and in the energy norm, for the run to add to its carried error.
+    band_data : float
+        For a touch, the data's part of ``band`` (:func:`graze_band_parts`: the state's
+        distance to the exact trajectory of the data and the data's resolution).
     """
 
     t: float
@@ -211,6 +213,8 @@ class Zero:
     band: float = 0.0
     note: str = ""
     enclosure: tuple = ()
+    carried: tuple = ()
+    band_data: float = 0.0
 
 
 def tolerance(rows: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -253,15 +257,6 @@ def motion_tolerance(rows: np.ndarray, A: np.ndarray, z: np.ndarray, tau: float,
         d.append(R @ z)
     return (tolerance(rows, z) + ROUNDOFF * motion_scale(d, tau)
             + np.abs(d[1]) * resolution(t, tau))
-
-
-def touch_band(d2, d3, floor, tau: float):
-    """Touch band at a local minimum (ψ' = 0) with ψ'' = d2, ψ''' = d3 and floor ``floor``
-    (the certified error of the float64 value of ψ there, :func:`graze_band`):
-    ``TOUCH_FACTOR·ROUNDOFF·(|d2|τ²/2 + |d3|τ³/6) + floor``, the guaranteed crossing depth
-    (:data:`TOUCH_FACTOR`)."""
-    return (TOUCH_FACTOR * ROUNDOFF * (np.abs(d2) * tau * tau / 2.0 + np.abs(d3) * tau ** 3 / 6.0)
-            + floor)
 
 
 def first_cubic_zero(d0: float, d1: float, d2: float, bound: float, width: float) -> float:
@@ -364,9 +359,8 @@ class FunctionalSet:
     |r̂_k|)·|z|`` (:meth:`errors`), likewise inflated.
     """
 
-    def __init__(self, flow: Flow, rows: np.ndarray, tau: float | None = None) -> None:
+    def __init__(self, flow: Flow, rows: np.ndarray) -> None:
         self.flow = flow
-        self.tau = flow.time_scale if tau is None else float(tau)   # the motion's time scale
         self.rows = np.atleast_2d(np.asarray(rows, dtype=float))
         N = self.rows.shape[1]
         u = np.finfo(float).eps / 2.0
@@ -514,18 +508,18 @@ FUNCTIONAL_SETS = 64
 """Functional sets kept per flow by :func:`functional_set` (least recently used dropped)."""
 
 
-def functional_set(flow: Flow, rows: np.ndarray, tau: float) -> FunctionalSet:
-    """The :class:`FunctionalSet` of ``rows`` along ``flow`` with time scale τ, built once per
+def functional_set(flow: Flow, rows: np.ndarray) -> FunctionalSet:
+    """The :class:`FunctionalSet` of ``rows`` along ``flow``, built once per
     flow and reused by every search of the same functionals (a run searches the same gaps
     and forces of a contact set at every event): its derivative rows, their certified
     errors and the proved norms ``‖r_3 T‖`` are constants of the flow. Deterministic, so a
     reused set gives the same bits as a new one."""
     cache = flow.__dict__.setdefault("_functional_sets", OrderedDict())
     rows = np.ascontiguousarray(rows, dtype=float)
-    key = (rows.shape, rows.tobytes(), float(tau))
+    key = (rows.shape, rows.tobytes())
     hit = cache.get(key)
     if hit is None:
-        hit = cache[key] = FunctionalSet(flow, rows, tau)
+        hit = cache[key] = FunctionalSet(flow, rows)
         if len(cache) > FUNCTIONAL_SETS:
             cache.popitem(last=False)
     else:
@@ -571,14 +565,14 @@ def _refine(fs: FunctionalSet, i: int, k: int, a: float, za: np.ndarray, lo: flo
 
 
 def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: float, d1: float,
-                    d2: float, bound: float, width: float, e2: float = 0.0):
+                    d2: float, bound: float, width: float, e2: float = 0.0, data=None):
     """Analyse functional i on a window where its minimum is near (d1 < 0 < d2; d1 = 0 for a
     functional not leaving a, :func:`_safe_step`: the minimum at a itself).
 
     Returns ``None`` when convexity cannot be certified on ``[a, a + 2s_m]`` (s_m = −d1/d2,
     within ``width``; ``curv = d2 − e2 − bound·2s_m > 0`` bounds ψ_i'' below on the span, e2
     the certified error of d2), else ``("positive", certified_until)``, ``("touch", Zero)``
-    or ``("cross", Zero)``.
+    or ``("cross", Zero)``. ``data``: the data's part of the band (:func:`graze_band`).
 
     The decision is three-valued on a certified enclosure ``[lower, upper]`` of the minimum
     m of the exact flow from ``za`` (:func:`minimum_decision`: float64 first, ball arithmetic
@@ -597,7 +591,8 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
     tau_m = _refine(fs, i, 1, a, za, 0.0, span, s_m)
     z_m = flow.expm(tau_m) @ za
     m_star = fs.value(i, 0, z_m)
-    touch = graze_band(fs, i, z_m)
+    parts = graze_band_parts(fs, i, z_m, a + tau_m, data)
+    touch = parts[0] + parts[1]
     lower, upper, note = minimum_decision(fs, i, za, tau_m, span, curv, touch)
     if lower > touch:
         return "positive", a + span
@@ -608,7 +603,7 @@ def _convex_minimum(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d0: flo
         if resume is None:                      # not certified beyond the span: its end
             resume = float(min(t_m + np.sqrt(max(2.0 * (2.0 * touch - lower), 0.0) / curv), a + span))
         return "touch", Zero(t_m, i, "touch", z_m, m_star, fs.value(i, 1, z_m), resume,
-                             band=touch, enclosure=(lower, upper), note=note)
+                             band=touch, enclosure=(lower, upper), note=note, band_data=parts[1])
     tau = _refine(fs, i, 0, a, za, 0.0, tau_m, 0.5 * tau_m) if d0 > 0.0 else 0.0
     z = _reset(flow, a + tau, flow.expm(tau) @ za)
     return "cross", Zero(a + tau, i, "cross", z, fs.value(i, 0, z), fs.value(i, 1, z), a + tau)
@@ -651,15 +646,43 @@ def _resume(fs: FunctionalSet, i: int, a: float, za: np.ndarray, tau_m: float, d
     return None
 
 
-def graze_band(fs: FunctionalSet, i: int, z: np.ndarray) -> float:
-    """Touch band of functional i at its minimum state z: :func:`touch_band` with the
-    functional set's time scale (the run's τ, of the part of the system the contacts see,
-    :meth:`observer.event.flow.Flow._coupled_scale`) and, as its floor, the certified error
-    ``e_0`` of the float64 value of ψ_i at z (:meth:`FunctionalSet.errors`: a γ_N bound, not
-    a count of round-offs of ``Σ_j |r_ij z_j|``, which made a shallow crossing far from the
-    origin a touch): the stated band of a graze (README)."""
+def graze_band(fs: FunctionalSet, i: int, z: np.ndarray, t: float = np.nan, data=None) -> float:
+    """The touch (graze) band δ of functional i at its minimum, the state z at time t: what
+    the data do not decide about ψ_i there, each part a certified bound (issue 34 item 1; no
+    time scale and no count of round-offs):
+
+    (a) the error ``e_0`` of the float64 evaluation of ψ_i at z
+        (:meth:`FunctionalSet.errors`: a γ_N bound, Higham §3.5);
+    (b) the distance of the search's state to the exact trajectory of the scenario's data,
+        seen through the row: the accumulated state error of the run carried to t
+        (``data``, :meth:`observer.event.master._Run.search_band`);
+    (c) the resolution of the data in the user's coordinates: the state and the gap's data
+        are floats known to their own representation, ``u·Σ_j|r_ij z_j|`` raised by
+        ``1 + 2γ`` (:func:`~observer.event.enclosures.representation_error`), z taken in the
+        coordinates the scenario was given in — the gap frame
+        (:class:`observer.event.frame.GapFrame`) makes the gaps coordinates and a
+        translation c disappear from the arithmetic, not from the data: there ψ_i is known
+        to no better than ``u·|c|``, and a minimum within it is undecidable from the data.
+
+    ``data(t, z)`` returns (b) + (c) for every functional (an array: :class:`SearchCarry`,
+    the search's own accumulated error plus what the master gives); without it (b) is 0 and
+    (c) is taken in the run's coordinates. A minimum certified above δ is a miss, below −δ a
+    crossing (an impact, however shallow), otherwise a graze (paper eq. (2): a gap touching
+    zero with zero relative velocity)."""
+    floor, extra = graze_band_parts(fs, i, z, t, data)
+    return floor + extra
+
+
+def graze_band_parts(fs: FunctionalSet, i: int, z: np.ndarray, t: float = np.nan,
+                     data=None) -> tuple[float, float]:
+    """``(a, (b) + (c))`` of :func:`graze_band`: the float64 evaluation's part, and the data's
+    (the state's distance to the exact trajectory of the data, and the data's resolution)."""
     floor = float(fs.errors(z, 0)[0, i])
-    return float(touch_band(fs.value(i, 2, z), fs.value(i, 3, z), floor, fs.tau))
+    if data is None:
+        extra = float(representation_error(fs.rows[i], z))
+    else:
+        extra = float(data(t, z)[i])
+    return floor, extra
 
 
 def minimum_decision(fs: FunctionalSet, i: int, za: np.ndarray, tau_m: float, span: float,
@@ -797,8 +820,8 @@ def _near_zero(fs: FunctionalSet, i: int, a: float, za: np.ndarray, d: np.ndarra
 
 
 def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, err: np.ndarray,
-               bound: np.ndarray, w: float, certified: dict[int, float], quick: np.ndarray | None = None
-               ) -> tuple[float, list[Zero]]:
+               bound: np.ndarray, w: float, certified: dict[int, float], quick: np.ndarray | None = None,
+               data=None) -> tuple[float, list[Zero]]:
     """Largest step from a over which no functional is certified to vanish, and the zeros
     found exactly on the way (convex minima, zeros at a). Vectorised quick test first: a
     functional whose cubic lower bound (the derivatives minus their certified errors
@@ -808,7 +831,8 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, err: 
     Every other decision is three-valued (:func:`derivative_sign`): ψ_i(a) certainly
     positive (its certified lower bound starts the cubic), or not — then it is at a zero
     unless leaving (ψ_i' > 0, or ψ_i' = 0 exactly and ψ_i'' > 0); no tolerance. ``quick``:
-    the quick test's outcome when already computed (:meth:`FunctionalSet.screen`)."""
+    the quick test's outcome when already computed (:meth:`FunctionalSet.screen`); ``data``:
+    the data's part of the touch bands (:func:`graze_band`)."""
     d0, d1, d2 = d[0], d[1], d[2]
     step = w
     found: list[Zero] = []
@@ -843,7 +867,7 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, err: 
             leaving = s1.sign == 1 or (s1.sign == 0 and
                                        derivative_sign(fs, i, 2, za, D2[i], E2[i]).sign == 1)
             if not leaving:                    # a float64 slope 0 too: the minimum is at a
-                res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i]) \
+                res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i], data) \
                     if D1[i] <= 0.0 < D2[i] else None
                 if res is None:
                     found.append(_zero_now(fs, i, a, za, d, s0.note or s1.note))
@@ -855,7 +879,7 @@ def _safe_step(fs: FunctionalSet, a: float, za: np.ndarray, d: np.ndarray, err: 
                 continue
         s = first_cubic_zero(max(start, 0.0), L1[i], L2[i], BD[i], w)
         if s < w and convex:
-            res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i])
+            res = _convex_minimum(fs, i, a, za, D0[i], D1[i], D2[i], BD[i], w, E2[i], data)
             if res is not None:
                 if res[0] != "positive":
                     found.append(res[1])
@@ -872,16 +896,104 @@ def _row_norm(v: np.ndarray) -> float:
     return norm_upper(v) if float(np.max(np.abs(v))) < 2.0 ** 511 else np.inf
 
 
+class SearchCarry:
+    """The search's own accumulated state error and the data's part of its touch bands
+    (:func:`graze_band` (b) and (c)), for :func:`first_zero`.
+
+    The search advances its float state window by window, ``z ← fl(exp(A s) z)``, each step
+    rounding: :attr:`err` bounds ``|z_a − exact flow from z0 at a|`` componentwise (the
+    a-priori bound of a matrix-vector product, Higham §3.5, as ``_Run.carry_error``: ``err ←
+    |E|·err·(1 + 2γ) + γ·|E|·|z|``, E = exp(A s) as computed), the oscillator states
+    reset from ``fl(ω a)`` known to ``u·|ω a|`` plus their own rounding. :meth:`__call__`
+    at the minimum ``a + s``: that error carried over s through the rows, ``|r|·|exp(A s)|·err``,
+    plus ``data(t, z)`` (the run's carried error and the data's resolution in the user's
+    coordinates, given by the master) or, without it, the data's representation in the run's
+    coordinates (:func:`~observer.event.enclosures.representation_error`). With ``energy``
+    (the run's :class:`~observer.event.energy.EnergyCarry`), the same error of the mechanical
+    state is carried in its energy norm too, ``ε ← e^{μ s} ε + ‖w‖_P`` (w the step's rounding
+    and what the oscillators' error feeds in), and the smaller enclosure taken: the
+    componentwise one grows with ``‖|exp(A s)|‖`` per step, the energy norm's does not.
+
+    Parameters
+    ----------
+    flow : Flow
+    rows : ndarray, shape (p, N)
+    a : float
+        Start of the search.
+    data : callable or None
+        See :func:`first_zero`.
+    energy : EnergyCarry or None
+        See :func:`first_zero`.
+    """
+
+    def __init__(self, flow: Flow, rows: np.ndarray, a: float, z: np.ndarray, data=None,
+                 energy=None) -> None:
+        self.flow, self.rows, self.a, self.data = flow, rows, float(a), data
+        self.abs_rows = np.abs(rows)
+        self.err = np.zeros(flow.N)
+        self.energy, self.eps, self.z = energy, 0.0, z
+        self._rate = energy.rate(flow) if energy is not None and energy.valid else math.inf
+        self.g = (flow.N + 1) * _U / (1.0 - (flow.N + 1) * _U)
+        self._osc = slice(2 * flow.n, flow.N - 1)
+        self._w = np.repeat(np.abs(flow._freq_array), 2).astype(float)
+        k = 2 * flow.n
+        self._absP = energy.absP if energy is not None else np.zeros((k, k))
+        self._gp = p_norm_gamma(k)
+
+    def advance(self, step: float, za: np.ndarray) -> np.ndarray:
+        """The state ``step`` after the current one (``a``), with :attr:`err` and :attr:`eps`
+        carried (:func:`observer.event.kernels.carry_step`, one compiled call)."""
+        flow = self.flow
+        E = flow.expm(step)
+        self.a = self.a + step
+        z = self.z = _reset(flow, self.a, E @ za, copy=False)
+        self.err, self.eps = self._step(E, za, z, step, True)
+        return z
+
+    def _step(self, E: np.ndarray, za: np.ndarray, z: np.ndarray, step: float, reset: bool):
+        flow = self.flow
+        return kernels.carry_step(E, za, z, self.err, self.eps, self.g, 2 * flow.n,
+                                  self._osc.start, self._osc.stop, self._w, self.a,
+                                  self._absP, self._gp, self._rate, step,
+                                  self.energy is not None, reset)
+
+    def at(self, t: float) -> tuple[np.ndarray, float]:
+        """``(err, eps)`` carried to t ≥ a, the flight from the current state included."""
+        s = float(t) - self.a
+        if not s > 0.0:
+            return self.err.copy(), self.eps
+        return self._step(self.flow.expm(s), self.z, self.z, s, False)
+
+    def hand(self, zero: Zero) -> tuple:
+        """``(zero, zero.t, zero.z)`` with :attr:`Zero.carried` set (:meth:`at`): what
+        :func:`first_zero` returns."""
+        zero.carried = self.at(zero.t)
+        return zero, zero.t, zero.z
+
+    def __call__(self, t: float, z: np.ndarray) -> np.ndarray:
+        """(b) + (c) of :func:`graze_band` for every row at the state z at t ≥ a."""
+        s = float(t) - self.a
+        absE = np.abs(self.flow.expm(s)) if s > 0.0 else np.eye(self.flow.N)
+        own = (self.abs_rows @ (absE @ self.err)) * (1.0 + 2.0 * self.g) ** 2
+        if self.energy is not None:               # the smaller of two proved bounds
+            k, g = 2 * self.flow.n, self.g
+            w = (absE[:k, self._osc] @ self.err[self._osc]) * (1.0 + 2.0 * g)
+            eps = self.energy.after(self.flow, max(s, 0.0), w, self.eps)
+            osc = (self.abs_rows[:, self._osc] @ self.err[self._osc]) * (1.0 + 2.0 * g)
+            own = np.minimum(own, self.energy.through(self.rows[:, :k], eps) + osc)
+        rest = representation_error(self.rows, z) if self.data is None else self.data(t, z)
+        return own + rest
+
+
 def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: float,
-               certified: dict[int, float] | None = None, tau: float | None = None, should_stop=None
-               ) -> tuple[Zero | None, float, np.ndarray]:
+               certified: dict[int, float] | None = None, should_stop=None, data=None,
+               energy=None) -> tuple[Zero | None, float, np.ndarray]:
     """First zero in ``[t0, t_end]`` of any functional ``rows[i]·z(t)`` along ``flow``.
 
     Decisions are three-valued on certified enclosures (:func:`_safe_step`,
-    :func:`minimum_decision`); a search interval (or its remainder) no longer than the
-    time resolution (:func:`time_resolution`) is integrated as a flow, not searched. The
-    windows and bounds are those of the block of the flow the functionals depend on
-    (:meth:`FunctionalSet._coupled`).
+    :func:`minimum_decision`); a search interval no longer than the time resolution
+    (:func:`time_resolution`) is integrated as a flow, not searched. The windows and bounds
+    are those of the block of the flow the functionals see (:meth:`FunctionalSet._coupled`).
 
     Parameters
     ----------
@@ -894,11 +1006,14 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
         End of the search.
     certified : dict, optional
         ``{i: t}``: ψ_i is known to stay positive until t (after a touch).
-    tau : float, optional
-        Unused by the search's decisions (kept for the callers' signature; the functional
-        sets are cached per value).
     should_stop : callable, optional
         A signal name it returns (:func:`_look`) stops the search: :class:`SearchStopped`.
+    data : callable, optional
+        ``data(t, z)``: per functional, the run's carried error and the data's resolution in
+        the user's coordinates at the state z at t (:func:`graze_band` (b), (c)), for the
+        touch bands only; without it z0 is exact data in the run's coordinates.
+    energy : EnergyCarry, optional
+        The run's energy norm: the search's own rounding is carried in it too (:class:`SearchCarry`).
 
     Returns
     -------
@@ -908,11 +1023,11 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
     """
     rows = np.atleast_2d(rows)
     a, za = float(t0), np.asarray(z0, dtype=float)
-    tau = flow.time_scale if tau is None else float(tau)
     if rows.shape[0] == 0 or t_end - a <= time_resolution(t_end):
         z = _reset(flow, t_end, flow.expm(t_end - a) @ za) if t_end > a else za
         return None, t_end, z
-    fs = functional_set(flow, rows, tau)
+    fs = functional_set(flow, rows)
+    carry = SearchCarry(flow, fs.rows, a, za, data, energy)
     certified = dict(certified or {})
     window = WINDOW / fs.norm_bound if fs.norm_bound > 0.0 else np.inf   # inf: ψ polynomial
     growth = exp_upper(up(fs.certified_norm * min(window, t_end - a) * (1.0 + 2.0 * _U)))
@@ -935,20 +1050,20 @@ def first_zero(flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray, t_end: f
             i = int(np.flatnonzero(~np.isfinite(bound))[0])
             raise NonFiniteFlow(a, a, za, ("bound", 3, i), float(bound[i]))
         step, found = (w, []) if quick.all() else _safe_step(fs, a, za, d, errs, bound, w, certified,
-                                                              quick)
+                                                              quick, carry)
         # no functional without a found zero vanishes in (a, a + step): the earliest found zero
         # within that reach is the first zero; one beyond it is recomputed later
         if found:
             first = min(found, key=lambda zr: zr.t)
             if first.t <= a + step:
-                return first, first.t, first.z
+                return carry.hand(first)
         step = max(step, 0.0)
         if step < w and step <= res:
             zero = _unresolved(fs, a, za, d, certified, res)
             if zero is not None:
-                return zero, zero.t, zero.z
+                return carry.hand(zero)
             step = min(res, w)                       # nothing approaches: time moves on
-        a, za = a + step, _reset(flow, a + step, flow.expm(step) @ za, copy=False)
+        a, za = a + step, carry.advance(step, za)
     raise RootIsolationError(f"root isolation stalled near t = {a!r} ({MAX_STEPS} safe steps)", a, za)
 
 

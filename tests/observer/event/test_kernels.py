@@ -181,7 +181,7 @@ def test_screen_step_is_the_numpy_expressions_bit_for_bit():
     from observer.event.roots import WINDOW, functional_set
 
     fl = flow_for(observer.load_scenario("impact_oscillator").system)
-    fs = functional_set(fl, fl.gap_rows, fl.time_scale)
+    fs = functional_set(fl, fl.gap_rows)
     z = fl.z(0.3, np.array([0.1, -0.2]))
     d, *got = fs.screen(z, 1.3, WINDOW / fs.norm_bound)
     assert np.array_equal(d, fs.derivatives(z))

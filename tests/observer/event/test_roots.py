@@ -42,7 +42,7 @@ def test_right_after_a_graze_an_open_contact_far_away_is_not_taken_as_the_zero(r
     tau = fl.time_scale
     certified = {0: 0.25 * resolution(0.0, tau)}       # the graze's certificate ends within res
     t_hit = GAP1 / V1
-    zero, t, _ = first_zero(fl, fl.gap_rows, 0.0, z0, reach * t_hit, certified, tau)
+    zero, t, _ = first_zero(fl, fl.gap_rows, 0.0, z0, reach * t_hit, certified)
     if reach < 1.0:
         assert zero is None and t == reach * t_hit
     else:
@@ -68,7 +68,7 @@ def test_a_shallow_crossing_far_from_the_origin_is_a_crossing_as_at_the_origin(o
     sc = Scenario.from_dict(doc)
     fl = flow_for(sc.system, ())
     z0 = fl.z(0.0, np.concatenate([sc.q0, sc.u0]))
-    zero, _, _ = first_zero(fl, fl.gap_rows, 0.0, z0, 4.0, {}, fl.time_scale)
+    zero, _, _ = first_zero(fl, fl.gap_rows, 0.0, z0, 4.0, {})
     t_star = np.pi - np.sqrt(2.0 * depth) * (1.0 + depth / 12.0)     # arccos(D − 1), series
     assert zero is not None and zero.kind == "cross"
     assert abs(zero.t - t_star) <= 1e-7
