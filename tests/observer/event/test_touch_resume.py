@@ -149,7 +149,7 @@ def test_a_zero_float64_slope_at_a_minimum_is_a_touch_that_resumes_after_it():
     t, x = POST_IMPACT[0], np.array(POST_IMPACT[1])
     flow = master.flow_for(run_sc.system, ())
     z = flow.z(t, x)
-    d = functional_set(flow, flow.gap_rows, flow.time_scale).derivatives(z)   # what the search sees
+    d = functional_set(flow, flow.gap_rows).derivatives(z)   # what the search sees
     assert d[0, 0] < 0.0 and d[1, 0] == 0.0 and d[2, 0] > 0.0                 # the degenerate state
     zero, _, _ = first_zero(flow, flow.gap_rows, t, z, run_sc.t_end)
     assert zero is not None and zero.kind == "touch" and zero.index == 0 and zero.t == t
