@@ -944,14 +944,20 @@ class _Run:
         hop_note = f"joint tail of contacts {tuple(cluster)}: exact hop"
         rows = [(*row[:6], "; ".join(filter(None, [hop_note, row[6]])))   # the tail's own
                 for row in jt.rows]                                          # events
-        if jt.t_inf >= self.t_end:
-            for row in rows:
-                if row[0] < self.t_end:
-                    self.event(*row[:6], note=row[6])
-            return None
         note = (f"joint tail of contacts {tuple(cluster)}: {jt.hops} impacts resolved by exact "
                 f"hops from the contact points")
         e = np.asarray(self.law.restitution, dtype=float)
+        if jt.t_inf >= self.t_end:        # the contacts settled before t_end rest there, held
+            for t_c, c in sorted((t_c, c) for c, t_c in jt.settled.items() if c in cluster):
+                if t_c < self.t_end:      # by the tail (the stick its accumulation row states)
+                    speed = float(gm[key.index(c)]) * e[c] if c in key else 0.0
+                    rows.append((t_c, c, "accumulation", speed, 0.0, jt.impulse[c], note))
+                    if c not in held:
+                        rows.append((t_c, c, "stick", 0.0, 0.0, 0.0, ""))
+            for row in sorted(rows, key=lambda r: r[0]):
+                if row[0] < self.t_end:
+                    self.event(*row[:6], note=row[6])
+            return None
         stick = self.sticking(jt.t_inf, jt.x, list(setp))
         for t_c, c in sorted((jt.settled.get(c, jt.t_inf), c) for c in cluster):
             speed = float(gm[key.index(c)]) * e[c] if c in key else 0.0

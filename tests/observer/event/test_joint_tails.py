@@ -191,3 +191,58 @@ def _with_forcing_harmonic(h0, e: float, c: float, harmonic: dict) -> Scenario:
            "initial": {"q": q0.tolist(), "u": [0.0, 0.0]},
            "simulation": {"t_end": 0.1, "h": 0.1 / 8}}
     return Scenario.from_dict(doc)
+
+
+# -- a joint tail that runs past t_end ------------------------------------------------------------
+
+PAST_T_END = dict(
+    M=np.diag([1.4686568981237573, 0.99, 0.8334996568937862, 0.7847929399530114]),
+    K=np.zeros((4, 4)), C=np.zeros((4, 4)),
+    W=np.array([[1.0, 0.0, 3e-05, -0.1191940144623942],
+                [-0.024273450973608602, 1.0, 0.3, 0.05574787646504091],
+                [0.0, 0.28902525429978126, 1.0, 0.06],
+                [-0.0762751108525336, 0.20353413985315952, 0.05423356813907236, 1.0]]),
+    q0=np.array([0.5637572817264438, 0.029544386071822304, -0.5871964540396689, 0.0]),
+    u0=np.array([0.10486757814925601, 0.003, -6.103515625e-05, 0.8]),
+    nu=np.array([-0.533040137519584, 0.18297970023582633, 0.6310668985429735, 0.13263872218318348]),
+    f=np.array([-14.686568981237574, -9.9, -8.334996568937862, -7.847929399530114]),
+    a=np.array([0.7629486428329115, -0.7768066662654558, -0.3333333333333333, 0.4762668581735501]),
+    w=0.8659657859853591, phi=5.047487276295625, e=0.6)
+"""A drawn system of tests/observer/event/test_invariance.py (hypothesis, CI on 2026-12-02):
+contact 2's impacts accumulate at t ≈ 0.18957 s, 0.005 s before contact 0 lands. Translated
+by −100 on every coordinate, contacts 0 and 2 are resolved as one joint tail whose common t∞
+lies beyond t_end = 0.2."""
+
+
+def test_a_joint_tail_past_t_end_states_the_accumulation_and_hold_of_a_contact_settled_before_it():
+    """Contact 2 settles inside the joint tail before t_end: its ``accumulation`` and
+    ``stick`` rows are listed (at the time it settled), as where its own tail is extrapolated
+    (untranslated), to 5e-9 s. Before, the tail's own stick row of that contact was dropped as
+    stated by an accumulation row that a tail ending after t_end never wrote: the translated
+    run had neither row, and the invariance property failed on it."""
+    def build(p: dict, c: np.ndarray) -> Scenario:     # translated by c (test_invariance.build)
+        doc = {"scenario": {"name": "invariance"},
+               "system": {"M": p["M"].tolist(), "C": p["C"].tolist(), "K": p["K"].tolist(),
+                          "W": p["W"].tolist(),
+                          "forcing": {"constant": (p["f"] + p["K"] @ c).tolist(),
+                                      "amplitude": p["a"].tolist(), "omega": p["w"],
+                                      "phase": p["phi"]},
+                          "gap": {"offset": (p["nu"] - p["W"].T @ c).tolist()}},
+               "impact": {"law": "newton", "restitution": p["e"]},
+               "initial": {"q": (p["q0"] + c).tolist(), "u": p["u0"].tolist()},
+               "simulation": {"t_end": 0.2, "h": 0.05}}
+        return Scenario.from_dict(doc)
+
+    def rests(res):
+        ev = res.events
+        return {k: ev[(ev["kind"] == k) & (ev["contact"] == 2)]["time"].to_numpy()
+                for k in ("accumulation", "stick")}
+
+    base = run_master(build(PAST_T_END, np.zeros(4)))
+    moved = run_master(build(PAST_T_END, c=np.full(4, -100.0)))
+    assert base.status.ok and moved.status.ok
+    assert any("joint tail of contacts (0, 2)" in n for n in moved.events["note"])  # the case
+    a, b = rests(base), rests(moved)
+    for k in ("accumulation", "stick"):
+        assert a[k].size == b[k].size == 1, (k, a[k], b[k])
+        assert abs(a[k][0] - b[k][0]) <= 5e-9
