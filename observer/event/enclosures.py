@@ -218,13 +218,7 @@ def polish_lcp(M: np.ndarray, W: np.ndarray, b: np.ndarray, x: np.ndarray,
     bits = max(int(start), 2)
     while bits <= PRECISION_CAP:
         with flint.ctx.workprec(bits):
-            G = None if cache is None else cache.get(bits)
-            if G is None:
-                Ma = flint.arb_mat(np.asarray(M, dtype=float).tolist())
-                Wa = flint.arb_mat(np.asarray(W, dtype=float).tolist())
-                G = Wa.transpose() * Ma.solve(Wa)
-                if cache is not None:
-                    cache[bits] = G
+            G = exact_delassus(M, W, bits, cache)
             ba = [flint.arb(v) for v in np.asarray(b, dtype=float).tolist()]
             lam = flint.arb_mat([[G[i, j] for j in S] for i in S]).solve(
                 flint.arb_mat([[-ba[i]] for i in S]))
