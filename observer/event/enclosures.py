@@ -247,13 +247,18 @@ def exact_delassus(M: np.ndarray, W: np.ndarray, bits: int, cache: dict | None =
     return G
 
 
-def _stick_balls(G, vrows, A, z, radius, S, R):
-    """(λ_S, w_R, w_R of radius 0) in ball arithmetic at the current precision: ``b = r_v·A·z``
-    exact from the float data, widened by ``radius``; ``λ_S = −G_SS⁻¹ b_S``,
-    ``w_R = G_RS λ_S + b_R``; None when G_SS is not certainly invertible."""
+def _free_accelerations(vrows, A, z):
+    """``r_v·A·z`` as an ``arb_mat`` column at the current precision, exact from the float
+    data (the same for every active set tried)."""
     Az = flint.arb_mat(np.asarray(A, dtype=float).tolist()) * \
         flint.arb_mat([[v] for v in np.asarray(z, dtype=float).tolist()])
-    V = flint.arb_mat(np.asarray(vrows, dtype=float).tolist()) * Az
+    return flint.arb_mat(np.asarray(vrows, dtype=float).tolist()) * Az
+
+
+def _stick_balls(G, V, radius, S, R):
+    """(λ_S, w_R, w_R of radius 0) in ball arithmetic at the current precision: ``b = V``
+    (:func:`_free_accelerations`) widened by ``radius``; ``λ_S = −G_SS⁻¹ b_S``,
+    ``w_R = G_RS λ_S + b_R``; None when G_SS is not certainly invertible."""
     out = []
     for rad in (radius, np.zeros(len(radius))):
         b = [V[i, 0] + flint.arb(0, float(r)) if r > 0.0 else V[i, 0]
@@ -324,9 +329,10 @@ def stick_decisions(M, W, vrows, A, z, radius, lam, cache: dict | None = None,
     while bits <= PRECISION_CAP:
         with flint.ctx.workprec(bits):
             G = exact_delassus(M, W, bits, cache)
+            V = _free_accelerations(vrows, A, z)
             for S in _active_sets(lam):
                 R = [i for i in range(n) if i not in S]
-                balls = _stick_balls(G, vrows, A, z, radius, S, R)
+                balls = _stick_balls(G, V, radius, S, R)
                 if balls is None:
                     continue
                 status, lift, notes = _stick_status(balls, S, R, bits)

@@ -251,7 +251,8 @@ def carry_step(E: np.ndarray, za: np.ndarray, z: np.ndarray, err: np.ndarray, ep
     the k mechanical components in its norm: ``w = new[:k] + |E[:k, lo:hi]|·err[lo:hi]·(1 + 2γ)``
     (what the oscillators' reset error feeds in), ``ε ← (ε·e^{rate·step}(1 + 4u) + ‖w‖_P)(1 + 4u)``,
     ``‖w‖_P ≤ sqrt(wᵀ|P|w·(1 + gp))`` raised twice (:func:`observer.event.energy.p_norm_bound`,
-    gp = γ_{k+2}); ε = inf where the rate or ε is not finite. With ``reset``: the oscillator
+    gp = γ_{2k+1}, :func:`observer.event.energy.p_norm_gamma`); ε = inf where the rate or ε
+    is not finite. With ``reset``: the oscillator
     states ``z[lo:hi]``, reset from ``fl(ω a)``, known to ``(ω·|a| + 2|z|)·u·(1 + 2γ)``
     (``wfreq``: the ω per oscillator state), and the time component exact.
 

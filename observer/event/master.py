@@ -427,15 +427,17 @@ class _Run:
         componentwise ``|r|·err`` and the energy norm's ``‖r‖_{P⁻¹}·ε`` (both proved)."""
         return self.carried(self.free_flow.gap_rows)
 
-    def carried(self, rows: np.ndarray) -> np.ndarray:
+    def carried(self, rows: np.ndarray, err: np.ndarray | None = None,
+                eps: float | None = None) -> np.ndarray:
         """The accumulated state error seen through ``rows`` (of the augmented state: their
         mechanical columns act on it): the smaller of ``|r|·err`` and ``‖r‖_{P⁻¹}·ε``, a
-        componentwise carry that overflowed (inf·0 = nan) counting as no bound."""
+        componentwise carry that overflowed (inf·0 = nan) counting as no bound. ``err``,
+        ``eps``: another carried error than the run's (:meth:`search_band`)."""
         k = 2 * self.n
         with np.errstate(over="ignore", invalid="ignore"):
-            comp = np.abs(rows[:, :k]) @ self.err
+            comp = np.abs(rows[:, :k]) @ (self.err if err is None else err)
         comp = np.where(np.isnan(comp), np.inf, comp)
-        return np.minimum(comp, self.energy.through(rows[:, :k]))
+        return np.minimum(comp, self.energy.through(rows[:, :k], eps))
 
     def search_band(self, flow: Flow, rows: np.ndarray, t0: float, z0: np.ndarray):
         """The data's part of the touch bands of a search from ``(t0, z0)`` along ``flow``
@@ -459,15 +461,11 @@ class _Run:
                 q = self.origin
                 const = np.abs(rows[:, -1] - rows[:, :n] @ q) + g * (ab[:, -1] + ab[:, :n] @ np.abs(q))
                 ab[:, -1] = const * (1.0 + 2.0 * g)
-            mech = ab[:, :k]
             E = np.abs(flow.expm(float(t) - t0)) if t > t0 else np.eye(z0.size)
             new = g * (E[:k] @ az0)
             err = (E[:k, :k] @ err0) * (1.0 + 2.0 * g) + new
-            with np.errstate(over="ignore", invalid="ignore"):
-                comp = mech @ err
-            comp = np.where(np.isnan(comp), np.inf, comp)
             eps = self.energy.after(flow, max(float(t) - t0, 0.0), new * (1.0 + 2.0 * g), eps0)
-            carried = np.minimum(comp, self.energy.through(rows[:, :k], eps))
+            carried = self.carried(rows, err, eps)
             zu = np.abs(z)
             if self.origin is not None:
                 zu = zu.copy()

@@ -62,7 +62,7 @@ from numba import njit
 from observer.event import kernels
 from observer.event.energy import p_norm_gamma
 from observer.event.enclosures import (PRECISION_CAP, PRECISION_START, Decision, coupled, dot_sign,
-                                       flow_sign, flow_value, representation_error)
+                                       flow_sign, flow_value, gamma, representation_error)
 from observer.event.flow import Flow, exp_upper, norm_upper, spectral_norm_upper, up
 
 WINDOW = 0.5
@@ -933,7 +933,7 @@ class SearchCarry:
         self.err = np.zeros(flow.N)
         self.energy, self.eps, self.z = energy, 0.0, z
         self._rate = energy.rate(flow) if energy is not None and energy.valid else math.inf
-        self.g = (flow.N + 1) * _U / (1.0 - (flow.N + 1) * _U)
+        self.g = gamma(flow.N + 1)
         self._osc = slice(2 * flow.n, flow.N - 1)
         self._w = np.repeat(np.abs(flow._freq_array), 2).astype(float)
         k = 2 * flow.n
