@@ -181,8 +181,8 @@ def test_the_ten_block_chain_lands_its_impact_clusters_and_finishes():
 def test_the_landing_cut_off_does_not_change_the_solution(monkeypatch):
     """rocking_chain, N = 7, 1.9 s (contacts 0 and 2 settle at t = 1.8519 s, by a joint tail
     or a landing): with the landing cut-off 100× larger (the certified gap error that a hop
-    must exceed, ``_Run.hop_error``, which also starts joint tails) every sample agrees within 1e-12 (measured 7e-15 with landings; on N = 10
-    over 2 s, 1.1e-12)."""
+    must exceed, ``_Run.hop_error``, which also starts joint tails) every sample agrees
+    within 1e-12."""
     import observer.event.master as master
     cols = [f"q{i}" for i in range(14)]
     _, res = _chain(7, 1.9)

@@ -209,7 +209,7 @@ PAST_T_END = dict(
     a=np.array([0.7629486428329115, -0.7768066662654558, -0.3333333333333333, 0.4762668581735501]),
     w=0.8659657859853591, phi=5.047487276295625, e=0.6)
 """A drawn system of tests/observer/event/test_invariance.py (hypothesis, CI on 2026-12-02):
-contact 2's impacts accumulate at t ≈ 0.18957 s, 0.005 s before contact 0 lands. Translated
+contact 2's impacts accumulate shortly before contact 0 lands. Translated
 by −100 on every coordinate, contacts 0 and 2 are resolved as one joint tail whose common t∞
 lies beyond t_end = 0.2."""
 
