@@ -34,8 +34,8 @@ ratios equal within :data:`ZENO_RATIO_SPREAD`) is stopped once the impact veloci
 fallen by :data:`ZENO_VELOCITY_RATIO`, or the last interval is within the time coordinate's
 resolution (two ulp of t: the impact times no longer tell it from zero), or every next hop is
 within the certified error of its gap (not resolvable, :meth:`_Run.hop_error`), or resolving
-more impacts would put more of the gaps' representation error than ZENO_TAIL_RTOL ulps of the
-elapsed time into t_∞ (:meth:`_Run.noisy_tail`, :func:`tail_noise_limit`; one contact: the
+more impacts would put more of the gaps' representation error than ``zeno_time_rtol`` of the
+elapsed time into t_∞ (:meth:`_Run.noisy_tail`, :func:`zeno_time_budget`; one contact: the
 velocity tail's error, several: the geometric tail's); the accumulation time
 t_∞ is extrapolated from the velocity γ⁺ after the last resolved impact and the exact
 contact acceleration and its rate (:meth:`_Run.velocity_tail`: ``2γ⁺/(α(1 − e))`` for a
@@ -50,7 +50,7 @@ impacts and accumulating again between them), or key's impact re-launches a held
 key bounces on a held set (the chain's
 blocks settling on each other), and one contact of key is resolved as far as
 its gap's representation allows (next hop within the gap's certified error, or
-:func:`tail_noise_limit` reached; several contacts: a hop within
+:func:`zeno_time_budget` reached; several contacts: a hop within
 :data:`observer.event.tails.MERGE_HOPS` motion tolerances), the cluster's **joint tail** (:mod:`observer.event.tails`)
 resolves it by exact hops of every contact relative to its contact point until all of them
 are held; each contact's ``accumulation`` row is at the time it was last held (its own t_∞)
@@ -102,24 +102,25 @@ ZENO_RATIO_SPREAD = 0.02
 ZENO_VELOCITY_RATIO = 1e-9
 """A geometric run is extrapolated once |γ⁻| has fallen below this fraction of its first value."""
 
-ZENO_TAIL_RTOL = 2.0 ** 22
-"""A geometric run of one contact is also extrapolated once the representation error of its
-gap would put more than ZENO_TAIL_RTOL ulps of t − t0 into t_∞ (the run's elapsed
-time: 2^22 ulp ∈ (4.7e-10, 9.3e-10]·(t − t0); :func:`tail_noise_limit`,
-:meth:`_Run.noisy_tail`); a cluster's joint tail starts there too
-(:func:`observer.event.tails.joint_due`). The elapsed time, not t: a shift of the time
-origin changes no decision. (It was ulp(max(|t|, τ)): a time origin at 1e3 let 2^13 times
-more of the gap's round-off into t_∞, and composed with a translation by 100 moved t_∞ by up
-to 6e-9.) Where the run is cut depends on the coordinates, t_∞ does not
-(:meth:`_Run.hop_tail`)."""
+ZENO_TIME_RTOL = 1e-9
+"""Default of ``run_master(zeno_time_rtol=…)``: the stated accuracy of an extrapolated t_∞
+relative to the run's elapsed time t − t0 (:func:`zeno_time_budget`); near the rule it
+replaces, 2^22 ulp(t − t0), which lay between 2^-31 and 2^-30 of t − t0 by where t − t0
+fell in its binade."""
 
 
-def tail_noise_limit(t: float, t0: float) -> float:
-    """ZENO_TAIL_RTOL·ulp(t − t0): the most of the gaps' representation error a Zeno tail may
-    carry into t_∞ (:data:`ZENO_TAIL_RTOL`), from the run's elapsed time t − t0 alone (the same
-    under any shift of the time origin; no time scale of the system: a slow mode anywhere
-    does not loosen it)."""
-    return ZENO_TAIL_RTOL * float(np.spacing(abs(float(t) - float(t0))))
+def zeno_time_budget(t: float, t0: float, rtol: float) -> float:
+    """rtol·|t − t0|: the most of the gaps' representation error that a Zeno tail cut at t may
+    carry into t_∞ (``zeno_time_rtol`` of :func:`run_master`), from the run's elapsed time
+    alone: the same under any shift of the time origin (up to the rounding of t − t0), no time
+    scale of the system (a slow mode anywhere does not loosen it). A geometric run of one
+    contact is extrapolated once its estimated carried error reaches it
+    (:meth:`_Run.noisy_tail`); a cluster's joint tail starts there too
+    (:func:`observer.event.tails.joint_due`). The elapsed time, not t: with |t|, a time
+    origin at 1e3 let ~2^13 times more of the gap's round-off into t_∞, and composed with a
+    translation by 100 moved t_∞ by up to 6e-9. Where the run is cut depends on the
+    coordinates, t_∞ does not (:meth:`_Run.hop_tail`)."""
+    return rtol * abs(float(t) - float(t0))
 
 
 HOP_ORDER = 8
@@ -243,7 +244,8 @@ class _Run:
     """Mutable state of one master run (the event loop's bookkeeping)."""
 
     def __init__(self, scenario: Scenario, h: float, t_end: float, max_events: int,
-                 zeno_velocity_ratio: float, t0: float = 0.0) -> None:
+                 zeno_velocity_ratio: float, t0: float = 0.0,
+                 zeno_time_rtol: float = ZENO_TIME_RTOL) -> None:
         self.sc = scenario
         self.system = scenario.system
         self.law: ImpactLaw = scenario.law
@@ -252,6 +254,7 @@ class _Run:
         self.h, self.t_end, self.t0 = h, t_end, t0
         self.max_events = max_events
         self.zeno_velocity_ratio = zeno_velocity_ratio
+        self.zeno_time_rtol = zeno_time_rtol
         count = int(np.floor((t_end - t0) / h + 1e-9)) + 1
         self.t_grid = np.minimum(t0 + h * np.arange(count), t_end)   # may exceed t_end by an ulp
         self.X = np.full((count, 2 * self.n), np.nan)
@@ -817,10 +820,10 @@ class _Run:
         with the carried error added)."""
         return represented_error(fl.gap_rows[idx], z)
 
-    def tail_noise(self, t: float) -> float:
-        """:func:`tail_noise_limit` at t for this run (its t0): what the joint tails of
-        :mod:`observer.event.tails` compare with, without importing this module."""
-        return tail_noise_limit(t, self.t0)
+    def time_budget(self, t: float) -> float:
+        """:func:`zeno_time_budget` at t for this run (its t0 and ``zeno_time_rtol``): what the
+        joint tails of :mod:`observer.event.tails` compare with, without importing this module."""
+        return zeno_time_budget(t, self.t0, self.zeno_time_rtol)
 
     def noisy_tail(self, key: tuple, fl: Flow, idx: list, z: np.ndarray, v_plus: np.ndarray,
                    t: float, d: np.ndarray) -> bool:
@@ -834,7 +837,7 @@ class _Run:
         contacts: the geometric tail ``d₂ρ/(1 − ρ)`` from the last three impact times, each
         located to δt (its largest over the contacts, v = γ⁺), errs by at most
         ``((1 + ρ)/(1 − ρ))²·δt`` (its derivatives in the three times). Once that reaches
-        :func:`tail_noise_limit` (ZENO_TAIL_RTOL ulps of the elapsed time t − t0; a cut
+        :func:`zeno_time_budget` (``zeno_time_rtol`` of the elapsed time t − t0; a cut
         there, not earlier, keeps the tail, which the observers treat as closed, short), the run
         is extrapolated from the current (still accurate) impact. A shift of the time origin
         does not change the decision."""
@@ -850,7 +853,7 @@ class _Run:
         else:
             rho = d[2] / d[1]
             noise = ((1.0 + rho) / (1.0 - rho)) ** 2 * (float(np.max(dg / v)) + time_resolution(t))
-        return noise >= tail_noise_limit(t, self.t0)
+        return noise >= zeno_time_budget(t, self.t0, self.zeno_time_rtol)
 
     def velocity_tail(self, key: tuple, v_plus: np.ndarray, accel: np.ndarray,
                       jerk: np.ndarray) -> float | None:
@@ -1084,7 +1087,8 @@ def _oscillator_block(flow: Flow, t: np.ndarray) -> np.ndarray:
 def run_master(scenario: Scenario, h: float | None = None, t_end: float | None = None,
                max_events: int = 100_000,
                zeno_velocity_ratio: float = ZENO_VELOCITY_RATIO, t0: float = 0.0,
-               should_stop=None, origin: np.ndarray | None = None) -> MasterEventResult:
+               should_stop=None, origin: np.ndarray | None = None,
+               zeno_time_rtol: float = ZENO_TIME_RTOL) -> MasterEventResult:
     """Exact event-driven run of the master of ``scenario`` (see module docstring).
 
     Parameters
@@ -1110,6 +1114,23 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
         The gap frame's origin q* when ``scenario`` is the frame's
         (:meth:`observer.event.frame.GapFrame.scenario`): the touch bands take the data's
         resolution in the given coordinates q = x + q* (:meth:`_Run.search_band`).
+    zeno_time_rtol : float
+        Stated accuracy of an extrapolated accumulation time t_∞, relative to the run's
+        elapsed time t − t0 (default :data:`ZENO_TIME_RTOL`, 1e-9; positive,
+        ``inf`` turns this cut-off off): the largest part of the gaps' representation error
+        that the extrapolation may carry into t_∞. Each resolved impact of a geometric run is
+        located to δt = δg/γ⁺ + two ulp of t (δg = eps·Σ|r z|, the gap's representation);
+        the run is extrapolated from the first impact at which the first-order propagation
+        of δt into t_∞ (:meth:`_Run.noisy_tail`) reaches ``zeno_time_rtol·(t − t0)``, and a
+        joint tail (:func:`observer.event.tails.joint_due`) starts there, a cluster of k
+        contacts at 1/k² of it. Exact: the decision is this comparison, so from the same
+        state a smaller value resolves no more impacts of a run (a cut never comes later),
+        and a time shift changes it only through the rounding of t − t0 and the time
+        resolution. Approximate:
+        the propagation is first order and does not bound the error of the impacts resolved
+        before the cut, nor the extrapolation's own error (exact for a constant contact
+        acceleration); the other cut-offs (``zeno_velocity_ratio``, the hop within its gap's
+        certified error, an interval within the time resolution) may cut first.
 
     A run that stops (event cap, stalled isolation, no progress) returns the frame up to its
     stop time, never NaN rows, with the reason in ``status``. So does a state that leaves the
@@ -1121,18 +1142,25 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
     """
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         return _run_master(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, should_stop,
-                           origin)
+                           origin, zeno_time_rtol)
 
 
 def _start(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_ratio: float,
-           t0: float, should_stop) -> tuple:
+           t0: float, should_stop, zeno_time_rtol: float = ZENO_TIME_RTOL) -> tuple:
     """The run's state at t0: ``(run, t_end, x, persistent)`` (the initial closed set decided)."""
     h = float(scenario.h if h is None else h)
     t_end = float(scenario.t_end if t_end is None else t_end)
     t0 = float(t0)
     if not (np.isfinite(t0) and np.isfinite(t_end) and t_end >= t0):
         raise ValueError(f"t_end = {t_end!r} must be finite and ≥ t0 = {t0!r}")
-    run = _Run(scenario, h, t_end, max_events, zeno_velocity_ratio, t0)
+    try:
+        rtol = float(zeno_time_rtol)
+    except (TypeError, ValueError):
+        rtol = np.nan
+    if not rtol > 0.0:
+        raise ValueError(f"zeno_time_rtol = {zeno_time_rtol!r} must be a positive relative "
+                         "accuracy of t_∞ (or inf to turn the cut-off off)")
+    run = _Run(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, rtol)
     run.should_stop = should_stop
     x = np.concatenate([scenario.q0, scenario.u0]).astype(float)
     if not run.free_flow.intrinsic:
@@ -1142,8 +1170,8 @@ def _start(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_ratio: f
 
 
 def _run_master(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_ratio: float,
-                t0: float, should_stop, origin=None) -> MasterEventResult:
-    run, t_end, x, persistent = _start(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, should_stop)
+                t0: float, should_stop, origin=None, zeno_time_rtol=ZENO_TIME_RTOL):
+    run, t_end, x, persistent = _start(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, should_stop, zeno_time_rtol)
     run.origin = None if origin is None else np.asarray(origin, dtype=float)
     t0 = run.t0
     status, nonfinite = RunStatus(), False

@@ -522,9 +522,9 @@ INTERLEAVED_T_INF = 0.03747446322866563
 def test_interleaved_accumulations_rest_at_the_30_digit_t_inf_translated_by_100(c):
     """Translated by (−100, 3.25), the event loop located each impact to the translated gap's
     round-off over its speed (~1e-13 m / 1e-4 m/s), and the interleaved contacts carried
-    those errors into each other's flights: t∞ was 5.8e-9 s late. A cluster's joint tail now
-    starts at 1/CLUSTER_NOISE of the one-contact budget
-    (:data:`observer.event.tails.CLUSTER_NOISE`): within 1e-9 s of the reference (measured 2e-13 s at c = 0, 1.2e-10 s translated)."""
+    those errors into each other's flights: t∞ was 5.8e-9 s late. A cluster of k contacts now
+    starts its joint tail once one contact's location error reaches its share 1/k² of the
+    stated accuracy (:func:`observer.event.tails.joint_due`): within 1e-9 s of the reference."""
     c = None if c is None else np.array(c)
     rest = rest_times(run_master(build(INTERLEAVED, c=c)))
     assert set(rest) == {0, 1}
@@ -661,14 +661,12 @@ def _stick_time(res, T: float = 0.0) -> float:
 @pytest.mark.parametrize("old_rule", [False, True])
 def test_translation_and_time_shift_composed_move_t_inf_by_less_than_1e9(old_rule, monkeypatch):
     """Translated by 100 and with the time origin at 1e3, the block's t∞ − T is within 1e-9 of
-    the original's (measured 6.5e-10; each alone 7.5e-10 and 2.4e-11). The noisy-tail cut is
-    a multiple of ulp of the run's elapsed time t − t0; with the old rule, ulp of
-    |t|, the origin at 1e3 let 2^13 times more of the translated gap's round-off into
-    t∞: 6.2e-9 (the check fails it)."""
+    the original's. The noisy-tail cut is ``zeno_time_rtol`` of the run's elapsed time t − t0
+    (:func:`observer.event.master.zeno_time_budget`); with a budget on |t| instead, the origin
+    at 1e3 lets ~8e3 times more of the translated gap's round-off into t∞ (the check fails it)."""
     import observer.event.master as master
     if old_rule:
-        monkeypatch.setattr(master, "tail_noise_limit",
-                            lambda t, t0: master.ZENO_TAIL_RTOL * float(np.spacing(abs(t))))
+        monkeypatch.setattr(master, "zeno_time_budget", lambda t, t0, rtol: rtol * abs(t))
     base = _stick_time(run_master(build(BLOCK)))
     T = 1e3
     both = _stick_time(run_master(build(BLOCK, c=np.array([100.0]), T=T), t0=T, t_end=T + T_END), T)

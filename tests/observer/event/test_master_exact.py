@@ -551,7 +551,42 @@ def test_zeno_cut_check_fails_a_cut_off_proportional_to_t(monkeypatch):
     binade moves the cut; scaled by 1e-3 to the elapsed budget's size at t ≈ 1e3; the ball
     with ν = 100, whose gap's representation makes the noise budget the cut-off that decides)."""
     import observer.event.master as master
-    monkeypatch.setattr(master, "tail_noise_limit", lambda t, t0: master.ZENO_TAIL_RTOL
-                        * np.finfo(float).eps * abs(t) * 1e-3)
+    monkeypatch.setattr(master, "zeno_time_budget", lambda t, t0, rtol: rtol * abs(t) * 1e-3)
     same = _zeno_cuts([1100.0, 1500.0, 2000.0], nu=100.0)
     assert not same[0] == same[1] == same[2]
+
+
+def _ball_cuts(nu: float, rtols) -> list[tuple[int, float, float]]:
+    """(impacts resolved, |t∞ − closed form|, t∞) of the ball dropped from 1 m (e = 0.5) on a
+    ground at ν, for each ``zeno_time_rtol``; t∞ = t₁ + 2v₁e/(g(1 − e)) in 50 digits."""
+    exact = ball_t_inf(1.0, 0.5)
+    out = []
+    for rtol in rtols:
+        res = run_master(ball(1.0, nu=nu, e=0.5, t_end=2.0), zeno_time_rtol=rtol)
+        assert res.status.ok
+        (z,) = res.zeno
+        out.append((z["impacts_resolved"], abs(float(mp.mpf(z["t_inf"]) - exact)), z["t_inf"]))
+    return out
+
+
+@pytest.mark.parametrize("nu", [100.0, 1e3])
+def test_a_tighter_zeno_time_rtol_cuts_earlier_and_gives_a_t_inf_as_accurate(nu):
+    """``zeno_time_rtol`` is the stated accuracy of t∞ relative to the elapsed time: on the
+    ball over a ground at ν = 100 and 1e3 (the gap's representation, ~eps·ν, makes this the
+    cut-off that decides), each tighter value (2^-26, 2^-30, 2^-34) resolves fewer impacts
+    (the comparison is the decision: a cut never comes later) and gives a t∞ no farther from
+    the closed form, and t∞ is within ``zeno_time_rtol·(t∞ − t0)`` of it (at e = 0.5 the
+    impacts resolved before the cut add no more than the cut's own error)."""
+    rtols = [2.0 ** -26, 2.0 ** -30, 2.0 ** -34]
+    cuts = _ball_cuts(nu, rtols)
+    impacts, errors = [c[0] for c in cuts], [c[1] for c in cuts]
+    assert impacts[0] > impacts[1] > impacts[2], impacts
+    assert errors[0] >= errors[1] >= errors[2], errors
+    for rtol, (_, err, t_inf) in zip(rtols, cuts):
+        assert err <= rtol * t_inf, (rtol, err)
+
+
+@pytest.mark.parametrize("bad", [0.0, -1e-9, float("nan"), "1e-9x"])
+def test_a_bad_zeno_time_rtol_is_refused_naming_the_parameter(bad):
+    with pytest.raises(ValueError, match="zeno_time_rtol"):
+        run_master(ball(1.0, e=0.5, t_end=2.0), zeno_time_rtol=bad)
