@@ -516,7 +516,8 @@ class _Run:
         ``λ_S = −G_SS⁻¹ b_S``, ``w_R = G_RS λ_S + b_R`` (R = cand ∖ S); it is enclosed in ball
         arithmetic (:func:`~observer.event.enclosures.stick_decisions`) from the exact
         Delassus matrix of M, W and the ball ``b`` around the exact ``r_v·A·z`` of the float
-        state z, of radius the accumulated state error through the rows (:meth:`carried`).
+        state z, of radius the accumulated state error through the rows (:meth:`carried`);
+        float64 balls first, which decide only where the arb balls would decide the same.
         If every λ_S is certainly positive and every w_R certainly nonnegative, S solves the
         LCP of every b in the ball (G a P-matrix: unique); a set refuted (a λ or w certainly
         negative: the float64 solver's rounding chose it) gives way to the others. A contact
