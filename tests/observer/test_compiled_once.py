@@ -37,7 +37,8 @@ from numba.core.registry import CPUDispatcher
 
 import observer.codegen as codegen
 
-COMPILED_MODULES = ("observer.primitives", "observer.codegen", "observer.event.roots", "observer.event.kernels", "observer.engines.compiled.step",
+COMPILED_MODULES = ("observer.primitives", "observer.codegen", "observer.event.roots", "observer.event.kernels",
+                    "observer.event.enclosures", "observer.engines.compiled.step",
                     "observer.engines.compiled.kernel", "observer.engines.compiled.members")
 """Every module of ``observer`` that compiles code (``njit`` or :func:`observer.codegen.compile_function`):
 kept whole by :func:`test_every_compiling_module_is_inspected`."""
