@@ -967,6 +967,28 @@ class _Run:
                 self.open(c, t_inf)
         return self.project(t_inf, x_inf, stick), tuple(stick)
 
+    def rests_at_end(self, jt: JointTail, rows: list, cluster: list) -> tuple[list, list]:
+        """The contacts of a joint tail past t_end (:meth:`joint_accumulate`) that rest at
+        t_end, as ``(t_c, c)``: each its settling time of the tail (``jt.settled``) or, if that
+        comes at or after t_end (an impact of the tail lifted it and held it again, after
+        t_end or by a hop below the time resolution), its last hold before t_end that no
+        lift-off follows before t_end; such a hold's own ``stick`` row leaves ``rows`` (the
+        accumulation row and its stick state it, as for a settling time). Returns (rows, rest)."""
+        rest = []
+        for c in cluster:
+            t_c = jt.settled.get(c)
+            if t_c is None:
+                continue
+            if t_c >= self.t_end:
+                mine = [r for r in rows if r[1] == c and r[0] < self.t_end
+                        and r[2] in ("stick", "liftoff")]
+                if not mine or mine[-1][2] != "stick":
+                    continue
+                t_c = mine[-1][0]
+                rows = [r for r in rows if r is not mine[-1]]
+            rest.append((t_c, c))
+        return rows, rest
+
     def joint_accumulate(self, jt: JointTail, t: float, x: np.ndarray, held: tuple,
                          cluster: list, key: tuple, gm: np.ndarray, impacts: int):
         """Carry the state to the common accumulation time of a joint tail
@@ -993,7 +1015,8 @@ class _Run:
                 f"hops from the contact points")
         e = np.asarray(self.law.restitution, dtype=float)
         if jt.t_inf >= self.t_end:        # the contacts settled before t_end rest there, held
-            for t_c, c in sorted((t_c, c) for c, t_c in jt.settled.items() if c in cluster):
+            rows, rest = self.rests_at_end(jt, rows, cluster)
+            for t_c, c in sorted(rest):
                 if t_c < self.t_end:      # by the tail (the stick its accumulation row states)
                     speed = float(gm[key.index(c)]) * e[c] if c in key else 0.0
                     rows.append((t_c, c, "accumulation", speed, 0.0, jt.impulse[c], note))
