@@ -494,13 +494,12 @@ def _ball_certify(Gm, Gr, bm, br, S, R, choice, count):  # pragma: no cover - co
 
 
 @njit(**JIT)
-def _free_balls(V, A, z, radius):  # pragma: no cover - compiled (numba)
+def _free_balls(V, A, z, radius, g):  # pragma: no cover - compiled (numba)
     """Balls (bm, br) of ``b = r_v·A·z`` (exact from the float data) widened by ``radius`` (as
     arb's ``arb(0, r)``, its radius rounded up to 30 bits, then added):
     ``|fl(V fl(Az)) − V A z| ≤ (2γ + γ²)|V||A||z|`` (γ = γ_{N+1}, Higham §3.1, in any
     summation order) plus the underflow of both products."""
     N = z.size
-    g = (N + 1) * _U / (1.0 - (N + 1) * _U)
     eta = N * _TINY
     Az, Aza = np.zeros(N), np.zeros(N)
     for i in range(N):
@@ -519,13 +518,13 @@ def _free_balls(V, A, z, radius):  # pragma: no cover - compiled (numba)
 
 
 @njit(**JIT)
-def _stick_certify(Gm, Gr, V, A, z, radius, x):  # pragma: no cover - compiled (numba)
+def _stick_certify(Gm, Gr, V, A, z, radius, x, g):  # pragma: no cover - compiled (numba)
     """:func:`_ball_certify` on the active set ``S = {x > 0}`` of the float64 solution x, the
     balls of b from :func:`_free_balls`, along every sequence of pivots arb may take (an
     exact tie of |G| entries is two; at most :data:`_PIVOT_PATHS` sequences): True when all
     certify. A non-finite value fails (an infinite midpoint has an infinite radius, NaN
     compares false)."""
-    bm, br = _free_balls(V, A, z, radius)
+    bm, br = _free_balls(V, A, z, radius, g)
     S, R = np.flatnonzero(x > 0.0), np.flatnonzero(~(x > 0.0))
     choice, count = np.zeros(S.size, np.int64), np.zeros(S.size, np.int64)
     for _ in range(_PIVOT_PATHS):
@@ -566,9 +565,10 @@ def _stick_fast(M, W, vrows, A, z, radius, lam, cache=None):
         (np.zeros((n, n)), np.zeros((n, n)))
     if balls is None:
         return None
+    zf = np.asarray(z, dtype=float)
     if _stick_certify(balls[0], balls[1], np.asarray(vrows, dtype=float),
-                      np.asarray(A, dtype=float), np.asarray(z, dtype=float),
-                      np.asarray(radius, dtype=float), x):
+                      np.asarray(A, dtype=float), zf, np.asarray(radius, dtype=float), x,
+                      gamma(zf.size + 1)):
         return (x > 0.0).tolist(), {}
     return None
 

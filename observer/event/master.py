@@ -118,7 +118,8 @@ def zeno_time_budget(t: float, t0: float, rtol: float) -> float:
     (:meth:`_Run.noisy_tail`); a cluster's joint tail starts there too
     (:func:`observer.event.tails.joint_due`). The elapsed time, not t: with |t|, a time
     origin at 1e3 let ~2^13 times more of the gap's round-off into t_∞, and composed with a
-    translation by 100 moved t_∞ by up to 6e-9. Where the run is cut depends on the
+    translation by 100 moved t_∞ by more than 1e-9 (tests/observer/event/test_invariance.py
+    fails that rule). Where the run is cut depends on the
     coordinates, t_∞ does not (:meth:`_Run.hop_tail`)."""
     return rtol * abs(float(t) - float(t0))
 
@@ -1140,7 +1141,7 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
         resolution in the given coordinates q = x + q* (:meth:`_Run.search_band`).
     zeno_time_rtol : float
         Stated accuracy of an extrapolated accumulation time t_∞, relative to the run's
-        elapsed time t − t0 (default :data:`ZENO_TIME_RTOL`, 1e-9; positive,
+        elapsed time t − t0 (default :data:`ZENO_TIME_RTOL`; positive,
         ``inf`` turns this cut-off off): the largest part of the gaps' representation error
         that the extrapolation may carry into t_∞. Each resolved impact of a geometric run is
         located to δt = δg/γ⁺ + two ulp of t (δg = eps·Σ|r z|, the gap's representation);
