@@ -1000,13 +1000,20 @@ class _Run:
         "exact hop") are listed, ``accumulation`` rows at each contact's last hold say how
         the tail was resolved, and the acceleration LCP decides which contacts stay closed.
         Returns (x, held set), or None if t_∞ ≥ t_end (the run ends; the tail's events
-        before t_end are listed)."""
+        before t_end are listed, an accumulation row's impulse is its contact's up to t_end,
+        :attr:`~observer.event.tails.JointTail.until_end`, and the sample intervals get the
+        frame's own: the projection onto the held set at t and its held forces up to t_end)."""
         for c in cluster:
             if self.intervals[c] and self.intervals[c][-1] == (t, t):
                 self.intervals[c].pop()
             self.closed_since.setdefault(c, t)
         setp = tuple(sorted(set(jt.held) | set(held)))
-        self.add_impulse(t, list(range(self.m)), jt.impulse)
+        if jt.t_inf < self.t_end:
+            self.add_impulse(t, list(range(self.m)), jt.impulse)
+        else:               # the frame's tail to t_end (as in accumulate): the projection at t,
+            idx = list(jt.held)                      # then the held forces' ∫λ dt (fill)
+            gam = self.free_flow.velocities(t, x)[idx]
+            self.add_impulse(t, idx, -np.linalg.solve(self.delassus(idx), gam))
         self.fill(flow_for(self.system, jt.held), t, self.project(t, x, list(jt.held)),
                   min(jt.t_inf, self.t_end), include_end=jt.t_inf >= self.t_end)
         hop_note = f"joint tail of contacts {tuple(cluster)}: exact hop"
@@ -1020,7 +1027,7 @@ class _Run:
             for t_c, c in sorted(rest):
                 if t_c < self.t_end:      # by the tail (the stick its accumulation row states)
                     speed = float(gm[key.index(c)]) * e[c] if c in key else 0.0
-                    rows.append((t_c, c, "accumulation", speed, 0.0, jt.impulse[c], note))
+                    rows.append((t_c, c, "accumulation", speed, 0.0, jt.until_end[c], note))
                     if c not in held:
                         rows.append((t_c, c, "stick", 0.0, 0.0, 0.0, ""))
             for row in sorted(rows, key=lambda r: r[0]):

@@ -31,7 +31,8 @@ resolves, as the event loop would: each impact, a held contact lifted by a hop a
 time resolution (``liftoff``), each hold (``stick``), note ``joint tail of contacts …: exact
 hop``; each contact's last hold is an ``accumulation`` row and its ``stick`` row, the note
 saying ``joint tail of contacts …: N impacts resolved by exact hops from the contact
-points``. A tail that runs past t_end lists its events before t_end. Where the tail starts
+points``. A tail that runs past t_end lists its events before t_end, and an accumulation
+row's impulse is its contact's up to t_end (:attr:`JointTail.until_end`). Where the tail starts
 depends on the coordinates (the trigger reads the gap's round-off); what it lists does not.
 Its error is the gaps' round-off at the start over the cluster's speeds, which the trigger
 keeps, to first order, within ``zeno_time_rtol·(t − t0)`` (``run_master``'s stated accuracy,
@@ -102,6 +103,9 @@ class JointTail:
     it resolves, a held contact lifted by a hop it resolves (``liftoff``), a contact held
     (``stick``) but for its last hold (``settled``), which the accumulation rows state; the
     note states a decision left undecided at the precision cap, with its enclosure, else ""."""
+    until_end: np.ndarray
+    """The impulse of each contact from the tail's start to the run's t_end: the impacts before
+    t_end and the held forces' ∫λ dt up to t_end (``impulse`` itself when t_∞ < t_end)."""
 
 
 def _rows(flow: Flow, c: int) -> np.ndarray:
@@ -243,12 +247,14 @@ def joint_tail(run, t: float, x: np.ndarray, held: tuple, cluster: list, key: tu
     held = held0 = tuple(sorted(held))
     x0 = x
     impulse = np.zeros(run.m)
+    until_end = None                                        # the impulse up to t_end
     tail, hops, settled, rows = 0.0, 0, {}, []
     while hops < TAIL_HOPS:
         if all(c in held for c in cluster):
             last = {(s, c) for c, s in settled.items()}        # stated by the accumulation rows
             rows = [r for r in rows if not (r[2] == "stick" and (r[0], r[1]) in last)]
-            out = JointTail(t + tail, x, held, impulse, hops, settled, rows)
+            out = JointTail(t + tail, x, held, impulse, hops, settled, rows,
+                            impulse if until_end is None else until_end)
             return out if _clear(run, t, x0, held0, cluster, out.t_inf) else None
         fl = flow_for(run.system, held)
         z = fl.z(t + tail, x)
@@ -261,6 +267,10 @@ def joint_tail(run, t: float, x: np.ndarray, held: tuple, cluster: list, key: tu
         dt = min(s.values())
         if not np.isfinite(dt) or not all(taylor_holds(fl, c, z, d[c], D[c], dt) for c in d):
             return None
+        if until_end is None and t + (tail + dt) >= run.t_end:   # this hop reaches t_end:
+            until_end = impulse.copy()                  # its impact (at t + tail after it, not
+            if held:                                    # before t_end) and ∫λ past t_end are out
+                until_end[list(held)] += fl.force_rows @ fl.integral(run.t_end - (t + tail), z)
         if held:                                            # ∫λ dt of the held forces
             impulse[list(held)] += fl.force_rows @ fl.integral(dt, z)
         x = fl.x_of(fl.propagate(t + tail, z, dt))

@@ -253,3 +253,45 @@ def test_a_joint_tail_past_t_end_states_the_accumulation_and_hold_of_a_contact_s
     for k in ("accumulation", "stick"):
         assert a[k].size == b[k].size == 1, (k, a[k], b[k])
         assert abs(a[k][0] - b[k][0]) <= 5e-9
+
+
+# -- the impulse of a joint tail cut by t_end --------------------------------------------------------
+
+def test_a_joint_tail_cut_by_t_end_reports_the_impulse_up_to_t_end_only():
+    """Two balls dropped from 5 mm and 5.5 mm (e = 0.4, translated by 100): ball 0's impact at
+    0.0711 s, in the last sample interval (t_k, t_end] = (0.0665, 0.076], starts their joint
+    tail; ball 0 rests at its t∞ = 0.07379 s, ball 1 (t∞ = 0.07739 s) still hops at t_end.
+    Independent momentum balance over that interval, W·Λ = M(u(t_end) − u(t_k)) + M·G·h
+    (free unit masses, W = I, the gravity integral exact):
+
+    - the frame's impulses P_k of both contacts against the frame's own velocities (the tail
+      is densely closed in the frame: the states from the projection at the tail's start);
+    - ball 0's impulse in its event rows (its impacts in (t_k, t_end), not the tail's exact
+      hops, which its accumulation row sums, and that row's impulse) against the frame's
+      velocities of ball 0, which rests at t_end (u = 0 there: the frame's and the ball's).
+
+    Before, both counted the whole tail to the common t∞ past t_end (the frame besides added
+    the held forces of its own fill to the tail's): 0.063 and 0.014 too much. Tolerance: the
+    rounding of the sums, 2⁻⁴⁶ ≈ 64 ulp of 1 (every term is below 1; ball 0's accumulation
+    row sums its tail's hop impulses and held-force integrals, a few dozen, each rounded to
+    an ulp of the running sum, and the impacts' velocity jumps round likewise)."""
+    h0, e, c, t_end = (0.005, 0.0055), 0.4, 100.0, 0.076
+    res = run_master(two_contacts(np.eye(2), h0, e, c, t_end))
+    assert res.status.ok
+    ev, f = res.events, res.frame
+    assert ev["note"].str.startswith("joint tail of contacts (0, 1)").any()      # the case
+    t_k, h = f["t"].iloc[-2], t_end - f["t"].iloc[-2]
+    assert f["t"].iloc[-1] == t_end
+    for j in (0, 1):
+        u = f[f"u{j}"].to_numpy()
+        balance = (u[-1] - u[-2]) + G * h
+        assert abs(f[f"P{j}"].iloc[-1] - balance) <= 2.0 ** -46, (j, f[f"P{j}"].iloc[-1], balance)
+    mine = ev[(ev["contact"] == 0) & (ev["time"] > t_k)]
+    acc = mine[mine["kind"] == "accumulation"]
+    assert len(acc) == 1 and acc["time"].iloc[0] < t_end
+    hop = mine["note"].str.endswith("exact hop")
+    rows = mine[(mine["kind"] == "impact") & ~hop]["impulse"].sum() + acc["impulse"].iloc[0]
+    u = f["u0"].to_numpy()
+    assert ball_t_inf(h0[0], e) < t_end and u[-1] == 0.0
+    balance = (u[-1] - u[-2]) + G * h
+    assert abs(rows - balance) <= 2.0 ** -46, (rows, balance)
