@@ -994,26 +994,23 @@ class _Run:
                          cluster: list, key: tuple, gm: np.ndarray, impacts: int):
         """Carry the state to the common accumulation time of a joint tail
         (:func:`observer.event.tails.joint_tail`) resolved from the impact of ``key`` at t:
-        the cluster is densely closed from t (as in :meth:`accumulate`), the tail's impulses
-        (impacts and held forces) go to the sample interval of t, the tail's events
+        the cluster is densely closed from t (as in :meth:`accumulate`): the sample intervals
+        get the frame's own impulse, the projection onto the held set at t and the held
+        forces' ∫λ dt to t_∞ (or t_end), not the tail's hops. The tail's events
         (:attr:`~observer.event.tails.JointTail.rows`: its impacts, lift-offs and holds, note
         "exact hop") are listed, ``accumulation`` rows at each contact's last hold say how
-        the tail was resolved, and the acceleration LCP decides which contacts stay closed.
-        Returns (x, held set), or None if t_∞ ≥ t_end (the run ends; the tail's events
-        before t_end are listed, an accumulation row's impulse is its contact's up to t_end,
-        :attr:`~observer.event.tails.JointTail.until_end`, and the sample intervals get the
-        frame's own: the projection onto the held set at t and its held forces up to t_end)."""
+        the tail was resolved (its impulse), and the acceleration LCP decides which contacts
+        stay closed. Returns (x, held set), or None if t_∞ ≥ t_end (the run ends; the tail's
+        events before t_end are listed, an accumulation row's impulse is its contact's up to
+        t_end, :attr:`~observer.event.tails.JointTail.until_end`)."""
         for c in cluster:
             if self.intervals[c] and self.intervals[c][-1] == (t, t):
                 self.intervals[c].pop()
             self.closed_since.setdefault(c, t)
         setp = tuple(sorted(set(jt.held) | set(held)))
-        if jt.t_inf < self.t_end:
-            self.add_impulse(t, list(range(self.m)), jt.impulse)
-        else:               # the frame's tail to t_end (as in accumulate): the projection at t,
-            idx = list(jt.held)                      # then the held forces' ∫λ dt (fill)
-            gam = self.free_flow.velocities(t, x)[idx]
-            self.add_impulse(t, idx, -np.linalg.solve(self.delassus(idx), gam))
+        idx = list(jt.held)      # the frame's tail (as in accumulate): the projection at t,
+        gam = self.free_flow.velocities(t, x)[idx]           # then the held forces' ∫λ dt (fill)
+        self.add_impulse(t, idx, -np.linalg.solve(self.delassus(idx), gam))
         self.fill(flow_for(self.system, jt.held), t, self.project(t, x, list(jt.held)),
                   min(jt.t_inf, self.t_end), include_end=jt.t_inf >= self.t_end)
         hop_note = f"joint tail of contacts {tuple(cluster)}: exact hop"

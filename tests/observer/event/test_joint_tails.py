@@ -295,3 +295,62 @@ def test_a_joint_tail_cut_by_t_end_reports_the_impulse_up_to_t_end_only():
     assert ball_t_inf(h0[0], e) < t_end and u[-1] == 0.0
     balance = (u[-1] - u[-2]) + G * h
     assert abs(rows - balance) <= 2.0 ** -46, (rows, balance)
+
+
+def test_a_joint_tail_ending_before_t_end_puts_the_frames_own_impulse_in_its_interval():
+    """The two balls of test_two_balls_whose_tails_overlap… (5 mm and 5.001 mm, e = 0.4,
+    translated by 100, t_end = 0.1): ball 0's impact at 0.0711 s starts their joint tail, both
+    rest at t∞ (0.07379 s) in the same sample interval (t_k, t_{k+1}] = (0.0625, 0.075].
+    Independent momentum balance over it, W·Λ = M(u(t_{k+1}) − u(t_k)) + M·G·h (free unit
+    masses, W = I, the gravity integral exact):
+
+    - the frame's impulses P of both contacts against the frame's own velocities (the frame
+      draws the tail densely closed from its start: the projection there, then held);
+    - each ball's event rows in the interval (its impacts, not the tail's exact hops, which
+      its accumulation row sums, and that row's impulse) plus its held force after the
+      tail, G·(t_{k+1} − t∞) with t∞ the tail's end (its last accumulation row).
+
+    Before, the frame added the whole tail's impulse on top of its fill's held forces: 0.027
+    too much per contact. Tolerance: the rounding of the sums, 2⁻⁴⁶ ≈ 64 ulp of 1 (every
+    term is below 1; the interval's P sums three impacts, the projection and two held-force
+    integrals, an accumulation row a few dozen hop impulses and integrals, each rounded to an
+    ulp of the running sum; the velocities' jumps round likewise)."""
+    h0, e, c, t_end = (0.005, 0.005001), 0.4, 100.0, 0.1
+    res = run_master(two_contacts(np.eye(2), h0, e, c, t_end))
+    assert res.status.ok
+    ev, f = res.events, res.frame
+    tail = ev[ev["note"].str.startswith("joint tail of contacts (0, 1)")]
+    t_grid = f["t"].to_numpy()
+    k = int(np.searchsorted(t_grid, tail["time"].min())) - 1          # the tail's interval
+    t_k, t_k1 = t_grid[k], t_grid[k + 1]
+    acc = tail[tail["kind"] == "accumulation"]
+    t_inf = acc["time"].max()
+    start = ev[(ev["kind"] == "impact") & (ev["time"] < tail["time"].min())]["time"].max()
+    assert len(acc) == 2 and t_k < start and t_inf < t_k1 < t_end      # the case: all in it
+    for j in (0, 1):
+        u = f[f"u{j}"].to_numpy()
+        balance = (u[k + 1] - u[k]) + G * (t_k1 - t_k)
+        P = f[f"P{j}"].iloc[k + 1]
+        assert abs(P - balance) <= 2.0 ** -46, (j, P, balance)
+        mine = ev[(ev["contact"] == j) & (ev["time"] > t_k) & (ev["time"] <= t_k1)]
+        hop = mine["note"].str.endswith("exact hop")
+        rows = (mine[(mine["kind"] == "impact") & ~hop]["impulse"].sum()
+                + mine[mine["kind"] == "accumulation"]["impulse"].sum() + G * (t_k1 - t_inf))
+        assert abs(rows - balance) <= 2.0 ** -46, (j, rows, balance)
+
+
+@pytest.mark.parametrize("c", [0.0, 100.0, -7.5])
+def test_the_frame_of_coupled_contacts_keeps_the_momentum_balance_through_their_joint_tail(c):
+    """The coupled contacts of COUPLED (their joint tail ends at t∞ ≈ 0.0971 s < t_end): the
+    frame's momentum balance M(u(t_{k+1}) − u(t_k)) + M·G·h = W·P on every sample interval,
+    the tail's included, for any translation. Before, the tail's interval held the tail's
+    impulse on top of its fill's held forces: 9.5e-6, 0.068 and 0.010 off for c = 0, 100,
+    −7.5. Tolerance 2⁻⁴⁶ as in the test above (every term below 1, W's entries ≤ 1)."""
+    W, h0, e, t_end = COUPLED
+    res = run_master(two_contacts(np.array(W), h0, e, c, t_end))
+    assert res.status.ok
+    f = res.frame
+    assert res.events["note"].str.startswith("joint tail of contacts (0, 1)").any()
+    t, U, P = f["t"].to_numpy(), f[["u0", "u1"]].to_numpy(), f[["P0", "P1"]].to_numpy()
+    off = np.diff(U, axis=0) + G * np.diff(t)[:, None] - P[1:] @ np.array(W).T
+    assert np.max(np.abs(off)) <= 2.0 ** -46, np.max(np.abs(off), axis=1)
