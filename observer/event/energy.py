@@ -216,6 +216,12 @@ class EnergyCarry:
         if math.isfinite(self.eps):
             self.eps = (self.eps + p_norm_bound(self.absP, w)) * (1.0 + 4.0 * _U)
 
+    def shift(self, w: np.ndarray) -> None:
+        """Add a move of the state bounded componentwise by w to ε (a move of the float
+        state within the data's error, not through the law's map)."""
+        if math.isfinite(self.eps):
+            self.eps = (self.eps + p_norm_bound(self.absP, w)) * (1.0 + 4.0 * _U)
+
     def through(self, rows: np.ndarray, eps: float | None = None) -> np.ndarray:
         """``‖r‖_{P⁻¹}·ε`` for every row r (inf where no bound is proved); ``eps``: another ε
         (:meth:`after`) than the run's."""

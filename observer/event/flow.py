@@ -134,16 +134,6 @@ class Flow:
         ``g = gap_rows @ z`` (paper eq. (2)), ``γ = velocity_rows @ z`` (eq. (3)).
     force_rows : ndarray, shape (len(active), N)
         ``λ_I = force_rows @ z`` (zero rows for the free flow).
-    time_scale : float
-        The time scale τ (:func:`_time_scale`) of the part of the system the gaps see
-        (:meth:`_coupled_scale`: a mode no contact is coupled to sets none): the event loop's
-        contact tolerances in :mod:`observer.event.master` are relative to the motion over τ;
-        the root search's sign decisions and its touch band use no τ (issue 34).
-    intrinsic : bool
-        Whether the system has a time scale of its own (a natural frequency, a damping rate or
-        a harmonic frequency); if not, ``time_scale`` is the flow's window, which is not
-        covariant with the length unit, and a run takes its motion's
-        (:func:`observer.event.master.motion_time_scale`).
     norm_bound : float
         ``‖T⁻¹AT‖₂`` for the balancing similarity T (``scale``): ``‖T⁻¹z(t+τ)‖ ≤
         exp(norm_bound·τ)‖T⁻¹z(t)‖`` (float64 SVD): it sets the root isolation's window.
@@ -204,32 +194,9 @@ class Flow:
         self.force_rows = force_rows
         self.scale, self._balanced = balance(A, cancelled)
         self.norm_bound = float(np.linalg.norm(self._balanced, 2))
-        free = None if not self.active else flow_for(system, ())
-        self.time_scale, self.intrinsic = (self._coupled_scale() if free is None
-                                           else (free.time_scale, free.intrinsic))  # one τ for all
         self._expm_cache: OrderedDict = OrderedDict()
         self._phi_cache: OrderedDict = OrderedDict()
         self._certified_norm: float | None = None
-
-    def _coupled_scale(self) -> tuple[float, bool]:
-        """``(time_scale, intrinsic)`` of the part of the system the gaps see: the closure of
-        the gap rows' support under the sparsity of A (:func:`observer.event.enclosures.coupled`),
-        whose DOFs D and harmonic frequencies alone enter :func:`_time_scale` (``M⁻¹K`` and
-        ``M⁻¹C`` restricted to D: the closure makes their coupling to the rest zero). A mode
-        no contact sees (an unconnected spring) sets no scale of the run (issue 34)."""
-        from observer.event.enclosures import coupled
-
-        n = self.n
-        mask = coupled(self.A, np.any(self.gap_rows != 0.0, axis=0))
-        dofs = np.flatnonzero(mask[:n] | mask[n:2 * n])
-        freqs = [w for k, w in enumerate(self.freqs)
-                 if mask[2 * n + 2 * k] or mask[2 * n + 2 * k + 1]]
-        if mask.all():
-            dofs = np.arange(n)
-        S = np.flatnonzero(mask)
-        norm = float(np.linalg.norm(self._balanced[np.ix_(S, S)], 2)) if S.size else 0.0
-        return (_time_scale(self.system, freqs, norm, dofs),
-                _has_rates(self.system, freqs, dofs))
 
     @cached_property
     def blocks(self) -> list[np.ndarray]:
@@ -591,42 +558,6 @@ def spectral_norm_upper(A: np.ndarray, scale: np.ndarray) -> float:
                 for i in range(N)]
         top = max(up(float(r.upper()), 1) for r in rows)      # arf → float: at most 1 ulp low
     return up(math.sqrt(max(top, 0.0)), 1)
-
-
-def _time_scale(system: LinearSystem, freqs: list[float], norm_bound: float,
-                dofs: np.ndarray | None = None) -> float:
-    """The system's own time scale τ = 1/ω_max, for the tolerances of
-    :mod:`observer.event.roots` (a property of the motion, not of the coordinates).
-
-    ω_max is the largest of the natural frequencies √|eig(M⁻¹K)|, the damping rates
-    |eig(M⁻¹C)| and the forcing and gap frequencies: all invariant under a translation of
-    coordinates and a shift of the time origin, and scaled as 1/time by a change of units.
-    A system with none of them (K = C = 0, constant forcing: the bouncing ball) has no
-    intrinsic time scale; its flow's window ``0.5/‖T⁻¹AT‖`` is used (covariant with units
-    up to the power-of-2 rounding of the balancing, invariant under translations, which
-    leave A unchanged when K = 0).
-    """
-    Minv = np.linalg.inv(system.M)
-    D = np.arange(system.n) if dofs is None else np.asarray(dofs, dtype=int)
-    rates = [0.0]
-    for mat, root in ((Minv @ system.K, True), (Minv @ system.C, False)):
-        mat = mat[np.ix_(D, D)]
-        if np.any(mat):
-            ev = np.abs(np.linalg.eigvals(mat))
-            rates.append(float(np.max(np.sqrt(ev) if root else ev)))
-    rates.extend(float(w) for w in freqs)
-    w_max = max(rates)
-    if w_max > 0.0:
-        return 1.0 / w_max
-    return 0.5 / max(norm_bound, 1e-300)
-
-
-def _has_rates(system: LinearSystem, freqs: list[float], dofs: np.ndarray | None = None) -> bool:
-    """True if K, C (on the DOFs ``dofs``, default all) or a harmonic term gives the system a
-    time scale of its own."""
-    D = np.arange(system.n) if dofs is None else np.asarray(dofs, dtype=int)
-    sub = np.ix_(D, D)
-    return bool(np.any(system.K[sub]) or np.any(system.C[sub]) or freqs)
 
 
 _FLOWS: dict = {}

@@ -175,8 +175,9 @@ class GapFrame:
     def for_scenario(sc) -> "GapFrame | None":
         """The frame a run of ``sc`` (a :class:`observer.scenario.Scenario`) takes: that of its
         system (:meth:`of`) when it lowers the gaps' representation floor at the initial
-        state, ``Σ_j (Σ_i |W_ij q_i| + |ν_j|)`` — the sum the engine's round-off bounds and
-        touch bands scale with (:func:`observer.event.roots.tolerance`) — else None (a motion
+        state, ``Σ_j (Σ_i |W_ij q_i| + |ν_j|)`` — the sum the engine's certified evaluation
+        errors and touch bands scale with
+        (:func:`observer.event.enclosures.represented_error`) — else None (a motion
         away from its contacts, a spring's rest position 10 m off the wall, is left in its
         coordinates: there the frame would only move the state away from its origin)."""
         frame = GapFrame.of(sc.system)

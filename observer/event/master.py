@@ -21,13 +21,16 @@ the evaluation error at the minimum, the run's accumulated state error carried t
 :meth:`_Run.search_band`, and the data's representation in the user's coordinates)
 is a graze with zero impulse (the run continues past it); its row carries ``depth = m*`` and
 a note stating the enclosure, δ and the guaranteed crossing depth δ* = δ + its width.
-A crossing with ``|γ⁻| ≤`` CONTACT_TOL motion
-tolerances of γ is labelled a graze too, and its (tiny) impulse is applied. A minimum above
-the touch band is a miss: no event. An open contact is impacted together with the one
-that triggers an impact (simultaneous impact) when its gap is not certainly positive (its
-float64 value within its certified evaluation error, γ_{N+1}·Σ|r z|) or closes within what
-the time coordinate's resolution (two ulp of t) hides at its speed, no wider:
-:meth:`_Run.simultaneous_band`.
+A crossing with ``|γ⁻|`` within γ's certified error (:meth:`_Run.velocity_band`, its
+carried part up to :meth:`_Run.accuracy_caps`) is labelled a graze too, and its (tiny)
+impulse is applied. A minimum above the touch band is a miss: no event. An open contact is
+impacted together with the one that triggers an impact (simultaneous impact) when its gap is
+not certainly positive (its float64 value within its certified evaluation error,
+γ_{N+1}·Σ|r z|, or within the run's carried state error up to ``zeno_time_rtol`` of the
+contact's reach, :meth:`_Run.accuracy_caps`; it is then moved onto its contact point,
+:meth:`_Run.onto_contacts`) or closes within what the time coordinate's resolution (two ulp
+of t) hides at its speed: :meth:`_Run.simultaneous_band`. No time scale of the system, no
+guessed length and no count of round-offs enters a decision.
 
 Zeno: a run of impacts of one contact set whose intervals shrink geometrically (consecutive
 ratios equal within :data:`ZENO_RATIO_SPREAD`) is stopped once the impact velocity has
@@ -50,8 +53,8 @@ impacts and accumulating again between them), or key's impact re-launches a held
 key bounces on a held set (the chain's
 blocks settling on each other), and one contact of key is resolved as far as
 its gap's representation allows (next hop within the gap's certified error, or
-:func:`zeno_time_budget` reached; several contacts: a hop within
-:data:`observer.event.tails.MERGE_HOPS` motion tolerances), the cluster's **joint tail** (:mod:`observer.event.tails`)
+:func:`zeno_time_budget` reached; several contacts: a hop no higher than the band an impact
+would merge, :meth:`_Run.merge_band`), the cluster's **joint tail** (:mod:`observer.event.tails`)
 resolves it by exact hops of every contact relative to its contact point until all of them
 are held; each contact's ``accumulation`` row is at the time it was last held (its own t_∞)
 and its note says ``joint tail of contacts …``. A joint tail that does not converge or would
@@ -75,8 +78,7 @@ from observer.event.enclosures import (dot_sign, gamma, polish_lcp, represented_
 from observer.event.energy import EnergyCarry
 from observer.event.flow import Flow, flow_for
 from observer.event.roots import (WINDOW, FunctionalSet, NonFiniteFlow,
-                                  RootIsolationError, SearchStopped, first_zero, motion_tolerance,
-                                  time_resolution, tolerance)
+                                  RootIsolationError, SearchStopped, first_zero, time_resolution)
 from observer.event.tails import JointTail, horner, joint_due, joint_tail
 from observer.impact import ImpactLaw, impact
 from observer.result import RunState, RunStatus
@@ -87,11 +89,6 @@ _U = np.finfo(float).eps / 2.0
 
 if TYPE_CHECKING:
     import pandas as pd
-
-CONTACT_TOL = 1e3
-"""A contact counts as closed (simultaneous impact, persistent contact) when |g| and the
-relevant velocity are within CONTACT_TOL × their round-off tolerance
-(:func:`observer.event.roots.tolerance`)."""
 
 ZENO_MIN_IMPACTS = 6
 """Impacts of one run needed before a geometric accumulation is recognised."""
@@ -270,7 +267,6 @@ class _Run:
         self.segments: list[tuple[float, float, tuple, np.ndarray]] = []
         self.free_flow = flow_for(self.system, ())
         self.Minv = self.free_flow.Minv
-        self.tau = self.free_flow.time_scale      # a system without one: set by run_master
         self.note, self.note_time = "", np.nan
         self.should_stop = None        # callable → a signal name (SIGINT/SIGTERM) or None
         self.hop_end = None            # (contact, t_k, t_last, x_last) of the last hop_tail
@@ -281,6 +277,7 @@ class _Run:
         self.energy = EnergyCarry(self.system, t_end - t0)   # the same error in ‖·‖_P
         self.origin: np.ndarray | None = None   # the gap frame's q* (run_master), for graze bands
         self.search_err, self.search_eps = np.zeros(2 * self.n), 0.0   # the searches' rounding
+        self.reach = np.zeros((2, self.m))   # max |g_j|, |γ_j| of the run so far (accuracy_caps)
 
     # -- sampling --------------------------------------------------------------------------
     def fill(self, flow: Flow, t_a: float, x_a: np.ndarray, t_b: float, include_end: bool) -> None:
@@ -358,12 +355,6 @@ class _Run:
             note = self.note if t == self.note_time else ""
         self.events.append((float(t), int(j), kind, float(gm), float(gp), float(imp),
                             float(depth), str(note)))
-
-    def tol(self, rows: np.ndarray, z: np.ndarray, t: float, flow: Flow | None = None) -> np.ndarray:
-        """Motion tolerance (:func:`observer.event.roots.motion_tolerance`) of ``rows @ z`` at t
-        along ``flow`` (default the free flow)."""
-        fl = flow or self.free_flow
-        return motion_tolerance(rows, fl.A, z, self.tau, t)
 
     def close(self, j: int, t: float) -> None:
         self.closed_since.setdefault(j, t)
@@ -564,26 +555,29 @@ class _Run:
         fl = self.free_flow
         z = fl.z(t, x)
         g, gam = fl.gap_rows @ z, fl.velocity_rows @ z
-        tol_g = CONTACT_TOL * self.tol(fl.gap_rows, z, t)
-        tau_v = CONTACT_TOL * self.tol(fl.velocity_rows, z, t)
+        cap_g, cap_v = self.accuracy_caps(g, gam)
         vband = self.velocity_band(z)
-        tol_v = np.minimum(tau_v, vband)
-        near, certified = self.simultaneous_band(t, z, gam, tol_g)
+        tol_v = np.maximum(self.velocity_band(z, carried=False), np.minimum(cap_v, vband))
+        own, near, certified = self.simultaneous_band(t, z, gam, cap_g)
         closing = {j for j in range(self.m) if abs(g[j]) <= near[j] and gam[j] < tol_v[j]}
         A = sorted(set(persistent) | set(trigger) | closing)
-        notes = self.unordered_notes(trigger, A, g, gam, certified, vband)
+        moved = [j for j in sorted(closing - set(trigger) - set(persistent)) if abs(g[j]) > own[j]]
+        x, notes = self.onto_contacts(t, x, A, moved, g, near)
+        for j, text in self.unordered_notes(trigger, A, g, gam, certified, vband).items():
+            notes.setdefault(j, []).extend(text)
         idx = np.array(A, dtype=int)
         G = self.delassus(A)
         gm = gam[idx]
         lam = impact(self.law, G, gm, idx, self.exact_solve(A)) if np.any(gm < 0.0) \
             else np.zeros(len(A))
         lam = np.maximum(lam, 0.0)
-        x = x.copy()
         x[self.n:] += self.velocity_jump(A, lam)
         self.jump_error(A, lam, x[self.n:])
         gp = fl.velocities(t, x)[idx]
-        vband_p = np.maximum(vband, self.velocity_band(fl.z(t, x)))         # + the jump
-        band_p = np.minimum(tau_v, vband_p)
+        zp = fl.z(t, x)
+        vband_p = np.maximum(vband, self.velocity_band(zp))                 # + the jump
+        band_p = np.maximum(np.maximum(tol_v, self.velocity_band(zp, carried=False)),
+                            np.minimum(cap_v, vband_p))
         cand = [c for c, v in zip(A, gp) if v <= band_p[c]]
         for c, v in zip(A, gp):
             if band_p[c] < v <= vband_p[c]:
@@ -628,6 +622,38 @@ class _Run:
                          f"carried error ±{certified[j]:.3g})" for j in later)
         return {c: [text] for c in trigger}
 
+    def onto_contacts(self, t: float, x: np.ndarray, A: list, moved: list, g: np.ndarray,
+                      band: np.ndarray) -> tuple[np.ndarray, dict[int, list[str]]]:
+        """A copy of x, its positions moved onto ``g_A = 0`` when some contacts of the impact
+        set A (``moved``) joined it although their float gaps are certainly not zero on the
+        float state itself: the data do not order their landings with the trigger's (their
+        gaps are within the carried state error ``band``, :meth:`simultaneous_band`; issue 34
+        item 3), so they are impacted together, at their contact points and not at an open
+        gap. The move is the M-metric projection ``Δq = −M⁻¹W_A G_AA⁻¹ g_A`` (velocities
+        unchanged), within the carried error that allowed it; the carried error grows by it
+        (:meth:`shifted`), so the enclosure of the exact trajectory stays proved. Returns
+        ``(x, notes)``: each moved contact's note names its gap and the carried error."""
+        x = x.copy()
+        if not moved:
+            return x, {}
+        n = self.n
+        W = self.system.W[:, A]
+        dq = -(self.Minv @ (W @ np.linalg.solve(self.delassus(A), g[A])))
+        x[:n] += dq
+        self.shifted(np.abs(dq), np.abs(x[:n]))
+        return x, {j: [f"landed with the impact: gap {g[j]:.3g} within the carried error "
+                       f"±{band[j]:.3g} (the data do not order it), moved onto its contact "
+                       "point"] for j in moved}
+
+    def shifted(self, dq: np.ndarray, q: np.ndarray) -> None:
+        """Add a move of the positions by ``dq`` (componentwise bound, ``q`` the moved
+        positions' magnitudes for the sum's rounding ``u·|q|``) to :attr:`err` and to the
+        energy norm's ε (:meth:`EnergyCarry.shift`)."""
+        n = self.n
+        new = (dq + _U * q) * (1.0 + 4.0 * _U)
+        self.err[:n] += new
+        self.energy.shift(np.concatenate([new, np.zeros(n)]))
+
     def joined_note(self, t: float, extra: list[str] | None) -> str | None:
         """The note of the zero that triggered the event at t (:meth:`event`'s default)
         followed by ``extra``; None (the default) when there is no extra."""
@@ -636,7 +662,45 @@ class _Run:
         own = self.note if t == self.note_time else ""
         return "; ".join([own] + extra if own else extra)
 
-    def velocity_band(self, z: np.ndarray) -> np.ndarray:
+    def accuracy_caps(self, g: np.ndarray, gam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """How far the carried state error decides simultaneity and rebounds (:meth:`collide`):
+        the run's stated relative accuracy ``zeno_time_rtol`` times each contact's own reach,
+        the largest |g_j| and |γ_j| of the run so far (:attr:`reach`, raised by ``g`` and
+        ``gam`` at this impact). Within ``rtol·max|g_j|`` a landing the data do not order with
+        the trigger's is impacted together with it, moved onto its contact point
+        (:meth:`onto_contacts`); within ``rtol·max|γ_j|`` a rebound the data do not decide is
+        a candidate to stick. Beyond, the carried error has grown past the stated accuracy
+        (late in a long chaotic run it outgrows the gaps): the float state orders the
+        landings and resolves the rebound, and the event row says that the data do not
+        decide it (:meth:`unordered_notes`). Relative to the run's own motion: no time scale
+        of the system, no guessed length, no count of round-offs (issue 34 item 1); the same
+        under a translation, a shift of the time origin and a change of units.
+
+        Returns
+        -------
+        cap_g, cap_v : ndarray
+            Per contact, in the gaps' and the relative velocities' units."""
+        self.reach[0] = np.maximum(self.reach[0], np.abs(g))
+        self.reach[1] = np.maximum(self.reach[1], np.abs(gam))
+        cap = self._caps()
+        return cap[0], cap[1]
+
+    def _caps(self) -> np.ndarray:
+        """``zeno_time_rtol·reach`` (0 where the reach is 0, also for rtol = inf)."""
+        with np.errstate(invalid="ignore"):
+            return np.where(self.reach > 0.0, self.zeno_time_rtol * self.reach, 0.0)
+
+    def merge_band(self, t: float, x: np.ndarray) -> np.ndarray:
+        """The gaps that an impact at t would land together with its trigger's
+        (:meth:`simultaneous_band` with the caps of :meth:`accuracy_caps` at the run's reach
+        so far, not raised): a joint tail (:func:`observer.event.tails.joint_due`) is due once
+        a hop of a simultaneous key is no higher, where event-by-event impacts would merge
+        its landings with the others'."""
+        fl = self.free_flow
+        z = fl.z(t, x)
+        return self.simultaneous_band(t, z, fl.velocity_rows @ z, self._caps()[0])[1]
+
+    def velocity_band(self, z: np.ndarray, carried: bool = True) -> np.ndarray:
         """The certified distance of every contact's float64 relative velocity ``r_v·z`` to
         its exact value on the exact trajectory: its evaluation and the state's
         representation, ``(1 + 2γ)(γ + u)·Σ|r_v z|`` with γ = γ_{N+1}
@@ -644,16 +708,20 @@ class _Run:
         row ``r_v = r A`` itself, ``γ_{N+1}·(|r||A|)|z|``, and the accumulated state error
         through the row (:attr:`err` componentwise, or the energy norm's
         ``‖r_v‖_{P⁻¹}·ε``, the smaller). No time scale, no count of round-offs: a
-        contact's γ⁺ outside it is certainly nonzero (issue 34 item 1)."""
+        contact's γ⁺ outside it is certainly nonzero (issue 34 item 1). ``carried=False``:
+        the float state's own part alone (its evaluation and representation: the band of
+        the exact flow from the float state itself)."""
         fl = self.free_flow
         rows = fl.velocity_rows
         g = gamma(z.size + 1)
         row_rounding = (1.0 + 2.0 * g) * g * (np.abs(fl.gap_rows) @ (np.abs(fl.A) @ np.abs(z)))
         own = represented_error(rows, z) + row_rounding
-        return (own + self.carried(rows)) * (1.0 + 2.0 * g) + np.finfo(float).tiny
+        if carried:
+            own = own + self.carried(rows)
+        return own * (1.0 + 2.0 * g) + np.finfo(float).tiny
 
     def simultaneous_band(self, t: float, z: np.ndarray, gam: np.ndarray, cap: np.ndarray
-                          ) -> tuple[np.ndarray, np.ndarray]:
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The gaps within which an open contact is impacted together with the one that
         triggered an impact at t (:meth:`collide`): a gap not certainly positive, or one that
         closes within the time coordinate's resolution. From what is certified: the gap's
@@ -672,23 +740,25 @@ class _Run:
         enclosures (:meth:`gap_error`); the energy norm's does not grow with ``‖|A|‖``
         (:class:`observer.event.energy.EnergyCarry`; tests/observer/event/test_energy_carry.py
         holds it to a small multiple of the steps' rounding over 10⁴ periods of an oscillator,
-        where the componentwise one overflows). ``cap`` (the persistent-contact band of
-        :meth:`collide`) still bounds it: a held flow's certified growth rate in P can be large
-        (its held force couples the error's component off the contact manifold into the
-        energy), and uncapped the band merged landings of the rocking chain: late in its run
-        its carried error outgrows its gaps, and the uncapped band would impact contacts well
-        above their stops. What the cap leaves in order against the carried error is noted
-        (:meth:`unordered_notes`; tests/observer/event/test_unordered_landings.py).
+        where the componentwise one overflows). The carried part counts up to ``cap`` (the
+        run's stated accuracy of each contact's gap, :meth:`accuracy_caps`): late in a long
+        chaotic run the carried error outgrows the gaps, and uncapped it would land every
+        contact together; beyond the cap the float state orders the landings and the row
+        says the data do not (:meth:`unordered_notes`). A contact landing together beyond its
+        own band is moved onto its contact point (:meth:`onto_contacts`): an impulse is
+        never applied at an open gap (issue 34 items 1 and 3).
 
         Returns
         -------
-        band, certified : ndarray
-            The capped band, and the certified one (uncapped)."""
+        own, band, certified : ndarray
+            The float state's own band (its representation and the time resolution), the
+            band with the carried error up to ``cap``, and with all of it."""
         fl = self.free_flow
         floor = represented_error(fl.gap_rows, z)
         hidden = time_resolution(t) * np.abs(gam)
-        certified = np.maximum(np.maximum(floor, hidden), self.gap_error(z))
-        return np.minimum(cap, certified), certified
+        own = np.maximum(floor, hidden)
+        carried = self.gap_error(z)
+        return own, np.maximum(own, np.minimum(cap, carried)), np.maximum(own, carried)
 
     # -- Zeno ------------------------------------------------------------------------------
     def zeno_check(self, key: tuple, t: float, x: np.ndarray, gm: np.ndarray,
@@ -1160,6 +1230,10 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
         before the cut, nor the extrapolation's own error (exact for a constant contact
         acceleration); the other cut-offs (``zeno_velocity_ratio``, the hop within its gap's
         certified error, an interval within the time resolution) may cut first.
+        The same value, relative to each contact's reach (its largest |g| and |γ| of the run),
+        is how far the carried state error merges a landing with an impact and makes a
+        rebound a candidate to stick (:meth:`_Run.accuracy_caps`); beyond it the event row
+        says the data do not decide it.
 
     A run that stops (event cap, stalled isolation, no progress) returns the frame up to its
     stop time, never NaN rows, with the reason in ``status``. So does a state that leaves the
@@ -1192,8 +1266,7 @@ def _start(scenario: Scenario, h, t_end, max_events: int, zeno_velocity_ratio: f
     run = _Run(scenario, h, t_end, max_events, zeno_velocity_ratio, t0, rtol)
     run.should_stop = should_stop
     x = np.concatenate([scenario.q0, scenario.u0]).astype(float)
-    if not run.free_flow.intrinsic:
-        run.tau = motion_time_scale(run.free_flow, t0, x)
+    run.accuracy_caps(run.free_flow.gaps(t0, x), run.free_flow.velocities(t0, x))   # the reach
     x, persistent = _initial_contacts(run, x)
     return run, t_end, x, persistent
 
@@ -1373,21 +1446,6 @@ def _identically_zero(flow: Flow, row: np.ndarray, z: np.ndarray) -> bool:
         if not (np.any(r) or np.any(e)):
             return True
     return True
-
-
-def motion_time_scale(flow: Flow, t0: float, x: np.ndarray) -> float:
-    """Time scale τ of a motion whose system has none (no stiffness, damping or frequency: the
-    bouncing ball), from its initial state: the largest of the contacts' times
-    ``√(2|g|/|γ̇|)``, ``|γ|/|γ̇|`` and ``|g|/|γ|`` (free fall, stop, approach) at t0, all
-    invariant under translations and time shifts and in seconds whatever the length unit
-    (the flow's window, which scales with the acceleration's length unit, only if all vanish)."""
-    z = flow.z(t0, x)
-    g, gam = np.abs(flow.gap_rows @ z), np.abs(flow.velocity_rows @ z)
-    acc = np.abs(flow.velocity_rows @ flow.A @ z)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cand = np.concatenate([np.sqrt(2.0 * g / acc), gam / acc, g / gam])
-    cand = cand[np.isfinite(cand) & (cand > 0.0)]
-    return float(cand.max()) if cand.size else flow.time_scale
 
 
 def _initial_contacts(run: _Run, x: np.ndarray):

@@ -43,10 +43,6 @@ Zeros are refined by safeguarded Newton steps (bisection when a step leaves the 
 until the step is below the time resolution :func:`time_resolution` (two ulp of t, no time
 scale). A search interval no longer than it is integrated as flow and not searched; zeros
 closer than it are taken by their time to zero (and noted when float64 cannot order them).
-
-:func:`motion_tolerance` and :func:`resolution` (on the motion's time scale τ) remain for
-the event loop's contact decisions in :mod:`observer.event.master` and
-:mod:`observer.event.tails`, not for the search.
 """
 
 from __future__ import annotations
@@ -68,14 +64,10 @@ from observer.event.flow import Flow, exp_upper, norm_upper, spectral_norm_upper
 WINDOW = 0.5
 """Window length in units of ``1/‖T⁻¹AT‖``: the growth factor of z over a window is ≤ e^0.5."""
 
-ROUNDOFF = 64.0 * np.finfo(float).eps
-"""Relative round-off of a functional: of its evaluation ``r·z`` (``ROUNDOFF · Σ_j |r_ij z_j|``,
-the representation floor) and of the motion it describes (``ROUNDOFF · S``, :func:`motion_scale`)."""
-
 TIME_RTOL = 2.0 * np.finfo(float).eps
-"""Time resolution ``TIME_RTOL · max(|t|, τ)`` (τ the system's time scale,
-:attr:`observer.event.flow.Flow.time_scale`): Newton refinement stops at it, and a search
-interval no longer than it is integrated as a flow, not searched (a remainder of a few ulp)."""
+"""Time resolution ``TIME_RTOL · |t|`` (:func:`time_resolution`): Newton refinement stops at
+it, and a search interval no longer than it is integrated as a flow, not searched (a
+remainder of a few ulp)."""
 
 TAYLOR_ORDER = 16
 """Degree + 1 of the Taylor model of a functional in :func:`FunctionalSet.enclose`: its
@@ -215,48 +207,6 @@ class Zero:
     enclosure: tuple = ()
     carried: tuple = ()
     band_data: float = 0.0
-
-
-def tolerance(rows: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """Evaluation round-off of each functional ``rows @ z``: ROUNDOFF·Σ|r_ij z_j| (the
-    representation floor: it depends on the coordinates, see :func:`motion_tolerance`)."""
-    return ROUNDOFF * (np.abs(rows) @ np.abs(z)) + np.finfo(float).tiny
-
-
-def resolution(t: float, tau: float) -> float:
-    """Time resolution at t: ``TIME_RTOL · max(|t|, τ)`` (a few ulp of t, or of τ near t = 0)."""
-    return TIME_RTOL * max(abs(float(t)), tau)
-
-
-def motion_scale(derivs, tau: float) -> np.ndarray:
-    """Motion scale ``S = Σ_k |ψ^(k)| τ^k / k!`` of functionals with derivatives
-    ``derivs = (ψ, ψ', ψ'', …)`` over the time scale τ: how much ψ changes over τ. Invariant
-    under a translation of coordinates and a shift of the time origin (ψ and its derivatives
-    are), scaled with ψ's unit by a change of units (τ scales with time)."""
-    out = np.zeros_like(np.asarray(derivs[0], dtype=float))
-    fac, tk = 1.0, 1.0
-    for k, dk in enumerate(derivs):
-        if k:
-            fac *= k
-            tk *= tau
-        out = out + np.abs(dk) * (tk / fac)
-    return out
-
-
-def motion_tolerance(rows: np.ndarray, A: np.ndarray, z: np.ndarray, tau: float, t: float
-                     ) -> np.ndarray:
-    """Zero tolerance of the functionals ``rows @ z`` of a flow with generator A at time t:
-    the representation floor ``ROUNDOFF·Σ|r z|``, the motion's round-off ``ROUNDOFF·S``
-    (:func:`motion_scale` of ψ and its first three derivatives) and what the time resolution
-    hides, ``|ψ'|·δt`` (:func:`resolution`)."""
-    rows = np.atleast_2d(rows)
-    d = [rows @ z]
-    R = rows
-    for _ in range(3):
-        R = R @ A
-        d.append(R @ z)
-    return (tolerance(rows, z) + ROUNDOFF * motion_scale(d, tau)
-            + np.abs(d[1]) * resolution(t, tau))
 
 
 def first_cubic_zero(d0: float, d1: float, d2: float, bound: float, width: float) -> float:
@@ -428,7 +378,7 @@ class FunctionalSet:
         return self._d4 @ z
 
     def sums(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``Σ_j |r̂_kj z_j|`` (the representation floors before ROUNDOFF) and the certified
+        """``Σ_j |r̂_kj z_j|`` (the representation floors) and the certified
         errors of :meth:`errors` (kmax = 2), k = 0..2, shape (3, p) each: one stacked product."""
         both = self._abs_rows @ np.abs(z)
         return both[:3], self._inflate * both[3:]

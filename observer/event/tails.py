@@ -55,7 +55,7 @@ import numpy as np
 
 from observer.event.flow import Flow, flow_for
 from observer.event.enclosures import Decision, _refine, arb_dot, coupled, gamma
-from observer.event.roots import RootIsolationError, first_zero, time_resolution, tolerance
+from observer.event.roots import RootIsolationError, first_zero, time_resolution
 from observer.impact import impact
 
 HOP_ORDER = 8
@@ -68,20 +68,6 @@ TAIL_HOPS = 20_000
 CLUSTER_REACH = 4.0
 """An open contact joins the cluster if it lands within this many tail lengths
 ``2γ⁺/(α(1 − e))`` of the impacting contact (the hop sum of a constant acceleration)."""
-
-MERGE_HOPS = 1e3
-"""A joint tail of several contacts is also due once a hop height ``γ⁺²/(2|γ̇|)`` of one of
-them is within MERGE_HOPS motion tolerances (:func:`observer.event.roots.motion_tolerance`
-without its representation floor: a property of the motion, the same in any coordinates).
-Below it the engine's event-by-event decisions, which use CONTACT_TOL motion tolerances
-(:data:`observer.event.master.CONTACT_TOL`: persistent contact, sticking, the velocity band),
-no longer follow the exact flow, and where they go wrong depends on the coordinates' round-off;
-the joint tail, resolved from the contact points, does not (issue 19: without this trigger a
-damped pair of contacts whose accumulations interleave rests 4.4e-8 s early at c = 0 and
-1.2e-9 s off translated by 100; a hop merged 6.6e-13 m above its contact point, under the
-older band of simultaneous impacts, moved t∞ by 4.3e-7 s)."""
-
-
 
 @dataclass
 class JointTail:
@@ -198,7 +184,11 @@ def joint_due(run, key: tuple, t: float, x: np.ndarray, held: tuple, tiny: list)
     the gap's round-off δg over its speed γ⁺ plus the time resolution δt
     (:func:`observer.event.roots.time_resolution`), puts more than its share of the stated
     accuracy into the tail, ``(1 + 2/(1 − e))·(δg/γ⁺ + δt) ≥ run.time_budget(t)/k²``, as
-    :meth:`~observer.event.master._Run.noisy_tail` does for k = 1). The cluster is key and
+    :meth:`~observer.event.master._Run.noisy_tail` does for k = 1; or, for a key of several
+    contacts landing together, a next hop ``γ⁺²/(2|γ̇|)`` no higher than the gap an impact
+    would land together with them, :meth:`~observer.event.master._Run.merge_band`: below it
+    event-by-event impacts merge the contacts' landings by the carried error, the joint tail
+    resolves them from the contact points). The cluster is key and
     every open contact landing within :data:`CLUSTER_REACH` tail lengths ``2γ⁺/(α(1 − e))``
     (parabolic estimate); its k contacts share the budget ``zeno_time_rtol·(t − t0)``
     (:meth:`~observer.event.master._Run.time_budget`) as k² first-order terms of the common
@@ -212,9 +202,8 @@ def joint_due(run, key: tuple, t: float, x: np.ndarray, held: tuple, tiny: list)
     z = fl.z(t, x)
     g, v = fl.gap_rows @ z, fl.velocity_rows @ z
     a = (fl.velocity_rows @ fl.A) @ z
-    floor = tolerance(fl.gap_rows, z)
-    dg = floor / 64.0                                      # eps·Σ|r z|: the representation
-    motion = run.tol(fl.gap_rows, z, t, fl) - floor        # ROUNDOFF·S + |g'|δt: no |q|, |ν|
+    dg = np.finfo(float).eps * (np.abs(fl.gap_rows) @ np.abs(z))   # the representation
+    merged = run.merge_band(t, x)                          # what an impact at t lands together
     e = np.asarray(run.law.restitution, dtype=float)
     reach = 0.0
     for c in key:
@@ -232,7 +221,7 @@ def joint_due(run, key: tuple, t: float, x: np.ndarray, held: tuple, tiny: list)
     due = bool(tiny)
     for c in key:
         due |= (1.0 + 2.0 / (1.0 - e[c])) * (dg[c] / v[c] + time_resolution(t)) >= share
-        due |= len(key) > 1 and v[c] * v[c] <= 2.0 * -a[c] * MERGE_HOPS * motion[c]
+        due |= len(key) > 1 and v[c] * v[c] <= 2.0 * -a[c] * merged[c]
     return sorted(cluster) if due else None
 
 
