@@ -23,11 +23,12 @@ from observer.event.master import ZENO_VELOCITY_RATIO, _Run
 from observer.scenario import Scenario
 
 
-def two_masses() -> Scenario:
+def two_masses(unit: float = 1.0) -> Scenario:
+    """The two masses, lengths in a unit 1/``unit`` of the metre (gravity 10·unit)."""
     doc = {"scenario": {"name": "two masses"},
            "system": {"M": [[1.0, 0.0], [0.0, 1.0]], "C": [[0.0, 0.0], [0.0, 0.0]],
                       "K": [[0.0, 0.0], [0.0, 0.0]], "W": [[1.0, 0.0], [0.0, 1.0]],
-                      "forcing": {"constant": [-10.0, -10.0]}},
+                      "forcing": {"constant": [-10.0 * unit, -10.0 * unit]}},
            "impact": {"law": "newton", "restitution": 0.5},
            "initial": {"q": [1.0, 1.0], "u": [0.0, 0.0]},
            "simulation": {"t_end": 1.0, "h": 0.25}}
@@ -35,20 +36,22 @@ def two_masses() -> Scenario:
 
 
 def collide_with(x: np.ndarray, carried: dict[int, float], reach=(0.0, 0.0),
-                 rtol: float = 1e-9, out: list | None = None):
+                 rtol: float = 1e-9, out: list | None = None, unit: float = 1.0):
     """The impact of mass 0 at t = 0.5 from the state x after the run carried the error
     ``carried`` (component → bound; the componentwise enclosure only, no energy-norm one),
     the run's reach so far ``reach`` (max |g_j|, max |γ_j|, the same for both contacts) and
     ``zeno_time_rtol = rtol``; returns (impacted set, event rows); ``out`` gets
-    (x⁺, the carried error after)."""
-    run = _Run(two_masses(), 0.25, 1.0, 10, ZENO_VELOCITY_RATIO, zeno_time_rtol=rtol)
-    run.reach[0], run.reach[1] = reach
+    (x⁺, the carried error after, in metres); ``unit``: the same in lengths of 1/unit m
+    (x, the carried error and the reach scaled by it)."""
+    run = _Run(two_masses(unit), 0.25, 1.0, 10, ZENO_VELOCITY_RATIO, zeno_time_rtol=rtol)
+    run.reach[0], run.reach[1] = np.multiply(reach, unit)
+    x = x * unit
     for k, e in carried.items():
-        run.err[k] = e
+        run.err[k] = e * unit
     run.energy.eps = np.inf if carried else 0.0
     x_after, _, A, _, _ = run.collide(0.5, x, (), {0})
     if out is not None:
-        out.extend([x_after, run.err.copy()])
+        out.extend([x_after / unit, run.err / unit])
     return A, run.events
 
 
@@ -89,30 +92,36 @@ def test_a_rebound_within_the_carried_velocity_error_is_kept_and_noted(carried, 
         assert float(note.split("±")[1].split(" ")[0]) >= 1e-8
 
 
+@pytest.mark.parametrize("unit", [1.0, 1e3, 2.0 ** -20])
 @pytest.mark.parametrize("d, rtol", [(5e-10, 1e-9), (9.9e-10, 1e-9), (9e-7, 1e-6)])
-def test_a_landing_within_the_carried_error_and_the_stated_accuracy_lands_together(d, rtol):
+def test_a_landing_within_the_carried_error_and_the_stated_accuracy_lands_together(d, rtol, unit):
     """Reach 1 m (both masses fell from 1 m), carried error 1e-6 m: within rtol·1 m mass 1 is
     impacted with mass 0, at its stop: its position after the impact is exactly 0 (M = W = I:
     the move is −d), its velocity Newton's 0.5 m/s (impulse 1.5), and the carried error of its
-    position grew by the move."""
+    position grew by the move. The same in millimetres and in 2^20-ths of a metre."""
     out = []
-    A, rows = collide_with(np.array([0.0, d, -1.0, -1.0]), {1: 1e-6}, (1.0, 1.0), rtol, out)
+    A, rows = collide_with(np.array([0.0, d, -1.0, -1.0]), {1: 1e-6}, (1.0, 1.0), rtol, out,
+                           unit)
     x_after, err = out
     assert A == [0, 1] and [(r[1], r[2]) for r in rows] == [(0, "impact"), (1, "impact")]
     assert x_after[1] == 0.0 and x_after[0] == 0.0
-    assert x_after[3] == pytest.approx(0.5, rel=1e-15) and rows[1][5] == pytest.approx(1.5)
-    assert err[1] >= 1e-6 + d
-    assert f"landed with the impact: gap {d:.3g} within the carried error ±" in rows[1][7]
+    assert x_after[3] == pytest.approx(0.5, rel=1e-15)
+    assert rows[1][5] == pytest.approx(1.5 * unit)
+    assert err[1] >= (1e-6 + d) * (1.0 - 1e-15)
+    assert f"landed with the impact: gap {d * unit:.3g} within the carried error ±" in rows[1][7]
 
 
+@pytest.mark.parametrize("unit", [1.0, 1e3])
 @pytest.mark.parametrize("d, rtol, reach", [(1.01e-9, 1e-9, 1.0), (5e-10, 1e-9, 0.49),
                                             (5e-10, 4.9e-10, 1.0)])
-def test_a_landing_beyond_the_stated_accuracy_is_ordered_and_noted(d, rtol, reach):
+def test_a_landing_beyond_the_stated_accuracy_is_ordered_and_noted(d, rtol, reach, unit):
     """Near misses of the cap rtol·reach (by 1 %, 2 %): mass 1 lands later, in order, not
-    moved, and the trigger's row says the data do not order it."""
+    moved, and the trigger's row says the data do not order it; the same in millimetres."""
     out = []
-    A, rows = collide_with(np.array([0.0, d, -1.0, -1.0]), {1: 1e-6}, (reach, 1.0), rtol, out)
-    assert A == [0] and [r[1] for r in rows] == [0] and out[0][1] == d
+    A, rows = collide_with(np.array([0.0, d, -1.0, -1.0]), {1: 1e-6}, (reach, 1.0), rtol, out,
+                           unit)
+    assert A == [0] and [r[1] for r in rows] == [0]
+    assert out[0][1] == pytest.approx(d, rel=1e-15)
     assert "contact 1 not ordered by the data" in rows[0][7]
 
 
