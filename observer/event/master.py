@@ -1233,7 +1233,8 @@ def run_master(scenario: Scenario, h: float | None = None, t_end: float | None =
         The same value, relative to each contact's reach (its largest |g| and |γ| of the run),
         is how far the carried state error merges a landing with an impact and makes a
         rebound a candidate to stick (:meth:`_Run.accuracy_caps`); beyond it the event row
-        says the data do not decide it.
+        says the data do not decide it (with ``inf``, the carried error decides without a
+        cap).
 
     A run that stops (event cap, stalled isolation, no progress) returns the frame up to its
     stop time, never NaN rows, with the reason in ``status``. So does a state that leaves the
