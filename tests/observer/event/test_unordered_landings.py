@@ -98,7 +98,7 @@ def test_a_landing_within_the_carried_error_and_the_stated_accuracy_lands_togeth
     """Reach 1 m (both masses fell from 1 m), carried error 1e-6 m: within rtol·1 m mass 1 is
     impacted with mass 0, at its stop: its position after the impact is exactly 0 (M = W = I:
     the move is −d), its velocity Newton's 0.5 m/s (impulse 1.5), and the carried error of its
-    position grew by the move. The same in millimetres and in 2^20-ths of a metre."""
+    position grew by the move. The same in millimetres and in units of 2^20 m."""
     out = []
     A, rows = collide_with(np.array([0.0, d, -1.0, -1.0]), {1: 1e-6}, (1.0, 1.0), rtol, out,
                            unit)
