@@ -21,7 +21,7 @@ the evaluation error at the minimum, the run's accumulated state error carried t
 :meth:`_Run.search_band`, and the data's representation in the user's coordinates)
 is a graze with zero impulse (the run continues past it); its row carries ``depth = m*`` and
 a note stating the enclosure, δ and the guaranteed crossing depth δ* = δ + its width.
-A crossing with ``|γ⁻|`` within γ's certified error (:meth:`_Run.velocity_band`, its
+A crossing with ``|γ⁻|`` within γ's certified error (:meth:`_Run.velocity_bands`, its
 carried part up to :meth:`_Run.accuracy_caps`) is labelled a graze too, and its (tiny)
 impulse is applied. A minimum above the touch band is a miss: no event. An open contact is
 impacted together with the one that triggers an impact (simultaneous impact) when its gap is
@@ -79,7 +79,7 @@ from observer.event.energy import EnergyCarry
 from observer.event.flow import Flow, flow_for
 from observer.event.roots import (WINDOW, FunctionalSet, NonFiniteFlow,
                                   RootIsolationError, SearchStopped, first_zero, time_resolution)
-from observer.event.tails import JointTail, horner, joint_due, joint_tail
+from observer.event.tails import JointTail, horner, joint_due, joint_tail, representation
 from observer.impact import ImpactLaw, impact
 from observer.result import RunState, RunStatus
 from observer.scenario import Scenario
@@ -556,8 +556,8 @@ class _Run:
         z = fl.z(t, x)
         g, gam = fl.gap_rows @ z, fl.velocity_rows @ z
         cap_g, cap_v = self.accuracy_caps(g, gam)
-        vband = self.velocity_band(z)
-        tol_v = np.maximum(self.velocity_band(z, carried=False), np.minimum(cap_v, vband))
+        vown, vband = self.velocity_bands(z)
+        tol_v = np.maximum(vown, np.minimum(cap_v, vband))
         own, near, certified = self.simultaneous_band(t, z, gam, cap_g)
         closing = {j for j in range(self.m) if abs(g[j]) <= near[j] and gam[j] < tol_v[j]}
         A = sorted(set(persistent) | set(trigger) | closing)
@@ -575,9 +575,9 @@ class _Run:
         self.jump_error(A, lam, x[self.n:])
         gp = fl.velocities(t, x)[idx]
         zp = fl.z(t, x)
-        vband_p = np.maximum(vband, self.velocity_band(zp))                 # + the jump
-        band_p = np.maximum(np.maximum(tol_v, self.velocity_band(zp, carried=False)),
-                            np.minimum(cap_v, vband_p))
+        vown_p, vband_p = self.velocity_bands(zp)
+        vband_p = np.maximum(vband, vband_p)                                # + the jump
+        band_p = np.maximum(np.maximum(tol_v, vown_p), np.minimum(cap_v, vband_p))
         cand = [c for c, v in zip(A, gp) if v <= band_p[c]]
         for c, v in zip(A, gp):
             if band_p[c] < v <= vband_p[c]:
@@ -700,7 +700,7 @@ class _Run:
         z = fl.z(t, x)
         return self.simultaneous_band(t, z, fl.velocity_rows @ z, self._caps()[0])[1]
 
-    def velocity_band(self, z: np.ndarray, carried: bool = True) -> np.ndarray:
+    def velocity_bands(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The certified distance of every contact's float64 relative velocity ``r_v·z`` to
         its exact value on the exact trajectory: its evaluation and the state's
         representation, ``(1 + 2γ)(γ + u)·Σ|r_v z|`` with γ = γ_{N+1}
@@ -708,17 +708,21 @@ class _Run:
         row ``r_v = r A`` itself, ``γ_{N+1}·(|r||A|)|z|``, and the accumulated state error
         through the row (:attr:`err` componentwise, or the energy norm's
         ``‖r_v‖_{P⁻¹}·ε``, the smaller). No time scale, no count of round-offs: a
-        contact's γ⁺ outside it is certainly nonzero (issue 34 item 1). ``carried=False``:
-        the float state's own part alone (its evaluation and representation: the band of
-        the exact flow from the float state itself)."""
+        contact's γ⁺ outside it is certainly nonzero (issue 34 item 1).
+
+        Returns
+        -------
+        own, band : ndarray
+            The float state's own part alone (its evaluation and representation: the band of
+            the exact flow from the float state itself), and the band with the carried error."""
         fl = self.free_flow
         rows = fl.velocity_rows
         g = gamma(z.size + 1)
         row_rounding = (1.0 + 2.0 * g) * g * (np.abs(fl.gap_rows) @ (np.abs(fl.A) @ np.abs(z)))
         own = represented_error(rows, z) + row_rounding
-        if carried:
-            own = own + self.carried(rows)
-        return own * (1.0 + 2.0 * g) + np.finfo(float).tiny
+        tiny = np.finfo(float).tiny
+        return (own * (1.0 + 2.0 * g) + tiny,
+                (own + self.carried(rows)) * (1.0 + 2.0 * g) + tiny)
 
     def simultaneous_band(self, t: float, z: np.ndarray, gam: np.ndarray, cap: np.ndarray
                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -913,7 +917,7 @@ class _Run:
         there, not earlier, keeps the tail, which the observers treat as closed, short), the run
         is extrapolated from the current (still accurate) impact. A shift of the time origin
         does not change the decision."""
-        dg = np.finfo(float).eps * (np.abs(fl.gap_rows[idx]) @ np.abs(z))
+        dg = representation(fl.gap_rows[idx], z)
         v = np.maximum(np.asarray(v_plus, dtype=float), np.finfo(float).tiny)
         if len(key) == 1:
             if not self.law.definition.single_contact_is_newton:

@@ -178,6 +178,13 @@ def horner(coefficients: list, x: float) -> float:
     return y
 
 
+def representation(rows: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """``eps·Σ_j |r_ij z_j|``: the representation error δg of each functional ``rows @ z``
+    (it grows with |q| and |ν|), over which an impact's location error is δg/γ⁺
+    (:func:`joint_due`, :meth:`observer.event.master._Run.noisy_tail`)."""
+    return np.finfo(float).eps * (np.abs(rows) @ np.abs(z))
+
+
 def joint_due(run, key: tuple, t: float, x: np.ndarray, held: tuple, tiny: list) -> list | None:
     """The cluster whose joint tail starts after the impact of ``key`` at t (state x, held
     set ``held``), or None if it is not due: due once a contact of key is resolved as far as
@@ -204,8 +211,7 @@ def joint_due(run, key: tuple, t: float, x: np.ndarray, held: tuple, tiny: list)
     z = fl.z(t, x)
     g, v = fl.gap_rows @ z, fl.velocity_rows @ z
     a = (fl.velocity_rows @ fl.A) @ z
-    dg = np.finfo(float).eps * (np.abs(fl.gap_rows) @ np.abs(z))   # the representation
-    merged = run.merge_band(t, x)                          # what an impact at t lands together
+    dg = representation(fl.gap_rows, z)
     e = np.asarray(run.law.restitution, dtype=float)
     reach = 0.0
     for c in key:
@@ -221,6 +227,7 @@ def joint_due(run, key: tuple, t: float, x: np.ndarray, held: tuple, tiny: list)
             cluster.append(b)
     share = run.time_budget(t) / len(cluster) ** 2      # k² terms share the budget
     due = bool(tiny)
+    merged = run.merge_band(t, x) if len(key) > 1 else None   # what an impact lands together
     for c in key:
         due |= (1.0 + 2.0 / (1.0 - e[c])) * (dg[c] / v[c] + time_resolution(t)) >= share
         due |= len(key) > 1 and v[c] * v[c] <= 2.0 * -a[c] * merged[c]

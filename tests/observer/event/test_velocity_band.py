@@ -10,7 +10,7 @@ inside that band, 4.8e-8 s before t∞ (the Zeno tail ``2γ⁺/(g(1 − e))`` lo
 certified error of γ⁺ (its evaluation, the state's representation and the velocity jump's
 rounding), the impacts go on until the Zeno extrapolation, which rests at t∞ (measured 3e-17
 s off). The band includes the accumulated state error (``_Run.err`` componentwise, or its
-energy-norm bound, the smaller, :meth:`observer.event.master._Run.velocity_band`): a band of
+energy-norm bound, the smaller, :meth:`observer.event.master._Run.velocity_bands`): a band of
 the current state's certified errors alone treated a held contact's velocity of -3.6e-29
 m/s — the held flow's round-off — as a certain approach (in one of test_invariance's
 two-contact tails under a change of units the held contact was re-launched six times and
