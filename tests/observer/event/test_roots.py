@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from observer.event.flow import flow_for
-from observer.event.roots import first_zero
+from observer.event.roots import first_zero, time_resolution
 from observer.scenario import Scenario
 
 OMEGA, AMP, V1, GAP1 = 2.0, 0.05, 0.7, 0.14
@@ -26,27 +26,32 @@ def graze_and_approach() -> Scenario:
     return Scenario.from_dict(doc)
 
 
+@pytest.mark.parametrize("t0", [0.0, 1e3])
 @pytest.mark.parametrize("reach", [0.5, 2.0])
-def test_right_after_a_graze_an_open_contact_far_away_is_not_taken_as_the_zero(reach):
+def test_right_after_a_graze_an_open_contact_far_away_is_not_taken_as_the_zero(reach, t0):
     """Regression of b3b82ce (``_unresolved``). Right after contact 0's graze, certified
     positive for less than the time resolution, the safe step falls below the resolution and
     the zero is "unresolved": the old rule took the approaching functional with the smallest
     first-order time to zero, here contact 1, GAP1 = 0.14 away, as a crossing at the graze
     instant (an impact of an open contact). Now only functionals vanishing near t qualify:
     up to ``reach`` × GAP1/V1 there is no zero before it, and the first zero is contact 1's,
-    at GAP1/V1 (closed form)."""
+    at GAP1/V1 (closed form). The system is time-invariant, so the graze is put at t0: at
+    t0 = 1e3 the time resolution (two ulp of t, 4.5e-13 s) is wide enough for the step to
+    fall below it, and the old rule fails there (without the reach filter of ``_unresolved``
+    contact 1 is taken at t0; the certificate filter alone does not stop it here); at t0 = 0
+    that path is not reached (the case only checks the answer)."""
     sc = graze_and_approach()
     fl = flow_for(sc.system, ())
     x0 = np.concatenate([sc.q0, sc.u0])
-    z0 = fl.z(0.0, x0)
-    certified = {0: 1e-17}          # the graze's certificate ends after a few ulp of 1e-16 s
+    z0 = fl.z(t0, x0)
+    certified = {0: t0 + 0.25 * time_resolution(t0)}   # the graze's certificate ends within res
     t_hit = GAP1 / V1
-    zero, t, _ = first_zero(fl, fl.gap_rows, 0.0, z0, reach * t_hit, certified)
+    zero, t, _ = first_zero(fl, fl.gap_rows, t0, z0, t0 + reach * t_hit, certified)
     if reach < 1.0:
-        assert zero is None and t == reach * t_hit
+        assert zero is None and t == t0 + reach * t_hit
     else:
         assert zero is not None and zero.index == 1 and zero.kind == "cross"
-        assert abs(zero.t - t_hit) <= 1e-14
+        assert abs(zero.t - (t0 + t_hit)) <= 1e-14 + time_resolution(t0)
 
 
 @pytest.mark.parametrize("offset", [0.0, 100.0])
