@@ -36,7 +36,7 @@ def test_right_after_a_graze_an_open_contact_far_away_is_not_taken_as_the_zero(r
     instant (an impact of an open contact). Now only functionals vanishing near t qualify:
     up to ``reach`` × GAP1/V1 there is no zero before it, and the first zero is contact 1's,
     at GAP1/V1 (closed form). The system is time-invariant, so the graze is put at t0: at
-    t0 = 1e3 the time resolution (two ulp of t, 4.5e-13 s) is wide enough for the step to
+    t0 = 1e3 the time resolution (two ulp of t, 4.4e-13 s) is wide enough for the step to
     fall below it, and the old rule fails there (without the reach filter of ``_unresolved``
     contact 1 is taken at t0; the certificate filter alone does not stop it here); at t0 = 0
     that path is not reached (the case only checks the answer)."""
